@@ -1,0 +1,56 @@
+# oceand — top-level build. Each area keeps its rules in mk/<area>.mk and
+# appends to BINS (built by `make`), TESTS (suites run by `make test`) and
+# BENCHES (run by `make bench`).
+#
+#   make run    install what is missing, build, start the daemon + web client
+#   make test   install what is missing, build, run every test suite
+
+SHELL   := /bin/bash
+BUILD   := build
+CC      ?= cc
+PKGS    := fftw3f libwebsockets libcjson libzstd zlib
+WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wno-unused-parameter
+CFLAGS  ?= -O2 -g
+CFLAGS  += -std=c11 -D_GNU_SOURCE $(WARN) -pthread -Iserver -Iproto/c
+PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
+PKG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lfftw3f_threads -lm
+# Sanitizer flavour of every C object, for the ASan+UBSan test pass.
+SAN_FLAGS := -O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all
+
+BINS    :=
+TESTS   :=
+BENCHES :=
+
+.PHONY: all deps test bench run clean
+all: deps
+	@$(MAKE) --no-print-directory build-all
+
+include $(sort $(wildcard mk/*.mk))
+
+.PHONY: build-all
+build-all: $(BINS)
+
+deps:
+	@scripts/deps.sh
+
+# Every suite runs even if one fails; the closing line counts suites.
+test: deps
+	@$(MAKE) --no-print-directory build-all
+	@pass=0; fail=0; failed=""; \
+	for t in $(TESTS); do \
+	  echo "=== $$t"; \
+	  if $(MAKE) --no-print-directory $$t; then pass=$$((pass+1)); \
+	  else fail=$$((fail+1)); failed="$$failed $$t"; fi; \
+	done; \
+	[ -n "$$failed" ] && echo "failed suites:$$failed"; \
+	echo "$$pass passed, $$fail failed"; [ $$fail -eq 0 ]
+
+bench: deps
+	@$(MAKE) --no-print-directory build-all
+	@for b in $(BENCHES); do $(MAKE) --no-print-directory $$b || exit 1; done
+
+$(BUILD):
+	@mkdir -p $(BUILD)
+
+clean:
+	rm -rf $(BUILD)

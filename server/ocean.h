@@ -1,0 +1,54 @@
+/* ocean.h — Tessendorf FFT ocean simulation, no networking, no globals.
+ *
+ * One struct ocean holds a whole simulation: parameters, the initial
+ * spectrum h~0(k), FFTW plans and output fields. Create it once, step it
+ * at any time t, reconfigure it when parameters change, free it.
+ *
+ * Output fields are N*N float arrays, row-major: sample (ix, iz) is at
+ * index iz*N + ix and lies at world position x = ix*L/N, z = iz*L/N
+ * (metres, y is up). The patch is periodic in x and z.
+ *   OCEAN_HEIGHT    h(x,z,t), m, positive up
+ *   OCEAN_DX/DZ     horizontal displacement, m, already scaled by the
+ *                   choppiness lambda: the surface point is (x+Dx, h, z+Dz)
+ *   OCEAN_SLOPE_X/Z dh/dx, dh/dz of the undisplaced height, dimensionless
+ *   OCEAN_JACOBIAN  det of d(x+Dx, z+Dz)/d(x,z), dimensionless; 1 = flat,
+ *                   < 0 where the surface folds (foam) */
+#ifndef OCEAND_OCEAN_H
+#define OCEAND_OCEAN_H
+
+#include "params.h"
+
+enum ocean_field {
+    OCEAN_HEIGHT, OCEAN_DX, OCEAN_DZ, OCEAN_SLOPE_X, OCEAN_SLOPE_Z, OCEAN_JACOBIAN,
+    OCEAN_FIELD_COUNT
+};
+#define OCEAN_FIELD_BIT(f) (1u << (f))
+#define OCEAN_ALL_FIELDS ((1u << OCEAN_FIELD_COUNT) - 1u)
+
+struct ocean_options {
+    int threads;               /* FFTW threads, >= 1 */
+    const char *wisdom_path;   /* FFTW wisdom cache file, NULL = none */
+    int plan_rigor;            /* 0 = FFTW_ESTIMATE (tests), 1 = FFTW_MEASURE */
+};
+
+struct ocean;
+
+/* Returns NULL with a message in err on invalid parameters or no memory. */
+struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_options *opt,
+                           char *err, size_t errlen);
+/* Apply new parameters. Random phases are kept (the sea evolves rather than
+ * jumps); a change of N re-plans. On error returns -1, the simulation is
+ * unchanged and err says why. */
+int ocean_reconfigure(struct ocean *o, const struct ocean_params *p, char *err, size_t errlen);
+/* Compute the fields in the mask (OCEAN_FIELD_BIT...) at time t seconds. */
+int ocean_step(struct ocean *o, double t, unsigned fields);
+/* Output of the last step; valid until the next step/reconfigure/free. */
+const float *ocean_field(const struct ocean *o, enum ocean_field f);
+const struct ocean_params *ocean_get_params(const struct ocean *o);
+int ocean_resolution(const struct ocean *o);
+void ocean_free(struct ocean *o);
+
+/* Stable lowercase names: "height", "dx", "dz", "slope_x", "slope_z", "jacobian". */
+const char *ocean_field_name(enum ocean_field f);
+
+#endif

@@ -1,0 +1,83 @@
+/* params.h — the one table of sea parameters.
+ *
+ * Every user-visible parameter of the simulation is described once here:
+ * name, type, unit, range, default, description, and where it lives in
+ * struct ocean_params. The daemon derives its config file, CLI flags, JSON
+ * validation and the `hello` schema (and so the web panel) from this table.
+ * No networking and no global mutable state. */
+#ifndef OCEAND_PARAMS_H
+#define OCEAND_PARAMS_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+enum spectrum_kind { SPECTRUM_PHILLIPS, SPECTRUM_PIERSON_MOSKOWITZ, SPECTRUM_JONSWAP, SPECTRUM_TMA };
+enum transform_kind { TRANSFORM_FFT, TRANSFORM_DFT };
+
+/* All lengths in metres, times in seconds, angles in degrees unless named. */
+struct ocean_params {
+    int    resolution;          /* N, samples per side, power of two 16..2048 */
+    double patch_size;          /* L, side of the periodic patch, m */
+    double wind_speed;          /* U10, wind speed 10 m above the sea, m/s */
+    double wind_direction;      /* degrees, 0 = +x, 90 = +z */
+    double amplitude;           /* dimensionless multiplier of the spectrum */
+    int    spectrum;            /* enum spectrum_kind */
+    double fetch;               /* km of open water upwind (JONSWAP, TMA) */
+    double depth;               /* m, water depth (dispersion, TMA) */
+    double gamma;               /* JONSWAP peak enhancement */
+    double directional_spread;  /* 0 = spreading as spectrum, 1 = fully directional (see params.c) */
+    double swell;               /* 0..1, elongation of the spreading toward the wind direction */
+    double choppiness;          /* lambda, horizontal displacement scale */
+    double small_wave_cutoff;   /* m, waves shorter than this are damped */
+    double loop_period;         /* s, 0 = never repeats */
+    int    seed;                /* random seed, >= 0 */
+    int    transform;           /* enum transform_kind */
+    double time_scale;          /* playback speed (used by the daemon) */
+    bool   paused;              /* playback pause (used by the daemon) */
+};
+
+enum param_type { PARAM_INT, PARAM_FLOAT, PARAM_ENUM, PARAM_BOOL };
+
+enum param_flags {
+    PARAM_POW2      = 1u << 0, /* integer must be a power of two */
+    PARAM_REPLAN    = 1u << 1, /* changing it rebuilds FFT plans (N) */
+    PARAM_PLAYBACK  = 1u << 2, /* read by the daemon's clock, not the physics */
+};
+
+struct param_def {
+    const char *name;
+    enum param_type type;
+    const char *unit;            /* "" when dimensionless */
+    double min, max;             /* inclusive; for ENUM 0..count-1 */
+    double def;                  /* default; for ENUM the index */
+    const char *const *choices;  /* ENUM only: NULL-terminated names */
+    const char *description;
+    size_t offset;               /* offsetof(struct ocean_params, field) */
+    unsigned flags;              /* enum param_flags */
+};
+
+extern const struct param_def param_table[];
+extern const size_t param_count;
+
+/* Fill with the defaults from the table. */
+void params_defaults(struct ocean_params *p);
+/* Look a parameter up by name; NULL if unknown. */
+const struct param_def *param_find(const char *name);
+/* Value of a parameter as a double (ENUM: index, BOOL: 0/1). */
+double param_get(const struct ocean_params *p, const struct param_def *d);
+/* Set from a double after checking type and range (ints must be whole, POW2
+ * enforced). Returns 0, or -1 with a message in err; p unchanged on error. */
+int param_set(struct ocean_params *p, const struct param_def *d, double v, char *err, size_t errlen);
+/* Set from text, as on a command line: numbers, true/false, enum names.
+ * Returns 0, or -1 with a message in err; p unchanged on error. */
+int param_set_text(struct ocean_params *p, const struct param_def *d, const char *text, char *err, size_t errlen);
+/* Name of an ENUM value, or NULL. */
+const char *param_enum_name(const struct param_def *d, int index);
+/* Index of an ENUM name, or -1. */
+int param_enum_index(const struct param_def *d, const char *name);
+/* Whole-set checks that no single range can express (e.g. DFT only for
+ * small N). Returns 0, or -1 with a message in err. */
+int params_validate(const struct ocean_params *p, char *err, size_t errlen);
+
+#endif
