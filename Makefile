@@ -49,8 +49,14 @@ bench: deps
 	@$(MAKE) --no-print-directory build-all
 	@for b in $(BENCHES); do $(MAKE) --no-print-directory $$b || exit 1; done
 
-$(BUILD):
-	@mkdir -p $(BUILD)
+# One object rule for every C file in the tree: normal and sanitizer flavours.
+$(BUILD)/obj/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(PKG_CFLAGS) -MMD -MP -c $< -o $@
+$(BUILD)/san/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(SAN_FLAGS) $(PKG_CFLAGS) -MMD -MP -c $< -o $@
+-include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
 
 clean:
 	rm -rf $(BUILD)
