@@ -1,0 +1,71 @@
+/* fuzz_control.c — libFuzzer target: one JSON control message through the
+ * whole control path the daemon runs (parse -> validate -> new state ->
+ * reply), checking the invariants a hostile client must not break. */
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "control.h"
+
+static void check(int ok)
+{
+    if (!ok)
+        abort(); /* libFuzzer records the input as a crash */
+}
+
+/* Every value in the table's range, every cross rule satisfied. */
+static void check_params(const struct ocean_params *p)
+{
+    for (size_t i = 0; i < param_count; i++) {
+        double v = param_get(p, &param_table[i]);
+        check(v == v && v >= param_table[i].min && v <= param_table[i].max);
+    }
+    char err[256];
+    check(params_validate(p, err, sizeof err) == 0);
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    struct ctl_limits lim = { .tick_rate = 30, .max_memory_mb = 512 };
+    struct ocean_params cur, before, next;
+    params_defaults(&cur);
+    before = cur;
+
+    struct ctl_msg m;
+    struct ctl_error e = { 0 };
+    cJSON *id = NULL;
+    if (control_parse((const char *)data, size, &m, &id, &e) != 0) {
+        check(e.code != NULL && e.message[0] != '\0');
+        free(control_print(control_error_msg(&e, id)));
+        cJSON_Delete(id);
+        return 0;
+    }
+    if (m.type == CTL_SET) {
+        uint64_t changed = 0;
+        if (control_apply_params(m.params, &cur, &lim, &next, &changed, &e) == 0) {
+            check_params(&next);
+            free(control_print(control_params_msg(&next, 2, changed, "c1", m.id)));
+        } else {
+            check(e.code != NULL);
+            free(control_print(control_error_msg(&e, m.id)));
+        }
+        check(memcmp(&cur, &before, sizeof cur) == 0); /* all or nothing */
+    } else if (m.type == CTL_SUBSCRIBE) {
+        struct subscription *s = malloc(2 * sizeof *s);
+        check(s != NULL);
+        subscription_default(&s[0], lim.tick_rate);
+        if (control_apply_subscribe(m.root, &s[0], &lim, &s[1], &e) == 0) {
+            check(s[1].fields != 0 && s[1].lod >= 0 && s[1].lod <= CTL_MAX_LOD);
+            check(s[1].bound_index >= 0 && s[1].bound_index < CTL_BOUND_COUNT);
+            check(s[1].max_rate > 0 && s[1].max_rate <= lim.tick_rate);
+            check(s[1].all_tiles || (s[1].ntiles >= 0 && s[1].ntiles <= CTL_MAX_TILES));
+            free(control_print(control_subscribed_msg(&s[1], m.id)));
+        }
+        free(s);
+    } else if (m.type == CTL_PING) {
+        free(control_print(control_pong_msg(m.id, m.has_t, m.t, 1)));
+    }
+    ctl_msg_free(&m);
+    return 0;
+}

@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# fuzz/run.sh BUILD TARGET SECONDS — replay the regression inputs of one
+# libFuzzer target, then fuzz it from the seed corpus for SECONDS into a
+# scratch copy (the repo's corpus stays small). Prints one JSON line.
+set -euo pipefail
+build=$1 t=$2 secs=$3
+bin=$build/fuzz/fuzz_$t
+mkdir -p "$build/fuzz/work-$t" "$build/fuzz/artifacts"
+if compgen -G "fuzz/regressions/$t/*" >/dev/null; then
+  "$bin" fuzz/regressions/$t/* 2>"$build/fuzz/regress-$t.log" \
+    || { tail -30 "$build/fuzz/regress-$t.log"; echo "fuzz $t: a regression input fails again"; exit 1; }
+fi
+maxlen=16384; [ "$t" = frame ] && maxlen=65536
+if ! "$bin" -max_total_time="$secs" -max_len=$maxlen -timeout=10 -rss_limit_mb=2048 \
+     -print_final_stats=1 -artifact_prefix="$build/fuzz/artifacts/$t-" \
+     "$build/fuzz/work-$t" "fuzz/corpus/$t" 2>"$build/fuzz/$t.log"; then
+  tail -40 "$build/fuzz/$t.log"
+  echo "fuzz $t: crash; the input is in $build/fuzz/artifacts/ — add it to fuzz/regressions/$t/"
+  exit 1
+fi
+execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$build/fuzz/$t.log" | grep -o '[0-9]*$')
+printf '{"fuzz":"%s","seconds":%s,"execs":%s,"execs_per_s":%s,"crashes":0}\n' \
+  "$t" "$secs" "$execs" "$((execs / secs))"

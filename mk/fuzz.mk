@@ -1,0 +1,34 @@
+# mk/fuzz.mk — libFuzzer targets (clang, ASan+UBSan) for the three parsers a
+# stranger can reach: JSON control messages, binary frames, the config file.
+#
+#   make fuzz                  run each target for FUZZ_SECONDS (default 60)
+#   make fuzz FUZZ_SECONDS=600 a longer local run
+# `make test` runs test-fuzz: every regression input once, then each target
+# for FUZZ_CI_SECONDS (60 s under CI=true, 10 s otherwise).
+
+FUZZ_CC      := clang
+FUZZ_FLAGS   := -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=fuzzer,address,undefined \
+                -fno-sanitize-recover=all -Iserver -Iproto/c $(WARN)
+FUZZ_SECONDS ?= 60
+FUZZ_CI_SECONDS ?= $(if $(CI),60,10)
+FUZZ_TARGETS := control frame config
+
+SIM_SRCS_FOR_FUZZ = $(filter-out server/ocean_dft_ref.c,$(wildcard server/ocean*.c)) server/params.c
+FUZZ_SRCS_control = fuzz/fuzz_control.c server/control.c $(SIM_SRCS_FOR_FUZZ)
+FUZZ_SRCS_frame   = fuzz/fuzz_frame.c $(wildcard proto/c/*.c)
+FUZZ_SRCS_config  = fuzz/fuzz_config.c server/config.c server/control.c server/state.c server/log.c \
+                    $(SIM_SRCS_FOR_FUZZ)
+
+$(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*.c server/*.h proto/c/*.c proto/c/*.h)
+	@mkdir -p $(dir $@)
+	$(FUZZ_CC) $(FUZZ_FLAGS) $(PKG_CFLAGS) $(FUZZ_SRCS_$*) -o $@ $(PKG_LIBS) $(FUZZ_EXTRA_LIBS)
+
+FUZZ_BINS := $(addprefix $(BUILD)/fuzz/fuzz_,$(FUZZ_TARGETS))
+
+.PHONY: fuzz fuzz-build test-fuzz
+fuzz-build: $(FUZZ_BINS)
+fuzz: fuzz-build
+	@for t in $(FUZZ_TARGETS); do fuzz/run.sh $(BUILD) $$t $(FUZZ_SECONDS) || exit 1; done
+test-fuzz: fuzz-build
+	@for t in $(FUZZ_TARGETS); do fuzz/run.sh $(BUILD) $$t $(FUZZ_CI_SECONDS) || exit 1; done
+TESTS += test-fuzz
