@@ -44,8 +44,11 @@ enum oc_field {
 
 enum oc_codec {
     OC_CODEC_RAW_F32 = 0,   /* payload = width*height float32, lossless */
-    OC_CODEC_QUANT_LORENZO = 1, /* quantise to bound, 2D Lorenzo, zigzag, byte shuffle, entropy coder (PROTOCOL.md) */
-    /* 2.. reserved: temporal prediction */
+    OC_CODEC_QUANT_LORENZO = 1, /* quantise to bound, predict (Lorenzo at tile borders, fitted
+                                   6-neighbour predictor inside), zigzag, escape packing, raw
+                                   DEFLATE (RFC 1951); the default. Bit-exact rules: PROTOCOL.md §5 */
+    OC_CODEC_QUANT_LORENZO_ZSTD = 2, /* proto area addition: same pipeline, zstd frame as the entropy coder */
+    /* 3.. reserved: temporal prediction */
 };
 
 /* Errors: negative return values. */
@@ -95,6 +98,10 @@ int  oc_frame_header_read(const uint8_t *src, size_t len, struct oc_frame_header
 struct oc_encoder;
 struct oc_encoder *oc_encoder_new(void);
 void oc_encoder_free(struct oc_encoder *e);
+/* proto area addition: choose the lossy codec (OC_CODEC_QUANT_LORENZO, the
+ * default, or OC_CODEC_QUANT_LORENZO_ZSTD) and the entropy coder level
+ * (0 = default: libdeflate 1 / zstd 1). OC_E_ARG on an unknown codec. */
+int oc_encoder_set_codec(struct oc_encoder *e, enum oc_codec codec, int level);
 
 /* Append one encoded tile (tile header + payload) to out. field_data is the
  * full n*n field, row-major; bound > 0 selects the lossy codec with
@@ -102,6 +109,10 @@ void oc_encoder_free(struct oc_encoder *e);
 int oc_encode_tile(struct oc_encoder *e, const float *field_data, int n, int tile_size,
                    int tile_x, int tile_z, int lod, enum oc_field field, float bound,
                    struct oc_buf *out);
+/* The tile is sent raw float32 (codec 0, lossless) instead when bound == 0,
+ * when the codes would not fit in int32 (huge dynamic range for the bound),
+ * when the bound is below float32 resolution of the values, or when the
+ * lossy payload would not be smaller than raw. Non-finite input: OC_E_ARG. */
 
 /* Decoder: walks a whole frame, checking every length before reading. */
 struct oc_decoder;
@@ -112,5 +123,7 @@ typedef int (*oc_tile_fn)(void *user, const struct oc_frame_header *fh,
                           const struct oc_tile_header *th, const float *samples);
 int oc_decode_frame(struct oc_decoder *d, const uint8_t *data, size_t len,
                     struct oc_frame_header *fh, oc_tile_fn fn, void *user);
+/* Returns OC_OK, a negative OC_E_* (bytes after the last tile: OC_E_CORRUPT),
+ * or the first nonzero value fn returned (decoding stops there). fn may be NULL. */
 
 #endif

@@ -1,0 +1,309 @@
+/* bench_codec.c — tile codec benchmark: bits/sample, max error, encode and
+ * decode MB/s (float32 input bytes per second, one core) for oceand's codec
+ * (codec 1 deflate-raw, codec 2 zstd) and, in the same run, the peers raw
+ * float32+zstd-1 and zfp fixed-accuracy at the largest tolerance that still
+ * meets the bound. One JSON object per line, medians of repetitions; speeds are
+ * float32 bytes per second of thread CPU time (one core).
+ *
+ * Input: the real simulation (ocean_create with params_defaults, t = 10 s)
+ * when built with HAVE_OCEAN, else a synthetic Phillips-spectrum sea made
+ * with FFTW (same spectrum shape, fixed seed). The "source" member says which. */
+#include "oc_proto.h"
+
+#include <fftw3.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <zfp.h>
+#include <zstd.h>
+#ifdef HAVE_OCEAN
+#include "ocean.h"
+#endif
+
+#define TILE 64 /* the daemon's default tile_size */
+
+/* Thread CPU time: "MB/s per core" on a shared machine, where wall time would
+ * also count the time other processes hold the core. */
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static int cmp_d(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+static double median(double *v, int n) { qsort(v, n, sizeof *v, cmp_d); return v[n / 2]; }
+
+/* ---- synthetic sea: Phillips spectrum, wind 12 m/s along x, L = 256 m ---- */
+static unsigned long long rng_state = 0x9e3779b97f4a7c15ull;
+static double urand(void)
+{
+    rng_state ^= rng_state << 13; rng_state ^= rng_state >> 7; rng_state ^= rng_state << 17;
+    return ((rng_state >> 11) + 0.5) * 0x1p-53;
+}
+static double gauss(void) { return sqrt(-2 * log(urand())) * cos(2 * M_PI * urand()); }
+
+static void synth_fields(int n, float *out[OC_FIELD_COUNT])
+{
+    const double L = 256.0, V = 12.0, g = 9.81, Lw = V * V / g, lambda = 1.0, l_small = L / 1000;
+    fftwf_complex *spec[5], *tmp = fftwf_malloc(sizeof(fftwf_complex) * n * n);
+    for (int f = 0; f < 5; f++) spec[f] = fftwf_malloc(sizeof(fftwf_complex) * n * n);
+    rng_state = 0x9e3779b97f4a7c15ull;
+    for (int m = 0; m < n; m++)
+        for (int l = 0; l < n; l++) {
+            int kx_i = l < n / 2 ? l : l - n, kz_i = m < n / 2 ? m : m - n;
+            double kx = 2 * M_PI * kx_i / L, kz = 2 * M_PI * kz_i / L, k = hypot(kx, kz);
+            double a = 0;
+            if (k > 0) {
+                double c = kx / k; /* wind along +x */
+                a = sqrt(2e-3 * exp(-1 / (k * Lw * k * Lw)) / (k * k * k * k) * c * c
+                         * exp(-k * k * l_small * l_small) / 2);
+            }
+            double re = a * gauss(), im = a * gauss();
+            size_t i = (size_t)m * n + l;
+            double ux = k > 0 ? kx / k : 0, uz = k > 0 ? kz / k : 0;
+            /* height, Dx = -i lambda kx/k h, Dz, slope_x = i kx h, slope_z = i kz h */
+            spec[0][i][0] = re; spec[0][i][1] = im;
+            spec[1][i][0] = lambda * ux * im; spec[1][i][1] = -lambda * ux * re;
+            spec[2][i][0] = lambda * uz * im; spec[2][i][1] = -lambda * uz * re;
+            spec[3][i][0] = -kx * im; spec[3][i][1] = kx * re;
+            spec[4][i][0] = -kz * im; spec[4][i][1] = kz * re;
+        }
+    /* The real part of the inverse transform is the sea for the Hermitian part of the spectrum. */
+    fftwf_plan p = fftwf_plan_dft_2d(n, n, tmp, tmp, FFTW_BACKWARD, FFTW_ESTIMATE);
+    for (int f = 0; f < 5; f++) {
+        memcpy(tmp, spec[f], sizeof(fftwf_complex) * n * n);
+        fftwf_execute(p);
+        for (size_t i = 0; i < (size_t)n * n; i++) out[f][i] = tmp[i][0];
+    }
+    /* Jacobian of the horizontal map by central differences of Dx, Dz. */
+    double dx = L / n;
+    for (int z = 0; z < n; z++)
+        for (int x = 0; x < n; x++) {
+            int xp = (x + 1) % n, xm = (x + n - 1) % n, zp = (z + 1) % n, zm = (z + n - 1) % n;
+            const float *DX = out[1], *DZ = out[2];
+            double jxx = (DX[z * n + xp] - DX[z * n + xm]) / (2 * dx);
+            double jzz = (DZ[zp * n + x] - DZ[zm * n + x]) / (2 * dx);
+            double jxz = (DX[zp * n + x] - DX[zm * n + x]) / (2 * dx);
+            double jzx = (DZ[z * n + xp] - DZ[z * n + xm]) / (2 * dx);
+            out[5][z * n + x] = (float)((1 + jxx) * (1 + jzz) - jxz * jzx);
+        }
+    fftwf_destroy_plan(p);
+    for (int f = 0; f < 5; f++) fftwf_free(spec[f]);
+    fftwf_free(tmp);
+}
+
+static const char *make_fields(int n, float *out[OC_FIELD_COUNT])
+{
+#ifdef HAVE_OCEAN
+    struct ocean_params prm;
+    params_defaults(&prm);
+    prm.resolution = n;
+    struct ocean_options opt = { .threads = 1, .wisdom_path = NULL, .plan_rigor = 0 };
+    char err[256];
+    struct ocean *o = ocean_create(&prm, &opt, err, sizeof err);
+    if (o && ocean_step(o, 10.0, OCEAN_ALL_FIELDS) == 0) {
+        for (int f = 0; f < OC_FIELD_COUNT; f++)
+            memcpy(out[f], ocean_field(o, (enum ocean_field)f), sizeof(float) * n * n);
+        ocean_free(o);
+        return "ocean";
+    }
+    fprintf(stderr, "bench_codec: ocean_create failed (%s), using synthetic sea\n", o ? "step" : err);
+    if (o) ocean_free(o);
+#endif
+    synth_fields(n, out);
+    return "synthetic";
+}
+
+/* ---- oceand codec: whole field as TILE x TILE tiles, all bytes counted ---- */
+struct stats { double bits, max_err, enc, dec; };
+
+static int check_tile(void *user, const struct oc_frame_header *fh, const struct oc_tile_header *th,
+                      const float *s)
+{
+    float **ctx = user; /* ctx[0] = decoded field */
+    int n = fh->n;
+    for (int j = 0; j < th->height; j++)
+        memcpy(ctx[0] + (size_t)(th->tile_z * fh->tile_size + j) * n + th->tile_x * fh->tile_size,
+               s + (size_t)j * th->width, sizeof(float) * th->width);
+    return 0;
+}
+
+static const char *frames_dir; /* --frames DIR: keep each encoded frame for the JS decode bench */
+
+static struct stats bench_oceand(const float *f, int n, int tile, int field, float bound, enum oc_codec codec, int reps)
+{
+    struct oc_encoder *e = oc_encoder_new();
+    struct oc_decoder *d = oc_decoder_new();
+    oc_encoder_set_codec(e, codec, 0);
+    struct oc_buf buf = { 0 };
+    float *dec = malloc(sizeof(float) * n * n);
+    double *te = malloc(sizeof(double) * reps), *td = malloc(sizeof(double) * reps);
+    int grid = n / tile;
+    for (int r = 0; r < reps; r++) {
+        buf.len = 0;
+        oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE);
+        struct oc_frame_header fh = { .seq = 1, .n = (uint16_t)n, .tile_size = (uint16_t)tile, .patch_size = 256,
+                                      .tile_count = (uint16_t)(grid * grid) };
+        double t0 = now();
+        oc_frame_header_write(buf.data, &fh);
+        buf.len = OC_FRAME_HEADER_SIZE;
+        for (int tz = 0; tz < grid; tz++)
+            for (int tx = 0; tx < grid; tx++)
+                if (oc_encode_tile(e, f, n, tile, tx, tz, 0, (enum oc_field)field, bound, &buf)) abort();
+        te[r] = now() - t0;
+        float *ctx[1] = { dec };
+        struct oc_frame_header out;
+        t0 = now();
+        if (oc_decode_frame(d, buf.data, buf.len, &out, check_tile, ctx)) abort();
+        td[r] = now() - t0;
+    }
+    struct stats s = { .bits = buf.len * 8.0 / ((double)n * n) };
+    if (frames_dir) {
+        char path[512];
+        snprintf(path, sizeof path, "%s/N%d_%s_%g_c%d_t%d.bin", frames_dir, n, oc_field_name((enum oc_field)field),
+                 bound, (int)codec, tile);
+        FILE *fp = fopen(path, "wb");
+        if (!fp || fwrite(buf.data, 1, buf.len, fp) != buf.len || fclose(fp)) perror(path);
+    }
+    for (size_t i = 0; i < (size_t)n * n; i++) s.max_err = fmax(s.max_err, fabs((double)dec[i] - f[i]));
+    double mb = 4.0 * n * n / 1e6;
+    s.enc = mb / median(te, reps);
+    s.dec = mb / median(td, reps);
+    free(te); free(td); free(dec); oc_buf_free(&buf);
+    oc_encoder_free(e); oc_decoder_free(d);
+    return s;
+}
+
+static struct stats bench_zstd_raw(const float *f, int n, int reps)
+{
+    size_t sz = sizeof(float) * n * n, cap = ZSTD_compressBound(sz);
+    void *c = malloc(cap), *dec = malloc(sz);
+    double *te = malloc(sizeof(double) * reps), *td = malloc(sizeof(double) * reps);
+    ZSTD_CCtx *cc = ZSTD_createCCtx();
+    ZSTD_DCtx *dc = ZSTD_createDCtx();
+    size_t clen = 0;
+    for (int r = 0; r < reps; r++) {
+        double t0 = now();
+        clen = ZSTD_compressCCtx(cc, c, cap, f, sz, 1);
+        te[r] = now() - t0;
+        t0 = now();
+        if (ZSTD_decompressDCtx(dc, dec, sz, c, clen) != sz) abort();
+        td[r] = now() - t0;
+    }
+    struct stats s = { .bits = clen * 8.0 / ((double)n * n), .max_err = memcmp(dec, f, sz) ? NAN : 0 };
+    s.enc = sz / 1e6 / median(te, reps);
+    s.dec = sz / 1e6 / median(td, reps);
+    ZSTD_freeCCtx(cc); ZSTD_freeDCtx(dc);
+    free(c); free(dec); free(te); free(td);
+    return s;
+}
+
+/* zfp fixed-accuracy round trip; returns compressed bytes, fills dec and times. */
+static size_t zfp_run(const float *f, int n, double tol, float *dec, void *buf, size_t cap,
+                      double *t_enc, double *t_dec)
+{
+    zfp_field *field = zfp_field_2d((void *)f, zfp_type_float, n, n);
+    zfp_stream *zs = zfp_stream_open(NULL);
+    zfp_stream_set_accuracy(zs, tol);
+    bitstream *bs = stream_open(buf, cap);
+    zfp_stream_set_bit_stream(zs, bs);
+    double t0 = now();
+    zfp_stream_rewind(zs);
+    size_t len = zfp_compress(zs, field);
+    *t_enc = now() - t0;
+    zfp_field *out = zfp_field_2d(dec, zfp_type_float, n, n);
+    t0 = now();
+    zfp_stream_rewind(zs);
+    if (!zfp_decompress(zs, out)) len = 0;
+    *t_dec = now() - t0;
+    zfp_field_free(out); zfp_field_free(field);
+    stream_close(bs); zfp_stream_close(zs);
+    return len;
+}
+
+static double max_err(const float *a, const float *b, size_t n)
+{
+    double m = 0;
+    for (size_t i = 0; i < n; i++) m = fmax(m, fabs((double)a[i] - b[i]));
+    return m;
+}
+
+static struct stats bench_zfp(const float *f, int n, float bound, int reps, double *tol_out)
+{
+    size_t cap = sizeof(float) * n * n * 2 + 4096;
+    void *buf = malloc(cap);
+    float *dec = malloc(sizeof(float) * n * n);
+    double te, td;
+    /* Largest tolerance (bisection in log space over [bound/16, 16*bound]) still meeting the bound. */
+    double lo = bound / 16.0, hi = bound * 16.0;
+    for (int it = 0; it < 30; it++) {
+        double mid = sqrt(lo * hi);
+        zfp_run(f, n, mid, dec, buf, cap, &te, &td);
+        if (max_err(f, dec, (size_t)n * n) <= bound) lo = mid; else hi = mid;
+    }
+    double *tes = malloc(sizeof(double) * reps), *tds = malloc(sizeof(double) * reps);
+    size_t len = 0;
+    for (int r = 0; r < reps; r++) len = zfp_run(f, n, lo, dec, buf, cap, &tes[r], &tds[r]);
+    struct stats s = { .bits = len * 8.0 / ((double)n * n), .max_err = max_err(f, dec, (size_t)n * n) };
+    s.enc = 4.0 * n * n / 1e6 / median(tes, reps);
+    s.dec = 4.0 * n * n / 1e6 / median(tds, reps);
+    *tol_out = lo;
+    free(buf); free(dec); free(tes); free(tds);
+    return s;
+}
+
+static void print(int n, const char *src, int field, float bound, const char *codec, int tile, struct stats s,
+                  const char *extra)
+{
+    printf("{\"bench\":\"codec\",\"N\":%d,\"source\":\"%s\",\"field\":\"%s\",\"bound\":%g,\"codec\":\"%s\","
+           "\"tile\":%d,\"bits\":%.3f,\"max_err\":%.6g,\"enc_MBs\":%.0f,\"dec_MBs\":%.0f%s}\n",
+           n, src, oc_field_name((enum oc_field)field), bound, codec, tile, s.bits, s.max_err, s.enc, s.dec,
+           extra ? extra : "");
+    fflush(stdout);
+}
+
+int main(int argc, char **argv)
+{
+    int only_height = 0;
+    for (int i = 1; i < argc; i++) {
+        if (strcmp(argv[i], "--height") == 0) only_height = 1;
+        else if (strcmp(argv[i], "--frames") == 0 && i + 1 < argc) frames_dir = argv[++i];
+        else { fprintf(stderr, "usage: bench_codec [--height] [--frames DIR]\n"); return 2; }
+    }
+    const int sizes[2] = { 256, 512 };
+    const float bounds[2] = { 0.001f, 0.01f };
+    for (int si = 0; si < 2; si++) {
+        int n = sizes[si], reps = n == 256 ? 21 : 9;
+        float *fields[OC_FIELD_COUNT];
+        for (int f = 0; f < OC_FIELD_COUNT; f++) fields[f] = malloc(sizeof(float) * n * n);
+        const char *src = make_fields(n, fields);
+        for (int f = 0; f < (only_height ? 1 : OC_FIELD_COUNT); f++) {
+            print(n, src, f, 0, "zstd-raw", n, bench_zstd_raw(fields[f], n, reps), NULL);
+            for (int b = 0; b < 2; b++) {
+                struct stats s1 = bench_oceand(fields[f], n, TILE, f, bounds[b], OC_CODEC_QUANT_LORENZO, reps);
+                struct stats s2 = bench_oceand(fields[f], n, TILE, f, bounds[b], OC_CODEC_QUANT_LORENZO_ZSTD, reps);
+                struct stats s3 = bench_oceand(fields[f], n, n, f, bounds[b], OC_CODEC_QUANT_LORENZO, reps);
+                double tol;
+                struct stats sz = bench_zfp(fields[f], n, bounds[b], reps, &tol);
+                char extra[128];
+                snprintf(extra, sizeof extra, ",\"entropy\":\"deflate-raw\",\"zfp_bits_ratio\":%.2f", sz.bits / s1.bits);
+                print(n, src, f, bounds[b], "oceand", TILE, s1, extra);
+                snprintf(extra, sizeof extra, ",\"entropy\":\"zstd-1\",\"zfp_bits_ratio\":%.2f", sz.bits / s2.bits);
+                print(n, src, f, bounds[b], "oceand-zstd", TILE, s2, extra);
+                snprintf(extra, sizeof extra, ",\"entropy\":\"deflate-raw\",\"zfp_bits_ratio\":%.2f", sz.bits / s3.bits);
+                print(n, src, f, bounds[b], "oceand", n, s3, extra);
+                snprintf(extra, sizeof extra, ",\"tolerance\":%.6g", tol);
+                print(n, src, f, bounds[b], "zfp", n, sz, extra);
+            }
+        }
+        for (int f = 0; f < OC_FIELD_COUNT; f++) free(fields[f]);
+    }
+    return 0;
+}

@@ -1,0 +1,70 @@
+/* oc_internal.h — helpers shared by the proto/c modules (not a public API). */
+#ifndef OCEAND_OC_INTERNAL_H
+#define OCEAND_OC_INTERNAL_H
+
+#include "oc_proto.h"
+
+/* Hot loops get an AVX2 clone picked at load time (GCC ifunc); elsewhere plain C. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#define OC_VECTOR_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define OC_VECTOR_CLONES
+#endif
+
+/* Little-endian scalar access (oc_header.c). */
+void oc_put_u16(uint8_t *p, uint16_t v);
+void oc_put_u32(uint8_t *p, uint32_t v);
+void oc_put_u64(uint8_t *p, uint64_t v);
+void oc_put_f32(uint8_t *p, float v);
+void oc_put_f64(uint8_t *p, double v);
+uint16_t oc_get_u16(const uint8_t *p);
+uint32_t oc_get_u32(const uint8_t *p);
+uint64_t oc_get_u64(const uint8_t *p);
+float oc_get_f32(const uint8_t *p);
+double oc_get_f64(const uint8_t *p);
+
+/* Parse + validate a frame header; *hsize = bytes to skip to the first tile. */
+int oc_frame_header_parse(const uint8_t *src, size_t len, struct oc_frame_header *h, size_t *hsize);
+void oc_tile_header_write(uint8_t *dst, const struct oc_tile_header *t);
+/* Parse + validate a tile header against its frame; checks payload_len <= len - 40. */
+int oc_tile_header_parse(const uint8_t *src, size_t len, const struct oc_frame_header *fh,
+                         struct oc_tile_header *t);
+
+/* Lossy payload (codec 1 and 2), PROTOCOL.md §5.5: a 16-byte prefix
+ *   0 u8 esc_width (0..4)   1 u8 0   2 u16 0   4 u32 esc_count
+ *   8 i8 coef[6] (W, N, NW, NE, WW, NN; units of 1/64)   14 u16 0
+ * then the entropy-coded bytes: count bytes of stream A + esc_count*esc_width bytes of stream B. */
+#define OC_LOSSY_PREFIX 16
+#define OC_PRED_COEFS 6
+extern const int8_t oc_lorenzo_coef[OC_PRED_COEFS];
+
+/* The integer pipeline (oc_transform.c). q and zz are w*h, row-major. */
+void oc_predict_fit(const int32_t *q, int w, int h, int8_t coef[OC_PRED_COEFS]);
+void oc_predict_residuals(const int32_t *q, int w, int h, const int8_t coef[OC_PRED_COEFS], uint32_t *zz);
+void oc_unpredict(const uint32_t *zz, int w, int h, const int8_t coef[OC_PRED_COEFS], int32_t *q);
+/* out must hold 5*count bytes; esc_scratch count values. Returns esc_count. */
+size_t oc_pack_escapes(const uint32_t *zz, size_t count, uint8_t *out, uint32_t *esc_scratch, int *esc_width);
+/* in holds count + esc_count*esc_width bytes; OC_E_CORRUPT if the escapes disagree. */
+int oc_unpack_escapes(const uint8_t *in, size_t count, size_t esc_count, int esc_width, uint32_t *zz);
+/* value = float32(offset + q*scale), computed in double: the normative reconstruction. */
+static inline float oc_dequant(int32_t q, double offset, double scale)
+{
+    return (float)(offset + (double)q * scale);
+}
+
+/* Test hook (gen_vectors): force predictor coefficients instead of fitting; NULL = fit. */
+void oc_encoder_force_predictor(struct oc_encoder *e, const int8_t *coef);
+
+/* Entropy coders (oc_entropy.c). One context per encoder/decoder. */
+struct oc_entropy;
+struct oc_entropy *oc_entropy_new(void);
+void oc_entropy_free(struct oc_entropy *c);
+size_t oc_entropy_bound(int codec, size_t n);
+/* Returns compressed size, or 0 on failure. */
+size_t oc_entropy_compress(struct oc_entropy *c, int codec, int level, const uint8_t *src, size_t n,
+                           uint8_t *dst, size_t cap);
+/* Decompress exactly n bytes consuming exactly srclen bytes; OC_E_CORRUPT otherwise. */
+int oc_entropy_decompress(struct oc_entropy *c, int codec, const uint8_t *src, size_t srclen,
+                          uint8_t *dst, size_t n);
+
+#endif

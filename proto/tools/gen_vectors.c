@@ -1,0 +1,262 @@
+/* gen_vectors.c — writes proto/vectors/: encoded frames (.bin), the exact
+ * decoded samples (.expected.f32, all tiles in frame order, little-endian),
+ * the encoder's input samples (.input.f32, same order, to check bounds), bad
+ * inputs, and manifest.json. Deterministic: same output on every run.
+ * Usage: gen_vectors DIR */
+#include "oc_internal.h" /* OC_LOSSY_PREFIX and the integer pipeline, for the crafted vector */
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static unsigned long long rng = 88172645463325252ull;
+static double urand(void)
+{
+    rng ^= rng << 13; rng ^= rng >> 7; rng ^= rng << 17;
+    return (rng >> 11) * 0x1p-53;
+}
+
+/* A smooth periodic sea-like field plus optional noise. */
+static float *make_field(int n, double amp, double noise, double bias)
+{
+    float *f = malloc(sizeof(float) * n * n);
+    for (int z = 0; z < n; z++)
+        for (int x = 0; x < n; x++) {
+            double a = 2 * M_PI * x / n, b = 2 * M_PI * z / n;
+            double v = amp * (0.6 * sin(a + 0.3) + 0.3 * sin(2 * a + 3 * b + 1.1) + 0.1 * cos(5 * b - 4 * a));
+            f[(size_t)z * n + x] = (float)(bias + v + noise * (urand() - 0.5));
+        }
+    return f;
+}
+
+struct tile_req { const float *data; int tx, tz, lod, field; float bound; int codec; };
+
+static FILE *manifest;
+static const char *dir;
+static int first_vector = 1;
+
+static void write_file(const char *name, const void *p, size_t len)
+{
+    char path[512];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    FILE *f = fopen(path, "wb");
+    if (!f || fwrite(p, 1, len, f) != len || fclose(f)) { perror(path); exit(1); }
+}
+
+static void emit(const char *name, const char *desc, int n, int ts, const struct tile_req *reqs, int count,
+                 struct oc_buf *keep)
+{
+    struct oc_encoder *e = oc_encoder_new();
+    struct oc_buf buf = { 0 };
+    struct oc_frame_header fh = { .seq = 1000 + (uint64_t)count, .sim_time = 12.5, .params_version = 3,
+                                  .n = (uint16_t)n, .tile_size = (uint16_t)ts, .patch_size = 256.0f,
+                                  .tile_count = (uint16_t)count, .flags = 0,
+                                  .server_time_us = 1763719200000000ull };
+    oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE);
+    oc_frame_header_write(buf.data, &fh);
+    buf.len = OC_FRAME_HEADER_SIZE;
+    /* Input samples gathered the way the encoder does, for the bound check. */
+    size_t total = 0;
+    for (int i = 0; i < count; i++) total += (size_t)(ts >> reqs[i].lod) * (ts >> reqs[i].lod);
+    float *input = malloc(sizeof(float) * total), *expected = malloc(sizeof(float) * total);
+    size_t at = 0;
+    fprintf(manifest, "%s\n    {\"name\":\"%s\",\"description\":\"%s\",\"file\":\"%s.bin\","
+            "\"expected\":\"%s.expected.f32\",\"input\":\"%s.input.f32\",\n     \"header\":{\"seq\":%llu,"
+            "\"simTime\":%.17g,\"paramsVersion\":%u,\"n\":%d,\"tileSize\":%d,\"patchSize\":%.9g,"
+            "\"tileCount\":%d,\"flags\":0,\"serverTimeUs\":%llu},\n     \"tiles\":[",
+            first_vector ? "" : ",", name, desc, name, name, name, (unsigned long long)fh.seq, fh.sim_time,
+            fh.params_version, n, ts, fh.patch_size, count, (unsigned long long)fh.server_time_us);
+    first_vector = 0;
+    for (int i = 0; i < count; i++) {
+        const struct tile_req *r = &reqs[i];
+        oc_encoder_set_codec(e, r->codec ? (enum oc_codec)r->codec : OC_CODEC_QUANT_LORENZO, 0);
+        size_t before = buf.len;
+        int rc = oc_encode_tile(e, r->data, n, ts, r->tx, r->tz, r->lod, (enum oc_field)r->field, r->bound, &buf);
+        if (rc) { fprintf(stderr, "%s: encode: %s\n", name, oc_strerror(rc)); exit(1); }
+        int side = ts >> r->lod, step = 1 << r->lod;
+        for (int j = 0; j < side; j++)
+            for (int k = 0; k < side; k++)
+                input[at + (size_t)j * side + k] =
+                    r->data[((size_t)r->tz * ts + (size_t)j * step) * n + (size_t)r->tx * ts + (size_t)k * step];
+        /* Read back what the encoder chose (codec may fall back to raw). */
+        const uint8_t *th = buf.data + before;
+        double off, sc; float bnd;
+        memcpy(&bnd, th + 12, 4); memcpy(&off, th + 16, 8); memcpy(&sc, th + 24, 8);
+        fprintf(manifest, "%s\n       {\"field\":\"%s\",\"lod\":%d,\"codec\":%d,\"tileX\":%d,\"tileZ\":%d,"
+                "\"width\":%d,\"height\":%d,\"bound\":%.9g,\"offset\":%.17g,\"scale\":%.17g,"
+                "\"sampleOffset\":%zu}", i ? "," : "", oc_field_name((enum oc_field)r->field), r->lod, th[2],
+                r->tx, r->tz, side, side, bnd, off, sc, at);
+        at += (size_t)side * side;
+    }
+    fprintf(manifest, "]}");
+    /* Expected output = what this library's decoder produces; the tests check it against input. */
+    struct oc_decoder *d = oc_decoder_new();
+    struct oc_frame_header out;
+    struct { float *dst; size_t at; } ctx = { expected, 0 };
+    int decode_cb(void *u, const struct oc_frame_header *h, const struct oc_tile_header *t, const float *s);
+    int rc = oc_decode_frame(d, buf.data, buf.len, &out, decode_cb, &ctx);
+    if (rc) { fprintf(stderr, "%s: decode: %s\n", name, oc_strerror(rc)); exit(1); }
+    char fn[256];
+    snprintf(fn, sizeof fn, "%s.bin", name); write_file(fn, buf.data, buf.len);
+    snprintf(fn, sizeof fn, "%s.expected.f32", name); write_file(fn, expected, sizeof(float) * total);
+    snprintf(fn, sizeof fn, "%s.input.f32", name); write_file(fn, input, sizeof(float) * total);
+    if (keep) { oc_buf_reserve(keep, buf.len); memcpy(keep->data, buf.data, buf.len); keep->len = buf.len; }
+    oc_decoder_free(d); oc_encoder_free(e); oc_buf_free(&buf);
+    free(input); free(expected);
+}
+
+int decode_cb(void *u, const struct oc_frame_header *h, const struct oc_tile_header *t, const float *s)
+{
+    struct { float *dst; size_t at; } *ctx = u;
+    memcpy(ctx->dst + ctx->at, s, sizeof(float) * t->width * t->height);
+    ctx->at += (size_t)t->width * t->height;
+    return 0;
+}
+
+/* A hand-built lossy tile the encoder would never produce: codes near 2^30,
+ * extreme coefficients (predictions need the int32 clamp, residuals wrap
+ * modulo 2^32, 4-byte escapes). Checks that every decoder follows the
+ * integer rules of PROTOCOL.md to the bit, not just on friendly data. */
+static void emit_crafted(void)
+{
+    const int n = 16, ts = 16, side = 16, count = side * side;
+    static int32_t q[256];
+    static uint32_t zz[256], esc[256];
+    static uint8_t packed[256 * 5], frame[8192];
+    static float vals[256];
+    const int8_t coef[OC_PRED_COEFS] = { 127, -128, 127, -128, 127, 127 };
+    const double offset = 0.5, scale = 1e-9;
+    for (int j = 0; j < side; j++)
+        for (int i = 0; i < side; i++)
+            q[j * side + i] = (int32_t)(((i * 7919 + j * 104729) % 2001 - 1000) * 1000000);
+    oc_predict_residuals(q, side, side, coef, zz);
+    int esc_width;
+    size_t esc_count = oc_pack_escapes(zz, count, packed, esc, &esc_width);
+    size_t plain = count + esc_count * (size_t)esc_width;
+    struct oc_entropy *ent = oc_entropy_new();
+    uint8_t *payload = frame + OC_FRAME_HEADER_SIZE + OC_TILE_HEADER_SIZE;
+    memset(payload, 0, OC_LOSSY_PREFIX);
+    payload[0] = (uint8_t)esc_width;
+    payload[4] = (uint8_t)esc_count; payload[5] = (uint8_t)(esc_count >> 8);
+    memcpy(payload + 8, coef, OC_PRED_COEFS);
+    size_t clen = oc_entropy_compress(ent, OC_CODEC_QUANT_LORENZO, 1, packed, plain, payload + OC_LOSSY_PREFIX,
+                                      sizeof frame - 200);
+    oc_entropy_free(ent);
+    struct oc_frame_header fh = { .seq = 77, .sim_time = 1.0, .params_version = 1, .n = n, .tile_size = ts,
+                                  .patch_size = 16.0f, .tile_count = 1 };
+    oc_frame_header_write(frame, &fh);
+    struct oc_tile_header th = { .field = OC_FIELD_HEIGHT, .codec = OC_CODEC_QUANT_LORENZO, .width = side,
+                                 .height = side, .bound = (float)(scale / 2), .offset = offset, .scale = scale,
+                                 .payload_len = (uint32_t)(OC_LOSSY_PREFIX + clen) };
+    oc_tile_header_write(frame + OC_FRAME_HEADER_SIZE, &th);
+    size_t len = OC_FRAME_HEADER_SIZE + OC_TILE_HEADER_SIZE + th.payload_len;
+    for (int k = 0; k < count; k++) vals[k] = oc_dequant(q[k], offset, scale);
+    write_file("v11_crafted.bin", frame, len);
+    write_file("v11_crafted.expected.f32", vals, sizeof vals);
+    write_file("v11_crafted.input.f32", vals, sizeof vals);
+    fprintf(manifest, ",\n    {\"name\":\"v11_crafted\",\"description\":\"hand-built: codes ~1e9, coefficients "
+            "127/-128 (clamped predictions, wrapped residuals), %zu escapes of %d bytes\",\"file\":\"v11_crafted.bin\","
+            "\"expected\":\"v11_crafted.expected.f32\",\"input\":\"v11_crafted.input.f32\",\n     \"header\":{\"seq\":77,"
+            "\"simTime\":1,\"paramsVersion\":1,\"n\":16,\"tileSize\":16,\"patchSize\":16,\"tileCount\":1,\"flags\":0,"
+            "\"serverTimeUs\":0},\n     \"tiles\":[\n       {\"field\":\"height\",\"lod\":0,\"codec\":1,\"tileX\":0,"
+            "\"tileZ\":0,\"width\":16,\"height\":16,\"bound\":%.9g,\"offset\":0.5,\"scale\":%.17g,\"sampleOffset\":0}]}",
+            esc_count, esc_width, th.bound, scale);
+}
+
+static int first_bad = 1;
+static void bad(const char *name, const char *desc, const uint8_t *p, size_t len, const char *err)
+{
+    char fn[256];
+    snprintf(fn, sizeof fn, "%s.bin", name);
+    write_file(fn, p, len);
+    fprintf(manifest, "%s\n    {\"name\":\"%s\",\"description\":\"%s\",\"file\":\"%s\",\"error\":\"%s\"}",
+            first_bad ? "" : ",", name, desc, fn, err);
+    first_bad = 0;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc != 2) { fprintf(stderr, "usage: gen_vectors DIR\n"); return 2; }
+    dir = argv[1];
+    char path[512];
+    snprintf(path, sizeof path, "%s/manifest.json", dir);
+    if (!(manifest = fopen(path, "w"))) { perror(path); return 1; }
+    fprintf(manifest, "{\"protocol\":%d,\"subprotocol\":\"%s\",\n \"note\":\"generated by proto/tools/gen_vectors.c "
+            "(make proto-vectors); expected = exact decoded float32 samples, all tiles in frame order\",\n"
+            " \"vectors\":[", OC_PROTO_VERSION, OC_SUBPROTOCOL);
+
+    float *h8 = make_field(8, 0.5, 0, 0);
+    float *h16 = make_field(16, 1.0, 0, 0);
+    float *h64 = make_field(64, 1.5, 0.002, 0);
+    float *d32 = make_field(32, 0.7, 0, 0.1), *j32 = make_field(32, 0.3, 0, 1.0);
+    float *h128 = make_field(128, 2.0, 0.001, -0.3);
+    float *noise64 = make_field(64, 0.1, 0.5, 0);
+    float *konst = malloc(sizeof(float) * 16 * 16), *huge = make_field(16, 1.0, 0, 0);
+    for (int i = 0; i < 256; i++) konst[i] = 0.25f;
+    huge[5] = 3e9f; huge[17] = -2e9f;
+
+    struct oc_buf tiny = { 0 }, big = { 0 };
+    { struct tile_req r[] = { { h8, 0, 0, 0, 0, 0.01f, 1 } };
+      emit("v01_tiny_lossy", "n=8, one 4x4 height tile, bound 1 cm (the PROTOCOL.md worked example)", 8, 4, r, 1, &tiny); }
+    { struct tile_req r[] = { { h16, 0, 0, 0, 0, 0, 0 }, { h16, 1, 1, 0, 0, 0, 0 } };
+      emit("v02_raw", "raw float32 (bound 0), two of four tiles", 16, 8, r, 2, NULL); }
+    { struct tile_req r[] = { { h64, 0, 0, 0, 0, 0.001f, 1 }, { h64, 1, 0, 0, 0, 0.001f, 1 },
+                              { h64, 0, 1, 0, 0, 0.001f, 1 }, { h64, 1, 1, 0, 0, 0.001f, 1 } };
+      emit("v03_height_1mm", "all tiles of a 64x64 height field, bound 1 mm, deflate", 64, 32, r, 4, &big); }
+    { struct tile_req r[] = { { d32, 1, 0, 0, 1, 0.01f, 1 }, { d32, 1, 0, 0, 2, 0.005f, 1 },
+                              { j32, 1, 0, 0, 3, 0.001f, 1 }, { j32, 1, 0, 0, 4, 0.001f, 1 },
+                              { j32, 1, 0, 0, 5, 0.01f, 1 } };
+      emit("v04_fields", "dx, dz, slope_x, slope_z, jacobian of one tile at several bounds", 32, 16, r, 5, NULL); }
+    { struct tile_req r[] = { { h64, 1, 1, 0, 0, 0.005f, 1 }, { h64, 1, 1, 1, 0, 0.005f, 1 },
+                              { h64, 1, 1, 2, 0, 0.005f, 1 }, { h64, 1, 1, 3, 0, 0.005f, 1 },
+                              { h64, 1, 1, 4, 0, 0.005f, 1 } };
+      emit("v05_lods", "one tile at LOD 0..4 (32, 16, 8, 4, 2 samples per side)", 64, 32, r, 5, NULL); }
+    { struct tile_req r[] = { { h128, 0, 3, 0, 0, 0.01f, 1 }, { h128, 2, 1, 0, 0, 0.01f, 1 },
+                              { h128, 3, 3, 1, 1, 0.01f, 1 } };
+      emit("v06_partial", "3 of 16 tiles (a region), mixed LOD", 128, 32, r, 3, NULL); }
+    { struct tile_req r[] = { { konst, 0, 0, 0, 0, 0.001f, 1 } };
+      emit("v07_constant", "constant tile: every residual after the first is 0", 16, 16, r, 1, NULL); }
+    { struct tile_req r[] = { { h64, 0, 0, 0, 0, 0.001f, 2 }, { h64, 1, 1, 1, 0, 0.01f, 2 } };
+      emit("v08_zstd", "codec 2 (zstd entropy coder)", 64, 32, r, 2, NULL); }
+    { struct tile_req r[] = { { huge, 0, 0, 0, 0, 0.001f, 1 } };
+      emit("v09_huge_range", "range 5e9 at bound 1 mm: codes would not fit, falls back to raw", 16, 16, r, 1, NULL); }
+    { struct tile_req r[] = { { noise64, 0, 0, 0, 0, 0.001f, 1 }, { noise64, 1, 0, 0, 0, 0.05f, 1 } };
+      emit("v10_noise", "white noise: many escaped residuals (stream B)", 64, 32, r, 2, NULL); }
+    emit_crafted();
+    fprintf(manifest, "\n ],\n \"bad\":[");
+
+    uint8_t tmp[4096];
+    bad("bad_short_header", "20 bytes of a frame header", big.data, 20, "truncated");
+    bad("bad_truncated_payload", "valid frame cut inside the last payload", big.data, big.len - 7, "truncated");
+    bad("bad_truncated_tile_header", "frame cut inside a tile header", big.data, OC_FRAME_HEADER_SIZE + 17, "truncated");
+    memcpy(tmp, tiny.data, tiny.len); tmp[0] = 'X';
+    bad("bad_magic", "first byte changed", tmp, tiny.len, "magic");
+    memcpy(tmp, tiny.data, tiny.len); tmp[4] = 2;
+    bad("bad_version", "version 2", tmp, tiny.len, "version");
+    memcpy(tmp, tiny.data, tiny.len); tmp[28] = 0x00; tmp[29] = 0x10;   /* n = 4096 */
+    bad("bad_oversized", "n = 4096 > OC_MAX_N", tmp, tiny.len, "too_large");
+    memcpy(tmp, tiny.data, tiny.len); tmp[28] = 12; tmp[29] = 0;        /* n = 12 */
+    bad("bad_n_not_pow2", "n = 12", tmp, tiny.len, "corrupt");
+    memcpy(tmp, tiny.data, tiny.len); tmp[OC_FRAME_HEADER_SIZE + 4] = 2; /* tile_x = 2 of 2 */
+    bad("bad_tile_outside", "tile_x outside the grid", tmp, tiny.len, "corrupt");
+    memcpy(tmp, tiny.data, tiny.len); tmp[OC_FRAME_HEADER_SIZE + 8] = 8;  /* width 8 != 4 */
+    bad("bad_tile_width", "width inconsistent with tile_size >> lod", tmp, tiny.len, "corrupt");
+    memcpy(tmp, tiny.data, tiny.len); tmp[36] = 2;                       /* tile_count 2, only 1 present */
+    bad("bad_tile_count", "tile_count says 2, one tile present", tmp, tiny.len, "truncated");
+    memcpy(tmp, tiny.data, tiny.len); tmp[tiny.len] = 0;
+    bad("bad_trailing", "one byte after the last tile", tmp, tiny.len + 1, "corrupt");
+    memcpy(tmp, tiny.data, tiny.len); tmp[OC_FRAME_HEADER_SIZE + OC_TILE_HEADER_SIZE] = 7; /* esc_width 7 */
+    bad("bad_esc_width", "lossy prefix esc_width 7", tmp, tiny.len, "corrupt");
+    memcpy(tmp, tiny.data, tiny.len); tmp[OC_FRAME_HEADER_SIZE + 2] = 9;  /* codec 9 */
+    bad("bad_codec", "unknown codec 9", tmp, tiny.len, "corrupt");
+    memcpy(tmp, tiny.data, tiny.len); tmp[OC_FRAME_HEADER_SIZE + 32] += 1;   /* payload_len + 1 */
+    bad("bad_payload_len", "payload_len one byte longer than the frame", tmp, tiny.len, "truncated");
+    memcpy(tmp, tiny.data, tiny.len); tmp[OC_FRAME_HEADER_SIZE + OC_TILE_HEADER_SIZE + OC_LOSSY_PREFIX] |= 0x06; /* BTYPE 3 */
+    bad("bad_deflate", "deflate block type 3 (invalid)", tmp, tiny.len, "corrupt");
+    fprintf(manifest, "\n ]\n}\n");
+    fclose(manifest);
+    oc_buf_free(&tiny); oc_buf_free(&big);
+    free(h8); free(h16); free(h64); free(d32); free(j32); free(h128); free(noise64); free(konst); free(huge);
+    return 0;
+}

@@ -1,0 +1,149 @@
+// proto_js.test.mjs — the JavaScript decoder against proto/vectors/ (node --test).
+// Every vector must decode to exactly the expected float32 bits (same as the
+// C decoder), within its bound of the input; every bad input must be rejected
+// with the listed code; control-message examples must carry their members.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { readFileSync, readdirSync, existsSync } from 'node:fs';
+import { fileURLToPath } from 'node:url';
+import { dirname, join } from 'node:path';
+import { createRequire } from 'node:module';
+import {
+  decodeFrame, parseFrameHeader, setZstdDecompressor, FIELD_NAMES, PROTO_VERSION, SUBPROTOCOL,
+} from '../proto/js/oc_decode.js';
+
+const root = join(dirname(fileURLToPath(import.meta.url)), '..');
+const vdir = join(root, 'proto/vectors');
+const manifest = JSON.parse(readFileSync(join(vdir, 'manifest.json'), 'utf8'));
+const load = (name) => {
+  const b = readFileSync(join(vdir, name));
+  return b.buffer.slice(b.byteOffset, b.byteOffset + b.byteLength); // exact-size ArrayBuffer
+};
+
+// Codec 2 (zstd) needs fzstd, which web/ installs; without it those vectors must fail with 'unsupported'.
+let haveZstd = false;
+const fzstdPath = join(root, 'web/node_modules/fzstd');
+if (existsSync(fzstdPath)) {
+  const fzstd = createRequire(join(root, 'web/package.json'))('fzstd');
+  setZstdDecompressor(fzstd.decompress);
+  haveZstd = true;
+}
+
+test('constants', () => {
+  assert.equal(PROTO_VERSION, manifest.protocol);
+  assert.equal(SUBPROTOCOL, manifest.subprotocol);
+  assert.deepEqual([...FIELD_NAMES], ['height', 'dx', 'dz', 'slope_x', 'slope_z', 'jacobian']);
+});
+
+for (const [v, useNodeZlib] of manifest.vectors.flatMap((x) => [[x, true], [x, false]])) {
+  const usesZstd = v.tiles.some((t) => t.codec === 2);
+  test(`vector ${v.name} (${useNodeZlib ? 'node zlib' : 'DecompressionStream'})`, async () => {
+    const buf = load(v.file);
+    if (usesZstd && !haveZstd) {
+      await assert.rejects(decodeFrame(buf, { useNodeZlib }), (e) => e.code === 'unsupported');
+      return;
+    }
+    const expected = new Float32Array(load(v.expected));
+    const input = new Float32Array(load(v.input));
+    const header = parseFrameHeader(buf);
+    for (const k of Object.keys(v.header)) assert.equal(header[k], v.header[k], `header.${k}`);
+    const frame = await decodeFrame(buf, { useNodeZlib });
+    for (const k of Object.keys(v.header)) assert.equal(frame.header[k], v.header[k], `header.${k}`);
+    assert.equal(frame.tiles.length, v.tiles.length);
+    frame.tiles.forEach((t, i) => {
+      const m = v.tiles[i];
+      assert.equal(t.fieldName, m.field);
+      assert.equal(FIELD_NAMES[t.field], m.field);
+      for (const k of ['lod', 'codec', 'tileX', 'tileZ', 'width', 'height', 'offset', 'scale']) assert.equal(t[k], m[k], k);
+      assert.equal(t.bound, Math.fround(m.bound));
+      const want = expected.subarray(m.sampleOffset, m.sampleOffset + t.samples.length);
+      const got = new Uint32Array(t.samples.buffer, t.samples.byteOffset, t.samples.length);
+      const wantBits = new Uint32Array(want.buffer, want.byteOffset, want.length);
+      assert.deepEqual(got, wantBits, `tile ${i}: float32 bits`);
+      let maxErr = 0;
+      for (let k = 0; k < t.samples.length; k++) maxErr = Math.max(maxErr, Math.abs(t.samples[k] - input[m.sampleOffset + k]));
+      assert.ok(maxErr <= t.bound, `tile ${i}: max error ${maxErr} > bound ${t.bound}`);
+    });
+  });
+}
+
+for (const [b, useNodeZlib] of manifest.bad.flatMap((x) => [[x, true], [x, false]])) {
+  test(`bad input ${b.name} -> ${b.error} (${useNodeZlib ? 'node zlib' : 'DecompressionStream'})`, async () => {
+    const buf = load(b.file);
+    await assert.rejects(decodeFrame(buf, { useNodeZlib }), (e) => {
+      assert.equal(e.code, b.error, e.message);
+      return true;
+    });
+  });
+}
+
+test('typed-array views and offsets are accepted', async () => {
+  const v = manifest.vectors[0];
+  const raw = new Uint8Array(load(v.file));
+  const padded = new Uint8Array(raw.length + 3);
+  padded.set(raw, 3);
+  const frame = await decodeFrame(padded.subarray(3));
+  assert.equal(frame.tiles.length, v.tiles.length);
+});
+
+test('a longer frame header (header_size 56) is skipped; 40 is corrupt', async () => {
+  const v = manifest.vectors[0];
+  const raw = new Uint8Array(load(v.file));
+  const longer = new Uint8Array(raw.length + 8);
+  longer.set(raw.subarray(0, 48));
+  longer.fill(0xab, 48, 56);
+  longer.set(raw.subarray(48), 56);
+  longer[6] = 56;
+  const frame = await decodeFrame(longer.buffer);
+  assert.equal(frame.tiles.length, v.tiles.length);
+  assert.equal(parseFrameHeader(longer.buffer).headerSize, 56);
+  longer[6] = 40;
+  assert.throws(() => parseFrameHeader(longer.buffer), (e) => e.code === 'corrupt');
+});
+
+test('random truncations and bit flips are rejected or decode', async () => {
+  const base = new Uint8Array(load(manifest.vectors.find((v) => v.name === 'v03_height_1mm').file));
+  let seed = 12345;
+  const rnd = () => (seed = (seed * 1103515245 + 12345) >>> 0) / 2 ** 32;
+  const codes = new Set(['truncated', 'magic', 'version', 'corrupt', 'too_large']);
+  for (let it = 0; it < 400; it++) {
+    const cut = it % 2 === 0 ? Math.floor(rnd() * base.length) : base.length;
+    const m = base.slice(0, cut);
+    if (it % 2) for (let f = 0; f < 3; f++) m[Math.floor(rnd() * m.length)] ^= 1 << Math.floor(rnd() * 8);
+    try {
+      await decodeFrame(m.buffer, { useNodeZlib: it % 4 < 2 });
+      assert.ok(it % 2 === 1, 'a truncated frame decoded');
+    } catch (e) {
+      assert.ok(codes.has(e.code), `unexpected error ${e.code}: ${e.message}`);
+    }
+  }
+});
+
+// Control messages: each example carries the members the spec requires.
+const required = {
+  hello: ['protocol', 'server', 'client_id', 'role', 'params', 'params_version', 'schema', 'fields', 'lods', 'bounds',
+    'tick_rate', 'tile_size', 'subscription'],
+  set: ['params'],
+  params: ['params', 'params_version', 'changed', 'by'],
+  subscribe: [],
+  subscribed: ['subscription'],
+  error: ['code', 'message'],
+  ping: [],
+  pong: ['server_time_us'],
+  pause: [],
+  resume: [],
+};
+const cdir = join(vdir, 'control');
+for (const f of readdirSync(cdir).filter((n) => n.endsWith('.json')).sort()) {
+  test(`control example ${f}`, () => {
+    const msg = JSON.parse(readFileSync(join(cdir, f), 'utf8'));
+    assert.ok(msg.type in required, `unknown type ${msg.type}`);
+    for (const k of required[msg.type]) assert.ok(k in msg, `${msg.type} lacks ${k}`);
+    if (msg.type === 'hello') {
+      assert.equal(msg.protocol, PROTO_VERSION);
+      assert.deepEqual(msg.fields, [...FIELD_NAMES]);
+      for (const s of msg.schema) for (const k of ['name', 'type', 'default', 'description']) assert.ok(k in s, `schema ${s.name} lacks ${k}`);
+    }
+    if (msg.type === 'error') assert.match(msg.code, /^[a-z_]+$/);
+  });
+}
