@@ -1,0 +1,102 @@
+#!/usr/bin/python3
+"""ocean_stats.py - subscribe to an oceand server and print statistics of each frame.
+
+    /usr/bin/python3 proto/examples/ocean_stats.py ws://127.0.0.1:8080 --frames 30
+    /usr/bin/python3 proto/examples/ocean_stats.py ws://127.0.0.1:8080 --fields height \\
+        --lod 1 --bound 0.001 --frames 10 --save out      # also write out/height-<seq>.npy
+
+Uses Debian's python3-websockets (10.x) and python3-numpy, and decodes the
+binary frames with oceanproto.py, its own implementation of proto/PROTOCOL.md.
+"""
+import argparse
+import asyncio
+import json
+import os
+import sys
+import time
+
+import numpy as np
+import websockets
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import oceanproto  # noqa: E402
+
+
+async def consume(args):
+    async with websockets.connect(args.url, subprotocols=[oceanproto.SUBPROTOCOL],
+                                  max_size=None, compression=None, open_timeout=args.timeout,
+                                  close_timeout=1) as ws:
+        hello = json.loads(await asyncio.wait_for(ws.recv(), args.timeout))
+        if hello.get("type") != "hello" or hello.get("protocol") != oceanproto.VERSION:
+            raise oceanproto.ProtocolError(f"unexpected first message: {str(hello)[:200]}")
+        p = hello["params"]
+        print(f"connected to {hello.get('server')}: N={p['resolution']} L={p['patch_size']} m "
+              f"wind {p['wind_speed']} m/s, spectrum {p['spectrum']}, tick {hello.get('tick_rate')} Hz")
+
+        # Ask for exactly what we want; wait for the server's normalised answer.
+        sub = {"type": "subscribe", "id": 1, "fields": args.fields, "lod": args.lod, "tiles": "all"}
+        if args.bound is not None:
+            sub["bound"] = args.bound
+        await ws.send(json.dumps(sub))
+        while True:
+            msg = await asyncio.wait_for(ws.recv(), args.timeout)
+            if isinstance(msg, bytes):
+                continue                       # a frame of the default subscription
+            reply = json.loads(msg)
+            if reply.get("type") == "error":
+                raise oceanproto.ProtocolError(f"subscribe rejected: {reply.get('code')}: {reply.get('message')}")
+            if reply.get("type") == "subscribed":
+                break
+
+        grid = oceanproto.Assembler(args.fields, args.lod)
+        done, nbytes, t0 = 0, 0, time.monotonic()
+        while done < args.frames:
+            msg = await asyncio.wait_for(ws.recv(), args.timeout)
+            if not isinstance(msg, bytes):
+                continue                       # params broadcasts etc.
+            frame = oceanproto.decode_frame(msg)
+            grid.add(frame)
+            if not grid.complete():
+                continue
+            done += 1
+            nbytes += len(msg)
+            latency_ms = time.time() * 1e3 - frame.server_time_us / 1e3
+            parts = []
+            for name in args.fields:
+                a = grid.fields[name]
+                parts.append(f"{name}: min {a.min():.3f} max {a.max():.3f} mean {a.mean():.3f} std {a.std():.3f}")
+                if args.save:
+                    np.save(os.path.join(args.save, f"{name}-{frame.seq:08d}.npy"), a)
+            print(f"seq {frame.seq}  t={frame.sim_time:.2f} s  " + "  ".join(parts) +
+                  f"  {len(msg) / 1024:.1f} KiB  latency {latency_ms:.1f} ms", flush=True)
+        dt = time.monotonic() - t0
+        print(f"{done} frames in {dt:.2f} s: {done / dt:.1f} frames/s, "
+              f"{nbytes / max(done, 1) / 1024:.1f} KiB/frame, {nbytes * 8 / dt / 1e6:.2f} Mbit/s")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("url", help="ws://host:port of an oceand server")
+    ap.add_argument("--frames", type=int, default=10, help="complete frames to receive (default 10)")
+    ap.add_argument("--fields", default="height,dx,dz", help="comma-separated field names")
+    ap.add_argument("--lod", type=int, default=0, help="level of detail: (N/2^lod)^2 samples")
+    ap.add_argument("--bound", type=float, help="max abs error; 0 = lossless (default: server's)")
+    ap.add_argument("--save", metavar="DIR", help="write DIR/<field>-<seq>.npy for each frame")
+    ap.add_argument("--timeout", type=float, default=10, help="seconds to wait for any message")
+    args = ap.parse_args()
+    args.fields = args.fields.split(",")
+    unknown = set(args.fields) - set(oceanproto.FIELDS)
+    if unknown:
+        ap.error(f"unknown fields {sorted(unknown)}; known: {', '.join(oceanproto.FIELDS)}")
+    if args.save:
+        os.makedirs(args.save, exist_ok=True)
+    try:
+        asyncio.run(consume(args))
+    except (oceanproto.ProtocolError, websockets.WebSocketException, OSError, asyncio.TimeoutError) as e:
+        print(f"ocean_stats: {type(e).__name__}: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,242 @@
+#!/usr/bin/env bash
+# test-tap: ocean-tap and the Python example against a real oceand.
+# Usage: tests/tap/run.sh BUILD_DIR    (run by `make test-tap` from the repo root)
+set -uo pipefail
+BUILD=${1:-build}
+PY=/usr/bin/python3
+TAP=$BUILD/ocean-tap
+EXAMPLE=proto/examples/ocean_stats.py
+tmp=$(mktemp -d)
+DAEMON_LOG=$tmp/oceand.log
+. "$(dirname "$0")/lib.sh"
+trap 'stop_daemons; rm -rf "$tmp"' EXIT
+
+N=128
+port=$(free_port)
+URL=ws://127.0.0.1:$port
+start_daemon "$port" --port "$port" --bind 127.0.0.1 --state-file "$tmp/state.json" \
+  --web-root "$BUILD/web" --resolution $N || fail "oceand did not start"
+
+# run EXPECTED_RC LABEL CMD... : run, keep stdout/stderr in $tmp/out, $tmp/err.
+run() {
+  local want=$1 label=$2; shift 2
+  "$@" >"$tmp/out" 2>"$tmp/err"
+  local rc=$?
+  [ "$rc" -eq "$want" ] || fail "$label: exit $rc, expected $want
+  command: $*
+  stdout: $(head -c 600 "$tmp/out")
+  stderr: $(head -c 600 "$tmp/err")"
+}
+# json_get FILE EXPR : evaluate a Python expression on the JSON document j.
+json_get() { $PY -c 'import json,sys; j=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))' "$1" "$2"; }
+
+section "command line and connection errors"
+run 1 "no URL" "$TAP"
+run 1 "bad --lod" "$TAP" "$URL" --lod 9
+run 1 "bad --fields" "$TAP" "$URL" --fields height,nope
+run 1 "bad --set" "$TAP" "$URL" --set wind_speed
+run 0 "--help" "$TAP" --help
+grep -q 'Exit codes' "$tmp/out" || fail "--help does not document the exit codes"
+closed=$(free_port)
+run 2 "nothing listening" "$TAP" "ws://127.0.0.1:$closed" --timeout 3
+grep -q 'cannot connect' "$tmp/err" || fail "connect failure message missing: $(cat "$tmp/err")"
+run 5 "unwritable --out" "$TAP" "$URL" --frames 1 --out /dev/null/x
+ok "usage (1), connect (2) and output (5) errors"
+
+section "hello"
+run 0 "hello" "$TAP" "$URL"
+cp "$tmp/out" "$tmp/hello.json"
+[ "$(json_get "$tmp/hello.json" 'j["protocol"]')" = 1 ] || fail "hello.protocol is not 1"
+[ "$(json_get "$tmp/hello.json" 'j["params"]["resolution"]')" = $N ] || fail "hello does not report resolution $N"
+ok "ocean-tap prints the hello as JSON"
+
+section "frames in every format"
+run 0 "npy frames" "$TAP" "$URL" --frames 3 --fields height,dx,dz --lod 1 --bound 0.001 --out "$tmp/npy" --format npy
+$PY - "$tmp/npy" $((N / 2)) <<'EOF' || fail "npy output is wrong"
+import glob, os, sys
+import numpy as np
+d, side = sys.argv[1], int(sys.argv[2])
+files = sorted(glob.glob(os.path.join(d, "*.npy")))
+seqs = {os.path.basename(f).split("-")[1] for f in files}
+assert len(seqs) == 3, f"expected 3 frames, got seqs {sorted(seqs)}"
+for s in seqs:
+    arrays = {}
+    for field in ("height", "dx", "dz"):
+        a = np.load(os.path.join(d, f"{field}-{s}"))
+        assert a.dtype == np.float32 and a.shape == (side, side), (field, a.dtype, a.shape)
+        assert np.isfinite(a).all(), f"{field} has non-finite samples"
+        assert a.std() > 0, f"{field} is constant"
+        arrays[field] = a
+    assert not np.array_equal(arrays["height"], arrays["dx"]), "height and dx are the same data"
+print(f"  {len(files)} files, {len(seqs)} frames of 3 fields, {side}x{side} float32")
+EOF
+run 0 "raw frame" "$TAP" "$URL" --frames 1 --fields height --bound 0 --out "$tmp/raw" --format raw
+f32=$(ls "$tmp"/raw/height-*.f32) || fail "no raw file"
+[ "$(stat -c %s "$f32")" -eq $((N * N * 4)) ] || fail "raw file has $(stat -c %s "$f32") bytes, expected $((N * N * 4))"
+side=$(json_get "${f32%.f32}.json" 'j["shape"][0]')
+seq=$(json_get "${f32%.f32}.json" 'j["seq"]')
+[ "$side" = $N ] || fail "sidecar shape $side, expected $N"
+[ "$(basename "$f32")" = "$(printf 'height-%08d.f32' "$seq")" ] || fail "sidecar seq $seq does not match $(basename "$f32")"
+for fmt in pgm pgm8; do
+  run 0 "$fmt frame" "$TAP" "$URL" --frames 1 --fields jacobian --lod 2 --max-rate 10 --out "$tmp/$fmt" --format $fmt
+  pgm=$(ls "$tmp"/$fmt/jacobian-*.pgm) || fail "no $fmt file"
+  maxval=$([ $fmt = pgm ] && echo 65535 || echo 255); bpp=$([ $fmt = pgm ] && echo 2 || echo 1)
+  $PY - "$pgm" $((N / 4)) $maxval $bpp <<'EOF' || fail "$fmt output is wrong"
+import sys
+path, side, maxval, bpp = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+data = open(path, "rb").read()
+lines = data.split(b"\n", 4)
+assert lines[0] == b"P5" and lines[1].startswith(b"# min="), lines[:2]
+assert lines[2] == f"{side} {side}".encode() and lines[3] == str(maxval).encode(), lines[2:4]
+assert len(lines[4]) == side * side * bpp, len(lines[4])
+px = [int.from_bytes(lines[4][k:k + bpp], "big") for k in range(0, len(lines[4]), bpp)]
+assert min(px) == 0 and max(px) == maxval, (min(px), max(px))   # normalised min..max
+EOF
+done
+ok "npy (3 frames x 3 fields, LOD 1), raw + sidecar, pgm 16-bit and 8-bit"
+
+section "memory checks (valgrind)"
+if command -v valgrind >/dev/null; then
+  VG="valgrind -q --error-exitcode=99 --leak-check=full --errors-for-leak-kinds=definite,indirect"
+  # One run through every code path that allocates: set, subscribe, frames, stats, files.
+  run 0 "ocean-tap under valgrind" $VG "$TAP" "$URL" --set amplitude=1 --frames 2 --fields height,jacobian \
+    --lod 1 --bound 0.001 --out "$tmp/vg" --format raw --stats
+  ok "no memory errors or leaks in ocean-tap (set, frames, stats, raw output)"
+else
+  echo "  skip: valgrind not installed"
+fi
+
+section "--stats"
+run 0 "stats" "$TAP" "$URL" --frames 5 --fields height --stats
+line=$(grep '^frames=' "$tmp/out") || fail "no summary line: $(cat "$tmp/out")"
+$PY - "$line" <<'EOF' || fail "bad stats line: $line"
+import sys
+kv = dict(p.split("=") for p in sys.argv[1].split())
+assert int(kv["frames"]) == 5 and float(kv["fps"]) > 0 and int(kv["bytes"]) > 0, kv
+for k in ("latency_ms_p50", "latency_ms_p95", "latency_ms_max", "mbit_per_s"):
+    float(kv[k])
+EOF
+ok "$line"
+
+section "--set and --watch"
+"$TAP" "$URL" --watch >"$tmp/watch.out" 2>"$tmp/watch.err" &
+watch_pid=$!
+# The watcher has to be connected before the change; retry until it sees one.
+seen=0
+for i in 1 2 3 4 5 6 7 8 9 10; do
+  run 0 "set choppiness" "$TAP" "$URL" --set choppiness=$((i % 2)).5   # alternates: always a change
+  grep -q '"choppiness"' "$tmp/watch.out" && { seen=1; break; }
+  sleep 0.3
+done
+[ $seen = 1 ] || fail "--watch printed no params broadcast: $(cat "$tmp/watch.out" "$tmp/watch.err")"
+kill -INT $watch_pid; wait $watch_pid; rc=$?
+[ $rc -eq 0 ] || fail "--watch exited $rc after Ctrl-C: $(cat "$tmp/watch.err")"
+$PY - "$tmp/watch.out" <<'EOF' || fail "--watch output is not params JSON lines"
+import json, sys
+msgs = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
+assert msgs and all(m["type"] == "params" for m in msgs), msgs
+assert any("choppiness" in m["changed"] for m in msgs), msgs
+EOF
+run 0 "set two parameters" "$TAP" "$URL" --set wind_speed=20 --set spectrum=phillips
+grep -Eq '^params_version=[0-9]+ changed=.*wind_speed' "$tmp/out" && grep -q 'spectrum' "$tmp/out" \
+  || fail "set did not report both changes: $(cat "$tmp/out")"
+run 0 "hello after set" "$TAP" "$URL"
+[ "$(json_get "$tmp/out" 'j["params"]["wind_speed"]')" = 20 ] || fail "wind_speed is not 20 after set"
+[ "$(json_get "$tmp/out" 'j["params"]["spectrum"]')" = phillips ] || fail "spectrum is not phillips after set"
+run 4 "out of range" "$TAP" "$URL" --set wind_speed=1000
+grep -q 'out_of_range' "$tmp/err" && grep -q 'wind_speed' "$tmp/err" || fail "no out_of_range/wind_speed in: $(cat "$tmp/err")"
+run 4 "unknown parameter" "$TAP" "$URL" --set no_such_thing=1
+grep -q 'unknown_param' "$tmp/err" || fail "no unknown_param in: $(cat "$tmp/err")"
+run 4 "bad enum" "$TAP" "$URL" --set spectrum=bogus
+run 4 "all or nothing" "$TAP" "$URL" --set wind_speed=5 --set no_such_thing=1
+run 0 "hello after rejects" "$TAP" "$URL"
+[ "$(json_get "$tmp/out" 'j["params"]["wind_speed"]')" = 20 ] || fail "a rejected set changed wind_speed"
+ok "--watch sees changes; --set applies (0) and reports rejections with the server's code (4)"
+
+section "Python example: its decoder against the shared test vectors"
+$PY tests/tap/test_oceanproto.py proto/vectors || fail "the Python decoder disagrees with proto/vectors"
+
+section "Python example decodes exactly what ocean-tap decodes"
+run 0 "pause" "$TAP" "$URL" --set paused=true
+# compare LOD BOUND : run both clients at once so they receive the same frames.
+compare() {
+  local lod=$1 bound=$2 a=$tmp/cmp-tap-$1-$2 b=$tmp/cmp-py-$1-$2
+  # Python starts slower (numpy import): give it a head start for more common frames.
+  $PY "$EXAMPLE" "$URL" --frames 8 --fields height,dx,dz,jacobian --lod "$lod" --bound "$bound" --save "$b" >"$tmp/py.out" 2>&1 &
+  local pp=$!
+  sleep 0.3
+  "$TAP" "$URL" --frames 8 --fields height,dx,dz,jacobian --lod "$lod" --bound "$bound" --out "$a" >"$tmp/tap.out" 2>&1
+  local trc=$?
+  wait $pp; local prc=$?
+  [ $trc -eq 0 ] || fail "ocean-tap (lod $lod, bound $bound) exited $trc: $(cat "$tmp/tap.out")"
+  [ $prc -eq 0 ] || fail "$EXAMPLE (lod $lod, bound $bound) exited $prc: $(cat "$tmp/py.out")"
+  $PY - "$a" "$b" <<'EOF' || fail "Python and C decoders disagree (lod $lod, bound $bound)"
+import glob, os, sys
+import numpy as np
+a, b = sys.argv[1], sys.argv[2]
+ta = {os.path.basename(f) for f in glob.glob(a + "/*.npy")}
+tb = {os.path.basename(f) for f in glob.glob(b + "/*.npy")}
+common = sorted(ta & tb)
+if not common:
+    # The sea is paused, so every frame is the same: compare the last of each.
+    last = lambda names, field: max(n for n in names if n.startswith(field + "-"))
+    pairs = [(last(ta, f), last(tb, f)) for f in ("height", "dx", "dz", "jacobian")]
+else:
+    pairs = [(n, n) for n in common]
+for na, nb in pairs:
+    x, y = np.load(os.path.join(a, na)), np.load(os.path.join(b, nb))
+    assert x.dtype == y.dtype == np.float32 and x.shape == y.shape, (na, x.dtype, x.shape, y.dtype, y.shape)
+    if not np.array_equal(x.view(np.uint32), y.view(np.uint32)):
+        diff = np.abs(x.astype(np.float64) - y)
+        sys.exit(f"{na}: {np.count_nonzero(diff)} samples differ, max {diff.max()}")
+print(f"  {len(pairs)} field arrays bit-identical ({len(pairs) // 4} frames with the same seq)" if common
+      else f"  {len(pairs)} field arrays bit-identical (no common seq; same paused sea)")
+EOF
+}
+compare 0 0
+compare 1 0.001
+compare 2 0.05
+grep -q 'height' "$tmp/py.out" || fail "the example prints no statistics: $(cat "$tmp/py.out")"
+
+# Lossy vs lossless of the same paused sea: the Python decoder honours the bound.
+"$TAP" "$URL" --frames 1 --fields height --bound 0 --out "$tmp/exact" >/dev/null 2>&1 || fail "lossless frame"
+$PY "$EXAMPLE" "$URL" --frames 1 --fields height --bound 0.005 --save "$tmp/lossy" >/dev/null 2>&1 || fail "example, bound 0.005"
+$PY - "$tmp/exact" "$tmp/lossy" 0.005 <<'EOF' || fail "the Python decoder exceeds the error bound"
+import glob, sys
+import numpy as np
+x = np.load(glob.glob(sys.argv[1] + "/height-*.npy")[0]).astype(np.float64)
+y = np.load(glob.glob(sys.argv[2] + "/height-*.npy")[0]).astype(np.float64)
+err = np.abs(x - y).max()
+# bound, plus float32 rounding of the reconstruction
+assert err <= float(sys.argv[3]) * (1 + 1e-6) + np.abs(x).max() * 2**-23, err
+print(f"  max |lossy - lossless| = {err:.6f} <= 0.005")
+EOF
+run 0 "resume" "$TAP" "$URL" --set paused=false
+ok "lossless and lossy (LOD 0/1/2) frames identical in both decoders; bound honoured"
+
+section "control token, timeouts and a server that goes away"
+silent=$(free_port)
+# A TCP listener that accepts and never answers the WebSocket handshake.
+$PY -c 'import socket, sys, time
+s = socket.socket(); s.bind(("127.0.0.1", int(sys.argv[1]))); s.listen(1)
+c, _ = s.accept(); time.sleep(5)' "$silent" &
+silent_pid=$!
+sleep 0.3
+run 6 "silent server" "$TAP" "ws://127.0.0.1:$silent" --timeout 1
+grep -q 'timed out' "$tmp/err" || fail "no timeout message: $(cat "$tmp/err")"
+kill $silent_pid 2>/dev/null; wait $silent_pid 2>/dev/null
+port2=$(free_port)
+start_daemon "$port2" --port "$port2" --state-file none --resolution 64 --control-token s3cret \
+  || fail "second oceand did not start"
+run 4 "set without the control token" "$TAP" "ws://127.0.0.1:$port2" --set wind_speed=5
+grep -q 'forbidden' "$tmp/err" || fail "no forbidden in: $(cat "$tmp/err")"
+run 0 "set with --token" "$TAP" "ws://127.0.0.1:$port2" --token s3cret --set wind_speed=5
+"$TAP" "ws://127.0.0.1:$port2" --frames 0 --fields height >"$tmp/out" 2>"$tmp/err" &
+stream_pid=$!
+sleep 0.5
+kill "${DAEMON_PIDS[-1]}"
+wait $stream_pid; rc=$?
+[ $rc -eq 7 ] || fail "stream from a daemon that stopped: exit $rc, expected 7: $(cat "$tmp/err")"
+ok "control token: without -> 4 forbidden, with --token -> 0; no answer -> 6, server gone mid-stream -> 7"
+
+finish_ok

@@ -1,0 +1,54 @@
+"""The Python example's decoder (proto/examples/oceanproto.py) against the
+shared test vectors (proto/vectors/): every good vector decodes to exactly the
+expected float32 samples, every bad vector is rejected with the error code of the manifest.
+Usage: /usr/bin/python3 tests/tap/test_oceanproto.py [proto/vectors]"""
+import json
+import os
+import sys
+
+import numpy as np
+
+here = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(here, "..", "..", "proto", "examples"))
+import oceanproto  # noqa: E402
+
+vdir = sys.argv[1] if len(sys.argv) > 1 else os.path.join(here, "..", "..", "proto", "vectors")
+manifest = json.load(open(os.path.join(vdir, "manifest.json")))
+failures = 0
+good = 0
+for v in manifest["vectors"]:
+    data = open(os.path.join(vdir, v["file"]), "rb").read()
+    expected = np.fromfile(os.path.join(vdir, v["expected"]), "<f4")
+    try:
+        frame = oceanproto.decode_frame(data)
+    except oceanproto.ProtocolError as e:
+        print(f"FAIL {v['name']}: rejected: {e}")
+        failures += 1
+        continue
+    got = np.concatenate([t.samples.ravel() for t in frame.tiles]) if frame.tiles else np.zeros(0, np.float32)
+    h = v["header"]
+    if (frame.seq, frame.n, frame.tile_size, len(frame.tiles)) != (h["seq"], h["n"], h["tileSize"], h["tileCount"]):
+        print(f"FAIL {v['name']}: header {frame.seq, frame.n, frame.tile_size, len(frame.tiles)}")
+        failures += 1
+    elif got.shape != expected.shape or not np.array_equal(got.view(np.uint32), expected.view(np.uint32)):
+        n = np.count_nonzero(got != expected) if got.shape == expected.shape else "shape"
+        print(f"FAIL {v['name']}: samples differ ({n})")
+        failures += 1
+    else:
+        good += 1
+bad = 0
+for b in manifest.get("bad", []):
+    try:
+        oceanproto.decode_frame(open(os.path.join(vdir, b["file"]), "rb").read())
+        print(f"FAIL {b['name']}: accepted")
+        failures += 1
+    except oceanproto.ProtocolError as e:
+        if e.code != b["error"]:
+            print(f"FAIL {b['name']}: error {e.code}, expected {b['error']} ({e})")
+            failures += 1
+        else:
+            bad += 1
+if failures or not good or not bad:
+    print(f"FAIL: {failures} failures ({good} good vectors decoded, {bad} bad vectors rejected)")
+    sys.exit(1)
+print(f"  ok  Python decoder: {good} vectors bit-exact, {bad} malformed frames rejected with the right error")

@@ -1,0 +1,696 @@
+/* ocean-tap — a command-line client of oceand for scripts and pipelines.
+ *
+ *   ocean-tap ws://host:8080 --frames 100 --fields height,dx,dz --lod 1 \
+ *             --bound 0.001 --out DIR --format npy|raw|pgm|pgm8
+ *   ocean-tap ws://host:8080 --set wind_speed=20 --set spectrum=jonswap
+ *   ocean-tap ws://host:8080 --watch
+ *
+ * One WebSocket connection (libwebsockets client, subprotocol oceand.v1),
+ * JSON control messages (cJSON) and binary frames decoded by the project's
+ * own decoder (proto/c). The steps run in order: hello -> set (if any) ->
+ * subscribe (if frames are wanted) -> frames / watch. See usage() for the
+ * exit codes a script can rely on. */
+#include <cjson/cJSON.h>
+#include <errno.h>
+#include <getopt.h>
+#include <libwebsockets.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+
+#include "oc_proto.h"
+#include "tap_frame.h"
+#include "tap_write.h"
+
+enum exit_code {
+    EXIT_OK = 0,
+    EXIT_USAGE = 1,       /* bad command line */
+    EXIT_CONNECT = 2,     /* could not connect or WebSocket handshake failed */
+    EXIT_PROTOCOL = 3,    /* malformed message or frame from the server */
+    EXIT_REJECTED = 4,    /* server answered a set/subscribe with an error */
+    EXIT_OUTPUT = 5,      /* could not write an output file */
+    EXIT_TIMEOUT = 6,     /* no answer / no frame within --timeout */
+    EXIT_CLOSED = 7,      /* server closed the connection before we were done */
+    EXIT_INTERRUPTED = 130, /* Ctrl-C before the first frame / answer (shell convention) */
+};
+
+#define MAX_SETS 64
+#define ID_SET 1
+#define ID_SUBSCRIBE 2
+#define ID_QUIET 3     /* watch only: the smallest subscription there is */
+
+static void usage(FILE *to)
+{
+    fprintf(to,
+        "usage: ocean-tap URL [options]\n"
+        "  URL                 ws://host:port[/path] of an oceand server (wss:// for TLS)\n"
+        "Frames:\n"
+        "  --frames N          receive N complete frames, then exit (0 = until Ctrl-C,\n"
+        "                      the default when only --out or --stats is given)\n"
+        "  --fields LIST       comma-separated: height,dx,dz,slope_x,slope_z,jacobian\n"
+        "                      (default height,dx,dz)\n"
+        "  --lod L             level of detail 0..4: fields are (N/2^L)^2 samples (default 0)\n"
+        "  --bound B           max abs error of the lossy codec, one of the server's bounds;\n"
+        "                      0 = lossless float32 (default: the server's, 0.01)\n"
+        "  --max-rate HZ       at most HZ frames per second\n"
+        "  --out DIR           write every frame, one file per field: DIR/<field>-<seq>.<ext>\n"
+        "  --format F          npy (default; numpy.load), raw (float32 + .json sidecar),\n"
+        "                      pgm (16-bit greyscale, min..max), pgm8 (8-bit)\n"
+        "  --stats             print frames/s, bytes and latency (each second to stderr,\n"
+        "                      summary on stdout at exit)\n"
+        "Control:\n"
+        "  --set NAME=VALUE    change a sea parameter (repeatable, applied together);\n"
+        "                      waits for the server's answer, prints the new params_version\n"
+        "  --token T           control token, when the server requires one\n"
+        "  --watch             print every params broadcast, one JSON line each (without\n"
+        "                      --frames/--out/--stats it subscribes to almost nothing)\n"
+        "Other:\n"
+        "  --timeout S         give up after S seconds without an expected answer (default 10)\n"
+        "  -v, --verbose       libwebsockets notices on stderr\n"
+        "  -h, --help          this text\n"
+        "Without --frames/--out/--stats/--set/--watch, prints the server's hello as JSON.\n"
+        "Exit codes: 0 ok, 1 usage, 2 connect failed, 3 protocol error,\n"
+        "  4 server rejected the request (its error code is printed), 5 output write failed,\n"
+        "  6 timeout, 7 connection closed by the server, 130 interrupted before the\n"
+        "  stream started (Ctrl-C during a stream or --watch exits 0).\n");
+}
+
+/* ---- options ------------------------------------------------------------ */
+
+struct opts {
+    char url[1024];
+    long frames;          /* -1 = not given */
+    unsigned fields;
+    int lod;
+    double bound;         /* < 0 = not given */
+    int max_rate;         /* 0 = not given */
+    const char *out_dir;
+    int format;
+    int stats, watch, verbose;
+    const char *sets[MAX_SETS];
+    int nsets;
+    const char *token;
+    double timeout;
+};
+
+static int parse_fields(const char *list, unsigned *mask)
+{
+    char buf[256];
+    snprintf(buf, sizeof buf, "%s", list);
+    *mask = 0;
+    for (char *save = NULL, *tok = strtok_r(buf, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
+        int f = oc_field_from_name(tok);
+        if (f < 0) return -1;
+        *mask |= 1u << f;
+    }
+    return *mask ? 0 : -1;
+}
+
+static int usage_error(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    fputs("ocean-tap: ", stderr);
+    vfprintf(stderr, fmt, ap);
+    fputs("\n(ocean-tap --help for usage)\n", stderr);
+    va_end(ap);
+    return EXIT_USAGE;
+}
+
+/* Returns -1 to continue, or an exit code. */
+static int parse_args(int argc, char **argv, struct opts *o)
+{
+    static const struct option longs[] = {
+        {"frames", required_argument, 0, 'n'}, {"fields", required_argument, 0, 'f'},
+        {"lod", required_argument, 0, 'l'},    {"bound", required_argument, 0, 'b'},
+        {"max-rate", required_argument, 0, 'r'}, {"out", required_argument, 0, 'o'},
+        {"format", required_argument, 0, 'F'}, {"stats", no_argument, 0, 's'},
+        {"set", required_argument, 0, 'S'},   {"token", required_argument, 0, 'T'},
+        {"watch", no_argument, 0, 'w'},       {"timeout", required_argument, 0, 't'},
+        {"verbose", no_argument, 0, 'v'},     {"help", no_argument, 0, 'h'},
+        {0, 0, 0, 0}};
+    *o = (struct opts){.frames = -1, .fields = 7u, .bound = -1, .format = TAP_NPY, .timeout = 10};
+    int c;
+    char *end;
+    while ((c = getopt_long(argc, argv, "vh", longs, NULL)) != -1) {
+        switch (c) {
+        case 'n':
+            o->frames = strtol(optarg, &end, 10);
+            if (*end || o->frames < 0) return usage_error("--frames needs a count >= 0");
+            break;
+        case 'f':
+            if (parse_fields(optarg, &o->fields)) return usage_error("unknown field in --fields %s", optarg);
+            break;
+        case 'l':
+            o->lod = (int)strtol(optarg, &end, 10);
+            if (*end || o->lod < 0 || o->lod > OC_MAX_LOD) return usage_error("--lod must be 0..%d", OC_MAX_LOD);
+            break;
+        case 'b':
+            o->bound = strtod(optarg, &end);
+            if (*end || !(o->bound >= 0)) return usage_error("--bound needs a number >= 0");
+            break;
+        case 'r':
+            o->max_rate = (int)strtol(optarg, &end, 10);
+            if (*end || o->max_rate <= 0) return usage_error("--max-rate needs a number > 0");
+            break;
+        case 'o': o->out_dir = optarg; break;
+        case 'F':
+            o->format = tap_format_from_name(optarg);
+            if (o->format < 0) return usage_error("--format must be npy, raw, pgm or pgm8");
+            break;
+        case 's': o->stats = 1; break;
+        case 'S':
+            if (!strchr(optarg, '=') || optarg[0] == '=') return usage_error("--set needs NAME=VALUE");
+            if (o->nsets == MAX_SETS) return usage_error("too many --set");
+            o->sets[o->nsets++] = optarg;
+            break;
+        case 'T': o->token = optarg; break;
+        case 'w': o->watch = 1; break;
+        case 't':
+            o->timeout = strtod(optarg, &end);
+            if (*end || !(o->timeout > 0)) return usage_error("--timeout needs seconds > 0");
+            break;
+        case 'v': o->verbose = 1; break;
+        case 'h': usage(stdout); return EXIT_OK;
+        default: return usage_error("unknown option");
+        }
+    }
+    if (optind != argc - 1) return usage_error(optind >= argc ? "missing URL" : "one URL only");
+    if (strlen(argv[optind]) >= sizeof o->url - 8) return usage_error("URL too long");
+    snprintf(o->url, sizeof o->url, "%s%s", strstr(argv[optind], "://") ? "" : "ws://", argv[optind]);
+    return -1;
+}
+
+/* ---- session state ------------------------------------------------------ */
+
+enum stage { ST_HELLO, ST_SET, ST_SUBSCRIBE, ST_RUN, ST_DONE };
+
+struct stats {
+    double t0, last_report;
+    long frames_at_report;
+    unsigned long long bytes, bytes_at_report;
+    double *lat_ms;       /* per frame: receive time - server_time_us */
+    size_t nlat, caplat;
+};
+
+struct session {
+    struct opts *o;
+    enum stage stage;
+    int exit_code;
+    int want_frames;
+    cJSON *schema;        /* hello.schema, to type --set values */
+    struct oc_buf msg;    /* the message being reassembled */
+    char *outq[4];        /* text messages waiting for WRITEABLE */
+    int noutq;
+    struct tap_frame *grid; /* the subscribed fields, assembled from tiles */
+    long frames_done;
+    double last_activity;
+    struct stats st;
+    struct lws *wsi;
+};
+
+static volatile sig_atomic_t interrupted;
+static struct lws_context *g_ctx;
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static double wall_us(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return ts.tv_sec * 1e6 + ts.tv_nsec * 1e-3;
+}
+
+static void finish(struct session *s, int code)
+{
+    if (s->stage == ST_DONE) return;
+    s->stage = ST_DONE;
+    s->exit_code = code;
+}
+
+/* Report the first failure only: later ones are its consequences. */
+static void fail(struct session *s, int code, const char *fmt, ...)
+{
+    if (s->stage == ST_DONE) return;
+    va_list ap;
+    va_start(ap, fmt);
+    fputs("ocean-tap: ", stderr);
+    vfprintf(stderr, fmt, ap);
+    fputc('\n', stderr);
+    va_end(ap);
+    finish(s, code);
+}
+
+/* Queue a JSON message (takes ownership of j) and ask lws for a write slot. */
+static void send_json(struct session *s, cJSON *j)
+{
+    char *text = cJSON_PrintUnformatted(j);
+    cJSON_Delete(j);
+    if (!text || s->noutq == (int)(sizeof s->outq / sizeof s->outq[0])) {
+        free(text);
+        fail(s, EXIT_PROTOCOL, "out of memory");
+        return;
+    }
+    s->outq[s->noutq++] = text;
+    lws_callback_on_writable(s->wsi);
+}
+
+/* ---- requests ----------------------------------------------------------- */
+
+static const char *schema_type(struct session *s, const char *name)
+{
+    cJSON *p;
+    cJSON_ArrayForEach(p, s->schema) {
+        cJSON *n = cJSON_GetObjectItemCaseSensitive(p, "name");
+        if (cJSON_IsString(n) && !strcmp(n->valuestring, name)) {
+            cJSON *t = cJSON_GetObjectItemCaseSensitive(p, "type");
+            return cJSON_IsString(t) ? t->valuestring : NULL;
+        }
+    }
+    return NULL;
+}
+
+/* The JSON value of a --set: typed by the server's schema. A value that does
+ * not fit its type is sent as a string, so the server (the one authority on
+ * parameters) answers with its documented error code. */
+static cJSON *set_value(struct session *s, const char *name, const char *text)
+{
+    const char *type = schema_type(s, name);
+    char *end;
+    if (type && !strcmp(type, "bool")) {
+        if (!strcmp(text, "true")) return cJSON_CreateTrue();
+        if (!strcmp(text, "false")) return cJSON_CreateFalse();
+        return cJSON_CreateString(text);
+    }
+    if (type && !strcmp(type, "enum")) return cJSON_CreateString(text);
+    double v = strtod(text, &end);
+    if (*text && !*end) return cJSON_CreateNumber(v);
+    return cJSON_CreateString(text);
+}
+
+static void send_set(struct session *s)
+{
+    cJSON *j = cJSON_CreateObject(), *params = cJSON_CreateObject();
+    cJSON_AddStringToObject(j, "type", "set");
+    cJSON_AddNumberToObject(j, "id", ID_SET);
+    for (int i = 0; i < s->o->nsets; i++) {
+        const char *eq = strchr(s->o->sets[i], '=');
+        char name[128];
+        snprintf(name, sizeof name, "%.*s", (int)(eq - s->o->sets[i]), s->o->sets[i]);
+        cJSON_DeleteItemFromObjectCaseSensitive(params, name); /* last --set of a name wins */
+        cJSON_AddItemToObject(params, name, set_value(s, name, eq + 1));
+    }
+    cJSON_AddItemToObject(j, "params", params);
+    if (s->o->token) cJSON_AddStringToObject(j, "token", s->o->token);
+    send_json(s, j);
+}
+
+static void send_subscribe(struct session *s)
+{
+    cJSON *j = cJSON_CreateObject(), *fields = cJSON_CreateArray();
+    cJSON_AddStringToObject(j, "type", "subscribe");
+    cJSON_AddNumberToObject(j, "id", ID_SUBSCRIBE);
+    for (int f = 0; f < OC_FIELD_COUNT; f++)
+        if (s->o->fields & (1u << f)) cJSON_AddItemToArray(fields, cJSON_CreateString(oc_field_name(f)));
+    cJSON_AddItemToObject(j, "fields", fields);
+    cJSON_AddNumberToObject(j, "lod", s->o->lod);
+    cJSON_AddStringToObject(j, "tiles", "all");
+    if (s->o->bound >= 0) cJSON_AddNumberToObject(j, "bound", s->o->bound);
+    if (s->o->max_rate > 0) cJSON_AddNumberToObject(j, "max_rate", s->o->max_rate);
+    send_json(s, j);
+}
+
+/* A watcher wants no frames, but a subscription cannot be empty: ask for one
+ * 4x4-sample tile of one field, once a second (about 100 bytes/s). */
+static void send_quiet_subscribe(struct session *s)
+{
+    cJSON *j = cJSON_CreateObject(), *tiles = cJSON_CreateArray(), *t00 = cJSON_CreateArray();
+    cJSON_AddStringToObject(j, "type", "subscribe");
+    cJSON_AddNumberToObject(j, "id", ID_QUIET);
+    cJSON *fields = cJSON_AddArrayToObject(j, "fields");
+    cJSON_AddItemToArray(fields, cJSON_CreateString("height"));
+    cJSON_AddNumberToObject(j, "lod", OC_MAX_LOD);
+    cJSON_AddItemToArray(t00, cJSON_CreateNumber(0));
+    cJSON_AddItemToArray(t00, cJSON_CreateNumber(0));
+    cJSON_AddItemToArray(tiles, t00);
+    cJSON_AddItemToObject(j, "tiles", tiles);
+    cJSON_AddNumberToObject(j, "max_rate", 1);
+    send_json(s, j);
+}
+
+/* Move on from the stage just completed to the next one that applies. */
+static void advance(struct session *s)
+{
+    if (s->stage == ST_HELLO && s->o->nsets) { s->stage = ST_SET; send_set(s); return; }
+    if (s->stage <= ST_SET && s->want_frames) { s->stage = ST_SUBSCRIBE; send_subscribe(s); return; }
+    if (s->stage <= ST_SUBSCRIBE && (s->want_frames || s->o->watch)) {
+        s->stage = ST_RUN;
+        s->st.t0 = s->st.last_report = now_s();
+        if (!s->want_frames) send_quiet_subscribe(s);
+        return;
+    }
+    finish(s, EXIT_OK);
+}
+
+/* ---- incoming messages -------------------------------------------------- */
+
+static int id_is(cJSON *msg, int id)
+{
+    cJSON *j = cJSON_GetObjectItemCaseSensitive(msg, "id");
+    return cJSON_IsNumber(j) && j->valuedouble == id;
+}
+
+static void print_error(cJSON *msg, const char *what)
+{
+    cJSON *code = cJSON_GetObjectItemCaseSensitive(msg, "code");
+    cJSON *text = cJSON_GetObjectItemCaseSensitive(msg, "message");
+    cJSON *param = cJSON_GetObjectItemCaseSensitive(msg, "param");
+    fprintf(stderr, "ocean-tap: %s: error %s%s%s: %s\n", what,
+            cJSON_IsString(code) ? code->valuestring : "?",
+            cJSON_IsString(param) ? " param=" : "", cJSON_IsString(param) ? param->valuestring : "",
+            cJSON_IsString(text) ? text->valuestring : "");
+}
+
+static void on_text(struct session *s, const char *text, size_t len)
+{
+    cJSON *msg = cJSON_ParseWithLength(text, len);
+    cJSON *type = cJSON_GetObjectItemCaseSensitive(msg, "type");
+    if (!cJSON_IsString(type)) {
+        fail(s, EXIT_PROTOCOL, "server sent a control message without a type: %.*s", (int)(len > 200 ? 200 : len), text);
+        cJSON_Delete(msg);
+        return;
+    }
+    const char *t = type->valuestring;
+    if (!strcmp(t, "hello") && s->stage == ST_HELLO) {
+        cJSON *proto = cJSON_GetObjectItemCaseSensitive(msg, "protocol");
+        if (!cJSON_IsNumber(proto) || proto->valueint != OC_PROTO_VERSION) {
+            fail(s, EXIT_PROTOCOL, "server speaks protocol %d, ocean-tap speaks %d",
+                 cJSON_IsNumber(proto) ? proto->valueint : -1, OC_PROTO_VERSION);
+        } else {
+            s->schema = cJSON_DetachItemFromObjectCaseSensitive(msg, "schema");
+            if (!s->o->nsets && !s->want_frames && !s->o->watch) {
+                /* Info mode: the hello without the long schema, one line. */
+                char *out = cJSON_PrintUnformatted(msg);
+                if (out) puts(out);
+                free(out);
+            }
+            advance(s);
+        }
+    } else if (!strcmp(t, "params")) {
+        if (s->o->watch) {
+            char *out = cJSON_PrintUnformatted(msg);
+            if (out) { puts(out); fflush(stdout); }
+            free(out);
+        }
+        if (s->stage == ST_SET && id_is(msg, ID_SET)) {
+            cJSON *v = cJSON_GetObjectItemCaseSensitive(msg, "params_version");
+            cJSON *changed = cJSON_GetObjectItemCaseSensitive(msg, "changed"), *c;
+            if (!s->o->watch) {
+                printf("params_version=%.0f changed=", cJSON_IsNumber(v) ? v->valuedouble : -1.0);
+                int first = 1;
+                cJSON_ArrayForEach(c, changed) if (cJSON_IsString(c)) {
+                    printf("%s%s", first ? "" : ",", c->valuestring);
+                    first = 0;
+                }
+                putchar('\n');
+                fflush(stdout);
+            }
+            advance(s);
+        }
+    } else if (!strcmp(t, "subscribed")) {
+        if (s->stage == ST_SUBSCRIBE) {
+            cJSON *sub = cJSON_GetObjectItemCaseSensitive(msg, "subscription");
+            cJSON *lod = cJSON_GetObjectItemCaseSensitive(sub, "lod");
+            if (cJSON_IsNumber(lod) && lod->valueint != s->o->lod)
+                fail(s, EXIT_PROTOCOL, "server chose lod %d, asked for %d", lod->valueint, s->o->lod);
+            else
+                advance(s);
+        }
+    } else if (!strcmp(t, "error")) {
+        if (s->stage == ST_SET && (id_is(msg, ID_SET) || !cJSON_GetObjectItem(msg, "id"))) {
+            print_error(msg, "set rejected");
+            finish(s, EXIT_REJECTED);
+        } else if (s->stage == ST_SUBSCRIBE && (id_is(msg, ID_SUBSCRIBE) || !cJSON_GetObjectItem(msg, "id"))) {
+            print_error(msg, "subscribe rejected");
+            finish(s, EXIT_REJECTED);
+        } else if (!id_is(msg, ID_QUIET)) { /* a server that refuses the quiet subscription still works */
+            print_error(msg, "server");
+        }
+    }
+    /* pong and unknown types: nothing to do (unknown members are ignored by the spec). */
+    cJSON_Delete(msg);
+}
+
+static int write_frame(struct session *s, const struct oc_frame_header *fh)
+{
+    for (int f = 0; f < OC_FIELD_COUNT; f++) {
+        int side;
+        float bound;
+        const float *data = tap_frame_field(s->grid, f, &side, &bound);
+        if (!data) continue;
+        char path[4096];
+        snprintf(path, sizeof path, "%s/%s-%08llu.%s", s->o->out_dir, oc_field_name(f),
+                 (unsigned long long)fh->seq, tap_format_ext(s->o->format));
+        struct tap_meta m = {.field = oc_field_name(f), .seq = fh->seq, .sim_time = fh->sim_time,
+                             .params_version = fh->params_version, .n = fh->n, .lod = s->o->lod,
+                             .patch_size = fh->patch_size,
+                             .bound = bound,
+                             .server_time_us = fh->server_time_us};
+        if (tap_write_field(s->o->format, path, data, side, &m) != 0) {
+            fail(s, EXIT_OUTPUT, "cannot write %s: %s", path, strerror(errno));
+            return -1;
+        }
+    }
+    return 0;
+}
+
+static void report_stats(struct session *s, double t, int final)
+{
+    struct stats *st = &s->st;
+    double dt = t - (final ? st->t0 : st->last_report);
+    long frames = final ? s->frames_done : s->frames_done - st->frames_at_report;
+    unsigned long long bytes = final ? st->bytes : st->bytes - st->bytes_at_report;
+    if (dt <= 0) dt = 1e-9;
+    if (final) {
+        /* Latency percentiles over all frames (sorted copy). */
+        double p50 = 0, p95 = 0, mx = 0;
+        if (st->nlat) {
+            double *v = st->lat_ms;
+            for (size_t i = 1; i < st->nlat; i++) /* insertion sort: counts are small */
+                for (size_t k = i; k > 0 && v[k - 1] > v[k]; k--) { double x = v[k]; v[k] = v[k - 1]; v[k - 1] = x; }
+            p50 = v[st->nlat / 2];
+            p95 = v[(size_t)((st->nlat - 1) * 0.95)];
+            mx = v[st->nlat - 1];
+        }
+        printf("frames=%ld seconds=%.3f fps=%.2f bytes=%llu bytes_per_frame=%.0f mbit_per_s=%.3f "
+               "latency_ms_p50=%.2f latency_ms_p95=%.2f latency_ms_max=%.2f\n",
+               frames, dt, frames / dt, bytes, frames ? (double)bytes / frames : 0.0,
+               bytes * 8 / dt / 1e6, p50, p95, mx);
+        fflush(stdout);
+    } else {
+        fprintf(stderr, "ocean-tap: %ld frames, %.1f fps, %.3f Mbit/s\n", s->frames_done,
+                frames / dt, bytes * 8 / dt / 1e6);
+        st->last_report = t;
+        st->frames_at_report = s->frames_done;
+        st->bytes_at_report = st->bytes;
+    }
+}
+
+static void on_binary(struct session *s, const uint8_t *data, size_t len)
+{
+    if (s->stage != ST_RUN || !s->want_frames) return; /* frames of the default subscription */
+    struct oc_frame_header fh;
+    int r = tap_frame_add(s->grid, data, len, &fh);
+    if (r) {
+        fail(s, EXIT_PROTOCOL, "bad binary frame (%zu bytes): %s", len, tap_frame_strerror(r));
+        return;
+    }
+    if (!tap_frame_complete(s->grid)) return; /* waiting for the first tiles of some field */
+    s->frames_done++;
+    s->st.bytes += len;
+    if (s->st.nlat == s->st.caplat) {
+        size_t cap = s->st.caplat ? 2 * s->st.caplat : 256;
+        double *p = realloc(s->st.lat_ms, cap * sizeof *p);
+        if (p) { s->st.lat_ms = p; s->st.caplat = cap; }
+    }
+    if (s->st.nlat < s->st.caplat) s->st.lat_ms[s->st.nlat++] = (wall_us() - (double)fh.server_time_us) / 1e3;
+    if (s->o->out_dir && write_frame(s, &fh) != 0) return;
+    if (s->o->frames > 0 && s->frames_done >= s->o->frames) finish(s, EXIT_OK);
+}
+
+/* ---- libwebsockets ------------------------------------------------------ */
+
+static int callback(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
+{
+    struct session *s = lws_context_user(lws_get_context(wsi));
+    switch (reason) {
+    case LWS_CALLBACK_CLIENT_CONNECTION_ERROR:
+        fail(s, EXIT_CONNECT, "cannot connect to %s: %s", s->o->url, in ? (const char *)in : "unknown error");
+        s->wsi = NULL;
+        break;
+    case LWS_CALLBACK_CLIENT_ESTABLISHED:
+        s->last_activity = now_s();
+        break;
+    case LWS_CALLBACK_CLIENT_RECEIVE:
+        s->last_activity = now_s();
+        if (lws_is_first_fragment(wsi)) s->msg.len = 0;
+        if (oc_buf_reserve(&s->msg, len) != 0) { fail(s, EXIT_PROTOCOL, "out of memory"); break; }
+        memcpy(s->msg.data + s->msg.len, in, len);
+        s->msg.len += len;
+        if (!lws_is_final_fragment(wsi)) break;
+        if (lws_frame_is_binary(wsi)) on_binary(s, s->msg.data, s->msg.len);
+        else on_text(s, (const char *)s->msg.data, s->msg.len);
+        break;
+    case LWS_CALLBACK_CLIENT_WRITEABLE:
+        if (s->noutq) {
+            char *text = s->outq[0];
+            size_t n = strlen(text);
+            unsigned char *buf = malloc(LWS_PRE + n);
+            if (!buf) { fail(s, EXIT_PROTOCOL, "out of memory"); break; }
+            memcpy(buf + LWS_PRE, text, n);
+            int w = lws_write(wsi, buf + LWS_PRE, n, LWS_WRITE_TEXT);
+            free(buf);
+            free(text);
+            memmove(s->outq, s->outq + 1, (size_t)--s->noutq * sizeof s->outq[0]);
+            if (w < (int)n) { fail(s, EXIT_CLOSED, "write to server failed"); return -1; }
+            if (s->noutq) lws_callback_on_writable(wsi);
+        }
+        break;
+    case LWS_CALLBACK_WS_PEER_INITIATED_CLOSE:
+        if (s->stage != ST_DONE) {
+            int code = len >= 2 ? ((const unsigned char *)in)[0] << 8 | ((const unsigned char *)in)[1] : 0;
+            fail(s, EXIT_CLOSED, "server closed the connection (code %d%s%.*s)", code,
+                 len > 2 ? ": " : "", (int)(len > 2 ? len - 2 : 0), (const char *)in + 2);
+        }
+        break;
+    case LWS_CALLBACK_CLIENT_CLOSED:
+        if (s->stage != ST_DONE) fail(s, EXIT_CLOSED, "connection closed by the server");
+        s->wsi = NULL;
+        break;
+    default:
+        break;
+    }
+    return 0;
+}
+
+static void on_signal(int sig)
+{
+    (void)sig;
+    interrupted = 1;
+    if (g_ctx) lws_cancel_service(g_ctx);
+}
+
+/* Wakes the service loop ten times a second to check timeouts and signals. */
+static lws_sorted_usec_list_t tick_sul;
+static void tick(lws_sorted_usec_list_t *sul)
+{
+    lws_sul_schedule(g_ctx, 0, sul, tick, 100 * LWS_US_PER_MS);
+}
+
+static int connect_server(struct session *s, struct lws_context *ctx)
+{
+    char url[sizeof s->o->url], path[sizeof s->o->url + 1];
+    const char *scheme, *host, *p;
+    int port;
+    snprintf(url, sizeof url, "%s", s->o->url);
+    if (lws_parse_uri(url, &scheme, &host, &port, &p) || !*host) {
+        fprintf(stderr, "ocean-tap: cannot parse URL %s\n", s->o->url);
+        return EXIT_USAGE;
+    }
+    int tls = !strcmp(scheme, "wss") || !strcmp(scheme, "https");
+    if (!tls && strcmp(scheme, "ws") && strcmp(scheme, "http")) {
+        fprintf(stderr, "ocean-tap: URL must start with ws:// or wss://\n");
+        return EXIT_USAGE;
+    }
+    snprintf(path, sizeof path, "/%s", p);
+    struct lws_client_connect_info ci = {
+        .context = ctx, .address = host, .port = port, .path = path, .host = host,
+        .origin = host, .protocol = OC_SUBPROTOCOL, .ssl_connection = tls ? LCCSCF_USE_SSL : 0,
+        .ietf_version_or_minus_one = -1, .pwsi = &s->wsi,
+    };
+    if (!lws_client_connect_via_info(&ci) && s->stage != ST_DONE) {
+        fprintf(stderr, "ocean-tap: cannot connect to %s\n", s->o->url);
+        return EXIT_CONNECT;
+    }
+    return s->stage == ST_DONE ? s->exit_code : -1;
+}
+
+int main(int argc, char **argv)
+{
+    struct opts o;
+    int r = parse_args(argc, argv, &o);
+    if (r >= 0) return r;
+    struct session s = {.o = &o};
+    s.want_frames = o.frames >= 0 || o.out_dir || o.stats;
+    if (o.frames < 0) o.frames = 0;
+    if (o.out_dir) {
+        if (mkdir(o.out_dir, 0777) != 0 && errno != EEXIST) {
+            fprintf(stderr, "ocean-tap: cannot create %s: %s\n", o.out_dir, strerror(errno));
+            return EXIT_OUTPUT;
+        }
+    }
+    if (s.want_frames && !(s.grid = tap_frame_new(o.fields, o.lod))) {
+        fprintf(stderr, "ocean-tap: out of memory\n");
+        return EXIT_PROTOCOL;
+    }
+
+    lws_set_log_level(o.verbose ? LLL_ERR | LLL_WARN | LLL_NOTICE : LLL_ERR, NULL);
+    static const struct lws_protocols protocols[] = {
+        {OC_SUBPROTOCOL, callback, 0, 1 << 16, 0, NULL, 0}, {NULL, NULL, 0, 0, 0, NULL, 0}};
+    struct lws_context_creation_info info = {
+        .port = CONTEXT_PORT_NO_LISTEN, .protocols = protocols, .gid = (gid_t)-1, .uid = (uid_t)-1,
+        .options = LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT, .user = &s,
+    };
+    struct lws_context *ctx = lws_create_context(&info);
+    if (!ctx) {
+        fprintf(stderr, "ocean-tap: cannot create the libwebsockets context\n");
+        return EXIT_CONNECT;
+    }
+    g_ctx = ctx;
+    signal(SIGINT, on_signal);
+    signal(SIGTERM, on_signal);
+    signal(SIGPIPE, SIG_IGN);
+    tick(&tick_sul);
+
+    s.last_activity = now_s();
+    r = connect_server(&s, ctx);
+    while (r < 0 && s.stage != ST_DONE) {
+        lws_service(ctx, 100);
+        double t = now_s();
+        if (interrupted) {
+            /* Ctrl-C ends a stream or watch normally; anything else is cut short. */
+            finish(&s, s.stage == ST_RUN ? EXIT_OK : EXIT_INTERRUPTED);
+            break;
+        }
+        if (o.stats && s.stage == ST_RUN && t - s.st.last_report >= 1.0) report_stats(&s, t, 0);
+        /* A pure watch may be silent for ever; everything else expects traffic. */
+        int expecting = s.stage != ST_RUN || s.want_frames;
+        if (expecting && t - s.last_activity > o.timeout) {
+            const char *what = s.stage == ST_HELLO ? "the server's hello"
+                             : s.stage == ST_SET ? "the answer to set"
+                             : s.stage == ST_SUBSCRIBE ? "the answer to subscribe" : "the next frame";
+            fail(&s, EXIT_TIMEOUT, "timed out after %.1f s waiting for %s", o.timeout, what);
+        }
+    }
+    if (r < 0) r = s.exit_code;
+    if (o.stats && s.want_frames && s.st.t0 > 0) report_stats(&s, now_s(), 1);
+
+    lws_sul_cancel(&tick_sul);
+    lws_context_destroy(ctx);
+    g_ctx = NULL;
+    for (int i = 0; i < s.noutq; i++) free(s.outq[i]);
+    cJSON_Delete(s.schema);
+    oc_buf_free(&s.msg);
+    tap_frame_free(s.grid);
+    free(s.st.lat_ms);
+    return r;
+}

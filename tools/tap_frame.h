@@ -1,0 +1,35 @@
+/* tap_frame.h — assemble the tiles of binary frames into whole fields.
+ *
+ * Each requested field is kept as a (n >> lod)^2 float grid. Tiles are
+ * decoded with the project decoder (oc_proto.h) and copied into place; a
+ * field is complete once every tile of the grid has arrived at least once
+ * (later tiles overwrite), so a server that sends only changed tiles is
+ * handled too. Tiles of other fields or another LOD are ignored (frames
+ * encoded before a subscribe took effect). */
+#ifndef OCEAND_TAP_FRAME_H
+#define OCEAND_TAP_FRAME_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "oc_proto.h"
+
+#define TAP_E_GEOMETRY (-100) /* a tile lies outside the grid its frame header describes */
+
+struct tap_frame;
+
+/* fields: bit mask of enum oc_field; lod: the subscribed LOD. */
+struct tap_frame *tap_frame_new(unsigned fields, int lod);
+void tap_frame_free(struct tap_frame *a);
+/* Decode one binary message into the grids. Returns 0, a negative
+ * enum oc_error, or TAP_E_GEOMETRY. fh receives the frame header. */
+int tap_frame_add(struct tap_frame *a, const uint8_t *data, size_t len, struct oc_frame_header *fh);
+/* 1 when every requested field is complete. */
+int tap_frame_complete(const struct tap_frame *a);
+/* Grid of one field (side*side floats, row-major, row = z), NULL if not
+ * requested; *bound = the error bound of its latest tile (0 = lossless). */
+const float *tap_frame_field(const struct tap_frame *a, enum oc_field f, int *side, float *bound);
+/* Message for tap_frame_add's error codes. */
+const char *tap_frame_strerror(int err);
+
+#endif
