@@ -1,0 +1,23 @@
+# mk/web.mk — the browser client (issue 5): bundle, playwright tests, decode+upload bench.
+# web/node_modules comes from `npm ci` (scripts/deps.sh, from web/package-lock.json).
+
+WEB_SRC := web/index.html web/build.mjs $(wildcard web/src/*.js web/src/*.css) proto/js/oc_decode.js
+
+BINS += $(BUILD)/web/index.html
+
+$(BUILD)/web/index.html: $(WEB_SRC) web/node_modules/.package-lock.json
+	node web/build.mjs $(BUILD)/web
+
+# npm ci writes node_modules/.package-lock.json; run deps.sh when it is missing.
+web/node_modules/.package-lock.json: web/package-lock.json
+	@scripts/deps.sh && touch $@
+
+.PHONY: test-web bench-web
+TESTS   += test-web
+BENCHES += bench-web
+
+test-web: $(BUILD)/web/index.html $(BUILD)/oceand
+	node tests/web/test_web.mjs --oceand $(BUILD)/oceand --web-root $(BUILD)/web --out $(BUILD)/web-test
+
+bench-web: $(BUILD)/web/index.html $(BUILD)/oceand
+	node bench/web_bench.mjs --oceand $(BUILD)/oceand --web-root $(BUILD)/web

@@ -1,0 +1,44 @@
+// Status overlay: connection, render and stream rates, latency, drops.
+// Rates are computed over a sliding one-second window.
+export class Stats {
+  constructor() {
+    this.frames = 0; this.bytes = 0; this.renders = 0; this.dropped = 0;
+    this.window = []; // [t, frames, bytes, renders]
+    this.fps = 0; this.framesPerSec = 0; this.kBps = 0;
+    this.latencyMs = null; this.decodeMs = null; this.uploadMs = null;
+  }
+  tick(now) {
+    this.window.push([now, this.frames, this.bytes, this.renders]);
+    while (this.window.length > 2 && now - this.window[0][0] > 1000) this.window.shift();
+    const [t0, f0, b0, r0] = this.window[0];
+    const dt = (now - t0) / 1000;
+    if (dt > 0.2) {
+      this.framesPerSec = (this.frames - f0) / dt;
+      this.kBps = (this.bytes - b0) / 1024 / dt;
+      this.fps = (this.renders - r0) / dt;
+    }
+  }
+}
+
+export class Hud {
+  constructor(el, banner) { this.el = el; this.banner = banner; this.lastDraw = 0; }
+  message(text) {
+    this.banner.hidden = !text;
+    this.banner.textContent = text || '';
+  }
+  draw(now, s, st) {
+    if (now - this.lastDraw < 250) return; // 4 Hz is plenty for text
+    this.lastDraw = now;
+    const cls = st.connected ? 'ok' : (st.connectionState === 'connecting' ? 'warn' : 'bad');
+    const f = (v, d = 1) => (v === null || v === undefined ? '–' : v.toFixed(d));
+    const esc = (t) => String(t).replace(/[&<>]/g, (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;' })[c]);
+    this.el.innerHTML =
+      `<span class="${cls}">● ${esc(st.connectionState)}</span>  ${esc(st.clientId || '')}\n` +
+      `render   ${f(s.fps, 0)} fps\n` +
+      `stream   ${f(s.framesPerSec, 1)} frames/s  ${f(s.kBps, 0)} kB/s\n` +
+      `latency  ${f(s.latencyMs, 0)} ms   dropped ${s.dropped}\n` +
+      `decode   ${f(s.decodeMs, 2)} ms  upload ${f(s.uploadMs, 2)} ms\n` +
+      `N ${st.n ?? '–'}  lod ${st.lod ?? '–'}  params v${st.paramsVersion ?? '–'}  seq ${st.lastSeq ?? '–'}` +
+      (st.lastError ? `\n<span class="bad">${esc(st.lastError.code)}: ${esc(st.lastError.message)}</span>` : '');
+  }
+}

@@ -1,0 +1,182 @@
+// oceand browser client: wires the connection, the decoder worker, the renderer,
+// the panel and the HUD together, and exposes read-only state as window.oceand.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+import { Connection, serverUrl } from './connection.js';
+import { Ocean } from './ocean.js';
+import { Panel } from './panel.js';
+import { Hud, Stats } from './hud.js';
+
+const query = new URLSearchParams(location.search);
+const canvas = document.getElementById('ocean');
+// ?aa=0 turns off multisampling (software GL in tests); ?detail=x scales mesh density.
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: query.get('aa') !== '0', preserveDrawingBuffer: query.has('test') });
+renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
+renderer.outputColorSpace = THREE.LinearSRGBColorSpace; // shaders write display-ready colour
+const camera = new THREE.PerspectiveCamera(55, 1, 0.5, 120000);
+camera.position.set(0, 14, 48);
+const camArg = (query.get('cam') || '').split(',').map(Number); // ?cam=x,y,z: start elsewhere
+if (camArg.length === 3 && camArg.every(Number.isFinite)) camera.position.set(...camArg);
+const controls = new OrbitControls(camera, canvas);
+controls.target.set(0, 2, 0);
+controls.enableDamping = true;
+controls.screenSpacePanning = false;           // pan slides over the sea: a simple fly mode
+controls.maxPolarAngle = Math.PI * 0.495;      // stay above the water
+controls.minDistance = 3;
+controls.maxDistance = 3000;
+controls.listenToKeyEvents(window);            // arrow keys pan
+const ocean = new Ocean(renderer, { detail: Number(query.get('detail') || 1) });
+const stats = new Stats();
+const hud = new Hud(document.getElementById('hud'), document.getElementById('banner'));
+
+// Everything a test or a curious user may read; window.oceand hands out copies.
+const st = {
+  connected: false, connectionState: 'idle', clientId: null, role: null,
+  framesReceived: 0, lastSeq: null, paramsVersion: null, params: null,
+  rendered: 0, n: null, lod: null, frameParamsVersion: null, lastError: null, serverError: null,
+};
+const view = { wireframe: false, freeze: false };
+// ?bench=1: time decode + upload per frame (upload waits for the GPU with finish())
+// and draw nothing, so rendering does not compete for the CPU being measured.
+const bench = query.has('bench');
+const timings = { decode: [], assemble: [], upload: [] };
+
+const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+let workerBusy = 0;            // frames handed to the worker and not yet back
+let pendingFrame = null;       // newest decoded frame waiting for the render loop
+const wantedSub = {};          // subscription changes made in the panel, kept across reconnects
+
+const conn = new Connection(serverUrl(), {
+  onState(state, detail) {
+    st.connectionState = state;
+    st.connected = state === 'open';
+    // Banner: the first "connecting…", then why we are down; a retry's own
+    // "connecting" keeps the last reason on screen. Cleared by hello.
+    if (state === 'closed' || state === 'retrying') hud.message(detail);
+    else if (state === 'connecting' && st.framesReceived === 0 && st.clientId === null) hud.message(detail);
+    if (state !== 'open' && st.clientId !== null) { st.clientId = null; panel.disconnected(); }
+  },
+  onMessage(msg) {
+    switch (msg.type) {
+      case 'hello':
+        st.clientId = msg.client_id; st.role = msg.role;
+        st.lastSeq = null; // a new session: seq gaps across a reconnect are not drops
+        st.params = msg.params; st.paramsVersion = msg.params_version;
+        panel.build(msg);
+        if (msg.subscription) panel.subscribed(msg.subscription);
+        // After a reconnect, ask again for what the user had chosen.
+        if (Object.keys(wantedSub).length) conn.send({ type: 'subscribe', ...wantedSub });
+        hud.message('');
+        break;
+      case 'params':
+        st.params = msg.params; st.paramsVersion = msg.params_version;
+        panel.update(msg);
+        break;
+      case 'subscribed':
+        panel.subscribed(msg.subscription || msg);
+        break;
+      case 'error': // a rejected request: the panel says why (decode errors go to the HUD)
+        st.serverError = msg;
+        panel.error(msg);
+        break;
+      default: break;
+    }
+  },
+  onFrame(buf) {
+    st.framesReceived++;
+    stats.frames++;
+    stats.bytes += buf.byteLength;
+    // Never queue behind a slow decoder: skip instead of lagging (the seq gap counts it).
+    if (workerBusy >= (bench ? 1 : 2)) return; // bench: one at a time, so each time is one frame's
+    workerBusy++;
+    worker.postMessage({ type: 'frame', buf }, [buf]);
+  },
+});
+
+const panel = new Panel({
+  set: (params) => conn.send({ type: 'set', params }),
+  subscribe: (sub) => { Object.assign(wantedSub, sub); conn.send({ type: 'subscribe', ...sub }); },
+  view,
+  onView(key, v) { if (key === 'wireframe') ocean.wireframe = v; },
+});
+
+worker.onmessage = (ev) => {
+  const msg = ev.data;
+  workerBusy--;
+  if (msg.type === 'error') { st.lastError = { code: 'decode', message: msg.message }; return; }
+  const h = msg.header;
+  st.lastError = null;
+  // Two frames may decode at once (the decoder awaits); never show an older one after a newer.
+  if (st.lastSeq !== null && h.seq <= st.lastSeq) { recycle(msg); return; }
+  if (st.lastSeq !== null && h.seq > st.lastSeq + 1) stats.dropped += h.seq - st.lastSeq - 1;
+  st.lastSeq = h.seq;
+  stats.decodeMs = msg.decodeMs;
+  if (pendingFrame) recycle(pendingFrame); // superseded before it was shown
+  pendingFrame = msg;
+};
+
+function recycle(f) {
+  const buffers = [];
+  if (f.disp) buffers.push({ buffer: f.disp.buffer, channels: 4 });
+  if (f.slope) buffers.push({ buffer: f.slope.buffer, channels: 2 });
+  worker.postMessage({ type: 'recycle', buffers }, buffers.map((b) => b.buffer));
+}
+
+function resize() {
+  const w = canvas.clientWidth, h = canvas.clientHeight;
+  if (canvas.width !== Math.floor(w * renderer.getPixelRatio()) || canvas.height !== Math.floor(h * renderer.getPixelRatio())) {
+    renderer.setSize(w, h, false);
+    camera.aspect = w / Math.max(h, 1);
+    camera.updateProjectionMatrix();
+  }
+}
+
+function frameLoop() {
+  const now = performance.now();
+  resize();
+  if (pendingFrame && !view.freeze) {
+    const f = pendingFrame;
+    pendingFrame = null;
+    const { uploadMs, released } = ocean.setFrame(f, now, bench);
+    stats.uploadMs = uploadMs;
+    if (bench && timings.decode.length < 10000) { timings.decode.push(f.decodeMs); timings.assemble.push(f.assembleMs); timings.upload.push(uploadMs); }
+    const buffers = released.map((a) => ({ buffer: a.buffer, channels: a.length === f.m * f.m * 2 ? 2 : 4 }));
+    worker.postMessage({ type: 'recycle', buffers }, buffers.map((b) => b.buffer));
+    st.n = f.header.n; st.lod = f.lod; st.frameParamsVersion = f.header.paramsVersion;
+    // Latency: server encode time to the frame reaching the screen (clocks of one machine, or NTP).
+    stats.latencyMs = (performance.timeOrigin + now) - f.header.serverTimeUs / 1000;
+  }
+  controls.update();
+  if (!bench) ocean.render(camera, now);
+  if (ocean.hasData) st.rendered++;
+  stats.renders++;
+  stats.tick(now);
+  hud.draw(now, stats, st);
+  requestAnimationFrame(frameLoop);
+}
+
+// Read-only view for tests and curious users.
+const snapshot = (o) => (o === null || typeof o !== 'object' ? o : Object.freeze(structuredClone(o)));
+window.oceand = Object.freeze({
+  get connected() { return st.connected; },
+  get connectionState() { return st.connectionState; },
+  get framesReceived() { return st.framesReceived; },
+  get lastSeq() { return st.lastSeq; },
+  get paramsVersion() { return st.paramsVersion; },
+  get frameParamsVersion() { return st.frameParamsVersion; },
+  get params() { return snapshot(st.params); },
+  get rendered() { return st.rendered; },
+  get clientId() { return st.clientId; },
+  get wireframe() { return ocean.wireframe; },
+  get stats() {
+    return Object.freeze({
+      fps: stats.fps, framesPerSec: stats.framesPerSec, kBps: stats.kBps, latencyMs: stats.latencyMs,
+      dropped: stats.dropped, decodeMs: stats.decodeMs, uploadMs: stats.uploadMs, n: st.n, lod: st.lod,
+      lastError: snapshot(st.lastError), serverError: snapshot(st.serverError),
+      ...(bench ? { timings: snapshot(timings) } : {}),
+    });
+  },
+});
+
+conn.start();
+requestAnimationFrame(frameLoop);

@@ -1,0 +1,216 @@
+// The sea as three.js objects: streamed fields as float textures, a field of
+// instanced patches (one per period of the simulation, finer near the camera),
+// a flat far ring to the horizon, and a sky dome sharing the same lighting.
+import * as THREE from 'three';
+import { skyVertex, skyFragment, waterVertex, waterFragment } from './shaders.js';
+
+const MAX_GRID = 128;        // segments per patch side at the finest level
+const MIN_GRID = 2;
+const NEAR_RANGE = 4000;     // metres of real geometry; beyond is the flat far ring
+const MAX_RING = 40;         // patches from the camera patch, whatever the patch size
+const HORIZON = 60000;       // metres to the end of the far ring
+const LOD_PIXEL = 0.012;     // wanted segment length per metre of distance (at detail 1)
+
+function floatTexture(data, m, format) {
+  const t = new THREE.DataTexture(data, m, m, format, THREE.FloatType);
+  t.wrapS = t.wrapT = THREE.RepeatWrapping;
+  t.magFilter = t.minFilter = THREE.LinearFilter;
+  t.generateMipmaps = false;
+  t.needsUpdate = true;
+  return t;
+}
+
+// A patch of g×g cells on [0,1]² (scaled to the patch size by the instance matrix),
+// with a skirt hanging below its border to hide cracks between detail levels.
+function patchGeometry(g) {
+  const pos = [], skirt = [], index = [];
+  for (let j = 0; j <= g; j++) for (let i = 0; i <= g; i++) { pos.push(i / g, 0, j / g); skirt.push(0); }
+  const v = (i, j) => j * (g + 1) + i;
+  for (let j = 0; j < g; j++) for (let i = 0; i < g; i++) {
+    index.push(v(i, j), v(i, j + 1), v(i + 1, j), v(i + 1, j), v(i, j + 1), v(i + 1, j + 1));
+  }
+  const ring = [];
+  for (let i = 0; i < g; i++) ring.push(v(i, 0));
+  for (let j = 0; j < g; j++) ring.push(v(g, j));
+  for (let i = g; i > 0; i--) ring.push(v(i, g));
+  for (let j = g; j > 0; j--) ring.push(v(0, j));
+  const base = pos.length / 3;
+  ring.forEach((r) => { pos.push(pos[3 * r], 0, pos[3 * r + 2]); skirt.push(1); });
+  for (let k = 0; k < ring.length; k++) {
+    const a = ring[k], b = ring[(k + 1) % ring.length], a2 = base + k, b2 = base + (k + 1) % ring.length;
+    index.push(a, a2, b, b, a2, b2);
+  }
+  const geo = new THREE.BufferGeometry();
+  geo.setAttribute('position', new THREE.Float32BufferAttribute(pos, 3));
+  geo.setAttribute('skirt', new THREE.Float32BufferAttribute(skirt, 1));
+  geo.setIndex(index);
+  return geo;
+}
+
+// Flat square ring between the patch field and the horizon (4 quads).
+function farRingGeometry() {
+  const geo = new THREE.BufferGeometry();
+  geo.setAttribute('position', new THREE.Float32BufferAttribute(new Float32Array(8 * 3), 3));
+  geo.setAttribute('skirt', new THREE.Float32BufferAttribute(new Float32Array(8), 1));
+  // outer 0..3, inner 4..7 (counter-clockwise)
+  geo.setIndex([0, 1, 4, 4, 1, 5, 1, 2, 5, 5, 2, 6, 2, 3, 6, 6, 3, 7, 3, 0, 7, 7, 0, 4]);
+  return geo;
+}
+
+export class Ocean {
+  constructor(renderer, { detail = 1 } = {}) {
+    this.renderer = renderer;
+    this.lodPixel = LOD_PIXEL / Math.max(detail, 0.05);
+    this.scene = new THREE.Scene();
+    this.m = 0;             // texture size (N >> lod)
+    this.patch = 0;         // patch size, metres
+    this.levels = [];       // InstancedMesh per detail level
+    this.layoutKey = '';
+    this.lastArrival = 0;
+    this.interval = 1000 / 30;
+    this.hasData = false;
+    const sun = new THREE.Vector3(-0.55, 0.3, -0.78).normalize();
+    this.uniforms = {
+      uDispA: { value: null }, uDispB: { value: null },
+      uSlopeA: { value: null }, uSlopeB: { value: null },
+      uMix: { value: 1 }, uPatch: { value: 1 }, uTexel: { value: 1 },
+      uHasSlope: { value: 0 }, uHasJac: { value: 0 },
+      uFadeNear: { value: 1000 }, uFadeFar: { value: 3000 }, uSkirtDepth: { value: 2 },
+      uSunDir: { value: sun }, uSunColor: { value: new THREE.Color(1.0, 0.93, 0.8) },
+      uDeep: { value: new THREE.Color(0.004, 0.035, 0.07) },
+      uScatter: { value: new THREE.Color(0.02, 0.16, 0.16) },
+      uFogDensity: { value: 0.00009 }, uFoam: { value: 1 },
+    };
+    this.material = new THREE.ShaderMaterial({
+      uniforms: this.uniforms, vertexShader: waterVertex, fragmentShader: waterFragment,
+      side: THREE.DoubleSide,
+    });
+    const sky = new THREE.Mesh(new THREE.SphereGeometry(1, 32, 16), new THREE.ShaderMaterial({
+      uniforms: { uSunDir: this.uniforms.uSunDir, uSunColor: this.uniforms.uSunColor },
+      vertexShader: skyVertex, fragmentShader: skyFragment, side: THREE.BackSide, depthWrite: false,
+    }));
+    sky.scale.setScalar(HORIZON * 0.9);
+    sky.frustumCulled = false;
+    sky.renderOrder = -1;
+    this.sky = sky;
+    this.scene.add(sky);
+    this.far = new THREE.Mesh(farRingGeometry(), this.material);
+    this.far.frustumCulled = false;
+    this.far.visible = false;
+    this.scene.add(this.far);
+    // Two texture slots (older A, newer B); data arrays are swapped in.
+    this.disp = [null, null];
+    this.slope = [null, null];
+  }
+
+  set wireframe(on) { this.material.wireframe = on; }
+  get wireframe() { return this.material.wireframe; }
+
+  // New decoded frame from the worker. Returns { uploadMs, released: [arrays] }.
+  // sync: wait for the GPU to finish the upload (benchmarks only).
+  setFrame(f, now, sync = false) {
+    const released = [];
+    const patch = f.header.patchSize;
+    if (f.m !== this.m || patch !== this.patch) this.rebuild(f.m, patch);
+    // The newer texture becomes the older one; the older one takes the new data.
+    const t0 = performance.now();
+    this.disp.reverse();
+    released.push(this.disp[1].image.data);
+    this.disp[1].image.data = f.disp;
+    this.disp[1].needsUpdate = true;
+    this.renderer.initTexture(this.disp[1]);
+    if (f.slope) {
+      if (!this.slope[0]) this.slope = [0, 1].map(() => floatTexture(new Float32Array(f.m * f.m * 2), f.m, THREE.RGFormat));
+      this.slope.reverse();
+      released.push(this.slope[1].image.data);
+      this.slope[1].image.data = f.slope;
+      this.slope[1].needsUpdate = true;
+      this.renderer.initTexture(this.slope[1]);
+    }
+    if (sync) this.renderer.getContext().finish();
+    const uploadMs = performance.now() - t0;
+    if (!this.hasData) { // first frame: both slots hold it, no blend from zeros
+      this.disp[0].image.data = f.disp.slice(); this.disp[0].needsUpdate = true;
+    }
+    const u = this.uniforms;
+    u.uDispA.value = this.disp[0]; u.uDispB.value = this.disp[1];
+    u.uHasSlope.value = f.slope ? 1 : 0;
+    if (f.slope) { u.uSlopeA.value = this.slope[0]; u.uSlopeB.value = this.slope[1]; }
+    u.uHasJac.value = f.present.jacobian ? 1 : 0;
+    // Estimate the frame interval to blend over (smoothed).
+    if (this.lastArrival) {
+      const dt = Math.min(Math.max(now - this.lastArrival, 5), 500);
+      this.interval += (dt - this.interval) * 0.2;
+    }
+    this.lastArrival = now;
+    this.hasData = true;
+    return { uploadMs, released: released.filter((a) => a && a.buffer.byteLength) };
+  }
+
+  rebuild(m, patch) {
+    this.m = m; this.patch = patch;
+    for (const t of [...this.disp, ...this.slope]) if (t && t.dispose) t.dispose();
+    this.disp = [0, 1].map(() => floatTexture(new Float32Array(m * m * 4), m, THREE.RGBAFormat));
+    this.slope = [null, null];
+    this.hasData = false;
+    const u = this.uniforms;
+    u.uPatch.value = patch; u.uTexel.value = 1 / m;
+    for (const l of this.levels) { this.scene.remove(l.mesh); l.mesh.geometry.dispose(); l.mesh.dispose(); }
+    this.levels = [];
+    this.ring = Math.min(MAX_RING, Math.ceil(NEAR_RANGE / patch));
+    const maxInstances = (2 * this.ring + 1) ** 2;
+    for (let g = Math.min(MAX_GRID, m); g >= MIN_GRID; g >>= 1) {
+      const mesh = new THREE.InstancedMesh(patchGeometry(g), this.material, maxInstances);
+      mesh.frustumCulled = false;
+      mesh.count = 0;
+      this.levels.push({ g, mesh });
+      this.scene.add(mesh);
+    }
+    u.uFadeFar.value = this.ring * patch * 0.95;
+    u.uFadeNear.value = u.uFadeFar.value * 0.35;
+    u.uSkirtDepth.value = Math.max(0.5, patch / 100);
+    this.layoutKey = '';
+  }
+
+  // Place patch instances around the camera; only when the camera changes cell.
+  layout(camera) {
+    const L = this.patch, R = this.ring;
+    const ci = Math.floor(camera.position.x / L), cj = Math.floor(camera.position.z / L);
+    const hq = Math.round(Math.log2(Math.max(camera.position.y, 1)) * 2);
+    const key = `${ci},${cj},${hq}`;
+    if (key === this.layoutKey) return;
+    this.layoutKey = key;
+    const camY = Math.max(Math.abs(camera.position.y), 1);
+    const mat = new THREE.Matrix4();
+    for (const l of this.levels) l.mesh.count = 0;
+    for (let j = cj - R; j <= cj + R; j++) for (let i = ci - R; i <= ci + R; i++) {
+      const x0 = i * L, z0 = j * L;
+      const dx = Math.max(x0 - camera.position.x, 0, camera.position.x - x0 - L);
+      const dz = Math.max(z0 - camera.position.z, 0, camera.position.z - z0 - L);
+      const d = Math.hypot(dx, dz, camY);
+      const want = L / (d * this.lodPixel);    // segments this patch deserves
+      let lvl = this.levels.findIndex((l) => l.g <= want);
+      if (lvl < 0) lvl = this.levels.length - 1;
+      const mesh = this.levels[lvl].mesh;
+      mat.makeScale(L, 1, L).setPosition(x0, 0, z0);
+      mesh.setMatrixAt(mesh.count++, mat);
+    }
+    for (const l of this.levels) l.mesh.instanceMatrix.needsUpdate = true;
+    // Far ring: from the patch field's edge to the horizon.
+    const a0 = (ci - R) * L, a1 = (ci + R + 1) * L, bx = camera.position.x, bz = camera.position.z;
+    const p = this.far.geometry.attributes.position;
+    const pts = [[bx - HORIZON, bz - HORIZON], [bx + HORIZON, bz - HORIZON], [bx + HORIZON, bz + HORIZON], [bx - HORIZON, bz + HORIZON],
+      [a0, (cj - R) * L], [a1, (cj - R) * L], [a1, (cj + R + 1) * L], [a0, (cj + R + 1) * L]];
+    pts.forEach(([x, z], k) => p.setXYZ(k, x, -0.05, z));
+    p.needsUpdate = true;
+    this.far.visible = true;
+  }
+
+  render(camera, now) {
+    if (!this.m) { this.renderer.render(this.scene, camera); return; }
+    this.sky.position.copy(camera.position);
+    this.layout(camera);
+    this.uniforms.uMix.value = Math.min(Math.max((now - this.lastArrival) / this.interval, 0), 1);
+    this.renderer.render(this.scene, camera);
+  }
+}

@@ -1,0 +1,68 @@
+// Decoder worker: turns one binary frame into GPU-ready arrays so the render
+// loop never decodes. Frame tiles are assembled into M×M textures (M = N >> lod):
+//   disp  RGBA float32: (dx, height, dz, jacobian)  — jacobian 1 when not streamed
+//   slope RG   float32: (slope_x, slope_z)          — only when slopes are streamed
+// Output buffers are transferred to the main thread, which hands them back for
+// reuse (no 4 MB allocation per frame at N=512).
+import { decodeFrame } from '../../proto/js/oc_decode.js';
+
+const CHANNEL = { dx: [0, 4], height: [1, 4], dz: [2, 4], jacobian: [3, 4], slope_x: [0, 2], slope_z: [1, 2] };
+const pool = { 4: [], 2: [] }; // recycled ArrayBuffers by channel count
+
+function take(channels, count) {
+  const list = pool[channels];
+  while (list.length) {
+    const b = list.pop();
+    if (b.byteLength === count * channels * 4) return new Float32Array(b);
+  }
+  return new Float32Array(count * channels);
+}
+
+self.onmessage = async (ev) => {
+  const msg = ev.data;
+  if (msg.type === 'recycle') {
+    for (const b of msg.buffers) if (b && pool[b.channels]) pool[b.channels].push(b.buffer);
+    return;
+  }
+  if (msg.type !== 'frame') return;
+  const t0 = performance.now();
+  let frame;
+  try {
+    frame = await decodeFrame(msg.buf);
+  } catch (e) {
+    self.postMessage({ type: 'error', message: String(e && e.message || e) });
+    return;
+  }
+  const t1 = performance.now();
+  const h = frame.header;
+  const lod = frame.tiles.length ? frame.tiles[0].lod : 0;
+  const m = h.n >> lod;
+  const count = m * m;
+  const present = {};
+  for (const t of frame.tiles) present[t.fieldName] = true;
+  const disp = take(4, count);
+  if (!present.jacobian) for (let i = 3; i < disp.length; i += 4) disp[i] = 1;
+  const slope = (present.slope_x || present.slope_z) ? take(2, count) : null;
+
+  for (const t of frame.tiles) {
+    const ch = CHANNEL[t.fieldName];
+    if (!ch || t.lod !== lod) continue;
+    const [c, stride] = ch;
+    const dst = stride === 4 ? disp : slope;
+    const step = h.tileSize >> lod;           // samples per tile side at this LOD
+    const x0 = t.tileX * step, z0 = t.tileZ * step;
+    const s = t.samples;
+    for (let j = 0; j < t.height; j++) {
+      let o = ((z0 + j) * m + x0) * stride + c;
+      let i0 = j * t.width;
+      for (let i = 0; i < t.width; i++, o += stride) dst[o] = s[i0 + i];
+    }
+  }
+  const t2 = performance.now();
+  const decodeMs = t2 - t0, assembleMs = t2 - t1;
+  const transfer = [disp.buffer];
+  if (slope) transfer.push(slope.buffer);
+  self.postMessage({
+    type: 'frame', header: h, lod, m, present, disp, slope, decodeMs, assembleMs, bytes: msg.buf.byteLength,
+  }, transfer);
+};
