@@ -1,0 +1,20 @@
+# mk/hostile.mk — hostile-client battery and churn test (issue 7) against a real
+# oceand on 127.0.0.1: malformed / nested / huge / compressed / binary messages,
+# set floods, connection storms, stalled, half-open and vanishing clients, and
+# 1000 connect/subscribe/disconnect cycles. Budget: < 4 min on 2 cores.
+#
+#   make test-hostile     the battery; "N passed, M failed", non-zero on a failure
+#   make bench-hostile    the same run, figures as one JSON line per case on stdout
+# HOSTILE_ARGS passes options, e.g. HOSTILE_ARGS="-k churn,set_flood" or "--strict".
+
+HOSTILE_ARGS ?=
+
+TESTS += test-hostile
+BENCHES += bench-hostile
+
+.PHONY: test-hostile bench-hostile
+test-hostile: $(BUILD)/oceand
+	/usr/bin/python3 tests/hostile/test_hostile.py --oceand $(BUILD)/oceand $(HOSTILE_ARGS)
+
+bench-hostile: $(BUILD)/oceand
+	@/usr/bin/python3 tests/hostile/test_hostile.py --oceand $(BUILD)/oceand --bench $(HOSTILE_ARGS)

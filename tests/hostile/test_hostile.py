@@ -1,0 +1,917 @@
+#!/usr/bin/python3
+"""Hostile-client battery and churn test for oceand (issue 7), against a real
+daemon on 127.0.0.1.
+
+    /usr/bin/python3 tests/hostile/test_hostile.py --oceand build/oceand [-k NAME] [--json]
+
+Every case starts its own daemon (temp state file, free port, small N unless
+the case needs real frames) and a well-behaved observer client in another
+process, runs one attack with bounded loops, then checks:
+  - the coded error / close code the attacker got (case specific),
+  - the parameters are unchanged (or, for the set flood, only rate-limited sets applied),
+  - the observer kept >= 99% of the frames of its window (by frame seq) and stayed connected,
+  - the daemon is alive, its RSS is flat, and it exits 0 on SIGTERM afterwards.
+Tick overruns (from /metrics) are reported, not asserted: the machine is shared.
+With --json each case also prints its figures as one JSON line on stdout (the
+human log then goes to stderr). Prints "N passed, M failed" last.
+"""
+import argparse
+import json
+import os
+import select
+import shutil
+import socket
+import sys
+import threading
+import time
+import traceback
+import zlib
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from harness import (OP_BIN, OP_CONT, OP_TEXT, CaseFailure, Daemon, Observer, Reader, check,  # noqa: E402
+                     handshake_request, raw_ws, read_http_response, rst_close, send_quiet, wait_until,
+                     ws_frame, ws_header)
+
+ARGS = None
+OUT = sys.stdout           # human log (stderr under --json)
+MIN_SHARE = 0.99           # observer frames kept during an attack
+MIN_WINDOW = 4.0           # seconds: the shortest observer window
+RSS_SLACK_KB = 2048        # "flat": RSS after the attack minus before
+LIBERAL = ("--control-rate", "10000", "--control-burst", "10000")   # cases that send many messages
+
+
+def log(*a):
+    print(*a, file=OUT, flush=True)
+
+
+# ---------------------------------------------------------------- helpers
+
+def attacker(d, **kw):
+    s, _ = raw_ws(d.port, **kw)
+    r = Reader(s)
+    check(r.until(lambda r: any(t.get("type") == "hello" for t in r.texts), 5), "attacker got no hello")
+    return s, r
+
+
+def ask(s, r, text, timeout=5):
+    """Send one text message; return the next error/params/pong/subscribed reply (or None)."""
+    n0 = len(r.texts)
+    check(send_quiet(s, ws_frame(OP_TEXT, text)), "connection closed while sending %r" % text[:60])
+    want = ("error", "params", "pong", "subscribed")
+    r.until(lambda r: any(t.get("type") in want for t in r.texts[n0:]), timeout)
+    for t in r.texts[n0:]:
+        if t.get("type") in want:
+            return t
+    return None
+
+
+def expect_errors(d, cases, **kw):
+    """cases: [(text, code, param or None)]. One connection; every reply checked."""
+    s, r = attacker(d, **kw)
+    bad = []
+    for text, code, param in cases:
+        m = ask(s, r, text)
+        shown = text if len(text) < 70 else text[:50] + "...(%d bytes)" % len(text)
+        if m is None:
+            bad.append("%s: no reply%s" % (shown, " (connection closed, code %r)" % r.close_code if r.eof else ""))
+        elif m.get("type") != "error" or m.get("code") != code:
+            bad.append("%s: got %s, want error %s" % (shown, json.dumps(m)[:160], code))
+        elif param and m.get("param") != param:
+            bad.append("%s: param %r, want %r" % (shown, m.get("param"), param))
+    s.close()
+    check(not bad, "; ".join(bad))
+    return len(cases)
+
+
+def fresh_hello(d):
+    s, r = attacker(d)
+    h = [t for t in r.texts if t.get("type") == "hello"][0]
+    s.close()
+    return h
+
+
+def stream_message(s, r, total, opcode=OP_TEXT, chunk=16384, frag=None, deadline_s=15, byte=b"x"):
+    """Send one message of `total` payload bytes (one frame, or fragments of
+    `frag` bytes), pumping the reader between chunks. Returns payload bytes
+    handed to the kernel when the server's close frame / EOF arrived (None if
+    it never did), and the total sent."""
+    s.setblocking(False)
+    sent = 0
+    at_close = None
+    deadline = time.time() + deadline_s
+    pending = b""
+
+    def parts():
+        if frag is None:
+            yield ws_header(opcode, total, key=b"\0\0\0\0")
+            left = total
+            while left > 0:
+                n = min(chunk, left)
+                yield byte * n
+                left -= n
+        else:
+            left, first = total, True
+            while left > 0:
+                n = min(frag, left)
+                left -= n
+                yield ws_header(opcode if first else OP_CONT, n, fin=left == 0, key=b"\0\0\0\0") + byte * n
+                first = False
+
+    it = parts()
+    while time.time() < deadline:
+        r.pump(0)
+        if (r.close_code is not None or r.eof) and at_close is None:
+            at_close = sent
+            break
+        if not pending:
+            pending = next(it, b"")
+            if not pending:
+                break
+        try:
+            k = s.send(pending)
+            sent += k
+            pending = pending[k:]
+        except BlockingIOError:
+            r.pump(0.02)
+        except (BrokenPipeError, ConnectionResetError, OSError):
+            break               # the server hung up: what it sent before is still to be read
+    s.setblocking(True)
+    if at_close is None:
+        r.until(lambda r: r.close_code is not None, 5)
+        if r.close_code is not None or r.eof:
+            at_close = sent
+            r.eof = True
+    return at_close, sent
+
+
+# ---------------------------------------------------------------- cases
+
+CASES = []
+
+
+def case(resolution=64, args=(), changes_params=False, rss_slack_kb=RSS_SLACK_KB, settle_clients=True, web=False):
+    def wrap(fn):
+        fn.opts = dict(resolution=resolution, args=args, changes_params=changes_params,
+                       rss_slack_kb=rss_slack_kb, settle_clients=settle_clients, web=web)
+        CASES.append(fn)
+        return fn
+    return wrap
+
+
+@case(args=LIBERAL)
+def malformed_json(d, fig):
+    cases = [(t, "bad_json", None) for t in (
+        "{", "}", '{"type":', '{"type":"set","params":{"wind_speed":20}', "not json at all", "",
+        " ", "{'type':'set'}", '{"type":"set",,}', '{"type" "ping"}', "[1,2,3]", '"a string"', "42",
+        "null", "true", '{"type":"ping",}', '{"type":"set","params":{"wind_speed":2O}}',
+        '{"type":"set","params":{"wind_speed":0x14}}', '{"type":"set","params":{"wind_speed":+20}}')]
+    fig["messages"] = expect_errors(d, cases)
+    # Invalid UTF-8 in a text frame is a protocol error for WebSocket (close 1007).
+    s, r = attacker(d)
+    send_quiet(s, ws_frame(OP_TEXT, b'{"type":"ping","x":"\xff\xfe"}'))
+    r.until(lambda r: r.close_code is not None, 5)
+    fig["invalid_utf8_close"] = r.close_code
+    s.close()
+    check(r.close_code == 1007, "invalid UTF-8: close code %r, want 1007" % r.close_code)
+
+
+@case(args=LIBERAL)
+def json_leniency(d, fig):
+    """Text that is not JSON (RFC 8259) but that a lenient parser accepts:
+    trailing data, control bytes as whitespace, invalid \\u escapes, and a
+    NUL inside the type string. Each must be rejected, and nothing applied."""
+    fig["messages"] = expect_errors(d, [
+        ('{"type":"ping","id":1} trailing', "bad_json", None),
+        ('{"type":"set","id":2,"params":{"wind_speed":21}}}', "bad_json", None),
+        ('{"type":"set","id":3,"params":{"wind_speed":22}} {"type":"set"}', "bad_json", None),
+        ('{"type":"ping"\x00,"id":4}', "bad_json", None),
+        ('{"type":"ping","id":5,"x":"\\uZZZZ"}', "bad_json", None),
+        ('{"type":"set\\u0000x","id":6,"params":{"wind_speed":23}}', "unknown_type", None),
+        ('{"type":"set","id":7,"params":{"spectrum":"phillips\\u0000junk"}}', "out_of_range", "spectrum"),
+        ('{"type":"set","id":8,"params":{"wind_speed\\u0000x":13}}', "unknown_param", None),
+        ('{"type":"subscribe","id":9,"fields":["height\\u0000junk"]}', "bad_subscription", None),
+    ])
+
+
+@case(args=LIBERAL)
+def nested_json(d, fig):
+    n = 60000                 # fits under the 64 KiB message limit
+    cases = [
+        ("[" * n, "bad_json", None),
+        ("{\"a\":" * (n // 5), "bad_json", None),
+        ('{"type":"set","params":{"wind_speed":' + "[" * n, "bad_json", None),
+        ('{"type":"set","params":{"wind_speed":' + "[" * 2000 + "]" * 2000 + "}}", "bad_json", None),
+        ('{"type":"set","params":{"wind_speed":' + "[" * 500 + "1" + "]" * 500 + "}}", "bad_type", "wind_speed"),
+        ('{"type":"ping","id":' + "{" * 20000 + "}", "bad_json", None),
+    ]
+    fig["messages"] = expect_errors(d, cases)
+    # 100000 '[' is larger than the message limit: too_large and close 1009.
+    s, r = attacker(d)
+    send_quiet(s, ws_frame(OP_TEXT, "[" * 100000))
+    r.until(lambda r: r.close_code is not None, 5)
+    fig["nested_100k_close"] = r.close_code
+    codes = [e.get("code") for e in r.errors()]
+    s.close()
+    check(r.close_code == 1009, "100000 '[': close code %r, want 1009" % r.close_code)
+    check(codes in ([], ["too_large"]), "100000 '[': errors %r" % codes)
+
+
+@case(args=LIBERAL)
+def wrong_types(d, fig):
+    S = '{"type":"set","id":%d,"params":{%s}}'
+    sets = [("wind_speed", '"fast"'), ("wind_speed", "null"), ("wind_speed", "[]"), ("wind_speed", "{}"),
+            ("wind_speed", "true"), ("wind_speed", "[20]"), ("spectrum", "3"), ("spectrum", "null"),
+            ("spectrum", '["phillips"]'), ("paused", '"true"'), ("paused", "1"), ("paused", "null"),
+            ("resolution", '"256"'), ("resolution", "128.5"), ("seed", "1.5"), ("seed", '"7"'),
+            ("transform", "false")]
+    cases = [(S % (i, '"%s":%s' % (p, v)), "bad_type", p) for i, (p, v) in enumerate(sets)]
+    cases += [
+        ('{"type":"set","id":100,"params":"wind_speed=20"}', "bad_message", None),
+        ('{"type":"set","id":101,"params":null}', "bad_message", None),
+        ('{"type":"set","id":102,"params":[["wind_speed",20]]}', "bad_message", None),
+        ('{"type":5,"id":103}', "bad_message", None),
+        ('{"type":null}', "bad_message", None),
+        ('{"type":["set"],"params":{"wind_speed":20}}', "bad_message", None),
+        ('{"type":"set","id":{"x":1},"params":{"wind_speed":20}}', "bad_message", None),
+        ('{"type":"set","id":[1],"params":{"wind_speed":20}}', "bad_message", None),
+        ('{"type":"set","id":105,"params":{"wind_speed":20,"amplitude":"big"}}', "bad_type", "amplitude"),
+        ('{"type":"subscribe","id":106,"fields":"height"}', "bad_subscription", None),
+        ('{"type":"subscribe","id":107,"fields":[1,2]}', "bad_subscription", None),
+        ('{"type":"subscribe","id":108,"lod":"0"}', "bad_subscription", None),
+        ('{"type":"subscribe","id":109,"lod":1.5}', "bad_subscription", None),
+        ('{"type":"subscribe","id":110,"tiles":"some"}', "bad_subscription", None),
+        ('{"type":"subscribe","id":111,"tiles":[[1]]}', "bad_subscription", None),
+        ('{"type":"subscribe","id":112,"tiles":[[-1,0]]}', "bad_subscription", None),
+        ('{"type":"subscribe","id":113,"tiles":[[70000,0]]}', "bad_subscription", None),
+        ('{"type":"subscribe","id":114,"tiles":[]}', "bad_subscription", None),
+        ('{"type":"subscribe","id":115,"max_rate":-1}', "bad_subscription", None),
+        ('{"type":"subscribe","id":116,"max_rate":0}', "bad_subscription", None),
+        ('{"type":"subscribe","id":117,"max_rate":"fast"}', "bad_subscription", None),
+        ('{"type":"subscribe","id":118,"bound":"0.01"}', "bad_subscription", None),
+    ]
+    fig["messages"] = expect_errors(d, cases)
+
+
+@case(args=LIBERAL)
+def nan_inf_huge_numbers(d, fig):
+    S = '{"type":"set","id":%d,"params":{%s}}'
+    cases = [
+        (S % (1, '"wind_speed":NaN'), "bad_json", None),
+        (S % (2, '"wind_speed":Infinity'), "bad_json", None),
+        (S % (3, '"wind_speed":-Infinity'), "bad_json", None),
+        (S % (4, '"wind_speed":nan'), "bad_json", None),
+        (S % (5, '"wind_speed":1e400'), "bad_type", "wind_speed"),
+        (S % (6, '"wind_speed":-1e400'), "bad_type", "wind_speed"),
+        (S % (7, '"wind_speed":1e308'), "out_of_range", "wind_speed"),
+        (S % (8, '"seed":1e300'), "out_of_range", "seed"),
+        (S % (9, '"seed":-1'), "out_of_range", "seed"),
+        (S % (10, '"resolution":1e400'), "bad_type", "resolution"),
+        (S % (11, '"time_scale":1e400'), "bad_type", "time_scale"),
+        (S % (12, '"wind_speed":20,"amplitude":1e400'), "bad_type", "amplitude"),
+        (S % (13, '"patch_size":' + "9" * 400), "bad_type", "patch_size"),
+        (S % (14, '"loop_period":-1e400'), "bad_type", "loop_period"),
+        ('{"type":"subscribe","id":15,"max_rate":1e400}', "bad_subscription", None),
+        ('{"type":"subscribe","id":16,"lod":1e400}', "bad_subscription", None),
+    ]
+    fig["messages"] = expect_errors(d, cases)
+    # A ping echoing a huge t must still produce valid JSON.
+    s, r = attacker(d)
+    m = ask(s, r, '{"type":"ping","id":1,"t":1e400}')
+    s.close()
+    check(m is not None and m.get("type") == "pong", "ping with t=1e400: reply %r" % (m,))
+
+
+@case(args=LIBERAL)
+def resolution_1m(d, fig):
+    S = '{"type":"set","id":%d,"params":{"resolution":%s}}'
+    rss0 = d.rss_kb()
+    cases = [(S % (1, 1 << 20), "out_of_range", "resolution"), (S % (2, 1 << 31), "out_of_range", "resolution"),
+             (S % (3, 1 << 63), "out_of_range", "resolution"), (S % (4, 4096), "out_of_range", "resolution"),
+             (S % (5, 0), "out_of_range", "resolution"), (S % (6, -64), "out_of_range", "resolution"),
+             (S % (7, 2048), "invalid", "resolution"),
+             ('{"type":"set","id":8,"params":{"resolution":1048576,"transform":"dft"}}', "out_of_range", "resolution")]
+    fig["messages"] = expect_errors(d, cases)
+    fig["rss_jump_kb"] = d.rss_kb() - rss0
+
+
+@case(args=LIBERAL)
+def unknown_types(d, fig):
+    types = ["fly", "", "SET", "Set", "set ", "__proto__", "constructor", "hello", "params", "error",
+             "subscribed", "pong", "x" * 1000, "s\u00e9t"]
+    cases = [(json.dumps({"type": t, "id": i, "params": {"wind_speed": 20}}), "unknown_type", None)
+             for i, t in enumerate(types)]
+    fig["messages"] = expect_errors(d, cases)
+
+
+@case(args=LIBERAL)
+def message_10mb(d, fig):
+    """One 10 MB text message: close 1009 at the first overflow, not after 10 MB."""
+    total = 10 << 20
+    s, r = attacker(d)
+    at_close, sent = stream_message(s, r, total)
+    s.close()
+    fig["close_code"] = r.close_code
+    fig["sent_kb_at_close"] = None if at_close is None else at_close // 1024
+    fig["too_large_error"] = [e.get("code") for e in r.errors()] == ["too_large"]
+    log("    10 MB message: close %r after %s kB handed to the kernel (of %d kB)"
+        % (r.close_code, fig["sent_kb_at_close"], total // 1024))
+    fig["eof"], fig["reset"] = r.eof, r.reset
+    check(r.close_code == 1009, "close code %r, want 1009 (connection ended: %s, by RST: %s, errors %r)"
+          % (r.close_code, r.eof, r.reset, [e.get("code") for e in r.errors()]))
+    check(at_close is not None and at_close < total // 2, "close only after %s of %d bytes" % (at_close, total))
+    # Same size in 1 KiB fragments.
+    s, r = attacker(d)
+    at_close2, _ = stream_message(s, r, total, frag=1024)
+    s.close()
+    fig["fragmented_close_code"] = r.close_code
+    fig["fragmented_sent_kb_at_close"] = None if at_close2 is None else at_close2 // 1024
+    check(r.close_code == 1009, "fragmented: close code %r, want 1009" % r.close_code)
+    check(at_close2 is not None and at_close2 < total // 2, "fragmented: close only after %s bytes" % at_close2)
+    check(d.metric("oceand_closed_too_large_total") == 2, "closed_too_large metric")
+
+
+@case(args=LIBERAL)
+def deflate_bomb(d, fig):
+    """permessage-deflate must be refused; a compressed (RSV1) message must not be inflated."""
+    s = socket.create_connection(("127.0.0.1", d.port), timeout=5)
+    s.sendall(handshake_request(d.port, "Sec-WebSocket-Extensions: permessage-deflate; client_max_window_bits\r\n"))
+    resp = read_http_response(s)
+    check(b" 101 " in resp.split(b"\r\n")[0], "handshake with a deflate offer refused: %r" % resp[:100])
+    negotiated = b"sec-websocket-extensions" in resp.lower()
+    fig["deflate_negotiated"] = negotiated
+    check(not negotiated, "server accepted permessage-deflate: %r" % resp)
+    # 64 MiB of JSON-ish text deflates to ~64 KiB; send it with RSV1 set anyway.
+    c = zlib.compressobj(9, zlib.DEFLATED, -15)
+    bomb = c.compress(b'{"type":"ping","pad":"') + c.compress(b"a" * (64 << 20)) + c.compress(b'"}')
+    bomb += c.flush(zlib.Z_SYNC_FLUSH)[:-4]
+    fig["bomb_bytes"] = len(bomb)
+    r = Reader(s)
+    r.until(lambda r: any(t.get("type") == "hello" for t in r.texts), 5)
+    rss0 = d.rss_kb()
+    send_quiet(s, ws_frame(OP_TEXT, bomb[:60000], rsv1=True))
+    r.until(lambda r: r.close_code is not None, 5)
+    fig["close_code"] = r.close_code
+    fig["rss_jump_kb"] = d.rss_kb() - rss0
+    s.close()
+    log("    deflate offer refused; RSV1 bomb of %d bytes (64 MiB inflated): close %r, eof %s"
+        % (len(bomb), r.close_code, r.eof))
+    check(r.close_code is not None or r.eof, "RSV1 message without the extension did not end the connection")
+    check(r.close_code in (None, 1002), "close code %r, want 1002 (protocol error)" % r.close_code)
+
+
+@case(args=LIBERAL)
+def binary_on_control(d, fig):
+    s, r = attacker(d)
+    for i in range(20):
+        send_quiet(s, ws_frame(OP_BIN, bytes([i]) * (i * 100 + 1)))
+    r.until(lambda r: len(r.errors()) >= 20, 5)
+    codes = [e.get("code") for e in r.errors()]
+    fig["errors_for_20"] = len(codes)
+    check(len(codes) == 20 and set(codes) == {"bad_message"}, "20 binary messages: errors %r" % codes)
+    # The connection is still usable for JSON afterwards.
+    m = ask(s, r, '{"type":"ping","id":7}')
+    check(m and m.get("type") == "pong", "ping after binary: %r" % (m,))
+    s.close()
+    # A 10 MB binary message: bad_message; the daemon must not buffer it.
+    s, r = attacker(d)
+    rss0 = d.rss_kb()
+    at_close, sent = stream_message(s, r, 10 << 20, opcode=OP_BIN, byte=b"\xa5")
+    r.until(lambda r: len(r.errors()) >= 1, 3)
+    fig["big_binary_close"] = r.close_code
+    fig["big_binary_sent_kb"] = sent // 1024
+    fig["big_binary_rss_jump_kb"] = d.rss_kb() - rss0
+    codes = [e.get("code") for e in r.errors()]
+    s.close()
+    log("    10 MB binary: errors %r, close %r, %d kB accepted, RSS +%d kB"
+        % (codes, r.close_code, sent // 1024, fig["big_binary_rss_jump_kb"]))
+    check(codes[:1] == ["bad_message"], "10 MB binary: errors %r" % codes)
+    check(fig["big_binary_rss_jump_kb"] < 4096, "RSS grew %d kB on a 10 MB binary message" % fig["big_binary_rss_jump_kb"])
+
+
+@case()   # daemon defaults: 20 messages/s, burst 40
+def binary_flood(d, fig):
+    """200 binary messages at once with the default rate limit: each costs the
+    daemon an error reply, so they should count against the control budget."""
+    s, r = attacker(d)
+    for i in range(200):
+        send_quiet(s, ws_frame(OP_BIN, b"\x00" * 16))
+    r.until(lambda r: len(r.errors()) >= 200 or r.eof, 5)
+    codes = [e.get("code") for e in r.errors()]
+    s.close()
+    fig.update(sent=200, bad_message=codes.count("bad_message"), rate_limited=codes.count("rate_limited"),
+               replies=len(codes))
+    log("    200 binary messages at once: %d bad_message, %d rate_limited"
+        % (codes.count("bad_message"), codes.count("rate_limited")))
+    check(codes.count("bad_message") >= 1, "no bad_message for binary data")
+    check(codes.count("bad_message") <= 40 + 5,
+          "%d bad_message replies to 200 binary messages: binary data bypasses the control rate limit (burst 40)"
+          % codes.count("bad_message"))
+
+
+@case(args=LIBERAL)
+def tile_amplification(d, fig):
+    """One 8 KB subscribe listing tile [0,0] 1024 times, all 6 fields, lossless,
+    then read as fast as possible: the subscription must be normalised (no
+    duplicate tiles), not turned into ~100 MB frames."""
+    s, r = attacker(d)
+    sub = json.dumps({"type": "subscribe", "id": 1, "fields": ["height", "dx", "dz", "slope_x", "slope_z", "jacobian"],
+                      "bound": 0, "tiles": [[0, 0]] * 1024})
+    m = ask(s, r, sub)
+    check(m is not None, "no reply to the subscribe")
+    tiles = (m.get("subscription") or {}).get("tiles")
+    fig["reply"] = m.get("code") or m.get("type")
+    fig["tiles_in_subscription"] = len(tiles) if isinstance(tiles, list) else tiles
+    # Read greedily for 3 s (bounded), in a thread, and count what arrives.
+    got = [0]
+    stop = time.time() + 3
+
+    def drain():
+        s.settimeout(0.5)
+        while time.time() < stop:
+            try:
+                k = len(s.recv(1 << 20))
+            except socket.timeout:
+                continue
+            except OSError:
+                break
+            if not k:
+                break
+            got[0] += k
+    m0 = d.metrics()
+    t = threading.Thread(target=drain)
+    t.start()
+    t.join()
+    m1 = d.metrics()
+    s.close()
+    sent_mb = (m1["oceand_bytes_sent_total"] - m0["oceand_bytes_sent_total"]) / 1e6
+    fig.update(received_mb_3s=round(got[0] / 1e6, 1), daemon_sent_mb_3s=round(sent_mb, 1))
+    log("    subscribe with 1024 copies of one tile: %s with %s tiles; the attacker received %.0f MB in 3 s"
+        " (the daemon sent %.0f MB)" % (fig["reply"], fig["tiles_in_subscription"], got[0] / 1e6, sent_mb))
+    if m.get("type") == "subscribed":
+        check(isinstance(tiles, list) and len(tiles) == len({tuple(t) for t in tiles}),
+              "duplicate tiles kept: %d entries for %d distinct tiles"
+              % (len(tiles), len({tuple(t) for t in tiles})))
+    else:
+        check(m.get("code") == "bad_subscription", "reply %r" % m)
+
+
+@case(changes_params=True)   # daemon defaults: 20 messages/s, burst 40
+def set_flood(d, fig):
+    """1000 `set`s in one second from one client: most get rate_limited."""
+    s, r = attacker(d)
+    changes0 = d.metric("oceand_param_changes_total")
+    t0 = time.time()
+    for i in range(1000):
+        # 10.0, 10.5, ... distinct consecutive values, so every accepted set is a change
+        send_quiet(s, ws_frame(OP_TEXT, '{"type":"set","id":%d,"params":{"wind_speed":%g}}' % (i, 10 + (i % 40) * 0.5)))
+        r.pump(0)
+        target = t0 + (i + 1) / 1000.0
+        while time.time() < target:
+            r.pump(max(0.0, target - time.time()))
+    elapsed = time.time() - t0
+    r.until(lambda r: sum(1 for t in r.texts if t.get("type") in ("params", "error")) >= 1000, 10)
+    mine = [t for t in r.texts if t.get("type") == "params" and "id" in t]
+    errs = [e.get("code") for e in r.errors()]
+    limited = errs.count("rate_limited")
+    s.close()
+    time.sleep(0.3)
+    changes = d.metric("oceand_param_changes_total") - changes0
+    allowed = 40 + 20 * elapsed + 2
+    fig.update(sent=1000, flood_seconds=round(elapsed, 2), accepted=len(mine), rate_limited=limited,
+               other_errors=len(errs) - limited, applied=changes, allowed_max=round(allowed))
+    log("    1000 sets in %.2f s: %d accepted, %d rate_limited, %d other errors, %d changes applied"
+        % (elapsed, len(mine), limited, len(errs) - limited, changes))
+    check(limited > 0, "no rate_limited error")
+    check(len(mine) + limited + (len(errs) - limited) == 1000, "not every set was answered")
+    check(len(errs) == limited, "unexpected errors %r" % sorted(set(errs)))
+    check(len(mine) <= allowed, "%d sets accepted, bucket allows %d" % (len(mine), allowed))
+    check(changes <= len(mine), "%d changes applied for %d accepted sets" % (changes, len(mine)))
+    # The sea holds the last accepted value.
+    last = max(mine, key=lambda t: t["params_version"]) if mine else None
+    if last:
+        h = fresh_hello(d)
+        check(h["params"] == last["params"], "params after the flood differ from the last accepted set")
+
+
+def burst(d, count, max_accept):
+    """Open `count` connections at once and handshake on all; returns the sockets and the figures."""
+    socks = []
+    for _ in range(count):
+        s = socket.socket()
+        s.setblocking(False)
+        s.connect_ex(("127.0.0.1", d.port))
+        socks.append(s)
+    req = handshake_request(d.port)
+    pending = {s: b"" for s in socks}
+    done = {}
+    sent = set()
+    deadline = time.time() + 20
+    while pending and time.time() < deadline:
+        # One blocking select for both directions: the attacker must not burn
+        # a core of this 2-core machine spinning, or it measures itself.
+        rl, w, _ = select.select(list(pending), [s for s in pending if s not in sent], [], 0.05)
+        for s in w:
+            try:
+                if s.send(req) == len(req):
+                    sent.add(s)
+            except OSError:
+                done[s] = pending.pop(s)
+        for s in rl:
+            if s not in pending:
+                continue
+            try:
+                data = s.recv(4096)
+            except (ConnectionError, OSError):
+                data = b""
+            pending[s] += data
+            if not data or b"\r\n\r\n" in pending[s]:
+                done[s] = pending.pop(s)
+    accepted = sum(1 for resp in done.values() if b" 101 " in resp.split(b"\r\n")[0])
+    return socks, dict(opened=count, accepted=accepted, refused=len(done) - accepted, unanswered=len(pending))
+
+
+@case(args=("--max-clients", "100"), rss_slack_kb=8192)
+def connections_500(d, fig):
+    """500 connections at once against --max-clients 100 (the observer holds one slot), twice:
+    the first burst warms lws and the allocator up, the second must not grow RSS."""
+    rss = []
+    for rnd in range(2):
+        socks, f = burst(d, 500, 99)
+        gauge = d.metric("oceand_clients")
+        log("    burst %d: 500 at once: %d accepted, %d refused, %d unanswered; clients gauge %g"
+            % (rnd + 1, f["accepted"], f["refused"], f["unanswered"], gauge))
+        fig.update({"burst%d_%s" % (rnd + 1, k): v for k, v in f.items()})
+        try:
+            check(f["unanswered"] == 0, "%d connections got no handshake answer in 20 s" % f["unanswered"])
+            check(f["accepted"] == 99, "%d accepted, want 99 (max 100, observer holds one)" % f["accepted"])
+            check(gauge == 100, "clients gauge %g, want 100" % gauge)
+            time.sleep(1.5)   # 99 connected clients that never read; the observer streams on
+        finally:
+            for s in socks:
+                s.close()
+        check(wait_until(lambda: d.metric("oceand_clients") == 1, 15),
+              "clients not cleaned up: %g" % d.metric("oceand_clients"))
+        time.sleep(0.3)
+        rss.append(d.rss_kb())
+    fig["rss_growth_second_burst_kb"] = rss[1] - rss[0]
+    log("    RSS after burst 1: %d kB, after burst 2: %d kB" % (rss[0], rss[1]))
+    check(rss[1] - rss[0] < 1024, "RSS grew %d kB from the first burst to the second" % (rss[1] - rss[0]))
+    s, r = attacker(d)   # room again
+    s.close()
+
+
+@case(args=LIBERAL + ("--control-token", "s3cret-token"))
+def viewer_without_token(d, fig):
+    """With --control-token an anonymous client is a viewer: every way of steering is forbidden."""
+    S = '{"type":"set","id":%d,"params":{"wind_speed":25}%s}'
+    s, r = attacker(d)
+    hello = [t for t in r.texts if t.get("type") == "hello"][0]
+    s.close()
+    fig["role"] = hello.get("role")
+    check(hello.get("role") == "viewer", "role %r with a control token set, want viewer" % hello.get("role"))
+    fig["messages"] = expect_errors(d, [
+        (S % (1, ""), "forbidden", None),
+        (S % (2, ',"token":"wrong"'), "forbidden", None),
+        (S % (3, ',"token":""'), "forbidden", None),
+        (S % (5, ',"token":"S3CRET-TOKEN"'), "forbidden", None),
+        (S % (6, ',"token":"s3cret-toke"'), "forbidden", None),
+        ('{"type":"pause","id":7}', "forbidden", None),
+        ('{"type":"resume","id":8}', "forbidden", None),
+        ('{"type":"set","id":9,"params":{"paused":true}}', "forbidden", None),
+        ('{"type":"set","id":10,"params":{"resolution":1048576}}', "forbidden", None),
+    ])
+    # Viewers may still subscribe and ping.
+    s, r = attacker(d)
+    m = ask(s, r, '{"type":"subscribe","id":1,"fields":["height"]}')
+    s.close()
+    check(m and m.get("type") == "subscribed", "viewer subscribe: %r" % (m,))
+
+
+def http_raw(port, request, limit=1 << 20, timeout=5):
+    s = socket.create_connection(("127.0.0.1", port), timeout=timeout)
+    try:
+        s.sendall(request)
+        out = b""
+        while len(out) < limit:
+            try:
+                c = s.recv(65536)
+            except (socket.timeout, ConnectionError):
+                break
+            if not c:
+                break
+            out += c
+        return out
+    finally:
+        s.close()
+
+
+@case(web=True)
+def http_hostile(d, fig):
+    """The HTTP side of the port: path traversal, oversized headers, a /metrics flood."""
+    leaks = []
+    for path in ("/../../../../../../etc/passwd", "/%2e%2e/%2e%2e/%2e%2e/%2e%2e/etc/passwd",
+                 "/..%2f..%2f..%2f..%2fetc%2fpasswd", "//etc/passwd", "/index.html/../../../../etc/passwd"):
+        out = http_raw(d.port, ("GET %s HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n" % path).encode())
+        status = out.split(b"\r\n", 1)[0].decode(errors="replace")
+        if b"root:" in out:
+            leaks.append(path)
+        fig.setdefault("traversal_status", []).append(status[9:12])
+    check(not leaks, "/etc/passwd served for %s" % leaks)
+    big = http_raw(d.port, b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Big: " + b"a" * (256 * 1024) + b"\r\n\r\n")
+    fig["huge_header_reply"] = big.split(b"\r\n", 1)[0].decode(errors="replace")[:40] or "closed"
+    n_ok = 0
+    for _ in range(200):
+        try:
+            d.get("/metrics", timeout=5)
+            n_ok += 1
+        except Exception:
+            pass
+    fig["metrics_answered"] = n_ok
+    log("    traversal statuses %s; 256 KiB header: %r; /metrics answered %d of 200"
+        % (fig["traversal_status"], fig["huge_header_reply"], n_ok))
+    check(n_ok == 200, "/metrics answered %d of 200" % n_ok)
+
+
+@case(resolution=256, rss_slack_kb=4096)
+def never_read(d, fig):
+    """20 clients that connect and never read, at N=256 (real frames), for 6 s."""
+    drops0 = d.metric('oceand_frames_dropped_total{reason="slow_client"}')
+    stalled = [raw_ws(d.port, rcvbuf=4096)[0] for _ in range(20)]
+    time.sleep(1.5)
+    rss_a = d.rss_kb()
+    time.sleep(4.5)
+    rss_b = d.rss_kb()
+    drops = d.metric('oceand_frames_dropped_total{reason="slow_client"}') - drops0
+    fig.update(stalled=20, rss_during_growth_kb=rss_b - rss_a, frames_skipped=drops)
+    log("    20 stalled clients: RSS %d -> %d kB over 4.5 s, %d frames skipped" % (rss_a, rss_b, drops))
+    for s in stalled:
+        s.close()
+    check(rss_b - rss_a < 1024, "RSS grew %d kB while clients were stalled" % (rss_b - rss_a))
+    check(drops > 20 * 30, "stalled clients skipped only %d frames" % drops)
+
+
+@case(args=("--ping-interval", "1", "--idle-timeout", "3"))
+def half_open(d, fig):
+    """TCP without handshake, half a handshake, and handshake-then-silence: all hung up."""
+    bare = [socket.create_connection(("127.0.0.1", d.port), timeout=5) for _ in range(50)]
+    partial = []
+    for _ in range(20):
+        s = socket.create_connection(("127.0.0.1", d.port), timeout=5)
+        s.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n")
+        partial.append(s)
+    silent = [raw_ws(d.port)[0] for _ in range(10)]          # read, never send (no pong)
+    mute = [raw_ws(d.port, rcvbuf=4096)[0] for _ in range(5)]  # neither read nor send
+    t0 = time.time()
+    try:
+        half_open_watch(d, fig, t0, bare, partial, silent)
+    finally:
+        for s in bare + partial + silent + mute:
+            s.close()
+
+
+def half_open_watch(d, fig, t0, bare, partial, silent):
+    check(d.metric("oceand_clients") == 16, "clients gauge %g, want 16" % d.metric("oceand_clients"))
+    s2, _ = raw_ws(d.port)          # a new client still gets in meanwhile
+    s2.close()
+    readers = [Reader(s) for s in bare + partial + silent]
+    closed_at = {}
+    deadline = t0 + 25
+    while time.time() < deadline and len(closed_at) < len(readers):
+        for i, r in enumerate(readers):
+            if i not in closed_at:
+                r.pump(0)
+                if r.eof:
+                    closed_at[i] = time.time() - t0
+        time.sleep(0.1)
+    gauge_ok = wait_until(lambda: d.metric("oceand_clients") == 1, max(0.1, deadline - time.time()))
+
+    def worst(lo, hi):
+        t = [closed_at.get(i) for i in range(lo, hi)]
+        return None if None in t else round(max(t), 1)
+    fig.update(no_handshake_closed_s=worst(0, 50), partial_handshake_closed_s=worst(50, 70),
+               silent_ws_closed_s=worst(70, 80), still_open=len(readers) - len(closed_at),
+               gauge_after=d.metric("oceand_clients"))
+    log("    hung up after: no handshake %s s, partial handshake %s s, silent WebSocket %s s; still open %d"
+        % (fig["no_handshake_closed_s"], fig["partial_handshake_closed_s"], fig["silent_ws_closed_s"],
+           fig["still_open"]))
+    check(fig["no_handshake_closed_s"] is not None, "TCP connections without a handshake never hung up")
+    check(fig["partial_handshake_closed_s"] is not None, "half-sent handshakes never hung up")
+    check(fig["silent_ws_closed_s"] is not None, "silent WebSocket clients never hung up (idle timeout 3 s)")
+    check(gauge_ok, "silent / non-reading clients still counted: %g" % d.metric("oceand_clients"))
+
+
+@case(resolution=256)
+def vanish_mid_frame(d, fig):
+    """Clients that vanish (RST) mid outbound frame, mid inbound message, mid handshake."""
+    for _ in range(10):
+        s, _ = raw_ws(d.port)
+        got = 0
+        while got < 6000:
+            got += len(s.recv(4096))
+        rst_close(s)
+    for _ in range(10):
+        s, r = attacker(d)
+        s.sendall(ws_header(OP_TEXT, 1000) + b"x" * 300)
+        rst_close(s)
+    for _ in range(10):
+        s = socket.create_connection(("127.0.0.1", d.port), timeout=5)
+        s.sendall(handshake_request(d.port)[:40])
+        rst_close(s)
+    ok = wait_until(lambda: d.metric("oceand_clients") == 1, 10)
+    fig["gauge_after"] = d.metric("oceand_clients")
+    check(ok, "vanished clients still counted: %g" % d.metric("oceand_clients"))
+
+
+@case(rss_slack_kb=1024)
+def churn(d, fig):
+    """1000 connect/subscribe/disconnect cycles; RSS growth after warm-up < 1 MB."""
+    subs = ['{"type":"subscribe","id":1,"fields":["height"],"lod":1,"bound":0.05}',
+            '{"type":"subscribe","id":1,"fields":["height","dx","dz","jacobian"],"bound":0}',
+            '{"type":"subscribe","id":1,"fields":["slope_x","slope_z"],"lod":2,"tiles":[[0,0]],"max_rate":10}',
+            '{"type":"subscribe","id":1,"bound":0.001}']
+    errors = []
+
+    def cycle(i):
+        s, r = attacker(d)
+        m = ask(s, r, subs[i % len(subs)])
+        if not m or m.get("type") != "subscribed":
+            errors.append("cycle %d: %r" % (i, m))
+        if i % 3 == 0:
+            send_quiet(s, ws_frame(8, b"\x03\xe8"))    # polite close
+            s.close()
+        elif i % 3 == 1:
+            s.close()
+        else:
+            rst_close(s)
+
+    def run(lo, hi, workers=4):
+        def worker(k):
+            for i in range(lo + k, hi, workers):
+                if len(errors) < 5:
+                    cycle(i)
+        ts = [threading.Thread(target=worker, args=(k,)) for k in range(workers)]
+        for t in ts:
+            t.start()
+        for t in ts:
+            t.join()
+
+    def settled_rss():
+        wait_until(lambda: d.metric("oceand_clients") == 1, 10)
+        time.sleep(0.5)
+        return d.rss_kb()
+
+    run(0, 100)                     # warm-up: allocator arenas, lws pools
+    rss_a, fds_a = settled_rss(), d.fds()
+    t0 = time.time()
+    run(100, 1100)
+    secs = time.time() - t0
+    rss_b, fds_b = settled_rss(), d.fds()
+    fig.update(cycles=1000, cycles_seconds=round(secs, 1), rss_after_warmup_kb=rss_a, rss_after_cycles_kb=rss_b,
+               churn_rss_growth_kb=rss_b - rss_a, fd_growth=fds_b - fds_a)
+    log("    1000 cycles in %.1f s: RSS %d -> %d kB (%+d), fds %+d" % (secs, rss_a, rss_b, rss_b - rss_a, fds_b - fds_a))
+    check(not errors, "; ".join(errors[:3]))
+    check(rss_b - rss_a < 1024, "RSS grew %d kB over 1000 cycles" % (rss_b - rss_a))
+    check(fds_b - fds_a <= 0, "%d file descriptors leaked" % (fds_b - fds_a))
+
+
+# ---------------------------------------------------------------- runner
+
+def run_case(fn, fig):
+    """Run one case on its own daemon; figures go into fig (kept when the case fails)."""
+    o = fn.opts
+    fig["N"] = o["resolution"]
+    d = Daemon(ARGS.oceand, *o["args"], resolution=o["resolution"], web=o["web"])
+    obs = None
+    try:
+        obs = Observer(d.url)
+        params0, version0 = obs.hello["params"], obs.hello["params_version"]
+        time.sleep(0.5)
+        m0 = d.metrics()
+        rss0 = d.rss_kb()
+        obs.mark()
+        cpu0, wait0 = d.sched()
+        t0 = time.time()
+        failure = None
+        try:
+            fn(d, fig)
+        except CaseFailure as e:
+            failure = str(e)
+        except Exception as e:  # a harness error (socket, timeout): the case fails, with a trace
+            failure = "%s: %s" % (type(e).__name__, e)
+            traceback.print_exc(file=OUT)
+        # Every window at least MIN_WINDOW long, so the share means something.
+        while time.time() < t0 + MIN_WINDOW:
+            time.sleep(0.05)
+        secs = time.time() - t0
+        # Liveness first: everything below needs the daemon.
+        alive = d.alive()
+        fig["daemon_alive"] = alive
+        check(alive, (failure + "; " if failure else "") + "daemon died (exit %r); log tail:\n%s"
+              % (d.proc.returncode, d.read_log()))
+        st = obs.stats()
+        cpu1, wait1 = d.sched()
+        fig["daemon_cpu_ms"], fig["runq_wait_ms"] = round(cpu1 - cpu0), round(wait1 - wait0)
+        m1 = d.metrics()
+        if o["settle_clients"]:
+            wait_until(lambda: d.metric("oceand_clients") == 1, 10)
+        time.sleep(0.3)
+        rss1 = d.rss_kb()
+        share = st.get("frames", 0) / st["span"] if st.get("span") else 0.0
+        fig.update(seconds=round(secs, 1), observer_frames=st.get("frames"), observer_span=st.get("span"),
+                   observer_share=round(share, 4), observer_closed=st.get("closed"),
+                   rss_before_kb=rss0, rss_after_kb=rss1, rss_growth_kb=rss1 - rss0,
+                   overruns=m1.get("oceand_tick_overruns_total", 0) - m0.get("oceand_tick_overruns_total", 0))
+        problems = [failure] if failure else []
+        if st.get("closed") is not None:
+            problems.append("observer was disconnected (code %r)" % st.get("closed"))
+        if st.get("frames", 0) < 0.5 * secs * d.tick_rate:
+            problems.append("observer got %s frames in %.1f s (daemon stalled?)" % (st.get("frames"), secs))
+        if share < MIN_SHARE:
+            # The attack's doing or the shared machine's? A lost frame means the
+            # daemon's threads were late by a tick period; if they spent at least
+            # that long ready-but-not-running (run-queue wait), the scheduler can
+            # explain the loss: reported as NOISE, not counted as a failure.
+            lost = st["span"] - st["frames"]
+            fig["observer_gaps"] = st.get("gaps")
+            explained = fig["runq_wait_ms"] >= lost * 1000.0 / d.tick_rate
+            if explained and not ARGS.strict:
+                fig["noisy"] = True
+                log("    NOISE: observer kept %.1f%% (%d lost, holes %s) while the daemon's threads waited %.0f ms"
+                    " for a core (CPU used: %.0f ms): the machine's loss, not the attack's"
+                    % (100 * share, lost, st.get("gaps"), fig["runq_wait_ms"], fig["daemon_cpu_ms"]))
+            else:
+                problems.append("observer kept %.1f%% of frames (%s of %s, holes %s), want >= %.0f%% "
+                                "(daemon threads waited %.0f ms for a core, used %.0f ms)"
+                                % (100 * share, st.get("frames"), st.get("span"), st.get("gaps"), 100 * MIN_SHARE,
+                                   fig["runq_wait_ms"], fig["daemon_cpu_ms"]))
+        if rss1 - rss0 >= o["rss_slack_kb"]:
+            problems.append("RSS grew %d kB (%d -> %d), want < %d" % (rss1 - rss0, rss0, rss1, o["rss_slack_kb"]))
+        if not o["changes_params"]:
+            h = fresh_hello(d)
+            if h["params"] != params0 or h["params_version"] != version0:
+                changed = sorted(k for k in params0 if h["params"].get(k) != params0[k])
+                problems.append("parameters changed: version %s -> %s, %s" % (version0, h["params_version"], changed))
+            if st.get("params"):
+                problems.append("observer saw %d params broadcasts" % st["params"])
+        obs.close()
+        obs = None
+        rc = d.stop()
+        fig["exit_code"] = rc
+        if rc != 0:
+            problems.append("exit code %r on SIGTERM after the attack; log tail:\n%s" % (rc, d.read_log()))
+        check(not problems, "; ".join(problems))
+    finally:
+        if obs:
+            obs.close()
+        if d.alive():
+            d.proc.kill()
+            d.proc.wait()
+        shutil.rmtree(d.tmp, ignore_errors=True)
+
+
+def main():
+    global ARGS, OUT
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--oceand", default="build/oceand")
+    ap.add_argument("-k", default="", help="run only cases whose name contains one of these (comma-separated)")
+    ap.add_argument("--json", action="store_true", help="figures as JSON lines on stdout, log on stderr")
+    ap.add_argument("--strict", action="store_true",
+                    help="no noise allowance: < 99%% observer delivery fails even when the daemon waited for a core")
+    ap.add_argument("--bench", action="store_true", help="like --json, and exit 0 even when a case fails")
+    ARGS = ap.parse_args()
+    if ARGS.json or ARGS.bench:
+        OUT = sys.stderr
+    passed = failed = 0
+    failed_names = []
+    t_all = time.time()
+    for fn in CASES:
+        if not any(k in fn.__name__ for k in ARGS.k.split(",")):
+            continue
+        log("--- %s" % fn.__name__)
+        t0 = time.time()
+        fig = {"bench": "hostile", "case": fn.__name__}
+        try:
+            run_case(fn, fig)
+            fig["ok"] = True
+            passed += 1
+            log("ok   %s (%.1f s): observer %.1f%% of %s frames, RSS %+d kB, overruns %d"
+                % (fn.__name__, time.time() - t0, 100 * fig["observer_share"], fig["observer_span"],
+                   fig["rss_growth_kb"], fig["overruns"]))
+        except Exception as e:
+            fig.update(ok=False, error=str(e)[:300])
+            failed += 1
+            failed_names.append(fn.__name__)
+            log("FAIL %s (%.1f s): %s" % (fn.__name__, time.time() - t0, e))
+            if not isinstance(e, CaseFailure):
+                traceback.print_exc(file=OUT)
+        if ARGS.json or ARGS.bench:
+            print(json.dumps(fig), flush=True)
+    log("hostile battery took %.0f s" % (time.time() - t_all))
+    if failed_names:
+        log("failed: " + " ".join(failed_names))
+    log("%d passed, %d failed" % (passed, failed))
+    sys.exit(0 if ARGS.bench or not failed else 1)
+
+
+if __name__ == "__main__":
+    main()
