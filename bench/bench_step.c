@@ -1,0 +1,219 @@
+/* bench_step.c — how long a simulation step takes, and how much of it is FFTW.
+ *
+ * Usage: bench_step [WISDOM_FILE]   (make bench-step passes build/fftw-wisdom)
+ * One JSON object per line on stdout, medians over repetitions:
+ *   {"bench":"step","N":..,"threads":..,"step_ms":..,"fftw_ms":..,"ratio":..}
+ *     a full step (all six fields: 8 c2r transforms) vs, in the same
+ *     process and interleaved with it, the bare FFTW executes that step runs;
+ *   {"bench":"pack_vs_c2r",...}  the transforms of a full step done our way
+ *     (split c2r), as 8 plain 2-D c2r, and as 4 c2c carrying two real
+ *     fields each (plus the de-interleave packing needs);
+ *   {"bench":"dft_vs_fft",...}   the thesis's Table IV.1: brute-force DFT vs
+ *     FFT step, all fields, one thread.
+ * Plans use FFTW_MEASURE with the wisdom file, as the daemon does. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "ocean_internal.h"
+
+static double now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+/* CPU time of all threads of the process: on a shared machine it tells
+ * how much of the wall time was ours. */
+static double cpu_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static double median(double *v, int n)
+{
+    qsort(v, n, sizeof *v, cmp_double);
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+static int reps_for(int n)
+{
+    return n <= 64 ? 200 : n <= 128 ? 100 : n <= 256 ? 40 : n <= 512 ? 20 : n <= 1024 ? 11 : 7;
+}
+
+static struct ocean *make(int n, int threads, const char *wisdom, int rigor)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = n;
+    struct ocean_options opt = {threads, wisdom, rigor};
+    char err[256];
+    struct ocean *o = ocean_create(&p, &opt, err, sizeof err);
+    if (!o)
+        fprintf(stderr, "bench_step: N=%d: %s\n", n, err);
+    return o;
+}
+
+static void bench_step(int n, int threads, const char *wisdom)
+{
+    struct ocean *o = make(n, threads, wisdom, 1);
+    if (!o)
+        return;
+    int reps = reps_for(n);
+    double *st = malloc(reps * sizeof *st), *ft = malloc(reps * sizeof *ft), *sc = malloc(reps * sizeof *sc);
+    ocean_step(o, 0.5, OCEAN_ALL_FIELDS); /* warm caches and pages */
+    for (int r = 0; r < reps; r++) {
+        double c0 = cpu_ms(), t0 = now_ms();
+        ocean_step(o, 1.0 + r * 0.033, OCEAN_ALL_FIELDS);
+        double t1 = now_ms(), c1 = cpu_ms();
+        ocean_fft_only(o, OCEAN_ALL_FIELDS);
+        double t2 = now_ms();
+        st[r] = t1 - t0;
+        ft[r] = t2 - t1;
+        sc[r] = c1 - c0;
+    }
+    double s = median(st, reps), f = median(ft, reps), c = median(sc, reps);
+    printf("{\"bench\":\"step\",\"N\":%d,\"threads\":%d,\"fields\":\"all\",\"step_ms\":%.3f,\"fftw_ms\":%.3f,"
+           "\"ratio\":%.3f,\"step_cpu_ms\":%.3f,\"reps\":%d}\n", n, threads, s, f, s / f, c, reps);
+    free(sc);
+    fflush(stdout);
+    free(st);
+    free(ft);
+    ocean_free(o);
+}
+
+/* The transforms of a full step, three ways, same FFTW_MEASURE rigor:
+ *  - ours: 5 z passes + 8 row c2r (ocean_fft_only, see ocean_step.c);
+ *  - 8 plain 2-D c2r of N x N, one per real field;
+ *  - packing: real fields A, B as the spectrum A~ + i B~ of one full N x N
+ *    c2c (A in the real, B in the imaginary part of the result), 4 of
+ *    them, plus the split into 8 float arrays that packing needs. */
+static void bench_pack(int n, int threads, const char *wisdom)
+{
+    struct ocean *o = make(n, threads, wisdom, 1);
+    if (!o)
+        return;
+    size_t nn = (size_t)n * n;
+    fftwf_complex *in[4], *out = fftwf_malloc(nn * sizeof *out);
+    for (int i = 0; i < 4; i++)
+        in[i] = fftwf_malloc(nn * sizeof *in[i]);
+    float *real = fftwf_malloc(8 * nn * sizeof(float));
+    ocean_fftw_lock();
+    if (wisdom)
+        fftwf_import_wisdom_from_filename(wisdom);
+    fftwf_plan_with_nthreads(threads);
+    fftwf_plan c2c = fftwf_plan_dft_2d(n, n, in[0], out, FFTW_BACKWARD, FFTW_MEASURE | FFTW_DESTROY_INPUT);
+    fftwf_plan c2r = fftwf_plan_dft_c2r_2d(n, n, in[0], real, FFTW_MEASURE);
+    if (wisdom)
+        fftwf_export_wisdom_to_filename(wisdom);
+    ocean_fftw_unlock();
+    for (int i = 0; i < 4; i++)
+        memset(in[i], 0, nn * sizeof *in[i]);
+    int reps = reps_for(n);
+    double *pt = malloc(reps * sizeof *pt), *ct = malloc(reps * sizeof *ct), *ft = malloc(reps * sizeof *ft),
+           *rt = malloc(reps * sizeof *rt);
+    ocean_step(o, 0.5, OCEAN_ALL_FIELDS);
+    for (int r = 0; r < reps; r++) {
+        double t0 = now_ms();
+        for (int i = 0; i < 4; i++) {
+            fftwf_execute_dft(c2c, in[i], out);
+            float *a = real + (size_t)(2 * i) * nn, *b = a + nn;
+            const float *z = (const float *)out;
+            for (size_t j = 0; j < nn; j++) {
+                a[j] = z[2 * j];
+                b[j] = z[2 * j + 1];
+            }
+        }
+        double t1 = now_ms();
+        for (int i = 0; i < 4; i++)
+            fftwf_execute_dft(c2c, in[i], out);
+        double t2 = now_ms();
+        ocean_fft_only(o, OCEAN_ALL_FIELDS);
+        double t3 = now_ms();
+        for (int i = 0; i < 8; i++)
+            fftwf_execute_dft_c2r(c2r, in[i / 2], real + (size_t)i * nn);
+        double t4 = now_ms();
+        pt[r] = t1 - t0;
+        ft[r] = t2 - t1;
+        ct[r] = t3 - t2;
+        rt[r] = t4 - t3;
+    }
+    double p = median(pt, reps), f = median(ft, reps), c = median(ct, reps), r2 = median(rt, reps);
+    printf("{\"bench\":\"pack_vs_c2r\",\"N\":%d,\"threads\":%d,\"split_c2r_ms\":%.3f,\"c2r_2d_x8_ms\":%.3f,"
+           "\"c2c_2d_x4_ms\":%.3f,\"c2c_2d_x4_split_ms\":%.3f}\n", n, threads, c, r2, f, p);
+    fflush(stdout);
+    ocean_fftw_lock();
+    fftwf_destroy_plan(c2c);
+    fftwf_destroy_plan(c2r);
+    ocean_fftw_unlock();
+    for (int i = 0; i < 4; i++)
+        fftwf_free(in[i]);
+    fftwf_free(out);
+    fftwf_free(real);
+    free(pt);
+    free(ct);
+    free(ft);
+    free(rt);
+    ocean_free(o);
+}
+
+static void bench_dft(int n, const char *wisdom)
+{
+    struct ocean *o = make(n, 1, wisdom, 1);
+    if (!o)
+        return;
+    int dreps = n <= 16 ? 21 : n <= 32 ? 5 : n <= 64 ? 3 : 1, freps = 201;
+    double *dt = malloc(dreps * sizeof *dt), *ft = malloc(freps * sizeof *ft);
+    for (int r = 0; r < dreps; r++) {
+        double t0 = now_ms();
+        ocean_step_dft(o, 1.0 + r, OCEAN_ALL_FIELDS);
+        dt[r] = now_ms() - t0;
+    }
+    for (int r = 0; r < freps; r++) {
+        double t0 = now_ms();
+        ocean_step_fft(o, 1.0 + r, OCEAN_ALL_FIELDS);
+        ft[r] = now_ms() - t0;
+    }
+    double d = median(dt, dreps), f = median(ft, freps);
+    printf("{\"bench\":\"dft_vs_fft\",\"N\":%d,\"threads\":1,\"fields\":\"all\",\"dft_ms\":%.3f,\"fft_ms\":%.4f,"
+           "\"speedup\":%.0f,\"dft_reps\":%d}\n", n, d, f, d / f, dreps);
+    fflush(stdout);
+    free(dt);
+    free(ft);
+    ocean_free(o);
+}
+
+int main(int argc, char **argv)
+{
+    const char *wisdom = argc > 1 ? argv[1] : NULL;
+    /* The machine is shared: say how busy it was. */
+    double load[3] = {0, 0, 0};
+    FILE *la = fopen("/proc/loadavg", "r");
+    if (la) {
+        if (fscanf(la, "%lf %lf %lf", &load[0], &load[1], &load[2]) != 3)
+            load[0] = -1;
+        fclose(la);
+    }
+    printf("{\"bench\":\"env\",\"cpus\":%ld,\"loadavg_1min\":%.2f,\"wisdom\":\"%s\"}\n",
+           sysconf(_SC_NPROCESSORS_ONLN), load[0], wisdom ? wisdom : "");
+    for (int n = 64; n <= 2048; n *= 2)
+        for (int threads = 1; threads <= 2; threads++)
+            bench_step(n, threads, wisdom);
+    for (int n = 256; n <= 1024; n *= 4)
+        for (int threads = 1; threads <= 2; threads++)
+            bench_pack(n, threads, wisdom);
+    for (int n = 16; n <= 128; n *= 2)
+        bench_dft(n, wisdom);
+    return 0;
+}

@@ -1,0 +1,48 @@
+# mk/sim.mk — the simulation library (server/params.c, server/ocean*.c).
+#   make build/libocean.a       the library (and build/san/libocean.a)
+#   make test-sim               physics + FFT-vs-DFT suite (tests/test_ocean.c)
+#   make test-sim-asan          the same suite built with ASan+UBSan
+#   make test-sim-valgrind      a reduced run (OCEAN_TEST_QUICK=1) under valgrind
+#   make bench-step             step / FFTW / DFT timings, JSON lines
+# See notes/readme-sim.md.
+
+SIM_SRCS      := server/params.c server/ocean.c server/ocean_spectrum.c server/ocean_step.c \
+                 server/ocean_dft.c server/ocean_fftw.c
+OCEAN_LIB     := $(BUILD)/libocean.a
+OCEAN_SAN_LIB := $(BUILD)/san/libocean.a
+SIM_WISDOM    := $(BUILD)/fftw-wisdom
+
+BINS    += $(OCEAN_LIB) $(BUILD)/test_ocean $(BUILD)/bench_step
+TESTS   += test-sim test-sim-asan test-sim-valgrind
+BENCHES += bench-step
+
+$(OCEAN_LIB): $(patsubst %.c,$(BUILD)/obj/%.o,$(SIM_SRCS))
+	@mkdir -p $(dir $@)
+	rm -f $@ && ar rcs $@ $^
+$(OCEAN_SAN_LIB): $(patsubst %.c,$(BUILD)/san/%.o,$(SIM_SRCS))
+	@mkdir -p $(dir $@)
+	rm -f $@ && ar rcs $@ $^
+
+# The per-mode loops are written to auto-vectorise: -O3 for these objects
+# (sanitizer objects keep SAN_FLAGS' -O1, which comes later on the line).
+$(patsubst %.c,$(BUILD)/obj/%.o,$(SIM_SRCS)): CFLAGS += -O3
+
+$(BUILD)/test_ocean: $(BUILD)/obj/tests/test_ocean.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/san/test_ocean: $(BUILD)/san/tests/test_ocean.o $(OCEAN_SAN_LIB)
+	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/bench_step: $(BUILD)/obj/bench/bench_step.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+
+.PHONY: test-sim test-sim-asan test-sim-valgrind bench-step
+# Tests plan with FFTW_ESTIMATE and no wisdom file: deterministic and quick.
+test-sim: $(BUILD)/test_ocean
+	$(BUILD)/test_ocean
+test-sim-asan: $(BUILD)/san/test_ocean
+	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 $(BUILD)/san/test_ocean
+test-sim-valgrind: $(BUILD)/test_ocean
+	OCEAN_TEST_QUICK=1 valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
+	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_ocean
+# FFTW_MEASURE plans, cached in $(SIM_WISDOM) across runs.
+bench-step: $(BUILD)/bench_step
+	$(BUILD)/bench_step $(SIM_WISDOM)

@@ -1,0 +1,183 @@
+/* ocean_spectrum.c — spectra, spreading, dispersion and random amplitudes.
+ *
+ * Conventions: Psi(kx, kz) dkx dkz = S(w) D(w, theta) dw dtheta, so
+ * Psi = S(w(k)) dw/dk D(w, theta) / k. With h~0(k) = 1/2 xi sqrt(Psi) dk and
+ * h~(k,t) = h~0(k) e^{-iwt} + conj(h~0(-k)) e^{iwt}, the height variance is
+ * sum Psi dk^2, the Riemann sum of the spectrum's integral: independent of
+ * N and L once the spectrum is resolved. */
+#include "ocean_spectrum.h"
+
+#include <math.h>
+
+#define PM_ALPHA 0.0081            /* Phillips constant */
+#define PM_PEAK 0.855              /* PM: w_p = 0.855 g / U10 (Horvath 2015, eq. 27) */
+/* JONSWAP: fetch beyond which the sea is fully developed, where the
+ * JONSWAP w_p reaches the PM one: (22 / 0.855)^3 in units of U^2/g. */
+#define FULLY_DEVELOPED_FETCH 17036.0
+
+void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p)
+{
+    const double g = OCEAN_G, U = p->wind_speed;
+    m->kind = p->spectrum;
+    m->calm = !(U > 1e-3);
+    m->wind_speed = U;
+    m->wind_angle = p->wind_direction * M_PI / 180.0;
+    m->amplitude = p->amplitude;
+    m->depth = p->depth;
+    m->gamma = p->gamma;
+    m->blend = p->directional_spread;
+    m->swell = p->swell;
+    m->cutoff = p->small_wave_cutoff;
+    m->loop_omega = p->loop_period > 0 ? 2.0 * M_PI / p->loop_period : 0.0;
+    m->patch = p->patch_size;
+    m->seed = (uint32_t)p->seed;
+    m->alpha = PM_ALPHA;
+    m->omega_p = m->calm ? 1.0 : PM_PEAK * g / U;
+    if (!m->calm && (m->kind == SPECTRUM_JONSWAP || m->kind == SPECTRUM_TMA)) {
+        /* Hasselmann et al. 1973 fetch laws, capped at the fully developed sea. */
+        double chi = g * p->fetch * 1000.0 / (U * U);
+        if (chi > FULLY_DEVELOPED_FETCH)
+            chi = FULLY_DEVELOPED_FETCH;
+        m->alpha = 0.076 * pow(chi, -0.22);
+        m->omega_p = 22.0 * (g / U) * pow(chi, -1.0 / 3.0);
+    }
+}
+
+double dispersion_omega(double k, double depth)
+{
+    return sqrt(OCEAN_G * k * tanh(k * depth));
+}
+
+double dispersion_domega_dk(double k, double depth)
+{
+    double kd = k * depth, w = dispersion_omega(k, depth);
+    if (!(w > 0))
+        return sqrt(OCEAN_G * depth); /* shallow-water limit at k = 0 */
+    double ch = cosh(kd);             /* inf for deep water: the term vanishes */
+    double sech2 = isinf(ch) ? 0.0 : 1.0 / (ch * ch);
+    return OCEAN_G * (tanh(kd) + kd * sech2) / (2.0 * w);
+}
+
+/* Kitaigorodskii depth attenuation (TMA), Horvath 2015 eq. 29. */
+static double tma_attenuation(double omega, double depth)
+{
+    double wh = omega * sqrt(depth / OCEAN_G);
+    if (wh <= 1.0)
+        return 0.5 * wh * wh;
+    if (wh < 2.0)
+        return 1.0 - 0.5 * (2.0 - wh) * (2.0 - wh);
+    return 1.0;
+}
+
+double spectrum_frequency(const struct spectrum_model *m, double w)
+{
+    if (m->calm || !(w > 0))
+        return 0.0;
+    const double g = OCEAN_G, wp = m->omega_p;
+    double r = wp / w, r4 = r * r * r * r;
+    double s = m->alpha * g * g / (w * w * w * w * w) * exp(-1.25 * r4);
+    if (m->kind == SPECTRUM_JONSWAP || m->kind == SPECTRUM_TMA) {
+        double sigma = w <= wp ? 0.07 : 0.09;
+        double d = (w - wp) / (sigma * wp);
+        s *= pow(m->gamma, exp(-0.5 * d * d));
+    }
+    if (m->kind == SPECTRUM_TMA)
+        s *= tma_attenuation(w, m->depth);
+    return s;
+}
+
+double spectrum_omni_k(const struct spectrum_model *m, double k)
+{
+    if (m->calm || !(k > 0))
+        return 0.0;
+    if (m->kind == SPECTRUM_PHILLIPS) {
+        /* Tessendorf's Phillips spectrum with a physical constant:
+         * alpha/2 k^-3 exp(-1/(k Lw)^2), Lw = U^2/g; it equals the PM tail. */
+        double lw = m->wind_speed * m->wind_speed / OCEAN_G, x = k * lw;
+        return 0.5 * m->alpha / (k * k * k) * exp(-1.0 / (x * x));
+    }
+    double w = dispersion_omega(k, m->depth);
+    return spectrum_frequency(m, w) * dispersion_domega_dk(k, m->depth);
+}
+
+/* Mitsuyasu spreading exponent s(w) (Horvath 2015 eq. 43) plus the swell
+ * elongation 16 tanh(w/wp) swell^2 (eq. 44). */
+static double spreading_exponent(const struct spectrum_model *m, double w)
+{
+    double r = w / m->omega_p, s;
+    if (r <= 1.0)
+        s = 6.97 * pow(r, 4.06);
+    else
+        s = 9.77 * pow(r, -2.33 - 1.45 * (m->wind_speed * m->omega_p / OCEAN_G - 1.17));
+    return s + 16.0 * tanh(r) * m->swell * m->swell;
+}
+
+double spectrum_spreading(const struct spectrum_model *m, double w, double theta)
+{
+    /* Tessendorf's |k.w|^2, normalised over the full circle. */
+    double c = cos(theta), d_cos2 = c * c / M_PI;
+    if (m->blend <= 0)
+        return d_cos2;
+    /* Hasselmann cos^2s(theta/2) with its normaliser
+     * Q(s) = 2^(2s-1) Gamma(s+1)^2 / (pi Gamma(2s+1)), via lgamma for large s. */
+    double s = spreading_exponent(m, w);
+    double q = exp((2.0 * s - 1.0) * M_LN2 + 2.0 * lgamma(s + 1.0) - lgamma(2.0 * s + 1.0)) / M_PI;
+    double d_h = q * pow(fabs(cos(0.5 * theta)), 2.0 * s);
+    return (1.0 - m->blend) * d_cos2 + m->blend * d_h;
+}
+
+double spectrum_directional(const struct spectrum_model *m, double kx, double kz)
+{
+    double k = hypot(kx, kz);
+    if (m->calm || !(k > 0))
+        return 0.0;
+    double w = dispersion_omega(k, m->depth);
+    double theta = remainder(atan2(kz, kx) - m->wind_angle, 2.0 * M_PI);
+    double damp = m->cutoff > 0 ? exp(-pow(k * m->cutoff / (2.0 * M_PI), 2)) : 1.0;
+    return m->amplitude * spectrum_omni_k(m, k) * spectrum_spreading(m, w, theta) / k * damp;
+}
+
+double spectrum_mode_omega(const struct spectrum_model *m, double k)
+{
+    double w = dispersion_omega(k, m->depth);
+    if (m->loop_omega > 0 && w > 0) {
+        /* Tessendorf's repeat period: nearest multiple, at least one. */
+        double q = nearbyint(w / m->loop_omega);
+        w = (q < 1 ? 1 : q) * m->loop_omega;
+    }
+    return w;
+}
+
+/* splitmix64 finaliser: a good 64-bit mix, cheap and portable. */
+static uint64_t mix64(uint64_t x)
+{
+    x ^= x >> 30;
+    x *= 0xbf58476d1ce4e5b9ull;
+    x ^= x >> 27;
+    x *= 0x94d049bb133111ebull;
+    x ^= x >> 31;
+    return x;
+}
+
+void spectrum_gauss_pair(uint32_t seed, int mx, int mz, double *a, double *b)
+{
+    uint64_t key = ((uint64_t)(uint32_t)mx << 32) | (uint32_t)mz;
+    uint64_t h1 = mix64(mix64(key ^ 0x9e3779b97f4a7c15ull) + seed);
+    uint64_t h2 = mix64(h1 ^ 0xd1b54a32d192ed03ull);
+    /* 53-bit uniforms; u1 in (0, 1] so the log is finite. */
+    double u1 = ((h1 >> 11) + 1) * 0x1.0p-53, u2 = (h2 >> 11) * 0x1.0p-53;
+    double r = sqrt(-2.0 * log(u1));
+    *a = r * cos(2.0 * M_PI * u2);
+    *b = r * sin(2.0 * M_PI * u2);
+}
+
+double complex spectrum_h0(const struct spectrum_model *m, int mx, int mz)
+{
+    double dk = 2.0 * M_PI / m->patch;
+    double psi = spectrum_directional(m, mx * dk, mz * dk);
+    if (!(psi > 0))
+        return 0.0;
+    double a, b;
+    spectrum_gauss_pair(m->seed, mx, mz, &a, &b);
+    return 0.5 * sqrt(psi) * dk * (a + I * b);
+}

@@ -1,0 +1,66 @@
+/* ocean_spectrum.h — the physics of the initial sea, in double precision.
+ *
+ * Dispersion, frequency spectra (Phillips, Pierson-Moskowitz, JONSWAP, TMA),
+ * directional spreading, and the random amplitudes h~0(k). Pure functions
+ * of the parameters; no FFT, no allocation. References in notes/readme-sim.md. */
+#ifndef OCEAND_OCEAN_SPECTRUM_H
+#define OCEAND_OCEAN_SPECTRUM_H
+
+#include <complex.h>
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "params.h"
+
+#define OCEAN_G 9.81 /* m/s^2 */
+
+/* Constants derived once from the parameters. */
+struct spectrum_model {
+    int kind;              /* enum spectrum_kind */
+    bool calm;             /* no wind: every amplitude is zero */
+    double wind_speed;     /* U10, m/s */
+    double wind_angle;     /* radians, direction the wind blows toward */
+    double amplitude;      /* multiplier of the spectrum */
+    double depth;          /* m */
+    double alpha;          /* Phillips / PM / JONSWAP energy scale */
+    double omega_p;        /* peak angular frequency, rad/s */
+    double gamma;          /* JONSWAP peak enhancement */
+    double blend;          /* directional_spread: 0 = cos^2, 1 = Mitsuyasu-Hasselmann */
+    double swell;          /* 0..1 */
+    double cutoff;         /* small_wave_cutoff, m (wavelength) */
+    double loop_omega;     /* 2 pi / loop_period, 0 = no loop */
+    double patch;          /* L, m */
+    uint32_t seed;
+};
+
+void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p);
+
+/* Finite-depth dispersion w = sqrt(g k tanh(k d)) and its derivative. */
+double dispersion_omega(double k, double depth);
+double dispersion_domega_dk(double k, double depth);
+
+/* One-sided frequency spectrum S(w), m^2 s (PM, JONSWAP, TMA; Phillips is
+ * defined in wavenumber, see spectrum_omni_k). Without amplitude/cutoff. */
+double spectrum_frequency(const struct spectrum_model *m, double omega);
+/* Omnidirectional wavenumber spectrum F(k) = S(w) dw/dk, m^3, without
+ * amplitude and cutoff. Integral of F over k = height variance. */
+double spectrum_omni_k(const struct spectrum_model *m, double k);
+/* Directional spreading D(w, theta), theta relative to the wind, radians;
+ * integral over theta in (-pi, pi] is 1 for every w. */
+double spectrum_spreading(const struct spectrum_model *m, double omega, double theta);
+/* Directional wavenumber spectrum Psi(kx, kz), m^4: the height variance is
+ * the integral of Psi over the plane. Includes amplitude and cutoff. */
+double spectrum_directional(const struct spectrum_model *m, double kx, double kz);
+
+/* Angular frequency of a mode, quantised to multiples of 2 pi / loop_period. */
+double spectrum_mode_omega(const struct spectrum_model *m, double k);
+
+/* Two independent standard normal numbers for integer wavenumber (mx, mz),
+ * a pure function of (seed, mx, mz): same seed, same waves at any N. */
+void spectrum_gauss_pair(uint32_t seed, int mx, int mz, double *a, double *b);
+
+/* h~0 for integer wavenumber (mx, mz) on a patch of side L:
+ * 1/2 (xi_r + i xi_i) sqrt(Psi(k)) dk, dk = 2 pi / L. */
+double complex spectrum_h0(const struct spectrum_model *m, int mx, int mz);
+
+#endif

@@ -1,0 +1,255 @@
+/* params.c — the one table of sea parameters, and the checks on it.
+ *
+ * Defaults describe a moderate wind sea that looks right at N = 256:
+ * a 256 m patch sampled every metre holds about four peak wavelengths of
+ * a 10 m/s JONSWAP sea over 100 km of fetch (peak ~60 m, Hs ~2 m), so
+ * the tiling is hard to spot and the shortest resolved wave (2 m) is
+ * still in the equilibrium range. Units and conventions: notes/readme-sim.md. */
+#include "params.h"
+
+#include <ctype.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+static const char *const spectrum_names[] = {"phillips", "pierson_moskowitz", "jonswap", "tma", NULL};
+static const char *const transform_names[] = {"fft", "dft", NULL};
+
+#define OFF(f) offsetof(struct ocean_params, f)
+
+/* Largest N for transform=dft: the brute-force sum costs 8*N^4 complex
+ * multiply-adds per step (~0.1 s at 64, ~2 s at 128). */
+#define DFT_MAX_N 64
+
+const struct param_def param_table[] = {
+    {"resolution", PARAM_INT, "", 16, 2048, 256, NULL,
+     "grid samples per side N (power of two); changing it re-plans the FFT", OFF(resolution),
+     PARAM_POW2 | PARAM_REPLAN},
+    {"patch_size", PARAM_FLOAT, "m", 1, 10000, 256, NULL,
+     "side L of the periodic square patch", OFF(patch_size), 0},
+    {"wind_speed", PARAM_FLOAT, "m/s", 0, 40, 10, NULL,
+     "wind speed U10, 10 m above the sea", OFF(wind_speed), 0},
+    {"wind_direction", PARAM_FLOAT, "deg", -360, 360, 0, NULL,
+     "direction the wind blows toward: 0 = +x, 90 = +z", OFF(wind_direction), 0},
+    {"amplitude", PARAM_FLOAT, "", 0, 10, 1, NULL,
+     "multiplier of the spectrum (wave heights scale with its square root)", OFF(amplitude), 0},
+    {"spectrum", PARAM_ENUM, "", 0, 3, SPECTRUM_JONSWAP, spectrum_names,
+     "wave spectrum: phillips (Tessendorf), pierson_moskowitz (fully developed), "
+     "jonswap (fetch limited), tma (jonswap in finite depth)",
+     OFF(spectrum), 0},
+    {"fetch", PARAM_FLOAT, "km", 0.1, 10000, 100, NULL,
+     "open water upwind (jonswap, tma); long fetches saturate at the fully developed sea",
+     OFF(fetch), 0},
+    {"depth", PARAM_FLOAT, "m", 0.5, 10000, 1000, NULL,
+     "water depth: dispersion w^2 = g k tanh(k d) for all spectra, plus the TMA attenuation",
+     OFF(depth), 0},
+    {"gamma", PARAM_FLOAT, "", 1, 10, 3.3, NULL,
+     "JONSWAP peak enhancement (1 = Pierson-Moskowitz shape)", OFF(gamma), 0},
+    {"directional_spread", PARAM_FLOAT, "", 0, 1, 1, NULL,
+     "directional spreading: 0 = Tessendorf's cos^2 (up- and downwind), "
+     "1 = Mitsuyasu-Hasselmann cos^2s(theta/2) (downwind, narrower near the peak); blends between",
+     OFF(directional_spread), 0},
+    {"swell", PARAM_FLOAT, "", 0, 1, 0, NULL,
+     "swell: longer crests, by narrowing the cos^2s part of the spreading (Horvath 2015)", OFF(swell), 0},
+    {"choppiness", PARAM_FLOAT, "", 0, 4, 1, NULL,
+     "lambda, horizontal displacement scale: > 0 sharpens crests, 0 = plain heights",
+     OFF(choppiness), 0},
+    {"small_wave_cutoff", PARAM_FLOAT, "m", 0, 100, 0.5, NULL,
+     "waves shorter than this wavelength are damped (exp(-(k l / 2 pi)^2))",
+     OFF(small_wave_cutoff), 0},
+    {"loop_period", PARAM_FLOAT, "s", 0, 3600, 0, NULL,
+     "the sea repeats exactly after this time (wave frequencies quantised); 0 = never",
+     OFF(loop_period), 0},
+    {"seed", PARAM_INT, "", 0, 2147483647, 1, NULL,
+     "random seed; the same seed gives the same waves at any resolution", OFF(seed), 0},
+    {"transform", PARAM_ENUM, "", 0, 1, TRANSFORM_FFT, transform_names,
+     "fft (FFTW) or dft (the brute-force O(N^4) sum, N <= 64 only)", OFF(transform), 0},
+    {"time_scale", PARAM_FLOAT, "", 0, 16, 1, NULL,
+     "playback speed: simulated seconds per wall-clock second", OFF(time_scale), PARAM_PLAYBACK},
+    {"paused", PARAM_BOOL, "", 0, 1, 0, NULL,
+     "stop the simulation clock", OFF(paused), PARAM_PLAYBACK},
+};
+const size_t param_count = sizeof param_table / sizeof param_table[0];
+
+static void *field_ptr(struct ocean_params *p, const struct param_def *d)
+{
+    return (char *)p + d->offset;
+}
+
+double param_get(const struct ocean_params *p, const struct param_def *d)
+{
+    const char *f = (const char *)p + d->offset;
+    switch (d->type) {
+    case PARAM_INT:
+    case PARAM_ENUM: { int v; memcpy(&v, f, sizeof v); return v; }
+    case PARAM_BOOL: { bool v; memcpy(&v, f, sizeof v); return v ? 1.0 : 0.0; }
+    case PARAM_FLOAT: { double v; memcpy(&v, f, sizeof v); return v; }
+    }
+    return 0;
+}
+
+static void store(struct ocean_params *p, const struct param_def *d, double v)
+{
+    void *f = field_ptr(p, d);
+    switch (d->type) {
+    case PARAM_INT:
+    case PARAM_ENUM: { int i = (int)v; memcpy(f, &i, sizeof i); break; }
+    case PARAM_BOOL: { bool b = v != 0; memcpy(f, &b, sizeof b); break; }
+    case PARAM_FLOAT: memcpy(f, &v, sizeof v); break;
+    }
+}
+
+void params_defaults(struct ocean_params *p)
+{
+    memset(p, 0, sizeof *p);
+    for (size_t i = 0; i < param_count; i++)
+        store(p, &param_table[i], param_table[i].def);
+}
+
+const struct param_def *param_find(const char *name)
+{
+    if (!name)
+        return NULL;
+    for (size_t i = 0; i < param_count; i++)
+        if (strcmp(param_table[i].name, name) == 0)
+            return &param_table[i];
+    return NULL;
+}
+
+/* The single-value check shared by param_set and params_validate. */
+static int check_value(const struct param_def *d, double v, char *err, size_t errlen)
+{
+    if (!isfinite(v)) {
+        snprintf(err, errlen, "%s: value must be a finite number", d->name);
+        return -1;
+    }
+    if (d->type != PARAM_FLOAT && v != floor(v)) {
+        snprintf(err, errlen, "%s: %g is not a whole number", d->name, v);
+        return -1;
+    }
+    if (v < d->min || v > d->max) {
+        if (d->type == PARAM_ENUM)
+            snprintf(err, errlen, "%s: index %g out of range 0..%g", d->name, v, d->max);
+        else
+            snprintf(err, errlen, "%s: %g%s%s out of range [%g, %g]", d->name, v,
+                     *d->unit ? " " : "", d->unit, d->min, d->max);
+        return -1;
+    }
+    if (d->flags & PARAM_POW2) {
+        long n = (long)v;
+        if (n <= 0 || (n & (n - 1)) != 0) {
+            snprintf(err, errlen, "%s: %ld is not a power of two", d->name, n);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+int param_set(struct ocean_params *p, const struct param_def *d, double v, char *err, size_t errlen)
+{
+    if (!p || !d) {
+        snprintf(err, errlen, "unknown parameter");
+        return -1;
+    }
+    if (check_value(d, v, err, errlen) != 0)
+        return -1;
+    store(p, d, v);
+    return 0;
+}
+
+const char *param_enum_name(const struct param_def *d, int index)
+{
+    if (!d || !d->choices || index < 0)
+        return NULL;
+    for (int i = 0; d->choices[i]; i++)
+        if (i == index)
+            return d->choices[i];
+    return NULL;
+}
+
+int param_enum_index(const struct param_def *d, const char *name)
+{
+    if (!d || !d->choices || !name)
+        return -1;
+    for (int i = 0; d->choices[i]; i++)
+        if (strcasecmp(d->choices[i], name) == 0)
+            return i;
+    return -1;
+}
+
+static int parse_number(const char *text, double *v)
+{
+    char *end;
+    while (isspace((unsigned char)*text))
+        text++;
+    if (!*text)
+        return -1;
+    *v = strtod(text, &end);
+    while (isspace((unsigned char)*end))
+        end++;
+    return *end ? -1 : 0;
+}
+
+int param_set_text(struct ocean_params *p, const struct param_def *d, const char *text, char *err,
+                   size_t errlen)
+{
+    double v;
+    if (!d || !text) {
+        snprintf(err, errlen, "unknown parameter or no value");
+        return -1;
+    }
+    if (d->type == PARAM_BOOL) {
+        static const char *const yes[] = {"true", "1", "yes", "on"}, *const no[] = {"false", "0", "no", "off"};
+        for (int i = 0; i < 4; i++) {
+            if (strcasecmp(text, yes[i]) == 0)
+                return param_set(p, d, 1, err, errlen);
+            if (strcasecmp(text, no[i]) == 0)
+                return param_set(p, d, 0, err, errlen);
+        }
+        snprintf(err, errlen, "%s: '%s' is not true or false", d->name, text);
+        return -1;
+    }
+    if (d->type == PARAM_ENUM) {
+        int i = param_enum_index(d, text);
+        if (i >= 0)
+            return param_set(p, d, i, err, errlen);
+        char list[256] = "";
+        for (int c = 0; d->choices[c]; c++) {
+            strncat(list, c ? ", " : "", sizeof list - strlen(list) - 1);
+            strncat(list, d->choices[c], sizeof list - strlen(list) - 1);
+        }
+        snprintf(err, errlen, "%s: '%s' is not one of %s", d->name, text, list);
+        return -1;
+    }
+    if (parse_number(text, &v) != 0) {
+        snprintf(err, errlen, "%s: '%s' is not a number", d->name, text);
+        return -1;
+    }
+    return param_set(p, d, v, err, errlen);
+}
+
+int params_validate(const struct ocean_params *p, char *err, size_t errlen)
+{
+    if (!p) {
+        snprintf(err, errlen, "no parameters");
+        return -1;
+    }
+    for (size_t i = 0; i < param_count; i++)
+        if (check_value(&param_table[i], param_get(p, &param_table[i]), err, errlen) != 0)
+            return -1;
+    if (p->transform == TRANSFORM_DFT && p->resolution > DFT_MAX_N) {
+        snprintf(err, errlen,
+                 "transform: dft is the O(N^4) brute-force sum, allowed only for resolution <= %d "
+                 "(got %d)", DFT_MAX_N, p->resolution);
+        return -1;
+    }
+    if (p->loop_period > 0 && p->loop_period < 1) {
+        snprintf(err, errlen,
+                 "loop_period: %g s is too short (0 = no loop, else >= 1 s, or all waves "
+                 "would share one frequency)", p->loop_period);
+        return -1;
+    }
+    return 0;
+}

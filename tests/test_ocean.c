@@ -1,0 +1,911 @@
+/* test_ocean.c — the simulation library against physics and a reference DFT.
+ *
+ * One line per check ("ok" / "FAIL"), then "N passed, M failed"; exit 1 on
+ * any failure. OCEAN_TEST_QUICK=1 runs a reduced set (smaller N, fewer
+ * seeds) for valgrind. Plans use FFTW_ESTIMATE and no wisdom: deterministic.
+ * Build and run: make test-sim (see mk/sim.mk). */
+#include <complex.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "ocean_internal.h"
+
+static int passed, failed;
+static int quick;
+
+static void check(int ok, const char *name, const char *fmt, ...)
+{
+    va_list ap;
+    printf("%s %s: ", ok ? "ok  " : "FAIL", name);
+    va_start(ap, fmt);
+    vprintf(fmt, ap);
+    va_end(ap);
+    printf("\n");
+    fflush(stdout);
+    if (ok)
+        passed++;
+    else
+        failed++;
+}
+
+static struct ocean *make(const struct ocean_params *p, int threads)
+{
+    char err[256] = "";
+    struct ocean_options opt = {threads, NULL, 0};
+    struct ocean *o = ocean_create(p, &opt, err, sizeof err);
+    if (!o)
+        check(0, "create", "ocean_create failed: %s", err);
+    return o;
+}
+
+static float *copy_field(const struct ocean *o, enum ocean_field f)
+{
+    size_t nn = (size_t)ocean_resolution(o) * ocean_resolution(o);
+    float *c = malloc(nn * sizeof *c);
+    memcpy(c, ocean_field(o, f), nn * sizeof *c);
+    return c;
+}
+
+static double max_abs(const float *a, size_t n)
+{
+    double m = 0;
+    for (size_t i = 0; i < n; i++)
+        m = fmax(m, fabs(a[i]));
+    return m;
+}
+
+/* max |a - b| / max |b| */
+static double rel_err(const float *a, const float *b, size_t n)
+{
+    double d = 0;
+    for (size_t i = 0; i < n; i++)
+        d = fmax(d, fabs((double)a[i] - b[i]));
+    double m = max_abs(b, n);
+    return m > 0 ? d / m : d;
+}
+
+static double variance(const float *a, size_t n)
+{
+    double s = 0, s2 = 0;
+    for (size_t i = 0; i < n; i++) {
+        s += a[i];
+        s2 += (double)a[i] * a[i];
+    }
+    return s2 / n - (s / n) * (s / n);
+}
+
+static const char *spec_name(int s)
+{
+    return param_enum_name(param_find("spectrum"), s);
+}
+
+/* ---- parameters --------------------------------------------------------- */
+
+static void test_params(void)
+{
+    struct ocean_params p, q;
+    char err[256];
+    params_defaults(&p);
+    check(params_validate(&p, err, sizeof err) == 0, "params.defaults_valid", "%s",
+          params_validate(&p, err, sizeof err) == 0 ? "defaults pass validation" : err);
+    static const char *const names[] = {"resolution", "patch_size", "wind_speed", "wind_direction",
+        "amplitude", "spectrum", "fetch", "depth", "gamma", "directional_spread", "swell",
+        "choppiness", "small_wave_cutoff", "loop_period", "seed", "transform", "time_scale", "paused"};
+    int found = 0, sane = 1;
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        const struct param_def *d = param_find(names[i]);
+        if (!d)
+            continue;
+        found++;
+        if (!(d->min <= d->def && d->def <= d->max) || !d->description || !d->unit)
+            sane = 0;
+    }
+    check(found == (int)(sizeof names / sizeof names[0]) && param_count == sizeof names / sizeof names[0] && sane,
+          "params.table", "%d of %zu fields in the table (param_count %zu), defaults in range: %s", found,
+          sizeof names / sizeof names[0], param_count, sane ? "yes" : "no");
+    const struct param_def *res = param_find("resolution");
+    check((res->flags & PARAM_POW2) && (res->flags & PARAM_REPLAN) && res->min == 16 && res->max == 2048 &&
+          (param_find("time_scale")->flags & PARAM_PLAYBACK) && (param_find("paused")->flags & PARAM_PLAYBACK),
+          "params.flags", "resolution POW2|REPLAN 16..2048, time_scale and paused PLAYBACK");
+
+    q = p;
+    int bad = 0;
+    err[0] = 0;
+    bad += param_set(&q, res, 100, err, sizeof err) == -1 && strstr(err, "power of two");
+    bad += param_set(&q, res, 4096, err, sizeof err) == -1 && strstr(err, "range");
+    bad += param_set(&q, param_find("wind_speed"), -1, err, sizeof err) == -1;
+    bad += param_set(&q, param_find("wind_speed"), NAN, err, sizeof err) == -1;
+    bad += param_set(&q, param_find("seed"), 1.5, err, sizeof err) == -1;
+    bad += param_set_text(&q, param_find("spectrum"), "bretschneider", err, sizeof err) == -1 &&
+           strstr(err, "jonswap");
+    bad += param_set_text(&q, param_find("wind_speed"), "12x", err, sizeof err) == -1;
+    check(bad == 7 && memcmp(&q, &p, sizeof p) == 0, "params.set_rejects", "%d/7 invalid values rejected, "
+          "params unchanged: %s; last message: \"%s\"", bad, memcmp(&q, &p, sizeof p) == 0 ? "yes" : "no", err);
+
+    int good = 0;
+    good += param_set_text(&q, param_find("spectrum"), "tma", err, sizeof err) == 0 && q.spectrum == SPECTRUM_TMA;
+    good += param_set_text(&q, param_find("paused"), "true", err, sizeof err) == 0 && q.paused;
+    good += param_set_text(&q, res, "512", err, sizeof err) == 0 && q.resolution == 512;
+    good += param_set(&q, param_find("wind_speed"), 17.5, err, sizeof err) == 0 && q.wind_speed == 17.5;
+    good += param_get(&q, param_find("wind_speed")) == 17.5 && param_get(&q, param_find("paused")) == 1;
+    good += param_enum_index(param_find("transform"), "dft") == TRANSFORM_DFT &&
+            strcmp(param_enum_name(param_find("spectrum"), 1), "pierson_moskowitz") == 0;
+    check(good == 6, "params.set_accepts", "%d/6 valid settings applied", good);
+
+    q = p;
+    q.transform = TRANSFORM_DFT;
+    q.resolution = 128;
+    int r1 = params_validate(&q, err, sizeof err);
+    check(r1 == -1 && strstr(err, "dft"), "params.validate_dft_bound", "dft at N=128: %s", err);
+    q.resolution = 64;
+    check(params_validate(&q, err, sizeof err) == 0, "params.validate_dft_small", "dft at N=64 accepted");
+    q = p;
+    q.resolution = 48;
+    check(params_validate(&q, err, sizeof err) == -1, "params.validate_range", "N=48: %s", err);
+}
+
+/* ---- physics helpers ----------------------------------------------------- */
+
+static void test_spreading_and_dispersion(void)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    double worst = 0;
+    for (int b = 0; b <= 2; b++)
+        for (int sw = 0; sw <= 1; sw++)
+            for (int wi = 0; wi < 5; wi++) {
+                p.directional_spread = b * 0.5;
+                p.swell = sw;
+                struct spectrum_model m;
+                spectrum_model_init(&m, &p);
+                double w = m.omega_p * (0.25 * (1 << wi)), sum = 0;
+                int n = quick ? 4000 : 20000; /* the midpoint rule meets a cusp at theta = pi when s < 1 */
+                for (int i = 0; i < n; i++) {
+                    double th = -M_PI + (i + 0.5) * 2 * M_PI / n;
+                    sum += spectrum_spreading(&m, w, th) * 2 * M_PI / n;
+                }
+                worst = fmax(worst, fabs(sum - 1));
+            }
+    double tol = quick ? 1e-4 : 1e-5;
+    check(worst < tol, "physics.spreading_unit_integral",
+          "max |int D dtheta - 1| = %.2e over spread, swell, w (limit %.0e)", worst, tol);
+
+    double dworst = 0;
+    double depths[] = {0.5, 5, 50, 5000};
+    for (int di = 0; di < 4; di++)
+        for (double k = 0.001; k < 100; k *= 3.7) {
+            double h = k * 1e-5;
+            double num = (dispersion_omega(k + h, depths[di]) - dispersion_omega(k - h, depths[di])) / (2 * h);
+            dworst = fmax(dworst, fabs(num / dispersion_domega_dk(k, depths[di]) - 1));
+        }
+    double deep = dispersion_omega(1.0, 1e4), shallow = dispersion_omega(0.001, 1.0);
+    check(dworst < 1e-6 && fabs(deep - sqrt(9.81)) < 1e-9 && fabs(shallow / 0.001 - sqrt(9.81)) < 1e-3,
+          "physics.dispersion", "dw/dk vs finite difference %.1e; deep w(1)=%.6f, shallow c=%.4f", dworst, deep,
+          shallow / 0.001);
+}
+
+/* ---- FFT against the brute-force DFT -------------------------------------- */
+
+static void test_fft_vs_dft(void)
+{
+    int sizes[] = {16, 32, 64};
+    int nsizes = quick ? 1 : 3;
+    for (int si = 0; si < nsizes; si++)
+        for (int s = 0; s < 4; s++) {
+            int n = sizes[si];
+            if (n == 64 && s != SPECTRUM_JONSWAP)
+                continue; /* N=64 costs 0.3 s per spectrum: one is enough */
+            struct ocean_params p;
+            params_defaults(&p);
+            p.resolution = n;
+            p.spectrum = s;
+            p.patch_size = 4.0 * n; /* 4 m spacing keeps many waves in band */
+            p.depth = s == SPECTRUM_TMA ? 15 : 1000;
+            p.choppiness = 1.3;
+            struct ocean *o = make(&p, 1);
+            if (!o)
+                continue;
+            size_t nn = (size_t)n * n;
+            double t = 37.25;
+            ocean_step_fft(o, t, OCEAN_ALL_FIELDS);
+            float *fft[OCEAN_FIELD_COUNT];
+            for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+                fft[f] = copy_field(o, f);
+            ocean_step_dft(o, t, OCEAN_ALL_FIELDS);
+            double worst = 0;
+            int worst_f = 0;
+            for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
+                double e = rel_err(fft[f], ocean_field(o, f), nn);
+                if (e > worst) {
+                    worst = e;
+                    worst_f = f;
+                }
+                free(fft[f]);
+            }
+            double hmax = max_abs(ocean_field(o, OCEAN_HEIGHT), nn);
+            char name[64];
+            snprintf(name, sizeof name, "fft_eq_dft.N%d.%s", n, spec_name(s));
+            check(worst <= 1e-5 && hmax > 0, name, "all 6 fields, worst rel err %.2e (%s), max|h| %.3f m", worst,
+                  ocean_field_name(worst_f), hmax);
+            ocean_free(o);
+        }
+
+    /* The public switch: transform=dft through ocean_step. */
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = 16;
+    struct ocean *o = make(&p, 1);
+    if (!o)
+        return;
+    ocean_step(o, 5.0, OCEAN_ALL_FIELDS);
+    float *h = copy_field(o, OCEAN_HEIGHT);
+    p.transform = TRANSFORM_DFT;
+    char err[256];
+    int r = ocean_reconfigure(o, &p, err, sizeof err);
+    ocean_step(o, 5.0, OCEAN_ALL_FIELDS);
+    double e = rel_err(h, ocean_field(o, OCEAN_HEIGHT), 256);
+    check(r == 0 && e <= 1e-5, "fft_eq_dft.switch", "ocean_step with transform=dft vs fft: rel err %.2e", e);
+    free(h);
+    ocean_free(o);
+}
+
+/* ---- wavenumber layout and symmetry --------------------------------------- */
+
+static void test_layout(void)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = 32;
+    p.patch_size = 100;
+    struct ocean *o = make(&p, 1);
+    if (!o)
+        return;
+    int n = 32, bad = 0;
+    for (int i = 0; i < n; i++) {
+        double want = 2 * M_PI * (i - n * (i > n / 2)) / p.patch_size;
+        if (fabs(ocean_wavenumber(i, n, p.patch_size) - want) > 1e-12 || fabs(o->g->kz[i] - want) > 1e-5 ||
+            (i <= n / 2 && fabs(o->g->kx[i] - want) > 1e-5))
+            bad++;
+    }
+    check(bad == 0, "layout.k_table", "kx[i] = 2pi(i - N[i > N/2])/L for all i: %d mismatches", bad);
+
+    /* End to end: the FFT output's mode at index (ix, iz) must be the
+     * reference amplitude of e^{i(kx x + kz z)} with k from that formula. */
+    ocean_step_fft(o, 3.0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+    const float *h = ocean_field(o, OCEAN_HEIGHT);
+    double complex *ref = malloc((size_t)n * n * sizeof *ref);
+    ocean_reference_spectrum(o, 3.0, TR_H, ref);
+    double refmax = 0;
+    for (int i = 0; i < n * n; i++)
+        refmax = fmax(refmax, cabs(ref[i]));
+    int idx[][2] = {{1, 0}, {0, 1}, {3, 5}, {31, 2}, {5, 29}, {17, 13}, {15, 17}};
+    double worst = 0;
+    for (size_t q = 0; q < sizeof idx / sizeof idx[0]; q++) {
+        int ix = idx[q][0], iz = idx[q][1];
+        double kx = 2 * M_PI * (ix - n * (ix > n / 2)) / p.patch_size;
+        double kz = 2 * M_PI * (iz - n * (iz > n / 2)) / p.patch_size;
+        double complex sum = 0;
+        for (int z = 0; z < n; z++)
+            for (int x = 0; x < n; x++)
+                sum += h[z * n + x] * cexp(-I * (kx * x + kz * z) * p.patch_size / n);
+        sum /= (double)n * n;
+        worst = fmax(worst, cabs(sum - ref[iz * n + ix]) / refmax);
+    }
+    check(worst < 1e-5 && refmax > 0, "layout.modes", "forward DFT of h at 7 indices vs reference h~(k): rel err %.2e",
+          worst);
+
+    /* Hermitian symmetry of every transform's spectrum, and real output. */
+    double herm = 0;
+    for (int tr = 0; tr < TR_COUNT; tr++) {
+        ocean_reference_spectrum(o, 3.0, tr, ref);
+        double m = 0;
+        for (int i = 0; i < n * n; i++)
+            m = fmax(m, cabs(ref[i]));
+        for (int iz = 0; iz < n; iz++)
+            for (int ix = 0; ix < n; ix++) {
+                int jx = (n - ix) % n, jz = (n - iz) % n;
+                herm = fmax(herm, cabs(ref[iz * n + ix] - conj(ref[jz * n + jx])) / m);
+            }
+    }
+    ocean_reference_spectrum(o, 3.0, TR_H, ref);
+    double im = 0, re = 0;
+    for (int z = 0; z < n; z += 7)
+        for (int x = 0; x < n; x += 5) {
+            double complex s = 0;
+            for (int kz = 0; kz < n; kz++)
+                for (int kx = 0; kx < n; kx++)
+                    s += ref[kz * n + kx] * cexp(2 * M_PI * I * (double)(kx * x + kz * z) / n);
+            im = fmax(im, fabs(cimag(s)));
+            re = fmax(re, fabs(creal(s)));
+        }
+    check(herm < 1e-12 && im < 1e-9 * re, "layout.hermitian_real",
+          "max |F(-k) - conj F(k)| / max|F| = %.1e over 8 spectra; complex sum: max|Im| %.1e vs max|Re| %.3f", herm,
+          im, re);
+    free(ref);
+    ocean_free(o);
+}
+
+/* ---- derivatives and displacement ------------------------------------------ */
+
+static void test_slopes(void)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = 64;
+    p.patch_size = 64;
+    p.small_wave_cutoff = 12; /* resolve what we differentiate */
+    struct ocean *o = make(&p, 1);
+    if (!o)
+        return;
+    int n = 64;
+    double dx = p.patch_size / n;
+    ocean_step(o, 11.0, OCEAN_ALL_FIELDS);
+    const float *h = ocean_field(o, OCEAN_HEIGHT);
+    const float *sx = ocean_field(o, OCEAN_SLOPE_X), *sz = ocean_field(o, OCEAN_SLOPE_Z);
+    double ex = 0, ez = 0, nx = 0, nz = 0;
+#define H(x, z) h[(((z) + n) % n) * n + (((x) + n) % n)]
+    for (int z = 0; z < n; z++)
+        for (int x = 0; x < n; x++) {
+            /* fourth-order central differences, periodic */
+            double fx = (-H(x + 2, z) + 8 * H(x + 1, z) - 8 * H(x - 1, z) + H(x - 2, z)) / (12 * dx);
+            double fz = (-H(x, z + 2) + 8 * H(x, z + 1) - 8 * H(x, z - 1) + H(x, z - 2)) / (12 * dx);
+            ex += pow(sx[z * n + x] - fx, 2);
+            ez += pow(sz[z * n + x] - fz, 2);
+            nx += pow(fx, 2);
+            nz += pow(fz, 2);
+        }
+#undef H
+    double rx = sqrt(ex / nx), rz = sqrt(ez / nz);
+    check(rx < 0.02 && rz < 0.02 && nx > 0, "slopes.finite_differences",
+          "rms(slope - FD)/rms(FD): x %.4f, z %.4f (limit 0.02)", rx, rz);
+
+    /* Jacobian from the displacement by finite differences too. */
+    const float *dX = ocean_field(o, OCEAN_DX), *dZ = ocean_field(o, OCEAN_DZ), *J = ocean_field(o, OCEAN_JACOBIAN);
+    double ej = 0, nj = 0;
+#define F(a, x, z) a[(((z) + n) % n) * n + (((x) + n) % n)]
+#define D1X(a, x, z) ((-F(a, x + 2, z) + 8 * F(a, x + 1, z) - 8 * F(a, x - 1, z) + F(a, x - 2, z)) / (12 * dx))
+#define D1Z(a, x, z) ((-F(a, x, z + 2) + 8 * F(a, x, z + 1) - 8 * F(a, x, z - 1) + F(a, x, z - 2)) / (12 * dx))
+    for (int z = 0; z < n; z++)
+        for (int x = 0; x < n; x++) {
+            double j = (1 + D1X(dX, x, z)) * (1 + D1Z(dZ, x, z)) - D1Z(dX, x, z) * D1X(dZ, x, z);
+            ej += pow(J[z * n + x] - j, 2);
+            nj += pow(j - 1, 2);
+        }
+#undef F
+#undef D1X
+#undef D1Z
+    double rj = sqrt(ej / nj);
+    check(rj < 0.02 && nj > 0, "jacobian.finite_differences", "rms(J - J_FD)/rms(J_FD - 1) = %.4f (limit 0.02)", rj);
+
+    /* lambda > 0 sharpens crests: the surface is compressed (J < 1) where h is high. */
+    size_t nn = (size_t)n * n;
+    double cov = 0;
+    for (size_t i = 0; i < nn; i++)
+        cov += h[i] * (J[i] - 1.0);
+    check(cov < 0, "jacobian.crests_compressed", "cov(h, J - 1) = %.3g (negative: crests sharpen)", cov / nn);
+
+    p.choppiness = 0;
+    char err[256];
+    ocean_reconfigure(o, &p, err, sizeof err);
+    ocean_step(o, 11.0, OCEAN_ALL_FIELDS);
+    double mdx = max_abs(ocean_field(o, OCEAN_DX), nn), mdz = max_abs(ocean_field(o, OCEAN_DZ), nn);
+    double mj = 0;
+    for (size_t i = 0; i < nn; i++)
+        mj = fmax(mj, fabs(ocean_field(o, OCEAN_JACOBIAN)[i] - 1.0));
+    double dx_before = max_abs(dX, nn); /* dX aliases the output: now lambda = 0 */
+    (void)dx_before;
+    check(mdx == 0 && mdz == 0 && mj == 0 && max_abs(ocean_field(o, OCEAN_HEIGHT), nn) > 0,
+          "displacement.lambda_zero", "lambda=0: max|Dx| %g, max|Dz| %g, max|J-1| %g", mdx, mdz, mj);
+    ocean_free(o);
+}
+
+/* ---- periodicity in space and time ---------------------------------------- */
+
+static void test_periodic(void)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = 32;
+    p.patch_size = 64;
+    struct ocean *o = make(&p, 1);
+    if (!o)
+        return;
+    int n = 32;
+    size_t nn = (size_t)n * n;
+    /* The continuous sum at x = L equals x = 0 (the k are multiples of 2pi/L). */
+    double complex *ref = malloc(nn * sizeof *ref);
+    ocean_reference_spectrum(o, 2.0, TR_H, ref);
+    double worst = 0, scale = 0;
+    for (int z = 0; z < n; z += 3) {
+        double complex s0 = 0, sL = 0;
+        for (int kz = 0; kz < n; kz++)
+            for (int kx = 0; kx < n; kx++) {
+                double kxv = ocean_wavenumber(kx, n, p.patch_size), kzv = ocean_wavenumber(kz, n, p.patch_size);
+                double zz = z * p.patch_size / n;
+                s0 += ref[kz * n + kx] * cexp(I * (kzv * zz));
+                sL += ref[kz * n + kx] * cexp(I * (kxv * p.patch_size + kzv * (zz + p.patch_size)));
+            }
+        worst = fmax(worst, cabs(sL - s0));
+        scale = fmax(scale, cabs(s0));
+    }
+    free(ref);
+    /* Seam: the jump across the tile edge is like any neighbour difference. */
+    ocean_step(o, 2.0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+    const float *h = ocean_field(o, OCEAN_HEIGHT);
+    double seam = 0, inner = 0;
+    for (int z = 0; z < n; z++) {
+        seam += pow(h[z * n] - h[z * n + n - 1], 2) + pow(h[z] - h[(n - 1) * n + z], 2);
+        for (int x = 1; x < n; x++)
+            inner += pow(h[z * n + x] - h[z * n + x - 1], 2) + pow(h[x * n + z] - h[(x - 1) * n + z], 2);
+    }
+    double ratio = sqrt(seam / (2.0 * n)) / sqrt(inner / (2.0 * n * (n - 1)));
+    check(worst < 1e-9 * scale && ratio < 1.6, "periodic.tiling",
+          "|h(L,z+L) - h(0,z)| = %.1e m; seam jump rms / neighbour rms = %.2f", worst, ratio);
+
+    p.loop_period = 20;
+    char err[256];
+    ocean_reconfigure(o, &p, err, sizeof err);
+    double e = 0, e_half = 1e9;
+    float *a[OCEAN_FIELD_COUNT];
+    ocean_step(o, 7.3, OCEAN_ALL_FIELDS);
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+        a[f] = copy_field(o, f);
+    ocean_step(o, 7.3 + 20 * 1000, OCEAN_ALL_FIELDS); /* a thousand periods later */
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+        e = fmax(e, rel_err(ocean_field(o, f), a[f], nn));
+    /* The FFT path wraps t into [0, T); the reference does not: they agree
+     * only if every w is a multiple of 2 pi / T. */
+    ocean_step_dft(o, 7.3 + 20 * 1000, OCEAN_ALL_FIELDS);
+    double e_ref = 0;
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+        e_ref = fmax(e_ref, rel_err(a[f], ocean_field(o, f), nn));
+    ocean_step(o, 7.3 + 10, OCEAN_ALL_FIELDS);
+    e_half = rel_err(ocean_field(o, OCEAN_HEIGHT), a[OCEAN_HEIGHT], nn);
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+        free(a[f]);
+    check(e <= 1e-5 && e_ref <= 1e-5 && e_half > 0.1, "periodic.loop_period",
+          "T = 20 s, all fields: field(t + 1000 T) vs field(t) %.1e, vs unwrapped reference %.1e; "
+          "at t + T/2: %.2f (must differ)", e, e_ref, e_half);
+
+    /* No loop: phases in double precision, so day-long runs stay exact: the
+     * step at t = 10 days must match the double-precision reference. */
+    p.loop_period = 0;
+    ocean_reconfigure(o, &p, err, sizeof err);
+    double tday = 864000.123;
+    ocean_step_fft(o, tday, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+    float *hf = copy_field(o, OCEAN_HEIGHT);
+    ocean_step_dft(o, tday, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+    double ed = rel_err(hf, ocean_field(o, OCEAN_HEIGHT), nn);
+    free(hf);
+    check(ed <= 1e-5, "time.ten_days", "t = 10 days: FFT path vs double reference rel err %.1e", ed);
+    ocean_free(o);
+}
+
+/* ---- energy ------------------------------------------------------------------ */
+
+static void test_parseval(void)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = 64;
+    struct ocean *o = make(&p, 1);
+    if (!o)
+        return;
+    int n = 64;
+    size_t nn = (size_t)n * n;
+    ocean_step(o, 4.0, OCEAN_ALL_FIELDS);
+    double complex *ref = malloc(nn * sizeof *ref);
+    double worst = 0;
+    for (int tr = 0; tr < TR_COUNT; tr++) {
+        ocean_reference_spectrum(o, 4.0, tr, ref);
+        double es = 0, ex = 0;
+        for (size_t i = 0; i < nn; i++)
+            es += pow(cabs(ref[i]), 2);
+        const float *f = ocean_transform_dest(o->g, tr);
+        for (size_t i = 0; i < nn; i++)
+            ex += (double)f[i] * f[i];
+        worst = fmax(worst, fabs(ex / nn / es - 1));
+    }
+    free(ref);
+    check(worst < 1e-5, "energy.parseval", "mean f^2 vs sum |F(k)|^2 over 8 transforms: worst rel diff %.1e", worst);
+    ocean_free(o);
+}
+
+static void test_variance_vs_n(void)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    int sizes[] = {64, 128, 256};
+    double v[3];
+    int count = quick ? 2 : 3;
+    for (int i = 0; i < count; i++) {
+        p.resolution = sizes[i];
+        struct ocean *o = make(&p, 1);
+        if (!o)
+            return;
+        ocean_step(o, 9.0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+        v[i] = variance(ocean_field(o, OCEAN_HEIGHT), (size_t)sizes[i] * sizes[i]);
+        ocean_free(o);
+    }
+    double lo = v[0], hi = v[0];
+    for (int i = 1; i < count; i++) {
+        lo = fmin(lo, v[i]);
+        hi = fmax(hi, v[i]);
+    }
+    check(hi / lo - 1 < 0.03, "energy.variance_independent_of_N",
+          "L=256 m, N=64/128%s: var(h) %.4f / %.4f%s%.4f m^2, spread %.1f%% (limit 3%%)", quick ? "" : "/256", v[0],
+          v[1], quick ? "" : " / ", quick ? 0.0 : v[2], 100 * (hi / lo - 1));
+}
+
+/* m0 of the spectrum over the resolved band: S integrated over w between
+ * the lowest and the Nyquist wavenumbers (Phillips: F over k). Simpson on a
+ * log grid; independent of the 2-D Psi, the spreading and dw/dk. */
+static double band_m0(const struct spectrum_model *m, double k_lo, double k_hi)
+{
+    int n = 20000;
+    double a, b;
+    int phillips = m->kind == SPECTRUM_PHILLIPS;
+    a = log(phillips ? k_lo : dispersion_omega(k_lo, m->depth));
+    b = log(phillips ? k_hi : dispersion_omega(k_hi, m->depth));
+    double h = (b - a) / n, sum = 0;
+    for (int i = 0; i <= n; i++) {
+        double u = exp(a + i * h);
+        double f = (phillips ? spectrum_omni_k(m, u) : spectrum_frequency(m, u)) * u; /* d(u) = u d(log u) */
+        sum += f * (i == 0 || i == n ? 1 : (i % 2 ? 4 : 2));
+    }
+    return sum * h / 3;
+}
+
+static void test_significant_height(void)
+{
+    for (int s = 0; s < 4; s++) {
+        struct ocean_params p;
+        params_defaults(&p);
+        p.spectrum = s;
+        p.resolution = quick ? 64 : 256;
+        p.patch_size = quick ? 250 : 1000; /* Nyquist k = 0.8 rad/m either way */
+        p.small_wave_cutoff = 0;
+        p.depth = s == SPECTRUM_TMA ? 20 : 1000;
+        int seeds = quick ? 4 : 24;
+        double m0 = 0;
+        struct ocean *o = make(&p, 1);
+        if (!o)
+            return;
+        for (int seed = 0; seed < seeds; seed++) {
+            p.seed = 1000 + seed;
+            char err[256];
+            ocean_reconfigure(o, &p, err, sizeof err);
+            ocean_step(o, 0.0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+            m0 += variance(ocean_field(o, OCEAN_HEIGHT), (size_t)p.resolution * p.resolution) / seeds;
+        }
+        double dk = 2 * M_PI / p.patch_size;
+        double ref = band_m0(&o->model, 0.5 * dk, M_PI * p.resolution / p.patch_size);
+        double hs = 4 * sqrt(m0), hs_ref = 4 * sqrt(ref);
+        char name[64];
+        snprintf(name, sizeof name, "energy.hs.%s", spec_name(s));
+        double tol = quick ? 0.10 : 0.05;
+        check(fabs(hs / hs_ref - 1) <= tol && hs_ref > 0.1, name,
+              "Hs = 4 sqrt(m0): field %.3f m (mean of %d seeds) vs spectrum %.3f m, %+.1f%% (limit %.0f%%)", hs,
+              seeds, hs_ref, 100 * (hs / hs_ref - 1), 100 * tol);
+        ocean_free(o);
+    }
+}
+
+/* ---- robustness ------------------------------------------------------------ */
+
+static int all_finite(const struct ocean *o)
+{
+    size_t nn = (size_t)ocean_resolution(o) * ocean_resolution(o);
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
+        const float *a = ocean_field(o, f);
+        for (size_t i = 0; i < nn; i++)
+            if (!isfinite(a[i]))
+                return 0;
+    }
+    return 1;
+}
+
+static void test_sweep(void)
+{
+    int runs = 0, bad = 0;
+    char where[512] = "";
+    for (size_t i = 0; i < param_count; i++) {
+        const struct param_def *d = &param_table[i];
+        if (d->flags & PARAM_PLAYBACK || strcmp(d->name, "transform") == 0)
+            continue;
+        double vals[3] = {d->min, d->max, 0.5 * (d->min + d->max)};
+        for (int vi = 0; vi < 3; vi++)
+            for (int s = 0; s < 4; s++) {
+                if (quick && (vi == 2 || s != (int)(i + vi) % 4))
+                    continue; /* quick: min and max, one spectrum each */
+                struct ocean_params p;
+                params_defaults(&p);
+                p.resolution = 16;
+                p.spectrum = s;
+                double v = vals[vi];
+                if (d->flags & PARAM_POW2) {
+                    if (vi == 2 || (quick && v > 64) || (!quick && s > 0))
+                        continue; /* 2048 once: it is the slow one */
+                } else if (d->type != PARAM_FLOAT) {
+                    v = floor(v);
+                }
+                char err[256];
+                if (param_set(&p, d, v, err, sizeof err) != 0) {
+                    bad++;
+                    snprintf(where, sizeof where, "%s=%g rejected: %s", d->name, v, err);
+                    continue;
+                }
+                if (params_validate(&p, err, sizeof err) != 0)
+                    continue; /* cross rule (e.g. loop_period in (0,1)): not a physics case */
+                struct ocean *o = make(&p, 1);
+                if (!o) {
+                    bad++;
+                    continue;
+                }
+                double times[] = {0.0, 1.5, 1e6};
+                for (int ti = 0; ti < 3; ti++) {
+                    ocean_step(o, times[ti], OCEAN_ALL_FIELDS);
+                    runs++;
+                    if (!all_finite(o)) {
+                        bad++;
+                        snprintf(where, sizeof where, "%s=%g spectrum=%s t=%g", d->name, v, spec_name(s), times[ti]);
+                    }
+                }
+                /* Amplitudes finite; k = 0 and the Nyquist row/column zero.
+                 * (The half spectra themselves are consumed by c2r.) */
+                struct ocean_grid *g = o->g;
+                int n = g->n, amp_bad = 0;
+                for (size_t m = 0; m < g->modes; m++) {
+                    int ix = (int)(m % g->nh), iz = (int)(m / g->nh);
+                    int special = (ix == 0 && iz == 0) || ix == n / 2 || iz == n / 2;
+                    float amp[4] = {g->a[m], g->b[m], g->d[m], g->e[m]};
+                    for (int q = 0; q < 4; q++)
+                        amp_bad += !isfinite(amp[q]) || (special && amp[q] != 0);
+                    amp_bad += !isfinite(g->omega[m]);
+                }
+                if (amp_bad) {
+                    bad++;
+                    snprintf(where, sizeof where, "%s=%g spectrum=%s: amplitude not finite or k=0/Nyquist not zero",
+                             d->name, v, spec_name(s));
+                }
+                ocean_free(o);
+            }
+    }
+    /* Corners: no wind, shallowest water, tiny patch with the finest grid. */
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = 32;
+    p.wind_speed = 0;
+    struct ocean *o = make(&p, 1);
+    if (o) {
+        ocean_step(o, 3, OCEAN_ALL_FIELDS);
+        runs++;
+        if (!all_finite(o) || max_abs(ocean_field(o, OCEAN_HEIGHT), 1024) != 0) {
+            bad++;
+            snprintf(where, sizeof where, "wind 0: not a flat finite sea");
+        }
+        p.wind_speed = 40;
+        p.depth = 0.5;
+        p.spectrum = SPECTRUM_TMA;
+        p.patch_size = 1;
+        p.fetch = 10000;
+        p.swell = 1;
+        p.gamma = 10;
+        p.small_wave_cutoff = 0;
+        char err[256];
+        ocean_reconfigure(o, &p, err, sizeof err);
+        ocean_step(o, 3, OCEAN_ALL_FIELDS);
+        runs++;
+        if (!all_finite(o)) {
+            bad++;
+            snprintf(where, sizeof where, "extreme corner not finite");
+        }
+        ocean_free(o);
+    }
+    check(bad == 0 && runs > (quick ? 40 : 100), "robust.no_nan_sweep", "%d steps over min/mid/max of every parameter x 4 spectra%s%s",
+          runs, bad ? ", first failure: " : ", all finite", where);
+}
+
+static void test_determinism(void)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = quick ? 32 : 256; /* >= 256: the fill is split over threads too */
+    size_t nn = (size_t)p.resolution * p.resolution;
+    struct ocean *a = make(&p, 1), *b = make(&p, 2), *c = make(&p, 1);
+    if (!a || !b || !c)
+        return;
+    ocean_step(a, 12.5, OCEAN_ALL_FIELDS);
+    ocean_step(b, 12.5, OCEAN_ALL_FIELDS);
+    ocean_step(c, 12.5, OCEAN_ALL_FIELDS);
+    int same_threads = 1, same_runs = 1;
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
+        same_threads &= memcmp(ocean_field(a, f), ocean_field(b, f), nn * sizeof(float)) == 0;
+        same_runs &= memcmp(ocean_field(a, f), ocean_field(c, f), nn * sizeof(float)) == 0;
+    }
+    p.seed = 2;
+    char err[256];
+    ocean_reconfigure(c, &p, err, sizeof err);
+    ocean_step(c, 12.5, OCEAN_ALL_FIELDS);
+    int differs = memcmp(ocean_field(a, OCEAN_HEIGHT), ocean_field(c, OCEAN_HEIGHT), nn * sizeof(float)) != 0;
+    check(same_threads && same_runs && differs, "determinism.bit_identical",
+          "N=%d, all fields: 1 vs 2 threads %s, two runs %s, other seed differs %s", p.resolution,
+          same_threads ? "identical" : "DIFFER", same_runs ? "identical" : "DIFFER", differs ? "yes" : "NO");
+    ocean_free(a);
+    ocean_free(b);
+    ocean_free(c);
+
+    /* Same seed, same large waves at any N: h~0 at equal integer k agree. */
+    params_defaults(&p);
+    p.resolution = 32;
+    struct ocean *s = make(&p, 1);
+    p.resolution = 64;
+    struct ocean *l = make(&p, 1);
+    if (!s || !l)
+        return;
+    int mism = 0, nonzero = 0;
+    for (int mz = -15; mz <= 15; mz++)
+        for (int mx = 0; mx <= 15; mx++) {
+            size_t is = (size_t)((mz + 32) % 32) * s->g->nh + mx, il = (size_t)((mz + 64) % 64) * l->g->nh + mx;
+            mism += s->g->a[is] != l->g->a[il] || s->g->b[is] != l->g->b[il] || s->g->omega[is] != l->g->omega[il];
+            nonzero += s->g->a[is] != 0;
+        }
+    check(mism == 0 && nonzero > 100, "determinism.same_waves_any_N",
+          "h~0 and w at |m| < 16 equal between N=32 and N=64: %d mismatches", mism);
+    ocean_free(s);
+    ocean_free(l);
+}
+
+static void test_reconfigure(void)
+{
+    struct ocean_params p, q;
+    params_defaults(&p);
+    p.resolution = 32;
+    struct ocean *o = make(&p, 1);
+    if (!o)
+        return;
+    size_t nn = 32 * 32;
+    ocean_step(o, 6.0, OCEAN_ALL_FIELDS);
+    float *h = copy_field(o, OCEAN_HEIGHT);
+    char err[256];
+    struct { const char *what; void (*set)(struct ocean_params *); } cases[] = {
+        {"resolution 100", NULL}, {"wind_speed -5", NULL}, {"patch_size NaN", NULL},
+        {"dft at N=128", NULL}, {"spectrum 7", NULL}, {"loop_period 0.5", NULL}};
+    int rejected = 0, unchanged = 1, messages = 1;
+    for (int i = 0; i < 6; i++) {
+        q = p;
+        switch (i) {
+        case 0: q.resolution = 100; break;
+        case 1: q.wind_speed = -5; break;
+        case 2: q.patch_size = NAN; break;
+        case 3: q.resolution = 128; q.transform = TRANSFORM_DFT; break;
+        case 4: q.spectrum = 7; break;
+        case 5: q.loop_period = 0.5; break;
+        }
+        err[0] = 0;
+        if (ocean_reconfigure(o, &q, err, sizeof err) == -1)
+            rejected++;
+        if (strlen(err) < 10)
+            messages = 0;
+        printf("     rejected %-16s -> \"%s\"\n", cases[i].what, err);
+        ocean_step(o, 6.0, OCEAN_ALL_FIELDS);
+        unchanged &= memcmp(ocean_get_params(o), &p, sizeof p) == 0 && ocean_resolution(o) == 32 &&
+                     memcmp(ocean_field(o, OCEAN_HEIGHT), h, nn * sizeof(float)) == 0;
+    }
+    struct ocean *none = ocean_create(&q, NULL, err, sizeof err);
+    check(rejected == 6 && unchanged && messages && !none, "params.invalid_rejected",
+          "%d/6 rejected with a message, simulation unchanged: %s; create with bad params: %s", rejected,
+          unchanged ? "yes" : "NO", none ? "ACCEPTED" : "NULL");
+    ocean_free(none);
+
+    /* Valid changes keep the random phases: amplitude x4 doubles h exactly. */
+    q = p;
+    q.amplitude = 4 * p.amplitude;
+    ocean_reconfigure(o, &q, err, sizeof err);
+    ocean_step(o, 6.0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+    float *h2 = copy_field(o, OCEAN_HEIGHT);
+    for (size_t i = 0; i < nn; i++)
+        h2[i] *= 0.5f;
+    double e = rel_err(h2, h, nn);
+    free(h2);
+    check(e < 1e-6, "reconfigure.keeps_phases", "amplitude x4 gives 2 h: rel err %.1e", e);
+
+    /* Re-plan to another N and back. */
+    q.resolution = 64;
+    int r = ocean_reconfigure(o, &q, err, sizeof err);
+    ocean_step(o, 6.0, OCEAN_ALL_FIELDS);
+    int ok64 = r == 0 && ocean_resolution(o) == 64 && all_finite(o);
+    q = p;
+    r = ocean_reconfigure(o, &q, err, sizeof err);
+    ocean_step(o, 6.0, OCEAN_ALL_FIELDS);
+    check(ok64 && r == 0 && memcmp(ocean_field(o, OCEAN_HEIGHT), h, nn * sizeof(float)) == 0,
+          "reconfigure.replan", "32 -> 64 -> 32: back to the identical field");
+    check(strcmp(ocean_field_name(OCEAN_SLOPE_Z), "slope_z") == 0 && ocean_field_name(OCEAN_FIELD_COUNT) == NULL,
+          "api.field_names", "stable names");
+    free(h);
+    ocean_free(o);
+}
+
+static double seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+/* Run one group and say how long it took (to keep the suite's budget). */
+#define RUN(fn)                                                       \
+    do {                                                              \
+        double t0_ = seconds();                                       \
+        fn();                                                         \
+        printf("     (%s: %.2f s)\n", #fn, seconds() - t0_);          \
+    } while (0)
+
+/* FFTW_MEASURE with a wisdom file: the file appears, a second ocean plans
+ * from it, and the fields equal the ESTIMATE ones to rounding. */
+static void test_wisdom(void)
+{
+    char dir[] = "/tmp/test_ocean_XXXXXX", path[64];
+    if (!mkdtemp(dir)) {
+        check(0, "fftw.wisdom", "mkdtemp failed");
+        return;
+    }
+    snprintf(path, sizeof path, "%s/wisdom", dir);
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = 32;
+    char err[256];
+    struct ocean_options opt = {2, path, 1};
+    struct ocean *a = ocean_create(&p, &opt, err, sizeof err);
+    FILE *f = fopen(path, "r");
+    long size = 0;
+    if (f) {
+        fseek(f, 0, SEEK_END);
+        size = ftell(f);
+        fclose(f);
+    }
+    struct ocean *b = ocean_create(&p, &opt, err, sizeof err), *c = make(&p, 1);
+    double e = 1;
+    if (a && b && c) {
+        ocean_step(b, 3.0, OCEAN_ALL_FIELDS);
+        ocean_step(c, 3.0, OCEAN_ALL_FIELDS);
+        e = 0;
+        for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
+            e = fmax(e, rel_err(ocean_field(b, i), ocean_field(c, i), 32 * 32));
+    }
+    check(a && b && size > 0 && e < 1e-5, "fftw.wisdom", "MEASURE plans, wisdom file %ld bytes, fields vs ESTIMATE %.1e",
+          size, e);
+    ocean_free(a);
+    ocean_free(b);
+    ocean_free(c);
+    remove(path);
+    rmdir(dir);
+}
+
+int main(void)
+{
+    const char *qenv = getenv("OCEAN_TEST_QUICK");
+    quick = qenv && *qenv && strcmp(qenv, "0") != 0;
+    if (quick)
+        printf("quick mode (OCEAN_TEST_QUICK): smaller grids, fewer seeds\n");
+    RUN(test_params);
+    RUN(test_spreading_and_dispersion);
+    RUN(test_fft_vs_dft);
+    RUN(test_layout);
+    RUN(test_slopes);
+    RUN(test_periodic);
+    RUN(test_parseval);
+    RUN(test_variance_vs_n);
+    RUN(test_significant_height);
+    RUN(test_sweep);
+    RUN(test_determinism);
+    RUN(test_reconfigure);
+    RUN(test_wisdom);
+    printf("%d passed, %d failed\n", passed, failed);
+    return failed ? 1 : 0;
+}
