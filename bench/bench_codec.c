@@ -7,7 +7,12 @@
  *
  * Input: the real simulation (ocean_create with params_defaults, t = 10 s)
  * when built with HAVE_OCEAN, else a synthetic Phillips-spectrum sea made
- * with FFTW (same spectrum shape, fixed seed). The "source" member says which. */
+ * with FFTW (same spectrum shape, fixed seed). The "source" member says which.
+ *
+ *   bench_codec [--height] [--tile-size T] [--frames DIR]
+ *   --height       height field only;  --tile-size T  tile side of the tiled runs
+ *   (power of two, default 64 = the daemon's default; clamped to N);
+ *   --frames DIR   keep every encoded frame for the JS decode benchmark. */
 #include "oc_proto.h"
 
 #include <fftw3.h>
@@ -22,7 +27,8 @@
 #include "ocean.h"
 #endif
 
-#define TILE 64 /* the daemon's default tile_size */
+/* Tile side of the tiled runs: the daemon's default (64) unless --tile-size T. */
+static int tile_size = 64;
 
 /* Thread CPU time: "MB/s per core" on a shared machine, where wall time would
  * also count the time other processes hold the core. */
@@ -275,28 +281,34 @@ int main(int argc, char **argv)
     for (int i = 1; i < argc; i++) {
         if (strcmp(argv[i], "--height") == 0) only_height = 1;
         else if (strcmp(argv[i], "--frames") == 0 && i + 1 < argc) frames_dir = argv[++i];
-        else { fprintf(stderr, "usage: bench_codec [--height] [--frames DIR]\n"); return 2; }
+        else if (strcmp(argv[i], "--tile-size") == 0 && i + 1 < argc) {
+            tile_size = atoi(argv[++i]);
+            if (tile_size < 1 || tile_size > OC_MAX_N || (tile_size & (tile_size - 1))) {
+                fprintf(stderr, "bench_codec: --tile-size must be a power of two in 1..%d\n", OC_MAX_N);
+                return 2;
+            }
+        } else { fprintf(stderr, "usage: bench_codec [--height] [--tile-size T] [--frames DIR]\n"); return 2; }
     }
     const int sizes[2] = { 256, 512 };
     const float bounds[2] = { 0.001f, 0.01f };
     for (int si = 0; si < 2; si++) {
-        int n = sizes[si], reps = n == 256 ? 21 : 9;
+        int n = sizes[si], reps = n == 256 ? 21 : 9, tile = tile_size < n ? tile_size : n;
         float *fields[OC_FIELD_COUNT];
         for (int f = 0; f < OC_FIELD_COUNT; f++) fields[f] = malloc(sizeof(float) * n * n);
         const char *src = make_fields(n, fields);
         for (int f = 0; f < (only_height ? 1 : OC_FIELD_COUNT); f++) {
             print(n, src, f, 0, "zstd-raw", n, bench_zstd_raw(fields[f], n, reps), NULL);
             for (int b = 0; b < 2; b++) {
-                struct stats s1 = bench_oceand(fields[f], n, TILE, f, bounds[b], OC_CODEC_QUANT_LORENZO, reps);
-                struct stats s2 = bench_oceand(fields[f], n, TILE, f, bounds[b], OC_CODEC_QUANT_LORENZO_ZSTD, reps);
+                struct stats s1 = bench_oceand(fields[f], n, tile, f, bounds[b], OC_CODEC_QUANT_LORENZO, reps);
+                struct stats s2 = bench_oceand(fields[f], n, tile, f, bounds[b], OC_CODEC_QUANT_LORENZO_ZSTD, reps);
                 struct stats s3 = bench_oceand(fields[f], n, n, f, bounds[b], OC_CODEC_QUANT_LORENZO, reps);
                 double tol;
                 struct stats sz = bench_zfp(fields[f], n, bounds[b], reps, &tol);
                 char extra[128];
                 snprintf(extra, sizeof extra, ",\"entropy\":\"deflate-raw\",\"zfp_bits_ratio\":%.2f", sz.bits / s1.bits);
-                print(n, src, f, bounds[b], "oceand", TILE, s1, extra);
+                print(n, src, f, bounds[b], "oceand", tile, s1, extra);
                 snprintf(extra, sizeof extra, ",\"entropy\":\"zstd-1\",\"zfp_bits_ratio\":%.2f", sz.bits / s2.bits);
-                print(n, src, f, bounds[b], "oceand-zstd", TILE, s2, extra);
+                print(n, src, f, bounds[b], "oceand-zstd", tile, s2, extra);
                 snprintf(extra, sizeof extra, ",\"entropy\":\"deflate-raw\",\"zfp_bits_ratio\":%.2f", sz.bits / s3.bits);
                 print(n, src, f, bounds[b], "oceand", n, s3, extra);
                 snprintf(extra, sizeof extra, ",\"tolerance\":%.6g", tol);

@@ -76,9 +76,9 @@ static int is_pow2(int v) { return v > 0 && !(v & (v - 1)); }
 
 /* Round to nearest (ties to even) for |x| < 2^51 without a libm call, so the
  * loop vectorises. Any rounding is valid: the decoder only sees q. */
-static inline int32_t round_i32(double x)
+static inline double round_d(double x)
 {
-    return (int32_t)((x + 0x1.8p52) - 0x1.8p52);
+    return (x + 0x1.8p52) - 0x1.8p52;
 }
 
 /* One quantisation pass; returns nonzero if some sample misses the bound.
@@ -91,9 +91,11 @@ static int quantise_pass(const float *restrict v, int32_t *restrict q, size_t co
     const double inv = 1.0 / scale;
     int bad = 0;
     for (size_t k = 0; k < count; k++) {
-        int32_t c = round_i32(((double)v[k] - offset) * inv);
-        double err = fabs((double)oc_dequant(c, offset, scale) - (double)v[k]);
-        q[k] = c;
+        /* r is the code as a double (|r| < 2^31): the same value oc_dequant would
+         * convert back from the int32, without the extra conversion. */
+        double r = round_d(((double)v[k] - offset) * inv);
+        double err = fabs((double)(float)(offset + r * scale) - (double)v[k]);
+        q[k] = (int32_t)r;
         bad |= err > bound;
     }
     return bad;
@@ -219,9 +221,10 @@ int oc_encode_tile(struct oc_encoder *e, const float *field_data, int n, int til
         return append_raw(out, &th, e->vals, count);
 
     int8_t coef[OC_PRED_COEFS];
+    uint32_t maxabs = oc_max_abs(e->q, count);
     if (e->force) memcpy(coef, e->forced, OC_PRED_COEFS);
-    else oc_predict_fit(e->q, side, side, coef);
-    oc_predict_residuals(e->q, side, side, coef, e->zz);
+    else oc_predict_fit_m(e->q, side, side, maxabs, coef);
+    oc_predict_residuals_m(e->q, side, side, maxabs, coef, e->zz);
     int esc_width;
     size_t esc_count = oc_pack_escapes(e->zz, count, e->packed, e->esc, &esc_width);
     size_t plain = count + esc_count * (size_t)esc_width;
@@ -232,6 +235,8 @@ int oc_encode_tile(struct oc_encoder *e, const float *field_data, int n, int til
     payload[0] = (uint8_t)esc_width;
     oc_put_u32(payload + 4, (uint32_t)esc_count);
     memcpy(payload + 8, coef, OC_PRED_COEFS);
+    /* Level 0 = default = 1: for codec 1 that is the Huffman-only DEFLATE writer
+     * (oc_entropy.c), for codec 2 zstd level 1; codec 1 levels 2..12 use libdeflate. */
     int level = e->level ? e->level : 1;
     size_t clen = oc_entropy_compress(e->ent, e->codec, level, e->packed, plain, payload + OC_LOSSY_PREFIX,
                                       cap - OC_LOSSY_PREFIX);

@@ -41,6 +41,11 @@ extern const int8_t oc_lorenzo_coef[OC_PRED_COEFS];
 /* The integer pipeline (oc_transform.c). q and zz are w*h, row-major. */
 void oc_predict_fit(const int32_t *q, int w, int h, int8_t coef[OC_PRED_COEFS]);
 void oc_predict_residuals(const int32_t *q, int w, int h, const int8_t coef[OC_PRED_COEFS], uint32_t *zz);
+/* The same two with max |q| already known (the encoder computes it once per tile). */
+uint32_t oc_max_abs(const int32_t *q, size_t count);
+void oc_predict_fit_m(const int32_t *q, int w, int h, uint32_t maxabs, int8_t coef[OC_PRED_COEFS]);
+void oc_predict_residuals_m(const int32_t *q, int w, int h, uint32_t maxabs, const int8_t coef[OC_PRED_COEFS],
+                            uint32_t *zz);
 void oc_unpredict(const uint32_t *zz, int w, int h, const int8_t coef[OC_PRED_COEFS], int32_t *q);
 /* out must hold 5*count bytes; esc_scratch count values. Returns esc_count. */
 size_t oc_pack_escapes(const uint32_t *zz, size_t count, uint8_t *out, uint32_t *esc_scratch, int *esc_width);
