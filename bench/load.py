@@ -1,0 +1,128 @@
+#!/usr/bin/python3
+"""Load benchmark for oceand: K WebSocket clients (build/load_client, libwebsockets)
+on loopback. Prints one JSON line per run:
+  {"bench":"load","N":256,"clients":200,"fps_median":..,"fps_min":..,"delivered":..,
+   "lat_p50_ms":..,"lat_p99_ms":..,"set_latency_ticks_p99":..,"daemon_cpu":..,"rss_mb":..,"overruns":..}
+delivered = share of the frames the daemon made in the window that reached the worst client.
+
+    /usr/bin/python3 bench/load.py [--runs 256:200,512:100] [--window 10]
+"""
+import argparse
+import json
+import os
+import re
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def metric(port, name):
+    text = urllib.request.urlopen("http://127.0.0.1:%d/metrics" % port, timeout=5).read().decode()
+    m = re.search(r"^%s (\S+)$" % re.escape(name), text, re.M)
+    return float(m.group(1)) if m else float("nan")
+
+
+def cpu_seconds(pid):
+    with open("/proc/%d/stat" % pid) as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def runq_wait_seconds(pid):
+    """Time the daemon's threads spent runnable but waiting for a CPU (schedstat)."""
+    total = 0
+    for tid in os.listdir("/proc/%d/task" % pid):
+        try:
+            with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
+                total += int(f.read().split()[1])
+        except OSError:
+            pass
+    return total / 1e9
+
+
+def rss_mb(pid):
+    with open("/proc/%d/status" % pid) as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return 0.0
+
+
+def run(args, n, k):
+    tmp = tempfile.mkdtemp(prefix="oceand-bench-")
+    port = free_port()
+    log = open(os.path.join(tmp, "oceand.log"), "wb")
+    d = subprocess.Popen([args.oceand, "--port", str(port), "--resolution", str(n), "--state-file", "none",
+                          "--web-root", tmp, "--max-clients", str(k + 16), "--log-level", "warn"]
+                         + args.oceand_args.split(),
+                         stdout=log, stderr=log)
+    try:
+        for _ in range(200):
+            try:
+                urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=1).read()
+                break
+            except OSError:
+                time.sleep(0.05)
+        lc = subprocess.Popen([args.load_client, str(port), str(k), str(args.warmup), str(args.window)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        line = lc.stderr.readline()          # "measuring": the window starts
+        cpu0, t0, wait0 = cpu_seconds(d.pid), time.monotonic(), runq_wait_seconds(d.pid)
+        over0 = metric(port, "oceand_tick_overruns_total")
+        tsum0, tcnt0 = metric(port, "oceand_tick_duration_seconds_sum"), metric(port, "oceand_tick_duration_seconds_count")
+        rss = [rss_mb(d.pid)]
+        while lc.poll() is None:
+            time.sleep(0.5)
+            rss.append(rss_mb(d.pid))
+        cpu1, t1, wait1 = cpu_seconds(d.pid), time.monotonic(), runq_wait_seconds(d.pid)
+        over1 = metric(port, "oceand_tick_overruns_total")
+        tsum1, tcnt1 = metric(port, "oceand_tick_duration_seconds_sum"), metric(port, "oceand_tick_duration_seconds_count")
+        out, err = lc.communicate()
+        if lc.returncode != 0 or not out.strip():
+            raise RuntimeError("load_client failed: %s %s" % (line, err))
+        r = json.loads(out)
+        res = {"bench": "load", "N": n, "clients": k, "oceand_args": args.oceand_args, "fps_median": r["fps_median"], "fps_min": r["fps_min"],
+               "delivered": r["delivered"], "lat_p50_ms": r["lat_p50_ms"], "lat_p99_ms": r["lat_p99_ms"],
+               "set_latency_ticks_p99": r["set_latency_ticks_p99"],
+               "daemon_cpu": round((cpu1 - cpu0) / (t1 - t0), 2),
+               "daemon_runq_wait": round((wait1 - wait0) / (t1 - t0), 2), "rss_mb": round(max(rss), 1),
+               "rss_mb_start": round(rss[0], 1), "overruns": int(over1 - over0),
+               "tick_ms_mean": round(1000 * (tsum1 - tsum0) / max(1, tcnt1 - tcnt0), 2),
+               "connected": r["connected"], "frame_kb": r["frame_kb"], "mbytes_per_s": r["mbytes_per_s"],
+               "set_samples": r["set_samples"], "window_s": args.window,
+               "loadavg_1m": round(os.getloadavg()[0], 2)}   # this machine is shared: context for the numbers
+        print(json.dumps(res), flush=True)
+    finally:
+        d.terminate()
+        try:
+            d.wait(5)
+        except subprocess.TimeoutExpired:
+            d.kill()
+        log.close()
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--oceand", default="build/oceand")
+    ap.add_argument("--load-client", default="build/load_client")
+    ap.add_argument("--runs", default="256:1,256:50,256:200,512:100", help="N:clients,...")
+    ap.add_argument("--oceand-args", default="", help="extra daemon flags, e.g. '--sim-nice -10'")
+    ap.add_argument("--warmup", type=float, default=2)
+    ap.add_argument("--window", type=float, default=10)
+    args = ap.parse_args()
+    for spec in args.runs.split(","):
+        n, k = (int(x) for x in spec.split(":"))
+        run(args, n, k)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,56 @@
+# mk/daemon.mk — the oceand daemon (issue 4): binary, integration tests, load bench, `make run`.
+
+DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c server/net.c \
+              server/metrics.c server/state.c server/log.c
+DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o)
+DAEMON_SAN_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/san/%.o)
+OCEAN_LIB ?= $(BUILD)/libocean.a
+OCEAN_SAN_LIB ?= $(BUILD)/san/libocean.a
+PROTO_LIB ?= $(BUILD)/liboc_proto.a
+PROTO_SAN_LIB ?= $(BUILD)/san/liboc_proto.a
+
+BINS += $(BUILD)/oceand
+TESTS += test-daemon test-daemon-asan
+BENCHES += bench-load
+
+$(BUILD)/oceand: $(DAEMON_OBJ) $(OCEAN_LIB) $(PROTO_LIB)
+	$(CC) $(CFLAGS) -o $@ $(DAEMON_OBJ) $(OCEAN_LIB) $(PROTO_LIB) $(PKG_LIBS)
+
+$(BUILD)/san/oceand: $(DAEMON_SAN_OBJ) $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB)
+	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $(DAEMON_SAN_OBJ) $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB) $(PKG_LIBS)
+
+# Unit test of the pure control module (parse/validate), and the frame checker
+# the integration tests use to decode frames and compare with the library.
+$(BUILD)/test_control: $(BUILD)/obj/tests/daemon/test_control.o $(BUILD)/obj/server/control.o \
+                       $(BUILD)/obj/server/config.o $(BUILD)/obj/server/state.o $(BUILD)/obj/server/log.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/san/test_control: $(BUILD)/san/tests/daemon/test_control.o $(BUILD)/san/server/control.o \
+                       $(BUILD)/san/server/config.o $(BUILD)/san/server/state.o $(BUILD)/san/server/log.o $(OCEAN_SAN_LIB)
+	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/frame_check: $(BUILD)/obj/tests/daemon/frame_check.o $(BUILD)/obj/server/control.o $(OCEAN_LIB) $(PROTO_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+
+DAEMON_TEST_DEPS := $(BUILD)/test_control $(BUILD)/frame_check
+
+.PHONY: test-daemon test-daemon-asan bench-load run
+test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
+	$(BUILD)/test_control
+	/usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
+
+# Same integration tests against an ASan+UBSan build (slower: frames at a lower N).
+test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(DAEMON_TEST_DEPS)
+	$(BUILD)/san/test_control
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  /usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check --sanitized
+
+bench-load: $(BUILD)/oceand $(BUILD)/load_client
+	/usr/bin/python3 bench/load.py --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_LOAD_ARGS)
+
+run: deps
+	@$(MAKE) --no-print-directory build-all
+	@if [ ! -f $(BUILD)/web/index.html ]; then echo "run: no $(BUILD)/web/index.html, oceand serves a placeholder page"; fi
+	@echo "run: open http://127.0.0.1:8080/ (Ctrl-C stops)"
+	exec $(BUILD)/oceand --web-root $(BUILD)/web $(OCEAND_ARGS)
+
+$(BUILD)/load_client: $(BUILD)/obj/bench/load_client.o
+	$(CC) $(CFLAGS) -o $@ $^

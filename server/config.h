@@ -1,0 +1,56 @@
+/* config.h — the one place that reads configuration.
+ *
+ * Precedence, lowest first: built-in defaults <- saved state file <-
+ * --config FILE (JSON) <- command-line flags. Sea parameters come from the
+ * params table (server/params.h); daemon options from the small table in
+ * config.c. Both are accepted in the config file and as flags, e.g.
+ * --wind-speed 20 or --wind_speed=20, --port 9000. */
+#ifndef OCEAND_CONFIG_H
+#define OCEAND_CONFIG_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "params.h"
+
+struct daemon_config {
+    int    port;
+    char   bind[64];
+    char   web_root[512];
+    double tick_rate;
+    int    log_level;          /* enum log_level */
+    char   state_file[512];    /* "" = do not save state */
+    char   config_file[512];
+    int    max_clients;
+    int    max_message;        /* bytes of one JSON text message */
+    double control_rate;       /* control messages per second per client */
+    int    control_burst;
+    int    ping_interval;      /* s of silence before we ping */
+    int    idle_timeout;       /* s of silence before we hang up */
+    char   allowed_origins[512]; /* "" = same host or no Origin; "*" = any; else comma list */
+    char   control_token[128];   /* "" = everyone may set */
+    int    fft_threads;
+    int    plan_rigor;
+    char   wisdom_file[512];
+    int    max_memory_mb;
+    int    tile_size;
+    int    send_buffer_kb;
+    int    sim_nice;           /* nice value of the tick thread (< 0 needs CAP_SYS_NICE) */     /* SO_SNDBUF per client: bounds the frames queued in the kernel */
+};
+
+/* What config_load found besides the values. */
+struct config_result {
+    bool help;                 /* --help was given: usage printed, exit 0 */
+    bool state_loaded;
+    uint32_t params_version;   /* from the state file, else 0 */
+    double sim_time;           /* from the state file, else 0 */
+};
+
+/* Fill *dc and *p. Returns 0, or -1 with a message in err. */
+int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_params *p,
+                struct config_result *res, char *err, size_t errlen);
+void config_usage(FILE *out, const char *argv0);
+
+#endif

@@ -1,0 +1,438 @@
+/* control.c — parse/validate JSON control messages, build JSON replies.
+ * See control.h; the wire contract is notes/control-spec.md. */
+#include "control.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "ocean.h"
+
+const float ctl_bounds[CTL_BOUND_COUNT] = { 0.0f, 0.001f, 0.005f, 0.01f, 0.05f };
+
+static int fail(struct ctl_error *e, const char *code, const char *param, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static int fail(struct ctl_error *e, const char *code, const char *param, const char *fmt, ...)
+{
+    va_list ap;
+    e->code = code;
+    snprintf(e->param, sizeof e->param, "%s", param ? param : "");
+    va_start(ap, fmt);
+    vsnprintf(e->message, sizeof e->message, fmt, ap);
+    va_end(ap);
+    return -1;
+}
+
+void subscription_default(struct subscription *s, double tick_rate)
+{
+    memset(s, 0, sizeof *s);
+    s->fields = OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_DX) | OCEAN_FIELD_BIT(OCEAN_DZ);
+    s->lod = 0;
+    s->bound_index = 3; /* 0.01 m */
+    s->max_rate = tick_rate;
+    s->all_tiles = true;
+}
+
+static bool is_scalar(const cJSON *j)
+{
+    return cJSON_IsString(j) || cJSON_IsNumber(j) || cJSON_IsBool(j) || cJSON_IsNull(j);
+}
+
+int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_out, struct ctl_error *e)
+{
+    memset(m, 0, sizeof *m);
+    if (id_out)
+        *id_out = NULL;
+    cJSON *root = cJSON_ParseWithLength(text, len);
+    if (!root)
+        return fail(e, "bad_json", NULL, "message is not valid JSON");
+    if (!cJSON_IsObject(root)) {
+        cJSON_Delete(root);
+        return fail(e, "bad_json", NULL, "message is not a JSON object");
+    }
+    const cJSON *id = cJSON_GetObjectItemCaseSensitive(root, "id");
+    if (id && !is_scalar(id)) {
+        cJSON_Delete(root);
+        return fail(e, "bad_message", NULL, "\"id\" must be a JSON scalar");
+    }
+    const cJSON *type = cJSON_GetObjectItemCaseSensitive(root, "type");
+    const char *ts = cJSON_GetStringValue(type);
+    int rc = 0;
+    if (!ts) {
+        rc = fail(e, "bad_message", NULL, "missing or non-string \"type\"");
+    } else if (strcmp(ts, "set") == 0) {
+        m->type = CTL_SET;
+        m->params = cJSON_GetObjectItemCaseSensitive(root, "params");
+        if (!cJSON_IsObject(m->params))
+            rc = fail(e, "bad_message", NULL, "\"set\" needs a \"params\" object");
+        const cJSON *tok = cJSON_GetObjectItemCaseSensitive(root, "token");
+        if (tok && !cJSON_IsString(tok))
+            rc = fail(e, "bad_message", NULL, "\"token\" must be a string");
+        m->token = cJSON_GetStringValue(tok);
+    } else if (strcmp(ts, "subscribe") == 0) {
+        m->type = CTL_SUBSCRIBE;
+    } else if (strcmp(ts, "pause") == 0) {
+        m->type = CTL_PAUSE;
+    } else if (strcmp(ts, "resume") == 0) {
+        m->type = CTL_RESUME;
+    } else if (strcmp(ts, "ping") == 0) {
+        m->type = CTL_PING;
+        const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "t");
+        if (t && !cJSON_IsNumber(t))
+            rc = fail(e, "bad_message", NULL, "\"t\" must be a number");
+        m->has_t = t != NULL;
+        m->t = t ? t->valuedouble : 0;
+    } else {
+        rc = fail(e, "unknown_type", NULL, "unknown message type \"%.40s\"", ts);
+    }
+    if (rc) {
+        if (id_out && id)
+            *id_out = cJSON_Duplicate(id, 1);
+        cJSON_Delete(root);
+        return rc;
+    }
+    m->root = root;
+    m->id = id;
+    return 0;
+}
+
+void ctl_msg_free(struct ctl_msg *m)
+{
+    cJSON_Delete(m->root);
+    memset(m, 0, sizeof *m);
+}
+
+double control_sim_bytes(int n)
+{
+    /* Spectra and FFT work arrays (complex), six output fields, encoder
+     * scratch and up to three frames in flight: ~160 bytes per sample. */
+    return 160.0 * (double)n * (double)n;
+}
+
+static bool is_pow2(double v)
+{
+    long n = (long)v;
+    return n > 0 && (n & (n - 1)) == 0;
+}
+
+/* Check one member against its table entry and store it into *p. */
+static int apply_one(const cJSON *item, const struct param_def *d, struct ocean_params *p, struct ctl_error *e)
+{
+    char err[160];
+    double v;
+    switch (d->type) {
+    case PARAM_INT:
+    case PARAM_FLOAT:
+        if (!cJSON_IsNumber(item))
+            return fail(e, "bad_type", d->name, "%s must be a number", d->name);
+        v = item->valuedouble;
+        if (!isfinite(v))
+            return fail(e, "bad_type", d->name, "%s must be finite", d->name);
+        if (d->type == PARAM_INT && v != floor(v))
+            return fail(e, "bad_type", d->name, "%s must be a whole number", d->name);
+        if (v < d->min || v > d->max)
+            return fail(e, "out_of_range", d->name, "%s = %g is outside %g..%g", d->name, v, d->min, d->max);
+        if ((d->flags & PARAM_POW2) && !is_pow2(v))
+            return fail(e, "out_of_range", d->name, "%s = %g is not a power of two", d->name, v);
+        break;
+    case PARAM_ENUM: {
+        const char *s = cJSON_GetStringValue(item);
+        if (!s)
+            return fail(e, "bad_type", d->name, "%s must be a string", d->name);
+        int idx = param_enum_index(d, s);
+        if (idx < 0)
+            return fail(e, "out_of_range", d->name, "%s: unknown choice \"%.40s\"", d->name, s);
+        v = idx;
+        break;
+    }
+    case PARAM_BOOL:
+        if (!cJSON_IsBool(item))
+            return fail(e, "bad_type", d->name, "%s must be true or false", d->name);
+        v = cJSON_IsTrue(item) ? 1 : 0;
+        break;
+    default:
+        return fail(e, "internal", d->name, "unknown parameter type");
+    }
+    if (param_set(p, d, v, err, sizeof err) != 0)
+        return fail(e, "out_of_range", d->name, "%s", err);
+    return 0;
+}
+
+int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const struct ctl_limits *lim,
+                         struct ocean_params *out, uint64_t *changed, struct ctl_error *e)
+{
+    if (!cJSON_IsObject(obj))
+        return fail(e, "bad_message", NULL, "\"params\" must be an object");
+    struct ocean_params p = *cur;
+    const cJSON *item;
+    cJSON_ArrayForEach(item, obj) {
+        const struct param_def *d = item->string ? param_find(item->string) : NULL;
+        if (!d)
+            return fail(e, "unknown_param", item->string, "unknown parameter \"%.40s\"",
+                        item->string ? item->string : "");
+        if (apply_one(item, d, &p, e) != 0)
+            return -1;
+    }
+    char err[160];
+    if (params_validate(&p, err, sizeof err) != 0)
+        return fail(e, "invalid", NULL, "%s", err);
+    if (lim && control_sim_bytes(p.resolution) > (double)lim->max_memory_mb * 1048576.0)
+        return fail(e, "invalid", "resolution", "resolution %d exceeds the memory cap of %d MB",
+                    p.resolution, lim->max_memory_mb);
+    uint64_t mask = 0;
+    for (size_t i = 0; i < param_count && i < 64; i++)
+        if (param_get(&p, &param_table[i]) != param_get(cur, &param_table[i]))
+            mask |= 1ull << i;
+    *out = p;
+    if (changed)
+        *changed = mask;
+    return 0;
+}
+
+int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, const struct ctl_limits *lim,
+                            struct subscription *out, struct ctl_error *e)
+{
+    struct subscription tmp; /* ~4 KB: fine on the stack */
+    memcpy(&tmp, cur, sizeof tmp);
+    const cJSON *j;
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "fields"))) {
+        if (!cJSON_IsArray(j) || cJSON_GetArraySize(j) == 0)
+            return fail(e, "bad_subscription", NULL, "\"fields\" must be a non-empty array of names");
+        unsigned mask = 0;
+        const cJSON *f;
+        cJSON_ArrayForEach(f, j) {
+            const char *name = cJSON_GetStringValue(f);
+            int k = -1;
+            for (int i = 0; name && i < OCEAN_FIELD_COUNT; i++)
+                if (strcmp(name, ocean_field_name((enum ocean_field)i)) == 0)
+                    k = i;
+            if (k < 0)
+                return fail(e, "bad_subscription", NULL, "unknown field \"%.40s\"", name ? name : "?");
+            mask |= OCEAN_FIELD_BIT(k);
+        }
+        tmp.fields = mask;
+    }
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "lod"))) {
+        if (!cJSON_IsNumber(j) || j->valuedouble != floor(j->valuedouble) || j->valuedouble < 0 ||
+            j->valuedouble > CTL_MAX_LOD)
+            return fail(e, "bad_subscription", NULL, "\"lod\" must be an integer 0..%d", CTL_MAX_LOD);
+        tmp.lod = (int)j->valuedouble;
+    }
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "bound"))) {
+        int k = -1;
+        for (int i = 0; cJSON_IsNumber(j) && i < CTL_BOUND_COUNT; i++)
+            if (fabs(j->valuedouble - ctl_bounds[i]) <= 1e-9 + 1e-6 * ctl_bounds[i])
+                k = i;
+        if (k < 0)
+            return fail(e, "bad_subscription", NULL, "\"bound\" must be one of 0, 0.001, 0.005, 0.01, 0.05");
+        tmp.bound_index = k;
+    }
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "max_rate"))) {
+        if (!cJSON_IsNumber(j) || !isfinite(j->valuedouble) || j->valuedouble <= 0)
+            return fail(e, "bad_subscription", NULL, "\"max_rate\" must be a positive number");
+        tmp.max_rate = j->valuedouble > lim->tick_rate ? lim->tick_rate : j->valuedouble;
+    }
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "tiles"))) {
+        const char *s = cJSON_GetStringValue(j);
+        if (s && strcmp(s, "all") == 0) {
+            tmp.all_tiles = true;
+            tmp.ntiles = 0;
+        } else if (cJSON_IsArray(j) && cJSON_GetArraySize(j) > 0 && cJSON_GetArraySize(j) <= CTL_MAX_TILES) {
+            int k = 0;
+            const cJSON *t;
+            cJSON_ArrayForEach(t, j) {
+                const cJSON *x = cJSON_GetArrayItem(t, 0), *z = cJSON_GetArrayItem(t, 1);
+                if (!cJSON_IsArray(t) || cJSON_GetArraySize(t) != 2 || !cJSON_IsNumber(x) || !cJSON_IsNumber(z) ||
+                    x->valuedouble != floor(x->valuedouble) || z->valuedouble != floor(z->valuedouble) ||
+                    x->valuedouble < 0 || z->valuedouble < 0 || x->valuedouble >= 32 || z->valuedouble >= 32)
+                    return fail(e, "bad_subscription", NULL, "\"tiles\" must be \"all\" or [[tx,tz],...] with 0 <= t < 32");
+                tmp.tiles[k][0] = (uint16_t)x->valuedouble;
+                tmp.tiles[k][1] = (uint16_t)z->valuedouble;
+                k++;
+            }
+            tmp.all_tiles = false;
+            tmp.ntiles = k;
+        } else {
+            return fail(e, "bad_subscription", NULL, "\"tiles\" must be \"all\" or a non-empty list of [tx,tz]");
+        }
+    }
+    memcpy(out, &tmp, sizeof tmp);
+    return 0;
+}
+
+/* ---- builders ---- */
+
+static cJSON *param_value_json(const struct ocean_params *p, const struct param_def *d)
+{
+    double v = param_get(p, d);
+    switch (d->type) {
+    case PARAM_ENUM: {
+        const char *name = param_enum_name(d, (int)v);
+        return cJSON_CreateString(name ? name : "");
+    }
+    case PARAM_BOOL:
+        return cJSON_CreateBool(v != 0);
+    default:
+        return cJSON_CreateNumber(v);
+    }
+}
+
+cJSON *control_params_object(const struct ocean_params *p)
+{
+    cJSON *o = cJSON_CreateObject();
+    for (size_t i = 0; i < param_count; i++)
+        cJSON_AddItemToObject(o, param_table[i].name, param_value_json(p, &param_table[i]));
+    return o;
+}
+
+static const char *type_name(enum param_type t)
+{
+    return t == PARAM_INT ? "int" : t == PARAM_FLOAT ? "float" : t == PARAM_ENUM ? "enum" : "bool";
+}
+
+cJSON *control_schema(void)
+{
+    struct ocean_params defs;
+    params_defaults(&defs);
+    cJSON *a = cJSON_CreateArray();
+    for (size_t i = 0; i < param_count; i++) {
+        const struct param_def *d = &param_table[i];
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "name", d->name);
+        cJSON_AddStringToObject(o, "type", type_name(d->type));
+        cJSON_AddStringToObject(o, "unit", d->unit ? d->unit : "");
+        if (d->type == PARAM_INT || d->type == PARAM_FLOAT) {
+            cJSON_AddNumberToObject(o, "min", d->min);
+            cJSON_AddNumberToObject(o, "max", d->max);
+        }
+        if (d->type == PARAM_ENUM) {
+            cJSON *c = cJSON_AddArrayToObject(o, "choices");
+            for (int k = 0; d->choices && d->choices[k]; k++)
+                cJSON_AddItemToArray(c, cJSON_CreateString(d->choices[k]));
+        }
+        cJSON_AddItemToObject(o, "default", param_value_json(&defs, d));
+        if (d->flags & PARAM_POW2)
+            cJSON_AddTrueToObject(o, "pow2");
+        if (d->flags & PARAM_REPLAN)
+            cJSON_AddTrueToObject(o, "replan");
+        if (d->flags & PARAM_PLAYBACK)
+            cJSON_AddTrueToObject(o, "playback");
+        cJSON_AddStringToObject(o, "description", d->description ? d->description : "");
+        cJSON_AddItemToArray(a, o);
+    }
+    return a;
+}
+
+cJSON *control_subscription_object(const struct subscription *s)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON *f = cJSON_AddArrayToObject(o, "fields");
+    for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
+        if (s->fields & OCEAN_FIELD_BIT(i))
+            cJSON_AddItemToArray(f, cJSON_CreateString(ocean_field_name((enum ocean_field)i)));
+    cJSON_AddNumberToObject(o, "lod", s->lod);
+    if (s->all_tiles) {
+        cJSON_AddStringToObject(o, "tiles", "all");
+    } else {
+        cJSON *t = cJSON_AddArrayToObject(o, "tiles");
+        for (int i = 0; i < s->ntiles; i++) {
+            int xz[2] = { s->tiles[i][0], s->tiles[i][1] };
+            cJSON_AddItemToArray(t, cJSON_CreateIntArray(xz, 2));
+        }
+    }
+    /* Print the bound as the client wrote it (0.01, not 0.00999999977). */
+    static const double bound_text[CTL_BOUND_COUNT] = { 0, 0.001, 0.005, 0.01, 0.05 };
+    cJSON_AddNumberToObject(o, "bound", bound_text[s->bound_index]);
+    cJSON_AddNumberToObject(o, "max_rate", s->max_rate);
+    return o;
+}
+
+static void add_id(cJSON *o, const cJSON *id)
+{
+    if (id)
+        cJSON_AddItemToObject(o, "id", cJSON_Duplicate(id, 1));
+}
+
+cJSON *control_error_msg(const struct ctl_error *e, const cJSON *id)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "type", "error");
+    cJSON_AddStringToObject(o, "code", e->code ? e->code : "internal");
+    cJSON_AddStringToObject(o, "message", e->message);
+    add_id(o, id);
+    if (e->param[0])
+        cJSON_AddStringToObject(o, "param", e->param);
+    return o;
+}
+
+cJSON *control_params_msg(const struct ocean_params *p, uint32_t version, uint64_t changed,
+                          const char *by, const cJSON *id)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "type", "params");
+    cJSON_AddItemToObject(o, "params", control_params_object(p));
+    cJSON_AddNumberToObject(o, "params_version", version);
+    cJSON *c = cJSON_AddArrayToObject(o, "changed");
+    for (size_t i = 0; i < param_count && i < 64; i++)
+        if (changed & (1ull << i))
+            cJSON_AddItemToArray(c, cJSON_CreateString(param_table[i].name));
+    if (by)
+        cJSON_AddStringToObject(o, "by", by);
+    add_id(o, id);
+    return o;
+}
+
+cJSON *control_subscribed_msg(const struct subscription *s, const cJSON *id)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "type", "subscribed");
+    add_id(o, id);
+    cJSON_AddItemToObject(o, "subscription", control_subscription_object(s));
+    return o;
+}
+
+cJSON *control_pong_msg(const cJSON *id, bool has_t, double t, uint64_t server_time_us)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "type", "pong");
+    add_id(o, id);
+    if (has_t)
+        cJSON_AddNumberToObject(o, "t", t);
+    cJSON_AddNumberToObject(o, "server_time_us", (double)server_time_us);
+    return o;
+}
+
+cJSON *control_hello_msg(const struct hello_info *h)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "type", "hello");
+    cJSON_AddNumberToObject(o, "protocol", 1);
+    cJSON_AddStringToObject(o, "server", "oceand/0.1");
+    cJSON_AddStringToObject(o, "client_id", h->client_id);
+    cJSON_AddStringToObject(o, "role", h->controller ? "controller" : "viewer");
+    cJSON_AddItemToObject(o, "params", control_params_object(h->params));
+    cJSON_AddNumberToObject(o, "params_version", h->params_version);
+    cJSON_AddItemToObject(o, "schema", control_schema());
+    cJSON *f = cJSON_AddArrayToObject(o, "fields");
+    for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
+        cJSON_AddItemToArray(f, cJSON_CreateString(ocean_field_name((enum ocean_field)i)));
+    int lods[CTL_MAX_LOD + 1];
+    for (int i = 0; i <= CTL_MAX_LOD; i++)
+        lods[i] = i;
+    cJSON_AddItemToObject(o, "lods", cJSON_CreateIntArray(lods, CTL_MAX_LOD + 1));
+    static const double bounds[CTL_BOUND_COUNT] = { 0, 0.001, 0.005, 0.01, 0.05 };
+    cJSON_AddItemToObject(o, "bounds", cJSON_CreateDoubleArray(bounds, CTL_BOUND_COUNT));
+    cJSON_AddNumberToObject(o, "tick_rate", h->tick_rate);
+    cJSON_AddNumberToObject(o, "tile_size", h->tile_size);
+    cJSON_AddItemToObject(o, "subscription", control_subscription_object(h->sub));
+    return o;
+}
+
+char *control_print(cJSON *msg)
+{
+    char *s = msg ? cJSON_PrintUnformatted(msg) : NULL;
+    cJSON_Delete(msg);
+    return s;
+}

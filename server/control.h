@@ -1,0 +1,103 @@
+/* control.h — the JSON control protocol (notes/control-spec.md, proto/PROTOCOL.md).
+ *
+ * Pure: parses and validates client messages against the parameter table
+ * and builds the server's JSON replies. No networking, no threads, no
+ * globals, so it can be unit-tested and fuzzed on its own. */
+#ifndef OCEAND_CONTROL_H
+#define OCEAND_CONTROL_H
+
+#include <cjson/cJSON.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "params.h"
+
+#define CTL_MAX_TILES 1024            /* (OC_MAX_N / 64)^2 */
+#define CTL_BOUND_COUNT 5
+extern const float ctl_bounds[CTL_BOUND_COUNT]; /* 0 = lossless, then lossy bounds (m) */
+#define CTL_MAX_LOD 4
+
+/* One error reply: code from the spec, human message, parameter at fault. */
+struct ctl_error {
+    const char *code;       /* "bad_json", "out_of_range", ... (static string) */
+    char message[200];
+    char param[48];         /* "" when no single parameter is at fault */
+};
+
+/* What a client wants to receive. */
+struct subscription {
+    unsigned fields;        /* OCEAN_FIELD_BIT mask, never 0 */
+    int lod;                /* 0..CTL_MAX_LOD */
+    int bound_index;        /* index into ctl_bounds */
+    double max_rate;        /* frames per second, 0 < r <= tick rate */
+    bool all_tiles;
+    int ntiles;             /* when !all_tiles */
+    uint16_t tiles[CTL_MAX_TILES][2];
+};
+
+/* Limits the validator enforces beyond the parameter table. */
+struct ctl_limits {
+    double tick_rate;       /* max_rate ceiling and default */
+    int max_memory_mb;      /* simulation memory cap, decides the largest N */
+};
+
+enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING };
+
+struct ctl_msg {
+    enum ctl_type type;
+    cJSON *root;            /* owned: the parsed message */
+    const cJSON *id;        /* inside root, or NULL */
+    const cJSON *params;    /* CTL_SET: the "params" object */
+    const char *token;      /* CTL_SET: optional "token", or NULL */
+    double t;               /* CTL_PING: echoed "t" */
+    bool has_t;
+};
+
+void subscription_default(struct subscription *s, double tick_rate);
+
+/* Parse one text message. On success returns 0 and fills m (free with
+ * ctl_msg_free). On failure returns -1, fills e, and *id_out (if not NULL)
+ * receives a detached copy of the message's "id" for the error reply
+ * (caller frees with cJSON_Delete). */
+int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_out, struct ctl_error *e);
+void ctl_msg_free(struct ctl_msg *m);
+
+/* Apply a JSON object of parameters onto *cur, all or nothing: every member
+ * is checked (name, JSON type, range, power of two), then the whole set
+ * (params_validate, memory cap). On success *out = new params and
+ * *changed = bit i set for param_table[i] whose value differs. */
+int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const struct ctl_limits *lim,
+                         struct ocean_params *out, uint64_t *changed, struct ctl_error *e);
+
+/* Merge the members of a "subscribe" message onto *cur into *out. */
+int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, const struct ctl_limits *lim,
+                            struct subscription *out, struct ctl_error *e);
+
+/* Bytes the simulation needs at resolution n (the memory-cap estimate). */
+double control_sim_bytes(int n);
+
+/* JSON builders; all return a cJSON tree the caller prints and deletes. */
+cJSON *control_params_object(const struct ocean_params *p);
+cJSON *control_schema(void);
+cJSON *control_subscription_object(const struct subscription *s);
+cJSON *control_error_msg(const struct ctl_error *e, const cJSON *id);
+cJSON *control_params_msg(const struct ocean_params *p, uint32_t version, uint64_t changed,
+                          const char *by, const cJSON *id);
+cJSON *control_subscribed_msg(const struct subscription *s, const cJSON *id);
+cJSON *control_pong_msg(const cJSON *id, bool has_t, double t, uint64_t server_time_us);
+struct hello_info {
+    const char *client_id;
+    bool controller;
+    const struct ocean_params *params;
+    uint32_t params_version;
+    double tick_rate;
+    int tile_size;
+    const struct subscription *sub;
+};
+cJSON *control_hello_msg(const struct hello_info *h);
+
+/* Print and delete: returns malloc'd text (free()), NULL on no memory. */
+char *control_print(cJSON *msg);
+
+#endif

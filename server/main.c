@@ -1,0 +1,97 @@
+/* main.c — oceand: read the configuration, start the simulation thread,
+ * serve HTTP + WebSocket on this thread until SIGINT/SIGTERM. */
+#include <fftw3.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "config.h"
+#include "log.h"
+#include "net.h"
+#include "sim_thread.h"
+
+/* Only a flag: the sim thread wakes the service loop every tick anyway
+ * (lws_cancel_service), so we see it within one period without calling
+ * into lws from a signal handler. */
+static volatile sig_atomic_t interrupted;
+
+static void on_signal(int sig)
+{
+    (void)sig;
+    interrupted = 1;
+    /* Safety net: if shutdown ever hangs (say, inside lws), SIGALRM's default
+     * action ends the process after 3 s instead of leaving it running. */
+    alarm(3);
+}
+
+int main(int argc, char **argv)
+{
+    struct daemon_config dc;
+    struct ocean_params params;
+    struct config_result res;
+    char err[512];
+    if (config_load(argc, argv, &dc, &params, &res, err, sizeof err) != 0) {
+        fprintf(stderr, "oceand: %s\n", err);
+        return 2;
+    }
+    if (res.help) {
+        config_usage(stdout, argv[0]);
+        return 0;
+    }
+    log_set_level((enum log_level)dc.log_level);
+    log_route_lws();
+    if (res.state_loaded)
+        LOGI("restored parameters from %s (version %u, t=%.2f s)", dc.state_file, res.params_version, res.sim_time);
+
+    /* The planner thread creates FFTW plans while the tick thread executes
+     * and may free others: make the FFTW planner thread-safe. */
+    fftwf_make_planner_thread_safe();
+
+    struct net *net = net_create(&dc, &params, res.params_version, err, sizeof err);
+    if (!net) {
+        LOGE("%s", err);
+        return 1;
+    }
+    struct sim_config sc = {
+        .tick_rate = dc.tick_rate,
+        .tile_size = dc.tile_size,
+        .opts = { .threads = dc.fft_threads, .wisdom_path = dc.wisdom_file[0] ? dc.wisdom_file : NULL,
+                  .plan_rigor = dc.plan_rigor },
+        .start_time = res.sim_time,
+        .nice = dc.sim_nice,
+        .start_version = res.params_version,
+        .wake = net_wake,
+        .wake_user = net,
+    };
+    struct sim *sim = sim_start(&params, &sc, err, sizeof err);
+    if (!sim) {
+        LOGE("simulation: %s", err);
+        net_destroy(net);
+        return 1;
+    }
+    net_attach_sim(net, sim);
+
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN);
+
+    LOGI("oceand listening on http://%s:%d/ (N=%d, %g Hz, web root %s)", dc.bind, net_port(net),
+         params.resolution, dc.tick_rate, dc.web_root);
+    while (!interrupted)
+        if (net_service(net) < 0)
+            break;
+
+    LOGI("stopping");
+    net_save_state(net);
+    sim_stop(sim);
+    net_attach_sim(net, NULL);
+    net_destroy(net);
+    LOGI("bye");
+    return 0;
+}

@@ -1,0 +1,96 @@
+/* metrics.c — Prometheus text exposition of g_metrics. */
+#include "metrics.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+
+struct metrics g_metrics;
+const double metrics_hist_le[METRICS_HIST_BUCKETS] = {
+    0.001, 0.002, 0.005, 0.01, 0.02, 0.033, 0.05, 0.1, 0.25, 1.0
+};
+
+void histogram_observe(struct histogram *h, double seconds)
+{
+    int i = 0;
+    while (i < METRICS_HIST_BUCKETS && seconds > metrics_hist_le[i])
+        i++;
+    atomic_fetch_add(&h->bucket[i], 1);
+    atomic_fetch_add(&h->sum_us, (uint64_t)(seconds * 1e6));
+    atomic_fetch_add(&h->count, 1);
+}
+
+struct out { char *buf; size_t cap, len; };
+
+static void put(struct out *o, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void put(struct out *o, const char *fmt, ...)
+{
+    if (o->len >= o->cap)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(o->buf + o->len, o->cap - o->len, fmt, ap);
+    va_end(ap);
+    if (n > 0)
+        o->len = o->len + (size_t)n < o->cap ? o->len + (size_t)n : o->cap - 1;
+}
+
+static void counter(struct out *o, const char *name, const char *help, uint64_t v)
+{
+    put(o, "# HELP %s %s\n# TYPE %s counter\n%s %llu\n", name, help, name, name, (unsigned long long)v);
+}
+
+static void gauge(struct out *o, const char *name, const char *help, double v)
+{
+    put(o, "# HELP %s %s\n# TYPE %s gauge\n%s %.17g\n", name, help, name, name, v);
+}
+
+static void hist(struct out *o, const char *name, const char *help, struct histogram *h)
+{
+    put(o, "# HELP %s %s\n# TYPE %s histogram\n", name, help, name);
+    uint64_t cum = 0;
+    for (int i = 0; i < METRICS_HIST_BUCKETS; i++) {
+        cum += atomic_load(&h->bucket[i]);
+        put(o, "%s_bucket{le=\"%g\"} %llu\n", name, metrics_hist_le[i], (unsigned long long)cum);
+    }
+    cum += atomic_load(&h->bucket[METRICS_HIST_BUCKETS]);
+    put(o, "%s_bucket{le=\"+Inf\"} %llu\n", name, (unsigned long long)cum);
+    put(o, "%s_sum %.6f\n%s_count %llu\n", name, (double)atomic_load(&h->sum_us) / 1e6, name,
+        (unsigned long long)cum);
+}
+
+size_t metrics_render(char *buf, size_t cap)
+{
+    struct out o = { buf, cap, 0 };
+    struct metrics *m = &g_metrics;
+    buf[0] = 0;
+    hist(&o, "oceand_tick_duration_seconds", "Time to step the simulation and encode one tick.", &m->tick_seconds);
+    hist(&o, "oceand_encode_duration_seconds", "Time to encode the subscribed layers of one tick.", &m->encode_seconds);
+    counter(&o, "oceand_ticks_total", "Simulation ticks run.", atomic_load(&m->ticks));
+    counter(&o, "oceand_tick_overruns_total", "Ticks that started a whole period late (skipped, not queued).",
+            atomic_load(&m->overruns));
+    counter(&o, "oceand_replans_total", "FFT re-plans after a resolution change.", atomic_load(&m->replans));
+    gauge(&o, "oceand_clients", "Connected WebSocket clients.", atomic_load(&m->clients));
+    put(&o, "# HELP oceand_clients_rejected_total WebSocket upgrades refused.\n"
+            "# TYPE oceand_clients_rejected_total counter\n"
+            "oceand_clients_rejected_total{reason=\"max_clients\"} %llu\n"
+            "oceand_clients_rejected_total{reason=\"origin\"} %llu\n",
+        (unsigned long long)atomic_load(&m->rejected_full), (unsigned long long)atomic_load(&m->rejected_origin));
+    counter(&o, "oceand_frames_sent_total", "Binary frames sent to clients.", atomic_load(&m->frames_sent));
+    counter(&o, "oceand_bytes_sent_total", "Bytes of binary frames sent to clients.", atomic_load(&m->bytes_sent));
+    counter(&o, "oceand_text_messages_sent_total", "JSON messages sent to clients.", atomic_load(&m->text_sent));
+    put(&o, "# HELP oceand_frames_dropped_total Frames a client skipped (latest frame wins).\n"
+            "# TYPE oceand_frames_dropped_total counter\n"
+            "oceand_frames_dropped_total{reason=\"slow_client\"} %llu\n"
+            "oceand_frames_dropped_total{reason=\"max_rate\"} %llu\n",
+        (unsigned long long)atomic_load(&m->dropped_slow), (unsigned long long)atomic_load(&m->dropped_rate));
+    counter(&o, "oceand_control_messages_total", "JSON control messages received.", atomic_load(&m->control_messages));
+    counter(&o, "oceand_control_errors_total", "JSON control messages answered with an error.",
+            atomic_load(&m->control_errors));
+    counter(&o, "oceand_param_changes_total", "Parameter sets applied.", atomic_load(&m->param_changes));
+    counter(&o, "oceand_closed_too_large_total", "Clients closed with 1009 (message too large).",
+            atomic_load(&m->closed_too_large));
+    gauge(&o, "oceand_params_version", "Current parameter version.", atomic_load(&m->params_version));
+    gauge(&o, "oceand_resolution", "Current simulation resolution N.", atomic_load(&m->resolution));
+    gauge(&o, "oceand_sim_time_seconds", "Current simulation time.", atomic_load(&m->sim_time));
+    return o.len;
+}

@@ -1,0 +1,35 @@
+/* metrics.h — process-wide counters, rendered as Prometheus text at /metrics.
+ * Counters are C11 atomics: the sim thread and the lws thread both update them. */
+#ifndef OCEAND_METRICS_H
+#define OCEAND_METRICS_H
+
+#include <stdatomic.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#define METRICS_HIST_BUCKETS 10
+struct histogram {
+    atomic_uint_least64_t bucket[METRICS_HIST_BUCKETS + 1]; /* last = +Inf */
+    atomic_uint_least64_t sum_us, count;
+};
+extern const double metrics_hist_le[METRICS_HIST_BUCKETS]; /* upper bounds, seconds */
+
+struct metrics {
+    struct histogram tick_seconds, encode_seconds;
+    atomic_uint_least64_t ticks, overruns, replans;
+    atomic_uint_least64_t frames_sent, bytes_sent, text_sent;
+    atomic_uint_least64_t dropped_slow, dropped_rate;
+    atomic_uint_least64_t control_messages, control_errors, param_changes;
+    atomic_uint_least64_t rejected_full, rejected_origin, closed_too_large;
+    atomic_int clients;
+    atomic_uint_least32_t params_version;
+    atomic_int resolution;
+    _Atomic double sim_time;
+};
+extern struct metrics g_metrics;
+
+void histogram_observe(struct histogram *h, double seconds);
+/* Render into buf; returns the length (truncated to cap-1). */
+size_t metrics_render(char *buf, size_t cap);
+
+#endif

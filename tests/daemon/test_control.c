@@ -1,0 +1,254 @@
+/* test_control — unit tests of server/control.c (pure JSON control logic)
+ * and server/config.c precedence, plus a small fuzz loop: random mutations
+ * of valid messages must never crash and must leave the params unchanged
+ * unless accepted. Prints "N passed, M failed". */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "config.h"
+#include "control.h"
+#include "ocean.h"
+#include "state.h"
+
+static int passed, failed;
+#define CHECK(cond, ...)                                                  \
+    do {                                                                  \
+        if (cond) {                                                       \
+            passed++;                                                     \
+        } else {                                                          \
+            failed++;                                                     \
+            printf("FAIL %s:%d: ", __FILE__, __LINE__);                   \
+            printf(__VA_ARGS__);                                          \
+            printf("\n");                                                 \
+        }                                                                 \
+    } while (0)
+
+static const struct ctl_limits lim = { .tick_rate = 30, .max_memory_mb = 256 };
+
+/* Parse a set and apply it to defaults; returns the error code or "ok". */
+static const char *try_set(const char *text, struct ocean_params *out, uint64_t *changed, struct ctl_error *e)
+{
+    struct ctl_msg m;
+    cJSON *id = NULL;
+    struct ocean_params p;
+    params_defaults(&p);
+    if (control_parse(text, strlen(text), &m, &id, e) != 0) {
+        cJSON_Delete(id);
+        return e->code;
+    }
+    if (m.type != CTL_SET) {
+        ctl_msg_free(&m);
+        return "not_set";
+    }
+    int rc = control_apply_params(m.params, &p, &lim, out, changed, e);
+    ctl_msg_free(&m);
+    return rc ? e->code : "ok";
+}
+
+static void test_sets(void)
+{
+    static const struct { const char *text, *code, *param; } cases[] = {
+        { "{\"type\":\"set\",\"params\":{\"wind_speed\":20}}", "ok", "" },
+        { "{\"type\":\"set\",\"params\":{\"wind_speed\":\"x\"}}", "bad_type", "wind_speed" },
+        { "{\"type\":\"set\",\"params\":{\"wind_speed\":1e999}}", "bad_type", "wind_speed" },
+        { "{\"type\":\"set\",\"params\":{\"wind_speed\":-1}}", "out_of_range", "wind_speed" },
+        { "{\"type\":\"set\",\"params\":{\"resolution\":3000}}", "out_of_range", "resolution" },
+        { "{\"type\":\"set\",\"params\":{\"resolution\":96}}", "out_of_range", "resolution" },
+        { "{\"type\":\"set\",\"params\":{\"resolution\":2048}}", "invalid", "resolution" },
+        { "{\"type\":\"set\",\"params\":{\"resolution\":64.5}}", "bad_type", "resolution" },
+        { "{\"type\":\"set\",\"params\":{\"spectrum\":\"phillips\",\"paused\":true}}", "ok", "" },
+        { "{\"type\":\"set\",\"params\":{\"spectrum\":3}}", "bad_type", "spectrum" },
+        { "{\"type\":\"set\",\"params\":{\"paused\":0}}", "bad_type", "paused" },
+        { "{\"type\":\"set\",\"params\":{\"nope\":0}}", "unknown_param", "nope" },
+        { "{\"type\":\"set\",\"params\":{\"wind_speed\":NaN}}", "bad_json", "" },
+        { "{\"type\":\"set\"}", "bad_message", "" },
+        { "{\"type\":7}", "bad_message", "" },
+        { "{\"type\":\"set\",\"id\":{\"a\":1},\"params\":{}}", "bad_message", "" },
+        { "\"set\"", "bad_json", "" },
+        { "{\"type\":\"jump\"}", "unknown_type", "" },
+        { "", "bad_json", "" },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        struct ocean_params out;
+        uint64_t changed = 0;
+        struct ctl_error e = { 0 };
+        const char *code = try_set(cases[i].text, &out, &changed, &e);
+        CHECK(strcmp(code, cases[i].code) == 0, "%s -> %s (%s), want %s", cases[i].text, code, e.message, cases[i].code);
+        if (strcmp(code, "ok") != 0 && cases[i].param[0])
+            CHECK(strcmp(e.param, cases[i].param) == 0, "%s: param %s", cases[i].text, e.param);
+    }
+    /* All or nothing, and the changed mask. */
+    struct ocean_params p, out;
+    params_defaults(&p);
+    out = p;
+    uint64_t changed = 0;
+    struct ctl_error e;
+    cJSON *obj = cJSON_Parse("{\"wind_speed\":21,\"amplitude\":-5}");
+    CHECK(control_apply_params(obj, &p, &lim, &out, &changed, &e) != 0, "mixed set accepted");
+    CHECK(memcmp(&out, &p, sizeof p) == 0, "rejected set changed the output");
+    cJSON_Delete(obj);
+    obj = cJSON_Parse("{\"wind_speed\":21,\"seed\":1}");
+    CHECK(control_apply_params(obj, &p, &lim, &out, &changed, &e) == 0, "valid set rejected: %s", e.message);
+    const struct param_def *ws = param_find("wind_speed");
+    CHECK(out.wind_speed == 21 && changed == (1ull << (ws - param_table)), "changed mask %llx", (unsigned long long)changed);
+    cJSON_Delete(obj);
+}
+
+static void test_subscribe(void)
+{
+    struct subscription cur, out;
+    subscription_default(&cur, 30);
+    struct ctl_error e;
+    cJSON *m = cJSON_Parse("{\"type\":\"subscribe\",\"fields\":[\"jacobian\",\"height\"],\"lod\":1,"
+                           "\"tiles\":[[0,1],[3,2]],\"bound\":0.001,\"max_rate\":100}");
+    CHECK(control_apply_subscribe(m, &cur, &lim, &out, &e) == 0, "subscribe rejected: %s", e.message);
+    CHECK(out.fields == (OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_JACOBIAN)) && out.lod == 1 &&
+              !out.all_tiles && out.ntiles == 2 && out.tiles[1][0] == 3 && out.tiles[1][1] == 2 &&
+              out.bound_index == 1 && out.max_rate == 30,
+          "normalised subscription");
+    char *s = control_print(control_subscribed_msg(&out, NULL));
+    CHECK(strstr(s, "\"fields\":[\"height\",\"jacobian\"]") && strstr(s, "\"bound\":0.001") && strstr(s, "\"max_rate\":30"),
+          "subscribed text %s", s);
+    free(s);
+    cJSON_Delete(m);
+    const char *bad[] = { "{\"fields\":[]}", "{\"fields\":[\"foam\"]}", "{\"lod\":5}", "{\"lod\":1.5}",
+                          "{\"bound\":0.002}", "{\"max_rate\":0}", "{\"tiles\":\"some\"}", "{\"tiles\":[[0,40]]}",
+                          "{\"tiles\":[[0]]}" };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        m = cJSON_Parse(bad[i]);
+        out = cur;
+        CHECK(control_apply_subscribe(m, &cur, &lim, &out, &e) != 0 && strcmp(e.code, "bad_subscription") == 0,
+              "%s accepted", bad[i]);
+        cJSON_Delete(m);
+    }
+}
+
+static void test_builders(void)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    struct subscription sub;
+    subscription_default(&sub, 30);
+    struct hello_info h = { "c1", true, &p, 3, 30, 64, &sub };
+    char *s = control_print(control_hello_msg(&h));
+    cJSON *j = cJSON_Parse(s);
+    CHECK(j && cJSON_GetArraySize(cJSON_GetObjectItem(j, "schema")) == (int)param_count, "hello schema");
+    CHECK(strcmp(cJSON_GetStringValue(cJSON_GetObjectItem(cJSON_GetObjectItem(j, "params"), "spectrum")),
+                 param_enum_name(param_find("spectrum"), p.spectrum)) == 0, "enum as string");
+    CHECK(cJSON_IsBool(cJSON_GetObjectItem(cJSON_GetObjectItem(j, "params"), "paused")), "bool as bool");
+    /* The params object round-trips through control_apply_params unchanged. */
+    struct ocean_params back;
+    uint64_t changed = 1;
+    struct ctl_error e;
+    CHECK(control_apply_params(cJSON_GetObjectItem(j, "params"), &p, &lim, &back, &changed, &e) == 0 && changed == 0,
+          "params round trip");
+    cJSON_Delete(j);
+    free(s);
+    cJSON *id = cJSON_CreateNumber(5);
+    s = control_print(control_params_msg(&p, 4, 1ull << 2, "c2", id));
+    CHECK(strstr(s, "\"changed\":[\"") && strstr(s, "\"by\":\"c2\"") && strstr(s, "\"id\":5"), "params msg %s", s);
+    free(s);
+    cJSON_Delete(id);
+}
+
+static void test_state_and_config(void)
+{
+    char dir[] = "/tmp/oceand-ctl-XXXXXX";
+    if (!mkdtemp(dir)) {
+        CHECK(0, "mkdtemp");
+        return;
+    }
+    char state[128], cfg[128], err[256];
+    snprintf(state, sizeof state, "%s/state.json", dir);
+    snprintf(cfg, sizeof cfg, "%s/c.json", dir);
+    struct ocean_params p;
+    params_defaults(&p);
+    p.wind_speed = 7;
+    p.seed = 42;
+    CHECK(state_save(state, &p, 9, 12.5, err, sizeof err) == 0, "state_save: %s", err);
+    FILE *f = fopen(cfg, "w");
+    fputs("{\"wind_speed\": 8, \"port\": 9999}", f);
+    fclose(f);
+    char *argv[] = { "oceand", "--state-file", state, "--config", cfg, "--tick-rate=15", "--choppiness", "2", NULL };
+    struct daemon_config dc;
+    struct config_result res;
+    struct ocean_params q;
+    CHECK(config_load(8, argv, &dc, &q, &res, err, sizeof err) == 0, "config_load: %s", err);
+    CHECK(q.seed == 42 && q.wind_speed == 8 && q.choppiness == 2 && dc.port == 9999 && dc.tick_rate == 15 &&
+              res.params_version == 9 && res.sim_time == 12.5,
+          "precedence: seed %d wind %g chop %g port %d", q.seed, q.wind_speed, q.choppiness, dc.port);
+    char *bad[] = { "oceand", "--state-file", "none", "--port", "70000", NULL };
+    CHECK(config_load(5, bad, &dc, &q, &res, err, sizeof err) != 0, "port 70000 accepted");
+    unlink(state);
+    unlink(cfg);
+    rmdir(dir);
+}
+
+/* Random mutations of valid messages: no crash, and a rejected set leaves
+ * the output untouched (run under ASan by test-daemon-asan). */
+static void fuzz(void)
+{
+    static const char *seeds[] = {
+        "{\"type\":\"set\",\"id\":1,\"params\":{\"wind_speed\":20,\"spectrum\":\"jonswap\",\"resolution\":128}}",
+        "{\"type\":\"subscribe\",\"fields\":[\"height\",\"dx\"],\"lod\":2,\"tiles\":[[0,0],[1,2]],\"bound\":0.01}",
+        "{\"type\":\"ping\",\"id\":\"x\",\"t\":12.5}",
+    };
+    const char alphabet[] = "{}[]\",:0123456789.eE-+truefalsnul \\u";
+    srand(1234);
+    struct ocean_params p;
+    params_defaults(&p);
+    struct subscription sub;
+    subscription_default(&sub, 30);
+    int accepted = 0;
+    for (int it = 0; it < 20000; it++) {
+        char buf[512];
+        snprintf(buf, sizeof buf, "%s", seeds[it % 3]);
+        size_t len = strlen(buf);
+        for (int k = rand() % 4 + 1; k > 0; k--) {
+            size_t pos = (size_t)rand() % len;
+            int op = rand() % 3;
+            if (op == 0)
+                buf[pos] = alphabet[rand() % (sizeof alphabet - 1)];
+            else if (op == 1 && len > 1)
+                memmove(buf + pos, buf + pos + 1, len-- - pos);
+            else if (len + 1 < sizeof buf) {
+                memmove(buf + pos + 1, buf + pos, len++ - pos + 1);
+                buf[pos] = alphabet[rand() % (sizeof alphabet - 1)];
+            }
+        }
+        struct ctl_msg m;
+        struct ctl_error e;
+        cJSON *id = NULL;
+        if (control_parse(buf, len, &m, &id, &e) != 0) {
+            cJSON_Delete(id);
+            continue;
+        }
+        struct ocean_params out = p;
+        struct subscription so = sub;
+        if (m.type == CTL_SET) {
+            if (control_apply_params(m.params, &p, &lim, &out, NULL, &e) == 0)
+                accepted++;
+            else if (memcmp(&out, &p, sizeof p) != 0)
+                CHECK(0, "rejected set modified output: %s", buf);
+        } else if (m.type == CTL_SUBSCRIBE) {
+            control_apply_subscribe(m.root, &sub, &lim, &so, &e);
+        }
+        ctl_msg_free(&m);
+    }
+    CHECK(accepted > 0, "fuzz never produced a valid set");
+    passed++;
+}
+
+int main(void)
+{
+    test_sets();
+    test_subscribe();
+    test_builders();
+    test_state_and_config();
+    fuzz();
+    printf("test_control: %d passed, %d failed\n", passed, failed);
+    return failed != 0;
+}

@@ -1,0 +1,850 @@
+#!/usr/bin/python3
+"""Integration tests for oceand: a real daemon on loopback, real WebSocket clients.
+
+Run with /usr/bin/python3 (python3-websockets 10.4, python3-numpy):
+    /usr/bin/python3 tests/daemon/test_daemon.py --oceand build/oceand --frame-check build/frame_check
+Each test starts its own daemon on a free port with a temporary state file and
+kills it at the end, even on failure. Prints "N passed, M failed" last.
+"""
+import argparse
+import asyncio
+import json
+import os
+import re
+import shutil
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+import traceback
+import urllib.error
+import urllib.request
+
+import websockets
+
+ARGS = None
+BASE_N = 256          # resolution used by the tests (smaller under sanitizers)
+TICK = 30.0
+FRAME_HDR = struct.Struct("<4sHHQdIHHfHHQ")      # 48 bytes, see proto/c/oc_proto.h
+TILE_HDR = struct.Struct("<BBBBHHHHfddII")       # 40 bytes
+
+
+class TestFailure(Exception):
+    pass
+
+
+def check(cond, msg):
+    if not cond:
+        raise TestFailure(msg)
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Daemon:
+    """One oceand process with its own port, state file and log."""
+
+    def __init__(self, *extra, state_file=None, tmpdir=None):
+        self.tmp = tmpdir or tempfile.mkdtemp(prefix="oceand-test-")
+        self.port = free_port()
+        self.state_file = state_file or os.path.join(self.tmp, "state.json")
+        self.log_path = os.path.join(self.tmp, "oceand.log")
+        args = [ARGS.oceand, "--port", str(self.port), "--state-file", self.state_file,
+                "--web-root", os.path.join(self.tmp, "web"), "--resolution", str(BASE_N),
+                "--tick-rate", str(int(TICK))] + list(extra)
+        self.log = open(self.log_path, "ab")
+        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log)
+        self.url = "ws://127.0.0.1:%d/" % self.port
+        self.http = "http://127.0.0.1:%d" % self.port
+        deadline = time.time() + 20
+        while True:
+            if self.proc.poll() is not None:
+                raise TestFailure("oceand exited at start with %s; log:\n%s" % (self.proc.returncode, self.read_log()))
+            try:
+                urllib.request.urlopen(self.http + "/healthz", timeout=1).read()
+                break
+            except (urllib.error.URLError, ConnectionError, OSError):
+                if time.time() > deadline:
+                    raise TestFailure("oceand did not answer /healthz")
+                time.sleep(0.05)
+
+    def read_log(self):
+        with open(self.log_path, "rb") as f:
+            return f.read().decode(errors="replace")[-4000:]
+
+    def rss_kb(self):
+        with open("/proc/%d/status" % self.proc.pid) as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1])
+        return 0
+
+    def get(self, path):
+        with urllib.request.urlopen(self.http + path, timeout=5) as r:
+            return r.status, r.headers.get("Content-Type", ""), r.read().decode()
+
+    def metric(self, name):
+        _, _, text = self.get("/metrics")
+        m = re.search(r"^%s (\S+)$" % re.escape(name), text, re.M)
+        check(m, "metric %s missing" % name)
+        return float(m.group(1))
+
+    def stop(self, sig=signal.SIGTERM, timeout=10):
+        """Signal and wait; returns (exit code, seconds)."""
+        if self.proc.poll() is not None:
+            return self.proc.returncode, 0.0
+        t0 = time.time()
+        self.proc.send_signal(sig)
+        try:
+            rc = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            if os.environ.get("OCEAND_TEST_GDB"):
+                subprocess.run(["gdb", "-p", str(self.proc.pid), "-batch", "-ex", "thread apply all bt"])
+            self.proc.kill()
+            self.proc.wait()
+            rc = None
+        return rc, time.time() - t0
+
+    def kill(self):
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.log.close()
+
+
+async def connect(d, **kw):
+    kw.setdefault("subprotocols", ["oceand.v1"])
+    kw.setdefault("max_size", None)
+    kw.setdefault("max_queue", None)   # read everything: a full client queue would stall the close handshake
+    kw.setdefault("close_timeout", 3)
+    ws = await websockets.connect(d.url, **kw)
+    hello = json.loads(await asyncio.wait_for(ws.recv(), 5))
+    check(hello.get("type") == "hello", "first message is not hello: %r" % hello)
+    return ws, hello
+
+
+async def recv_json(ws, pred=lambda m: True, timeout=5.0):
+    """Next JSON message satisfying pred (frames in between are skipped)."""
+    deadline = time.time() + timeout
+    while True:
+        left = deadline - time.time()
+        if left <= 0:
+            raise TestFailure("timed out waiting for a JSON message")
+        m = await asyncio.wait_for(ws.recv(), left)
+        if isinstance(m, str):
+            j = json.loads(m)
+            if pred(j):
+                return j
+
+
+async def recv_frame(ws, pred=lambda h, b: True, timeout=5.0):
+    """Next binary frame satisfying pred; returns (header dict, bytes)."""
+    deadline = time.time() + timeout
+    while True:
+        left = deadline - time.time()
+        if left <= 0:
+            raise TestFailure("timed out waiting for a frame")
+        m = await asyncio.wait_for(ws.recv(), left)
+        if isinstance(m, bytes):
+            h = parse_header(m)
+            if pred(h, m):
+                return h, m
+
+
+def parse_header(b):
+    check(len(b) >= 48, "frame shorter than its header")
+    (magic, ver, hsize, seq, sim_time, pv, n, ts, L, count, flags, us) = FRAME_HDR.unpack_from(b)
+    check(magic == b"OCNF" and ver == 1 and hsize == 48, "bad frame header %r" % (magic,))
+    return dict(seq=seq, sim_time=sim_time, params_version=pv, n=n, tile_size=ts, patch_size=L,
+                tile_count=count, server_time_us=us)
+
+
+def tiles(b):
+    h = parse_header(b)
+    off, out = 48, []
+    for _ in range(h["tile_count"]):
+        f, lod, codec, fl, tx, tz, w, hh, bound, o, s, plen, _r = TILE_HDR.unpack_from(b, off)
+        out.append(dict(field=f, lod=lod, codec=codec, tx=tx, tz=tz, w=w, h=hh, bound=bound))
+        off += 40 + plen
+    check(off == len(b), "tile lengths do not add up to the frame length")
+    return out
+
+
+def frame_check(d, params, frames):
+    """Run build/frame_check: decode + compare with the library. Returns its JSON lines."""
+    pfile = os.path.join(d.tmp, "params-%d.json" % time.monotonic_ns())
+    with open(pfile, "w") as f:
+        json.dump({"params": params}, f)
+    files = []
+    for i, b in enumerate(frames):
+        p = os.path.join(d.tmp, "frame-%d-%d.bin" % (time.monotonic_ns(), i))
+        with open(p, "wb") as f:
+            f.write(b)
+        files.append(p)
+    r = subprocess.run([ARGS.frame_check, pfile] + files, capture_output=True, text=True, timeout=120)
+    check(r.returncode == 0, "frame_check failed:\n%s%s" % (r.stdout, r.stderr))
+    return [json.loads(l) for l in r.stdout.splitlines()]
+
+
+def raw_ws_socket(port, rcvbuf=None):
+    """A WebSocket handshake done by hand, so the test controls every read."""
+    s = socket.socket()
+    if rcvbuf:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+    s.connect(("127.0.0.1", port))
+    s.sendall(("GET / HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+               "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+               "Sec-WebSocket-Protocol: oceand.v1\r\n\r\n" % port).encode())
+    resp = b""
+    while b"\r\n\r\n" not in resp:
+        c = s.recv(1)
+        check(c, "connection closed during handshake")
+        resp += c
+    check(b" 101 " in resp.split(b"\r\n")[0], "handshake refused: %r" % resp[:80])
+    return s
+
+
+# ---------------------------------------------------------------- tests
+
+TESTS = []
+
+
+def test(fn):
+    TESTS.append(fn)
+    return fn
+
+
+@test
+def test_help_and_bad_flag():
+    r = subprocess.run([ARGS.oceand, "--help"], capture_output=True, text=True, timeout=10)
+    check(r.returncode == 0, "--help exit %d" % r.returncode)
+    for flag in ("--port", "--bind", "--web-root", "--config", "--tick-rate", "--log-level", "--wind-speed",
+                 "--max-clients", "--max-message"):
+        check(flag in r.stdout, "--help does not mention %s" % flag)
+    r = subprocess.run([ARGS.oceand, "--no-such-flag", "1"], capture_output=True, text=True, timeout=10)
+    check(r.returncode != 0 and "no-such-flag" in r.stderr, "unknown flag accepted")
+    r = subprocess.run([ARGS.oceand, "--wind-speed", "1e9", "--state-file", "none"], capture_output=True, text=True, timeout=10)
+    check(r.returncode != 0, "out-of-range flag accepted")
+
+
+@test
+def test_hello_two_clients_and_frames(d):
+    async def run():
+        a, ha = await connect(d)
+        b, hb = await connect(d)
+        check(ha["client_id"] != hb["client_id"], "client ids not distinct")
+        check(ha["protocol"] == 1 and ha["role"] == "controller", "hello fields")
+        names = {s["name"] for s in ha["schema"]}
+        for p in ("resolution", "wind_speed", "spectrum", "time_scale", "paused"):
+            check(p in names and p in ha["params"], "param %s missing from hello" % p)
+        check(ha["params"]["resolution"] == BASE_N, "resolution in hello")
+        check(ha["subscription"]["fields"] == ["height", "dx", "dz"], "default subscription")
+        check(ha["tick_rate"] == TICK, "tick_rate in hello")
+        check(not a.extensions, "permessage-deflate was negotiated: %r" % a.extensions)
+        # Frames on both clients, ticks spaced by whole periods of sim time.
+        got = {}
+        for name, ws in (("a", a), ("b", b)):
+            frames = []
+            t0 = time.time()
+            while time.time() - t0 < 1.5:
+                h, m = await recv_frame(ws)
+                frames.append((h, m))
+            got[name] = frames
+        for name, frames in got.items():
+            check(len(frames) >= 3, "client %s got only %d frames in 1.5 s" % (name, len(frames)))
+            seqs = [h["seq"] for h, _ in frames]
+            check(seqs == sorted(seqs) and len(set(seqs)) == len(seqs), "seq not increasing")
+            for (h1, _), (h2, _) in zip(frames, frames[1:]):
+                k = (h2["sim_time"] - h1["sim_time"]) * TICK
+                check(k > 0.5 and abs(k - round(k)) < 1e-6, "sim time step %g ticks is not whole" % k)
+            ticks = (frames[-1][0]["sim_time"] - frames[0][0]["sim_time"]) * TICK
+            print("    client %s: %d frames over %.0f ticks, %d bytes each" % (name, len(frames), ticks, len(frames[-1][1])))
+            h, m = frames[-1]
+            check(h["n"] == BASE_N and h["tile_count"] == 3 * (BASE_N // 64) ** 2, "frame shape %r" % h)
+            check({t["field"] for t in tiles(m)} == {0, 1, 2}, "default fields")
+        res = frame_check(d, ha["params"], [m for _, m in got["a"][-3:]])
+        check(all(r["bad"] == 0 and r["max_err"] <= 0.01 for r in res), "frames not within bound: %r" % res)
+        await a.close()
+        await b.close()
+    asyncio.run(run())
+
+
+@test
+def test_set_broadcast(d):
+    async def run():
+        a, ha = await connect(d)
+        b, hb = await connect(d)
+        v0 = ha["params_version"]
+        await a.send(json.dumps({"type": "set", "id": 41, "params": {"wind_speed": 20}}))
+        pa = await recv_json(a, lambda m: m["type"] == "params")
+        pb = await recv_json(b, lambda m: m["type"] == "params")
+        for p in (pa, pb):
+            check(p["params_version"] == v0 + 1, "version %r, want %d" % (p["params_version"], v0 + 1))
+            check(p["changed"] == ["wind_speed"], "changed %r" % p["changed"])
+            check(p["by"] == ha["client_id"], "by %r" % p.get("by"))
+            check(p["params"]["wind_speed"] == 20, "new value")
+        check(pa.get("id") == 41, "originator's copy lacks its id")
+        check("id" not in pb, "other client's copy has an id")
+        for ws in (a, b):
+            h, _ = await recv_frame(ws, lambda h, m: h["params_version"] >= v0 + 1)
+            check(h["params_version"] == v0 + 1, "frame version")
+        # A set that changes nothing: answered to the sender only, version unchanged.
+        await a.send(json.dumps({"type": "set", "id": 42, "params": {"wind_speed": 20}}))
+        p = await recv_json(a, lambda m: m["type"] in ("params", "error"))
+        check(p["type"] == "params" and p["changed"] == [] and p["params_version"] == v0 + 1 and p["id"] == 42,
+              "no-op set reply %r" % p)
+        await a.close()
+        await b.close()
+    asyncio.run(run())
+
+
+BAD_SETS = [
+    ('{"type":"set","id":1,"params":{"wind_speed":"fast"}}', "bad_type", "wind_speed"),
+    ('{"type":"set","id":2,"params":{"wind_speed":1000}}', "out_of_range", "wind_speed"),
+    ('{"type":"set","id":3,"params":{"resolution":3000}}', "out_of_range", "resolution"),
+    ('{"type":"set","id":4,"params":{"resolution":1000}}', "out_of_range", "resolution"),
+    ('{"type":"set","id":5,"params":{"resolution":256.5}}', "bad_type", "resolution"),
+    ('{"type":"set","id":6,"params":{"wind_speed":NaN}}', "bad_json", None),
+    ('{"type":"set","id":7,"params":{"wind_speed":1e999}}', "bad_type", "wind_speed"),
+    ('{"type":"set","id":8,"params":{"no_such_param":1}}', "unknown_param", "no_such_param"),
+    ('{"type":"set","id":9,"params":{"spectrum":"nonsense"}}', "out_of_range", "spectrum"),
+    ('{"type":"set","id":10,"params":{"paused":1}}', "bad_type", "paused"),
+    ('{"type":"set","id":11,"params":{"wind_speed":5,"amplitude":-1}}', "out_of_range", "amplitude"),
+    ('{"type":"set","id":12,"params":{"transform":"dft","resolution":512}}', "invalid", None),
+    ('{"type":"set","id":13,"params":{"resolution":2048}}', "invalid", "resolution"),
+    ('{"type":"set","id":14,"params":[1,2]}', "bad_message", None),
+    ('{"type":"set","id":15}', "bad_message", None),
+    ('{"type":"set", "id":16, "params":', "bad_json", None),
+    ('[1,2,3]', "bad_json", None),
+    ('{"id":18}', "bad_message", None),
+    ('{"type":"fly","id":19}', "unknown_type", None),
+    ('{"type":"subscribe","id":20,"lod":9}', "bad_subscription", None),
+    ('{"type":"subscribe","id":21,"bound":0.02}', "bad_subscription", None),
+    ('{"type":"subscribe","id":22,"fields":["height","foam"]}', "bad_subscription", None),
+]
+
+
+@test
+def test_bad_sets_change_nothing(d):
+    async def run():
+        a, ha = await connect(d)
+        b, hb = await connect(d)
+        for text, code, param in BAD_SETS:
+            await a.send(text)
+            e = await recv_json(a, lambda m: m["type"] in ("error", "params"))
+            check(e["type"] == "error", "%s: accepted (%r)" % (text, e))
+            check(e["code"] == code, "%s: code %s, want %s (%s)" % (text, e["code"], code, e.get("message")))
+            if param:
+                check(e.get("param") == param, "%s: param %r" % (text, e.get("param")))
+            want_id = json.loads(text).get("id") if code != "bad_json" else None
+            if isinstance(want_id, int):
+                check(e.get("id") == want_id, "%s: id %r not echoed" % (text, e.get("id")))
+        await a.send(b"\x00\x01binary")
+        e = await recv_json(a, lambda m: m["type"] == "error")
+        check(e["code"] == "bad_message", "binary from client: %r" % e)
+        # Streaming goes on for both, and nothing changed.
+        for ws in (a, b):
+            await recv_frame(ws)
+        c, hc = await connect(d)
+        check(hc["params"] == ha["params"], "parameters changed after rejected sets")
+        check(hc["params_version"] == ha["params_version"], "version changed after rejected sets")
+        for ws in (a, b, c):
+            h, _ = await recv_frame(ws)
+            check(h["params_version"] == ha["params_version"], "frame version moved")
+            await ws.close()
+    asyncio.run(run())
+
+
+@test
+def test_too_large_message_closes_1009(d):
+    async def run():
+        a, ha = await connect(d)
+        big, _ = await connect(d)
+        payload = '{"type":"set","params":{"wind_speed":20},"pad":"' + "x" * (1 << 20) + '"}'
+        got_error = None
+        try:
+            await big.send(payload)
+            while True:
+                m = await asyncio.wait_for(big.recv(), 5)
+                if isinstance(m, str) and json.loads(m)["type"] == "error":
+                    got_error = json.loads(m)
+        except websockets.exceptions.ConnectionClosed:
+            pass
+        await asyncio.wait_for(big.wait_closed(), 5)
+        check(big.close_code == 1009, "close code %r, want 1009" % big.close_code)
+        if got_error:
+            check(got_error["code"] == "too_large", "error before close: %r" % got_error)
+        print("    closed with 1009; too_large error %s" % ("received" if got_error else "not received"))
+        # The other client streams on, nothing changed.
+        h, _ = await recv_frame(a)
+        check(h["params_version"] == ha["params_version"], "params changed by a too-large message")
+        check(d.metric("oceand_closed_too_large_total") == 1, "metric closed_too_large")
+        await a.close()
+    asyncio.run(run())
+
+
+@test
+def test_stalled_client_does_not_slow_others(d):
+    async def run():
+        a, ha = await connect(d)
+        got = []
+
+        async def reader():
+            while True:
+                h, _ = await recv_frame(a, timeout=30)
+                got.append(h)
+        task = asyncio.ensure_future(reader())
+
+        async def share(seconds):
+            """Share of the frames the daemon made that the reader received."""
+            n0 = len(got)
+            await asyncio.sleep(seconds)
+            window = got[n0:]
+            check(len(window) >= 2, "the reader received %d frames in %g s" % (len(window), seconds))
+            return len(window) / (window[-1]["seq"] - window[0]["seq"] + 1)
+
+        base = await share(2)
+        stalled = raw_ws_socket(d.port, rcvbuf=4096)      # handshake done, then never read
+        metric = 'oceand_frames_dropped_total{reason="slow_client"}'
+        deadline = time.time() + 20
+        while d.metric(metric) == 0:                       # until its socket buffers are full
+            check(time.time() < deadline, "the stalled client never started skipping frames")
+            await asyncio.sleep(0.2)
+        rss0, drops0, seq0 = d.rss_kb(), d.metric(metric), got[-1]["seq"]
+        with_stalled = await share(3)
+        rss1, drops1, seq1 = d.rss_kb(), d.metric(metric), got[-1]["seq"]
+        made = seq1 - seq0
+        print("    reader got %.0f%% of frames alone, %.0f%% next to a stalled client; the stalled one skipped "
+              "%d of %d; RSS %d -> %d kB" % (100 * base, 100 * with_stalled, drops1 - drops0, made, rss0, rss1))
+        check(drops1 - drops0 >= made / 2, "the stalled client is not skipping frames")
+        check(with_stalled >= 0.6 * base, "a stalled client slowed the reader down")
+        check(rss1 - rss0 < 16 * 1024, "memory grew by %d kB with a stalled client" % (rss1 - rss0))
+        check(d.metric("oceand_clients") == 2, "clients gauge")
+        task.cancel()
+        stalled.close()
+        await a.close()
+    asyncio.run(run())
+
+
+@test
+def test_client_vanishes_mid_frame(d):
+    async def run():
+        a, _ = await connect(d)
+        for _ in range(5):
+            s = raw_ws_socket(d.port)
+            got = 0
+            while got < 6000:               # hello + part of a frame
+                got += len(s.recv(4096))
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            s.close()                       # RST mid-frame
+        deadline = time.time() + 10
+        while d.metric("oceand_clients") != 1:
+            check(time.time() < deadline, "vanished clients not cleaned up: %g" % d.metric("oceand_clients"))
+            await asyncio.sleep(0.1)
+        await recv_frame(a)
+        await a.close()
+    asyncio.run(run())
+
+
+@test
+def test_change_resolution_mid_stream(d):
+    async def run():
+        a, ha = await connect(d)
+        await recv_frame(a)
+        new_n = BASE_N // 2
+        await a.send(json.dumps({"type": "set", "id": 1, "params": {"resolution": new_n}}))
+        frames, params = [], None
+        deadline = time.time() + 15
+        while time.time() < deadline:
+            m = await asyncio.wait_for(a.recv(), 5)
+            if isinstance(m, str):
+                j = json.loads(m)
+                check(j["type"] == "params", "unexpected %r" % j)
+                params = j
+                continue
+            h = parse_header(m)
+            frames.append((h, m))
+            if h["n"] == new_n and len([f for f in frames if f[0]["n"] == new_n]) >= 3:
+                break
+        check(params and params["changed"] == ["resolution"], "no params message for the change")
+        sizes = [h["n"] for h, _ in frames]
+        first_new = sizes.index(new_n)
+        check(all(s == BASE_N for s in sizes[:first_new]) and all(s == new_n for s in sizes[first_new:]),
+              "sizes not old then new: %r" % sizes)
+        gaps = [(b[0]["sim_time"] - a_[0]["sim_time"]) * TICK for a_, b in zip(frames, frames[1:])]
+        gap = gaps[first_new - 1]
+        others = max([g for i, g in enumerate(gaps) if i != first_new - 1] or [1])
+        print("    switch %d -> %d: gap of %.0f ticks between the last old and the first new frame "
+              "(largest other gap %.0f)" % (BASE_N, new_n, gap, others))
+        # A few ticks, or no worse than this client's normal jitter on a loaded machine.
+        check(gap <= max(5.5, 1.5 * others + 1), "gap of %.1f ticks at the resolution change" % gap)
+        h, m = frames[-1]
+        check(h["params_version"] == params["params_version"], "new frames carry the new version")
+        check(h["tile_count"] == 3 * max(1, new_n // 64) ** 2, "tile count at new N")
+        res = frame_check(d, params["params"], [m])
+        check(res[0]["bad"] == 0, "frame at the new N does not match the library")
+        await a.close()
+    asyncio.run(run())
+
+
+@test
+def test_determinism_end_to_end(d):
+    """Lossless frames equal, bit for bit, what the library computes for the same params and time."""
+    async def run():
+        a, ha = await connect(d)
+        await a.send(json.dumps({"type": "subscribe", "id": 1, "fields": ["height", "dx", "dz", "slope_x", "slope_z",
+                                                                          "jacobian"], "bound": 0}))
+        sub = await recv_json(a, lambda m: m["type"] == "subscribed")
+        check(sub["subscription"]["bound"] == 0 and len(sub["subscription"]["fields"]) == 6, "subscribed %r" % sub)
+        h, m = await recv_frame(a, lambda h, m: h["tile_count"] == 6 * (BASE_N // 64) ** 2)
+        check(all(t["codec"] == 0 for t in tiles(m)), "bound 0 must be raw float32")
+        res = frame_check(d, ha["params"], [m])
+        check(res[0]["bad"] == 0 and res[0]["max_err"] == 0, "lossless frame differs: %r" % res)
+        # After a live change too (the daemon reconfigures; the checker builds afresh).
+        await a.send(json.dumps({"type": "set", "id": 2, "params": {"wind_speed": 15, "spectrum": "phillips",
+                                                                     "choppiness": 1.5}}))
+        p = await recv_json(a, lambda m: m["type"] == "params")
+        h, m = await recv_frame(a, lambda h, m: h["params_version"] == p["params_version"] and h["tile_count"] > 0)
+        res2 = frame_check(d, p["params"], [m])
+        check(res2[0]["bad"] == 0 and res2[0]["max_err"] == 0, "after a set: %r" % res2)
+        print("    bit-exact at t=%.3f and at t=%.3f after a set" % (res[0]["sim_time"], res2[0]["sim_time"]))
+        await a.close()
+    asyncio.run(run())
+
+
+@test
+def test_pause_resume_time_scale(d):
+    async def run():
+        a, _ = await connect(d)
+        await a.send('{"type":"pause","id":1}')
+        p = await recv_json(a, lambda m: m["type"] == "params")
+        check(p["params"]["paused"] is True and p["changed"] == ["paused"], "pause reply %r" % p)
+        h1, _ = await recv_frame(a, lambda h, m: h["params_version"] == p["params_version"])
+        for _ in range(5):
+            h, _ = await recv_frame(a)
+        check(h["sim_time"] == h1["sim_time"] and h["seq"] > h1["seq"], "sim time moved while paused")
+        await a.send('{"type":"set","id":2,"params":{"time_scale":2}}')
+        await recv_json(a, lambda m: m["type"] == "params")
+        await a.send('{"type":"resume","id":3}')
+        p = await recv_json(a, lambda m: m["type"] == "params")
+        check(p["params"]["paused"] is False, "resume")
+        await recv_frame(a, lambda h, m: h["params_version"] == p["params_version"])
+        prev, _ = await recv_frame(a)
+        for _ in range(5):
+            h, _ = await recv_frame(a)
+            k = (h["sim_time"] - prev["sim_time"]) * TICK / 2
+            check(k > 0.5 and abs(k - round(k)) < 1e-6, "time_scale 2: step of %g ticks" % k)
+            prev = h
+        await a.close()
+    asyncio.run(run())
+
+
+@test
+def test_subscribe_fields_lod_tiles(d):
+    async def run():
+        a, _ = await connect(d)
+        await a.send(json.dumps({"type": "subscribe", "id": "s", "fields": ["jacobian", "height"], "lod": 2,
+                                 "tiles": [[0, 0], [1, 1]], "bound": 0.05, "max_rate": 10}))
+        s = await recv_json(a, lambda m: m["type"] == "subscribed")
+        check(s["id"] == "s" and s["subscription"] == {"fields": ["height", "jacobian"], "lod": 2,
+                                                        "tiles": [[0, 0], [1, 1]], "bound": 0.05, "max_rate": 10},
+              "normalised subscription %r" % s)
+        h, m = await recv_frame(a, lambda h, m: h["tile_count"] == 4)
+        ts = tiles(m)
+        check({(t["field"], t["tx"], t["tz"]) for t in ts} == {(0, 0, 0), (0, 1, 1), (5, 0, 0), (5, 1, 1)}, "tiles %r" % ts)
+        check(all(t["lod"] == 2 and t["w"] == 16 and t["h"] == 16 for t in ts), "lod 2 tile shape")
+        # max_rate 10 at a 30 Hz tick: about one frame in three (tick jitter can
+        # shorten one gap, so look at the mean), and the skips are counted.
+        first = h
+        for _ in range(6):
+            h, _ = await recv_frame(a)
+        mean_gap = (h["sim_time"] - first["sim_time"]) * TICK / 6
+        check(mean_gap >= 2.0, "max_rate not honoured: mean gap %.2f ticks" % mean_gap)
+        check(d.metric('oceand_frames_dropped_total{reason="max_rate"}') > 0, "max_rate skips not counted")
+        await a.send('{"type":"subscribe","tiles":"all","max_rate":30,"lod":0}')
+        s = await recv_json(a, lambda m: m["type"] == "subscribed")
+        check(s["subscription"]["tiles"] == "all" and s["subscription"]["fields"] == ["height", "jacobian"],
+              "omitted members keep their value")
+        b, hb = await connect(d)
+        await b.close()
+        res = frame_check(d, hb["params"],
+                          [(await recv_frame(a, lambda h, m: h["tile_count"] == 2 * (BASE_N // 64) ** 2))[1]])
+        check(res[0]["max_err"] <= 0.05, "bound 0.05")
+        await a.close()
+    asyncio.run(run())
+
+
+@test
+def test_ping_and_rate_limit(d):
+    async def run():
+        a, _ = await connect(d)
+        await a.send('{"type":"ping","id":9,"t":1234.5}')
+        p = await recv_json(a, lambda m: m["type"] == "pong")
+        check(p["id"] == 9 and p["t"] == 1234.5 and p["server_time_us"] > 1.6e15, "pong %r" % p)
+        for i in range(100):
+            await a.send('{"type":"ping","id":%d}' % i)
+        pongs = limited = 0
+        while pongs + limited < 100:
+            m = await recv_json(a, lambda m: m["type"] in ("pong", "error"))
+            if m["type"] == "pong":
+                pongs += 1
+            else:
+                check(m["code"] == "rate_limited", "error %r" % m)
+                limited += 1
+        print("    100 pings at once: %d answered, %d rate_limited" % (pongs, limited))
+        check(limited > 0 and pongs >= 30, "rate limit not applied (burst 40)")
+        await a.close()
+    asyncio.run(run())
+
+
+@test
+def test_http_healthz_metrics(d):
+    st, ct, body = d.get("/healthz")
+    check(st == 200 and json.loads(body)["status"] == "ok", "healthz %r" % body)
+    st, ct, body = d.get("/metrics")
+    check(st == 200 and ct.startswith("text/plain"), "metrics content type %r" % ct)
+    for name in ("oceand_tick_duration_seconds_bucket", "oceand_tick_overruns_total", "oceand_clients",
+                 "oceand_frames_sent_total", "oceand_bytes_sent_total", "oceand_frames_dropped_total",
+                 "oceand_param_changes_total", "oceand_encode_duration_seconds_count"):
+        check(name in body, "metric %s missing" % name)
+    st, ct, body = d.get("/")
+    check(st == 200 and "oceand" in body, "placeholder page")
+    try:
+        d.get("/no/such/file")
+        check(False, "404 expected")
+    except urllib.error.HTTPError as e:
+        check(e.code == 404, "status %d" % e.code)
+
+
+def test_static_files():
+    tmp = tempfile.mkdtemp(prefix="oceand-test-")
+    os.makedirs(os.path.join(tmp, "web"))
+    with open(os.path.join(tmp, "web", "index.html"), "w") as f:
+        f.write("<!doctype html><title>ocean web client</title>")
+    d = Daemon(tmpdir=tmp)
+    try:
+        st, ct, body = d.get("/")
+        check(st == 200 and "ocean web client" in body and ct.startswith("text/html"), "index.html not served")
+    finally:
+        d.kill()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+TESTS.append(test_static_files)
+
+
+@test
+def test_refusals(d):
+    async def run():
+        for kw, what in ((dict(subprotocols=None), "no subprotocol"),
+                         (dict(origin="http://evil.example"), "foreign Origin")):
+            try:
+                ws, _ = await connect(d, **kw)
+                await ws.close()
+                check(False, "%s accepted" % what)
+            except (websockets.exceptions.InvalidStatusCode, websockets.exceptions.InvalidHandshake,
+                    ConnectionError):
+                pass
+        ws, _ = await connect(d, origin="http://127.0.0.1:%d" % d.port)   # same origin is fine
+        await ws.close()
+    asyncio.run(run())
+
+
+def test_max_clients():
+    d = Daemon("--max-clients", "2")
+    try:
+        async def run():
+            a, _ = await connect(d)
+            b, _ = await connect(d)
+            try:
+                c, _ = await connect(d)
+                check(False, "third client accepted with --max-clients 2")
+            except (websockets.exceptions.InvalidHandshake, ConnectionError):
+                pass
+            await a.close()
+            await asyncio.sleep(0.3)
+            c, _ = await connect(d)   # room again
+            await c.close()
+            await b.close()
+        asyncio.run(run())
+    finally:
+        d.kill()
+
+
+TESTS.append(test_max_clients)
+
+
+def test_control_token_roles():
+    d = Daemon("--control-token", "s3cret")
+    try:
+        async def run():
+            a, h = await connect(d)
+            check(h["role"] == "viewer", "role %r with a control token set" % h["role"])
+            await a.send('{"type":"set","id":1,"params":{"wind_speed":13}}')
+            e = await recv_json(a, lambda m: m["type"] in ("error", "params"))
+            check(e["type"] == "error" and e["code"] == "forbidden" and e["id"] == 1, "set without token: %r" % e)
+            await a.send('{"type":"pause","id":2}')
+            e = await recv_json(a, lambda m: m["type"] in ("error", "params"))
+            check(e["code"] == "forbidden", "pause without token: %r" % e)
+            await a.send('{"type":"set","id":3,"token":"s3cret","params":{"wind_speed":13}}')
+            p = await recv_json(a, lambda m: m["type"] in ("error", "params"))
+            check(p["type"] == "params" and p["params"]["wind_speed"] == 13, "set with token: %r" % p)
+            await a.close()
+        asyncio.run(run())
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+    finally:
+        d.kill()
+
+
+TESTS.append(test_control_token_roles)
+
+
+def test_idle_client_is_dropped():
+    """A client that never answers pings is hung up after --idle-timeout."""
+    d = Daemon("--ping-interval", "1", "--idle-timeout", "2")
+    try:
+        async def run():
+            a, _ = await connect(d)            # answers pings (websockets does)
+            s = raw_ws_socket(d.port)         # never reads, never pongs
+            check(d.metric("oceand_clients") == 2, "two clients")
+            deadline = time.time() + 15
+            while d.metric("oceand_clients") != 1:
+                check(time.time() < deadline, "the silent client was not dropped")
+                await recv_frame(a)           # keep the good client busy reading
+            await recv_frame(a)               # the responsive client is still served
+            s.close()
+            await a.close()
+        asyncio.run(run())
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+    finally:
+        d.kill()
+
+
+TESTS.append(test_idle_client_is_dropped)
+
+
+def test_sigterm_and_state_restore():
+    tmp = tempfile.mkdtemp(prefix="oceand-test-")
+    state = os.path.join(tmp, "state.json")
+    d = Daemon(state_file=state, tmpdir=tmp)
+    try:
+        async def run():
+            a, h = await connect(d)
+            await a.send('{"type":"set","params":{"wind_speed":17.5,"spectrum":"tma"}}')
+            p = await recv_json(a, lambda m: m["type"] == "params")
+            fh, _ = await recv_frame(a, lambda h, m: h["params_version"] == p["params_version"])
+            await a.close()
+            return p, fh
+        p, fh = asyncio.run(run())
+        rc, secs = d.stop(signal.SIGTERM)
+        print("    SIGTERM: exit %r after %.2f s" % (rc, secs))
+        check(rc == 0, "exit code %r after SIGTERM; log:\n%s" % (rc, d.read_log()))
+        check(secs < 3, "took %.1f s to stop" % secs)
+        saved = json.load(open(state))
+        check(saved["params"]["wind_speed"] == 17.5, "state file %r" % saved)
+        d.kill()
+        d2 = Daemon(state_file=state, tmpdir=tmp)
+        try:
+            async def run2():
+                a, h = await connect(d2)
+                check(h["params"]["wind_speed"] == 17.5 and h["params"]["spectrum"] == "tma", "not restored: %r" % h["params"])
+                check(h["params_version"] == p["params_version"], "version not restored")
+                f2, _ = await recv_frame(a)
+                check(f2["sim_time"] >= fh["sim_time"], "sim time restarted from 0")
+                await a.close()
+            asyncio.run(run2())
+            rc, _ = d2.stop(signal.SIGINT)
+            check(rc == 0, "exit code %r after SIGINT" % rc)
+        finally:
+            d2.kill()
+    finally:
+        d.kill()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+TESTS.append(test_sigterm_and_state_restore)
+
+
+def test_config_precedence():
+    tmp = tempfile.mkdtemp(prefix="oceand-test-")
+    cfg = os.path.join(tmp, "c.json")
+    with open(cfg, "w") as f:
+        json.dump({"wind_speed": 5, "amplitude": 2, "control_rate": 50}, f)
+    state = os.path.join(tmp, "state.json")
+    with open(state, "w") as f:
+        json.dump({"params": {"wind_speed": 3, "amplitude": 3, "seed": 9}, "params_version": 4}, f)
+    d = Daemon("--config", cfg, "--wind-speed", "6", state_file=state, tmpdir=tmp)
+    try:
+        async def run():
+            a, h = await connect(d)
+            p = h["params"]
+            check(p["wind_speed"] == 6, "CLI must win over the config file: %r" % p["wind_speed"])
+            check(p["amplitude"] == 2, "config file must win over saved state: %r" % p["amplitude"])
+            check(p["seed"] == 9, "saved state must win over defaults: %r" % p["seed"])
+            await a.close()
+        asyncio.run(run())
+    finally:
+        d.kill()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+TESTS.append(test_config_precedence)
+
+
+# ---------------------------------------------------------------- runner
+
+def main():
+    global ARGS, BASE_N
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--oceand", default="build/oceand")
+    ap.add_argument("--frame-check", default="build/frame_check")
+    ap.add_argument("--sanitized", action="store_true", help="sanitizer build: smaller N")
+    ap.add_argument("-k", default="", help="run only tests whose name contains this")
+    ARGS = ap.parse_args()
+    if ARGS.sanitized:
+        BASE_N = 128
+    passed = failed = 0
+    t_all = time.time()
+    for fn in TESTS:
+        if ARGS.k not in fn.__name__:
+            continue
+        t0 = time.time()
+        print("--- %s" % fn.__name__, flush=True)
+        d = None
+        try:
+            if fn.__code__.co_argcount == 1:
+                d = Daemon()
+                try:
+                    fn(d)
+                    rc, _ = d.stop()
+                    check(rc == 0, "daemon exit code %r at the end; log:\n%s" % (rc, d.read_log()))
+                    log = d.read_log()
+                    check("ERROR: AddressSanitizer" not in log and "runtime error:" not in log,
+                          "sanitizer report:\n%s" % log)
+                finally:
+                    d.kill()
+                    shutil.rmtree(d.tmp, ignore_errors=True)
+            else:
+                fn()
+            passed += 1
+            print("ok   %s (%.1f s)" % (fn.__name__, time.time() - t0), flush=True)
+        except Exception as e:
+            failed += 1
+            print("FAIL %s: %s" % (fn.__name__, e), flush=True)
+            if not isinstance(e, TestFailure):
+                traceback.print_exc()
+    print("daemon tests took %.0f s" % (time.time() - t_all))
+    print("%d passed, %d failed" % (passed, failed))
+    sys.exit(1 if failed else 0)
+
+
+if __name__ == "__main__":
+    main()
