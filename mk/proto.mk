@@ -31,8 +31,11 @@ $(BUILD)/gen_vectors: $(BUILD)/obj/proto/tools/gen_vectors.o $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 
 .PHONY: test-proto test-proto-asan test-proto-js proto-vectors bench-codec
-test-proto: $(BUILD)/test_proto
+test-proto: $(BUILD)/test_proto $(BUILD)/gen_vectors
 	$(BUILD)/test_proto proto/vectors
+	@# the checked-in vectors must be exactly what today's encoder writes
+	@rm -rf $(BUILD)/vectors-regen && mkdir -p $(BUILD)/vectors-regen && $(BUILD)/gen_vectors $(BUILD)/vectors-regen >/dev/null
+	@diff -r --exclude=control proto/vectors $(BUILD)/vectors-regen >/dev/null || { echo "proto/vectors is stale: run make proto-vectors"; exit 1; }
 	set -o pipefail; python3 proto/tools/ref_decode.py proto/vectors | tail -1
 test-proto-asan: $(BUILD)/san/test_proto
 	ASAN_OPTIONS=detect_leaks=1 $(BUILD)/san/test_proto proto/vectors

@@ -100,7 +100,7 @@ struct oc_encoder *oc_encoder_new(void);
 void oc_encoder_free(struct oc_encoder *e);
 /* proto area addition: choose the lossy codec (OC_CODEC_QUANT_LORENZO, the
  * default, or OC_CODEC_QUANT_LORENZO_ZSTD) and the entropy coder level
- * (0 = default: libdeflate 1 / zstd 1). OC_E_ARG on an unknown codec. */
+ * (0 = default: Huffman-only DEFLATE block / zstd 1; 2..12: libdeflate level). OC_E_ARG on an unknown codec. */
 int oc_encoder_set_codec(struct oc_encoder *e, enum oc_codec codec, int level);
 
 /* Append one encoded tile (tile header + payload) to out. field_data is the
