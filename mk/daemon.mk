@@ -10,7 +10,7 @@ PROTO_LIB ?= $(BUILD)/liboc_proto.a
 PROTO_SAN_LIB ?= $(BUILD)/san/liboc_proto.a
 
 BINS += $(BUILD)/oceand
-TESTS += test-daemon test-daemon-asan
+TESTS += test-daemon test-daemon-asan test-daemon-valgrind
 BENCHES += bench-load
 
 $(BUILD)/oceand: $(DAEMON_OBJ) $(OCEAN_LIB) $(PROTO_LIB)
@@ -32,7 +32,10 @@ $(BUILD)/frame_check: $(BUILD)/obj/tests/daemon/frame_check.o $(BUILD)/obj/serve
 
 DAEMON_TEST_DEPS := $(BUILD)/test_control $(BUILD)/frame_check
 
-.PHONY: test-daemon test-daemon-asan bench-load run
+# Valgrind for the unit test: zero errors and zero definite leaks (~5 s).
+VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite
+
+.PHONY: test-daemon test-daemon-asan test-daemon-valgrind bench-load run
 test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	$(BUILD)/test_control
 	/usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
@@ -42,6 +45,9 @@ test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(DAEMON_TEST_DE
 	$(BUILD)/san/test_control
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check --sanitized
+
+test-daemon-valgrind: $(BUILD)/test_control
+	$(VALGRIND) $(BUILD)/test_control
 
 bench-load: $(BUILD)/oceand $(BUILD)/load_client
 	/usr/bin/python3 bench/load.py --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_LOAD_ARGS)

@@ -2,6 +2,7 @@
 #   make build/liboc_proto.a   the library (and build/san/liboc_proto.a)
 #   make test-proto            C decoder/encoder tests + the Python reference decoder on the vectors
 #   make test-proto-asan       the C tests under ASan+UBSan
+#   make test-proto-valgrind   the C tests under valgrind (errors and definite leaks fail)
 #   make test-proto-js         the JavaScript decoder (node --test)
 #   make proto-vectors         regenerate proto/vectors/ (checked in)
 #   make bench-codec           codec benchmark, JSON lines
@@ -13,7 +14,7 @@ PROTO_SAN_LIB  := $(BUILD)/san/liboc_proto.a
 PKG_LIBS       += -ldeflate
 
 BINS    += $(PROTO_LIB) $(BUILD)/test_proto $(BUILD)/gen_vectors
-TESTS   += test-proto test-proto-asan test-proto-js
+TESTS   += test-proto test-proto-asan test-proto-js test-proto-valgrind
 BENCHES += bench-codec
 
 $(PROTO_LIB): $(patsubst %.c,$(BUILD)/obj/%.o,$(PROTO_SRCS))
@@ -30,7 +31,7 @@ $(BUILD)/san/test_proto: $(BUILD)/san/tests/test_proto.o $(PROTO_SAN_LIB)
 $(BUILD)/gen_vectors: $(BUILD)/obj/proto/tools/gen_vectors.o $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 
-.PHONY: test-proto test-proto-asan test-proto-js proto-vectors bench-codec
+.PHONY: test-proto test-proto-asan test-proto-valgrind test-proto-js proto-vectors bench-codec
 test-proto: $(BUILD)/test_proto $(BUILD)/gen_vectors
 	$(BUILD)/test_proto proto/vectors
 	@# the checked-in vectors must be exactly what today's encoder writes
@@ -39,6 +40,9 @@ test-proto: $(BUILD)/test_proto $(BUILD)/gen_vectors
 	set -o pipefail; python3 proto/tools/ref_decode.py proto/vectors | tail -1
 test-proto-asan: $(BUILD)/san/test_proto
 	ASAN_OPTIONS=detect_leaks=1 $(BUILD)/san/test_proto proto/vectors
+# The C tests under valgrind: zero errors, zero definite leaks (~5 s, no quick mode needed).
+test-proto-valgrind: $(BUILD)/test_proto
+	valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite $(BUILD)/test_proto proto/vectors
 test-proto-js:
 	node --test tests/proto_js.test.mjs tests/proto_js_browser.test.mjs
 proto-vectors: $(BUILD)/gen_vectors

@@ -42,6 +42,9 @@ static const struct opt_def opt_table[] = {
     { "allowed_origins", OPT_STR, O(allowed_origins), 0, 0, "", "WebSocket Origins allowed: \"\" = same host "
       "or none, \"*\" = any, else comma-separated list like http://example.org:8080" },
     { "control_token", OPT_STR, O(control_token), 0, 0, "", "if set, `set` needs this token (others are viewers)" },
+    { "tls_cert", OPT_STR, O(tls_cert), 0, 0, "", "PEM certificate file: serve https/wss instead of http/ws "
+      "on the same port (needs --tls-key)" },
+    { "tls_key", OPT_STR, O(tls_key), 0, 0, "", "PEM private key file of --tls-cert" },
     { "fft_threads", OPT_INT, O(fft_threads), 1, 64, "1", "FFTW threads" },
     { "plan_rigor", OPT_INT, O(plan_rigor), 0, 1, "0", "0 = FFTW_ESTIMATE, 1 = FFTW_MEASURE (slower start)" },
     { "wisdom_file", OPT_STR, O(wisdom_file), 0, 0, "", "FFTW wisdom cache file (\"\" = none)" },
@@ -254,7 +257,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
     for (size_t i = 0; i < opt_count; i++)
         if (opt_set_text(dc, &opt_table[i], opt_table[i].def, err, errlen) != 0)
             return -1;
-    dc->tile_size = 64;
+    dc->tile_size = 128; /* tiles are min(128, N): meets the 6.5 bits/sample target at N=256, encodes faster than 64 */
 
     /* Pass 1: --help, --config and --state-file decide what else to read. */
     const char *config_path = NULL, *state_cli = NULL;
@@ -285,10 +288,15 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         size_t len;
         if (read_file(config_path, &text, &len, err, errlen) != 0)
             return -1;
-        cfg = cJSON_ParseWithLength(text, len);
+        const char *end = NULL;
+        cfg = cJSON_ParseWithLengthOpts(text, len, &end, 0);
+        /* One JSON object and nothing but whitespace after it (as for messages). */
+        while (cfg && end < text + len && (*end == ' ' || *end == '\t' || *end == '\n' || *end == '\r'))
+            end++;
+        bool trailing = cfg && end != text + len;
         free(text);
-        if (!cJSON_IsObject(cfg)) {
-            snprintf(err, errlen, "%s: not a JSON object", config_path);
+        if (!cJSON_IsObject(cfg) || trailing) {
+            snprintf(err, errlen, "%s: not a JSON object%s", config_path, trailing ? " (data after it)" : "");
             cJSON_Delete(cfg);
             return -1;
         }
@@ -349,6 +357,10 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
             snprintf(err, errlen, "unknown option %s (see --help)", flag);
             return -1;
         }
+    }
+    if (!dc->tls_cert[0] != !dc->tls_key[0]) {
+        snprintf(err, errlen, "--tls-cert and --tls-key go together (one of them is missing)");
+        return -1;
     }
     char verr[200];
     if (params_validate(p, verr, sizeof verr) != 0) {

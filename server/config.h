@@ -36,8 +36,10 @@ struct daemon_config {
     char   wisdom_file[512];
     int    max_memory_mb;
     int    tile_size;
-    int    send_buffer_kb;
-    int    sim_nice;           /* nice value of the tick thread (< 0 needs CAP_SYS_NICE) */     /* SO_SNDBUF per client: bounds the frames queued in the kernel */
+    int    send_buffer_kb;     /* SO_SNDBUF per client: bounds the frames queued in the kernel */
+    int    sim_nice;           /* nice value of the tick thread (< 0 needs CAP_SYS_NICE) */
+    char   tls_cert[512];      /* PEM certificate (chain): "" = plain http/ws */
+    char   tls_key[512];       /* PEM private key of tls_cert */
 };
 
 /* What config_load found besides the values. */

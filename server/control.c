@@ -40,14 +40,62 @@ static bool is_scalar(const cJSON *j)
     return cJSON_IsString(j) || cJSON_IsNumber(j) || cJSON_IsBool(j) || cJSON_IsNull(j);
 }
 
+static bool is_hex(char c)
+{
+    return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f') || (c >= 'A' && c <= 'F');
+}
+
+static bool is_json_space(char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; }
+
+/* What cJSON 1.7 lets through but RFC 8259 (or we) do not: raw control bytes
+ * (cJSON skips them as whitespace, even NUL), "\u" without four hex digits
+ * (decoded as 0) and "\u0000" (cJSON hands out C strings, so a NUL would
+ * silently truncate a name: "set\u0000x" would act as "set"). A backslash
+ * outside a string fails the parse anyway, so one flat scan is enough. */
+static int prescan(const char *text, size_t len, struct ctl_error *e)
+{
+    for (size_t i = 0; i < len; i++) {
+        unsigned char c = (unsigned char)text[i];
+        if (c < 0x20 && !is_json_space((char)c))
+            return fail(e, "bad_json", NULL, "raw control byte 0x%02x at offset %zu", c, i);
+        if (c != '\\')
+            continue;
+        if (i + 1 < len && text[i + 1] == 'u') {
+            if (i + 6 > len)
+                return fail(e, "bad_json", NULL, "truncated \\u escape at offset %zu", i);
+            if (!is_hex(text[i + 2]) || !is_hex(text[i + 3]) || !is_hex(text[i + 4]) || !is_hex(text[i + 5]))
+                return fail(e, "bad_json", NULL, "invalid \\u escape at offset %zu", i);
+            if (memcmp(text + i + 2, "0000", 4) == 0)
+                return fail(e, "bad_json", NULL, "\\u0000 (NUL) in a string is not accepted");
+            i += 5;
+        } else {
+            i++; /* skip the escaped character, so "\\\\u0000" is a backslash then text */
+        }
+    }
+    return 0;
+}
+
 int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_out, struct ctl_error *e)
 {
     memset(m, 0, sizeof *m);
     if (id_out)
         *id_out = NULL;
-    cJSON *root = cJSON_ParseWithLength(text, len);
+    if (prescan(text, len, e) != 0)
+        return -1;
+    /* The whole message must be one JSON value: cJSON stops after the first
+     * value, so check what follows it ourselves (require_null_terminated
+     * would need a NUL inside len, which the wire does not give us). */
+    const char *end = NULL;
+    cJSON *root = cJSON_ParseWithLengthOpts(text, len, &end, 0);
     if (!root)
         return fail(e, "bad_json", NULL, "message is not valid JSON");
+    while (end && end < text + len && is_json_space(*end))
+        end++;
+    if (end != text + len) {
+        cJSON_Delete(root);
+        return fail(e, "bad_json", NULL, "trailing data after the JSON value (offset %zu)",
+                    end ? (size_t)(end - text) : (size_t)0);
+    }
     if (!cJSON_IsObject(root)) {
         cJSON_Delete(root);
         return fail(e, "bad_json", NULL, "message is not a JSON object");
@@ -240,6 +288,11 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
             tmp.all_tiles = true;
             tmp.ntiles = 0;
         } else if (cJSON_IsArray(j) && cJSON_GetArraySize(j) > 0 && cJSON_GetArraySize(j) <= CTL_MAX_TILES) {
+            /* Duplicates are dropped: the normalised list names each tile at
+             * most once, so a subscription never asks for more than the whole
+             * grid ("all"), whatever the client lists (tile [0,0] x 1024 would
+             * otherwise make every frame 1024 copies of one tile). */
+            uint32_t seen[32] = { 0 }; /* bit tx of seen[tz] */
             int k = 0;
             const cJSON *t;
             cJSON_ArrayForEach(t, j) {
@@ -248,8 +301,12 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
                     x->valuedouble != floor(x->valuedouble) || z->valuedouble != floor(z->valuedouble) ||
                     x->valuedouble < 0 || z->valuedouble < 0 || x->valuedouble >= 32 || z->valuedouble >= 32)
                     return fail(e, "bad_subscription", NULL, "\"tiles\" must be \"all\" or [[tx,tz],...] with 0 <= t < 32");
-                tmp.tiles[k][0] = (uint16_t)x->valuedouble;
-                tmp.tiles[k][1] = (uint16_t)z->valuedouble;
+                unsigned tx = (unsigned)x->valuedouble, tz = (unsigned)z->valuedouble;
+                if (seen[tz] & (1u << tx))
+                    continue;
+                seen[tz] |= 1u << tx;
+                tmp.tiles[k][0] = (uint16_t)tx;
+                tmp.tiles[k][1] = (uint16_t)tz;
                 k++;
             }
             tmp.all_tiles = false;
@@ -428,6 +485,17 @@ cJSON *control_hello_msg(const struct hello_info *h)
     cJSON_AddNumberToObject(o, "tile_size", h->tile_size);
     cJSON_AddItemToObject(o, "subscription", control_subscription_object(h->sub));
     return o;
+}
+
+bool control_token_equal(const char *given, const char *secret)
+{
+    /* Constant time in the content: always walk the whole secret, never stop
+     * at the first difference (only the secret's length shows in the timing). */
+    size_t lg = strlen(given), ls = strlen(secret);
+    unsigned char diff = (unsigned char)(lg != ls);
+    for (size_t i = 0; i < ls; i++)
+        diff |= (unsigned char)((i < lg ? (unsigned char)given[i] : 0u) ^ (unsigned char)secret[i]);
+    return diff == 0;
 }
 
 char *control_print(cJSON *msg)

@@ -13,7 +13,7 @@
 
 #include "params.h"
 
-#define CTL_MAX_TILES 1024            /* (OC_MAX_N / 64)^2 */
+#define CTL_MAX_TILES 1024            /* 32 x 32: tile coordinates are 0..31 (no duplicates kept) */
 #define CTL_BOUND_COUNT 5
 extern const float ctl_bounds[CTL_BOUND_COUNT]; /* 0 = lossless, then lossy bounds (m) */
 #define CTL_MAX_LOD 4
@@ -96,6 +96,10 @@ struct hello_info {
     const struct subscription *sub;
 };
 cJSON *control_hello_msg(const struct hello_info *h);
+
+/* Token check for `set`/`pause`/`resume`, in constant time (no early exit
+ * at the first wrong byte). */
+bool control_token_equal(const char *given, const char *secret);
 
 /* Print and delete: returns malloc'd text (free()), NULL on no memory. */
 char *control_print(cJSON *msg);

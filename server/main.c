@@ -81,7 +81,7 @@ int main(int argc, char **argv)
     sigaction(SIGTERM, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
 
-    LOGI("oceand listening on http://%s:%d/ (N=%d, %g Hz, web root %s)", dc.bind, net_port(net),
+    LOGI("oceand listening on %s://%s:%d/ (N=%d, %g Hz, web root %s)", dc.tls_cert[0] ? "https" : "http", dc.bind, net_port(net),
          params.resolution, dc.tick_rate, dc.web_root);
     while (!interrupted)
         if (net_service(net) < 0)

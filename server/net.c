@@ -46,7 +46,8 @@ struct session {
     /* receive */
     char *rx;
     size_t rx_len;
-    bool rx_binary_reported;
+    bool rx_binary;               /* inside a binary message (fragments of it follow) */
+    size_t rx_binary_len;         /* its bytes so far: --max-message applies to it too */
     int closing;                  /* close status to send once the queue drains, 0 = none */
     double tokens, tokens_t;      /* control-message rate limit (token bucket) */
 
@@ -248,7 +249,10 @@ static void submit_set(struct net *n, struct session *s, const cJSON *params, co
     sim_submit(n->sim, set);
 }
 
-static void handle_message(struct net *n, struct session *s, const char *text, size_t len)
+/* Charge one message to the client's token bucket (every message from a
+ * client, text or binary, costs the daemon a reply). false = over the limit:
+ * the client got rate_limited and the message is to be dropped. */
+static bool take_token(struct net *n, struct session *s)
 {
     atomic_fetch_add(&g_metrics.control_messages, 1);
     double now = mono_now();
@@ -260,9 +264,16 @@ static void handle_message(struct net *n, struct session *s, const char *text, s
         struct ctl_error e = { .code = "rate_limited" };
         snprintf(e.message, sizeof e.message, "more than %g control messages per second", n->dc.control_rate);
         send_error(s, &e, NULL);
-        return;
+        return false;
     }
     s->tokens -= 1;
+    return true;
+}
+
+static void handle_message(struct net *n, struct session *s, const char *text, size_t len)
+{
+    if (!take_token(n, s))
+        return;
 
     struct ctl_msg m;
     struct ctl_error e;
@@ -276,7 +287,7 @@ static void handle_message(struct net *n, struct session *s, const char *text, s
     case CTL_SET:
     case CTL_PAUSE:
     case CTL_RESUME: {
-        if (!s->controller && !(m.token && n->dc.control_token[0] && strcmp(m.token, n->dc.control_token) == 0)) {
+        if (!s->controller && !(m.token && n->dc.control_token[0] && control_token_equal(m.token, n->dc.control_token))) {
             struct ctl_error f = { .code = "forbidden", .message = "this client may not change parameters (token needed)" };
             send_error(s, &f, m.id);
             break;
@@ -462,14 +473,22 @@ static int on_writable(struct net *n, struct session *s)
     return 0;
 }
 
-/* A newer frame replaces `seq`: every client that did not start sending it
- * skips it (latest frame wins). Counted here, as it happens, so that a
- * client that stopped reading shows up in the metrics at once. */
-static void count_skipped(struct net *n, uint64_t seq)
+/* Frame `old` is replaced by the newer `seq` (latest frame wins): every
+ * client that did not start sending `old` skips it, and every client skips
+ * the frames in between, which the sim published while this thread was
+ * busy and nobody ever saw. Counted here, as it happens, so that a client
+ * that stopped reading shows up in the metrics at once; per client the
+ * count equals the holes in the seq numbers it receives. */
+static void count_skipped(struct net *n, uint64_t old, uint64_t seq)
 {
-    for (struct session *s = n->sessions; s; s = s->next)
-        if (s->last_seq && s->last_seq < seq)
-            atomic_fetch_add(s->sub.max_rate < n->dc.tick_rate ? &g_metrics.dropped_rate : &g_metrics.dropped_slow, 1);
+    uint64_t unseen = seq > old + 1 ? seq - old - 1 : 0;
+    for (struct session *s = n->sessions; s; s = s->next) {
+        if (!s->last_seq || s->last_seq >= seq)
+            continue; /* no frame yet (holes count from the first frame on) */
+        uint64_t k = unseen + (s->last_seq < old ? 1 : 0);
+        if (k)
+            atomic_fetch_add(s->sub.max_rate < n->dc.tick_rate ? &g_metrics.dropped_rate : &g_metrics.dropped_slow, k);
+    }
 }
 
 /* ---- origin check ---- */
@@ -497,6 +516,27 @@ static bool origin_allowed(struct net *n, struct lws *wsi)
 }
 
 /* ---- the WebSocket protocol ---- */
+
+/* A message over --max-message: too_large, then close 1009. Called at the
+ * first byte over the limit; the rest is never buffered. */
+static void close_too_large(struct net *n, struct session *s)
+{
+    atomic_fetch_add(&g_metrics.closed_too_large, 1);
+    struct ctl_error e = { .code = "too_large" };
+    snprintf(e.message, sizeof e.message, "message larger than %d bytes", n->dc.max_message);
+    atomic_fetch_add(&g_metrics.control_errors, 1);
+    char *text = control_print(control_error_msg(&e, NULL));
+    queue_text(s, text, true);
+    free(text);
+    s->closing = LWS_CLOSE_STATUS_MESSAGE_TOO_LARGE;
+    free(s->rx);
+    s->rx = NULL;
+    s->rx_len = 0;
+    /* Keep reading (and discarding) the rest: closing a socket with unread
+     * input makes the kernel send RST, and the client would never see our 1009. */
+    lws_set_timeout(s->wsi, PENDING_TIMEOUT_CLOSE_SEND, 5); /* backstop if it never reads */
+    lws_callback_on_writable(s->wsi);
+}
 
 static void session_free(struct net *n, struct session *s)
 {
@@ -584,31 +624,29 @@ static int cb_ws(struct lws *wsi, enum lws_callback_reasons reason, void *user, 
     case LWS_CALLBACK_RECEIVE: {
         if (s->closing)
             return 0;
+        bool message_end = lws_is_final_fragment(wsi) && !lws_remaining_packet_payload(wsi);
         if (lws_frame_is_binary(wsi)) {
-            if (lws_is_first_fragment(wsi)) {
-                struct ctl_error e = { .code = "bad_message", .message = "binary messages are not accepted from clients" };
-                send_error(s, &e, NULL);
+            /* Binary data is not part of the protocol, but it costs a reply:
+             * it is charged to the rate limit and capped like text. */
+            if (!s->rx_binary) {
+                s->rx_binary = true;
+                s->rx_binary_len = 0;
+                if (len + lws_remaining_packet_payload(wsi) <= (size_t)n->dc.max_message && take_token(n, s)) {
+                    struct ctl_error e = { .code = "bad_message", .message = "binary messages are not accepted from clients" };
+                    send_error(s, &e, NULL);
+                }
             }
+            s->rx_binary_len += len;
+            if (s->rx_binary_len + lws_remaining_packet_payload(wsi) > (size_t)n->dc.max_message) {
+                close_too_large(n, s);
+                return 0;
+            }
+            if (message_end)
+                s->rx_binary = false;
             return 0;
         }
         if (s->rx_len + len > (size_t)n->dc.max_message) {
-            /* Stop at the first byte over the limit; do not wait for the rest. */
-            atomic_fetch_add(&g_metrics.closed_too_large, 1);
-            struct ctl_error e = { .code = "too_large" };
-            snprintf(e.message, sizeof e.message, "message larger than %d bytes", n->dc.max_message);
-            atomic_fetch_add(&g_metrics.control_errors, 1);
-            char *text = control_print(control_error_msg(&e, NULL));
-            queue_text(s, text, true);
-            free(text);
-            s->closing = LWS_CLOSE_STATUS_MESSAGE_TOO_LARGE;
-            free(s->rx);
-            s->rx = NULL;
-            s->rx_len = 0;
-            /* Keep reading (and discarding) the rest: closing a socket with
-             * unread input makes the kernel send RST, and the client would
-             * never see our 1009. */
-            lws_set_timeout(wsi, PENDING_TIMEOUT_CLOSE_SEND, 5); /* backstop if it never reads */
-            lws_callback_on_writable(wsi);
+            close_too_large(n, s);
             return 0;
         }
         if (lws_is_first_fragment(wsi) && lws_is_final_fragment(wsi) && !lws_remaining_packet_payload(wsi) &&
@@ -622,7 +660,7 @@ static int cb_ws(struct lws *wsi, enum lws_callback_reasons reason, void *user, 
         s->rx = nb;
         memcpy(s->rx + s->rx_len, in, len);
         s->rx_len += len;
-        if (lws_is_final_fragment(wsi) && !lws_remaining_packet_payload(wsi)) {
+        if (message_end) {
             handle_message(n, s, s->rx, s->rx_len);
             s->rx_len = 0;
         }
@@ -717,7 +755,7 @@ static int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user
             struct frame *f = sim_latest(n->sim);
             if (f != n->latest) {
                 if (n->latest)
-                    count_skipped(n, n->latest->hdr.seq);
+                    count_skipped(n, n->latest->hdr.seq, f->hdr.seq);
                 frame_unref(n->latest);
                 n->latest = f;
             } else {
@@ -788,12 +826,24 @@ struct net *net_create(const struct daemon_config *dc, const struct ocean_params
     info.user = n;
     info.retry_and_idle_policy = &n->retry;
     info.options = LWS_SERVER_OPTION_DISABLE_IPV6 | LWS_SERVER_OPTION_VALIDATE_UTF8;
+    if (dc->tls_cert[0]) {
+        /* https/wss on the same port (lws' OpenSSL backend). Plain http/ws
+         * connections to it fail the TLS handshake: no
+         * LWS_SERVER_OPTION_ALLOW_NON_SSL_ON_SSL_PORT. */
+        info.options |= LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT;
+        info.ssl_cert_filepath = n->dc.tls_cert;
+        info.ssl_private_key_filepath = n->dc.tls_key;
+    }
     info.extensions = NULL; /* no permessage-deflate: frames are compressed already */
     info.timeout_secs = 10;
     info.pt_serv_buf_size = CHUNK_SIZE + LWS_PRE + 64; /* lws' scratch for partial sends and reads */
     n->ctx = lws_create_context(&info);
     if (!n->ctx) {
-        snprintf(err, errlen, "cannot listen on %s:%d (in use, or bad --bind?)", dc->bind, dc->port);
+        if (dc->tls_cert[0])
+            snprintf(err, errlen, "cannot listen on %s:%d with TLS (port in use, bad --bind, or unreadable / "
+                     "mismatched --tls-cert %s / --tls-key %s?)", dc->bind, dc->port, dc->tls_cert, dc->tls_key);
+        else
+            snprintf(err, errlen, "cannot listen on %s:%d (in use, or bad --bind?)", dc->bind, dc->port);
         free(n);
         return NULL;
     }

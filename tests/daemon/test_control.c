@@ -126,6 +126,88 @@ static void test_subscribe(void)
     }
 }
 
+/* D1 (notes/hostile-findings.md): the whole message must be exactly one JSON
+ * value, with no raw control bytes, no invalid \u escapes and no \u0000 (which
+ * would truncate names: "set\u0000x" must not act as "set"). */
+static void test_strict_json(void)
+{
+    static const struct { const char *text; size_t len; const char *code; } cases[] = {
+        { "{\"type\":\"ping\",\"id\":1} trailing", 0, "bad_json" },
+        { "{\"type\":\"set\",\"id\":2,\"params\":{\"wind_speed\":21}}}", 0, "bad_json" },
+        { "{\"type\":\"set\",\"id\":3,\"params\":{\"wind_speed\":22}} {\"type\":\"set\"}", 0, "bad_json" },
+        { "{\"type\":\"ping\"\0,\"id\":4}", 23, "bad_json" },          /* raw NUL between tokens */
+        { "{\"type\":\"ping\",\"id\":4}\0", 23, "bad_json" },          /* raw NUL after the value */
+        { "{\"type\":\"ping\",\x01\"id\":4}", 0, "bad_json" },         /* raw control byte */
+        { "{\"type\":\"pi\x1fng\"}", 0, "bad_json" },                   /* raw control byte in a string */
+        { "{\"type\":\"ping\",\"id\":5,\"x\":\"\\uZZZZ\"}", 0, "bad_json" },
+        { "{\"type\":\"ping\",\"id\":5,\"x\":\"\\u12\"}", 0, "bad_json" },
+        { "{\"type\":\"ping\",\"x\":\"\\u", 0, "bad_json" },
+        { "{\"type\":\"set\\u0000x\",\"id\":6,\"params\":{\"wind_speed\":23}}", 0, "bad_json" },
+        { "{\"type\":\"set\",\"id\":7,\"params\":{\"spectrum\":\"phillips\\u0000junk\"}}", 0, "bad_json" },
+        { "{\"type\":\"set\",\"id\":8,\"params\":{\"wind_speed\\u0000x\":13}}", 0, "bad_json" },
+        { "{\"type\":\"subscribe\",\"id\":9,\"fields\":[\"height\\u0000junk\"]}", 0, "bad_json" },
+        /* still fine: whitespace around, escapes that are not NUL, an escaped backslash before "u0000" */
+        { " \t\r\n{\"type\":\"ping\",\"id\":10} \r\n\t ", 0, "ok" },
+        { "{\"type\":\"p\\u0069ng\",\"x\":\"\\\\u0000 \\n \\u00e9\"}", 0, "ok" },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        size_t len = cases[i].len ? cases[i].len : strlen(cases[i].text);
+        struct ctl_msg m;
+        struct ctl_error e = { 0 };
+        cJSON *id = NULL;
+        int rc = control_parse(cases[i].text, len, &m, &id, &e);
+        cJSON_Delete(id);
+        const char *code = rc ? e.code : "ok";
+        CHECK(strcmp(code, cases[i].code) == 0, "strict JSON case %zu (%.60s): %s (%s), want %s", i, cases[i].text,
+              code, e.message, cases[i].code);
+        if (rc == 0) {
+            CHECK(m.type == CTL_PING, "case %zu: type %d, want ping", i, (int)m.type);
+            ctl_msg_free(&m);
+        }
+    }
+}
+
+/* D3: duplicate tiles are dropped, so no subscription asks for more than the
+ * whole grid; 1024 copies of [0,0] normalise to one tile. */
+static void test_subscribe_dedupe(void)
+{
+    struct subscription cur, *out = malloc(sizeof *out);
+    subscription_default(&cur, 30);
+    struct ctl_error e;
+    size_t cap = 32 + 1024 * 8;
+    char *text = malloc(cap);
+    size_t off = (size_t)snprintf(text, cap, "{\"type\":\"subscribe\",\"tiles\":[");
+    for (int i = 0; i < 1024; i++)
+        off += (size_t)snprintf(text + off, cap - off, "%s[0,0]", i ? "," : "");
+    snprintf(text + off, cap - off, "]}");
+    cJSON *m = cJSON_Parse(text);
+    CHECK(m && control_apply_subscribe(m, &cur, &lim, out, &e) == 0, "1024 x [0,0] rejected: %s", e.message);
+    CHECK(!out->all_tiles && out->ntiles == 1 && out->tiles[0][0] == 0 && out->tiles[0][1] == 0,
+          "1024 x [0,0] normalised to %d tiles, want 1", out->ntiles);
+    cJSON_Delete(m);
+    m = cJSON_Parse("{\"tiles\":[[1,2],[3,4],[1,2],[2,1],[3,4],[31,31],[31,31]]}");
+    CHECK(control_apply_subscribe(m, &cur, &lim, out, &e) == 0, "subscribe with duplicates rejected: %s", e.message);
+    CHECK(out->ntiles == 4 && out->tiles[0][0] == 1 && out->tiles[0][1] == 2 && out->tiles[1][0] == 3 &&
+              out->tiles[2][0] == 2 && out->tiles[2][1] == 1 && out->tiles[3][0] == 31,
+          "duplicates: %d tiles, want 4 in first-seen order", out->ntiles);
+    char *s = control_print(control_subscribed_msg(out, NULL));
+    CHECK(s && strstr(s, "\"tiles\":[[1,2],[3,4],[2,1],[31,31]]"), "subscribed text %s", s ? s : "(null)");
+    free(s);
+    cJSON_Delete(m);
+    free(text);
+    free(out);
+}
+
+static void test_token_equal(void)
+{
+    CHECK(control_token_equal("s3cret", "s3cret"), "same token refused");
+    CHECK(!control_token_equal("s3cres", "s3cret"), "last byte differs: accepted");
+    CHECK(!control_token_equal("s3cre", "s3cret"), "prefix accepted");
+    CHECK(!control_token_equal("s3cretX", "s3cret"), "longer accepted");
+    CHECK(!control_token_equal("", "s3cret"), "empty accepted");
+    CHECK(!control_token_equal("S3CRET", "s3cret"), "case-changed accepted");
+}
+
 static void test_builders(void)
 {
     struct ocean_params p;
@@ -180,8 +262,21 @@ static void test_state_and_config(void)
     CHECK(q.seed == 42 && q.wind_speed == 8 && q.choppiness == 2 && dc.port == 9999 && dc.tick_rate == 15 &&
               res.params_version == 9 && res.sim_time == 12.5,
           "precedence: seed %d wind %g chop %g port %d", q.seed, q.wind_speed, q.choppiness, dc.port);
+    CHECK(dc.tile_size == 128, "default tile size %d, want 128", dc.tile_size);
+    f = fopen(cfg, "w");
+    fputs("{\"wind_speed\": 8}\n{\"port\": 1}", f);
+    fclose(f);
+    char *trailing[] = { "oceand", "--state-file", "none", "--config", cfg, NULL };
+    CHECK(config_load(5, trailing, &dc, &q, &res, err, sizeof err) != 0, "config file with trailing data accepted");
     char *bad[] = { "oceand", "--state-file", "none", "--port", "70000", NULL };
     CHECK(config_load(5, bad, &dc, &q, &res, err, sizeof err) != 0, "port 70000 accepted");
+    char *half_tls[] = { "oceand", "--state-file", "none", "--tls-cert", "/x/cert.pem", NULL };
+    CHECK(config_load(5, half_tls, &dc, &q, &res, err, sizeof err) != 0 && strstr(err, "tls"),
+          "--tls-cert without --tls-key accepted");
+    char *tls[] = { "oceand", "--state-file", "none", "--tls-cert", "/x/cert.pem", "--tls-key=/x/key.pem", NULL };
+    CHECK(config_load(6, tls, &dc, &q, &res, err, sizeof err) == 0 && strcmp(dc.tls_cert, "/x/cert.pem") == 0 &&
+              strcmp(dc.tls_key, "/x/key.pem") == 0,
+          "TLS flags: %s", err);
     unlink(state);
     unlink(cfg);
     rmdir(dir);
@@ -246,6 +341,9 @@ int main(void)
 {
     test_sets();
     test_subscribe();
+    test_strict_json();
+    test_subscribe_dedupe();
+    test_token_equal();
     test_builders();
     test_state_and_config();
     fuzz();

@@ -14,12 +14,14 @@ import re
 import shutil
 import signal
 import socket
+import ssl
 import struct
 import subprocess
 import sys
 import tempfile
 import time
 import traceback
+import http.client
 import urllib.error
 import urllib.request
 
@@ -28,6 +30,12 @@ import websockets
 ARGS = None
 BASE_N = 256          # resolution used by the tests (smaller under sanitizers)
 TICK = 30.0
+TILE = 128            # the daemon's default tile size; tiles are min(TILE, N) on a side
+
+
+def tiles_per_frame(n, fields):
+    """tile_count of an all-tiles frame at resolution n with `fields` fields."""
+    return fields * (n // min(TILE, n)) ** 2
 FRAME_HDR = struct.Struct("<4sHHQdIHHfHHQ")      # 48 bytes, see proto/c/oc_proto.h
 TILE_HDR = struct.Struct("<BBBBHHHHfddII")       # 40 bytes
 
@@ -50,8 +58,9 @@ def free_port():
 class Daemon:
     """One oceand process with its own port, state file and log."""
 
-    def __init__(self, *extra, state_file=None, tmpdir=None):
+    def __init__(self, *extra, state_file=None, tmpdir=None, tls_ctx=None):
         self.tmp = tmpdir or tempfile.mkdtemp(prefix="oceand-test-")
+        self.tls_ctx = tls_ctx           # client SSL context when the daemon serves https/wss
         self.port = free_port()
         self.state_file = state_file or os.path.join(self.tmp, "state.json")
         self.log_path = os.path.join(self.tmp, "oceand.log")
@@ -60,14 +69,15 @@ class Daemon:
                 "--tick-rate", str(int(TICK))] + list(extra)
         self.log = open(self.log_path, "ab")
         self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log)
-        self.url = "ws://127.0.0.1:%d/" % self.port
-        self.http = "http://127.0.0.1:%d" % self.port
+        scheme = "s" if tls_ctx else ""
+        self.url = "ws%s://127.0.0.1:%d/" % (scheme, self.port)
+        self.http = "http%s://127.0.0.1:%d" % (scheme, self.port)
         deadline = time.time() + 20
         while True:
             if self.proc.poll() is not None:
                 raise TestFailure("oceand exited at start with %s; log:\n%s" % (self.proc.returncode, self.read_log()))
             try:
-                urllib.request.urlopen(self.http + "/healthz", timeout=1).read()
+                urllib.request.urlopen(self.http + "/healthz", timeout=1, context=self.tls_ctx).read()
                 break
             except (urllib.error.URLError, ConnectionError, OSError):
                 if time.time() > deadline:
@@ -86,7 +96,7 @@ class Daemon:
         return 0
 
     def get(self, path):
-        with urllib.request.urlopen(self.http + path, timeout=5) as r:
+        with urllib.request.urlopen(self.http + path, timeout=5, context=self.tls_ctx) as r:
             return r.status, r.headers.get("Content-Type", ""), r.read().decode()
 
     def metric(self, name):
@@ -123,7 +133,9 @@ async def connect(d, **kw):
     kw.setdefault("max_size", None)
     kw.setdefault("max_queue", None)   # read everything: a full client queue would stall the close handshake
     kw.setdefault("close_timeout", 3)
-    ws = await websockets.connect(d.url, **kw)
+    if d.tls_ctx and "ssl" not in kw:
+        kw["ssl"] = d.tls_ctx
+    ws = await websockets.connect(kw.pop("url", d.url), **kw)
     hello = json.loads(await asyncio.wait_for(ws.recv(), 5))
     check(hello.get("type") == "hello", "first message is not hello: %r" % hello)
     return ws, hello
@@ -266,7 +278,8 @@ def test_hello_two_clients_and_frames(d):
             ticks = (frames[-1][0]["sim_time"] - frames[0][0]["sim_time"]) * TICK
             print("    client %s: %d frames over %.0f ticks, %d bytes each" % (name, len(frames), ticks, len(frames[-1][1])))
             h, m = frames[-1]
-            check(h["n"] == BASE_N and h["tile_count"] == 3 * (BASE_N // 64) ** 2, "frame shape %r" % h)
+            check(h["n"] == BASE_N and h["tile_count"] == tiles_per_frame(BASE_N, 3) and h["tile_size"] == min(TILE, BASE_N),
+                  "frame shape %r" % h)
             check({t["field"] for t in tiles(m)} == {0, 1, 2}, "default fields")
         res = frame_check(d, ha["params"], [m for _, m in got["a"][-3:]])
         check(all(r["bad"] == 0 and r["max_err"] <= 0.01 for r in res), "frames not within bound: %r" % res)
@@ -486,7 +499,7 @@ def test_change_resolution_mid_stream(d):
         check(gap <= max(5.5, 1.5 * others + 1), "gap of %.1f ticks at the resolution change" % gap)
         h, m = frames[-1]
         check(h["params_version"] == params["params_version"], "new frames carry the new version")
-        check(h["tile_count"] == 3 * max(1, new_n // 64) ** 2, "tile count at new N")
+        check(h["tile_count"] == tiles_per_frame(new_n, 3), "tile count at new N")
         res = frame_check(d, params["params"], [m])
         check(res[0]["bad"] == 0, "frame at the new N does not match the library")
         await a.close()
@@ -502,7 +515,7 @@ def test_determinism_end_to_end(d):
                                                                           "jacobian"], "bound": 0}))
         sub = await recv_json(a, lambda m: m["type"] == "subscribed")
         check(sub["subscription"]["bound"] == 0 and len(sub["subscription"]["fields"]) == 6, "subscribed %r" % sub)
-        h, m = await recv_frame(a, lambda h, m: h["tile_count"] == 6 * (BASE_N // 64) ** 2)
+        h, m = await recv_frame(a, lambda h, m: h["tile_count"] == tiles_per_frame(BASE_N, 6))
         check(all(t["codec"] == 0 for t in tiles(m)), "bound 0 must be raw float32")
         res = frame_check(d, ha["params"], [m])
         check(res[0]["bad"] == 0 and res[0]["max_err"] == 0, "lossless frame differs: %r" % res)
@@ -548,17 +561,22 @@ def test_pause_resume_time_scale(d):
 @test
 def test_subscribe_fields_lod_tiles(d):
     async def run():
-        a, _ = await connect(d)
+        a, hello = await connect(d)
+        ts_ = min(hello["tile_size"], BASE_N)
+        tps = BASE_N // ts_
+        # The last tile on the diagonal, and a duplicate that the daemon drops (D3).
+        want = [[0, 0], [tps - 1, tps - 1]] if tps > 1 else [[0, 0]]
         await a.send(json.dumps({"type": "subscribe", "id": "s", "fields": ["jacobian", "height"], "lod": 2,
-                                 "tiles": [[0, 0], [1, 1]], "bound": 0.05, "max_rate": 10}))
+                                 "tiles": want + [[0, 0]], "bound": 0.05, "max_rate": 10}))
         s = await recv_json(a, lambda m: m["type"] == "subscribed")
         check(s["id"] == "s" and s["subscription"] == {"fields": ["height", "jacobian"], "lod": 2,
-                                                        "tiles": [[0, 0], [1, 1]], "bound": 0.05, "max_rate": 10},
+                                                        "tiles": want, "bound": 0.05, "max_rate": 10},
               "normalised subscription %r" % s)
-        h, m = await recv_frame(a, lambda h, m: h["tile_count"] == 4)
+        h, m = await recv_frame(a, lambda h, m: h["tile_count"] == 2 * len(want))
         ts = tiles(m)
-        check({(t["field"], t["tx"], t["tz"]) for t in ts} == {(0, 0, 0), (0, 1, 1), (5, 0, 0), (5, 1, 1)}, "tiles %r" % ts)
-        check(all(t["lod"] == 2 and t["w"] == 16 and t["h"] == 16 for t in ts), "lod 2 tile shape")
+        check({(t["field"], t["tx"], t["tz"]) for t in ts} == {(f, x, z) for f in (0, 5) for x, z in want},
+              "tiles %r" % ts)
+        check(all(t["lod"] == 2 and t["w"] == ts_ // 4 and t["h"] == ts_ // 4 for t in ts), "lod 2 tile shape")
         # max_rate 10 at a 30 Hz tick: about one frame in three (tick jitter can
         # shorten one gap, so look at the mean), and the skips are counted.
         first = h
@@ -574,7 +592,7 @@ def test_subscribe_fields_lod_tiles(d):
         b, hb = await connect(d)
         await b.close()
         res = frame_check(d, hb["params"],
-                          [(await recv_frame(a, lambda h, m: h["tile_count"] == 2 * (BASE_N // 64) ** 2))[1]])
+                          [(await recv_frame(a, lambda h, m: h["tile_count"] == tiles_per_frame(BASE_N, 2)))[1]])
         check(res[0]["max_err"] <= 0.05, "bound 0.05")
         await a.close()
     asyncio.run(run())
@@ -654,6 +672,149 @@ def test_refusals(d):
         ws, _ = await connect(d, origin="http://127.0.0.1:%d" % d.port)   # same origin is fine
         await ws.close()
     asyncio.run(run())
+
+
+def test_dropped_frames_match_seq_gaps():
+    """D4: frames a slow client skips are all counted, frames the sim published
+    between two wake-ups of the network thread included: the client's holes in
+    seq equal oceand_frames_dropped_total{reason="slow_client"} (it is the only client)."""
+    metric = 'oceand_frames_dropped_total{reason="slow_client"}'
+    d = Daemon("--send-buffer-kb", "16")
+
+    async def run():
+        drops0 = d.metric(metric)
+        # Small socket buffers on both sides, max_queue=1 and a small read limit:
+        # the library stops reading when we do, so the daemon soon sees a slow
+        # client and skips frames for it.
+        sock = socket.socket()
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 16384)
+        sock.connect(("127.0.0.1", d.port))
+        a, _ = await connect(d, max_queue=1, read_limit=1 << 14, sock=sock)
+        seqs = []
+        t0 = time.time()
+        while time.time() - t0 < 3:                  # slow: ~8 frames/s of 30
+            h, _ = await recv_frame(a, timeout=10)
+            seqs.append(h["seq"])
+            await asyncio.sleep(0.12)
+        t0 = time.time()
+        while time.time() - t0 < 1.5:                # catch up: read as fast as we can
+            h, _ = await recv_frame(a, timeout=10)
+            seqs.append(h["seq"])
+        drops = d.metric(metric) - drops0
+        gaps = sum(b - a_ - 1 for a_, b in zip(seqs, seqs[1:]))
+        print("    slow client: %d frames received, %d missing by seq, metric says %d skipped"
+              % (len(seqs), gaps, drops))
+        check(gaps >= 10, "the slow client skipped only %d frames: not slow enough to test" % gaps)
+        # At the moment the metric was read a frame or two may have been replaced
+        # that the client has not received yet (it was reading at full speed).
+        check(gaps <= drops <= gaps + 3, "skipped frames counted %d, holes in seq %d" % (drops, gaps))
+        await a.close()
+    try:
+        asyncio.run(run())
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+    finally:
+        d.kill()
+
+
+TESTS.append(test_dropped_frames_match_seq_gaps)
+
+
+def make_cert(tmp):
+    """A self-signed certificate for localhost / 127.0.0.1 made with openssl."""
+    cert, key = os.path.join(tmp, "cert.pem"), os.path.join(tmp, "key.pem")
+    r = subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1",
+                        "-subj", "/CN=localhost", "-addext", "subjectAltName=DNS:localhost,IP:127.0.0.1",
+                        "-keyout", key, "-out", cert], capture_output=True, text=True, timeout=60)
+    check(r.returncode == 0, "openssl failed: %s" % r.stderr)
+    return cert, key
+
+
+def test_tls():
+    """--tls-cert/--tls-key: https and wss on the same port with a self-signed
+    certificate (the client trusts exactly that certificate); plain ws:// and
+    http:// to the same port are refused."""
+    tmp = tempfile.mkdtemp(prefix="oceand-tls-")
+    cert, key = make_cert(tmp)
+    ctx = ssl.create_default_context(cafile=cert)
+    d = Daemon("--tls-cert", cert, "--tls-key", key, tmpdir=tmp, tls_ctx=ctx)
+    try:
+        check(d.url.startswith("wss://"), "url %s" % d.url)
+        st, _, body = d.get("/healthz")
+        check(st == 200 and json.loads(body)["status"] == "ok", "https /healthz: %r" % body)
+
+        async def run():
+            a, hello = await connect(d)
+            check(hello["type"] == "hello", "hello over wss")
+            h, m = await recv_frame(a, timeout=10)
+            check(h["n"] == BASE_N and len(m) > 48, "frame over wss %r" % h)
+            await a.send('{"type":"ping","id":1}')
+            p = await recv_json(a, lambda m: m["type"] == "pong")
+            check(p["id"] == 1, "pong over wss")
+            await a.close()
+            # A plain ws:// client on the TLS port gets no WebSocket.
+            try:
+                ws, _ = await connect(d, url="ws://127.0.0.1:%d/" % d.port, ssl=None, open_timeout=5)
+                await ws.close()
+                check(False, "plain ws:// accepted on the TLS port")
+            except TestFailure:
+                raise
+            except Exception as e:                      # handshake fails or the server hangs up
+                print("    plain ws:// refused: %s" % type(e).__name__)
+            # A client that does not trust the certificate refuses the server too.
+            try:
+                ws, _ = await connect(d, ssl=ssl.create_default_context(), open_timeout=5)
+                await ws.close()
+                check(False, "an untrusted certificate was accepted by a default client")
+            except ssl.SSLCertVerificationError:
+                pass
+        asyncio.run(run())
+        try:
+            urllib.request.urlopen("http://127.0.0.1:%d/healthz" % d.port, timeout=5).read()
+            check(False, "plain http:// answered on the TLS port")
+        except (urllib.error.URLError, ConnectionError, OSError, http.client.HTTPException):
+            pass
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+        check("ERROR" not in d.read_log(), "errors in the log:\n%s" % d.read_log())
+    finally:
+        d.kill()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+TESTS.append(test_tls)
+
+
+def test_allowed_origins():
+    """--allowed-origins: a browser (Origin header) from a listed origin gets in,
+    a foreign one and the same host (not listed) are refused; programs that
+    send no Origin are not browsers and get in."""
+    d = Daemon("--allowed-origins", "http://good.example:8080,https://also.example")
+    try:
+        async def run():
+            for origin in ("http://good.example:8080", "https://also.example"):
+                ws, _ = await connect(d, origin=origin)
+                await ws.close()
+            for origin in ("http://evil.example", "http://good.example:8081", "http://good.example:8080.evil.example",
+                           "http://127.0.0.1:%d" % d.port, "null"):
+                try:
+                    ws, _ = await connect(d, origin=origin)
+                    await ws.close()
+                    check(False, "Origin %s accepted" % origin)
+                except (websockets.exceptions.InvalidStatusCode, websockets.exceptions.InvalidHandshake,
+                        ConnectionError):
+                    pass
+            ws, _ = await connect(d)       # no Origin header
+            await ws.close()
+            check(d.metric('oceand_clients_rejected_total{reason="origin"}') == 5, "origin rejections not counted")
+        asyncio.run(run())
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+    finally:
+        d.kill()
+
+
+TESTS.append(test_allowed_origins)
 
 
 def test_max_clients():
