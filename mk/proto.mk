@@ -44,7 +44,7 @@ test-proto-asan: $(BUILD)/san/test_proto
 test-proto-valgrind: $(BUILD)/test_proto
 	valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite $(BUILD)/test_proto proto/vectors
 test-proto-js:
-	node --test tests/proto_js.test.mjs tests/proto_js_browser.test.mjs
+	node --test tests/proto_js.test.mjs tests/proto_js_inflate.test.mjs tests/proto_js_browser.test.mjs
 proto-vectors: $(BUILD)/gen_vectors
 	$(BUILD)/gen_vectors proto/vectors
 

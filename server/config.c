@@ -46,8 +46,10 @@ static const struct opt_def opt_table[] = {
       "on the same port (needs --tls-key)" },
     { "tls_key", OPT_STR, O(tls_key), 0, 0, "", "PEM private key file of --tls-cert" },
     { "fft_threads", OPT_INT, O(fft_threads), 1, 64, "1", "FFTW threads" },
-    { "plan_rigor", OPT_INT, O(plan_rigor), 0, 1, "0", "0 = FFTW_ESTIMATE, 1 = FFTW_MEASURE (slower start)" },
-    { "wisdom_file", OPT_STR, O(wisdom_file), 0, 0, "", "FFTW wisdom cache file (\"\" = none)" },
+    { "plan_rigor", OPT_INT, O(plan_rigor), 0, 1, "1", "1 = FFTW_MEASURE (faster steps; the first plan of "
+      "each N takes a moment, then it is cached in --wisdom-file), 0 = FFTW_ESTIMATE" },
+    { "wisdom_file", OPT_STR, O(wisdom_file), 0, 0, "auto", "FFTW wisdom cache: \"auto\" = "
+      "$XDG_CACHE_HOME/oceand/fftw-wisdom, else ~/.cache/oceand/fftw-wisdom; \"none\" = no cache" },
     { "send_buffer_kb", OPT_INT, O(send_buffer_kb), 16, 65536, "512", "kernel send buffer per client (KiB): "
       "small keeps a slow client's queue, and so its latency, short" },
     { "sim_nice", OPT_INT, O(sim_nice), -20, 19, "0", "nice value of the tick thread; below 0 (needs "
@@ -248,6 +250,26 @@ static const char *flag_value(int argc, char **argv, int *i)
     return NULL;
 }
 
+/* "auto" puts the FFTW wisdom in the user's cache directory, so a restart
+ * (and every later daemon of this user) skips FFTW_MEASURE's planning;
+ * "none" or "" = no cache. The directory itself is made by main. */
+static void resolve_wisdom_path(struct daemon_config *dc)
+{
+    if (strcmp(dc->wisdom_file, "none") == 0) {
+        dc->wisdom_file[0] = '\0';
+        return;
+    }
+    if (strcmp(dc->wisdom_file, "auto") != 0)
+        return;
+    const char *xdg = getenv("XDG_CACHE_HOME"), *home = getenv("HOME");
+    if (xdg && *xdg)
+        snprintf(dc->wisdom_file, sizeof dc->wisdom_file, "%s/oceand/fftw-wisdom", xdg);
+    else if (home && *home)
+        snprintf(dc->wisdom_file, sizeof dc->wisdom_file, "%s/.cache/oceand/fftw-wisdom", home);
+    else
+        dc->wisdom_file[0] = '\0';
+}
+
 int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_params *p,
                 struct config_result *res, char *err, size_t errlen)
 {
@@ -362,6 +384,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         snprintf(err, errlen, "--tls-cert and --tls-key go together (one of them is missing)");
         return -1;
     }
+    resolve_wisdom_path(dc);
     char verr[200];
     if (params_validate(p, verr, sizeof verr) != 0) {
         snprintf(err, errlen, "parameters: %s", verr);

@@ -1,10 +1,12 @@
 /* main.c — oceand: read the configuration, start the simulation thread,
  * serve HTTP + WebSocket on this thread until SIGINT/SIGTERM. */
+#include <errno.h>
 #include <fftw3.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "config.h"
@@ -24,6 +26,26 @@ static void on_signal(int sig)
     /* Safety net: if shutdown ever hangs (say, inside lws), SIGALRM's default
      * action ends the process after 3 s instead of leaving it running. */
     alarm(3);
+}
+
+/* mkdir -p of the folder that will hold path. */
+static int ensure_parent_dir(const char *path)
+{
+    char dir[512];
+    snprintf(dir, sizeof dir, "%s", path);
+    char *slash = strrchr(dir, '/');
+    if (!slash || slash == dir)
+        return 0;
+    *slash = '\0';
+    for (char *p = dir + 1; *p; p++) {
+        if (*p != '/')
+            continue;
+        *p = '\0';
+        if (mkdir(dir, 0755) != 0 && errno != EEXIST)
+            return -1;
+        *p = '/';
+    }
+    return mkdir(dir, 0755) != 0 && errno != EEXIST ? -1 : 0;
 }
 
 int main(int argc, char **argv)
@@ -48,6 +70,10 @@ int main(int argc, char **argv)
     /* The planner thread creates FFTW plans while the tick thread executes
      * and may free others: make the FFTW planner thread-safe. */
     fftwf_make_planner_thread_safe();
+    if (dc.wisdom_file[0] && ensure_parent_dir(dc.wisdom_file) != 0) {
+        LOGW("no FFTW wisdom cache: cannot create the folder of %s: %s", dc.wisdom_file, strerror(errno));
+        dc.wisdom_file[0] = '\0';
+    }
 
     struct net *net = net_create(&dc, &params, res.params_version, err, sizeof err);
     if (!net) {

@@ -2,12 +2,18 @@
 //   node proto/js/bench_decode.mjs [DIR]   (DIR = frames written by `bench_codec --frames DIR`)
 // dec_MBs = decoded float32 bytes per second of wall time (median of repetitions);
 // dec_MBs_cpu = the same per second of process CPU time (mean), steadier on a shared machine.
-// Codec 2 (zstd) frames are measured only when fzstd is installed in web/node_modules.
+// Codec 1 frames are measured with node's zlib and, when fflate is installed in
+// web/node_modules, the way the browser client decodes: fflate's inflateSync through
+// setInflateRaw() for tiles below 128x128 samples, DecompressionStream for larger ones
+// ('fflate+streams'). Codec 2 (zstd) frames are measured only when fzstd is installed there.
+// Last, `codec_js_decode_frame` lines: the web client's default subscription (height, dx, dz
+// at 1 cm, 64×64 tiles) joined into one frame per N, decoded with each inflater, including
+// the no-dependency browser fallback (one DecompressionStream per tile).
 import { readFileSync, readdirSync, existsSync } from 'node:fs';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { createRequire } from 'node:module';
-import { decodeFrame, setZstdDecompressor } from './oc_decode.js';
+import { decodeFrame, setZstdDecompressor, setInflateRaw } from './oc_decode.js';
 
 const root = join(dirname(fileURLToPath(import.meta.url)), '../..');
 const dir = process.argv[2] || join(root, 'build/bench_frames');
@@ -17,34 +23,76 @@ try {
   setZstdDecompressor(createRequire(fzstdFrom)('fzstd').decompress);
   zstd = true;
 } catch { /* codec 2 frames skipped */ }
+let fflateInflate = null;
+try {
+  const { inflateSync } = createRequire(fzstdFrom)('fflate');
+  fflateInflate = (src, out) => inflateSync(src, { out });
+} catch { /* fflate runs skipped */ }
+// The codec-1 inflaters: decodeFrame options + setInflateRaw() argument for each.
+const inflaters = [
+  { name: 'node zlib', opts: {}, fn: null },
+  ...(fflateInflate ? [{ name: 'fflate+streams', opts: { useNodeZlib: false }, fn: fflateInflate }] : []),
+];
+
+// Median wall ms and mean CPU ms per decode of buf.
+async function timeDecode(buf, opts, reps) {
+  await decodeFrame(buf, opts); // warm-up
+  const times = [];
+  const cpu0 = process.cpuUsage();
+  for (let r = 0; r < reps; r++) {
+    const t0 = performance.now();
+    await decodeFrame(buf, opts);
+    times.push(performance.now() - t0);
+  }
+  const cpu = process.cpuUsage(cpu0);
+  times.sort((x, y) => x - y);
+  return { ms: times[times.length >> 1], cpuMs: (cpu.user + cpu.system) / 1e3 / reps };
+}
 
 if (!existsSync(dir)) {
   console.error(`bench_decode: no frames in ${dir} (run bench_codec --frames ${dir})`);
   process.exit(1);
 }
-for (const f of readdirSync(dir).filter((n) => n.endsWith('.bin')).sort()) {
+const files = readdirSync(dir).filter((n) => n.endsWith('.bin')).sort();
+for (const f of files) {
   const [, n, field, bound, codec, tile] = f.match(/^N(\d+)_(\w+?)_([\d.e-]+)_c(\d)_t(\d+)\.bin$/) || [];
   if (!n || (codec === '2' && !zstd)) continue;
   const b = readFileSync(join(dir, f));
   const buf = b.buffer.slice(b.byteOffset, b.byteOffset + b.byteLength);
   let samples = 0;
   for (const t of (await decodeFrame(buf)).tiles) samples += t.samples.length;
-  const times = [];
   const reps = Number(n) >= 512 ? 25 : 60;
-  const cpu0 = process.cpuUsage();
-  for (let r = 0; r < reps; r++) {
-    const t0 = performance.now();
-    await decodeFrame(buf);
-    times.push(performance.now() - t0);
+  for (const inf of codec === '1' ? inflaters : [{ name: 'fzstd', opts: {}, fn: null }]) {
+    setInflateRaw(inf.fn);
+    const { ms, cpuMs } = await timeDecode(buf, inf.opts, reps);
+    console.log(JSON.stringify({
+      bench: 'codec_js_decode', N: Number(n), field, bound: Number(bound), codec: Number(codec), tile: Number(tile),
+      entropy: codec === '1' ? `deflate-raw (${inf.name})` : 'zstd (fzstd)',
+      bytes: b.length, dec_MBs: Math.round((samples * 4) / 1e3 / ms), ms: Number(ms.toFixed(3)),
+      dec_MBs_cpu: Math.round((samples * 4) / 1e3 / cpuMs),
+    }));
   }
-  const cpu = process.cpuUsage(cpu0);
-  const cpuMs = (cpu.user + cpu.system) / 1e3 / reps; // mean process CPU time per frame
-  times.sort((x, y) => x - y);
-  const ms = times[times.length >> 1];
-  console.log(JSON.stringify({
-    bench: 'codec_js_decode', N: Number(n), field, bound: Number(bound), codec: Number(codec), tile: Number(tile),
-    entropy: codec === '1' ? 'deflate-raw (node zlib)' : 'zstd (fzstd)',
-    bytes: b.length, dec_MBs: Math.round((samples * 4) / 1e3 / ms), ms: Number(ms.toFixed(3)),
-    dec_MBs_cpu: Math.round((samples * 4) / 1e3 / cpuMs),
-  }));
 }
+
+// One frame holding several single-field frames' tiles (same n, tile_size; header of the first).
+function joinFrames(bufs) {
+  const head = bufs[0].subarray(0, bufs[0].readUInt16LE(6));
+  const out = Buffer.concat([head, ...bufs.map((b) => b.subarray(b.readUInt16LE(6)))]);
+  out.writeUInt16LE(bufs.reduce((c, b) => c + b.readUInt16LE(36), 0), 36);
+  return out.buffer.slice(out.byteOffset, out.byteOffset + out.length);
+}
+for (const n of [256, 512]) {
+  const names = ['height', 'dx', 'dz'].map((fld) => `N${n}_${fld}_0.01_c1_t64.bin`);
+  if (!names.every((f) => files.includes(f))) continue;
+  const buf = joinFrames(names.map((f) => readFileSync(join(dir, f))));
+  const stream = { name: 'DecompressionStream', opts: { useNodeZlib: false }, fn: null };
+  for (const inf of [...inflaters, stream]) {
+    setInflateRaw(inf.fn);
+    const { ms, cpuMs } = await timeDecode(buf, inf.opts, n >= 512 ? 15 : 40);
+    console.log(JSON.stringify({
+      bench: 'codec_js_decode_frame', N: n, fields: 'height,dx,dz', bound: 0.01, tile: 64, codec: 1,
+      inflate: inf.name, bytes: buf.byteLength, ms: Number(ms.toFixed(2)), cpu_ms: Number(cpuMs.toFixed(2)),
+    }));
+  }
+}
+setInflateRaw(null);

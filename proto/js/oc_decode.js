@@ -1,8 +1,12 @@
 // oc_decode.js — decoder for oceand protocol v1 binary frames (proto/PROTOCOL.md).
-// ES module for browsers and node >= 20, no dependencies: codec 1 (the
-// default) inflates raw DEFLATE with the platform: node's zlib when running
-// under node (process.getBuiltinModule, no import, so bundlers leave it
-// alone), else DecompressionStream('deflate-raw').
+// ES module for browsers and node >= 20, no imports (bundlers and the in-browser
+// test inline it as is). Codec 1 (the default) is raw DEFLATE, inflated by:
+//   - node's zlib when running under node (process.getBuiltinModule, no import);
+//   - else DecompressionStream('deflate-raw'), all tiles of a frame concurrently;
+//   - and, when a synchronous inflater is installed with setInflateRaw() (e.g.
+//     fflate's inflateSync, as the web client's worker does), that one for tiles
+//     below 128x128 samples, where a stream's set-up cost dominates
+//     (STREAM_MIN_SAMPLES, measured).
 // Codec 2 (zstd) is optional: call setZstdDecompressor(fzstd.decompress) to
 // enable it. Every length is checked before it is read; bad input throws an
 // Error whose `code` is 'truncated' | 'magic' | 'version' | 'corrupt' |
@@ -24,6 +28,18 @@ const nodeZlib = globalThis.process?.getBuiltinModule?.('node:zlib') ?? null;
 let zstdDecompress = null;
 /** Enable codec 2: fn(Uint8Array compressed, Uint8Array out) -> Uint8Array (e.g. fzstd's decompress). */
 export function setZstdDecompressor(fn) { zstdDecompress = fn; }
+
+let inflateRawSync = null;
+/**
+ * Install a synchronous raw-DEFLATE inflater for codec 1 (null removes it):
+ * fn(Uint8Array compressed, Uint8Array out) -> Uint8Array of the inflated bytes (a view of
+ * `out` or a new array), throwing on a bad stream. `out` has room for one byte more than the
+ * expected size, so a stream that runs long shows up as a longer result. With fflate:
+ * setInflateRaw((src, out) => inflateSync(src, { out })).
+ * Used for tiles below STREAM_MIN_SAMPLES (all tiles where DecompressionStream is missing);
+ * under node only with options.useNodeZlib = false.
+ */
+export function setInflateRaw(fn) { inflateRawSync = fn; }
 
 /** Error thrown for bad input; `code` says which kind. */
 export class FrameError extends Error {
@@ -103,6 +119,7 @@ function readTileHeader(bytes, dv, pos, fh) {
   return t;
 }
 
+// Synchronous inflaters: node's zlib, or the one installed with setInflateRaw().
 function inflateRawNode(src, n) {
   let res;
   try {
@@ -115,8 +132,31 @@ function inflateRawNode(src, n) {
   return new Uint8Array(res.buffer.buffer, res.buffer.byteOffset, n);
 }
 
-async function inflateRaw(src, n, useNodeZlib) {
-  if (nodeZlib && useNodeZlib) return inflateRawNode(src, n);
+let inflateOut = new Uint8Array(4097); // reused: its bytes are consumed by reconstruct() before the next tile
+function inflateRawInstalled(src, n) {
+  if (inflateOut.length < n + 1) inflateOut = new Uint8Array(n + 1);
+  let res;
+  try {
+    res = inflateRawSync(src, inflateOut.subarray(0, n + 1));
+  } catch (e) {
+    throw fail('corrupt', `deflate: ${e && e.message}`);
+  }
+  if (!(res instanceof Uint8Array) || res.length !== n) throw fail('corrupt', `deflate stream gave ${res && res.length} bytes, expected ${n}`);
+  return res;
+}
+
+// Which inflater for a codec 1 tile when both a setInflateRaw() one and DecompressionStream
+// exist: a stream costs ~0.1 ms to set up but then inflates natively, ~1.6x faster than
+// fflate, so it wins on large tiles. Measured in headless Chromium on the 2-core dev machine
+// (notes/readme-web.md), inflating one N=256 height+dx+dz frame: 48 tiles of 64x64 samples,
+// fflate 2.5 ms, streams 4.7 ms; 12 tiles of 128x128, fflate 2.4 ms, streams 1.6 ms.
+const STREAM_MIN_SAMPLES = 128 * 128;
+const haveStreams = typeof DecompressionStream === 'function';
+const preferStream = (t) => t.codec === CODEC_QUANT_LORENZO && t.width * t.height >= STREAM_MIN_SAMPLES;
+
+// One DecompressionStream per tile (async; decodeFrame runs them concurrently).
+async function inflateRawStream(src, n) {
+  if (!haveStreams) throw fail('unsupported', 'codec 1 needs DecompressionStream or setInflateRaw()');
   const ds = new DecompressionStream('deflate-raw');
   const writer = ds.writable.getWriter();
   const written = writer.write(src).then(() => writer.close()).catch(() => {}); // errors surface on the reader
@@ -155,104 +195,164 @@ function unzstd(src, n) {
   return out;
 }
 
-const unzig = (z) => (z >>> 1) ^ -(z & 1);
-
 // Streams A + B -> zigzag residuals -> prediction inverse (int32 wrap-around)
 // -> float32(offset + q*scale). Mirrors proto/c/oc_transform.c exactly.
-let scratch = new Int32Array(4096); // reused: reconstruct() never awaits, so tiles cannot interleave here
+// Scratch arrays are reused: reconstruct() never awaits, so tiles cannot interleave here.
+let scratch = new Int32Array(4096);   // the codes q
+let zzScratch = new Int32Array(4096); // zigzag values when the tile has escapes
 
+// Tiles with escapes: stream A + stream B -> one zigzag value per sample (u32 bit pattern).
+function unpackEscapes(zz, packed, count, escCount, escWidth) {
+  // One byte per sample; 255 = take the next escaped value from stream B (byte planes).
+  let e = 0;
+  for (let k = 0; k < count; k++) {
+    let z = packed[k];
+    if (z === 255) {
+      if (e === escCount) throw fail('corrupt', 'more escapes than esc_count');
+      let x = 0;
+      for (let p = 0; p < escWidth; p++) x += packed[count + p * escCount + e] * 2 ** (8 * p);
+      if (x > 0xffffffff - 255) throw fail('corrupt', 'escaped residual out of range');
+      z = (x + 255) | 0;
+      e++;
+    }
+    zz[k] = z;
+  }
+  if (e !== escCount) throw fail('corrupt', 'fewer escapes than esc_count');
+}
+
+// The interior prediction when its sum is outside int32 (never for real data): the same sum
+// in float64 (exact, |s| < 2^41), floor(s / 64), clamped to int32.
+function predictWide(c, W, N, NW, NE, WW, NN) {
+  const s = c[0] * W + c[1] * N + c[2] * NW + c[3] * NE + c[4] * WW + c[5] * NN + 32;
+  return Math.max(-2147483648, Math.min(2147483647, Math.floor(s / 64)));
+}
+
+// One pass over the tile, row by row: zigzag-decode the residual, add the prediction, store
+// the code (for the rows below) and its float. The last decoded neighbours stay in locals
+// (wv = W, ww = WW, n = N, nw = NW) rather than being re-read. Every sum is exact (|x| < 2^53)
+// before `| 0` wraps it to int32, as the C decoder's uint32 arithmetic does.
+// z = src[k] is a zigzag value (a stream A byte, or from unpackEscapes); its residual is
+// (z >>> 1) ^ -(z & 1).
 function reconstruct(t, packed, escCount, escWidth, coef) {
   const w = t.width, h = t.height, count = w * h;
   if (scratch.length < count) scratch = new Int32Array(count);
   const q = scratch;
-  // Residuals: one byte each, 255 = take the next escaped value from stream B.
-  if (escCount === 0) {
-    for (let k = 0; k < count; k++) { const z = packed[k]; q[k] = (z >>> 1) ^ -(z & 1); }
-  } else {
-    let e = 0;
-    for (let k = 0; k < count; k++) {
-      let z = packed[k];
-      if (z === 255) {
-        if (e === escCount) throw fail('corrupt', 'more escapes than esc_count');
-        let x = 0;
-        for (let p = 0; p < escWidth; p++) x += packed[count + p * escCount + e] * 2 ** (8 * p);
-        if (x > 0xffffffff - 255) throw fail('corrupt', 'escaped residual out of range');
-        z = (x + 255) | 0;
-        e++;
-      }
-      q[k] = (z >>> 1) ^ -(z & 1);
-    }
-    if (e !== escCount) throw fail('corrupt', 'fewer escapes than esc_count');
-  }
-  // q holds residuals; integrate in place (row 0 from the left, column 0 from above, Lorenzo at the
-  // borders, the 6-coefficient predictor inside).
-  for (let i = 1; i < w; i++) q[i] = (q[i] + q[i - 1]) | 0;
-  const cW = coef[0], cN = coef[1], cNW = coef[2], cNE = coef[3], cWW = coef[4], cNN = coef[5];
-  for (let j = 1; j < h; j++) {
-    const r = j * w, u = r - w, u2 = u - w;
-    q[r] = (q[r] + q[u]) | 0;
-    if (j < 2 || w < 4) {
-      for (let i = 1; i < w; i++) q[r + i] = (q[r + i] + q[r + i - 1] + q[u + i] - q[u + i - 1]) | 0;
-      continue;
-    }
-    let ww = q[r];
-    let wv = (q[r + 1] + ww + q[u + 1] - q[u]) | 0;
-    q[r + 1] = wv;
-    for (let i = 2; i <= w - 2; i++) {
-      // Exact: |s| < 2^41, so s is an exact double. In int32 range (always, for real data) the
-      // floor division is an arithmetic shift; outside it, floor of the exact quotient, clamped.
-      const s = cN * q[u + i] + cNW * q[u + i - 1] + cNE * q[u + i + 1] + cNN * q[u2 + i] + cW * wv + cWW * ww + 32;
-      let p;
-      if (s >= -2147483648 && s <= 2147483647) p = s >> 6;
-      else p = Math.max(-2147483648, Math.min(2147483647, Math.floor(s * 0.015625)));
-      ww = wv;
-      wv = (q[r + i] + p) | 0;
-      q[r + i] = wv;
-    }
-    q[r + w - 1] = (q[r + w - 1] + wv + q[u + w - 1] - q[u + w - 2]) | 0;
+  let src = packed; // no escapes (the usual case): read stream A directly
+  if (escCount !== 0) {
+    if (zzScratch.length < count) zzScratch = new Int32Array(count);
+    src = zzScratch;
+    unpackEscapes(src, packed, count, escCount, escWidth);
   }
   const out = new Float32Array(count); // the store rounds to float32, as the C cast does
   const off = t.offset, sc = t.scale;
-  for (let k = 0; k < count; k++) out[k] = off + q[k] * sc;
+  let z = src[0];
+  let wv = (z >>> 1) ^ -(z & 1); // (0, 0): P = 0
+  q[0] = wv; out[0] = off + wv * sc;
+  for (let i = 1; i < w; i++) { // row 0: P = W
+    z = src[i];
+    wv = (((z >>> 1) ^ -(z & 1)) + wv) | 0;
+    q[i] = wv; out[i] = off + wv * sc;
+  }
+  const cW = coef[0], cN = coef[1], cNW = coef[2], cNE = coef[3], cWW = coef[4], cNN = coef[5];
+  const hasInterior = w >= 4 && h >= 3;
+  for (let j = 1; j < h; j++) {
+    const r = j * w, u = r - w;
+    z = src[r];
+    wv = (((z >>> 1) ^ -(z & 1)) + q[u]) | 0; // column 0: P = N
+    q[r] = wv; out[r] = off + wv * sc;
+    let nw = q[u];
+    if (j < 2 || !hasInterior) { // Lorenzo across the row
+      for (let i = 1; i < w; i++) {
+        const n = q[u + i];
+        z = src[r + i];
+        wv = (((z >>> 1) ^ -(z & 1)) + wv + n - nw) | 0;
+        q[r + i] = wv; out[r + i] = off + wv * sc;
+        nw = n;
+      }
+      continue;
+    }
+    const u2 = u - w;
+    let ww = wv, n = q[u + 1];
+    z = src[r + 1];
+    wv = (((z >>> 1) ^ -(z & 1)) + wv + n - nw) | 0; // i = 1: Lorenzo
+    q[r + 1] = wv; out[r + 1] = off + wv * sc;
+    nw = n; n = q[u + 2];
+    for (let i = 2; i < w - 1; i++) { // interior: the 6-neighbour predictor
+      const ne = q[u + i + 1], nn = q[u2 + i];
+      z = src[r + i];
+      const res = (z >>> 1) ^ -(z & 1);
+      // 32 first (so no product's -0 reaches the JIT as a possible result: it keeps int32
+      // arithmetic) and the W term last (the only one that depends on the previous sample).
+      // s is only compared and shifted, so it stays an int32; the rare sum outside int32 is
+      // recomputed in float64.
+      const s = (32 + cN * n + cNW * nw + cNE * ne + cWW * ww + cNN * nn) + cW * wv;
+      const p = s >= -2147483648 && s <= 2147483647 ? s >> 6 : predictWide(coef, wv, n, nw, ne, ww, nn);
+      ww = wv;
+      wv = (res + p) | 0;
+      q[r + i] = wv; out[r + i] = off + wv * sc;
+      nw = n; n = ne;
+    }
+    z = src[r + w - 1];
+    wv = (((z >>> 1) ^ -(z & 1)) + wv + n - nw) | 0; // i = w - 1: Lorenzo
+    q[r + w - 1] = wv; out[r + w - 1] = off + wv * sc;
+  }
   return out;
 }
 
-async function decodeTile(t, bytes, start, useNodeZlib) {
+function decodeRaw(t, bytes, start) {
   const count = t.width * t.height;
-  if (t.codec === CODEC_RAW_F32) {
-    if (t.payloadLen !== count * 4) throw fail('corrupt', `raw payload ${t.payloadLen} bytes for ${count} samples`);
-    const out = new Float32Array(count);
-    new Uint8Array(out.buffer).set(bytes.subarray(start, start + t.payloadLen));
-    if (new Uint8Array(new Uint16Array([1]).buffer)[0] !== 1) { // big-endian host: decode explicitly
-      const dv = new DataView(bytes.buffer, bytes.byteOffset + start, t.payloadLen);
-      for (let k = 0; k < count; k++) out[k] = dv.getFloat32(4 * k, true);
-    }
-    return out;
+  if (t.payloadLen !== count * 4) throw fail('corrupt', `raw payload ${t.payloadLen} bytes for ${count} samples`);
+  const out = new Float32Array(count);
+  new Uint8Array(out.buffer).set(bytes.subarray(start, start + t.payloadLen));
+  if (new Uint8Array(new Uint16Array([1]).buffer)[0] !== 1) { // big-endian host: decode explicitly
+    const dv = new DataView(bytes.buffer, bytes.byteOffset + start, t.payloadLen);
+    for (let k = 0; k < count; k++) out[k] = dv.getFloat32(4 * k, true);
   }
+  return out;
+}
+
+// The 16-byte prefix of a lossy payload (§5.1), validated; src = the entropy-coded stream.
+function readLossyPrefix(t, bytes, start) {
+  const count = t.width * t.height;
   if (t.payloadLen < LOSSY_PREFIX) throw fail('corrupt', 'lossy payload shorter than its prefix');
   const dv = new DataView(bytes.buffer, bytes.byteOffset + start, LOSSY_PREFIX);
   const escWidth = bytes[start];
   const escCount = dv.getUint32(4, true);
   if (escWidth > 4 || bytes[start + 1] || dv.getUint16(2, true) || dv.getUint16(14, true)) throw fail('corrupt', 'lossy prefix');
   if (escCount > count || (escCount === 0) !== (escWidth === 0)) throw fail('corrupt', 'esc_count/esc_width');
-  const coef = [0, 1, 2, 3, 4, 5].map((i) => dv.getInt8(8 + i));
+  const coef = new Int8Array(6);
+  for (let i = 0; i < 6; i++) coef[i] = dv.getInt8(8 + i);
   const src = bytes.subarray(start + LOSSY_PREFIX, start + t.payloadLen);
-  const n = count + escCount * escWidth;
-  const packed = t.codec === CODEC_QUANT_LORENZO ? await inflateRaw(src, n, useNodeZlib) : unzstd(src, n);
-  return reconstruct(t, packed, escCount, escWidth, coef);
+  return { escWidth, escCount, coef, src, n: count + escCount * escWidth };
+}
+
+// One tile, synchronously; inflate = a synchronous raw-DEFLATE inflater.
+function decodeTileSync(t, bytes, start, inflate) {
+  if (t.codec === CODEC_RAW_F32) return decodeRaw(t, bytes, start);
+  const l = readLossyPrefix(t, bytes, start);
+  const packed = t.codec === CODEC_QUANT_LORENZO ? inflate(l.src, l.n) : unzstd(l.src, l.n);
+  return reconstruct(t, packed, l.escCount, l.escWidth, l.coef);
+}
+
+// One tile with DecompressionStream for codec 1 (the other codecs are synchronous).
+async function decodeTileStream(t, bytes, start) {
+  if (t.codec !== CODEC_QUANT_LORENZO) return decodeTileSync(t, bytes, start, null);
+  const l = readLossyPrefix(t, bytes, start);
+  return reconstruct(t, await inflateRawStream(l.src, l.n), l.escCount, l.escWidth, l.coef);
 }
 
 /**
  * Decode a whole binary frame: {header, tiles:[{field, fieldName, lod, codec, tileX, tileZ, width, height,
- * bound, offset, scale, samples: Float32Array}]}. options.useNodeZlib = false forces DecompressionStream
- * under node too (the tests use it to cover the browser path).
+ * bound, offset, scale, samples: Float32Array}]}. options.useNodeZlib = false skips node's zlib under node
+ * (then DecompressionStream and any setInflateRaw() inflater are used, as in a browser: the tests cover
+ * the browser paths so).
  */
 export async function decodeFrame(arrayBuffer, options = {}) {
   const useNodeZlib = options.useNodeZlib !== false;
   const bytes = asBytes(arrayBuffer);
   const header = readFrameHeader(bytes);
   const dv = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
-  // Validate every tile header and length first, then decode the payloads concurrently.
+  // Validate every tile header and length first, then decode the payloads.
   const metas = [];
   let pos = header.headerSize;
   for (let i = 0; i < header.tileCount; i++) {
@@ -262,14 +362,29 @@ export async function decodeFrame(arrayBuffer, options = {}) {
     pos += t.payloadLen;
   }
   if (pos !== bytes.length) throw fail('corrupt', `${bytes.length - pos} bytes after the last tile`);
-  const decoded = await Promise.allSettled(metas.map(({ t, start }) => decodeTile(t, bytes, start, useNodeZlib)));
-  const tiles = metas.map(({ t }, i) => {
-    if (decoded[i].status === 'rejected') throw decoded[i].reason;
-    return {
-      field: t.field, fieldName: FIELD_NAMES[t.field], lod: t.lod, codec: t.codec,
-      tileX: t.tileX, tileZ: t.tileZ, width: t.width, height: t.height,
-      bound: t.bound, offset: t.offset, scale: t.scale, samples: decoded[i].value,
-    };
-  });
+  let samples;
+  if (nodeZlib && useNodeZlib) {
+    // Synchronous: tile after tile, the first bad payload throws.
+    samples = metas.map(({ t, start }) => decodeTileSync(t, bytes, start, inflateRawNode));
+  } else if (inflateRawSync && !(haveStreams && metas.some(({ t }) => preferStream(t)))) {
+    samples = metas.map(({ t, start }) => decodeTileSync(t, bytes, start, inflateRawInstalled));
+  } else {
+    // Some tiles through DecompressionStream, all in flight at once; the others synchronously.
+    // The first bad payload in frame order wins.
+    const decoded = await Promise.allSettled(metas.map(({ t, start }) => {
+      if (t.codec === CODEC_QUANT_LORENZO && (!inflateRawSync || preferStream(t))) return decodeTileStream(t, bytes, start);
+      try {
+        return decodeTileSync(t, bytes, start, inflateRawInstalled);
+      } catch (e) {
+        return Promise.reject(e);
+      }
+    }));
+    samples = decoded.map((d) => { if (d.status === 'rejected') throw d.reason; return d.value; });
+  }
+  const tiles = metas.map(({ t }, i) => ({
+    field: t.field, fieldName: FIELD_NAMES[t.field], lod: t.lod, codec: t.codec,
+    tileX: t.tileX, tileZ: t.tileZ, width: t.width, height: t.height,
+    bound: t.bound, offset: t.offset, scale: t.scale, samples: samples[i],
+  }));
   return { header, tiles };
 }

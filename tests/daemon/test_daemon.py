@@ -66,7 +66,9 @@ class Daemon:
         self.log_path = os.path.join(self.tmp, "oceand.log")
         args = [ARGS.oceand, "--port", str(self.port), "--state-file", self.state_file,
                 "--web-root", os.path.join(self.tmp, "web"), "--resolution", str(BASE_N),
-                "--tick-rate", str(int(TICK))] + list(extra)
+                "--tick-rate", str(int(TICK)),
+                # ESTIMATE plans, like frame_check's reference: bit-exact comparisons
+                "--plan-rigor", "0", "--wisdom-file", "none"] + list(extra)
         self.log = open(self.log_path, "ab")
         self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log)
         scheme = "s" if tls_ctx else ""

@@ -4,7 +4,12 @@
 //   slope RG   float32: (slope_x, slope_z)          — only when slopes are streamed
 // Output buffers are transferred to the main thread, which hands them back for
 // reuse (no 4 MB allocation per frame at N=512).
-import { decodeFrame } from '../../proto/js/oc_decode.js';
+import { inflateSync } from 'fflate';
+import { decodeFrame, setInflateRaw } from '../../proto/js/oc_decode.js';
+
+// Codec 1 (raw DEFLATE): fflate's synchronous inflate for small tiles, where one async
+// DecompressionStream per tile costs more than the inflating (the decoder picks per tile).
+setInflateRaw((src, out) => inflateSync(src, { out }));
 
 const CHANNEL = { dx: [0, 4], height: [1, 4], dz: [2, 4], jacobian: [3, 4], slope_x: [0, 2], slope_z: [1, 2] };
 const pool = { 4: [], 2: [] }; // recycled ArrayBuffers by channel count

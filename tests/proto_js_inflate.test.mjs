@@ -1,0 +1,128 @@
+// oc_decode_inflate.test.mjs — the decoder with an installed synchronous inflater
+// (setInflateRaw + fflate's inflateSync, as web/src/worker.js wires it in the browser) must
+// reproduce every deflate vector bit for bit and reject every bad input with the listed code,
+// like the node-zlib and DecompressionStream paths in tests/proto_js.test.mjs.
+//   node --test proto/js/oc_decode_inflate.test.mjs      (skipped when web/node_modules lacks fflate)
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { readFileSync, existsSync } from 'node:fs';
+import { fileURLToPath } from 'node:url';
+import { dirname, join } from 'node:path';
+import { createRequire } from 'node:module';
+import { decodeFrame, setInflateRaw } from '../proto/js/oc_decode.js';
+
+const root = join(dirname(fileURLToPath(import.meta.url)), '..');
+const vdir = join(root, 'proto/vectors');
+const manifest = JSON.parse(readFileSync(join(vdir, 'manifest.json'), 'utf8'));
+const load = (name) => {
+  const b = readFileSync(join(vdir, name));
+  return b.buffer.slice(b.byteOffset, b.byteOffset + b.byteLength);
+};
+const haveFflate = existsSync(join(root, 'web/node_modules/fflate'));
+const skip = !haveFflate && 'fflate not installed in web/node_modules';
+if (haveFflate) {
+  const { inflateSync } = createRequire(join(root, 'web/package.json'))('fflate');
+  setInflateRaw((src, out) => inflateSync(src, { out }));
+}
+const opts = { useNodeZlib: false }; // under node, zlib would win otherwise
+
+for (const v of manifest.vectors.filter((x) => x.tiles.every((t) => t.codec !== 2))) {
+  test(`vector ${v.name} (setInflateRaw + fflate)`, { skip }, async () => {
+    const frame = await decodeFrame(load(v.file), opts);
+    const expected = new Uint32Array(load(v.expected));
+    assert.equal(frame.tiles.length, v.tiles.length);
+    frame.tiles.forEach((t, i) => {
+      const off = v.tiles[i].sampleOffset;
+      assert.deepEqual(new Uint32Array(t.samples.buffer, t.samples.byteOffset, t.samples.length),
+        expected.subarray(off, off + t.samples.length), `tile ${i}: float32 bits`);
+    });
+  });
+}
+
+for (const b of manifest.bad) {
+  test(`bad input ${b.name} -> ${b.error} (setInflateRaw + fflate)`, { skip }, async () => {
+    await assert.rejects(decodeFrame(load(b.file), opts), (e) => {
+      assert.equal(e.code, b.error, e.message);
+      return true;
+    });
+  });
+}
+
+test('deflate streams that end early or run long are corrupt (setInflateRaw + fflate)', { skip }, async () => {
+  const v = manifest.vectors.find((x) => x.name === 'v03_height_1mm');
+  const raw = new Uint8Array(load(v.file));
+  const dv = new DataView(raw.buffer);
+  const { deflateRawSync } = await import('node:zlib');
+  // Re-encode tile 0's stream with one byte more or less of content, keeping the frame consistent.
+  const start = 48 + 40, len = dv.getUint32(48 + 32, true);
+  const { inflateRawSync } = await import('node:zlib');
+  const content = inflateRawSync(raw.subarray(start + 16, start + len));
+  for (const c of [content.subarray(0, content.length - 1), Buffer.concat([content, Buffer.from([0])])]) {
+    const stream = deflateRawSync(c);
+    const frame = new Uint8Array(raw.length - (len - 16) + stream.length);
+    frame.set(raw.subarray(0, start + 16));
+    frame.set(stream, start + 16);
+    frame.set(raw.subarray(start + len), start + 16 + stream.length);
+    new DataView(frame.buffer).setUint32(48 + 32, 16 + stream.length, true);
+    await assert.rejects(decodeFrame(frame.buffer, opts), (e) => e.code === 'corrupt');
+    await assert.rejects(decodeFrame(frame.buffer), (e) => e.code === 'corrupt'); // node zlib agrees
+  }
+});
+
+// A frame with a 128x128 tile (inflated by DecompressionStream when both exist) and an 8x8 one
+// (by the installed inflater), built here: both must equal node zlib's decode, and a bad stream in
+// either must be reported.
+function mixedFrame(deflateRawSync, badTile = -1) {
+  let seed = 99;
+  const rnd = () => (seed = (seed * 1103515245 + 12345) >>> 0) / 2 ** 32;
+  const tiles = [[128, 0], [8, 1]].map(([side, tx], i) => {
+    const a = new Uint8Array(side * side);
+    for (let k = 0; k < a.length; k++) a[k] = Math.floor(rnd() * rnd() * 40);
+    let stream = deflateRawSync(a);
+    if (i === badTile) stream = stream.subarray(0, stream.length - 3);
+    const payload = Buffer.alloc(16 + stream.length);
+    Buffer.from([45, 30, -12, 8, -5, -2]).copy(payload, 8); // signed coefficients
+    payload.set(stream, 16);
+    const th = Buffer.alloc(40);
+    th[0] = 0; th[2] = 1; // height, codec 1
+    th.writeUInt16LE(tx, 4); th.writeUInt16LE(side, 8); th.writeUInt16LE(side, 10);
+    th.writeFloatLE(0.01, 12); th.writeDoubleLE(0.25, 16); th.writeDoubleLE(0.0199, 24);
+    th.writeUInt32LE(payload.length, 32);
+    return Buffer.concat([th, payload]);
+  });
+  // n = 256, tile_size 128; the 8x8 tile is tile (1, 0) at lod 4.
+  tiles[1][1] = 4;
+  const fh = Buffer.alloc(48);
+  fh.write('OCNF', 0, 'latin1'); fh.writeUInt16LE(1, 4); fh.writeUInt16LE(48, 6);
+  fh.writeUInt16LE(256, 28); fh.writeUInt16LE(128, 30); fh.writeFloatLE(256, 32); fh.writeUInt16LE(2, 36);
+  const b = Buffer.concat([fh, ...tiles]);
+  return b.buffer.slice(b.byteOffset, b.byteOffset + b.length);
+}
+
+test('large tiles via DecompressionStream, small ones via the installed inflater, same bits', { skip }, async () => {
+  const { deflateRawSync } = await import('node:zlib');
+  const buf = mixedFrame(deflateRawSync);
+  const want = await decodeFrame(buf); // node zlib
+  const got = await decodeFrame(buf, opts);
+  assert.deepEqual(got.tiles.map((t) => t.width), [128, 8]);
+  got.tiles.forEach((t, i) => assert.deepEqual(new Uint32Array(t.samples.buffer), new Uint32Array(want.tiles[i].samples.buffer)));
+  for (const bad of [0, 1]) await assert.rejects(decodeFrame(mixedFrame(deflateRawSync, bad), opts), (e) => e.code === 'corrupt');
+});
+
+test('random truncations and bit flips are rejected or decode (setInflateRaw + fflate)', { skip }, async () => {
+  const base = new Uint8Array(load(manifest.vectors.find((v) => v.name === 'v03_height_1mm').file));
+  let seed = 777;
+  const rnd = () => (seed = (seed * 1103515245 + 12345) >>> 0) / 2 ** 32;
+  const codes = new Set(['truncated', 'magic', 'version', 'corrupt', 'too_large']);
+  for (let it = 0; it < 400; it++) {
+    const cut = it % 2 === 0 ? Math.floor(rnd() * base.length) : base.length;
+    const m = base.slice(0, cut);
+    if (it % 2) for (let f = 0; f < 3; f++) m[Math.floor(rnd() * m.length)] ^= 1 << Math.floor(rnd() * 8);
+    try {
+      await decodeFrame(m.buffer, opts);
+      assert.ok(it % 2 === 1, 'a truncated frame decoded');
+    } catch (e) {
+      assert.ok(codes.has(e.code), `unexpected error ${e.code}: ${e.message}`);
+    }
+  }
+});
