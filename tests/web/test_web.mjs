@@ -98,8 +98,16 @@ try {
     assert(s.lastSeq !== null && s.lastSeq > 0, `lastSeq ${s.lastSeq}`);
     assert(s.stats.n >= 16, `N is ${s.stats.n}`);
     assert(s.stats.lastError === null, `error: ${JSON.stringify(s.stats.lastError)}`);
-    const hud = await a.locator('#hud').innerText();
-    assert(hud.includes(`N ${s.stats.n}`) && hud.includes('frames/s'), `HUD does not show the stream: "${hud}"`);
+    // The HUD refreshes on its own timer: wait for it to show the stream.
+    try {
+      await waitFor(a, 'HUD shows N', (n) => {
+        const t = document.querySelector('#hud')?.innerText || '';
+        return t.includes(`N ${n}`) && t.includes('frames/s');
+      }, s.stats.n, 15000);
+    } catch (e) {
+      const hud = await a.locator('#hud').innerText();
+      assert(false, `HUD does not show the stream: "${hud}"`);
+    }
     const ro = await a.evaluate(() => {
       try { window.oceand.framesReceived = -1; window.oceand.params.wind_speed = -1; } catch { /* frozen */ }
       return window.oceand.framesReceived !== -1 && window.oceand.params.wind_speed !== -1;
