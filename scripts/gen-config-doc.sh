@@ -9,9 +9,9 @@
 #   ... --daemon BIN                         add the daemon's own options, read
 #                                            from `BIN --help` (its option table)
 #
-# The doc is README.md when it contains the markers
+# The doc is README.md; everything between its markers
 #   <!-- config-reference -->  ...  <!-- /config-reference -->
-# otherwise notes/readme-ops.md. Everything between the markers is generated.
+# is generated.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mode=print doc= daemon=
@@ -56,10 +56,7 @@ want=$("$gen")
 if [ -n "$daemon" ]; then want+=$'\n'$(daemon_table); fi
 if [ "$mode" = print ]; then printf '%s\n' "$want"; exit 0; fi
 
-if [ -z "$doc" ]; then
-  doc=notes/readme-ops.md
-  grep -qF -- "$begin" README.md 2>/dev/null && doc=README.md
-fi
+[ -n "$doc" ] || doc=README.md
 if ! grep -qF -- "$begin" "$doc" || ! grep -qF -- "$end" "$doc"; then
   echo "gen-config-doc: $doc has no '$begin' ... '$end' markers" >&2
   exit 1

@@ -1,5 +1,5 @@
 /* control.c — parse/validate JSON control messages, build JSON replies.
- * See control.h; the wire contract is notes/control-spec.md. */
+ * See control.h; the wire contract is proto/PROTOCOL.md. */
 #include "control.h"
 
 #include <math.h>

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """bench_table.py — turn `make bench-codec` JSON lines (stdin) into the
-markdown tables of notes/readme-proto.md.   make bench-codec | python3 proto/tools/bench_table.py"""
+markdown tables of docs/codec.md.   make bench-codec | python3 proto/tools/bench_table.py"""
 import json
 import sys
 

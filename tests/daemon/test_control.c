@@ -126,7 +126,7 @@ static void test_subscribe(void)
     }
 }
 
-/* D1 (notes/hostile-findings.md): the whole message must be exactly one JSON
+/* D1 (docs/reliability.md): the whole message must be exactly one JSON
  * value, with no raw control bytes, no invalid \u escapes and no \u0000 (which
  * would truncate names: "set\u0000x" must not act as "set"). */
 static void test_strict_json(void)
