@@ -9,6 +9,8 @@
  * was too slow for. */
 #include "net.h"
 
+#include "clock.h"
+
 #include <libwebsockets.h>
 #include <math.h>
 #include <netinet/in.h>
@@ -94,20 +96,6 @@ struct net {
     struct lws_http_mount m_files, m_health, m_metrics;
     struct lws_protocols protocols[3];
 };
-
-static double mono_now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-static uint64_t unix_us(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
-    return (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
-}
 
 static struct net *net_of(struct lws *wsi) { return lws_context_user(lws_get_context(wsi)); }
 

@@ -1,6 +1,8 @@
 /* sim_thread.c — fixed-rate tick, parameter application, re-plan, encode, publish. */
 #include "sim_thread.h"
 
+#include "clock.h"
+
 #include <errno.h>
 #include <math.h>
 #include <signal.h>
@@ -133,20 +135,6 @@ void sim_demand(struct sim *s, int key, int delta) { atomic_fetch_add(&s->demand
 double sim_time_now(struct sim *s) { return atomic_load(&s->now_time); }
 
 /* ---- sim-thread internals ---- */
-
-static double mono_now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-static uint64_t unix_us(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
-    return (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
-}
 
 static void emit(struct sim *s, struct sim_event *e)
 {
