@@ -4,7 +4,7 @@
 #   make test-sim-asan          the same suite built with ASan+UBSan
 #   make test-sim-valgrind      a reduced run (OCEAN_TEST_QUICK=1) under valgrind
 #   make bench-step             step / FFTW / DFT timings, JSON lines
-# See notes/readme-sim.md.
+# See docs/simulation.md.
 
 SIM_SRCS      := server/params.c server/ocean.c server/ocean_spectrum.c server/ocean_step.c \
                  server/ocean_dft.c server/ocean_fftw.c

@@ -45,7 +45,7 @@ static const struct opt_def opt_table[] = {
     { "tls_cert", OPT_STR, O(tls_cert), 0, 0, "", "PEM certificate file: serve https/wss instead of http/ws "
       "on the same port (needs --tls-key)" },
     { "tls_key", OPT_STR, O(tls_key), 0, 0, "", "PEM private key file of --tls-cert" },
-    { "fft_threads", OPT_INT, O(fft_threads), 1, 64, "1", "FFTW threads" },
+    { "fft_threads", OPT_INT, O(fft_threads), 1, 64, "1", "worker threads for the simulation step (fill and FFTs)" },
     { "plan_rigor", OPT_INT, O(plan_rigor), 0, 1, "1", "1 = FFTW_MEASURE (faster steps; the first plan of "
       "each N takes a moment, then it is cached in --wisdom-file), 0 = FFTW_ESTIMATE" },
     { "wisdom_file", OPT_STR, O(wisdom_file), 0, 0, "auto", "FFTW wisdom cache: \"auto\" = "

@@ -7,6 +7,7 @@
  * (brute force); the physics in ocean_spectrum.c. */
 #include <math.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -74,48 +75,129 @@ double ocean_phase_time(const struct ocean *o, double t)
     return t;
 }
 
-/* ---- threads ------------------------------------------------------------ */
+/* ---- threads: a small persistent pool ------------------------------------ */
 
-struct rows_job {
-    void (*fn)(void *ctx, int r0, int r1, int worker);
-    void *ctx;
-    int r0, r1, worker;
+/* Workers sleep on a condition variable between jobs. A job is "open" while
+ * its caller is still handing out items; a worker joins it only while it is
+ * open, and the caller waits only for workers that joined. So a worker the
+ * shared machine has not scheduled yet costs nothing: the caller does its
+ * items and returns without waiting for it to wake up. */
+struct ocean_pool;
+struct pool_worker {
+    struct ocean_pool *pool;
+    int id;                    /* 1..threads-1; the caller is worker 0 */
 };
 
-static void *rows_thread(void *arg)
+struct ocean_pool {
+    pthread_mutex_t mu;
+    pthread_cond_t wake, done;
+    pthread_t tid[OCEAN_MAX_THREADS];
+    struct pool_worker worker[OCEAN_MAX_THREADS];
+    int started;               /* workers running (ids 1..started) */
+    int stop;
+    unsigned long gen;         /* job number, bumped per job */
+    int open, joined, limit;   /* job accepting workers; workers inside; max worker id + 1 */
+    void (*fn)(void *ctx, int i0, int i1, int worker);
+    void *ctx;
+    int items;
+    atomic_int next;           /* next item to hand out */
+};
+
+static void run_items(struct ocean_pool *pool, void (*fn)(void *, int, int, int), void *ctx, int items, int id)
 {
-    struct rows_job *j = arg;
-    j->fn(j->ctx, j->r0, j->r1, j->worker);
+    for (int i; (i = atomic_fetch_add_explicit(&pool->next, 1, memory_order_relaxed)) < items;)
+        fn(ctx, i, i + 1, id);
+}
+
+static void *pool_thread(void *arg)
+{
+    const struct pool_worker wa = *(const struct pool_worker *)arg;
+    struct ocean_pool *pool = wa.pool;
+    unsigned long seen = 0;
+    pthread_mutex_lock(&pool->mu);
+    for (;;) {
+        while (!pool->stop && (pool->gen == seen || !pool->open || wa.id >= pool->limit)) {
+            seen = pool->gen; /* a closed or too-small job: skip it */
+            pthread_cond_wait(&pool->wake, &pool->mu);
+        }
+        if (pool->stop)
+            break;
+        seen = pool->gen;
+        void (*fn)(void *, int, int, int) = pool->fn;
+        void *ctx = pool->ctx;
+        int items = pool->items;
+        pool->joined++;
+        pthread_mutex_unlock(&pool->mu);
+        run_items(pool, fn, ctx, items, wa.id);
+        pthread_mutex_lock(&pool->mu);
+        if (--pool->joined == 0)
+            pthread_cond_signal(&pool->done);
+    }
+    pthread_mutex_unlock(&pool->mu);
     return NULL;
 }
 
-/* Short-lived threads: creating one costs ~20 us, far below a step at the
- * sizes where we split (N >= 128); a pool would add state for little. */
-void ocean_parallel_rows(int threads, int rows, void (*fn)(void *ctx, int r0, int r1, int worker), void *ctx)
+struct ocean_pool *ocean_pool_new(int threads)
 {
     if (threads > OCEAN_MAX_THREADS)
         threads = OCEAN_MAX_THREADS;
-    if (threads > rows)
-        threads = rows;
-    if (threads <= 1) {
-        fn(ctx, 0, rows, 0);
+    if (threads <= 1)
+        return NULL;
+    struct ocean_pool *pool = calloc(1, sizeof *pool);
+    if (!pool)
+        return NULL; /* the caller then runs everything itself */
+    pthread_mutex_init(&pool->mu, NULL);
+    pthread_cond_init(&pool->wake, NULL);
+    pthread_cond_init(&pool->done, NULL);
+    atomic_init(&pool->next, 0);
+    for (int i = 1; i < threads; i++) {
+        pool->worker[i] = (struct pool_worker){pool, i};
+        if (pthread_create(&pool->tid[pool->started], NULL, pool_thread, &pool->worker[i]) != 0)
+            break; /* fewer workers: still correct, the caller does the rest */
+        pool->started++;
+    }
+    return pool;
+}
+
+void ocean_pool_free(struct ocean_pool *pool)
+{
+    if (!pool)
+        return;
+    pthread_mutex_lock(&pool->mu);
+    pool->stop = 1;
+    pthread_cond_broadcast(&pool->wake);
+    pthread_mutex_unlock(&pool->mu);
+    for (int i = 0; i < pool->started; i++)
+        pthread_join(pool->tid[i], NULL);
+    pthread_mutex_destroy(&pool->mu);
+    pthread_cond_destroy(&pool->wake);
+    pthread_cond_destroy(&pool->done);
+    free(pool);
+}
+
+void ocean_parallel(struct ocean_pool *pool, int threads, int items,
+                    void (*fn)(void *ctx, int i0, int i1, int worker), void *ctx)
+{
+    if (!pool || threads <= 1 || items <= 1 || pool->started == 0) {
+        fn(ctx, 0, items, 0);
         return;
     }
-    struct rows_job jobs[OCEAN_MAX_THREADS];
-    pthread_t tid[OCEAN_MAX_THREADS];
-    bool started[OCEAN_MAX_THREADS] = {false};
-    for (int i = 0; i < threads; i++)
-        jobs[i] = (struct rows_job){fn, ctx, (int)((long)rows * i / threads),
-                                    (int)((long)rows * (i + 1) / threads), i};
-    for (int i = 1; i < threads; i++)
-        started[i] = pthread_create(&tid[i], NULL, rows_thread, &jobs[i]) == 0;
-    fn(ctx, jobs[0].r0, jobs[0].r1, 0);
-    for (int i = 1; i < threads; i++) {
-        if (started[i])
-            pthread_join(tid[i], NULL);
-        else /* could not start a thread: do its share here (its worker slot is free) */
-            fn(ctx, jobs[i].r0, jobs[i].r1, i);
-    }
+    pthread_mutex_lock(&pool->mu);
+    pool->fn = fn;
+    pool->ctx = ctx;
+    pool->items = items;
+    pool->limit = threads;
+    atomic_store_explicit(&pool->next, 0, memory_order_relaxed);
+    pool->open = 1;
+    pool->gen++;
+    pthread_cond_broadcast(&pool->wake);
+    pthread_mutex_unlock(&pool->mu); /* the unlock/lock pairs order `next` and the job's data */
+    run_items(pool, fn, ctx, items, 0);
+    pthread_mutex_lock(&pool->mu);
+    pool->open = 0; /* all items handed out: latecomers skip this job */
+    while (pool->joined > 0)
+        pthread_cond_wait(&pool->done, &pool->mu);
+    pthread_mutex_unlock(&pool->mu);
 }
 
 /* ---- grid: allocation, plan, amplitudes ---------------------------------- */
@@ -134,9 +216,10 @@ static void grid_free(struct ocean_grid *g)
     for (size_t i = 0; i < sizeof floats / sizeof floats[0]; i++)
         fftwf_free(floats[i]);
     fftwf_free(g->omega);
+    fftwf_free(g->amp);
     for (int i = 0; i < COL_COUNT; i++)
         fftwf_free(g->col[i]);
-    fftwf_free(g->rowbuf);
+    fftwf_free(g->scratch);
     for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
         fftwf_free(g->out[i]);
     for (int i = 0; i < 3; i++)
@@ -178,18 +261,25 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
     g->n = n;
     g->nh = n / 2 + 1;
     g->modes = (size_t)n * g->nh;
+    g->tile = n / 2 < OCEAN_COL_TILE ? n / 2 : OCEAN_COL_TILE;
     size_t nn = (size_t)n * n;
     g->a = zalloc(g->modes * sizeof(float), &ok);
     g->b = zalloc(g->modes * sizeof(float), &ok);
     g->d = zalloc(g->modes * sizeof(float), &ok);
     g->e = zalloc(g->modes * sizeof(float), &ok);
     g->omega = zalloc(g->modes * sizeof(double), &ok);
+    g->amp = zalloc((size_t)(n / 2 / g->tile) * n * sizeof *g->amp, &ok);
     g->kx = zalloc((size_t)g->nh * sizeof(float), &ok);
     g->kz = zalloc((size_t)n * sizeof(float), &ok);
     for (int i = 0; i < COL_COUNT; i++)
         g->col[i] = zalloc(g->modes * 2 * sizeof(float), &ok);
     g->workers = opt->threads < OCEAN_MAX_THREADS ? opt->threads : OCEAN_MAX_THREADS;
-    g->rowbuf = zalloc((size_t)g->workers * OCEAN_ROW_BLOCK * g->nh * 2 * sizeof(float), &ok);
+    /* Per worker: the fill's h~, lambda/k and spectrum for one tile; or
+     * two blocks of row-pass input (ROW_BLOCK x nh complex each). */
+    size_t fill_floats = ocean_tile_floats(n, g->tile), row_floats = (size_t)2 * OCEAN_ROW_BLOCK * g->nh * 2;
+    g->scratch_floats = fill_floats > row_floats ? fill_floats : row_floats;
+    g->scratch_floats = (g->scratch_floats + 15) & ~(size_t)15; /* keep every slot 64-byte aligned */
+    g->scratch = zalloc((size_t)g->workers * g->scratch_floats * sizeof(float), &ok);
     for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
         g->out[i] = zalloc(nn * sizeof(float), &ok);
     for (int i = 0; i < 3; i++)
@@ -208,16 +298,19 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
         fftwf_import_wisdom_from_filename(opt->wisdom_path); /* missing file is fine */
     unsigned flags = opt->plan_rigor ? FFTW_MEASURE : FFTW_ESTIMATE;
     /* MEASURE overwrites the arrays while timing: we plan before filling.
-     * Columns: nh in-place N-point transforms, stride nh, FFTW's threads.
-     * Rows: a block of c2r, run by our own workers, so one FFTW thread.
-     * Below N = 256 threads cost more than they save (measured). */
-    int nh = g->nh;
-    fftwf_complex *c0 = (fftwf_complex *)g->col[0];
-    fftwf_plan_with_nthreads(n >= OCEAN_THREADS_FROM_N ? opt->threads : 1);
-    g->col_plan = fftwf_plan_many_dft(1, &n, nh, c0, NULL, nh, 1, c0, NULL, nh, 1, FFTW_BACKWARD, flags);
+     * Both plans are small batches that our own pool's workers execute
+     * (new-array execute is thread-safe), so each is planned for one FFTW
+     * thread: that lets the fill share a tile's cache with its z pass, and
+     * the plans do not depend on the thread count (same bits on 1 or 2).
+     * Columns: `tile` in-place N-point c2c over the contiguous columns of
+     * a worker's fill tile (ocean_step.c).
+     * Rows: a block of N-point c2r from a worker's scratch to the output. */
+    fftwf_complex *tile = (fftwf_complex *)ocean_tile_spectrum(g->scratch, n, g->tile);
+    int dist = ocean_tile_dist(n);
     fftwf_plan_with_nthreads(1);
-    g->row_plan = fftwf_plan_many_dft_c2r(1, &n, OCEAN_ROW_BLOCK, (fftwf_complex *)g->rowbuf, NULL, 1, nh,
-                                          g->out[0], NULL, 1, n, flags);
+    g->col_plan = fftwf_plan_many_dft(1, &n, g->tile, tile, NULL, 1, dist, tile, NULL, 1, dist, FFTW_BACKWARD, flags);
+    g->row_plan = fftwf_plan_many_dft_c2r(1, &n, OCEAN_ROW_BLOCK, (fftwf_complex *)g->scratch, NULL,
+                                          OCEAN_ROW_BLOCK, 1, g->out[0], NULL, 1, n, flags);
     if (g->col_plan && g->row_plan && opt->plan_rigor && opt->wisdom_path && *opt->wisdom_path)
         export_wisdom(opt->wisdom_path);
     ocean_fftw_unlock();
@@ -261,19 +354,32 @@ static void amp_rows(void *arg, int r0, int r1, int worker)
             g->e[i] = (float)(creal(p) - creal(q));
             g->omega[i] = spectrum_mode_omega(m, dk * hypot(mx, mz));
         }
+        for (int ix = 0; ix < n / 2; ix++) { /* the fill's copy, in tile order */
+            size_t i = (size_t)iz * g->nh + ix;
+            struct ocean_tile_row *t = g->amp + (size_t)(ix / g->tile) * n + iz;
+            int j = ix % g->tile;
+            t->a[j] = g->a[i];
+            t->b[j] = g->b[i];
+            t->d[j] = g->d[i];
+            t->e[j] = g->e[i];
+            t->omega[j] = g->omega[i];
+            double k = dk * hypot(ix, mz);
+            t->invk[j] = k > 0 ? (float)(1.0 / k) : 0.0f;
+        }
     }
 }
 
 /* h~0 and w for every mode. Depends only on the parameters (the random
  * numbers on seed and integer k), so reconfiguring keeps the sea's phases. */
-static void grid_set_amplitudes(struct ocean_grid *g, const struct spectrum_model *m, int threads)
+static void grid_set_amplitudes(struct ocean_grid *g, const struct spectrum_model *m, struct ocean_pool *pool,
+                                int threads)
 {
     for (int i = 0; i < g->nh; i++)
         g->kx[i] = (float)ocean_wavenumber(i, g->n, m->patch);
     for (int i = 0; i < g->n; i++)
         g->kz[i] = (float)ocean_wavenumber(i, g->n, m->patch);
     struct amp_ctx c = {g, m};
-    ocean_parallel_rows(threads, g->n, amp_rows, &c);
+    ocean_parallel(pool, threads, g->n, amp_rows, &c);
 }
 
 /* ---- public API ------------------------------------------------------- */
@@ -315,7 +421,8 @@ struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_opti
         free(o);
         return NULL;
     }
-    grid_set_amplitudes(o->g, &o->model, o->opt.threads);
+    o->pool = ocean_pool_new(o->opt.threads); /* NULL (one thread) is fine: slower, same result */
+    grid_set_amplitudes(o->g, &o->model, o->pool, o->opt.threads);
     return o;
 }
 
@@ -336,7 +443,7 @@ int ocean_reconfigure(struct ocean *o, const struct ocean_params *p, char *err, 
     /* Nothing below can fail: commit. */
     o->p = *p;
     spectrum_model_init(&o->model, p);
-    grid_set_amplitudes(g, &o->model, o->opt.threads);
+    grid_set_amplitudes(g, &o->model, o->pool, o->opt.threads);
     if (g != o->g) {
         grid_free(o->g);
         o->g = g;
@@ -375,6 +482,7 @@ void ocean_free(struct ocean *o)
 {
     if (!o)
         return;
+    ocean_pool_free(o->pool);
     grid_free(o->g);
     free(o->wisdom_path);
     free(o);

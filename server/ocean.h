@@ -26,7 +26,7 @@ enum ocean_field {
 #define OCEAN_ALL_FIELDS ((1u << OCEAN_FIELD_COUNT) - 1u)
 
 struct ocean_options {
-    int threads;               /* FFTW threads, >= 1 */
+    int threads;               /* worker threads for the step (fill + transforms), >= 1 */
     const char *wisdom_path;   /* FFTW wisdom cache file, NULL = none */
     int plan_rigor;            /* 0 = FFTW_ESTIMATE (tests), 1 = FFTW_MEASURE */
 };

@@ -23,29 +23,64 @@ enum ocean_transform { TR_H, TR_DX, TR_DZ, TR_SX, TR_SZ, TR_JXX, TR_JZZ, TR_JXZ,
  *   COL_KZINVK  i lambda kz h~/k -> Dz (1), dDx/dz (i kx)
  *   COL_KZ2INVK -lambda kz^2 h~/k -> dDz/dz (1) */
 enum ocean_column { COL_H, COL_KZ, COL_INVK, COL_KZINVK, COL_KZ2INVK, COL_COUNT };
-#define OCEAN_ROW_BLOCK 16   /* rows per c2r batch: a block stays in cache */
+#define OCEAN_ROW_BLOCK 8    /* rows per c2r batch (measured: 8 beats 4 and 16) */
+#define OCEAN_COL_TILE 16    /* kx columns per fill + z-pass tile (fewer if N/2 < 16) */
 #define OCEAN_MAX_THREADS 64
-#define OCEAN_THREADS_FROM_N 256 /* smaller grids run on one thread: faster */
+#define OCEAN_THREADS_FROM_N 256 /* smaller grids run on one thread (at 128 a second thread did not pay, measured) */
+
+/* One row of one fill tile: per mode, a, b, d, e and omega as below, and
+ * 1/k (0 at k = 0), so the step needs no division or square root. */
+struct ocean_tile_row {
+    float a[OCEAN_COL_TILE], b[OCEAN_COL_TILE], d[OCEAN_COL_TILE], e[OCEAN_COL_TILE];
+    float invk[OCEAN_COL_TILE];
+    double omega[OCEAN_COL_TILE];
+};
 
 /* Everything whose size depends on N: made together, swapped together. */
 struct ocean_grid {
     int n, nh;                 /* N, N/2 + 1 (columns of the half spectrum) */
+    int tile;                  /* OCEAN_COL_TILE, or N/2 if smaller */
     size_t modes;              /* n * nh */
     /* Per mode of the half spectrum (row iz = kz index, column ix = kx index
-     * 0..N/2), from h~0(k) = p and conj(h~0(-k)) = m:
+     * 0..N/2, index iz*nh + ix), from h~0(k) = p and conj(h~0(-k)) = m:
      *   hr = a c + b s, hi = d c - e s, with c, s = cos, sin(w t)
      * a = pr + mr, b = pi - mi, d = pi + mi, e = pr - mr. */
     float *a, *b, *d, *e;
     double *omega;             /* rad/s, per mode */
     float *kx, *kz;            /* rad/m, per column / per row (layout formula) */
-    float *col[COL_COUNT];     /* half spectra (N rows x nh), interleaved complex */
+    /* The same amplitudes in the order the fill reads them: tile tl, row iz
+     * at amp[tl*N + iz] (columns tl*tile .. +tile; the Nyquist column, zero,
+     * is left out). A sequential stream instead of a 64-byte piece of each
+     * row of five arrays. */
+    struct ocean_tile_row *amp;
+    /* z-pass spectra (after the z pass), block-major: the values of rows
+     * iz = b*B + r (B = OCEAN_ROW_BLOCK) are at col[k][2*((b*nh + ix)*B + r)],
+     * so a block of B rows is one contiguous piece that row_plan reads as
+     * is (B interleaved c2r inputs). The Nyquist column ix = N/2 is zero. */
+    float *col[COL_COUNT];
     float *out[OCEAN_FIELD_COUNT];
     float *jac[3];             /* dDx/dx, dDz/dz, dDx/dz before combining */
-    float *rowbuf;             /* per worker: OCEAN_ROW_BLOCK rows of c2r input */
-    int workers;               /* rowbuf slots */
-    fftwf_plan col_plan;       /* in place, N-point c2c along z, nh of them (FFTW threads) */
-    fftwf_plan row_plan;       /* OCEAN_ROW_BLOCK N-point c2r along x (one thread each) */
+    float *scratch;            /* per worker, scratch_floats each: fill tile / 2 row blocks */
+    size_t scratch_floats;
+    int workers;               /* scratch slots */
+    fftwf_plan col_plan;       /* in place, `tile` contiguous N-point c2c (one thread each) */
+    fftwf_plan row_plan;       /* OCEAN_ROW_BLOCK N-point c2r along x, input interleaved
+                                * (stride ROW_BLOCK), rows out contiguous (one thread each) */
 };
+
+/* A small persistent thread pool (ocean.c): threads - 1 sleeping workers
+ * plus the caller. Items are handed out one at a time from a shared
+ * counter, so a worker that the (shared) machine deschedules does not hold
+ * up the others; which thread does an item never changes its result. */
+struct ocean_pool;
+struct ocean_pool *ocean_pool_new(int threads);
+void ocean_pool_free(struct ocean_pool *pool);
+/* Run fn(ctx, i, i + 1, worker) for every item i in [0, items) on up to
+ * `threads` threads (caller included); worker is 0..threads-1 and distinct
+ * among concurrent calls. Returns when all items are done. pool may be NULL
+ * (then the caller does everything). */
+void ocean_parallel(struct ocean_pool *pool, int threads, int items,
+                    void (*fn)(void *ctx, int i0, int i1, int worker), void *ctx);
 
 struct ocean {
     struct ocean_params p;
@@ -53,6 +88,7 @@ struct ocean {
     char *wisdom_path;
     struct spectrum_model model;
     struct ocean_grid *g;
+    struct ocean_pool *pool;   /* opt.threads - 1 workers; NULL for one thread */
 };
 
 /* Transforms needed for an OCEAN_FIELD_BIT mask. */
@@ -77,9 +113,12 @@ double ocean_phase_time(const struct ocean *o, double t);
 void ocean_combine_jacobian_rows(struct ocean_grid *g, int r0, int r1);
 /* Output array that transform tr lands in. */
 float *ocean_transform_dest(struct ocean_grid *g, enum ocean_transform tr);
-/* Run fn(ctx, row0, row1, worker) over rows [0, rows) on `threads`
- * threads; worker is 0..threads-1, distinct per concurrent call. */
-void ocean_parallel_rows(int threads, int rows, void (*fn)(void *ctx, int r0, int r1, int worker), void *ctx);
+
+/* Layout of a worker's fill scratch (ocean_step.c): its size in floats,
+ * where its spectrum (col_plan's array) starts, and that one's column stride. */
+size_t ocean_tile_floats(int n, int tile);
+float *ocean_tile_spectrum(float *scratch, int n, int tile);
+int ocean_tile_dist(int n);
 
 /* Wavenumber of index i on an N grid of side L: 2 pi (i - N [i > N/2]) / L. */
 double ocean_wavenumber(int i, int n, double patch);

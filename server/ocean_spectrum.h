@@ -2,7 +2,7 @@
  *
  * Dispersion, frequency spectra (Phillips, Pierson-Moskowitz, JONSWAP, TMA),
  * directional spreading, and the random amplitudes h~0(k). Pure functions
- * of the parameters; no FFT, no allocation. References in notes/readme-sim.md. */
+ * of the parameters; no FFT, no allocation. References in docs/simulation.md. */
 #ifndef OCEAND_OCEAN_SPECTRUM_H
 #define OCEAND_OCEAN_SPECTRUM_H
 

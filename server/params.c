@@ -4,7 +4,7 @@
  * a 256 m patch sampled every metre holds about four peak wavelengths of
  * a 10 m/s JONSWAP sea over 100 km of fetch (peak ~60 m, Hs ~2 m), so
  * the tiling is hard to spot and the shortest resolved wave (2 m) is
- * still in the equilibrium range. Units and conventions: notes/readme-sim.md. */
+ * still in the equilibrium range. Units and conventions: docs/simulation.md. */
 #include "params.h"
 
 #include <ctype.h>
