@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "control.h"
 #include "log.h"
@@ -45,7 +46,8 @@ static const struct opt_def opt_table[] = {
     { "tls_cert", OPT_STR, O(tls_cert), 0, 0, "", "PEM certificate file: serve https/wss instead of http/ws "
       "on the same port (needs --tls-key)" },
     { "tls_key", OPT_STR, O(tls_key), 0, 0, "", "PEM private key file of --tls-cert" },
-    { "fft_threads", OPT_INT, O(fft_threads), 1, 64, "1", "worker threads for the simulation step (fill and FFTs)" },
+    { "fft_threads", OPT_INT, O(fft_threads), 0, 64, "0", "worker threads for the simulation step and for "
+      "rebuilding the spectrum after a change (0 = one per core, at most 8)" },
     { "plan_rigor", OPT_INT, O(plan_rigor), 0, 1, "1", "1 = FFTW_MEASURE (faster steps; the first plan of "
       "each N takes a moment, then it is cached in --wisdom-file), 0 = FFTW_ESTIMATE" },
     { "wisdom_file", OPT_STR, O(wisdom_file), 0, 0, "auto", "FFTW wisdom cache: \"auto\" = "
@@ -385,6 +387,10 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         return -1;
     }
     resolve_wisdom_path(dc);
+    if (dc->fft_threads == 0) {
+        long cores = sysconf(_SC_NPROCESSORS_ONLN);
+        dc->fft_threads = cores < 1 ? 1 : cores > 8 ? 8 : (int)cores;
+    }
     char verr[200];
     if (params_validate(p, verr, sizeof verr) != 0) {
         snprintf(err, errlen, "parameters: %s", verr);
