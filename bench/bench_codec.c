@@ -27,8 +27,8 @@
 #include "ocean.h"
 #endif
 
-/* Tile side of the tiled runs: the daemon's default (64) unless --tile-size T. */
-static int tile_size = 64;
+/* Tile side of the tiled runs: the daemon's default (128) unless --tile-size T. */
+static int tile_size = 128;
 
 /* Thread CPU time: "MB/s per core" on a shared machine, where wall time would
  * also count the time other processes hold the core. */
