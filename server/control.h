@@ -1,4 +1,4 @@
-/* control.h — the JSON control protocol (notes/control-spec.md, proto/PROTOCOL.md).
+/* control.h — the JSON control protocol (proto/PROTOCOL.md §7).
  *
  * Pure: parses and validates client messages against the parameter table
  * and builds the server's JSON replies. No networking, no threads, no

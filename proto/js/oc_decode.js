@@ -148,7 +148,7 @@ function inflateRawInstalled(src, n) {
 // Which inflater for a codec 1 tile when both a setInflateRaw() one and DecompressionStream
 // exist: a stream costs ~0.1 ms to set up but then inflates natively, ~1.6x faster than
 // fflate, so it wins on large tiles. Measured in headless Chromium on the 2-core dev machine
-// (notes/readme-web.md), inflating one N=256 height+dx+dz frame: 48 tiles of 64x64 samples,
+// (docs/web.md), inflating one N=256 height+dx+dz frame: 48 tiles of 64x64 samples,
 // fflate 2.5 ms, streams 4.7 ms; 12 tiles of 128x128, fflate 2.4 ms, streams 1.6 ms.
 const STREAM_MIN_SAMPLES = 128 * 128;
 const haveStreams = typeof DecompressionStream === 'function';
