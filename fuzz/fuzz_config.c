@@ -1,31 +1,38 @@
-/* fuzz_config.c — libFuzzer target: the --config file loader. The input is
- * written to a file (the loader reads paths) and loaded as the daemon would,
- * with no state file so nothing else is read. */
+/* fuzz_config.c — libFuzzer target: the config-file loader. Each input is
+ * applied, as the text of a --config file, onto the daemon's defaults
+ * through config_apply_text, the path config_load takes after reading the
+ * file. A rejected file must say why and change nothing; an accepted one
+ * must leave every parameter in range and the set valid. */
 #include <stdint.h>
-#include <stdio.h>
 #include <stdlib.h>
-#include <unistd.h>
+#include <string.h>
 
 #include "config.h"
+
+static struct daemon_config base_dc;
+static struct ocean_params base_p;
+
+static void load_defaults(void)
+{
+    char *argv[] = { "oceand", "--state-file", "none", NULL };
+    struct config_result res;
+    char err[512];
+    if (config_load(3, argv, &base_dc, &base_p, &res, err, sizeof err) != 0)
+        abort();
+}
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-    static char path[64];
-    if (!path[0])
-        snprintf(path, sizeof path, "/dev/shm/oceand-fuzz-config-%d.json", (int)getpid());
-    FILE *f = fopen(path, "wb");
-    if (!f)
-        return 0;
-    fwrite(data, 1, size, f);
-    fclose(f);
-
-    char *argv[] = { "oceand", "--state-file", "none", "--config", path, NULL };
-    struct daemon_config dc;
-    struct ocean_params p;
-    struct config_result res;
-    char err[512];
-    if (config_load(5, argv, &dc, &p, &res, err, sizeof err) == 0) {
+    static int ready;
+    if (!ready) {
+        load_defaults();
+        ready = 1;
+    }
+    struct daemon_config dc = base_dc;
+    struct ocean_params p = base_p;
+    char err[512] = "";
+    if (config_apply_text(&dc, &p, (const char *)data, size, err, sizeof err) == 0) {
         for (size_t i = 0; i < param_count; i++) {
             double v = param_get(&p, &param_table[i]);
             if (!(v >= param_table[i].min && v <= param_table[i].max))
@@ -33,8 +40,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         }
         if (params_validate(&p, err, sizeof err) != 0)
             abort();
-    } else if (err[0] == '\0') {
-        abort(); /* an error must say why */
+    } else if (err[0] == '\0' || memcmp(&dc, &base_dc, sizeof dc) != 0 || memcmp(&p, &base_p, sizeof p) != 0) {
+        abort(); /* an error must say why and leave everything as it was */
     }
     return 0;
 }

@@ -252,6 +252,56 @@ static const char *flag_value(int argc, char **argv, int *i)
     return NULL;
 }
 
+/* One JSON object and nothing but whitespace after it (as for messages).
+ * Returns the object, or NULL with a message naming `what`. */
+static cJSON *parse_config_text(const char *text, size_t len, const char *what, char *err, size_t errlen)
+{
+    const char *end = NULL;
+    cJSON *cfg = cJSON_ParseWithLengthOpts(text, len, &end, 0);
+    while (cfg && end < text + len && (*end == ' ' || *end == '\t' || *end == '\n' || *end == '\r'))
+        end++;
+    bool trailing = cfg && end != text + len;
+    if (!cJSON_IsObject(cfg) || trailing) {
+        snprintf(err, errlen, "%s: not a JSON object%s", what, trailing ? " (data after it)" : "");
+        cJSON_Delete(cfg);
+        return NULL;
+    }
+    return cfg;
+}
+
+/* Every member of a config object onto dc / p (state_file was used already). */
+static int apply_config_object(struct daemon_config *dc, struct ocean_params *p, const cJSON *cfg,
+                               char *err, size_t errlen)
+{
+    const cJSON *item;
+    cJSON_ArrayForEach(item, cfg) {
+        if (strcmp(item->string, "state_file") == 0)
+            continue;
+        if (set_from_json(dc, p, item, err, errlen) != 0)
+            return -1;
+    }
+    return 0;
+}
+
+int config_apply_text(struct daemon_config *dc, struct ocean_params *p, const char *text, size_t len,
+                      char *err, size_t errlen)
+{
+    struct daemon_config dc2 = *dc;
+    struct ocean_params p2 = *p;
+    cJSON *cfg = parse_config_text(text, len, "config", err, errlen);
+    if (!cfg)
+        return -1;
+    int rc = apply_config_object(&dc2, &p2, cfg, err, errlen);
+    cJSON_Delete(cfg);
+    if (rc == 0 && params_validate(&p2, err, errlen) != 0)
+        rc = -1;
+    if (rc == 0) {
+        *dc = dc2;
+        *p = p2;
+    }
+    return rc;
+}
+
 /* "auto" puts the FFTW wisdom in the user's cache directory, so a restart
  * (and every later daemon of this user) skips FFTW_MEASURE's planning;
  * "none" or "" = no cache. The directory itself is made by main. */
@@ -312,18 +362,10 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         size_t len;
         if (read_file(config_path, &text, &len, err, errlen) != 0)
             return -1;
-        const char *end = NULL;
-        cfg = cJSON_ParseWithLengthOpts(text, len, &end, 0);
-        /* One JSON object and nothing but whitespace after it (as for messages). */
-        while (cfg && end < text + len && (*end == ' ' || *end == '\t' || *end == '\n' || *end == '\r'))
-            end++;
-        bool trailing = cfg && end != text + len;
+        cfg = parse_config_text(text, len, config_path, err, errlen);
         free(text);
-        if (!cJSON_IsObject(cfg) || trailing) {
-            snprintf(err, errlen, "%s: not a JSON object%s", config_path, trailing ? " (data after it)" : "");
-            cJSON_Delete(cfg);
+        if (!cfg)
             return -1;
-        }
         snprintf(dc->config_file, sizeof dc->config_file, "%s", config_path);
     }
 
@@ -345,15 +387,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
             LOGW("ignoring saved state: %s", serr);  /* a corrupt state file must not stop the daemon */
         res->state_loaded = s > 0;
     }
-    const cJSON *item;
-    cJSON_ArrayForEach(item, cfg) {
-        if (strcmp(item->string, "state_file") == 0)
-            continue;
-        if (set_from_json(dc, p, item, err, errlen) != 0) {
-            rc = -1;
-            break;
-        }
-    }
+    rc = apply_config_object(dc, p, cfg, err, errlen);
     cJSON_Delete(cfg);
     if (rc)
         return -1;

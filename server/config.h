@@ -53,6 +53,11 @@ struct config_result {
 /* Fill *dc and *p. Returns 0, or -1 with a message in err. */
 int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_params *p,
                 struct config_result *res, char *err, size_t errlen);
+/* Apply the text of a config file (one JSON object) onto *dc and *p, all or
+ * nothing, then check the whole parameter set. Returns 0, or -1 with a
+ * message in err and nothing changed. (config_load uses the same path.) */
+int config_apply_text(struct daemon_config *dc, struct ocean_params *p, const char *text, size_t len,
+                      char *err, size_t errlen);
 void config_usage(FILE *out, const char *argv0);
 
 #endif
