@@ -5,7 +5,6 @@
  * must leave every parameter in range and the set valid. */
 #include <stdint.h>
 #include <stdlib.h>
-#include <string.h>
 
 #include "config.h"
 
@@ -19,6 +18,17 @@ static void load_defaults(void)
     char err[512];
     if (config_load(3, argv, &base_dc, &base_p, &res, err, sizeof err) != 0)
         abort();
+}
+
+/* Plain byte comparison, left out of coverage tracing: libFuzzer's memcmp
+ * hook on these 4 KiB structs cost more than the code under test. */
+__attribute__((no_sanitize("coverage"))) static int same_bytes(const void *a, const void *b, size_t n)
+{
+    const unsigned char *x = a, *y = b;
+    unsigned char diff = 0;
+    for (size_t i = 0; i < n; i++)
+        diff |= x[i] ^ y[i];
+    return diff == 0;
 }
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
@@ -40,7 +50,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         }
         if (params_validate(&p, err, sizeof err) != 0)
             abort();
-    } else if (err[0] == '\0' || memcmp(&dc, &base_dc, sizeof dc) != 0 || memcmp(&p, &base_p, sizeof p) != 0) {
+    } else if (err[0] == '\0' || !same_bytes(&dc, &base_dc, sizeof dc) || !same_bytes(&p, &base_p, sizeof p)) {
         abort(); /* an error must say why and leave everything as it was */
     }
     return 0;
