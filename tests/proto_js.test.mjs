@@ -11,6 +11,7 @@ import { createRequire } from 'node:module';
 import {
   decodeFrame, parseFrameHeader, setZstdDecompressor, FIELD_NAMES, PROTO_VERSION, SUBPROTOCOL,
 } from '../proto/js/oc_decode.js';
+import { mutateAndDecode } from './proto_js_mutate.mjs';
 
 const root = join(dirname(fileURLToPath(import.meta.url)), '..');
 const vdir = join(root, 'proto/vectors');
@@ -102,21 +103,8 @@ test('a longer frame header (header_size 56) is skipped; 40 is corrupt', async (
 });
 
 test('random truncations and bit flips are rejected or decode', async () => {
-  const base = new Uint8Array(load(manifest.vectors.find((v) => v.name === 'v03_height_1mm').file));
-  let seed = 12345;
-  const rnd = () => (seed = (seed * 1103515245 + 12345) >>> 0) / 2 ** 32;
-  const codes = new Set(['truncated', 'magic', 'version', 'corrupt', 'too_large']);
-  for (let it = 0; it < 400; it++) {
-    const cut = it % 2 === 0 ? Math.floor(rnd() * base.length) : base.length;
-    const m = base.slice(0, cut);
-    if (it % 2) for (let f = 0; f < 3; f++) m[Math.floor(rnd() * m.length)] ^= 1 << Math.floor(rnd() * 8);
-    try {
-      await decodeFrame(m.buffer, { useNodeZlib: it % 4 < 2 });
-      assert.ok(it % 2 === 1, 'a truncated frame decoded');
-    } catch (e) {
-      assert.ok(codes.has(e.code), `unexpected error ${e.code}: ${e.message}`);
-    }
-  }
+  const frame = load(manifest.vectors.find((v) => v.name === 'v03_height_1mm').file);
+  await mutateAndDecode(frame, 12345, (it) => ({ useNodeZlib: it % 4 < 2 }));
 });
 
 // Control messages: each example carries the members the spec requires.

@@ -10,6 +10,7 @@ import { fileURLToPath } from 'node:url';
 import { dirname, join } from 'node:path';
 import { createRequire } from 'node:module';
 import { decodeFrame, setInflateRaw } from '../proto/js/oc_decode.js';
+import { mutateAndDecode } from './proto_js_mutate.mjs';
 
 const root = join(dirname(fileURLToPath(import.meta.url)), '..');
 const vdir = join(root, 'proto/vectors');
@@ -110,19 +111,6 @@ test('large tiles via DecompressionStream, small ones via the installed inflater
 });
 
 test('random truncations and bit flips are rejected or decode (setInflateRaw + fflate)', { skip }, async () => {
-  const base = new Uint8Array(load(manifest.vectors.find((v) => v.name === 'v03_height_1mm').file));
-  let seed = 777;
-  const rnd = () => (seed = (seed * 1103515245 + 12345) >>> 0) / 2 ** 32;
-  const codes = new Set(['truncated', 'magic', 'version', 'corrupt', 'too_large']);
-  for (let it = 0; it < 400; it++) {
-    const cut = it % 2 === 0 ? Math.floor(rnd() * base.length) : base.length;
-    const m = base.slice(0, cut);
-    if (it % 2) for (let f = 0; f < 3; f++) m[Math.floor(rnd() * m.length)] ^= 1 << Math.floor(rnd() * 8);
-    try {
-      await decodeFrame(m.buffer, opts);
-      assert.ok(it % 2 === 1, 'a truncated frame decoded');
-    } catch (e) {
-      assert.ok(codes.has(e.code), `unexpected error ${e.code}: ${e.message}`);
-    }
-  }
+  const frame = load(manifest.vectors.find((v) => v.name === 'v03_height_1mm').file);
+  await mutateAndDecode(frame, 777, () => opts);
 });
