@@ -11,7 +11,16 @@ CC      ?= cc
 PKGS    := fftw3f libwebsockets libcjson libzstd zlib
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wno-unused-parameter
 CFLAGS  ?= -O2 -g
-CFLAGS  += -std=c11 -D_GNU_SOURCE $(WARN) -pthread -Iserver -Iproto/c
+CFLAGS  += -std=c11 -D_GNU_SOURCE $(WARN) -pthread
+# Include paths are per target so that dependencies run one way:
+#   server/sim/ (the simulation library) sees only its own headers;
+#   proto/c/ (protocol + codec) sees only its own;
+#   everything else (daemon, tools, tests) sees the library's public header
+#   folder server/sim/include and proto/c, never server/sim's internals.
+# Tests and benchmarks of the library itself add server/sim (mk/sim.mk).
+INC     := -Iserver -Iserver/sim/include -Iproto/c
+$(BUILD)/obj/server/sim/%.o $(BUILD)/san/server/sim/%.o: INC := -Iserver/sim/include -Iserver/sim
+$(BUILD)/obj/proto/c/%.o $(BUILD)/san/proto/c/%.o: INC := -Iproto/c
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lfftw3f_threads -lm
 # Sanitizer flavour of every C object, for the ASan+UBSan test pass.
@@ -52,10 +61,10 @@ bench: deps
 # One object rule for every C file in the tree: normal and sanitizer flavours.
 $(BUILD)/obj/%.o: %.c
 	@mkdir -p $(dir $@)
-	$(CC) $(CFLAGS) $(PKG_CFLAGS) -MMD -MP -c $< -o $@
+	$(CC) $(CFLAGS) $(INC) $(PKG_CFLAGS) -MMD -MP -c $< -o $@
 $(BUILD)/san/%.o: %.c
 	@mkdir -p $(dir $@)
-	$(CC) $(CFLAGS) $(SAN_FLAGS) $(PKG_CFLAGS) -MMD -MP -c $< -o $@
+	$(CC) $(CFLAGS) $(SAN_FLAGS) $(INC) $(PKG_CFLAGS) -MMD -MP -c $< -o $@
 -include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
 
 clean:

@@ -8,18 +8,18 @@
 
 FUZZ_CC      := clang
 FUZZ_FLAGS   := -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=fuzzer,address,undefined \
-                -fno-sanitize-recover=all -Iserver -Iproto/c $(WARN)
+                -fno-sanitize-recover=all -Iserver -Iserver/sim/include -Iserver/sim -Iproto/c $(WARN)
 FUZZ_SECONDS ?= 60
 FUZZ_CI_SECONDS ?= $(if $(CI),60,10)
 FUZZ_TARGETS := control frame config
 
-SIM_SRCS_FOR_FUZZ = $(filter-out server/ocean_dft_ref.c,$(wildcard server/ocean*.c)) server/params.c
+SIM_SRCS_FOR_FUZZ = $(wildcard server/sim/*.c)
 FUZZ_SRCS_control = fuzz/fuzz_control.c server/control.c $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_frame   = fuzz/fuzz_frame.c $(wildcard proto/c/*.c)
 FUZZ_SRCS_config  = fuzz/fuzz_config.c server/config.c server/control.c server/state.c server/log.c \
                     $(SIM_SRCS_FOR_FUZZ)
 
-$(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*.c server/*.h proto/c/*.c proto/c/*.h)
+$(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*.c server/*.h server/sim/*.[ch] server/sim/include/*.h proto/c/*.c proto/c/*.h)
 	@mkdir -p $(dir $@)
 	$(FUZZ_CC) $(FUZZ_FLAGS) $(PKG_CFLAGS) $(FUZZ_SRCS_$*) -o $@ $(PKG_LIBS) $(FUZZ_EXTRA_LIBS)
 

@@ -1,4 +1,4 @@
-# mk/sim.mk — the simulation library (server/params.c, server/ocean*.c).
+# mk/sim.mk — the simulation library (server/sim/: public headers in server/sim/include).
 #   make build/libocean.a       the library (and build/san/libocean.a)
 #   make test-sim               physics + FFT-vs-DFT suite (tests/test_ocean.c)
 #   make test-sim-asan          the same suite built with ASan+UBSan
@@ -6,8 +6,7 @@
 #   make bench-step             step / FFTW / DFT timings, JSON lines
 # See docs/simulation.md.
 
-SIM_SRCS      := server/params.c server/ocean.c server/ocean_spectrum.c server/ocean_step.c \
-                 server/ocean_dft.c server/ocean_fftw.c
+SIM_SRCS      := $(wildcard server/sim/*.c)
 OCEAN_LIB     := $(BUILD)/libocean.a
 OCEAN_SAN_LIB := $(BUILD)/san/libocean.a
 SIM_WISDOM    := $(BUILD)/fftw-wisdom
@@ -26,6 +25,10 @@ $(OCEAN_SAN_LIB): $(patsubst %.c,$(BUILD)/san/%.o,$(SIM_SRCS))
 # The per-mode loops are written to auto-vectorise: -O3 for these objects
 # (sanitizer objects keep SAN_FLAGS' -O1, which comes later on the line).
 $(patsubst %.c,$(BUILD)/obj/%.o,$(SIM_SRCS)): CFLAGS += -O3
+
+# The library's own tests and benchmark may look inside (ocean_internal.h).
+$(BUILD)/obj/tests/test_ocean.o $(BUILD)/san/tests/test_ocean.o $(BUILD)/obj/bench/bench_step.o: \
+  INC := -Iserver/sim/include -Iserver/sim
 
 $(BUILD)/test_ocean: $(BUILD)/obj/tests/test_ocean.o $(OCEAN_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)

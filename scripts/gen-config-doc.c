@@ -1,5 +1,5 @@
 /* gen-config-doc — print the configuration reference (Markdown) from the one
- * parameter table, server/params.c. scripts/gen-config-doc.sh splices it
+ * parameter table, server/sim/params.c. scripts/gen-config-doc.sh splices it
  * between the <!-- config-reference --> markers of README.md (or
  * README.md) and tests/tap/ops.sh fails when they disagree. */
 #include <stdio.h>

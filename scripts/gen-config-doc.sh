@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The configuration reference in the docs is generated from the parameter
-# table (server/params.c) by build/gen-config-doc (scripts/gen-config-doc.c).
+# table (server/sim/params.c) by build/gen-config-doc (scripts/gen-config-doc.c).
 #
 #   scripts/gen-config-doc.sh GEN            print the reference (Markdown)
 #   scripts/gen-config-doc.sh --update GEN   rewrite it in the doc (make config-doc)

@@ -430,7 +430,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         snprintf(err, errlen, "parameters: %s", verr);
         return -1;
     }
-    if (control_sim_bytes(p->resolution) > (double)dc->max_memory_mb * 1048576.0) {
+    if (!control_fits_memory(p->resolution, dc->max_memory_mb)) {
         snprintf(err, errlen, "resolution %d exceeds --max-memory-mb %d", p->resolution, dc->max_memory_mb);
         return -1;
     }

@@ -152,11 +152,12 @@ void ctl_msg_free(struct ctl_msg *m)
     memset(m, 0, sizeof *m);
 }
 
-double control_sim_bytes(int n)
+bool control_fits_memory(int n, int max_memory_mb)
 {
-    /* Spectra and FFT work arrays (complex), six output fields, encoder
-     * scratch and up to three frames in flight: ~160 bytes per sample. */
-    return 160.0 * (double)n * (double)n;
+    /* While a new N is being built the old simulation still runs, so two
+     * exist at once; plus up to three frames in flight of one raw field. */
+    double bytes = 2.0 * (double)ocean_memory_bytes(n, 1) + 3.0 * 4.0 * (double)n * (double)n;
+    return bytes <= (double)max_memory_mb * 1048576.0;
 }
 
 static bool is_pow2(double v)
@@ -226,7 +227,7 @@ int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const
     char err[160];
     if (params_validate(&p, err, sizeof err) != 0)
         return fail(e, "invalid", NULL, "%s", err);
-    if (lim && control_sim_bytes(p.resolution) > (double)lim->max_memory_mb * 1048576.0)
+    if (lim && !control_fits_memory(p.resolution, lim->max_memory_mb))
         return fail(e, "invalid", "resolution", "resolution %d exceeds the memory cap of %d MB",
                     p.resolution, lim->max_memory_mb);
     uint64_t mask = 0;

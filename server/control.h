@@ -74,8 +74,10 @@ int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const
 int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, const struct ctl_limits *lim,
                             struct subscription *out, struct ctl_error *e);
 
-/* Bytes the simulation needs at resolution n (the memory-cap estimate). */
-double control_sim_bytes(int n);
+/* Whether the daemon's simulation at resolution n fits max_memory_mb: two
+ * simulations (ocean_memory_bytes, the running one and one being built)
+ * plus the frames in flight. */
+bool control_fits_memory(int n, int max_memory_mb);
 
 /* JSON builders; all return a cJSON tree the caller prints and deletes. */
 cJSON *control_params_object(const struct ocean_params *p);

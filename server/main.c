@@ -1,7 +1,6 @@
 /* main.c — oceand: read the configuration, start the simulation thread,
  * serve HTTP + WebSocket on this thread until SIGINT/SIGTERM. */
 #include <errno.h>
-#include <fftw3.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -67,9 +66,6 @@ int main(int argc, char **argv)
     if (res.state_loaded)
         LOGI("restored parameters from %s (version %u, t=%.2f s)", dc.state_file, res.params_version, res.sim_time);
 
-    /* The planner thread creates FFTW plans while the tick thread executes
-     * and may free others: make the FFTW planner thread-safe. */
-    fftwf_make_planner_thread_safe();
     if (dc.wisdom_file[0] && ensure_parent_dir(dc.wisdom_file) != 0) {
         LOGW("no FFTW wisdom cache: cannot create the folder of %s: %s", dc.wisdom_file, strerror(errno));
         dc.wisdom_file[0] = '\0';

@@ -250,6 +250,24 @@ static void export_wisdom(const char *path)
         remove(tmp);
 }
 
+size_t ocean_memory_bytes(int n, int threads)
+{
+    if (n < 2)
+        return 0;
+    size_t nh = (size_t)n / 2 + 1, modes = (size_t)n * nh, nn = (size_t)n * n;
+    int tile = n / 2 < OCEAN_COL_TILE ? n / 2 : OCEAN_COL_TILE;
+    int workers = threads < 1 ? 1 : threads < OCEAN_MAX_THREADS ? threads : OCEAN_MAX_THREADS;
+    size_t fill_floats = ocean_tile_floats(n, tile), row_floats = (size_t)2 * OCEAN_ROW_BLOCK * nh * 2;
+    size_t scratch = ((fill_floats > row_floats ? fill_floats : row_floats) + 15) & ~(size_t)15;
+    /* The same arrays as grid_new, in the same order. */
+    return modes * (4 * sizeof(float) + sizeof(double))                   /* a, b, d, e, omega */
+         + (size_t)(n / 2 / tile) * n * sizeof(struct ocean_tile_row)      /* amp */
+         + (nh + (size_t)n) * sizeof(float)                               /* kx, kz */
+         + COL_COUNT * modes * 2 * sizeof(float)                          /* col */
+         + (size_t)workers * scratch * sizeof(float)                      /* scratch */
+         + (OCEAN_FIELD_COUNT + 3) * nn * sizeof(float);                  /* out, jac */
+}
+
 static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char *err, size_t errlen)
 {
     struct ocean_grid *g = calloc(1, sizeof *g);

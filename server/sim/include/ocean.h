@@ -46,6 +46,10 @@ int ocean_step(struct ocean *o, double t, unsigned fields);
 const float *ocean_field(const struct ocean *o, enum ocean_field f);
 const struct ocean_params *ocean_get_params(const struct ocean *o);
 int ocean_resolution(const struct ocean *o);
+/* Bytes one simulation of resolution n with `threads` workers allocates for
+ * its grids (spectra, FFT work arrays, output fields): what a memory cap
+ * should count. FFTW's plans are not included (small beside the arrays). */
+size_t ocean_memory_bytes(int n, int threads);
 void ocean_free(struct ocean *o);
 
 /* Stable lowercase names: "height", "dx", "dz", "slope_x", "slope_z", "jacobian". */
