@@ -25,6 +25,12 @@ enum ocean_field {
 #define OCEAN_FIELD_BIT(f) (1u << (f))
 #define OCEAN_ALL_FIELDS ((1u << OCEAN_FIELD_COUNT) - 1u)
 
+/* Largest simulation time, s (about 31.7 years), for which ocean_step keeps
+ * its phase accuracy: phases w*t are formed in double, whose rounding at
+ * t = 1e9 s stays below 1e-4 rad for every w up to N = 2048 on a 1 m patch.
+ * Callers (the daemon's state file) must refuse times outside [0, max]. */
+#define OCEAN_TIME_MAX 1.0e9
+
 struct ocean_options {
     int threads;               /* worker threads for the step (fill + transforms), >= 1 */
     const char *wisdom_path;   /* FFTW wisdom cache file, NULL = none */
