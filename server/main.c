@@ -1,5 +1,6 @@
-/* main.c — oceand: read the configuration, start the simulation thread,
- * serve HTTP + WebSocket on this thread until SIGINT/SIGTERM. */
+/* main.c — oceand: read the configuration, start the simulation (tick and
+ * builder threads), serve HTTP + WebSocket on this thread until SIGINT/SIGTERM,
+ * saving the parameters as they change. Threads: docs/threads.md. */
 #include <errno.h>
 #include <signal.h>
 #include <stdio.h>
@@ -12,6 +13,7 @@
 #include "log.h"
 #include "net.h"
 #include "sim_thread.h"
+#include "state.h"
 
 /* Only a flag: the sim thread wakes the service loop every tick anyway
  * (lws_cancel_service), so we see it within one period without calling
@@ -94,6 +96,10 @@ int main(int argc, char **argv)
         return 1;
     }
     net_attach_sim(net, sim);
+    /* State saving listens to the parameter changes the sim applies. */
+    struct state_saver saver;
+    state_saver_init(&saver, dc.state_file, &params, res.params_version);
+    net_on_params(net, state_saver_on_params, &saver);
 
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
@@ -105,12 +111,16 @@ int main(int argc, char **argv)
 
     LOGI("oceand listening on %s://%s:%d/ (N=%d, %g Hz, web root %s)", dc.tls_cert[0] ? "https" : "http", dc.bind, net_port(net),
          params.resolution, dc.tick_rate, dc.web_root);
-    while (!interrupted)
+    /* lws_service returns after each wake-up (every tick): a save that the
+     * once-a-second limit held back is written within a tick of its time. */
+    while (!interrupted) {
         if (net_service(net) < 0)
             break;
+        state_saver_flush(&saver, sim_time_now(sim), false);
+    }
 
     LOGI("stopping");
-    net_save_state(net);
+    state_saver_flush(&saver, sim_time_now(sim), true);
     sim_stop(sim);
     net_attach_sim(net, NULL);
     net_destroy(net);

@@ -1,11 +1,14 @@
-/* sim_thread.c — fixed-rate tick, parameter application, re-plan, encode, publish. */
+/* sim_thread.c — the tick loop (apply -> step -> encode -> publish) and the
+ * builder thread that prepares parameter sets off the tick path. */
 #include "sim_thread.h"
 
 #include "clock.h"
 
 #include <errno.h>
 #include <math.h>
+#include <pthread.h>
 #include <signal.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -20,83 +23,56 @@
 struct built {
     struct ocean *ocean;          /* new simulation, or NULL when only playback changed */
     struct ocean_params params;   /* in force after the batch */
-    struct sim_set *sets;         /* in order; each has ->prev, or ->failed with ->err */
+    struct sim_set *sets;         /* in order; each has ->prev, or a failed ->status */
 };
 
 struct sim {
-    pthread_t thread;
-    atomic_bool stop;
-    struct sim_config cfg;
+    struct sim_config cfg;        /* written by sim_start, read-only after */
+    pthread_t thread, builder;    /* sim_start / sim_stop */
+    bool builder_started;         /* sim_start / sim_stop */
+    atomic_bool stop;             /* written by sim_stop, read by tick + builder */
+    int test_fail_seed;           /* OCEAND_TEST_FAIL_BUILD_SEED, -1 = none; read-only after start */
 
-    /* Owned by the sim thread. */
+    /* Tick thread only. */
     struct ocean *ocean;
     struct ocean_params params;   /* in force */
     uint32_t version;
     double sim_time;
-    uint64_t seq;
+    uint64_t seq;                 /* ticks run (PROTOCOL.md §3.1: +1 per tick, frame or not) */
+    uint64_t published;           /* frames published: struct frame.index */
     struct oc_encoder *enc;
 
-    /* The builder thread applies parameter sets off the tick path: it builds
-     * a new ocean (ocean_create: spectrum, and FFTW plans for a new N cost
-     * 20-80 ms at N = 256-512, several ticks) and leaves it in `ready`; the
-     * next tick swaps it in. The builder owns build_base. */
-    pthread_t builder;
-    bool builder_started;
-    struct ocean_params build_base;  /* params of the newest state built */
+    /* Builder thread only: the params of the newest state built (applied, or
+     * waiting in `ready`): the base the next batch is checked against. */
+    struct ocean_params build_base;
 
-    /* Shared with the network thread, under lock. */
+    /* Under lock: the tick, builder and network threads meet here. */
     pthread_mutex_t lock;
-    struct frame *latest;
     pthread_cond_t cond;              /* wakes the builder */
-    bool builder_busy;                /* inside ocean_create */
-    struct sim_set *pending, **pending_tail;
-    struct built *ready;              /* built, waiting for a tick boundary */
-    struct ocean *to_free;            /* swapped out, for the builder to free */
-    struct sim_event *events, **events_tail;
-    atomic_int demand[SIM_DEMAND_KEYS];
-    _Atomic double now_time;
+    struct frame *latest;             /* tick writes (publish), network reads (sim_latest) */
+    bool builder_busy;                /* builder: inside a build; sim_stop reads */
+    struct sim_set *pending, **pending_tail;  /* network appends, builder takes */
+    struct built ready;               /* builder fills, tick takes at a tick boundary */
+    bool ready_full;
+    struct ocean *to_free;            /* tick leaves the swapped-out ocean, builder frees it */
+    struct sim_set *answers, **answers_tail;  /* tick appends, network takes */
+
+    /* Atomics: written by one thread, read by another without the lock. */
+    atomic_int demand[LAYER_KEYS];    /* network writes (subscriptions), tick reads */
+    _Atomic double now_time;          /* tick writes, network reads (state file) */
+    atomic_uint_least64_t now_seq;    /* tick writes, network reads (new clients' first frame) */
 };
 
-/* ---- frames ---- */
+void sim_set_free(struct sim_set *set) { free(set); }
 
-void frame_ref(struct frame *f) { atomic_fetch_add(&f->refs, 1); }
-
-void frame_unref(struct frame *f)
+struct ocean_params params_with(const struct ocean_params *base, const struct ocean_params *values, uint64_t mask)
 {
-    if (!f || atomic_fetch_sub(&f->refs, 1) != 1)
-        return;
-    for (int i = 0; i < f->nlayers; i++) {
-        oc_buf_free(&f->layers[i].buf);
-        free(f->layers[i].tile_off);
-    }
-    free(f->layers);
-    free(f);
-}
-
-const struct layer *frame_layer(const struct frame *f, int field, int lod, int bound_index)
-{
-    for (int i = 0; i < f->nlayers; i++) {
-        const struct layer *l = &f->layers[i];
-        if (l->field == field && l->lod == lod && l->bound_index == bound_index)
-            return l;
-    }
-    return NULL;
-}
-
-void sim_event_free(struct sim_event *e)
-{
-    if (e) {
-        cJSON_Delete(e->id);
-        free(e);
-    }
-}
-
-static void set_free(struct sim_set *s)
-{
-    if (s) {
-        cJSON_Delete(s->id);
-        free(s);
-    }
+    struct ocean_params p = *base;
+    char err[64];
+    for (size_t i = 0; i < param_count && i < 64; i++)
+        if (mask & (1ull << i))
+            param_set(&p, &param_table[i], param_get(values, &param_table[i]), err, sizeof err);
+    return p;
 }
 
 /* ---- network-side API ---- */
@@ -104,6 +80,7 @@ static void set_free(struct sim_set *s)
 void sim_submit(struct sim *s, struct sim_set *set)
 {
     set->next = NULL;
+    set->status = SIM_SET_QUEUED;
     pthread_mutex_lock(&s->lock);
     *s->pending_tail = set;
     s->pending_tail = &set->next;
@@ -111,14 +88,14 @@ void sim_submit(struct sim *s, struct sim_set *set)
     pthread_mutex_unlock(&s->lock);
 }
 
-struct sim_event *sim_take_events(struct sim *s)
+struct sim_set *sim_take_answers(struct sim *s)
 {
     pthread_mutex_lock(&s->lock);
-    struct sim_event *e = s->events;
-    s->events = NULL;
-    s->events_tail = &s->events;
+    struct sim_set *a = s->answers;
+    s->answers = NULL;
+    s->answers_tail = &s->answers;
     pthread_mutex_unlock(&s->lock);
-    return e;
+    return a;
 }
 
 struct frame *sim_latest(struct sim *s)
@@ -131,51 +108,19 @@ struct frame *sim_latest(struct sim *s)
     return f;
 }
 
+uint64_t sim_seq(struct sim *s) { return atomic_load(&s->now_seq); }
 void sim_demand(struct sim *s, int key, int delta) { atomic_fetch_add(&s->demand[key], delta); }
 double sim_time_now(struct sim *s) { return atomic_load(&s->now_time); }
 
-/* ---- sim-thread internals ---- */
+/* ---- builder thread ---- */
 
-static void emit(struct sim *s, struct sim_event *e)
+static uint64_t params_diff(const struct ocean_params *a, const struct ocean_params *b)
 {
-    e->next = NULL;
-    pthread_mutex_lock(&s->lock);
-    *s->events_tail = e;
-    s->events_tail = &e->next;
-    pthread_mutex_unlock(&s->lock);
-}
-
-/* Event for a set: applied (changed vs before) or failed with err. Takes the set's id. */
-static void emit_for_set(struct sim *s, struct sim_set *set, const struct ocean_params *before,
-                         const struct ctl_error *err)
-{
-    struct sim_event *e = calloc(1, sizeof *e);
-    if (!e)
-        return;
-    e->failed = err != NULL;
-    if (err)
-        e->err = *err;
-    e->params = s->params;
-    e->version = s->version;
+    uint64_t m = 0;
     for (size_t i = 0; i < param_count && i < 64; i++)
-        if (param_get(&s->params, &param_table[i]) != param_get(before, &param_table[i]))
-            e->changed |= 1ull << i;
-    e->origin = set->origin;
-    memcpy(e->by, set->by, sizeof e->by);
-    e->id = set->id;
-    set->id = NULL;
-    emit(s, e);
-}
-
-/* The set's values for the params it names, on top of base. */
-static struct ocean_params merged(const struct ocean_params *base, const struct sim_set *set)
-{
-    struct ocean_params p = *base;
-    char err[64];
-    for (size_t i = 0; i < param_count && i < 64; i++)
-        if (set->mask & (1ull << i))
-            param_set(&p, &param_table[i], param_get(&set->values, &param_table[i]), err, sizeof err);
-    return p;
+        if (param_get(a, &param_table[i]) != param_get(b, &param_table[i]))
+            m |= 1ull << i;
+    return m;
 }
 
 static bool physics_differ(const struct ocean_params *a, const struct ocean_params *b)
@@ -186,16 +131,60 @@ static bool physics_differ(const struct ocean_params *a, const struct ocean_para
     return false;
 }
 
-static void internal_error(struct ctl_error *e, const char *code, const char *msg)
+static void set_failed(struct sim_set *set, enum sim_set_status status, const char *msg)
 {
-    memset(e, 0, sizeof *e);
-    e->code = code;
-    snprintf(e->message, sizeof e->message, "%s", msg);
+    set->status = status;
+    snprintf(set->message, sizeof set->message, "%s", msg);
 }
 
-/* Builder thread: take the queued sets, check each on top of the previous
- * one (all or nothing per set), build one new ocean for the whole batch if
- * any physics changed, and hand it to the tick thread. */
+/* ocean_create, or the test hook's simulated out-of-memory (see sim_thread.h). */
+static struct ocean *build_ocean(struct sim *s, const struct ocean_params *p, enum sim_set_status *why,
+                                 char *err, size_t errlen)
+{
+    if (s->test_fail_seed >= 0 && p->seed == s->test_fail_seed) {
+        usleep(300 * 1000); /* long enough for a test to queue another set behind this one */
+        snprintf(err, errlen, "out of memory (test hook OCEAND_TEST_FAIL_BUILD_SEED)");
+        *why = SIM_SET_NO_MEMORY;
+        return NULL;
+    }
+    *why = SIM_SET_INVALID;
+    return ocean_create(p, &s->cfg.opts, err, errlen);
+}
+
+/* Check each set of a batch on top of the previous one (all or nothing per
+ * set) and build ONE new ocean for the whole batch if any physics changed.
+ * Allocates nothing but the ocean: whatever fails, every set is answered
+ * and build_base moves only to what was really built. */
+static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
+{
+    struct ocean_params cur = s->build_base;
+    char err[200];
+    for (struct sim_set *set = sets; set; set = set->next) {
+        struct ocean_params next = params_with(&cur, &set->values, set->mask);
+        if (params_validate(&next, err, sizeof err) != 0) {
+            set_failed(set, SIM_SET_INVALID, err);
+            continue;
+        }
+        set->prev = cur;
+        cur = next;
+    }
+    out->ocean = NULL;
+    if (physics_differ(&s->build_base, &cur)) {
+        enum sim_set_status why;
+        out->ocean = build_ocean(s, &cur, &why, err, sizeof err);
+        if (!out->ocean) {
+            LOGW("applying parameters failed: %s", err);
+            for (struct sim_set *set = sets; set; set = set->next)
+                if (set->status == SIM_SET_QUEUED)
+                    set_failed(set, why, err);
+            cur = s->build_base;
+        }
+    }
+    s->build_base = cur;
+    out->params = cur;
+    out->sets = sets;
+}
+
 static void *builder_main(void *arg)
 {
     struct sim *s = arg;
@@ -209,7 +198,7 @@ static void *builder_main(void *arg)
             pthread_mutex_lock(&s->lock);
             continue;
         }
-        if (!s->pending || s->ready) {
+        if (!s->pending || s->ready_full) {
             pthread_cond_wait(&s->cond, &s->lock);
             continue;
         }
@@ -219,65 +208,36 @@ static void *builder_main(void *arg)
         s->builder_busy = true;
         pthread_mutex_unlock(&s->lock);
 
-        struct built *b = calloc(1, sizeof *b);
-        struct ocean_params cur = s->build_base;
-        for (struct sim_set *set = sets; set; set = set->next) {
-            struct ocean_params next = merged(&cur, set);
-            char err[200];
-            if (params_validate(&next, err, sizeof err) != 0) {
-                set->failed = true;
-                internal_error(&set->err, "invalid", err);
-                continue;
-            }
-            set->prev = cur;
-            cur = next;
-        }
-        if (b && physics_differ(&s->build_base, &cur)) {
-            char err[200];
-            b->ocean = ocean_create(&cur, &s->cfg.opts, err, sizeof err);
-            if (!b->ocean) {
-                LOGW("applying parameters failed: %s", err);
-                for (struct sim_set *set = sets; set; set = set->next)
-                    if (!set->failed) {
-                        set->failed = true;
-                        internal_error(&set->err, "invalid", err);
-                    }
-                cur = s->build_base;
-            }
-        }
-        s->build_base = cur;
+        struct built b;
+        build_batch(s, sets, &b);
+
         pthread_mutex_lock(&s->lock);
         s->builder_busy = false;
-        if (b) {
-            b->params = cur;
-            b->sets = sets;
-            s->ready = b;
-        } else {
-            while (sets) { /* out of memory: drop the batch */
-                struct sim_set *n = sets->next;
-                set_free(sets);
-                sets = n;
-            }
-        }
+        s->ready = b;
+        s->ready_full = true;
     }
     pthread_mutex_unlock(&s->lock);
     return NULL;
 }
 
-/* At a tick boundary: swap in what the builder prepared, one version per set. */
+/* ---- tick thread ---- */
+
+/* At a tick boundary: swap in what the builder prepared, one version per
+ * applied set, and hand every set back to the network thread answered. */
 static void apply_pending(struct sim *s)
 {
     pthread_mutex_lock(&s->lock);
-    struct built *b = s->ready;
-    s->ready = NULL;
-    if (b)
+    bool have = s->ready_full;
+    struct built b = s->ready;
+    s->ready_full = false;
+    if (have)
         pthread_cond_signal(&s->cond);
     pthread_mutex_unlock(&s->lock);
-    if (!b)
+    if (!have)
         return;
-    if (b->ocean) {
+    if (b.ocean) {
         struct ocean *old = s->ocean;
-        s->ocean = b->ocean;
+        s->ocean = b.ocean;
         if (ocean_resolution(old) != ocean_resolution(s->ocean)) {
             atomic_fetch_add(&g_metrics.replans, 1);
             LOGI("resolution now %d", ocean_resolution(s->ocean));
@@ -292,97 +252,65 @@ static void apply_pending(struct sim *s)
         if (!slot_free)
             ocean_free(old);
     }
-    struct sim_set *set = b->sets;
-    while (set) {
-        struct sim_set *next = set->next;
-        if (set->failed) {
-            emit_for_set(s, set, &s->params, &set->err);
-        } else {
-            s->params = merged(&set->prev, set);
+    struct sim_set *last = NULL;
+    for (struct sim_set *set = b.sets; set; set = set->next) {
+        if (set->status == SIM_SET_QUEUED) {
+            struct ocean_params before = s->params;
+            s->params = params_with(&set->prev, &set->values, set->mask);
             s->version++;
             atomic_fetch_add(&g_metrics.param_changes, 1);
-            emit_for_set(s, set, &set->prev, NULL);
+            set->status = SIM_SET_APPLIED;
+            set->changed = params_diff(&before, &s->params);
         }
-        set_free(set);
-        set = next;
+        set->params = s->params;
+        set->version = s->version;
+        last = set;
     }
-    s->params = b->params;
-    free(b);
+    s->params = b.params;
+    if (last) {
+        pthread_mutex_lock(&s->lock);
+        *s->answers_tail = b.sets;
+        s->answers_tail = &last->next;
+        pthread_mutex_unlock(&s->lock);
+    }
 }
 
-/* Step and encode what is subscribed; NULL if nobody wants anything. */
-static struct frame *make_frame(struct sim *s)
+/* Which layers clients want now, from the demand counters. */
+static void demand_snapshot(struct sim *s, struct frame_want *w)
 {
-    int n = ocean_resolution(s->ocean);
-    int ts = s->cfg.tile_size < n ? s->cfg.tile_size : n;
-    int tps = n / ts;
-    unsigned fields = 0;
-    int nlayers = 0;
-    for (int k = 0; k < SIM_DEMAND_KEYS; k++)
+    w->fields = 0;
+    w->nkeys = 0;
+    for (int k = 0; k < LAYER_KEYS; k++)
         if (atomic_load(&s->demand[k]) > 0) {
-            fields |= OCEAN_FIELD_BIT(k / ((CTL_MAX_LOD + 1) * CTL_BOUND_COUNT));
-            nlayers++;
+            w->fields |= OCEAN_FIELD_BIT(layer_key_field(k));
+            w->keys[w->nkeys++] = (uint16_t)k;
         }
-    if (!fields)
-        return NULL;
-    if (ocean_step(s->ocean, s->sim_time, fields) != 0) {
-        LOGE("ocean_step failed at t=%g", s->sim_time);
-        return NULL;
-    }
+}
+
+static bool step(struct sim *s, unsigned fields)
+{
+    if (ocean_step(s->ocean, s->sim_time, fields) == 0)
+        return true;
+    LOGE("ocean_step failed at t=%g", s->sim_time);
+    return false;
+}
+
+static struct frame *encode(struct sim *s, const struct frame_want *want)
+{
     double t0 = mono_now();
-    struct frame *f = calloc(1, sizeof *f);
-    if (!f)
-        return NULL;
-    atomic_init(&f->refs, 1);
-    f->layers = calloc((size_t)nlayers, sizeof *f->layers);
-    f->tiles_per_side = tps;
-    if (!f->layers) {
-        free(f);
-        return NULL;
-    }
-    for (int k = 0; k < SIM_DEMAND_KEYS; k++) {
-        if (atomic_load(&s->demand[k]) <= 0 || f->nlayers == nlayers)
-            continue;
-        int field = k / ((CTL_MAX_LOD + 1) * CTL_BOUND_COUNT);
-        int lod = (k / CTL_BOUND_COUNT) % (CTL_MAX_LOD + 1);
-        int bi = k % CTL_BOUND_COUNT;
-        if ((ts >> lod) < 1)
-            continue;
-        const float *data = ocean_field(s->ocean, (enum ocean_field)field);
-        if (!(fields & OCEAN_FIELD_BIT(field)) || !data)
-            continue;
-        struct layer *l = &f->layers[f->nlayers];
-        l->field = (uint8_t)field;
-        l->lod = (uint8_t)lod;
-        l->bound_index = (uint8_t)bi;
-        l->tile_off = malloc(sizeof(uint32_t) * ((size_t)tps * tps + 1));
-        int rc = l->tile_off ? 0 : OC_E_NOMEM;
-        for (int tz = 0; rc == 0 && tz < tps; tz++)
-            for (int tx = 0; rc == 0 && tx < tps; tx++) {
-                l->tile_off[tz * tps + tx] = (uint32_t)l->buf.len;
-                rc = oc_encode_tile(s->enc, data, n, ts, tx, tz, lod, (enum oc_field)field, ctl_bounds[bi], &l->buf);
-            }
-        if (rc != 0) {
-            LOGE("encoding %s lod %d: %s", ocean_field_name((enum ocean_field)field), lod, oc_strerror(rc));
-            oc_buf_free(&l->buf);
-            free(l->tile_off);
-            memset(l, 0, sizeof *l);
-            continue;
-        }
-        l->tile_off[tps * tps] = (uint32_t)l->buf.len;
-        f->nlayers++;
-    }
+    struct oc_frame_header h = {
+        .seq = s->seq, .sim_time = s->sim_time, .params_version = s->version,
+        .patch_size = (float)s->params.patch_size,
+    };
+    struct frame *f = frame_encode(s->ocean, s->enc, s->cfg.tile_size, want, &h);
+    if (f)
+        f->index = s->published++;
     histogram_observe(&g_metrics.encode_seconds, mono_now() - t0);
-    f->hdr.seq = ++s->seq;
-    f->hdr.sim_time = s->sim_time;
-    f->hdr.params_version = s->version;
-    f->hdr.n = (uint16_t)n;
-    f->hdr.tile_size = (uint16_t)ts;
-    f->hdr.patch_size = (float)s->params.patch_size;
-    f->hdr.server_time_us = unix_us();
     return f;
 }
 
+/* The newest frame replaces the previous one; NULL (no frame this tick)
+ * too, so that nobody is ever handed a frame from an earlier tick. */
 static void publish(struct sim *s, struct frame *f)
 {
     pthread_mutex_lock(&s->lock);
@@ -390,6 +318,24 @@ static void publish(struct sim *s, struct frame *f)
     s->latest = f;
     pthread_mutex_unlock(&s->lock);
     frame_unref(old);
+}
+
+static void tick(struct sim *s)
+{
+    apply_pending(s);
+    s->seq++;
+    atomic_store(&s->now_seq, s->seq);
+    atomic_store(&s->now_time, s->sim_time);
+    atomic_store(&g_metrics.sim_time, s->sim_time);
+    atomic_store(&g_metrics.params_version, s->version);
+    atomic_store(&g_metrics.resolution, ocean_resolution(s->ocean));
+
+    struct frame_want want;
+    demand_snapshot(s, &want);
+    struct frame *f = NULL;
+    if (want.nkeys && step(s, want.fields))
+        f = encode(s, &want);
+    publish(s, f);
 }
 
 static void *sim_main(void *arg)
@@ -405,18 +351,12 @@ static void *sim_main(void *arg)
     double elapsed = 0; /* wall seconds since the previous tick (0 on the first) */
     while (!atomic_load(&s->stop)) {
         double t0 = mono_now();
-        /* The clock runs under the parameters that were in force during the interval. */
+        /* The clock runs under the parameters that were in force during the
+         * interval, with or without clients (PROTOCOL.md §3.1). */
         if (!s->params.paused)
             s->sim_time += s->params.time_scale * elapsed;
-        apply_pending(s);
-        atomic_store(&s->now_time, s->sim_time);
-        atomic_store(&g_metrics.sim_time, s->sim_time);
-        atomic_store(&g_metrics.params_version, s->version);
-        atomic_store(&g_metrics.resolution, ocean_resolution(s->ocean));
-        struct frame *f = make_frame(s);
-        if (f)
-            publish(s, f);
-        /* Always wake lws: events (params) may be waiting even without a frame. */
+        tick(s);
+        /* Always wake lws: answers (params) may be waiting even without a frame. */
         if (s->cfg.wake)
             s->cfg.wake(s->cfg.wake_user);
         atomic_fetch_add(&g_metrics.ticks, 1);
@@ -461,7 +401,11 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     s->version = cfg->start_version;
     s->sim_time = cfg->start_time;
     s->pending_tail = &s->pending;
-    s->events_tail = &s->events;
+    s->answers_tail = &s->answers;
+    const char *hook = getenv("OCEAND_TEST_FAIL_BUILD_SEED");
+    s->test_fail_seed = hook && *hook ? atoi(hook) : -1;
+    if (s->test_fail_seed >= 0)
+        LOGW("test hook: builds with seed %d will fail (OCEAND_TEST_FAIL_BUILD_SEED)", s->test_fail_seed);
     pthread_mutex_init(&s->lock, NULL);
     pthread_cond_init(&s->cond, NULL);
     s->build_base = *p;
@@ -502,6 +446,15 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     return s;
 }
 
+static void free_sets(struct sim_set *set)
+{
+    while (set) {
+        struct sim_set *n = set->next;
+        sim_set_free(set);
+        set = n;
+    }
+}
+
 void sim_stop(struct sim *s)
 {
     if (!s)
@@ -521,26 +474,15 @@ void sim_stop(struct sim *s)
     }
     if (s->builder_started)
         pthread_join(s->builder, NULL);
-    struct sim_set *lists[2] = { s->pending, s->ready ? s->ready->sets : NULL };
-    for (int i = 0; i < 2; i++)
-        while (lists[i]) {
-            struct sim_set *n = lists[i]->next;
-            set_free(lists[i]);
-            lists[i] = n;
-        }
-    if (s->ready) {
-        if (s->ready->ocean)
-            ocean_free(s->ready->ocean);
-        free(s->ready);
+    free_sets(s->pending);
+    free_sets(s->answers);
+    if (s->ready_full) {
+        free_sets(s->ready.sets);
+        if (s->ready.ocean)
+            ocean_free(s->ready.ocean);
     }
     if (s->to_free)
         ocean_free(s->to_free);
-    struct sim_event *e = s->events;
-    while (e) {
-        struct sim_event *n = e->next;
-        sim_event_free(e);
-        e = n;
-    }
     frame_unref(s->latest);
     ocean_free(s->ocean);
     oc_encoder_free(s->enc);

@@ -1,0 +1,71 @@
+/* frame.h — one tick's encoded output, shared read-only by every client.
+ *
+ * The tick thread encodes each (field, LOD, bound) layer that some client
+ * subscribes to, once, into a struct frame; the lws thread copies byte
+ * ranges of it (the tiles each client asked for) into its sockets. A frame is
+ * immutable once built and freed when its last reference goes (frame_ref /
+ * frame_unref are atomic, so either thread may drop the last one). */
+#ifndef OCEAND_FRAME_H
+#define OCEAND_FRAME_H
+
+#include <stdatomic.h>
+#include <stdint.h>
+
+#include "control.h"
+#include "oc_proto.h"
+#include "ocean.h"
+
+/* A layer key: one (field, LOD, bound index) combination, 0..LAYER_KEYS-1.
+ * Subscriptions are counted per key (demand); a frame holds one layer per
+ * key that had demand when it was built. */
+#define LAYER_KEYS (OCEAN_FIELD_COUNT * (CTL_MAX_LOD + 1) * CTL_BOUND_COUNT)
+static inline int layer_key(int field, int lod, int bound_index)
+{
+    return (field * (CTL_MAX_LOD + 1) + lod) * CTL_BOUND_COUNT + bound_index;
+}
+static inline int layer_key_field(int key) { return key / ((CTL_MAX_LOD + 1) * CTL_BOUND_COUNT); }
+static inline int layer_key_lod(int key) { return (key / CTL_BOUND_COUNT) % (CTL_MAX_LOD + 1); }
+static inline int layer_key_bound(int key) { return key % CTL_BOUND_COUNT; }
+
+/* The tile side frames use at resolution n: the configured size, or n when
+ * the grid is smaller. hello and params announce this value too. */
+static inline int frame_tile_size(int configured, int n) { return configured < n ? configured : n; }
+
+/* All tiles of one field at one LOD and bound, encoded back to back. */
+struct layer {
+    uint8_t field, lod, bound_index;
+    struct oc_buf buf;
+    uint32_t *tile_off;     /* tiles_per_side^2 + 1 offsets into buf; tile i = tz*tps + tx */
+};
+
+struct frame {
+    atomic_int refs;
+    struct oc_frame_header hdr; /* tile_count is per client: set when sending */
+    uint64_t index;             /* frames published before this one (not on the wire): counts
+                                   frames the lws thread never saw, unlike seq, which also
+                                   advances on ticks that built no frame */
+    int tiles_per_side;
+    int nlayers;
+    struct layer *layers;
+};
+
+/* Which layers to build: the keys with demand, and the fields they need. */
+struct frame_want {
+    unsigned fields;            /* OCEAN_FIELD_BIT mask of the keys below */
+    int nkeys;
+    uint16_t keys[LAYER_KEYS];
+};
+
+/* Encode the wanted layers of the ocean's last step into a new frame (one
+ * reference, held by the caller). hdr gives seq, sim_time, params_version,
+ * patch_size; n, tile_size and server_time_us are filled in here. A layer
+ * that fails to encode is left out (logged). NULL when out of memory. */
+struct frame *frame_encode(const struct ocean *o, struct oc_encoder *enc, int tile_size,
+                           const struct frame_want *want, const struct oc_frame_header *hdr);
+
+void frame_ref(struct frame *f);
+void frame_unref(struct frame *f);     /* NULL is fine */
+/* The layer for (field, lod, bound), or NULL if nobody asked for it this tick. */
+const struct layer *frame_layer(const struct frame *f, int field, int lod, int bound_index);
+
+#endif

@@ -1,0 +1,247 @@
+/* dispatch.c — control messages from clients (PROTOCOL.md §7): the rate
+ * limit, set / pause / resume, subscribe, ping; and the answers to sets that
+ * come back from the simulation, broadcast as `params` or returned to the
+ * sender as an error.
+ *
+ * A set is checked here against `view` (the applied parameters plus every
+ * set still on its way), sent to the sim with an opaque tag, and remembered
+ * as a struct request until the sim answers that tag. */
+#include "net_internal.h"
+
+#include "clock.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "log.h"
+#include "metrics.h"
+#include "sim_thread.h"
+
+/* ---- subscriptions and demand ---- */
+
+void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
+{
+    if (!n->sim)
+        return;
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+        if (sub->fields & OCEAN_FIELD_BIT(f))
+            sim_demand(n->sim, layer_key(f, sub->lod, sub->bound_index), delta);
+}
+
+/* ---- sets in flight ---- */
+
+static struct request *request_of(lws_dll2_t *d) { return lws_container_of(d, struct request, list); }
+
+static void request_free(struct request *r)
+{
+    lws_dll2_remove(&r->list);
+    cJSON_Delete(r->id);
+    free(r);
+}
+
+void dispatch_free_requests(struct net *n)
+{
+    while (n->requests.head)
+        request_free(request_of(n->requests.head));
+}
+
+/* view = applied + every set not answered yet, in order: what the sim will
+ * have once they are applied, so the next set is checked on that. */
+static void rebuild_view(struct net *n)
+{
+    n->view = n->applied;
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->requests); d; d = d->next)
+        n->view = params_with(&n->view, &request_of(d)->values, request_of(d)->mask);
+}
+
+static void submit_set(struct net *n, struct session *s, const cJSON *params, const cJSON *id)
+{
+    struct ctl_error e;
+    struct ocean_params out;
+    uint64_t changed;
+    if (control_apply_params(params, &n->view, &n->lim, &out, &changed, &e) != 0) {
+        session_send_error(s, &e, id);
+        return;
+    }
+    if (!changed) {
+        session_queue_json(s, control_params_msg(&n->view, n->applied_version, 0, s->client_id, id));
+        return;
+    }
+    struct sim_set *set = calloc(1, sizeof *set);
+    struct request *r = calloc(1, sizeof *r);
+    cJSON *idc = id ? cJSON_Duplicate(id, 1) : NULL;
+    if (!set || !r || (id && !idc)) {
+        free(set);
+        free(r);
+        cJSON_Delete(idc);
+        struct ctl_error oom = { .code = "internal", .message = "out of memory" };
+        session_send_error(s, &oom, id);
+        return;
+    }
+    r->tag = set->tag = ++n->next_tag;
+    r->serial = s->serial;
+    memcpy(r->by, s->client_id, sizeof r->by);
+    r->id = idc;
+    r->values = set->values = out;
+    r->mask = set->mask = changed;
+    lws_dll2_add_tail(&r->list, &n->requests);
+    n->view = out;
+    sim_submit(n->sim, set);
+}
+
+/* ---- answers from the sim ---- */
+
+static uint64_t resolution_bit(void)
+{
+    const struct param_def *d = param_find("resolution");
+    return d ? 1ull << (d - param_table) : 0;
+}
+
+/* `params` for one applied set; with tile_size when N changed, since the
+ * tile side follows N below the configured size (hello has it too). */
+static cJSON *params_msg(struct net *n, const struct sim_set *a, const char *by, const cJSON *id)
+{
+    cJSON *m = control_params_msg(&a->params, a->version, a->changed, by, id);
+    if (m && (a->changed & resolution_bit()))
+        cJSON_AddNumberToObject(m, "tile_size", net_tile_size(n));
+    return m;
+}
+
+static void answer(struct net *n, const struct sim_set *a)
+{
+    struct request *r = NULL;
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->requests); d && !r; d = d->next)
+        if (request_of(d)->tag == a->tag)
+            r = request_of(d);
+    if (!r) {
+        LOGE("answer for an unknown set (tag %llu)", (unsigned long long)a->tag);
+        return;
+    }
+    struct session *origin = session_find(n, r->serial);
+    n->applied = a->params;
+    n->applied_version = a->version;
+    if (a->status == SIM_SET_APPLIED) {
+        if (n->on_params)
+            n->on_params(n->on_params_user, &n->applied, n->applied_version);
+        char *all = control_print(params_msg(n, a, r->by, NULL));
+        for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
+            if (session_of(d) != origin)
+                session_queue_text(session_of(d), all, false);
+        free(all);
+        if (origin)
+            session_queue_json(origin, params_msg(n, a, r->by, r->id));
+    } else if (origin) {
+        struct ctl_error e = { .code = a->status == SIM_SET_NO_MEMORY ? "internal" : "invalid" };
+        snprintf(e.message, sizeof e.message, "%s", a->message);
+        session_send_error(origin, &e, r->id);
+    }
+    request_free(r);
+}
+
+void dispatch_answers(struct net *n)
+{
+    struct sim_set *a = sim_take_answers(n->sim);
+    if (!a)
+        return;
+    while (a) {
+        struct sim_set *next = a->next;
+        answer(n, a);
+        sim_set_free(a);
+        a = next;
+    }
+    rebuild_view(n);
+}
+
+/* ---- messages ---- */
+
+/* The request id of a message we will not otherwise parse (rate_limited):
+ * §7 promises it in every error a request causes. A detached copy or NULL. */
+static cJSON *request_id(const char *text, size_t len)
+{
+    if (!text)
+        return NULL;
+    cJSON *root = cJSON_ParseWithLength(text, len);
+    cJSON *id = cJSON_IsObject(root) ? cJSON_GetObjectItemCaseSensitive(root, "id") : NULL;
+    cJSON *copy = id && !cJSON_IsArray(id) && !cJSON_IsObject(id) ? cJSON_Duplicate(id, 0) : NULL;
+    cJSON_Delete(root);
+    return copy;
+}
+
+/* Charge one message to the client's token bucket (every message from a
+ * client, text or binary, costs the daemon a reply). false = over the limit:
+ * the client got rate_limited (with the message's id, if text) and the
+ * message is to be dropped. */
+bool dispatch_take_token(struct net *n, struct session *s, const char *text, size_t len)
+{
+    atomic_fetch_add(&g_metrics.control_messages, 1);
+    double now = mono_now();
+    s->tokens += (now - s->tokens_t) * n->dc.control_rate;
+    if (s->tokens > n->dc.control_burst)
+        s->tokens = n->dc.control_burst;
+    s->tokens_t = now;
+    if (s->tokens < 1) {
+        struct ctl_error e = { .code = "rate_limited" };
+        snprintf(e.message, sizeof e.message, "more than %g control messages per second", n->dc.control_rate);
+        cJSON *id = request_id(text, len);
+        session_send_error(s, &e, id);
+        cJSON_Delete(id);
+        return false;
+    }
+    s->tokens -= 1;
+    return true;
+}
+
+void dispatch_message(struct net *n, struct session *s, const char *text, size_t len)
+{
+    if (!dispatch_take_token(n, s, text, len))
+        return;
+
+    struct ctl_msg m;
+    struct ctl_error e;
+    cJSON *bad_id = NULL;
+    if (control_parse(text, len, &m, &bad_id, &e) != 0) {
+        session_send_error(s, &e, bad_id);
+        cJSON_Delete(bad_id);
+        return;
+    }
+    switch (m.type) {
+    case CTL_SET:
+    case CTL_PAUSE:
+    case CTL_RESUME: {
+        if (!s->controller && !(m.token && n->dc.control_token[0] && control_token_equal(m.token, n->dc.control_token))) {
+            struct ctl_error f = { .code = "forbidden", .message = "this client may not change parameters (token needed)" };
+            session_send_error(s, &f, m.id);
+            break;
+        }
+        if (m.type == CTL_SET) {
+            submit_set(n, s, m.params, m.id);
+        } else {
+            cJSON *p = cJSON_CreateObject();
+            cJSON_AddBoolToObject(p, "paused", m.type == CTL_PAUSE);
+            submit_set(n, s, p, m.id);
+            cJSON_Delete(p);
+        }
+        break;
+    }
+    case CTL_SUBSCRIBE: {
+        struct subscription *ns = malloc(sizeof *ns); /* ~4 kB (tile list): not on the stack */
+        if (!ns)
+            break;
+        if (control_apply_subscribe(m.root, &s->sub, &n->lim, ns, &e) != 0) {
+            session_send_error(s, &e, m.id);
+        } else {
+            dispatch_demand(n, ns, +1);
+            dispatch_demand(n, &s->sub, -1);
+            s->sub = *ns;
+            session_queue_json(s, control_subscribed_msg(&s->sub, m.id));
+        }
+        free(ns);
+        break;
+    }
+    case CTL_PING:
+        session_queue_json(s, control_pong_msg(m.id, m.has_t, m.t, unix_us()));
+        break;
+    }
+    ctl_msg_free(&m);
+}

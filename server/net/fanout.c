@@ -1,0 +1,188 @@
+/* fanout.c — frames to clients, latest frame wins.
+ *
+ * net.latest is the newest frame the tick thread published. A client sends
+ * one frame at a time: its header (with its own tile count) and the byte
+ * ranges of the tiles it subscribed to, copied from the shared layers into
+ * its own LWS_PRE-prefixed chunk buffer, as a fragmented WebSocket message.
+ * A client that is still busy when newer frames arrive skips them: it holds
+ * a reference to at most the one frame it is sending, so it never slows the
+ * others and memory stays flat. Nothing is encoded per client. */
+#include "net_internal.h"
+
+#include "clock.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "metrics.h"
+#include "sim_thread.h"
+
+/* Frame `f` replaces the previous one (latest frame wins): every client
+ * that did not start sending the previous one skips it, and every client
+ * skips the frames in between, which the sim published while this thread
+ * was busy and nobody ever saw. Counted here, as it happens, so that a
+ * client that stopped reading shows up in the metrics at once; per client
+ * the count equals the holes in the seq numbers it receives (while it is
+ * subscribed, every tick builds a frame). */
+static void count_skipped(struct net *n, const struct frame *f)
+{
+    if (!n->seen_any)
+        return;
+    uint64_t unseen = f->index > n->seen_index + 1 ? f->index - n->seen_index - 1 : 0;
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
+        struct session *s = session_of(d);
+        if (!s->last_seq || s->last_seq >= f->hdr.seq)
+            continue; /* no frame yet (holes count from the first frame on) */
+        uint64_t k = unseen + (s->last_seq < n->seen_seq ? 1 : 0);
+        if (k)
+            atomic_fetch_add(s->sub.max_rate < n->dc.tick_rate ? &g_metrics.dropped_rate : &g_metrics.dropped_slow, k);
+    }
+}
+
+void fanout_take_latest(struct net *n)
+{
+    struct frame *f = sim_latest(n->sim);
+    if (f == n->latest) {
+        frame_unref(f);
+        return;
+    }
+    if (f) {
+        count_skipped(n, f);
+        n->seen_any = true;
+        n->seen_index = f->index;
+        n->seen_seq = f->hdr.seq;
+    }
+    frame_unref(n->latest);
+    n->latest = f; /* NULL after a tick that built no frame: nothing stale is kept */
+}
+
+bool fanout_want_write(const struct net *n, const struct session *s)
+{
+    const struct frame *f = n->latest;
+    return f && f->hdr.seq > s->last_seq && f->hdr.seq >= s->first_seq;
+}
+
+/* Prepare s->cur = f for this client: header, layers, tile list. false if the
+ * frame lacks a layer this client needs (its subscription just changed). */
+static bool begin_frame(struct session *s, struct frame *f)
+{
+    int tps = f->tiles_per_side;
+    int nf = 0;
+    for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++) {
+        s->layers[fi] = NULL;
+        if (!(s->sub.fields & OCEAN_FIELD_BIT(fi)))
+            continue;
+        s->layers[fi] = frame_layer(f, fi, s->sub.lod, s->sub.bound_index);
+        if (!s->layers[fi])
+            return false;
+        nf++;
+    }
+    s->ntiles = 0;
+    if (s->sub.all_tiles) {
+        for (int i = 0; i < tps * tps; i++)
+            s->tiles[s->ntiles++] = (uint16_t)i;
+    } else {
+        for (int i = 0; i < s->sub.ntiles; i++)
+            if (s->sub.tiles[i][0] < tps && s->sub.tiles[i][1] < tps)
+                s->tiles[s->ntiles++] = (uint16_t)(s->sub.tiles[i][1] * tps + s->sub.tiles[i][0]);
+    }
+    struct oc_frame_header h = f->hdr;
+    h.tile_count = (uint16_t)(nf * s->ntiles);
+    oc_frame_header_write(s->hdr, &h);
+    s->total = OC_FRAME_HEADER_SIZE;
+    for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++)
+        for (int i = 0; s->layers[fi] && i < s->ntiles; i++)
+            s->total += s->layers[fi]->tile_off[s->tiles[i] + 1] - s->layers[fi]->tile_off[s->tiles[i]];
+    frame_ref(f);
+    s->cur = f;
+    s->sent = 0;
+    s->hdr_off = 0;
+    s->fi = 0;
+    s->ti = 0;
+    s->off = 0;
+    return true;
+}
+
+/* Copy the next bytes of the client's frame into dst. */
+static size_t fill(struct session *s, unsigned char *dst, size_t cap)
+{
+    size_t n = 0;
+    if (s->hdr_off < OC_FRAME_HEADER_SIZE) {
+        size_t take = OC_FRAME_HEADER_SIZE - (size_t)s->hdr_off;
+        if (take > cap)
+            take = cap;
+        memcpy(dst, s->hdr + s->hdr_off, take);
+        s->hdr_off += (int)take;
+        n += take;
+    }
+    while (n < cap && s->fi < OCEAN_FIELD_COUNT) {
+        const struct layer *l = s->layers[s->fi];
+        if (!l || s->ti >= s->ntiles) {
+            s->fi++;
+            s->ti = 0;
+            s->off = 0;
+            continue;
+        }
+        int tile = s->tiles[s->ti];
+        size_t start = l->tile_off[tile], size = l->tile_off[tile + 1] - start;
+        size_t take = size - s->off;
+        if (take > cap - n)
+            take = cap - n;
+        memcpy(dst + n, l->buf.data + start + s->off, take);
+        n += take;
+        s->off += take;
+        if (s->off == size) {
+            s->ti++;
+            s->off = 0;
+        }
+    }
+    return n;
+}
+
+static int send_chunk(struct session *s)
+{
+    if (!s->chunk && !(s->chunk = malloc(LWS_PRE + CHUNK_SIZE)))
+        return -1;
+    size_t len = fill(s, s->chunk + LWS_PRE, CHUNK_SIZE);
+    bool first = s->sent == 0, last = s->sent + len >= s->total;
+    int flags = lws_write_ws_flags(LWS_WRITE_BINARY, first, last);
+    if (lws_write(s->wsi, s->chunk + LWS_PRE, len, (enum lws_write_protocol)flags) < (int)len)
+        return -1;
+    s->sent += len;
+    if (last) {
+        atomic_fetch_add(&g_metrics.frames_sent, 1);
+        atomic_fetch_add(&g_metrics.bytes_sent, s->total);
+        frame_unref(s->cur);
+        s->cur = NULL;
+    }
+    return 0;
+}
+
+/* Continue the frame in progress, or start the newest one if it is newer
+ * than the last one sent and the client's max_rate allows. Returns 1 if
+ * something was written, 0 if not, -1 to close. */
+int fanout_write(struct net *n, struct session *s)
+{
+    if (!s->cur) {
+        struct frame *f = n->latest;
+        if (!fanout_want_write(n, s))
+            return 0;
+        double now = mono_now();
+        /* max_rate: wait until a period has (almost) passed; half a tick of slack absorbs jitter. */
+        if (s->sub.max_rate < n->dc.tick_rate && now - s->last_frame_t < 1.0 / s->sub.max_rate - 0.5 / n->dc.tick_rate)
+            return 0;
+        if (!begin_frame(s, f))
+            return 0;
+        s->last_seq = f->hdr.seq;
+        s->last_frame_t = now;
+    }
+    return send_chunk(s) == 0 ? 1 : -1;
+}
+
+void fanout_session_free(struct session *s)
+{
+    frame_unref(s->cur);
+    s->cur = NULL;
+    free(s->chunk);
+    s->chunk = NULL;
+}

@@ -1,0 +1,100 @@
+/* http.c — plain HTTP on the daemon's port: /healthz, /metrics, and a
+ * placeholder page at / when the web client is not built. Static files are
+ * served by lws itself (an LWSMPRO_FILE mount, context.c). This protocol
+ * also refuses WebSocket upgrades that do not ask for oceand.v1. */
+#include "net_internal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "log.h"
+#include "metrics.h"
+
+static const char placeholder_html[] =
+    "<!doctype html><meta charset=utf-8><title>oceand</title>"
+    "<h1>oceand is running</h1><p>The web client is not built (no index.html in the web root). "
+    "Run <code>make</code> to bundle it into <code>build/web</code>.</p>"
+    "<p>WebSocket: subprotocol <code>oceand.v1</code> on this port. "
+    "<a href=/metrics>/metrics</a> · <a href=/healthz>/healthz</a></p>\n";
+
+/* The body for uri (LWS_PRE bytes of headroom, then *len bytes), with its
+ * type; NULL with *len = 0 for 404, NULL with *len = 1 when out of memory. */
+static char *render(struct net *n, const char *uri, size_t *len, const char **type)
+{
+    char *body = NULL;
+    *len = 0;
+    if (strcmp(uri, "/healthz") == 0) {
+        *type = "application/json";
+        if ((body = malloc(LWS_PRE + 256)))
+            *len = (size_t)snprintf(body + LWS_PRE, 256, "{\"status\":\"ok\",\"clients\":%d,\"params_version\":%u,\"ticks\":%llu}\n",
+                                    (int)n->sessions.count, n->applied_version,
+                                    (unsigned long long)atomic_load(&g_metrics.ticks));
+    } else if (strcmp(uri, "/metrics") == 0) {
+        *type = "text/plain; version=0.0.4; charset=utf-8";
+        size_t cap = 16384;
+        if ((body = malloc(LWS_PRE + cap)))
+            *len = metrics_render(body + LWS_PRE, cap);
+    } else if (n->placeholder && (strcmp(uri, "/") == 0 || strcmp(uri, "/index.html") == 0)) {
+        *type = "text/html; charset=utf-8";
+        if ((body = malloc(LWS_PRE + sizeof placeholder_html)))
+            memcpy(body + LWS_PRE, placeholder_html, *len = sizeof placeholder_html - 1);
+    } else {
+        return NULL;
+    }
+    if (!body)
+        *len = 1;
+    return body;
+}
+
+int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
+{
+    struct net *n = net_of(wsi);
+    struct http_session *hs = user;
+    switch (reason) {
+    case LWS_CALLBACK_FILTER_PROTOCOL_CONNECTION:
+        LOGD("refusing a WebSocket without subprotocol %s", OC_SUBPROTOCOL);
+        return 1;
+    case LWS_CALLBACK_HTTP: {
+        char uri[256] = "";
+        lws_hdr_copy(wsi, uri, sizeof uri, WSI_TOKEN_GET_URI);
+        const char *type = "text/plain; charset=utf-8";
+        size_t blen;
+        char *body = render(n, uri, &blen, &type);
+        if (!body && blen == 0)
+            return lws_return_http_status(wsi, HTTP_STATUS_NOT_FOUND, NULL) ? -1 : lws_http_transaction_completed(wsi);
+        if (!body)
+            return -1;
+        hs->body = (unsigned char *)body;
+        hs->len = blen;
+        unsigned char hdr[LWS_PRE + 512], *start = hdr + LWS_PRE, *p = start, *end = hdr + sizeof hdr - 1;
+        if (lws_add_http_common_headers(wsi, HTTP_STATUS_OK, type, blen, &p, end) ||
+            lws_add_http_header_by_token(wsi, WSI_TOKEN_HTTP_CACHE_CONTROL, (const unsigned char *)"no-store", 8, &p, end) ||
+            lws_finalize_write_http_header(wsi, start, &p, end))
+            return 1;
+        lws_callback_on_writable(wsi);
+        return 0;
+    }
+    case LWS_CALLBACK_HTTP_WRITEABLE: {
+        if (!hs || !hs->body)
+            break;
+        int w = lws_write(wsi, hs->body + LWS_PRE, hs->len, LWS_WRITE_HTTP_FINAL);
+        free(hs->body);
+        hs->body = NULL;
+        if (w < (int)hs->len)
+            return -1;
+        if (lws_http_transaction_completed(wsi))
+            return -1;
+        return 0;
+    }
+    case LWS_CALLBACK_CLOSED_HTTP:
+        if (hs) {
+            free(hs->body);
+            hs->body = NULL;
+        }
+        break;
+    default:
+        break;
+    }
+    return lws_callback_http_dummy(wsi, reason, user, in, len);
+}

@@ -1,0 +1,155 @@
+/* net_internal.h — what the files of server/net/ share. Not for the rest of
+ * the daemon, which uses ../net.h.
+ *
+ * Every function and field here belongs to the lws service thread (the one
+ * that calls net_service), unless its comment says otherwise; nothing here is
+ * locked. Data from the simulation arrives only through sim_latest,
+ * sim_take_answers and sim_seq (server/sim_thread.h), on that thread, after
+ * lws_cancel_service woke it (LWS_CALLBACK_EVENT_WAIT_CANCELLED in
+ * session.c). docs/threads.md has the whole contract.
+ *
+ *   context.c   lws context, protocol table, mounts; net_create/destroy
+ *   upgrade.c   who may open a WebSocket (Origin, --max-clients)
+ *   session.c   the oceand.v1 protocol: session lifecycle, receive, write
+ *               scheduling, JSON send queue, the sim's wake-up
+ *   dispatch.c  control messages: rate limit, set/subscribe/ping, and the
+ *               answers to sets coming back from the sim
+ *   fanout.c    frames: latest-frame-wins hand-over, per-client slicing
+ *   http.c      /healthz, /metrics, placeholder page */
+#ifndef OCEAND_NET_INTERNAL_H
+#define OCEAND_NET_INTERNAL_H
+
+#include <cjson/cJSON.h>
+#include <libwebsockets.h>
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "config.h"
+#include "control.h"
+#include "frame.h"
+#include "net.h"
+#include "oc_proto.h"
+
+#define CHUNK_SIZE (32 * 1024)    /* bytes per lws_write of a frame */
+#define MAX_TEXT_QUEUE 256        /* a client this far behind on JSON is not reading: drop it */
+
+/* One queued JSON message. */
+struct text {
+    lws_dll2_t list;              /* in session.tq */
+    size_t len;
+    unsigned char data[];         /* LWS_PRE bytes, then the message */
+};
+
+/* One WebSocket client: lws' per-session data of the oceand.v1 protocol.
+ * Written and read only on the lws thread. */
+struct session {
+    lws_dll2_t list;              /* in net.sessions; detached = not (or no longer) established */
+    struct lws *wsi;
+    uint64_t serial;              /* unique for the daemon's life; requests find their sender by it */
+    char client_id[24];           /* "c<serial>": hello.client_id, params.by */
+    bool controller;              /* may set without a token */
+    struct subscription sub;      /* in force; counted in the sim's demand */
+
+    /* receive */
+    char *rx;                     /* a text message being assembled from fragments */
+    size_t rx_len;
+    bool rx_binary;               /* inside a binary message (fragments of it follow) */
+    size_t rx_binary_len;         /* its bytes so far: --max-message applies to it too */
+    int closing;                  /* close status to send once the queue drains, 0 = none */
+    double tokens, tokens_t;      /* control-message rate limit (token bucket) and its last refill */
+
+    /* transmit: JSON queue (sent before any new frame) */
+    lws_dll2_owner_t tq;          /* struct text, oldest first; tq.count = messages */
+    size_t tq_bytes;              /* their bytes (for a per-client byte cap) */
+
+    /* transmit: the frame being sent (fanout.c) */
+    struct frame *cur;            /* one reference while sending, else NULL */
+    uint8_t hdr[OC_FRAME_HEADER_SIZE];
+    const struct layer *layers[OCEAN_FIELD_COUNT];
+    uint16_t tiles[CTL_MAX_TILES];
+    int ntiles;
+    size_t total, sent;           /* bytes of this client's frame, and sent so far */
+    int hdr_off, fi, ti;          /* position: header bytes, field, tile... */
+    size_t off;                   /* ...and byte within the tile */
+    uint64_t first_seq;           /* frames older than this are never sent (tick at join) */
+    uint64_t last_seq;            /* seq of the last frame started, 0 = none yet */
+    double last_frame_t;          /* when it started (max_rate) */
+    unsigned char *chunk;         /* LWS_PRE + CHUNK_SIZE */
+};
+
+/* A set sent to the sim and not answered yet: the sim knows it only by tag. */
+struct request {
+    lws_dll2_t list;              /* in net.requests, in submission order */
+    uint64_t tag;
+    uint64_t serial;              /* sender's session serial (it may be gone by the answer) */
+    char by[24];                  /* sender's client id */
+    cJSON *id;                    /* owned copy of the request id, or NULL */
+    struct ocean_params values;   /* what the set asked for (mask of params)... */
+    uint64_t mask;                /* ...replayed onto the applied params to rebuild the view */
+};
+
+/* Per-connection data of the HTTP protocol. */
+struct http_session {
+    unsigned char *body;          /* LWS_PRE + len */
+    size_t len;
+};
+
+/* The network side. All fields: lws thread only (written by net_create
+ * before the service loop starts, then by the callbacks), except where noted. */
+struct net {
+    struct lws_context *ctx;      /* net_create; read by net_wake on the tick thread (lws_cancel_service) */
+    struct daemon_config dc;      /* read-only after net_create */
+    struct ctl_limits lim;        /* read-only after net_create */
+    struct sim *sim;              /* net_attach_sim, by main before/after the service loop */
+    struct frame *latest;         /* newest frame taken from the sim (one reference), or NULL */
+    uint64_t seen_index;          /* frame.index of the last frame taken (skip counting) */
+    uint64_t seen_seq;            /* its seq */
+    bool seen_any;
+    lws_dll2_owner_t sessions;    /* struct session; .count = connected clients */
+    uint64_t next_serial;
+    lws_dll2_owner_t requests;    /* struct request: sets sent to the sim, not answered yet */
+    uint64_t next_tag;
+    struct ocean_params applied;  /* in force (from the sim's answers) */
+    uint32_t applied_version;
+    struct ocean_params view;     /* applied + every pending request: what the next set is checked on */
+    net_params_fn on_params;      /* listener for applied changes (main: state saving) */
+    void *on_params_user;
+    bool placeholder;             /* no index.html in the web root */
+    int port;
+    lws_retry_bo_t retry;
+    struct lws_http_mount m_files, m_health, m_metrics;
+    struct lws_protocols protocols[3];
+};
+
+static inline struct net *net_of(struct lws *wsi) { return lws_context_user(lws_get_context(wsi)); }
+static inline struct session *session_of(lws_dll2_t *d) { return lws_container_of(d, struct session, list); }
+/* The tile side in use at the applied resolution (hello, params). */
+static inline int net_tile_size(const struct net *n) { return frame_tile_size(n->dc.tile_size, n->applied.resolution); }
+
+/* upgrade.c */
+bool upgrade_allowed(struct net *n, struct lws *wsi);
+
+/* session.c */
+int cb_ws(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len);
+void session_queue_text(struct session *s, const char *msg, bool front);
+void session_queue_json(struct session *s, cJSON *msg);   /* prints and deletes msg */
+void session_send_error(struct session *s, const struct ctl_error *e, const cJSON *id);
+struct session *session_find(struct net *n, uint64_t serial);
+
+/* dispatch.c */
+bool dispatch_take_token(struct net *n, struct session *s, const char *text, size_t len);
+void dispatch_message(struct net *n, struct session *s, const char *text, size_t len);
+void dispatch_answers(struct net *n);                        /* the sim's answers to sets */
+void dispatch_demand(struct net *n, const struct subscription *sub, int delta);
+void dispatch_free_requests(struct net *n);
+
+/* fanout.c */
+void fanout_take_latest(struct net *n);                      /* after a wake-up */
+bool fanout_want_write(const struct net *n, const struct session *s); /* a frame is ready for s */
+int fanout_write(struct net *n, struct session *s);          /* one lws_write of a frame */
+void fanout_session_free(struct session *s);
+
+/* http.c */
+int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len);
+
+#endif
