@@ -142,7 +142,7 @@ static struct ocean *build_ocean(struct sim *s, const struct ocean_params *p, en
                                  char *err, size_t errlen)
 {
     if (s->test_fail_seed >= 0 && p->seed == s->test_fail_seed) {
-        usleep(300 * 1000); /* long enough for a test to queue another set behind this one */
+        usleep(500 * 1000); /* long enough for a test to queue another set behind this one */
         snprintf(err, errlen, "out of memory (test hook OCEAND_TEST_FAIL_BUILD_SEED)");
         *why = SIM_SET_NO_MEMORY;
         return NULL;

@@ -67,7 +67,7 @@ struct sim;
  * thread and the builder thread.
  * SIGINT/SIGTERM are blocked in both. Returns NULL with err on failure.
  * Test-only: with OCEAND_TEST_FAIL_BUILD_SEED=S in the environment, a build
- * whose parameters have seed S takes 0.3 s and then fails as if out of
+ * whose parameters have seed S takes 0.5 s and then fails as if out of
  * memory (tests/daemon/test_daemon.py uses it; never set it in production). */
 struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg, char *err, size_t errlen);
 void sim_stop(struct sim *s);

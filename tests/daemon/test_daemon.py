@@ -58,7 +58,7 @@ def free_port():
 class Daemon:
     """One oceand process with its own port, state file and log."""
 
-    def __init__(self, *extra, state_file=None, tmpdir=None, tls_ctx=None):
+    def __init__(self, *extra, state_file=None, tmpdir=None, tls_ctx=None, env=None):
         self.tmp = tmpdir or tempfile.mkdtemp(prefix="oceand-test-")
         self.tls_ctx = tls_ctx           # client SSL context when the daemon serves https/wss
         self.port = free_port()
@@ -70,7 +70,8 @@ class Daemon:
                 # ESTIMATE plans, like frame_check's reference: bit-exact comparisons
                 "--plan-rigor", "0", "--wisdom-file", "none"] + list(extra)
         self.log = open(self.log_path, "ab")
-        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log)
+        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log,
+                                     env=dict(os.environ, **env) if env else None)
         scheme = "s" if tls_ctx else ""
         self.url = "ws%s://127.0.0.1:%d/" % (scheme, self.port)
         self.http = "http%s://127.0.0.1:%d" % (scheme, self.port)
@@ -960,6 +961,189 @@ def test_config_precedence():
 
 
 TESTS.append(test_config_precedence)
+
+
+# ------------------------------------------------ defects of issue 10 (each failed before its fix)
+
+# Test-only hook of the daemon (server/sim_thread.h): a build whose parameters
+# have this seed takes 0.5 s and then fails as if out of memory.
+FAIL_SEED = 4242
+
+
+def test_failed_set_keeps_pending_sets_in_view():
+    """Issue 10 defect 1: a set that fails at apply time must not drop the
+    sets accepted after it from the view the next set is checked against."""
+    d = Daemon(env={"OCEAND_TEST_FAIL_BUILD_SEED": str(FAIL_SEED)})
+    try:
+        async def run():
+            a, h = await connect(d)
+            v0 = h["params_version"]
+            await a.send(json.dumps({"type": "set", "id": 1, "params": {"seed": FAIL_SEED}}))
+            await asyncio.sleep(0.2)   # the builder is inside set 1's (failing) build
+            await a.send(json.dumps({"type": "set", "id": 2, "params": {"resolution": 64}}))
+            e = await recv_json(a, lambda m: m.get("id") == 1, timeout=10)
+            check(e["type"] == "error" and e["code"] == "internal", "set 1 should fail at apply time: %r" % e)
+            p = await recv_json(a, lambda m: m.get("id") == 2, timeout=10)
+            check(p["type"] == "params" and p["params"]["resolution"] == 64 and p["params_version"] == v0 + 1
+                  and p["params"]["seed"] == h["params"]["seed"], "set 2 should apply on the old base: %r" % p)
+            # transform dft is allowed only at N <= 64: valid on top of set 2.
+            await a.send(json.dumps({"type": "set", "id": 3, "params": {"transform": "dft"}}))
+            r = await recv_json(a, lambda m: m.get("id") == 3, timeout=10)
+            check(r["type"] == "params" and r["params"]["transform"] == "dft" and r["params_version"] == v0 + 2,
+                  "set 3 was checked against the wrong base: %r" % r)
+            await a.close()
+        asyncio.run(run())
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+    finally:
+        d.kill()
+        shutil.rmtree(d.tmp, ignore_errors=True)
+
+
+TESTS.append(test_failed_set_keeps_pending_sets_in_view)
+
+
+def test_build_out_of_memory_answers_and_keeps_base():
+    """Issue 10 defect 2: a batch whose build runs out of memory gets a coded
+    error for every sender, and the base of later sets does not move."""
+    d = Daemon(env={"OCEAND_TEST_FAIL_BUILD_SEED": str(FAIL_SEED)})
+    try:
+        async def run():
+            a, h = await connect(d)
+            b, _ = await connect(d)
+            v0 = h["params_version"]
+            await a.send(json.dumps({"type": "set", "id": "a1", "params": {"seed": FAIL_SEED, "wind_speed": 11}}))
+            e = await recv_json(a, lambda m: m.get("id") == "a1", timeout=10)
+            check(e["type"] == "error" and e["code"] == "internal" and "memory" in e["message"],
+                  "the sender got %r" % e)
+            await a.send(json.dumps({"type": "set", "id": "a2", "params": {"wind_speed": 12}}))
+            p = await recv_json(a, lambda m: m.get("id") == "a2", timeout=10)
+            check(p["type"] == "params" and p["params_version"] == v0 + 1 and p["changed"] == ["wind_speed"]
+                  and p["params"]["seed"] == h["params"]["seed"], "base moved by the failed batch: %r" % p)
+            pb = await recv_json(b, lambda m: m["type"] == "params")
+            check(pb["params_version"] == v0 + 1 and pb["params"]["wind_speed"] == 12,
+                  "the other client saw %r first" % pb)
+            fh, _ = await recv_frame(a, lambda fh, m: fh["params_version"] >= v0 + 1)
+            check(fh["params_version"] == v0 + 1, "frame version %r" % fh["params_version"])
+            await a.close()
+            await b.close()
+        asyncio.run(run())
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+    finally:
+        d.kill()
+        shutil.rmtree(d.tmp, ignore_errors=True)
+
+
+TESTS.append(test_build_out_of_memory_answers_and_keeps_base)
+
+
+@test
+def test_join_after_idle_gets_a_current_frame(d):
+    """Issue 10 defect 4: after a period with no client, a new client's first
+    frame is from the current tick, and seq counts the idle ticks (§3.1)."""
+    async def run():
+        a, _ = await connect(d)
+        h1, _ = await recv_frame(a)
+        await a.close()
+        await asyncio.sleep(1.5)
+        t_now = d.metric("oceand_sim_time_seconds")
+        b, _ = await connect(d)
+        h2, _ = await recv_frame(b)
+        check(h2["sim_time"] >= t_now, "first frame after idling is stale: sim_time %.3f, clock already at %.3f"
+              % (h2["sim_time"], t_now))
+        ticks = (h2["sim_time"] - h1["sim_time"]) * TICK   # time_scale 1
+        dseq = h2["seq"] - h1["seq"]
+        print("    idle: %.2f s of sim time, seq +%d" % (ticks / TICK, dseq))
+        # +1 per tick run; ticks skipped by an overrun advance sim_time only.
+        check(0.5 * ticks <= dseq <= ticks + 1, "seq advanced by %d across %.0f ticks" % (dseq, ticks))
+        await b.close()
+    asyncio.run(run())
+
+
+def test_tile_size_follows_resolution():
+    """Issue 10 defect 5: hello and params announce the tile size frames use."""
+    d = Daemon("--resolution", "64")
+    try:
+        async def run():
+            a, h = await connect(d)
+            fh, _ = await recv_frame(a)
+            check(h["tile_size"] == fh["tile_size"] == 64, "hello tile_size %r, frames %r" % (h["tile_size"], fh["tile_size"]))
+            for n, want in ((32, 32), (256, min(TILE, 256))):
+                await a.send(json.dumps({"type": "set", "id": n, "params": {"resolution": n}}))
+                p = await recv_json(a, lambda m: m.get("id") == n, timeout=10)
+                check(p["type"] == "params" and p.get("tile_size") == want, "params after N=%d: %r" % (n, p))
+                fh, _ = await recv_frame(a, lambda fh, m: fh["params_version"] == p["params_version"])
+                check(fh["tile_size"] == want, "frames at N=%d have tile_size %d" % (n, fh["tile_size"]))
+            await a.send(json.dumps({"type": "set", "id": "w", "params": {"wind_speed": 9}}))
+            p = await recv_json(a, lambda m: m.get("id") == "w")
+            check("tile_size" not in p, "tile_size announced although N did not change")
+            b, hb = await connect(d)
+            check(hb["tile_size"] == min(TILE, 256), "hello after N=256: tile_size %r" % hb["tile_size"])
+            await a.close()
+            await b.close()
+        asyncio.run(run())
+    finally:
+        d.kill()
+        shutil.rmtree(d.tmp, ignore_errors=True)
+
+
+TESTS.append(test_tile_size_follows_resolution)
+
+
+@test
+def test_rate_limited_error_has_id(d):
+    """Issue 10 defect 6: rate_limited errors echo the request id (§7)."""
+    async def run():
+        a, _ = await connect(d)
+        sent = ["r%d" % i for i in range(100)]
+        for rid in sent:
+            await a.send(json.dumps({"type": "ping", "id": rid}))
+        answered = []
+        limited = 0
+        while len(answered) < len(sent):
+            m = await recv_json(a, lambda m: m["type"] in ("pong", "error"))
+            if m["type"] == "error":
+                check(m["code"] == "rate_limited", "error %r" % m)
+                limited += 1
+            check("id" in m, "%s without the request id: %r" % (m["type"], m))
+            answered.append(m["id"])
+        check(limited > 0, "rate limit not reached")
+        check(sorted(answered) == sorted(sent), "ids answered do not match the ids sent")
+        await a.close()
+    asyncio.run(run())
+
+
+def test_state_saved_on_change():
+    """State saving listens to applied changes: the file follows a set within
+    a second or so, without a shutdown (a kill -9 keeps it)."""
+    d = Daemon()
+    try:
+        async def run():
+            a, _ = await connect(d)
+            await a.send('{"type":"set","id":1,"params":{"wind_speed":13.5}}')
+            p = await recv_json(a, lambda m: m.get("id") == 1)
+            await a.close()
+            return p
+        p = asyncio.run(run())
+        deadline = time.time() + 10
+        saved = None
+        while time.time() < deadline:
+            try:
+                saved = json.load(open(d.state_file))
+                if saved["params"]["wind_speed"] == 13.5:
+                    break
+            except (OSError, ValueError, KeyError):
+                pass
+            time.sleep(0.1)
+        check(saved and saved["params"]["wind_speed"] == 13.5 and saved["params_version"] == p["params_version"],
+              "state file not written after a set: %r" % saved)
+    finally:
+        d.kill()
+        shutil.rmtree(d.tmp, ignore_errors=True)
+
+
+TESTS.append(test_state_saved_on_change)
 
 
 # ---------------------------------------------------------------- runner
