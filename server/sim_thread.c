@@ -26,41 +26,40 @@ struct built {
     struct sim_set *sets;         /* in order; each has ->prev, or a failed ->status */
 };
 
+/* Each field says which thread writes it and which reads it ("tick",
+ * "builder", "lws" = the network thread; docs/threads.md). */
 struct sim {
-    struct sim_config cfg;        /* written by sim_start, read-only after */
-    pthread_t thread, builder;    /* sim_start / sim_stop */
-    bool builder_started;         /* sim_start / sim_stop */
-    atomic_bool stop;             /* written by sim_stop, read by tick + builder */
-    int test_fail_seed;           /* OCEAND_TEST_FAIL_BUILD_SEED, -1 = none; read-only after start */
+    struct sim_config cfg;        /* sim_start writes; all read, never written after */
+    pthread_t thread, builder;    /* sim_start writes; sim_stop reads */
+    bool builder_started;         /* sim_start writes; sim_stop reads */
+    atomic_bool stop;             /* sim_stop writes; tick and builder read */
+    int test_fail_seed;           /* sim_start writes (OCEAND_TEST_FAIL_BUILD_SEED, -1 = none); builder reads */
 
-    /* Tick thread only. */
-    struct ocean *ocean;
-    struct ocean_params params;   /* in force */
-    uint32_t version;
-    double sim_time;
-    uint64_t seq;                 /* ticks run (PROTOCOL.md §3.1: +1 per tick, frame or not) */
-    uint64_t published;           /* frames published: struct frame.index */
-    struct oc_encoder *enc;
+    struct ocean *ocean;          /* tick only: the simulation in force */
+    struct ocean_params params;   /* tick only: the parameters in force */
+    uint32_t version;             /* tick only: params_version in force */
+    double sim_time;              /* tick only: the clock (copied to now_time) */
+    uint64_t seq;                 /* tick only: ticks run (PROTOCOL.md §3.3: +1 per tick, frame or not) */
+    uint64_t published;           /* tick only: frames published, for struct frame.index */
+    struct oc_encoder *enc;       /* tick only */
 
-    /* Builder thread only: the params of the newest state built (applied, or
+    /* builder only: the params of the newest state built (applied, or
      * waiting in `ready`): the base the next batch is checked against. */
     struct ocean_params build_base;
 
-    /* Under lock: the tick, builder and network threads meet here. */
-    pthread_mutex_t lock;
-    pthread_cond_t cond;              /* wakes the builder */
-    struct frame *latest;             /* tick writes (publish), network reads (sim_latest) */
-    bool builder_busy;                /* builder: inside a build; sim_stop reads */
-    struct sim_set *pending, **pending_tail;  /* network appends, builder takes */
-    struct built ready;               /* builder fills, tick takes at a tick boundary */
-    bool ready_full;
-    struct ocean *to_free;            /* tick leaves the swapped-out ocean, builder frees it */
-    struct sim_set *answers, **answers_tail;  /* tick appends, network takes */
+    pthread_mutex_t lock;             /* guards the fields below up to the atomics */
+    pthread_cond_t cond;              /* tick and lws signal, builder waits */
+    struct frame *latest;             /* tick writes (publish); lws reads (sim_latest) */
+    bool builder_busy;                /* builder writes; sim_stop reads */
+    struct sim_set *pending, **pending_tail;  /* lws appends (sim_submit); builder takes */
+    struct built ready;               /* builder writes; tick takes at a tick boundary */
+    bool ready_full;                  /* builder sets, tick clears */
+    struct ocean *to_free;            /* tick writes (swapped-out ocean); builder frees it */
+    struct sim_set *answers, **answers_tail;  /* tick appends; lws takes (sim_take_answers) */
 
-    /* Atomics: written by one thread, read by another without the lock. */
-    atomic_int demand[LAYER_KEYS];    /* network writes (subscriptions), tick reads */
-    _Atomic double now_time;          /* tick writes, network reads (state file) */
-    atomic_uint_least64_t now_seq;    /* tick writes, network reads (new clients' first frame) */
+    atomic_int demand[LAYER_KEYS];    /* atomic: lws writes (subscriptions); tick reads */
+    _Atomic double now_time;          /* atomic: tick writes; lws reads (state file) */
+    atomic_uint_least64_t now_seq;    /* atomic: tick writes; lws reads (a new client's first frame) */
 };
 
 void sim_set_free(struct sim_set *set) { free(set); }

@@ -36,15 +36,16 @@
 /* One queued JSON message. */
 struct text {
     lws_dll2_t list;              /* in session.tq */
-    size_t len;
+    size_t len;                   /* bytes of the message */
     unsigned char data[];         /* LWS_PRE bytes, then the message */
 };
 
 /* One WebSocket client: lws' per-session data of the oceand.v1 protocol.
- * Written and read only on the lws thread. */
+ * Every field is written and read on the lws thread only (session.c,
+ * dispatch.c, fanout.c); no other thread ever sees a session. */
 struct session {
     lws_dll2_t list;              /* in net.sessions; detached = not (or no longer) established */
-    struct lws *wsi;
+    struct lws *wsi;              /* NULL once closed */
     uint64_t serial;              /* unique for the daemon's life; requests find their sender by it */
     char client_id[24];           /* "c<serial>": hello.client_id, params.by */
     bool controller;              /* may set without a token */
@@ -52,7 +53,7 @@ struct session {
 
     /* receive */
     char *rx;                     /* a text message being assembled from fragments */
-    size_t rx_len;
+    size_t rx_len;                /* its bytes so far */
     bool rx_binary;               /* inside a binary message (fragments of it follow) */
     size_t rx_binary_len;         /* its bytes so far: --max-message applies to it too */
     int closing;                  /* close status to send once the queue drains, 0 = none */
@@ -64,9 +65,9 @@ struct session {
 
     /* transmit: the frame being sent (fanout.c) */
     struct frame *cur;            /* one reference while sending, else NULL */
-    uint8_t hdr[OC_FRAME_HEADER_SIZE];
-    const struct layer *layers[OCEAN_FIELD_COUNT];
-    uint16_t tiles[CTL_MAX_TILES];
+    uint8_t hdr[OC_FRAME_HEADER_SIZE]; /* its header, with this client's tile count */
+    const struct layer *layers[OCEAN_FIELD_COUNT]; /* per field, NULL = not subscribed */
+    uint16_t tiles[CTL_MAX_TILES]; /* the frame's tiles this client gets, in order */
     int ntiles;
     size_t total, sent;           /* bytes of this client's frame, and sent so far */
     int hdr_off, fi, ti;          /* position: header bytes, field, tile... */
@@ -94,31 +95,32 @@ struct http_session {
     size_t len;
 };
 
-/* The network side. All fields: lws thread only (written by net_create
- * before the service loop starts, then by the callbacks), except where noted. */
+/* The network side. Every field is written and read on the lws thread only
+ * (by net_create before the service loop starts, then in lws callbacks),
+ * except where its comment names another thread. */
 struct net {
-    struct lws_context *ctx;      /* net_create; read by net_wake on the tick thread (lws_cancel_service) */
+    struct lws_context *ctx;      /* net_create writes; lws reads; the tick reads it in net_wake (lws_cancel_service) */
     struct daemon_config dc;      /* read-only after net_create */
     struct ctl_limits lim;        /* read-only after net_create */
-    struct sim *sim;              /* net_attach_sim, by main before/after the service loop */
+    struct sim *sim;              /* main writes (net_attach_sim) outside the service loop; lws reads */
     struct frame *latest;         /* newest frame taken from the sim (one reference), or NULL */
     uint64_t seen_index;          /* frame.index of the last frame taken (skip counting) */
     uint64_t seen_seq;            /* its seq */
-    bool seen_any;
+    bool seen_any;                /* a frame was taken at least once */
     lws_dll2_owner_t sessions;    /* struct session; .count = connected clients */
-    uint64_t next_serial;
+    uint64_t next_serial;         /* last session serial handed out */
     lws_dll2_owner_t requests;    /* struct request: sets sent to the sim, not answered yet */
-    uint64_t next_tag;
+    uint64_t next_tag;            /* last struct sim_set tag handed out */
     struct ocean_params applied;  /* in force (from the sim's answers) */
-    uint32_t applied_version;
+    uint32_t applied_version;     /* its params_version */
     struct ocean_params view;     /* applied + every pending request: what the next set is checked on */
-    net_params_fn on_params;      /* listener for applied changes (main: state saving) */
-    void *on_params_user;
+    net_params_fn on_params;      /* main writes (net_on_params) before the loop: applied-change listener */
+    void *on_params_user;         /* its argument (main's state saver, used on this thread) */
     bool placeholder;             /* no index.html in the web root */
-    int port;
-    lws_retry_bo_t retry;
-    struct lws_http_mount m_files, m_health, m_metrics;
-    struct lws_protocols protocols[3];
+    int port;                     /* the port really listened on (--port 0) */
+    lws_retry_bo_t retry;         /* ping / hang-up policy, read by lws */
+    struct lws_http_mount m_files, m_health, m_metrics; /* read by lws */
+    struct lws_protocols protocols[3]; /* [0] http, [1] oceand.v1, [2] terminator; read by lws */
 };
 
 static inline struct net *net_of(struct lws *wsi) { return lws_context_user(lws_get_context(wsi)); }
