@@ -13,7 +13,7 @@
 #include "log.h"
 #include "net.h"
 #include "sim_thread.h"
-#include "state.h"
+#include "state_saver.h"
 
 /* Only a flag: the sim thread wakes the service loop every tick anyway
  * (lws_cancel_service), so we see it within one period without calling

@@ -10,9 +10,7 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "clock.h"
 #include "control.h"
-#include "log.h"
 
 int state_save(const char *path, const struct ocean_params *p, uint32_t version, double sim_time,
                char *err, size_t errlen)
@@ -99,32 +97,4 @@ int state_load(const char *path, struct ocean_params *p, uint32_t *version, doub
         *sim_time = cJSON_IsNumber(t) && isfinite(t->valuedouble) && t->valuedouble >= 0 ? t->valuedouble : 0;
     cJSON_Delete(root);
     return 1;
-}
-
-void state_saver_init(struct state_saver *sv, const char *path, const struct ocean_params *p, uint32_t version)
-{
-    sv->path = path;
-    sv->params = *p;
-    sv->version = version;
-    sv->dirty = false;
-    sv->saved_t = mono_now();
-}
-
-void state_saver_on_params(void *saver, const struct ocean_params *p, uint32_t version)
-{
-    struct state_saver *sv = saver;
-    sv->params = *p;
-    sv->version = version;
-    sv->dirty = true;
-}
-
-void state_saver_flush(struct state_saver *sv, double sim_time, bool force)
-{
-    if (!sv->path[0] || !(force || (sv->dirty && mono_now() - sv->saved_t >= 1.0)))
-        return;
-    char err[300];
-    if (state_save(sv->path, &sv->params, sv->version, sim_time, err, sizeof err) != 0)
-        LOGW("%s", err);
-    sv->dirty = false;
-    sv->saved_t = mono_now();
 }

@@ -155,15 +155,20 @@ void dispatch_answers(struct net *n)
 
 /* ---- messages ---- */
 
+#define RATE_LIMITED_ID_MAX 256 /* bytes of a string id echoed in rate_limited (no amplification) */
+
 /* The request id of a message we will not otherwise parse (rate_limited):
- * §7 promises it in every error a request causes. A detached copy or NULL. */
+ * §7 promises it in every error a request causes. A detached copy, or NULL
+ * for no id, a non-scalar one, or a string over RATE_LIMITED_ID_MAX. */
 static cJSON *request_id(const char *text, size_t len)
 {
     if (!text)
         return NULL;
     cJSON *root = cJSON_ParseWithLength(text, len);
     cJSON *id = cJSON_IsObject(root) ? cJSON_GetObjectItemCaseSensitive(root, "id") : NULL;
-    cJSON *copy = id && !cJSON_IsArray(id) && !cJSON_IsObject(id) ? cJSON_Duplicate(id, 0) : NULL;
+    bool echo = id && !cJSON_IsArray(id) && !cJSON_IsObject(id) &&
+                !(cJSON_IsString(id) && strlen(id->valuestring) > RATE_LIMITED_ID_MAX);
+    cJSON *copy = echo ? cJSON_Duplicate(id, 0) : NULL;
     cJSON_Delete(root);
     return copy;
 }
