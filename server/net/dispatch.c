@@ -110,6 +110,8 @@ static cJSON *params_msg(struct net *n, const struct sim_set *a, const char *by,
 
 static void answer(struct net *n, const struct sim_set *a)
 {
+    n->applied = a->params; /* in force after this set, applied or refused */
+    n->applied_version = a->version;
     struct request *r = NULL;
     for (lws_dll2_t *d = lws_dll2_get_head(&n->requests); d && !r; d = d->next)
         if (request_of(d)->tag == a->tag)
@@ -119,8 +121,6 @@ static void answer(struct net *n, const struct sim_set *a)
         return;
     }
     struct session *origin = session_find(n, r->serial);
-    n->applied = a->params;
-    n->applied_version = a->version;
     if (a->status == SIM_SET_APPLIED) {
         if (n->on_params)
             n->on_params(n->on_params_user, &n->applied, n->applied_version);
