@@ -114,6 +114,8 @@ static void natsd_kill(int sig)
     natsd_pid = 0;
 }
 
+static bool natsd_tls; /* serve TLS only, with tmpdir/cert.pem + key.pem */
+
 static bool natsd_start(void)
 {
     char conf[300], log[300];
@@ -124,6 +126,8 @@ static bool natsd_start(void)
         return false;
     /* loopback only; a small max_payload so that layers are split into parts */
     fprintf(f, "listen: 127.0.0.1:%d\nmax_payload: 65536\n", natsd_port);
+    if (natsd_tls)
+        fprintf(f, "tls { cert_file: \"%s/cert.pem\", key_file: \"%s/key.pem\" }\n", tmpdir, tmpdir);
     fclose(f);
     pid_t pid = fork();
     if (pid < 0)
@@ -273,12 +277,14 @@ static bool spin_until(double seconds, bool (*pred)(void *), void *arg)
     }
 }
 
+static const char *link_tls_ca; /* --nats-tls-ca of the links opened next */
+
 static struct cl_link *open_link(struct obs *o, enum cl_role role, const char *name, const char *prefix)
 {
     char url[64], err[300];
     snprintf(url, sizeof url, "nats://127.0.0.1:%d", natsd_port);
     struct cl_config c = {
-        .role = role, .url = url, .prefix = prefix, .name = name,
+        .role = role, .url = url, .prefix = prefix, .name = name, .tls_ca = link_tls_ca,
         .heartbeat_s = role == CL_ROLE_SIM ? 0.2 : 0.3,
         .demand_ttl_s = 1.5, .sim_timeout_s = 1.0, .request_timeout_s = 3.0,
         .reconnect_min_s = 0.05, .reconnect_max_s = 0.5,
@@ -601,6 +607,59 @@ int main(void)
             struct demwant w = { &sim, K1, K2, 2, -1 };
             CHECK(spin_until(1.0, p_demand, &w), "the new sim did not get the edges' demand within a second");
         }
+    }
+
+    current = "TLS";
+    for (int i = 0; i < nobs; i++)
+        if (all_obs[i]->link)
+            close_link(all_obs[i]);
+    natsd_kill(SIGTERM);
+    {
+        /* a self-signed certificate for 127.0.0.1; the links trust exactly it */
+        char cmd[1200], ca[300];
+        snprintf(cmd, sizeof cmd,
+                 "openssl req -x509 -newkey rsa:2048 -nodes -days 1 -subj /CN=127.0.0.1 "
+                 "-addext subjectAltName=IP:127.0.0.1 -keyout '%s/key.pem' -out '%s/cert.pem' >/dev/null 2>&1",
+                 tmpdir, tmpdir);
+        snprintf(ca, sizeof ca, "%s/cert.pem", tmpdir);
+        natsd_tls = true;
+        natsd_port = free_port();
+        if (system(cmd) != 0 || !natsd_start()) {
+            fail("could not start nats-server with TLS");
+            goto out;
+        }
+        struct obs ts = { .who = "tls-sim" }, te = { .who = "tls-edge" }, tp = { .who = "plain-edge" };
+        all_obs[nobs++] = &ts;
+        all_obs[nobs++] = &te;
+        all_obs[nobs++] = &tp;
+        link_tls_ca = ca;
+        open_link(&ts, CL_ROLE_SIM, "sim-tls", prefix);
+        open_link(&te, CL_ROLE_EDGE, "edge-tls", prefix);
+        link_tls_ca = NULL;
+        open_link(&tp, CL_ROLE_EDGE, "edge-plain", prefix);
+        struct evwant ws = { &ts, CL_EV_CONNECTED, 1 }, we = { &te, CL_EV_CONNECTED, 1 };
+        CHECK(ts.link && spin_until(10, p_event, &ws), "the sim did not connect over TLS");
+        CHECK(te.link && spin_until(10, p_event, &we), "the edge did not connect over TLS");
+        if (ts.link && te.link) {
+            demand1(&te, K1, -1);
+            struct demwant w = { &ts, K1, -1, 1, -1 };
+            CHECK(spin_until(5, p_demand, &w), "demand over TLS");
+            struct gen_layer g;
+            gen_layer_make(&g, 64, 16, 0, 0, 2, 77, 500, 41);
+            publish(&ts, &g);
+            struct laywant lw = { &te, K1, 77 };
+            CHECK(spin_until(5, p_layer, &lw) && gen_layer_equal(&g, te.layers[K1]), "layer over TLS");
+            gen_layer_free(&g);
+        }
+        /* a client that does not speak TLS never gets in */
+        CHECK(tp.ev[CL_EV_CONNECTED] == 0 && !(tp.link && cl_link_connected(tp.link)),
+              "a plain client connected to a TLS-only server");
+        for (int i = 0; i < nobs; i++)
+            if (all_obs[i]->link)
+                close_link(all_obs[i]);
+        for (int i = nobs - 3; i < nobs; i++)
+            obs_free(all_obs[i]);
+        nobs -= 3;
     }
 
 out:
