@@ -4,14 +4,16 @@
  * peer could publish, without reading outside them.
  * Input: records [u32 little-endian length][bytes], each tried as a layer
  * part (fed to one assembler) and as an envelope; the whole input is also
- * tried as a subject. Whatever parses must write back byte for byte. */
+ * tried as a subject. Whatever parses must write back byte for byte;
+ * complete layers go on into a frame collector. */
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "cluster/cluster.h"
 
-static void check_part(const uint8_t *msg, size_t len, struct cl_assembler *a)
+static void check_part(const uint8_t *msg, size_t len, struct cl_assembler *a, struct cl_collector *col,
+                       const uint8_t want[CL_KEY_BYTES])
 {
     struct cl_layer_part p;
     if (cl_layer_part_parse(msg, len, &p) != CL_OK)
@@ -40,7 +42,16 @@ static void check_part(const uint8_t *msg, size_t len, struct cl_assembler *a)
         for (int i = 0; i < total; i++)
             if (l->tile_off[i + 1] < l->tile_off[i] + 40)
                 abort();
-        cl_layer_free(l);
+        struct cl_frame_set *out[2];
+        int n = cl_collector_add(col, l, want, out);
+        for (int i = 0; i < n; i++) {
+            if (out[i]->nlayers < 1 || out[i]->nlayers > CL_KEYS)
+                abort();
+            for (int j = 1; j < out[i]->nlayers; j++)
+                if (out[i]->layers[j]->info.seq != out[i]->hdr.seq)
+                    abort();
+            cl_frame_set_free(out[i]);
+        }
     }
 }
 
@@ -71,8 +82,14 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     struct cl_assembler *a = cl_assembler_new();
     struct cl_demand *d = cl_demand_new(4);
-    if (!a || !d)
+    struct cl_collector *col = cl_collector_new();
+    if (!a || !d || !col)
         abort();
+    /* the edge wants the layers whose key bits the input's first bytes set */
+    uint8_t want[CL_KEY_BYTES] = { 0 };
+    for (size_t i = 0; i < size && i < 19; i++)
+        want[i] = data[i];
+    want[18] &= 0x3f; /* keys 0..149 only */
     double t = 0;
     for (size_t pos = 0; pos + 4 <= size;) {
         uint32_t len = (uint32_t)data[pos] | (uint32_t)data[pos + 1] << 8 | (uint32_t)data[pos + 2] << 16 |
@@ -85,7 +102,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         if (!rec)
             abort();
         memcpy(rec, data + pos, len);
-        check_part(rec, len, a);
+        check_part(rec, len, a, col, want);
         check_envelope(rec, len, d, t);
         free(rec);
         pos += len;
@@ -102,5 +119,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     free(subj);
     cl_assembler_free(a);
     cl_demand_free(d);
+    cl_collector_free(col);
     return 0;
 }

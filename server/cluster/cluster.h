@@ -194,6 +194,35 @@ void cl_assembler_free(struct cl_assembler *a);
 int cl_assembler_add(struct cl_assembler *a, const struct cl_layer_part *p, struct cl_layer **out);
 uint64_t cl_assembler_dropped(const struct cl_assembler *a);
 
+/* Groups an edge's complete layers into frames: all layers of one seq. A
+ * frame is complete when every layer the edge wants (want) and the sim
+ * encoded at that seq (info.encoded) has arrived. A layer of a newer seq
+ * hands out the older frame as it is (partial: some layer was lost or
+ * superseded; counted) so a lost layer never stalls the stream; an older
+ * seq is dropped. Layers of one seq must agree on the frame header fields.
+ * Not thread-safe (the lws thread owns it). */
+struct cl_frame_set {
+    struct cl_layer_info hdr;          /* frame fields (seq .. server_time_us, encoded) of its layers */
+    int nlayers;
+    struct cl_layer *layers[CL_KEYS];  /* in key order, NULL-free up to nlayers */
+    bool partial;
+};
+void cl_frame_set_free(struct cl_frame_set *f);
+struct cl_collector;
+struct cl_collector *cl_collector_new(void);
+void cl_collector_free(struct cl_collector *c);
+/* Takes the layer. Returns how many frames it wrote to out[0..1] (0, 1 or
+ * 2: the older partial one, then the completed new one), or a negative
+ * CL_E_* (the layer is freed). The caller frees each frame. */
+int cl_collector_add(struct cl_collector *c, struct cl_layer *l, const uint8_t want[CL_KEY_BYTES],
+                     struct cl_frame_set *out[2]);
+/* The pending frame if it is complete for want now (a viewer left), else NULL. */
+struct cl_frame_set *cl_collector_check(struct cl_collector *c, const uint8_t want[CL_KEY_BYTES]);
+struct cl_collector_stats { uint64_t frames, partial, stale, mismatched; };
+void cl_collector_stats(const struct cl_collector *c, struct cl_collector_stats *out);
+/* Whether the fields of one layer are consistent (what cl_layer_part_write checks). */
+bool cl_layer_info_valid(const struct cl_layer_info *info);
+
 /* ---- envelopes (OCNE): everything that is not a layer ---------------------
  *   0 "OCNE"  4 u8 version (1)  5 u8 kind  6 u8 origin_len  7 u8 by_len
  *   8 u32 body_len  12 origin, by, body (exactly; nothing after)

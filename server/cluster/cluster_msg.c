@@ -167,6 +167,8 @@ static int tile_check(const uint8_t *t, uint32_t span, const struct cl_layer_inf
     return CL_OK;
 }
 
+bool cl_layer_info_valid(const struct cl_layer_info *info) { return info && info_check(info) == CL_OK; }
+
 long cl_layer_part_write(uint8_t *dst, size_t cap, const struct cl_layer_info *info,
                          int tile_first, int tile_count, const uint8_t *data, const uint32_t *tile_off)
 {

@@ -846,8 +846,8 @@ int cl_sim_publish_layer(struct cl_link *l, const struct cl_layer_info *info, co
                          const uint32_t *tile_off, void (*release)(void *ctx), void *ctx)
 {
     int total = info ? info->tiles_per_side * info->tiles_per_side : 0;
-    if (!l || l->cfg.role != CL_ROLE_SIM || !info || !tile_off || total < 1 || tile_off[0] != 0 ||
-        tile_off[total] != len || len > CL_MAX_LAYER_BYTES) {
+    if (!l || l->cfg.role != CL_ROLE_SIM || !cl_layer_info_valid(info) || !tile_off || total < 1 ||
+        tile_off[0] != 0 || tile_off[total] != len || len > CL_MAX_LAYER_BYTES) {
         if (release)
             release(ctx);
         return CL_E_ARG;
