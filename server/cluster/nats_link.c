@@ -1057,7 +1057,10 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
                  "at most %d characters", prefix, CL_PREFIX_MAX);
         return NULL;
     }
-    if (cfg->name && (!cfg->name[0] || strlen(cfg->name) >= CL_NAME_MAX || strpbrk(cfg->name, " \t\r\n"))) {
+    bool name_ok = !cfg->name || (cfg->name[0] && strlen(cfg->name) < CL_NAME_MAX);
+    for (const char *p = cfg->name; name_ok && p && *p; p++)
+        name_ok = *p >= 0x21 && *p <= 0x7e; /* what an envelope's origin may hold */
+    if (!name_ok) {
         snprintf(err, errlen, "invalid cluster name: 1..%d printable characters without spaces", CL_NAME_MAX - 1);
         return NULL;
     }

@@ -407,6 +407,9 @@ int main(void)
         struct cl_config bad = { .role = CL_ROLE_EDGE, .url = "nats://127.0.0.1:1", .prefix = "a.*" };
         CHECK(cl_link_open(&bad, err, sizeof err) == NULL && strstr(err, "prefix"), "a wildcard prefix accepted");
         bad.prefix = NULL;
+        bad.name = "edge 1";
+        CHECK(cl_link_open(&bad, err, sizeof err) == NULL && strstr(err, "name"), "a name with a space accepted");
+        bad.name = NULL;
         bad.tls_cert = "/nonexistent.pem";
         CHECK(cl_link_open(&bad, err, sizeof err) == NULL, "a certificate without key accepted");
     }
