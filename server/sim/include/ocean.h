@@ -93,9 +93,7 @@ struct ocean_point {
 };
 
 /* Snapshot the current amplitudes and parameters for queries: O(N^2) time
- * and memory (about 100 bytes per mode kept). Returns NULL with err on no
- * memory. Modes whose total contribution is provably negligible (see
- * ocean_surface_pruned_bound) are left out. */
+ * and memory (56 bytes per mode). Returns NULL with err on no memory. */
 struct ocean_surface *ocean_surface_new(const struct ocean *o, char *err, size_t errlen);
 void ocean_surface_free(struct ocean_surface *s);
 /* Values at npoints world points xz[i] = {x, z} at simulation time t (s).
@@ -104,11 +102,8 @@ void ocean_surface_free(struct ocean_surface *s);
  * Thread-safe: s is only read. */
 int ocean_surface_query(const struct ocean_surface *s, double t, const double (*xz)[2], int npoints,
                         struct ocean_point *out);
-/* Modes kept in the snapshot, and the bound on what the left-out modes can
- * add to the height (m); slopes, displacement and their time derivatives
- * stay below the same number times the documented factor (ocean_query.c). */
+/* Modes with a non-zero amplitude in the snapshot (each costs the same). */
 int ocean_surface_modes(const struct ocean_surface *s);
-double ocean_surface_pruned_bound(const struct ocean_surface *s);
 /* The parameters the snapshot was made from. */
 const struct ocean_params *ocean_surface_params(const struct ocean_surface *s);
 /* One-shot convenience: snapshot, query, free. */
