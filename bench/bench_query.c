@@ -9,6 +9,9 @@
  *       ocean_surface_query for 1, 16 and 256 random points of the default
  *       sea (choppiness 1), including the per-call time setup (one
  *       sin/cos per mode) and the Newton inversion (mean steps per point);
+ *   {"bench":"probe_tick","N":..,"points":16,...}
+ *       the 16 points one tick later, warm-started from the previous
+ *       sources (ocean_surface_query_from), as a probe subscription would;
  *   {"bench":"query_vs_step","N":..,"step_ms":..,"points_per_step":..}
  *       how many points cost as much as one full FFT step of the grid.
  * The machine may be shared: compare rows of one run, not across runs. */
@@ -95,6 +98,32 @@ int main(void)
             double ms = median(v, reps);
             per_point = ms / count;
             double cms = median(cpu, reps);
+            if (count == 16) {
+                /* A probe: the same points one tick (1/30 s) later, started
+                 * from the sources the previous tick returned. */
+                double(*guess)[2] = malloc((size_t)count * sizeof *guess);
+                long wsteps = 0;
+                double wv[REPS], wc[REPS];
+                for (int r = 0; r < REPS; r++) {
+                    ocean_surface_query(s, 20.0 + r, (const double(*)[2])xz, count, out);
+                    for (int i = 0; i < count; i++) {
+                        guess[i][0] = out[i].source[0];
+                        guess[i][1] = out[i].source[1];
+                    }
+                    double t0 = now_ms(), c0 = cpu_ms();
+                    ocean_surface_query_from(s, 20.0 + r + 1.0 / 30, (const double(*)[2])xz,
+                                             (const double(*)[2])guess, count, out);
+                    wv[r] = now_ms() - t0;
+                    wc[r] = cpu_ms() - c0;
+                    for (int i = 0; i < count; i++)
+                        wsteps += out[i].iterations;
+                }
+                double wms = median(wv, REPS), wcms = median(wc, REPS);
+                printf("{\"bench\":\"probe_tick\",\"N\":%d,\"points\":%d,\"ms\":%.3f,\"cpu_ms\":%.3f,"
+                       "\"cpu_us_per_point\":%.1f,\"newton_steps\":%.2f}\n",
+                       p.resolution, count, wms, wcms, 1e3 * wcms / count, (double)wsteps / ((double)count * REPS));
+                free(guess);
+            }
             printf("{\"bench\":\"query\",\"N\":%d,\"points\":%d,\"ms\":%.3f,\"cpu_ms\":%.3f,"
                    "\"us_per_point\":%.1f,\"cpu_us_per_point\":%.1f,\"newton_steps\":%.2f}\n",
                    p.resolution, count, ms, cms, 1e3 * ms / count, 1e3 * cms / count,

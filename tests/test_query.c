@@ -488,6 +488,28 @@ static void test_threads_and_snapshot(void)
     /* Every mode off the Nyquist row and column (and k = 0) is non-zero. */
     check(ocean_surface_modes(s) == 63 * 32 - 1, "query.modes", "N=64: %d non-zero modes in the snapshot (expected %d)",
           ocean_surface_modes(s), 63 * 32 - 1);
+    /* Warm start, as a probe does: sources of the previous tick as guesses.
+     * Same answers, fewer Newton steps. */
+    struct ocean_point prev[COUNT], cold[COUNT], warm[COUNT];
+    double guess[COUNT][2];
+    ocean_surface_query(s2, 9.0, (const double(*)[2])xz, COUNT, prev);
+    for (int i = 0; i < COUNT; i++) {
+        guess[i][0] = prev[i].source[0];
+        guess[i][1] = prev[i].source[1];
+    }
+    int rc1 = ocean_surface_query(s2, 9.0 + 1.0 / 30, (const double(*)[2])xz, COUNT, cold);
+    int rc2 = ocean_surface_query_from(s2, 9.0 + 1.0 / 30, (const double(*)[2])xz, (const double(*)[2])guess, COUNT, warm);
+    int steps_cold = 0, steps_warm = 0, all = 1;
+    double dh = 0;
+    for (int i = 0; i < COUNT; i++) {
+        steps_cold += cold[i].iterations;
+        steps_warm += warm[i].iterations;
+        all &= cold[i].converged && warm[i].converged;
+        dh = fmax(dh, fabs(cold[i].height - warm[i].height) + fabs(cold[i].vertical_velocity - warm[i].vertical_velocity));
+    }
+    check(rc1 == 0 && rc2 == 0 && all && dh < 1e-7 && steps_warm < steps_cold, "query.warm_start",
+          "%d points one tick later: %d Newton steps from the previous sources vs %d from the points, same values (%.1e)",
+          COUNT, steps_warm, steps_cold, dh);
     ocean_surface_free(s);
     ocean_surface_free(s2);
     ocean_free(o);

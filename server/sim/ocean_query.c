@@ -176,6 +176,7 @@ const struct ocean_params *ocean_surface_params(const struct ocean_surface *s)
 struct work {
     double *pr, *pi, *qr, *qi;
     double *cx, *sx;       /* cos, sin(2 pi mx x / L), mx = 0 .. N/2 */
+    double *cz, *sz;       /* cos, sin(2 pi mz z / L), mz = 0 .. N/2 */
 };
 
 /* Everything the outputs need, at one undisplaced point x0. */
@@ -200,13 +201,31 @@ static double turns(double x, double L)
     return u < 1.0 ? u : 0.0;
 }
 
+/* c[m] + i s[m] = e^{2 pi i m u}, m = 0 .. count-1: by the angle-addition
+ * recurrence (one complex multiply per entry instead of a sin and a cos,
+ * which were a quarter of an evaluation), re-anchored with an exact
+ * sin/cos every 16 entries so rounding cannot build up (error ~1e-15). */
 static void phase_table(double u, int count, double *c, double *s)
 {
+    double ang1 = 2.0 * M_PI * u, c1 = cos(ang1), s1 = sin(ang1);
     for (int m = 0; m < count; m++) {
-        double ang = 2.0 * M_PI * fmod(m * u, 1.0);
-        c[m] = cos(ang);
-        s[m] = sin(ang);
+        if (m % 16 == 0) {
+            double ang = 2.0 * M_PI * fmod(m * u, 1.0);
+            c[m] = cos(ang);
+            s[m] = sin(ang);
+        } else {
+            c[m] = c[m - 1] * c1 - s[m - 1] * s1;
+            s[m] = s[m - 1] * c1 + c[m - 1] * s1;
+        }
     }
+}
+
+/* e^{i kz z} of row r from the table of |mz| (rows with mz < 0: conjugate). */
+static inline void row_phase(const struct ocean_surface *s, const struct work *w, int r, double *cz, double *sz)
+{
+    int mz = s->row_mz[r];
+    *cz = w->cz[mz < 0 ? -mz : mz];
+    *sz = mz < 0 ? -w->sz[-mz] : w->sz[mz];
 }
 
 /* D and grad D only: what one Newton step needs (5 sums instead of 26). */
@@ -215,9 +234,11 @@ static void eval_displacement(const struct ocean_surface *s, struct work *w, dou
                               struct surface_sums *o)
 {
     phase_table(ux, s->nh, w->cx, w->sx);
+    phase_table(uz, s->nh, w->cz, w->sz);
     double dx = 0, dz = 0, dxx = 0, dxz = 0, dzz = 0;
     for (int r = 0; r < s->rows; r++) {
-        double ang = 2.0 * M_PI * fmod(s->row_mz[r] * uz, 1.0), cz = cos(ang), sz = sin(ang), kz = s->row_kz[r];
+        double cz, sz, kz = s->row_kz[r];
+        row_phase(s, w, r, &cz, &sz);
         double rdx = 0, rdz = 0, rdxx = 0, rdxz = 0, rdzz = 0;
         const int m0 = s->row_start[r], m1 = s->row_start[r + 1];
         const double *cxr = w->cx + s->row_c0[r] - m0, *sxr = w->sx + s->row_c0[r] - m0; /* index by mode */
@@ -255,9 +276,11 @@ __attribute__((target_clones("avx2", "default")))
 static void eval_all(const struct ocean_surface *s, struct work *w, double ux, double uz, struct surface_sums *o)
 {
     phase_table(ux, s->nh, w->cx, w->sx);
+    phase_table(uz, s->nh, w->cz, w->sz);
     memset(o, 0, sizeof *o);
     for (int r = 0; r < s->rows; r++) {
-        double ang = 2.0 * M_PI * fmod(s->row_mz[r] * uz, 1.0), cz = cos(ang), sz = sin(ang);
+        double cz, sz;
+        row_phase(s, w, r, &cz, &sz);
         double kz = s->row_kz[r], kz2 = kz * kz;
         double h = 0, hx = 0, spi = 0, hxx = 0, kxpr = 0, ht = 0, htx = 0, sqi = 0, htt = 0;
         double dx = 0, dz = 0, dxx = 0, dxz = 0, dzz = 0, dtx = 0, dtz = 0, dttx = 0, dttz = 0;
@@ -382,8 +405,8 @@ static double newton(const struct ocean_surface *s, struct work *w, double xr, d
  * of the residual, and then it is restarted from points around, at the
  * distance of the displacement found so far (a fold has several sources:
  * any converged one is a correct answer). */
-static void invert_displacement(const struct ocean_surface *s, struct work *w, double xr, double zr, double *x0,
-                                double *z0, int *iterations, int *converged)
+static void invert_displacement(const struct ocean_surface *s, struct work *w, double xr, double zr, double sx0,
+                                double sz0, double *x0, double *z0, int *iterations, int *converged)
 {
     *iterations = 0;
     *converged = 0;
@@ -393,7 +416,15 @@ static void invert_displacement(const struct ocean_surface *s, struct work *w, d
         *converged = 1;
         return;
     }
-    double bx, bz, best = newton(s, w, xr, zr, xr, zr, 30, &bx, &bz, iterations);
+    double bx, bz, best = newton(s, w, xr, zr, sx0, sz0, 30, &bx, &bz, iterations);
+    if (best >= NEWTON_TOL && (sx0 != xr || sz0 != zr)) { /* a poor guess: start over from the point */
+        double cx, cz, res = newton(s, w, xr, zr, xr, zr, 30, &cx, &cz, iterations);
+        if (res < best) {
+            best = res;
+            bx = cx;
+            bz = cz;
+        }
+    }
     double radius = fmax(hypot(bx - xr, bz - zr), 1e-3 * s->patch);
     for (int k = 0; k < 24 && best >= NEWTON_TOL; k++) {
         double ang = 2.0 * M_PI * k / 8.0, r = radius * (0.5 + 0.5 * (k / 8)); /* 3 rings of 8 */
@@ -456,16 +487,23 @@ static void fill_point(const struct surface_sums *q, struct ocean_point *p)
 int ocean_surface_query(const struct ocean_surface *s, double t, const double (*xz)[2], int npoints,
                         struct ocean_point *out)
 {
+    return ocean_surface_query_from(s, t, xz, NULL, npoints, out);
+}
+
+int ocean_surface_query_from(const struct ocean_surface *s, double t, const double (*xz)[2],
+                             const double (*start)[2], int npoints, struct ocean_point *out)
+{
     if (!s || !isfinite(t) || npoints < 0 || (npoints > 0 && (!xz || !out)))
         return -1;
     for (int i = 0; i < npoints; i++)
-        if (!isfinite(xz[i][0]) || !isfinite(xz[i][1]))
+        if (!isfinite(xz[i][0]) || !isfinite(xz[i][1]) ||
+            (start && (!isfinite(start[i][0]) || !isfinite(start[i][1]))))
             return -1;
     if (npoints == 0)
         return 0;
     size_t m = s->spans ? (size_t)s->spans : 1;
     struct work w;
-    double *buf = malloc((4 * m + 2 * (size_t)s->nh) * sizeof *buf);
+    double *buf = malloc((4 * m + 4 * (size_t)s->nh) * sizeof *buf);
     if (!buf)
         return -1;
     w.pr = buf;
@@ -474,6 +512,8 @@ int ocean_surface_query(const struct ocean_surface *s, double t, const double (*
     w.qi = w.qr + m;
     w.cx = w.qi + m;
     w.sx = w.cx + s->nh;
+    w.cz = w.sx + s->nh;
+    w.sz = w.cz + s->nh;
     /* Phases at t (wrapped into the loop period when the sea loops: the
      * modes' w are whole multiples of 2 pi / period, so this is exact). */
     double tt = t;
@@ -496,7 +536,14 @@ int ocean_surface_query(const struct ocean_surface *s, double t, const double (*
         double x0, z0;
         struct ocean_point *p = &out[i];
         memset(p, 0, sizeof *p);
-        invert_displacement(s, &w, xr, zr, &x0, &z0, &p->iterations, &p->converged);
+        /* The guess, as an offset from the point, moved to the reduced point;
+         * guesses further than L/4 away are not guesses. */
+        double gx = xr, gz = zr;
+        if (start && fabs(start[i][0] - x) < 0.25 * L && fabs(start[i][1] - z) < 0.25 * L) {
+            gx = xr + (start[i][0] - x);
+            gz = zr + (start[i][1] - z);
+        }
+        invert_displacement(s, &w, xr, zr, gx, gz, &x0, &z0, &p->iterations, &p->converged);
         struct surface_sums q;
         eval_all(s, &w, turns(x0, L), turns(z0, L), &q);
         fill_point(&q, p);

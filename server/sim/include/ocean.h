@@ -102,6 +102,12 @@ void ocean_surface_free(struct ocean_surface *s);
  * Thread-safe: s is only read. */
 int ocean_surface_query(const struct ocean_surface *s, double t, const double (*xz)[2], int npoints,
                         struct ocean_point *out);
+/* The same, with a guess of each point's source (x0, z0) to start the
+ * inversion from, e.g. the `source` a probe's previous tick returned: the
+ * sea moves little in a tick, so this saves most Newton steps. start may be
+ * NULL; a guess further than L/4 from its point is ignored. */
+int ocean_surface_query_from(const struct ocean_surface *s, double t, const double (*xz)[2],
+                             const double (*start)[2], int npoints, struct ocean_point *out);
 /* Modes with a non-zero amplitude in the snapshot (each costs the same). */
 int ocean_surface_modes(const struct ocean_surface *s);
 /* The parameters the snapshot was made from. */
