@@ -425,6 +425,17 @@ static void test_bad_input(void)
           "%d/%zu bad calls return -1 and write nothing; 0 points ok; a good call after them works", fails,
           sizeof cases / sizeof cases[0]);
     ocean_surface_free(s);
+
+    /* A calm sea (no wind): every amplitude is zero; flat water, normal up. */
+    struct ocean_params p = *ocean_get_params(o);
+    p.wind_speed = 0;
+    ocean_reconfigure(o, &p, err, sizeof err);
+    struct ocean_point calm[2];
+    int rc = ocean_query(o, 4.0, (const double(*)[2])good, 2, calm);
+    check(rc == 0 && calm[1].height == 0 && calm[1].normal[1] == 1 && calm[1].vertical_velocity == 0 &&
+              calm[1].converged && calm[1].source[0] == 3 && calm[1].jacobian == 1,
+          "query.calm", "wind 0: height %g, normal y %g, source (%g, %g)", calm[1].height, calm[1].normal[1],
+          calm[1].source[0], calm[1].source[1]);
     ocean_free(o);
 }
 
