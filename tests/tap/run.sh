@@ -130,7 +130,8 @@ if command -v valgrind >/dev/null; then
   # One run through every code path that allocates: set, subscribe, frames, stats, files.
   run 0 "ocean-tap under valgrind" $VG "$TAP" "$URL" --set amplitude=1 --frames 2 --fields height,jacobian \
     --lod 1 --bound 0.001 --out "$tmp/vg" --format raw --stats
-  ok "no memory errors or leaks in ocean-tap (set, frames, stats, raw output)"
+  run 0 "ocean-tap --format exr under valgrind" $VG "$TAP" "$URL" --frames 2 --lod 2 --out "$tmp/vg-exr" --format exr
+  ok "no memory errors or leaks in ocean-tap (set, frames, stats, raw output, EXR bake)"
 else
   echo "  skip: valgrind not installed"
 fi
