@@ -3,7 +3,8 @@
 DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c server/frame.c \
               server/net/context.c server/net/upgrade.c server/net/session.c server/net/dispatch.c \
               server/net/fanout.c server/net/http.c \
-              server/metrics.c server/state.c server/state_saver.c server/log.c
+              server/metrics.c server/state.c server/state_saver.c server/log.c \
+              server/query_msg.c server/query_worker.c server/probe.c
 DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o)
 DAEMON_SAN_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/san/%.o)
 OCEAN_LIB ?= $(BUILD)/libocean.a
@@ -62,3 +63,12 @@ run: deps
 
 $(BUILD)/load_client: $(BUILD)/obj/bench/load_client.o
 	$(CC) $(CFLAGS) -o $@ $^
+
+# Point queries and probes (issue 14): the probe accuracy test and the exact
+# reference the daemon tests compare `query_result` with.
+$(BUILD)/test_probe: $(BUILD)/obj/tests/daemon/test_probe.o $(BUILD)/obj/server/probe.o $(BUILD)/obj/server/query_msg.o \
+                     $(BUILD)/obj/server/control.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/query_ref: $(BUILD)/obj/tests/daemon/query_ref.o $(BUILD)/obj/server/query_msg.o $(BUILD)/obj/server/control.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+DAEMON_TEST_DEPS += $(BUILD)/test_probe $(BUILD)/query_ref

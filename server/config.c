@@ -56,6 +56,14 @@ static const struct opt_def opt_table[] = {
       "small keeps a slow client's queue, and so its latency, short" },
     { "sim_nice", OPT_INT, O(sim_nice), -20, 19, "0", "nice value of the tick thread; below 0 (needs "
       "CAP_SYS_NICE) keeps the tick on time on a busy machine" },
+    { "query_threads", OPT_INT, O(query_threads), 1, 16, "1", "worker threads for point queries and probes" },
+    { "query_window", OPT_FLOAT, O(query_window), 0, 60, "5", "seconds of sim time before now that a "
+      "query's \"time\" may ask for" },
+    { "query_budget", OPT_FLOAT, O(query_budget), 1, 1e6, "1000", "exact query points per second, all clients "
+      "together, counted at N = 256 (a point at N costs (N/256)^2); over it: busy" },
+    { "query_queue", OPT_INT, O(query_queue), 1, 4096, "64", "queries waiting at most; more: busy" },
+    { "probe_max_points", OPT_INT, O(probe_max_points), 1, 64, "16", "probe points per client" },
+    { "probe_max_total", OPT_INT, O(probe_max_total), 1, 100000, "2048", "probe points, all clients together" },
     { "max_memory_mb", OPT_INT, O(max_memory_mb), 16, 1 << 20, "256", "memory cap for the simulation; limits N" },
 };
 #undef O

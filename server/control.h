@@ -42,7 +42,8 @@ struct ctl_limits {
     int max_memory_mb;      /* simulation memory cap, decides the largest N */
 };
 
-enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING };
+enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING,
+                CTL_QUERY, CTL_PROBE /* members checked by query_msg.c */ };
 
 struct ctl_msg {
     enum ctl_type type;

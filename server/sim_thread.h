@@ -18,6 +18,7 @@
 
 #include "frame.h"
 #include "ocean.h"
+#include "query_worker.h"
 
 /* What became of a set. The network thread maps it to a wire error code. */
 enum sim_set_status {
@@ -60,6 +61,7 @@ struct sim_config {
     uint32_t start_version;
     void (*wake)(void *user);   /* called after every tick (lws_cancel_service) */
     void *wake_user;
+    struct query_service *queries; /* point queries and probes (query_worker.h), NULL = none */
 };
 
 struct sim;
