@@ -42,12 +42,17 @@ VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-k
 test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	$(BUILD)/test_control
 	/usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
+	$(BUILD)/test_probe
+	/usr/bin/python3 tests/daemon/test_query.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check --query-ref $(BUILD)/query_ref
 
 # Same integration tests against an ASan+UBSan build (slower: frames at a lower N).
 test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(DAEMON_TEST_DEPS)
 	$(BUILD)/san/test_control
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check --sanitized
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  /usr/bin/python3 tests/daemon/test_query.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check \
+	  --query-ref $(BUILD)/query_ref --sanitized
 
 test-daemon-valgrind: $(BUILD)/test_control
 	$(VALGRIND) $(BUILD)/test_control
