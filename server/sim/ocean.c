@@ -381,8 +381,7 @@ static void amp_rows(void *arg, int r0, int r1, int worker)
             t->d[j] = g->d[i];
             t->e[j] = g->e[i];
             t->omega[j] = g->omega[i];
-            double k = dk * hypot(ix, mz);
-            t->invk[j] = k > 0 ? (float)(1.0 / k) : 0.0f;
+            t->invk[j] = (float)displacement_over_k(dk * hypot(ix, mz), m->depth);
         }
     }
 }

@@ -21,7 +21,8 @@ enum ocean_transform { TR_H, TR_DX, TR_DZ, TR_SX, TR_SZ, TR_JXX, TR_JZZ, TR_JXZ,
  *   COL_KZ      i kz h~         -> slope_z (1)
  *   COL_INVK    lambda h~/k     -> Dx (i kx), dDx/dx (-kx^2)
  *   COL_KZINVK  i lambda kz h~/k -> Dz (1), dDx/dz (i kx)
- *   COL_KZ2INVK -lambda kz^2 h~/k -> dDz/dz (1) */
+ *   COL_KZ2INVK -lambda kz^2 h~/k -> dDz/dz (1)
+ * ("1/k" is coth(kD)/k throughout: displacement_over_k, depth D.) */
 enum ocean_column { COL_H, COL_KZ, COL_INVK, COL_KZINVK, COL_KZ2INVK, COL_COUNT };
 #define OCEAN_ROW_BLOCK 8    /* rows per c2r batch (measured: 8 beats 4 and 16) */
 #define OCEAN_COL_TILE 16    /* kx columns per fill + z-pass tile (fewer if N/2 < 16) */
@@ -29,7 +30,7 @@ enum ocean_column { COL_H, COL_KZ, COL_INVK, COL_KZINVK, COL_KZ2INVK, COL_COUNT 
 #define OCEAN_THREADS_FROM_N 256 /* smaller grids run on one thread (at 128 a second thread did not pay, measured) */
 
 /* One row of one fill tile: per mode, a, b, d, e and omega as below, and
- * 1/k (0 at k = 0), so the step needs no division or square root. */
+ * invk = coth(kD)/k (0 at k = 0), so the step needs no division or square root. */
 struct ocean_tile_row {
     float a[OCEAN_COL_TILE], b[OCEAN_COL_TILE], d[OCEAN_COL_TILE], e[OCEAN_COL_TILE];
     float invk[OCEAN_COL_TILE];

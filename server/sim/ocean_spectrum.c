@@ -11,9 +11,12 @@
 
 #define PM_ALPHA 0.0081            /* Phillips constant */
 #define PM_PEAK 0.855              /* PM: w_p = 0.855 g / U10 (Horvath 2015, eq. 27) */
-/* JONSWAP: fetch beyond which the sea is fully developed, where the
- * JONSWAP w_p reaches the PM one: (22 / 0.855)^3 in units of U^2/g. */
-#define FULLY_DEVELOPED_FETCH 17036.0
+/* JONSWAP fetch laws (Hasselmann et al. 1973, Dtsch. Hydrogr. Z. Suppl. A8(12)):
+ * f_p = 3.5 (g/U) chi^-0.33, alpha = 0.076 chi^-0.22, chi = g F / U^2. */
+#define JONSWAP_FP_COEF 3.5
+#define JONSWAP_FP_EXP (-0.33)
+#define JONSWAP_ALPHA_COEF 0.076
+#define JONSWAP_ALPHA_EXP (-0.22)
 
 void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p)
 {
@@ -34,12 +37,15 @@ void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p)
     m->alpha = PM_ALPHA;
     m->omega_p = m->calm ? 1.0 : PM_PEAK * g / U;
     if (!m->calm && (m->kind == SPECTRUM_JONSWAP || m->kind == SPECTRUM_TMA)) {
-        /* Hasselmann et al. 1973 fetch laws, capped at the fully developed sea. */
+        /* Hasselmann et al. 1973 fetch laws, capped at the fully developed
+         * sea: the fetch (about 18770 U^2/g) where the JONSWAP w_p falls
+         * to the PM one, 0.855 g/U. */
         double chi = g * p->fetch * 1000.0 / (U * U);
-        if (chi > FULLY_DEVELOPED_FETCH)
-            chi = FULLY_DEVELOPED_FETCH;
-        m->alpha = 0.076 * pow(chi, -0.22);
-        m->omega_p = 22.0 * (g / U) * pow(chi, -1.0 / 3.0);
+        double chi_full = pow(PM_PEAK / (2.0 * M_PI * JONSWAP_FP_COEF), 1.0 / JONSWAP_FP_EXP);
+        if (chi > chi_full)
+            chi = chi_full;
+        m->alpha = JONSWAP_ALPHA_COEF * pow(chi, JONSWAP_ALPHA_EXP);
+        m->omega_p = 2.0 * M_PI * JONSWAP_FP_COEF * (g / U) * pow(chi, JONSWAP_FP_EXP);
     }
 }
 
@@ -135,6 +141,16 @@ double spectrum_directional(const struct spectrum_model *m, double kx, double kz
     double theta = remainder(atan2(kz, kx) - m->wind_angle, 2.0 * M_PI);
     double damp = m->cutoff > 0 ? exp(-pow(k * m->cutoff / (2.0 * M_PI), 2)) : 1.0;
     return m->amplitude * spectrum_omni_k(m, k) * spectrum_spreading(m, w, theta) / k * damp;
+}
+
+double displacement_over_k(double k, double depth)
+{
+    if (!(k > 0))
+        return 0.0;
+    /* Linear theory's particle orbits (docs/simulation.md): at the surface
+     * the horizontal semi-axis is coth(kd) times the vertical one. tanh is
+     * exactly 1 in double beyond kd ~ 19, so deep water is 1/k. */
+    return 1.0 / (k * tanh(k * depth));
 }
 
 double spectrum_mode_omega(const struct spectrum_model *m, double k)

@@ -52,6 +52,11 @@ double spectrum_spreading(const struct spectrum_model *m, double omega, double t
  * the integral of Psi over the plane. Includes amplitude and cutoff. */
 double spectrum_directional(const struct spectrum_model *m, double kx, double kz);
 
+/* coth(k d) / k, 0 at k = 0: the horizontal displacement of linear waves in
+ * depth d is D~ = i lambda (kx, kz) coth(k d)/k h~ (1/k in deep water; the
+ * orbit's horizontal semi-axis is coth(k d) times the vertical one). */
+double displacement_over_k(double k, double depth);
+
 /* Angular frequency of a mode, quantised to multiples of 2 pi / loop_period. */
 double spectrum_mode_omega(const struct spectrum_model *m, double k);
 

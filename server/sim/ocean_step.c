@@ -4,7 +4,10 @@
  * (a wave h~0 e^{i(k.x - wt)} travels along +k, i.e. downwind), then each
  * requested real field's spectrum is h~ times a factor:
  *   height 1, Dx i lambda kx/k, Dz i lambda kz/k, slopes i kx, i kz,
- *   Jacobian terms -lambda kx^2/k, -lambda kz^2/k, -lambda kx kz/k.
+ *   Jacobian terms -lambda kx^2/k, -lambda kz^2/k, -lambda kx kz/k,
+ * where every "1/k" is coth(kD)/k in water of depth D (linear theory's
+ * orbits are wider than tall in shallow water; 1/k in deep water): the
+ * per-mode "invk" below holds that, displacement_over_k().
  * (lambda > 0 moves points toward crests and sharpens them; Tessendorf writes
  * the same with D = -i k/k h~ and a negative lambda.)
  *
