@@ -1,6 +1,7 @@
 /* bench_step.c — how long a simulation step takes, and how much of it is FFTW.
  *
- * Usage: bench_step [WISDOM_FILE]   (make bench-step passes build/fftw-wisdom)
+ * Usage: bench_step [WISDOM_FILE [GROUP]]   (make bench-step passes build/fftw-wisdom;
+ * GROUP = step, pack, reconfigure or dft runs only that one)
  * One JSON object per line on stdout, medians over repetitions:
  *   {"bench":"step","N":..,"threads":..,"step_ms":..,"fftw_ms":..,"ratio":..}
  *     a full step (all six fields: 8 real transforms) vs, in the same
@@ -10,6 +11,9 @@
  *   {"bench":"pack_vs_c2r",...}  the transforms of a full step done our way
  *     (split c2r), as 8 plain 2-D c2r, and as 4 c2c carrying two real
  *     fields each (plus the de-interleave packing needs);
+ *   {"bench":"reconfigure",...}  a parameter change at the same N: ms and
+ *     cpu_ms of ocean_reconfigure, prepare_ms + commit_ms of the builder's
+ *     path, and create_ms of a whole new ocean (the old builder path);
  *   {"bench":"dft_vs_fft",...}   the thesis's Table IV.1: brute-force DFT vs
  *     FFT step, all fields, one thread.
  * Plans use FFTW_MEASURE with the wisdom file, as the daemon does. */
@@ -173,6 +177,57 @@ static void bench_pack(int n, int threads, const char *wisdom)
     ocean_free(o);
 }
 
+/* A parameter change at the same N (wind speed, alternating), three ways:
+ * ocean_reconfigure on the stepping thread (its pool), ocean_prepare (what
+ * a builder thread runs; its own workers) followed by the O(1)
+ * ocean_commit, and a whole new ocean_create with the same wisdom (what
+ * the daemon's builder did per batch before ocean_prepare existed). */
+static void bench_reconfigure(int n, int threads, const char *wisdom)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = n;
+    struct ocean *o = make(n, threads, wisdom, 1);
+    if (!o)
+        return;
+    int reps = n <= 256 ? 21 : n <= 512 ? 11 : 7;
+    double *rt = malloc(reps * sizeof *rt), *rc = malloc(reps * sizeof *rc), *pt = malloc(reps * sizeof *pt),
+           *ct = malloc(reps * sizeof *ct), *commit = malloc(reps * sizeof *commit);
+    char err[256];
+    ocean_step(o, 0.5, OCEAN_ALL_FIELDS);
+    for (int r = 0; r < reps; r++) {
+        p.wind_speed = r % 2 ? 10.0 : 12.0;
+        double c0 = cpu_ms(), t0 = now_ms();
+        ocean_reconfigure(o, &p, err, sizeof err);
+        double t1 = now_ms(), c1 = cpu_ms();
+        p.wind_speed = r % 2 ? 11.0 : 13.0;
+        struct ocean_prepared *pr = ocean_prepare(o, &p, err, sizeof err);
+        double t2 = now_ms();
+        ocean_commit(o, pr);
+        double t3 = now_ms();
+        ocean_prepared_free(pr);
+        double t4 = now_ms();
+        struct ocean *fresh = make(n, threads, wisdom, 1);
+        double t5 = now_ms();
+        ocean_free(fresh);
+        rt[r] = t1 - t0;
+        rc[r] = c1 - c0;
+        pt[r] = t2 - t1;
+        commit[r] = t3 - t2;
+        ct[r] = t5 - t4;
+    }
+    printf("{\"bench\":\"reconfigure\",\"N\":%d,\"threads\":%d,\"change\":\"wind_speed\",\"ms\":%.3f,"
+           "\"cpu_ms\":%.3f,\"prepare_ms\":%.3f,\"commit_ms\":%.4f,\"create_ms\":%.3f,\"reps\":%d}\n", n, threads,
+           median(rt, reps), median(rc, reps), median(pt, reps), median(commit, reps), median(ct, reps), reps);
+    fflush(stdout);
+    free(rt);
+    free(rc);
+    free(pt);
+    free(ct);
+    free(commit);
+    ocean_free(o);
+}
+
 static void bench_dft(int n, const char *wisdom)
 {
     struct ocean *o = make(n, 1, wisdom, 1);
@@ -201,7 +256,9 @@ static void bench_dft(int n, const char *wisdom)
 
 int main(int argc, char **argv)
 {
-    const char *wisdom = argc > 1 ? argv[1] : NULL;
+    const char *wisdom = argc > 1 && *argv[1] ? argv[1] : NULL;
+    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, pack, reconfigure, dft */
+#define WANT(name) (!only || strcmp(only, name) == 0)
     /* The machine is shared: say how busy it was. */
     double load[3] = {0, 0, 0};
     FILE *la = fopen("/proc/loadavg", "r");
@@ -212,13 +269,16 @@ int main(int argc, char **argv)
     }
     printf("{\"bench\":\"env\",\"cpus\":%ld,\"loadavg_1min\":%.2f,\"wisdom\":\"%s\"}\n",
            sysconf(_SC_NPROCESSORS_ONLN), load[0], wisdom ? wisdom : "");
-    for (int n = 64; n <= 2048; n *= 2)
+    for (int n = 64; n <= 2048 && WANT("step"); n *= 2)
         for (int threads = 1; threads <= 2; threads++)
             bench_step(n, threads, wisdom);
-    for (int n = 256; n <= 1024; n *= 4)
+    for (int n = 256; n <= 1024 && WANT("pack"); n *= 4)
         for (int threads = 1; threads <= 2; threads++)
             bench_pack(n, threads, wisdom);
-    for (int n = 16; n <= 128; n *= 2)
+    for (int n = 256; n <= 1024 && WANT("reconfigure"); n *= 2)
+        for (int threads = 1; threads <= 2; threads++)
+            bench_reconfigure(n, threads, wisdom);
+    for (int n = 16; n <= 128 && WANT("dft"); n *= 2)
         bench_dft(n, wisdom);
     return 0;
 }

@@ -6,6 +6,7 @@
  * Build and run: make test-sim (see mk/sim.mk). */
 #include <complex.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -1015,6 +1016,121 @@ static void test_reconfigure(void)
     ocean_free(o);
 }
 
+/* ---- parameter changes off the stepping thread ------------------------------- */
+
+struct prep_job {
+    struct ocean *o;
+    struct ocean_params p;
+    struct ocean_prepared *pr;
+    char err[256];
+};
+
+static void *prep_thread(void *arg)
+{
+    struct prep_job *j = arg;
+    j->pr = ocean_prepare(j->o, &j->p, j->err, sizeof j->err);
+    return NULL;
+}
+
+static int same_fields(const struct ocean *a, const struct ocean *b)
+{
+    int n = ocean_resolution(a);
+    if (n != ocean_resolution(b))
+        return 0;
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+        if (memcmp(ocean_field(a, f), ocean_field(b, f), (size_t)n * n * sizeof(float)) != 0)
+            return 0;
+    return 1;
+}
+
+static void test_prepare_commit(void)
+{
+    struct ocean_params p, q;
+    params_defaults(&p);
+    p.resolution = quick ? 32 : 256;
+    struct ocean *o = make(&p, 2);
+    if (!o)
+        return;
+    char err[256];
+    /* Every kind of change through the cache (wind, seed, patch, depth,
+     * spectrum, spreading, N) gives the bits a fresh ocean_create gives:
+     * nothing stale survives in the cached normals, rings or k tables. */
+    struct ocean_params steps[6];
+    for (int i = 0; i < 6; i++)
+        steps[i] = p;
+    steps[0].wind_speed = 17;
+    steps[1].seed = 7;
+    steps[2].patch_size = 400;
+    steps[3].depth = 6;
+    steps[3].spectrum = SPECTRUM_TMA;
+    steps[4].directional_spread = 0.3;
+    steps[4].wind_direction = 130;
+    steps[5].resolution = quick ? 64 : 128;
+    int fresh_same = 0;
+    for (int i = 0; i < 6; i++) {
+        q = steps[i];
+        ocean_reconfigure(o, &q, err, sizeof err);
+        struct ocean *f = make(&q, 1);
+        if (!f)
+            continue;
+        ocean_step(o, 21.5, OCEAN_ALL_FIELDS);
+        ocean_step(f, 21.5, OCEAN_ALL_FIELDS);
+        fresh_same += same_fields(o, f);
+        ocean_free(f);
+    }
+    check(fresh_same == 6, "reconfigure.equals_fresh", "%d/6 changes (wind, seed, patch, depth+tma, spread+direction, "
+          "N) bit-identical to a fresh ocean_create", fresh_same);
+
+    /* Prepared on another thread while this one steps; committed here. */
+    ocean_reconfigure(o, &p, err, sizeof err);
+    struct prep_job job = {o, p, NULL, ""};
+    job.p.wind_speed = 14;
+    job.p.seed = 3;
+    pthread_t th;
+    int started = pthread_create(&th, NULL, prep_thread, &job) == 0;
+    for (int i = 0; i < 5; i++)
+        ocean_step(o, 1.0 + i, OCEAN_ALL_FIELDS);
+    if (started)
+        pthread_join(th, NULL);
+    else
+        prep_thread(&job);
+    int before_commit = ocean_get_params(o)->seed == p.seed; /* prepare changed nothing yet */
+    int rc = ocean_commit(o, job.pr);
+    ocean_prepared_free(job.pr);
+    struct ocean *f = make(&job.p, 1);
+    int same = 0;
+    if (f) {
+        ocean_step(o, 8.25, OCEAN_ALL_FIELDS);
+        ocean_step(f, 8.25, OCEAN_ALL_FIELDS);
+        same = same_fields(o, f);
+        ocean_free(f);
+    }
+    check(started && before_commit && rc == 0 && same && ocean_get_params(o)->seed == 3, "prepare.other_thread",
+          "prepared on a second thread during 5 steps, committed: fields equal a fresh ocean's %s", same ? "yes" : "NO");
+
+    /* A stale prepare is refused and changes nothing; bad parameters give NULL. */
+    q = p;
+    q.wind_speed = 5;
+    struct ocean_prepared *stale = ocean_prepare(o, &q, err, sizeof err);
+    ocean_reconfigure(o, &p, err, sizeof err);
+    ocean_step(o, 3.0, OCEAN_ALL_FIELDS);
+    float *h = copy_field(o, OCEAN_HEIGHT);
+    int stale_rc = ocean_commit(o, stale);
+    ocean_prepared_free(stale);
+    ocean_step(o, 3.0, OCEAN_ALL_FIELDS);
+    size_t nn = (size_t)p.resolution * p.resolution;
+    int unchanged = ocean_get_params(o)->wind_speed == p.wind_speed &&
+                    memcmp(h, ocean_field(o, OCEAN_HEIGHT), nn * sizeof(float)) == 0;
+    free(h);
+    q = p;
+    q.resolution = 100;
+    err[0] = 0;
+    struct ocean_prepared *bad = ocean_prepare(o, &q, err, sizeof err);
+    check(stale != NULL && stale_rc == -1 && unchanged && !bad && strstr(err, "power of two"), "prepare.stale_and_invalid",
+          "commit after another reconfigure: %d (unchanged: %s); N=100: %s", stale_rc, unchanged ? "yes" : "NO", err);
+    ocean_free(o);
+}
+
 static double seconds(void)
 {
     struct timespec ts;
@@ -1091,6 +1207,7 @@ int main(void)
     RUN(test_sweep);
     RUN(test_determinism);
     RUN(test_reconfigure);
+    RUN(test_prepare_commit);
     RUN(test_wisdom);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;

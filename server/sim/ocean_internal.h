@@ -4,6 +4,7 @@
 #define OCEAND_OCEAN_INTERNAL_H
 
 #include <complex.h>
+#include <stdint.h>
 #include <fftw3.h>
 
 #include "ocean.h"
@@ -49,6 +50,15 @@ struct ocean_grid {
     float *a, *b, *d, *e;
     double *omega;             /* rad/s, per mode */
     float *kx, *kz;            /* rad/m, per column / per row (layout formula) */
+    /* What a parameter change keeps (ocean.c, prepare): per mode, the four
+     * standard normals of h~0(k) and h~0(-k) for `seed` (xi_r, xi_i of +k,
+     * of -k), and its ring: the index of |m|^2 = mx^2 + mz^2 in ring_m2
+     * (ascending, `rings` distinct values), since all of Psi but the
+     * spreading's angle depends on |k| alone. */
+    float *gauss;
+    uint32_t seed;
+    uint32_t *ring, *ring_m2;
+    size_t rings;
     /* The same amplitudes in the order the fill reads them: tile tl, row iz
      * at amp[tl*N + iz] (columns tl*tile .. +tile; the Nyquist column, zero,
      * is left out). A sequential stream instead of a 64-byte piece of each
@@ -90,6 +100,8 @@ struct ocean {
     struct spectrum_model model;
     struct ocean_grid *g;
     struct ocean_pool *pool;   /* opt.threads - 1 workers; NULL for one thread */
+    struct ocean_pool *prep_pool; /* ocean_prepare's own (another thread's), made on first use */
+    unsigned long generation;  /* commits so far: a prepare made before the last one is stale */
 };
 
 /* Transforms needed for an OCEAN_FIELD_BIT mask. */
