@@ -5,6 +5,7 @@
  * seeds) for valgrind. Plans use FFTW_ESTIMATE and no wisdom: deterministic.
  * Build and run: make test-sim (see mk/sim.mk). */
 #include <complex.h>
+#include <malloc.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
@@ -1131,6 +1132,58 @@ static void test_prepare_commit(void)
     ocean_free(o);
 }
 
+/* ---- memory accounting -------------------------------------------------------- */
+
+/* Heap bytes in use according to glibc (small blocks + mmapped blocks). */
+static size_t heap_in_use(void)
+{
+    struct mallinfo2 mi = mallinfo2();
+    return mi.uordblks + mi.hblkhd;
+}
+
+/* ocean_memory_bytes is what a memory cap counts: it must match what an
+ * ocean really allocates. Two independent counts: the bytes that went
+ * through the library's array allocator during ocean_create (the test
+ * hook ocean_alloc_bytes), and glibc's own mallinfo2 before and after
+ * (everything: plans, pool, structs), when the allocator is glibc's
+ * (not under ASan or valgrind, which bring their own). */
+static void test_memory_bytes(void)
+{
+    int sizes[] = {64, 256, 512, 1024};
+    int first = quick ? 0 : 1, last = quick ? 1 : 3;
+    /* Is mallinfo2 telling the truth here? A known 3 MB block must show. */
+    size_t h0 = heap_in_use();
+    void *volatile probe = malloc(3u << 20); /* volatile: the compiler may not elide it */
+    if (probe)
+        memset(probe, 1, 3u << 20);
+    size_t h1 = heap_in_use();
+    free(probe);
+    int glibc = h1 - h0 >= (3u << 20) && h1 - h0 < (3u << 20) + 65536;
+    double worst_hook = 0, worst_heap = 0;
+    char line[512] = "";
+    for (int i = first; i <= last; i++) {
+        int n = sizes[i];
+        struct ocean_params p;
+        params_defaults(&p);
+        p.resolution = n;
+        size_t want = ocean_memory_bytes(n, 2);
+        size_t hook0 = ocean_alloc_bytes, heap0 = heap_in_use();
+        struct ocean *o = make(&p, 2);
+        size_t hook = ocean_alloc_bytes - hook0, heap = heap_in_use() - heap0;
+        ocean_free(o);
+        double eh = fabs((double)hook / want - 1), ep = fabs((double)heap / want - 1);
+        worst_hook = fmax(worst_hook, eh);
+        if (glibc)
+            worst_heap = fmax(worst_heap, ep);
+        size_t len = strlen(line);
+        snprintf(line + len, sizeof line - len, "%sN=%d: %.2f MB said, arrays %.2f, heap %s%.2f", i > first ? "; " : "",
+                 n, want / 1e6, hook / 1e6, glibc ? "" : "(n/a) ", heap / 1e6);
+    }
+    check(worst_hook <= 0.10 && worst_heap <= 0.10, "memory.bytes_match",
+          "%s (limit 10%%: arrays %.1f%%, heap %s%.1f%%)", line, 100 * worst_hook, glibc ? "" : "not measured ",
+          100 * worst_heap);
+}
+
 static double seconds(void)
 {
     struct timespec ts;
@@ -1208,6 +1261,7 @@ int main(void)
     RUN(test_determinism);
     RUN(test_reconfigure);
     RUN(test_prepare_commit);
+    RUN(test_memory_bytes);
     RUN(test_wisdom);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;

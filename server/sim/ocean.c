@@ -259,11 +259,15 @@ static void grid_free(struct ocean_grid *g)
     free(g);
 }
 
+_Atomic size_t ocean_alloc_bytes;
+
 static void *zalloc(size_t bytes, bool *ok)
 {
     void *p = fftwf_malloc(bytes); /* SIMD-aligned, as FFTW's new-array execute needs */
-    if (p)
+    if (p) {
         memset(p, 0, bytes);
+        atomic_fetch_add_explicit(&ocean_alloc_bytes, bytes, memory_order_relaxed);
+    }
     else
         *ok = false;
     return p;

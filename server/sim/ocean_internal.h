@@ -104,6 +104,10 @@ struct ocean {
     unsigned long generation;  /* commits so far: a prepare made before the last one is stale */
 };
 
+/* Test hook: bytes ever allocated for the library's arrays (grids,
+ * amplitudes, normals), summed; never decreases. */
+extern _Atomic size_t ocean_alloc_bytes;
+
 /* Transforms needed for an OCEAN_FIELD_BIT mask. */
 unsigned ocean_transforms_for(unsigned fields);
 
