@@ -488,6 +488,51 @@ static void test_periodic(void)
     ocean_free(o);
 }
 
+/* The end of the documented time range (ocean.h, OCEAN_TIME_MAX): the FFT
+ * path's phases at t = 1e9 s must match the double-precision reference as
+ * well as at small t, for a sea that loops and one that does not, and for
+ * a tiny patch whose short waves have the largest w t of any setting. */
+static void test_time_max(void)
+{
+    struct {
+        const char *what;
+        int n;
+        double patch, loop, cutoff;
+    } cases[] = {{"default", 32, 256, 0, 0.5}, {"loop_20s", 32, 256, 20, 0.5}, {"patch_1m", 64, 1, 0, 0}};
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        if (quick && c == 2)
+            continue; /* N = 64 DFT: slow under valgrind */
+        struct ocean_params p;
+        params_defaults(&p);
+        p.resolution = cases[c].n;
+        p.patch_size = cases[c].patch;
+        p.loop_period = cases[c].loop;
+        p.small_wave_cutoff = cases[c].cutoff;
+        struct ocean *o = make(&p, 1);
+        if (!o)
+            continue;
+        size_t nn = (size_t)p.resolution * p.resolution;
+        double times[2] = {37.25, OCEAN_TIME_MAX}, err[2] = {0, 0};
+        for (int ti = 0; ti < 2; ti++) {
+            float *fft[OCEAN_FIELD_COUNT];
+            ocean_step_fft(o, times[ti], OCEAN_ALL_FIELDS);
+            for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+                fft[f] = copy_field(o, f);
+            ocean_step_dft(o, times[ti], OCEAN_ALL_FIELDS);
+            for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
+                err[ti] = fmax(err[ti], rel_err(fft[f], ocean_field(o, f), nn));
+                free(fft[f]);
+            }
+        }
+        char name[64];
+        snprintf(name, sizeof name, "time.max.%s", cases[c].what);
+        check(err[1] <= 1e-5 && err[0] <= 1e-5, name,
+              "N=%d L=%g m loop %g s: FFT vs double reference, all fields, at t = %.0e s %.1e, at t = %.2f s %.1e "
+              "(limit 1e-5 for both)", p.resolution, p.patch_size, p.loop_period, times[1], err[1], times[0], err[0]);
+        ocean_free(o);
+    }
+}
+
 /* ---- energy ------------------------------------------------------------------ */
 
 static void test_parseval(void)
@@ -1252,6 +1297,7 @@ int main(void)
     RUN(test_layout);
     RUN(test_slopes);
     RUN(test_periodic);
+    RUN(test_time_max);
     RUN(test_parseval);
     RUN(test_variance_vs_n);
     RUN(test_significant_height);

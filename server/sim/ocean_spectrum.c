@@ -135,7 +135,11 @@ double spectrum_spreading(const struct spectrum_model *m, double w, double theta
      * Q(s) = 2^(2s-1) Gamma(s+1)^2 / (pi Gamma(2s+1)), via lgamma for large s. */
     double s = spreading_exponent(m, w);
     double q = spreading_norm(s);
-    double d_h = q * pow(fabs(cos(0.5 * theta)), 2.0 * s);
+    /* |cos(theta/2)|^2s as ((1 + cos theta)/2)^s: the same, but exactly 0
+     * straight upwind (cos(pi/2) is 6e-17 in double, and (6e-17)^2s is not
+     * small for the small s of short waves), as on the fast path. */
+    double half = 0.5 * (1.0 + c);
+    double d_h = q * pow(half > 0 ? half : 0.0, s);
     return (1.0 - m->blend) * d_cos2 + m->blend * d_h;
 }
 
