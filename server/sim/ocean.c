@@ -206,7 +206,7 @@ void ocean_parallel(struct ocean_pool *pool, int threads, int items,
 struct ocean_amps {
     float *a, *b, *d, *e;
     double *omega;
-    struct ocean_tile_row *amp;
+    float *ampc;
 };
 
 static void amps_free(struct ocean_amps *s)
@@ -215,20 +215,20 @@ static void amps_free(struct ocean_amps *s)
     for (size_t i = 0; i < sizeof floats / sizeof floats[0]; i++)
         fftwf_free(floats[i]);
     fftwf_free(s->omega);
-    fftwf_free(s->amp);
+    fftwf_free(s->ampc);
     memset(s, 0, sizeof *s);
 }
 
 /* Swap the amplitude arrays of a grid with a set (commit: O(1)). */
 static void amps_swap(struct ocean_grid *g, struct ocean_amps *s)
 {
-    struct ocean_amps t = {g->a, g->b, g->d, g->e, g->omega, g->amp};
+    struct ocean_amps t = {g->a, g->b, g->d, g->e, g->omega, g->ampc};
     g->a = s->a;
     g->b = s->b;
     g->d = s->d;
     g->e = s->e;
     g->omega = s->omega;
-    g->amp = s->amp;
+    g->ampc = s->ampc;
     *s = t;
 }
 
@@ -241,8 +241,10 @@ static void grid_free(struct ocean_grid *g)
         fftwf_destroy_plan(g->col_plan);
     if (g->row_plan)
         fftwf_destroy_plan(g->row_plan);
+    if (g->store_plan)
+        fftwf_destroy_plan(g->store_plan);
     ocean_fftw_unlock();
-    struct ocean_amps amps = {g->a, g->b, g->d, g->e, g->omega, g->amp};
+    struct ocean_amps amps = {g->a, g->b, g->d, g->e, g->omega, g->ampc};
     amps_free(&amps);
     fftwf_free(g->kx);
     fftwf_free(g->kz);
@@ -282,7 +284,7 @@ static bool amps_alloc(struct ocean_amps *s, int n, int tile)
     s->d = zalloc(modes * sizeof(float), &ok);
     s->e = zalloc(modes * sizeof(float), &ok);
     s->omega = zalloc(modes * sizeof(double), &ok);
-    s->amp = zalloc((size_t)(n / 2 / tile) * n * sizeof *s->amp, &ok);
+    s->ampc = zalloc((size_t)(n / 2) * OCEAN_AMP_COL_FLOATS(n) * sizeof(float), &ok);
     if (!ok)
         amps_free(s);
     return ok;
@@ -380,7 +382,7 @@ size_t ocean_memory_bytes(int n, int threads)
     size_t scratch = ((fill_floats > row_floats ? fill_floats : row_floats) + 15) & ~(size_t)15;
     /* The same arrays as grid_new, in the same order. */
     return modes * (4 * sizeof(float) + sizeof(double))                   /* a, b, d, e, omega */
-         + (size_t)(n / 2 / tile) * n * sizeof(struct ocean_tile_row)      /* amp */
+         + (size_t)(n / 2) * OCEAN_AMP_COL_FLOATS(n) * sizeof(float)      /* ampc */
          + (nh + (size_t)n) * sizeof(float)                               /* kx, kz */
          + modes * (4 * sizeof(float) + sizeof(uint32_t))                 /* gauss, ring */
          + ring_count(n) * sizeof(uint32_t)                               /* ring_m2 */
@@ -444,17 +446,27 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
      * the plans do not depend on the thread count (same bits on 1 or 2).
      * Columns: `tile` in-place N-point c2c over the contiguous columns of
      * a worker's fill tile (ocean_step.c).
-     * Rows: a block of N-point c2r from a worker's scratch to the output. */
+     * Rows: a block of N-point c2r from a worker's scratch to the output.
+     * Between them, the transposition: a tile's transformed columns into
+     * the block-major half spectrum (see ocean_grid.col), as FFTW's own
+     * rank-0 (copy-only) guru plan over three loops: T columns (in: stride
+     * dist, out: B), N/B blocks (in: B, out: nh*B), B rows (1, 1). The same
+     * copy as a hand-written loop (measured equal: docs/simulation.md), but
+     * part of the FFTW plan set, like the transposition inside FFTW's 2-D
+     * transforms. */
     fftwf_complex *tile = (fftwf_complex *)ocean_tile_spectrum(g->scratch, n, g->tile);
     int dist = ocean_tile_dist(n);
+    const int B = OCEAN_ROW_BLOCK;
+    fftwf_iodim store_dims[3] = {{g->tile, dist, B}, {n / B, B, g->nh * B}, {B, 1, 1}};
     fftwf_plan_with_nthreads(1);
     g->col_plan = fftwf_plan_many_dft(1, &n, g->tile, tile, NULL, 1, dist, tile, NULL, 1, dist, FFTW_BACKWARD, flags);
-    g->row_plan = fftwf_plan_many_dft_c2r(1, &n, OCEAN_ROW_BLOCK, (fftwf_complex *)g->scratch, NULL,
-                                          OCEAN_ROW_BLOCK, 1, g->out[0], NULL, 1, n, flags);
-    if (g->col_plan && g->row_plan && opt->plan_rigor && opt->wisdom_path && *opt->wisdom_path)
+    g->row_plan = fftwf_plan_many_dft_c2r(1, &n, B, (fftwf_complex *)g->scratch, NULL,
+                                          B, 1, g->out[0], NULL, 1, n, flags);
+    g->store_plan = fftwf_plan_guru_dft(0, NULL, 3, store_dims, tile, (fftwf_complex *)g->col[0], FFTW_BACKWARD, flags);
+    if (g->col_plan && g->row_plan && g->store_plan && opt->plan_rigor && opt->wisdom_path && *opt->wisdom_path)
         export_wisdom(opt->wisdom_path);
     ocean_fftw_unlock();
-    if (!g->col_plan || !g->row_plan) {
+    if (!g->col_plan || !g->row_plan || !g->store_plan) {
         snprintf(err, errlen, "FFTW could not plan a %dx%d transform", n, n);
         grid_free(g);
         return NULL;
@@ -518,14 +530,14 @@ static void radial_chunks(void *arg, int c0, int c1, int worker)
 struct amp_ctx {
     const struct ocean_grid *g;       /* n, ring */
     const struct spectrum_model *m;
+    double lambda;                    /* choppiness, folded into linvk */
     const struct spectrum_radial *radial;
     const float *gauss;
     struct ocean_amps *amps;
 };
 
 /* h~0(k) and h~0(-k) per mode from the radial table, the spreading's angle
- * and the cached normals; then a, b, d, e (see ocean_grid) and the fill's
- * tile-ordered copy. */
+ * and the cached normals; then a, b, d, e and omega (see ocean_grid). */
 static void amp_rows(void *arg, int r0, int r1, int worker)
 {
     const struct amp_ctx *c = arg;
@@ -561,16 +573,28 @@ static void amp_rows(void *arg, int r0, int r1, int worker)
             s->e[i] = (float)(pr - mr);
             s->omega[i] = r->omega;
         }
-        for (int ix = 0; ix < n / 2; ix++) { /* the fill's copy, in tile order */
+    }
+}
+
+/* The fill's column-major copy (ocean_amp_col), columns [c0, c1). */
+static void amp_columns(void *arg, int c0, int c1, int worker)
+{
+    const struct amp_ctx *c = arg;
+    const struct ocean_grid *g = c->g;
+    struct ocean_amps *s = c->amps;
+    const int n = g->n, nh = g->nh;
+    const double lambda = c->lambda;
+    for (int ix = c0; ix < c1; ix++) {
+        float *col = ocean_amp_col(s->ampc, n, ix);
+        double *omega = (double *)(col + 5 * (size_t)n);
+        for (int iz = 0; iz < n; iz++) {
             size_t i = (size_t)iz * nh + ix;
-            struct ocean_tile_row *t = s->amp + (size_t)(ix / g->tile) * n + iz;
-            int j = ix % g->tile;
-            t->a[j] = s->a[i];
-            t->b[j] = s->b[i];
-            t->d[j] = s->d[i];
-            t->e[j] = s->e[i];
-            t->omega[j] = s->omega[i];
-            t->invk[j] = iz == n / 2 ? 0.0f : (float)c->radial[g->ring[i]].disp;
+            col[iz] = s->a[i];
+            col[n + iz] = s->b[i];
+            col[2 * n + iz] = s->d[i];
+            col[3 * n + iz] = s->e[i];
+            col[4 * n + iz] = iz == n / 2 ? 0.0f : (float)(lambda * c->radial[g->ring[i]].disp);
+            omega[iz] = s->omega[i];
         }
     }
 }
@@ -579,16 +603,17 @@ static void amp_rows(void *arg, int r0, int r1, int worker)
  * normals `gauss`. Depends only on the parameters (the random numbers on
  * seed and integer k), so reconfiguring keeps the sea's phases. Returns
  * false without memory for the radial table. */
-static bool amps_compute(const struct ocean_grid *g, const struct spectrum_model *m, const float *gauss,
-                         struct ocean_amps *amps, struct ocean_pool *pool, int threads)
+static bool amps_compute(const struct ocean_grid *g, const struct spectrum_model *m, double lambda,
+                         const float *gauss, struct ocean_amps *amps, struct ocean_pool *pool, int threads)
 {
     struct spectrum_radial *radial = malloc((g->rings ? g->rings : 1) * sizeof *radial);
     if (!radial)
         return false;
     struct radial_ctx rc = {m, g->ring_m2, radial, g->rings, 64};
     ocean_parallel(pool, threads, rc.chunks, radial_chunks, &rc);
-    struct amp_ctx c = {g, m, radial, gauss, amps};
+    struct amp_ctx c = {g, m, lambda, radial, gauss, amps};
     ocean_parallel(pool, threads, g->n, amp_rows, &c);
+    ocean_parallel(pool, threads, g->n / 2, amp_columns, &c);
     free(radial);
     return true;
 }
@@ -649,8 +674,8 @@ static struct ocean_prepared *prepare(const struct ocean *o, const struct ocean_
         gauss_compute(pr->grid->n, pr->seed, pr->grid->gauss, pool, threads);
         set_k_tables(pr->grid, p->patch_size);
         struct ocean_amps amps = {pr->grid->a, pr->grid->b, pr->grid->d, pr->grid->e, pr->grid->omega,
-                                  pr->grid->amp};
-        if (!amps_compute(pr->grid, &pr->model, pr->grid->gauss, &amps, pool, threads))
+                                  pr->grid->ampc};
+        if (!amps_compute(pr->grid, &pr->model, p->choppiness, pr->grid->gauss, &amps, pool, threads))
             goto oom;
         return pr;
     }
@@ -665,7 +690,7 @@ static struct ocean_prepared *prepare(const struct ocean *o, const struct ocean_
         gauss_compute(g->n, pr->seed, pr->gauss, pool, threads);
         gauss = pr->gauss;
     }
-    if (!amps_compute(g, &pr->model, gauss, &pr->amps, pool, threads))
+    if (!amps_compute(g, &pr->model, p->choppiness, gauss, &pr->amps, pool, threads))
         goto oom;
     return pr;
 oom:

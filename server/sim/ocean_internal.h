@@ -30,13 +30,16 @@ enum ocean_column { COL_H, COL_KZ, COL_INVK, COL_KZINVK, COL_KZ2INVK, COL_COUNT 
 #define OCEAN_MAX_THREADS 64
 #define OCEAN_THREADS_FROM_N 256 /* smaller grids run on one thread (at 128 a second thread did not pay, measured) */
 
-/* One row of one fill tile: per mode, a, b, d, e and omega as below, and
- * invk = coth(kD)/k (0 at k = 0), so the step needs no division or square root. */
-struct ocean_tile_row {
-    float a[OCEAN_COL_TILE], b[OCEAN_COL_TILE], d[OCEAN_COL_TILE], e[OCEAN_COL_TILE];
-    float invk[OCEAN_COL_TILE];
-    double omega[OCEAN_COL_TILE];
-};
+/* The fill's copy of the amplitudes, one kx column (ix < N/2) after the
+ * other, each column-major along kz: a, b, d, e (as below), linvk =
+ * lambda coth(kD)/k (0 at k = 0; lambda folded in, so the step needs no
+ * division, square root or scaling), each N floats, then omega, N doubles.
+ * A tile's columns are one sequential stream, and the fill writes h~ down
+ * a column with no transposition. */
+#define OCEAN_AMP_COL_FLOATS(n) (7 * (size_t)(n)) /* 5 float + 1 double arrays of N */
+static inline float *ocean_amp_col(float *ampc, int n, int ix) { return ampc + (size_t)ix * OCEAN_AMP_COL_FLOATS(n); }
+/* Within a column: a = col, b = col + N, d = col + 2N, e = col + 3N,
+ * linvk = col + 4N, omega = (double *)(col + 5N). */
 
 /* Everything whose size depends on N: made together, swapped together. */
 struct ocean_grid {
@@ -59,11 +62,10 @@ struct ocean_grid {
     uint32_t seed;
     uint32_t *ring, *ring_m2;
     size_t rings;
-    /* The same amplitudes in the order the fill reads them: tile tl, row iz
-     * at amp[tl*N + iz] (columns tl*tile .. +tile; the Nyquist column, zero,
-     * is left out). A sequential stream instead of a 64-byte piece of each
-     * row of five arrays. */
-    struct ocean_tile_row *amp;
+    /* The same amplitudes as the fill reads them: OCEAN_AMP_COL_FLOATS(N)
+     * per column ix = 0 .. N/2-1 (the Nyquist column, zero, left out), see
+     * ocean_amp_col. */
+    float *ampc;
     /* z-pass spectra (after the z pass), block-major: the values of rows
      * iz = b*B + r (B = OCEAN_ROW_BLOCK) are at col[k][2*((b*nh + ix)*B + r)],
      * so a block of B rows is one contiguous piece that row_plan reads as
@@ -75,6 +77,7 @@ struct ocean_grid {
     size_t scratch_floats;
     int workers;               /* scratch slots */
     fftwf_plan col_plan;       /* in place, `tile` contiguous N-point c2c (one thread each) */
+    fftwf_plan store_plan;     /* rank 0 (a copy): a transformed tile -> its columns of col[k] */
     fftwf_plan row_plan;       /* OCEAN_ROW_BLOCK N-point c2r along x, input interleaved
                                 * (stride ROW_BLOCK), rows out contiguous (one thread each) */
 };
