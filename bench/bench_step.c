@@ -1,7 +1,7 @@
 /* bench_step.c — how long a simulation step takes, and how much of it is FFTW.
  *
  * Usage: bench_step [WISDOM_FILE [GROUP]]   (make bench-step passes build/fftw-wisdom;
- * GROUP = step, pack, reconfigure or dft runs only that one)
+ * GROUP = step, pack, layout, reconfigure or dft runs only that one)
  * One JSON object per line on stdout, medians over repetitions:
  *   {"bench":"step","N":..,"threads":..,"step_ms":..,"fftw_ms":..,"ratio":..}
  *     a full step (all six fields: 8 real transforms) vs, in the same
@@ -13,6 +13,9 @@
  *   {"bench":"pack_vs_c2r",...}  the transforms of a full step done our way
  *     (split c2r), as 8 plain 2-D c2r, and as 4 c2c carrying two real
  *     fields each (plus the de-interleave packing needs);
+ *   {"bench":"z_to_rows",...}    one spectrum's z + row pass with the
+ *     transposition as FFTW's rank-0 copy, as our own copy, or folded into
+ *     FFTW's strided transforms (column-major or row-major in between);
  *   {"bench":"reconfigure",...}  a parameter change at the same N: ms and
  *     cpu_ms of ocean_reconfigure, prepare_ms + commit_ms of the builder's
  *     path, and create_ms of a whole new ocean (the old builder path);
@@ -182,6 +185,116 @@ static void bench_pack(int n, int threads, const char *wisdom)
     ocean_free(o);
 }
 
+/* Why the transposition between the z and the row pass is an FFTW rank-0
+ * plan (ocean.c, store_plan), and why the spectrum between the passes is
+ * block-major. One spectrum's two passes (N/2 columns, N rows), one
+ * thread, process CPU time, four ways:
+ *   ours:      z pass in place on a contiguous tile, then the copy into the
+ *              block-major spectrum (FFTW rank-0 guru plan), then the row
+ *              c2r reading blocks of 8 interleaved rows;
+ *   ours with the copy as our own loop (memcpy of 8 complex per column),
+ *              as before this round; copy_only_* time the copy alone;
+ *   colmajor:  FFTW's z pass out of place straight into a column-major
+ *              spectrum, row c2r reading it with input stride N;
+ *   rowmajor:  FFTW's z pass out of place into a row-major spectrum (output
+ *              stride N/2+1), row c2r over contiguous rows.
+ * The last two put the whole transposition inside FFTW's transforms. */
+static void bench_layout(int n, const char *wisdom)
+{
+    const int T = 16, B = OCEAN_ROW_BLOCK, nh = n / 2 + 1, sd = ocean_tile_dist(n);
+    float *tile = fftwf_malloc(sizeof(float) * 2 * T * sd);
+    fftwf_complex *col = fftwf_malloc(sizeof(fftwf_complex) * (size_t)n * nh);
+    float *out = fftwf_malloc(sizeof(float) * (size_t)n * n);
+    unsigned fl = FFTW_MEASURE;
+    fftwf_iodim store_dims[3] = {{T, sd, B}, {n / B, B, nh * B}, {B, 1, 1}};
+    ocean_fftw_init();
+    ocean_fftw_lock();
+    if (wisdom)
+        fftwf_import_wisdom_from_filename(wisdom);
+    fftwf_plan_with_nthreads(1);
+    fftwf_plan z_in = fftwf_plan_many_dft(1, &n, T, (fftwf_complex *)tile, NULL, 1, sd, (fftwf_complex *)tile, NULL,
+                                          1, sd, FFTW_BACKWARD, fl);
+    fftwf_plan copy = fftwf_plan_guru_dft(0, NULL, 3, store_dims, (fftwf_complex *)tile, col, FFTW_BACKWARD, fl);
+    fftwf_plan r_blk = fftwf_plan_many_dft_c2r(1, &n, B, col, NULL, B, 1, out, NULL, 1, n, fl);
+    fftwf_plan z_cm = fftwf_plan_many_dft(1, &n, T, (fftwf_complex *)tile, NULL, 1, sd, col, NULL, 1, n,
+                                          FFTW_BACKWARD, fl);
+    fftwf_plan r_cm = fftwf_plan_many_dft_c2r(1, &n, B, col, NULL, n, 1, out, NULL, 1, n, fl);
+    fftwf_plan z_rm = fftwf_plan_many_dft(1, &n, T, (fftwf_complex *)tile, NULL, 1, sd, col, NULL, nh, 1,
+                                          FFTW_BACKWARD, fl);
+    fftwf_plan r_rm = fftwf_plan_many_dft_c2r(1, &n, B, col, NULL, 1, nh, out, NULL, 1, n, fl);
+    if (wisdom)
+        fftwf_export_wisdom_to_filename(wisdom);
+    ocean_fftw_unlock();
+    memset(tile, 0, sizeof(float) * 2 * T * sd);
+    memset(col, 0, sizeof(fftwf_complex) * (size_t)n * nh);
+    int reps = reps_for(n);
+    double *v[6];
+    for (int i = 0; i < 6; i++)
+        v[i] = malloc(reps * sizeof(double));
+    for (int r = 0; r < reps; r++) {
+        double c0 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++) {
+            fftwf_execute_dft(z_in, (fftwf_complex *)tile, (fftwf_complex *)tile);
+            fftwf_execute_dft(copy, (fftwf_complex *)tile, col + (size_t)tl * T * B);
+        }
+        for (int b = 0; b < n / B; b++)
+            fftwf_execute_dft_c2r(r_blk, col + (size_t)b * nh * B, out + (size_t)b * B * n);
+        double c1 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++) {
+            fftwf_execute_dft(z_in, (fftwf_complex *)tile, (fftwf_complex *)tile);
+            for (int b = 0; b < n / B; b++) {
+                float *dst = (float *)col + 2 * (((size_t)b * nh + tl * T) * B);
+                for (int j = 0; j < T; j++)
+                    memcpy(dst + 2 * j * B, tile + 2 * ((size_t)j * sd + b * B), 2 * B * sizeof(float));
+            }
+        }
+        for (int b = 0; b < n / B; b++)
+            fftwf_execute_dft_c2r(r_blk, col + (size_t)b * nh * B, out + (size_t)b * B * n);
+        double c2 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++)
+            fftwf_execute_dft(z_cm, (fftwf_complex *)tile, col + (size_t)tl * T * n);
+        for (int b = 0; b < n / B; b++)
+            fftwf_execute_dft_c2r(r_cm, col + (size_t)b * B, out + (size_t)b * B * n);
+        double c3 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++)
+            fftwf_execute_dft(z_rm, (fftwf_complex *)tile, col + tl * T);
+        for (int b = 0; b < n / B; b++)
+            fftwf_execute_dft_c2r(r_rm, col + (size_t)b * B * nh, out + (size_t)b * B * n);
+        double c4 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++)
+            fftwf_execute_dft(copy, (fftwf_complex *)tile, col + (size_t)tl * T * B);
+        double c5 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++)
+            for (int b = 0; b < n / B; b++) {
+                float *dst = (float *)col + 2 * (((size_t)b * nh + tl * T) * B);
+                for (int j = 0; j < T; j++)
+                    memcpy(dst + 2 * j * B, tile + 2 * ((size_t)j * sd + b * B), 2 * B * sizeof(float));
+            }
+        double c6 = cpu_ms();
+        v[0][r] = c1 - c0;
+        v[1][r] = c2 - c1;
+        v[2][r] = c3 - c2;
+        v[3][r] = c4 - c3;
+        v[4][r] = c5 - c4;
+        v[5][r] = c6 - c5;
+    }
+    printf("{\"bench\":\"z_to_rows\",\"N\":%d,\"threads\":1,\"ours_fftw_copy_cpu_ms\":%.3f,"
+           "\"ours_own_copy_cpu_ms\":%.3f,\"colmajor_cpu_ms\":%.3f,\"rowmajor_cpu_ms\":%.3f,"
+           "\"copy_only_fftw_cpu_ms\":%.3f,\"copy_only_own_cpu_ms\":%.3f}\n", n, median(v[0], reps),
+           median(v[1], reps), median(v[2], reps), median(v[3], reps), median(v[4], reps), median(v[5], reps));
+    fflush(stdout);
+    for (int i = 0; i < 6; i++)
+        free(v[i]);
+    ocean_fftw_lock();
+    fftwf_plan plans[] = {z_in, copy, r_blk, z_cm, r_cm, z_rm, r_rm};
+    for (size_t i = 0; i < sizeof plans / sizeof plans[0]; i++)
+        fftwf_destroy_plan(plans[i]);
+    ocean_fftw_unlock();
+    fftwf_free(tile);
+    fftwf_free(col);
+    fftwf_free(out);
+}
+
 /* A parameter change at the same N (wind speed, alternating), three ways:
  * ocean_reconfigure on the stepping thread (its pool), ocean_prepare (what
  * a builder thread runs; its own workers) followed by the O(1)
@@ -262,7 +375,7 @@ static void bench_dft(int n, const char *wisdom)
 int main(int argc, char **argv)
 {
     const char *wisdom = argc > 1 && *argv[1] ? argv[1] : NULL;
-    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, pack, reconfigure, dft */
+    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, pack, layout, reconfigure, dft */
 #define WANT(name) (!only || strcmp(only, name) == 0)
     /* The machine is shared: say how busy it was. */
     double load[3] = {0, 0, 0};
@@ -280,6 +393,8 @@ int main(int argc, char **argv)
     for (int n = 256; n <= 1024 && WANT("pack"); n *= 4)
         for (int threads = 1; threads <= 2; threads++)
             bench_pack(n, threads, wisdom);
+    for (int n = 256; n <= 2048 && WANT("layout"); n *= 2)
+        bench_layout(n, wisdom);
     for (int n = 256; n <= 1024 && WANT("reconfigure"); n *= 2)
         for (int threads = 1; threads <= 2; threads++)
             bench_reconfigure(n, threads, wisdom);

@@ -1224,6 +1224,22 @@ static void test_memory_bytes(void)
         snprintf(line + len, sizeof line - len, "%sN=%d: %.2f MB said, arrays %.2f, heap %s%.2f", i > first ? "; " : "",
                  n, want / 1e6, hook / 1e6, glibc ? "" : "(n/a) ", heap / 1e6);
     }
+    /* threads = 0 means every online core, uncapped below 64 (issue 15). */
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    int want_threads = cores < 1 ? 1 : cores > OCEAN_MAX_THREADS ? OCEAN_MAX_THREADS : (int)cores;
+    struct ocean_params p0;
+    params_defaults(&p0);
+    p0.resolution = 64;
+    struct ocean_options opt0 = {0, NULL, 0};
+    char err0[256];
+    struct ocean *o0 = ocean_create(&p0, &opt0, err0, sizeof err0);
+    int got_threads = o0 ? o0->opt.threads : -1;
+    ocean_free(o0);
+    check(got_threads == want_threads && ocean_threads(0) == want_threads && ocean_threads(100) == 64 &&
+          ocean_threads(-3) == 1 && ocean_threads(12) == 12 &&
+          ocean_memory_bytes(512, 0) == ocean_memory_bytes(512, want_threads),
+          "threads.zero_is_every_core", "threads 0 -> %d (cores online %ld; 12 -> %d, 100 -> %d, -3 -> %d)", got_threads,
+          cores, ocean_threads(12), ocean_threads(100), ocean_threads(-3));
     check(worst_hook <= 0.10 && worst_heap <= 0.10, "memory.bytes_match",
           "%s (limit 10%%: arrays %.1f%%, heap %s%.1f%%)", line, 100 * worst_hook, glibc ? "" : "not measured ",
           100 * worst_heap);

@@ -371,13 +371,23 @@ static void export_wisdom(const char *path)
         remove(tmp);
 }
 
+int ocean_threads(int requested)
+{
+    if (requested == 0) {
+        long cores = sysconf(_SC_NPROCESSORS_ONLN);
+        requested = cores < 1 ? 1 : cores > OCEAN_MAX_THREADS ? OCEAN_MAX_THREADS : (int)cores;
+    }
+    return requested < 1 ? 1 : requested > OCEAN_MAX_THREADS ? OCEAN_MAX_THREADS : requested;
+}
+
 size_t ocean_memory_bytes(int n, int threads)
 {
     if (n < 2)
         return 0;
+    threads = ocean_threads(threads);
     size_t nh = (size_t)n / 2 + 1, modes = (size_t)n * nh, nn = (size_t)n * n;
     int tile = n / 2 < OCEAN_COL_TILE ? n / 2 : OCEAN_COL_TILE;
-    int workers = threads < 1 ? 1 : threads < OCEAN_MAX_THREADS ? threads : OCEAN_MAX_THREADS;
+    int workers = threads;
     size_t fill_floats = ocean_tile_floats(n, tile), row_floats = (size_t)2 * OCEAN_ROW_BLOCK * nh * 2;
     size_t scratch = ((fill_floats > row_floats ? fill_floats : row_floats) + 15) & ~(size_t)15;
     /* The same arrays as grid_new, in the same order. */
@@ -746,8 +756,7 @@ struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_opti
     struct ocean_options o_opt = {1, NULL, 0};
     if (opt)
         o_opt = *opt;
-    if (o_opt.threads < 1)
-        o_opt.threads = 1;
+    o_opt.threads = ocean_threads(o_opt.threads);
     if (!p) {
         snprintf(err, errlen, "no parameters");
         return NULL;

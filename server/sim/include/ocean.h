@@ -32,7 +32,8 @@ enum ocean_field {
 #define OCEAN_TIME_MAX 1.0e9
 
 struct ocean_options {
-    int threads;               /* worker threads for the step (fill + transforms), >= 1 */
+    int threads;               /* worker threads for the step (fill + transforms), >= 1;
+                                * 0 = one per online core (ocean_threads) */
     const char *wisdom_path;   /* FFTW wisdom cache file, NULL = none */
     int plan_rigor;            /* 0 = FFTW_ESTIMATE (tests), 1 = FFTW_MEASURE */
 };
@@ -73,7 +74,11 @@ int ocean_step(struct ocean *o, double t, unsigned fields);
 const float *ocean_field(const struct ocean *o, enum ocean_field f);
 const struct ocean_params *ocean_get_params(const struct ocean *o);
 int ocean_resolution(const struct ocean *o);
-/* Bytes one simulation of resolution n with `threads` workers allocates for
+/* The thread count ocean_create uses for options.threads = requested:
+ * 0 = one per online core (sysconf), with no cap but OCEAN_MAX_THREADS (64);
+ * below 0 = 1; above 64 = 64. */
+int ocean_threads(int requested);
+/* Bytes one simulation of resolution n with `threads` workers (as above) allocates for
  * its grids (spectra, FFT work arrays, output fields): what a memory cap
  * should count. FFTW's plans are not included (small beside the arrays). */
 size_t ocean_memory_bytes(int n, int threads);
