@@ -4,6 +4,7 @@
  * GROUP = step, pack, layout, reconfigure or dft runs only that one)
  * One JSON object per line on stdout, medians over repetitions:
  *   {"bench":"step","N":..,"threads":..,"step_ms":..,"fftw_ms":..,"ratio":..}
+ *     for threads = 1, 2, 4, ... up to the online cores (the scaling curve);
  *     a full step (all six fields: 8 real transforms) vs, in the same
  *     process and interleaved with it, the bare FFTW executes that step runs
  *     (same plans, arrays and threads); also the step's process CPU time
@@ -387,8 +388,11 @@ int main(int argc, char **argv)
     }
     printf("{\"bench\":\"env\",\"cpus\":%ld,\"loadavg_1min\":%.2f,\"wisdom\":\"%s\"}\n",
            sysconf(_SC_NPROCESSORS_ONLN), load[0], wisdom ? wisdom : "");
+    /* Thread scaling: 1, 2, 4, ... up to the machine's cores (at least 1 and 2). */
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    int max_threads = cores > 2 ? (cores < OCEAN_MAX_THREADS ? (int)cores : OCEAN_MAX_THREADS) : 2;
     for (int n = 64; n <= 2048 && WANT("step"); n *= 2)
-        for (int threads = 1; threads <= 2; threads++)
+        for (int threads = 1; threads <= max_threads; threads *= 2)
             bench_step(n, threads, wisdom);
     for (int n = 256; n <= 1024 && WANT("pack"); n *= 4)
         for (int threads = 1; threads <= 2; threads++)
