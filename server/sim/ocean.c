@@ -275,7 +275,7 @@ static void *zalloc(size_t bytes, bool *ok)
     return p;
 }
 
-static bool amps_alloc(struct ocean_amps *s, int n, int tile)
+static bool amps_alloc(struct ocean_amps *s, int n)
 {
     bool ok = true;
     size_t modes = (size_t)n * (n / 2 + 1);
@@ -415,7 +415,7 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
     g->tile = n / 2 < OCEAN_COL_TILE ? n / 2 : OCEAN_COL_TILE;
     size_t nn = (size_t)n * n;
     struct ocean_amps amps = {0};
-    ok = amps_alloc(&amps, n, g->tile);
+    ok = amps_alloc(&amps, n);
     amps_swap(g, &amps);
     g->kx = zalloc((size_t)g->nh * sizeof(float), &ok);
     g->kz = zalloc((size_t)n * sizeof(float), &ok);
@@ -689,7 +689,7 @@ static struct ocean_prepared *prepare(const struct ocean *o, const struct ocean_
             goto oom;
         return pr;
     }
-    if (!amps_alloc(&pr->amps, g->n, g->tile))
+    if (!amps_alloc(&pr->amps, g->n))
         goto oom;
     const float *gauss = g->gauss;
     if (pr->seed != g->seed) {

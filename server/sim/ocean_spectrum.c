@@ -122,7 +122,11 @@ static double spreading_exponent(const struct spectrum_model *m, double w)
  * via lgamma for large s. */
 static double spreading_norm(double s)
 {
-    return exp((2.0 * s - 1.0) * M_LN2 + 2.0 * lgamma(s + 1.0) - lgamma(2.0 * s + 1.0)) / M_PI;
+    /* lgamma_r, not lgamma: lgamma writes the global signgam, a data race
+     * when the pool's threads build the spectrum together (ThreadSanitizer). */
+    int sign;
+    double g1 = lgamma_r(s + 1.0, &sign), g2 = lgamma_r(2.0 * s + 1.0, &sign);
+    return exp((2.0 * s - 1.0) * M_LN2 + 2.0 * g1 - g2) / M_PI;
 }
 
 double spectrum_spreading(const struct spectrum_model *m, double w, double theta)
