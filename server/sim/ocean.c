@@ -1,10 +1,14 @@
-/* ocean.c — lifetime of a simulation: create, reconfigure, step, free.
+/* ocean.c — lifetime of a simulation: create, prepare + commit
+ * (reconfigure), step, free.
  *
- * The N-dependent state (amplitudes, spectra, outputs, FFT plan) lives in
- * struct ocean_grid so that a change of N builds a complete new grid and
- * swaps it in only when everything succeeded: on error the old one is
- * untouched. The per-step work is in ocean_step.c (FFT) and ocean_dft.c
- * (brute force); the physics in ocean_spectrum.c. */
+ * The N-dependent state (amplitudes, spectra, outputs, FFT plans, the
+ * cached per-mode normals and rings) lives in struct ocean_grid. Every
+ * parameter change is prepared beside the live state (new amplitudes, or
+ * for a new N a complete new grid) and swapped in by pointers only when
+ * everything succeeded: on error the old state is untouched, and the
+ * preparing may run on another thread than the stepping. The per-step
+ * work is in ocean_step.c (FFT) and ocean_dft.c (brute force); the
+ * physics in ocean_spectrum.c. */
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -519,7 +523,7 @@ static void gauss_compute(int n, uint32_t seed, float *gauss, struct ocean_pool 
     ocean_parallel(pool, threads, n, gauss_rows, &c);
 }
 
-/* Rings [r0, r1) of the radial table. */
+/* The radial table (spectrum_radial_at per ring), in `chunks` pieces. */
 struct radial_ctx {
     const struct spectrum_model *m;
     const uint32_t *ring_m2;
