@@ -15,6 +15,7 @@
 #include "config.h"
 #include "control.h"
 #include "log.h"
+#include "oc_proto.h"
 #include "ocean.h"
 #include "state.h"
 
@@ -518,6 +519,20 @@ static void test_hello_matches_vector(void)
     cJSON_Delete(have);
 }
 
+/* Spec gap (PROTOCOL.md §6.1): under 8 bytes a binary message is `truncated`
+ * whatever its bytes; `magic` needs the 8 bytes of magic + version. */
+static void test_short_frames(void)
+{
+    static const uint8_t ocn[8] = { 'O', 'C', 'N', 'F', 1, 0, 48, 0 }, junk[8] = "XYZWXYZ";
+    struct oc_frame_header h;
+    for (size_t len = 0; len < 8; len++) {
+        CHECK(oc_frame_header_read(ocn, len, &h) == OC_E_TRUNCATED, "%zu bytes of OCNF: not truncated", len);
+        CHECK(oc_frame_header_read(junk, len, &h) == OC_E_TRUNCATED, "%zu junk bytes: not truncated", len);
+    }
+    CHECK(oc_frame_header_read(junk, 8, &h) == OC_E_MAGIC, "8 junk bytes: not magic");
+    CHECK(oc_frame_header_read(ocn, 8, &h) == OC_E_TRUNCATED, "8 bytes of a header: not truncated");
+}
+
 /* Issue 10 (3): a config file over 16 MiB is refused, not cut; issue 16 (6):
  * a FIFO as the config or state file is refused at once (it used to block
  * start-up forever: the alarm turns a hang into a failure). */
@@ -701,6 +716,7 @@ int main(void)
     test_pong_integer();
     test_subscribe_codec();
     test_hello_matches_vector();
+    test_short_frames();
     test_config_file_limits();
     test_state_values();
     fuzz();
