@@ -66,7 +66,7 @@ static const size_t opt_count = sizeof opt_table / sizeof opt_table[0];
 static const struct param_def *opt_find(const char *name)
 {
     for (size_t i = 0; i < opt_count; i++)
-        if (strcmp(opt_table[i].name, name) == 0)
+        if (opt_table[i].name[0] == name[0] && strcmp(opt_table[i].name, name) == 0)
             return &opt_table[i];
     return NULL;
 }

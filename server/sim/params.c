@@ -127,7 +127,7 @@ const struct param_def *param_find(const char *name)
     if (!name)
         return NULL;
     for (size_t i = 0; i < param_count; i++)
-        if (strcmp(param_table[i].name, name) == 0)
+        if (param_table[i].name[0] == name[0] && strcmp(param_table[i].name, name) == 0)
             return &param_table[i];
     return NULL;
 }
