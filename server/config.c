@@ -93,6 +93,9 @@ static int set_from_json(struct daemon_config *dc, struct ocean_params *p, const
     return 0;
 }
 
+/* Flags are parsed by hand, not with getopt_long: its option list would be
+ * built from both tables at run time, and it does not take --wind_speed and
+ * --wind-speed alike. "--name" -> "name", dashes to underscores, up to '='. */
 static void norm_name(char *dst, size_t n, const char *src)
 {
     size_t i = 0;

@@ -2,6 +2,7 @@
  * See control.h; the wire contract is proto/PROTOCOL.md. */
 #include "control.h"
 
+#include <ctype.h>
 #include <inttypes.h>
 #include <math.h>
 #include <stdarg.h>
@@ -55,11 +56,7 @@ static bool is_scalar(const cJSON *j)
     return cJSON_IsString(j) || cJSON_IsNumber(j) || cJSON_IsBool(j) || cJSON_IsNull(j);
 }
 
-static bool is_hex(char c)
-{
-    return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f') || (c >= 'A' && c <= 'F');
-}
-
+/* JSON's four blanks (RFC 8259), not isspace(): that also takes \v and \f. */
 static bool is_json_space(char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; }
 
 /* What cJSON 1.7 lets through but RFC 8259 (or we) do not: raw control bytes
@@ -78,7 +75,8 @@ static int prescan(const char *text, size_t len, struct ctl_error *e)
         if (i + 1 < len && text[i + 1] == 'u') {
             if (i + 6 > len)
                 return fail(e, "bad_json", NULL, "truncated \\u escape at offset %zu", i);
-            if (!is_hex(text[i + 2]) || !is_hex(text[i + 3]) || !is_hex(text[i + 4]) || !is_hex(text[i + 5]))
+            if (!isxdigit((unsigned char)text[i + 2]) || !isxdigit((unsigned char)text[i + 3]) ||
+                !isxdigit((unsigned char)text[i + 4]) || !isxdigit((unsigned char)text[i + 5]))
                 return fail(e, "bad_json", NULL, "invalid \\u escape at offset %zu", i);
             if (memcmp(text + i + 2, "0000", 4) == 0)
                 return fail(e, "bad_json", NULL, "\\u0000 (NUL) in a string is not accepted");
@@ -534,7 +532,9 @@ cJSON *control_hello_msg(const struct hello_info *h)
 bool control_token_equal(const char *given, const char *secret)
 {
     /* Constant time in the content: always walk the whole secret, never stop
-     * at the first difference (only the secret's length shows in the timing). */
+     * at the first difference (only the secret's length shows in the timing).
+     * Hand-written: OpenSSL's CRYPTO_memcmp does this, but the daemon does not
+     * link libcrypto itself (only libwebsockets may, and only with TLS built in). */
     size_t lg = strlen(given), ls = strlen(secret);
     unsigned char diff = (unsigned char)(lg != ls);
     for (size_t i = 0; i < ls; i++)
