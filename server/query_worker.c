@@ -141,6 +141,18 @@ struct ocean_surface *query_snapshot(struct query_service *q, const struct ocean
     return s;
 }
 
+struct ocean_surface *query_snapshot_prepared(struct query_service *q, const struct ocean *o,
+                                              const struct ocean_prepared *pr)
+{
+    if (!q || !o || !pr)
+        return NULL;
+    char err[128];
+    struct ocean_surface *s = ocean_prepared_surface(o, pr, err, sizeof err);
+    if (!s)
+        LOGW("point queries: %s", err);
+    return s;
+}
+
 void query_version(struct query_service *q, uint32_t version, double since, bool new_physics,
                    struct ocean_surface *surface)
 {

@@ -41,6 +41,10 @@ void query_service_free(struct query_service *q);
  * it, before it is handed to the tick (NULL on no memory; then queries at
  * its version get `internal`). */
 struct ocean_surface *query_snapshot(struct query_service *q, const struct ocean *o);
+/* The same for a prepared parameter change (ocean_prepare) of o, before it
+ * is committed: the builder thread, which made pr. */
+struct ocean_surface *query_snapshot_prepared(struct query_service *q, const struct ocean *o,
+                                              const struct ocean_prepared *pr);
 /* Parameters version `version` is in force from sim time `since` on.
  * new_physics: it comes with a new ocean whose snapshot is `surface` (owned
  * from now on, may be NULL); else the previous snapshot stays valid. Tick thread. */

@@ -76,9 +76,12 @@ def test_query_matches_exact_reference(d):
     async def run():
         ws, hello = await connect(d)
         rid = 10
-        for chop in (0, 1, 2):
+        # same N (the builder's prepared amplitudes), then a new N and seed (a new grid)
+        for change in ({"choppiness": 0}, {"choppiness": 1}, {"choppiness": 2},
+                       {"resolution": td.BASE_N // 2, "seed": 5, "choppiness": 1.5}):
+            chop = change["choppiness"]
             rid += 1
-            p = await set_params(ws, {"choppiness": chop}, rid)
+            p = await set_params(ws, change, rid)
             rid += 1
             await ws.send(json.dumps({"type": "query", "id": rid, "points": points}))
             r = await recv_json(ws, lambda m: m.get("id") == rid, timeout=20)
