@@ -275,6 +275,18 @@ run 4 "probe over the limit" "$TAP" "$URL" --probe "$(for i in $(seq 1 17); do p
 grep -q 'too_many_points' "$tmp/err" || fail "no too_many_points in: $(cat "$tmp/err")"
 ok "--query prints query_result (errors: 4 with the code), --probe one line per tick (JSON or CSV)"
 
+section "Python examples: buoy and ship (probes)"
+run 0 "buoy" timeout 60 $PY proto/examples/buoy.py "$URL" --seconds 3
+$PY - "$tmp/out" <<'EOF' || fail "buoy.py output: $(cat "$tmp/out")"
+import json, sys
+j = json.loads(open(sys.argv[1]).read().strip().splitlines()[-1])
+assert j["points"] == 9 and j["samples"] >= 60 and j["frames"] >= 5, j
+assert 0.5 < j["ratio"] < 2 and j["hs_sea_m"] > 0, j
+EOF
+run 0 "ship" timeout 30 $PY proto/examples/ship.py "$URL" --ticks 6 --speed 5 --heading 45
+[ "$(grep -c '^ *[0-9]' "$tmp/out")" -eq 6 ] || fail "ship.py: expected 6 motion lines: $(cat "$tmp/out")"
+ok "buoy.py compares its Hs with the sea's; ship.py prints heave, pitch and roll per tick"
+
 section "control token, timeouts and a server that goes away"
 silent=$(free_port)
 # A TCP listener that accepts and never answers the WebSocket handshake.
