@@ -17,6 +17,7 @@
 
 #include "clock.h"
 #include "log.h"
+#include "metrics.h"
 #include "probe.h"
 
 #define MAX_EPOCHS 32             /* versions kept at most (a burst of sets inside the window) */
@@ -102,8 +103,6 @@ struct query_service {
     int ncounts, capcounts, probe_total;
 
     atomic_uint probe_fields;     /* lws writes, tick reads */
-    atomic_uint_least64_t n_queries, n_points, n_busy, n_probe_ticks, n_probe_skipped, n_probe_points;
-    _Atomic double probe_seconds_last;
 };
 
 /* ---- snapshots ---- */
@@ -237,6 +236,7 @@ struct query_out *query_take_results(struct query_service *q)
 
 static void run_job(struct query_service *q, struct job *j)
 {
+    double t0 = mono_now();
     char *text = NULL;
     struct ocean_point *pts = calloc((size_t)j->n, sizeof *pts);
     if (pts && ocean_surface_query(j->snap->surf, j->t, (const double(*)[2])j->xz, j->n, pts) == 0) {
@@ -246,6 +246,7 @@ static void run_job(struct query_service *q, struct job *j)
         text = control_print(control_error_msg(&e, j->id));
     }
     free(pts);
+    histogram_observe(&g_metrics.query_seconds, mono_now() - t0);
     struct query_out *o = out_new(j->serial, false, text);
     post(q, o, o);
 }
@@ -287,7 +288,6 @@ static void run_probes(struct query_service *q, struct grids *g)
     struct probe_grids pg = { .n = g->n, .patch = g->patch, .h = g->h, .dx = g->dx, .dz = g->dz };
     struct query_out *first = NULL, **tail = &first, *last = NULL;
     struct probe_value v[PROBE_MAX_POINTS];
-    uint64_t points = 0;
     for (struct probe_client *c = q->clients; c; c = c->next) {
         /* History shifts by one tick (same sim time: paused, keep it). */
         bool advance = c->nhist == 0 || g->t != c->hist_t[0];
@@ -310,7 +310,6 @@ static void run_probes(struct query_service *q, struct grids *g)
                              c->nhist > 2 ? c->hist_t[2] : c->hist_t[0] };
             probe_derivatives(p->hist_h, ht, &v[i].vertical_velocity, &v[i].vertical_acceleration);
         }
-        points += (uint64_t)c->n;
         struct query_out *o = out_new(c->serial, true, probe_data_text(g->seq, g->t, g->version, c->n, v));
         if (o) {
             *tail = o;
@@ -318,9 +317,8 @@ static void run_probes(struct query_service *q, struct grids *g)
             last = o;
         }
     }
-    atomic_fetch_add(&q->n_probe_ticks, 1);
-    atomic_fetch_add(&q->n_probe_points, points);
-    atomic_store(&q->probe_seconds_last, mono_now() - t0);
+    atomic_fetch_add(&g_metrics.probe_ticks, 1);
+    histogram_observe(&g_metrics.probe_seconds, mono_now() - t0);
     post(q, first, last);
 }
 
@@ -391,7 +389,7 @@ void query_tick(struct query_service *q, const struct ocean *o, uint64_t seq, do
     if (!g && q->pending) { /* the worker has not taken the last one: this tick replaces it */
         g = q->pending;
         q->pending = NULL;
-        atomic_fetch_add(&q->n_probe_skipped, 1);
+        atomic_fetch_add(&g_metrics.probe_skipped, 1);
     }
     pthread_mutex_unlock(&q->lock);
     const int n = ocean_resolution(o);
@@ -422,7 +420,7 @@ void query_tick(struct query_service *q, const struct ocean *o, uint64_t seq, do
     struct grids *old = q->pending;
     q->pending = g;
     if (old) {
-        atomic_fetch_add(&q->n_probe_skipped, 1);
+        atomic_fetch_add(&g_metrics.probe_skipped, 1);
         if (!q->spare) {
             q->spare = old;
             old = NULL;
@@ -473,7 +471,7 @@ int query_submit(struct query_service *q, uint64_t serial, const cJSON *id, cons
     if (!snap || !snap->surf)
         return fail(e, "internal", "no snapshot of the sea for that time (out of memory when it was made)");
     if (full) {
-        atomic_fetch_add(&q->n_busy, 1);
+        atomic_fetch_add(&g_metrics.query_busy, 1);
         return fail(e, "busy", "too many queries waiting; try again shortly");
     }
     /* The global budget: a token bucket of points (counted at N = 256). */
@@ -483,7 +481,7 @@ int query_submit(struct query_service *q, uint64_t serial, const cJSON *id, cons
     q->tokens_t = tnow;
     if (q->tokens < cost) {
         snap_unref(snap);
-        atomic_fetch_add(&q->n_busy, 1);
+        atomic_fetch_add(&g_metrics.query_busy, 1);
         e->code = "busy";
         e->param[0] = '\0';
         snprintf(e->message, sizeof e->message, "the server's query budget (%g points/s at N = 256) is spent; "
@@ -506,8 +504,8 @@ int query_submit(struct query_service *q, uint64_t serial, const cJSON *id, cons
     j->snap = snap;
     j->n = r->n;
     memcpy(j->xz, r->xz, (size_t)r->n * sizeof j->xz[0]);
-    atomic_fetch_add(&q->n_queries, 1);
-    atomic_fetch_add(&q->n_points, (uint64_t)r->n);
+    atomic_fetch_add(&g_metrics.queries, 1);
+    atomic_fetch_add(&g_metrics.query_points, (uint64_t)r->n);
     pthread_mutex_lock(&q->lock);
     *q->jobs_tail = j;
     q->jobs_tail = &j->next;
@@ -559,6 +557,7 @@ static void set_count(struct query_service *q, uint64_t serial, int n)
     if (c)
         c->n = n;
     q->probe_total += n - old;
+    atomic_store(&g_metrics.probe_points, q->probe_total);
     if (c && n == 0)
         *c = q->counts[--q->ncounts];
     atomic_store(&q->probe_fields, q->probe_total > 0 ? OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_DX) |
@@ -578,6 +577,7 @@ int query_probe_set(struct query_service *q, uint64_t serial, const struct probe
     struct probe_count *c = count_of(q, serial);
     int old = c ? c->n : 0;
     if (q->probe_total - old + p->n > q->cfg.probe_max_total) {
+        atomic_fetch_add(&g_metrics.query_busy, 1);
         e->code = "busy";
         e->param[0] = '\0';
         snprintf(e->message, sizeof e->message, "the server probes %d points already (at most %d for all clients)",
@@ -609,21 +609,6 @@ void query_client_gone(struct query_service *q, uint64_t serial)
         return;
     send_cmd(q, serial, NULL);
     set_count(q, serial, 0);
-}
-
-void query_stats(const struct query_service *q, struct query_stats *st)
-{
-    memset(st, 0, sizeof *st);
-    if (!q)
-        return;
-    struct query_service *m = (struct query_service *)q; /* atomics only */
-    st->queries = atomic_load(&m->n_queries);
-    st->points = atomic_load(&m->n_points);
-    st->busy = atomic_load(&m->n_busy);
-    st->probe_ticks = atomic_load(&m->n_probe_ticks);
-    st->probe_ticks_skipped = atomic_load(&m->n_probe_skipped);
-    st->probe_points = atomic_load(&m->n_probe_points);
-    st->probe_seconds_last = atomic_load(&m->probe_seconds_last);
 }
 
 /* ---- life ---- */

@@ -76,11 +76,4 @@ struct query_out {
 struct query_out *query_take_results(struct query_service *q);
 void query_out_free(struct query_out *o);
 
-/* Counters for /metrics and the bench (atomics). */
-struct query_stats {
-    uint64_t queries, points, busy, probe_ticks, probe_ticks_skipped, probe_points;
-    double probe_seconds_last;  /* worker time of the last probe tick */
-};
-void query_stats(const struct query_service *q, struct query_stats *st);
-
 #endif
