@@ -1,25 +1,48 @@
-/* probe.c — Catmull-Rom interpolation of a tick's grids and Newton
- * inversion of the displacement on the interpolated map (probe.h).
- * Hand-written: 40 lines of a textbook cubic (Catmull & Rom 1974), where a
- * library (GSL interp2d) would want a copy of the grid in double each tick
- * and knows nothing of periodic patches. */
+/* probe.c — Lanczos-3 interpolation of a tick's grids and Newton inversion
+ * of the displacement on the interpolated map (probe.h). Lanczos-3 (6 x 6
+ * taps) rather than Catmull-Rom (4 x 4): 5.6 mm rms height error instead of
+ * 8.3 mm at N = 256 (build/test_probe), the grid's spectrum reaching its
+ * Nyquist wavenumber. Hand-written: a library (GSL interp2d) would want a
+ * copy of the grid in double each tick and knows nothing of periodic patches. */
 #include "probe.h"
 
 #include <math.h>
 
-/* Catmull-Rom weights of the four samples around u in [0, 1), and of
- * their derivative in u. */
-static void cr_weights(double u, double w[4], double dw[4])
+#define LZ_A 3             /* Lanczos-3: 6 taps per axis */
+#define TAPS (2 * LZ_A)
+
+/* Normalised Lanczos-3 weights of the samples at offsets -2..3 around u in
+ * [0, 1), and their derivative in u. With x = u - j (j an integer), sin(pi x)
+ * = (-1)^j sin(pi u) and sin(pi x / 3) follows from sin, cos(pi u / 3) by angle
+ * addition: four trigonometric calls per axis instead of 24. */
+static void kernel_weights(double u, double w[TAPS], double dw[TAPS])
 {
-    double u2 = u * u, u3 = u2 * u;
-    w[0] = 0.5 * (-u3 + 2 * u2 - u);
-    w[1] = 0.5 * (3 * u3 - 5 * u2 + 2);
-    w[2] = 0.5 * (-3 * u3 + 4 * u2 + u);
-    w[3] = 0.5 * (u3 - u2);
-    dw[0] = 0.5 * (-3 * u2 + 4 * u - 1);
-    dw[1] = 0.5 * (9 * u2 - 10 * u);
-    dw[2] = 0.5 * (-9 * u2 + 8 * u + 1);
-    dw[3] = 0.5 * (3 * u2 - 2 * u);
+    static const double cj[TAPS] = { -0.5, 0.5, 1, 0.5, -0.5, -1 };              /* cos(pi j / 3), j = -2..3 */
+    static const double sj[TAPS] = { -0.8660254037844386, -0.8660254037844386, 0, 0.8660254037844386,
+                                     0.8660254037844386, 0 };                        /* sin(pi j / 3) */
+    const double s1 = sin(M_PI * u), c1 = cos(M_PI * u), s3 = sin(M_PI * u / 3), c3 = cos(M_PI * u / 3);
+    double sw = 0, sdw = 0;
+    for (int k = 0; k < TAPS; k++) {
+        const int j = k - LZ_A + 1;
+        const double x = u - j, sign = (j & 1) ? -1.0 : 1.0;
+        if (fabs(x) < 1e-12) { /* the sample itself: sinc = 1, sinc' = 0 */
+            w[k] = 1;
+            dw[k] = 0;
+        } else {
+            const double sx = sign * s1, cx = sign * c1;                  /* sin, cos(pi x) */
+            const double sx3 = s3 * cj[k] - c3 * sj[k], cx3 = c3 * cj[k] + s3 * sj[k]; /* of pi x / 3 */
+            const double px = M_PI * x, a = sx / px, b = 3 * sx3 / px;      /* sinc(x), sinc(x / 3) */
+            const double da = (cx - a) / x, db = (cx3 - b) / x;             /* their derivatives in x */
+            w[k] = a * b;
+            dw[k] = da * b + a * db;
+        }
+        sw += w[k];
+        sdw += dw[k];
+    }
+    for (int k = 0; k < TAPS; k++) { /* weights that sum to 1 keep a flat field flat */
+        dw[k] = (dw[k] - w[k] * sdw / sw) / sw;
+        w[k] /= sw;
+    }
 }
 
 /* Value and gradient (per metre) of the three fields at (x, z). */
@@ -33,23 +56,23 @@ static void interp(const struct probe_grids *g, double x, double z, struct sampl
     const double cell = g->patch / n;
     double fx = x / cell, fz = z / cell;
     double ix0 = floor(fx), iz0 = floor(fz);
-    double wx[4], dwx[4], wz[4], dwz[4];
-    cr_weights(fx - ix0, wx, dwx);
-    cr_weights(fz - iz0, wz, dwz);
+    double wx[TAPS], dwx[TAPS], wz[TAPS], dwz[TAPS];
+    kernel_weights(fx - ix0, wx, dwx);
+    kernel_weights(fz - iz0, wz, dwz);
     /* Periodic indices: reduce the (possibly huge) cell index modulo n first. */
     long bx = (long)fmod(ix0, n), bz = (long)fmod(iz0, n);
-    int cols[4], rows[4];
-    for (int k = 0; k < 4; k++) {
-        cols[k] = (int)(((bx + k - 1) % n + n) % n);
-        rows[k] = (int)(((bz + k - 1) % n + n) % n);
+    int cols[TAPS], rows[TAPS];
+    for (int k = 0; k < TAPS; k++) {
+        cols[k] = (int)(((bx + k - LZ_A + 1) % n + n) % n);
+        rows[k] = (int)(((bz + k - LZ_A + 1) % n + n) % n);
     }
     const float *f[3] = { g->h, g->dx, g->dz };
     for (int c = 0; c < 3; c++) {
         double v = 0, gx = 0, gz = 0;
-        for (int j = 0; j < 4; j++) {
+        for (int j = 0; j < TAPS; j++) {
             const float *row = f[c] + (size_t)rows[j] * n;
             double r = 0, dr = 0;
-            for (int i = 0; i < 4; i++) {
+            for (int i = 0; i < TAPS; i++) {
                 r += wx[i] * row[cols[i]];
                 dr += dwx[i] * row[cols[i]];
             }

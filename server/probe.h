@@ -1,5 +1,5 @@
 /* probe.h — the cheap path for probes: surface values at a world point from
- * one tick's height/dx/dz grids, by Catmull-Rom bicubic interpolation and
+ * one tick's height/dx/dz grids, by Lanczos-3 (6 x 6 taps) interpolation and
  * Newton inversion of the interpolated displacement. Pure (no threads).
  * Accuracy against the exact query (ocean_surface_query): tests/daemon/test_probe.c
  * measures it; docs/query.md has the figures. */

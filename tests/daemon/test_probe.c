@@ -1,4 +1,4 @@
-/* test_probe — accuracy of the probes' cheap path (server/probe.c: Catmull-Rom
+/* test_probe — accuracy of the probes' cheap path (server/probe.c: Lanczos-3
  * on a tick's grids, Newton on the interpolated displacement, derivatives from
  * the last three ticks) against the library's exact query, at the daemon's
  * defaults (N = 256) with choppiness 0, 1 and 2. Prints one JSON line per
@@ -140,9 +140,9 @@ int main(void)
 {
     messages();
     /* Limits: the measured errors (docs/query.md) with headroom. */
-    struct limits l0 = { 0.040, 0.012, 8.0, 0.20, 1.5 };
-    struct limits l1 = { 0.040, 0.012, 9.0, 0.20, 1.5 };
-    struct limits l2 = { 0.045, 0.013, 9.0, 0.25, 3.5 };
+    struct limits l0 = { 0.022, 0.0075, 4.5, 0.12, 1.0 };
+    struct limits l1 = { 0.022, 0.0075, 5.0, 0.12, 1.4 };
+    struct limits l2 = { 0.040, 0.0090, 5.0, 0.20, 4.5 };
     accuracy(0, &l0);
     accuracy(1, &l1);
     accuracy(2, &l2);
