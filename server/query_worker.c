@@ -21,6 +21,8 @@
 #include "probe.h"
 
 #define MAX_EPOCHS 32             /* versions kept at most (a burst of sets inside the window) */
+#define MAX_SNAPSHOTS 3           /* distinct snapshots kept (7 MB each at N = 512): under a stream of
+                                   * physics changes the window shrinks to the last three of them */
 
 /* A snapshot, shared by the epochs (versions) it serves and the jobs using it. */
 struct snap {
@@ -167,7 +169,7 @@ void query_version(struct query_service *q, uint32_t version, double since, bool
         if (snap)
             atomic_fetch_add(&snap->refs, 1);
     }
-    struct snap *drop[MAX_EPOCHS];
+    struct snap *drop[MAX_EPOCHS + 1];
     int ndrop = 0;
     /* Keep what the window can still ask for: an epoch is needed while the
      * next one starts after since - window. */
@@ -178,6 +180,22 @@ void query_version(struct query_service *q, uint32_t version, double since, bool
         q->nepochs--;
     }
     q->epochs[q->nepochs++] = (struct epoch){ .version = version, .since = since, .snap = snap };
+    /* At most MAX_SNAPSHOTS distinct snapshots: drop the epochs before the oldest kept one. */
+    int distinct = 0, keep_from = 0;
+    for (int i = q->nepochs - 1; i >= 0; i--) {
+        if (i == q->nepochs - 1 || q->epochs[i].snap != q->epochs[i + 1].snap)
+            distinct++;
+        if (distinct > MAX_SNAPSHOTS) {
+            keep_from = i + 1;
+            break;
+        }
+    }
+    for (int i = 0; i < keep_from; i++)
+        drop[ndrop++] = q->epochs[i].snap;
+    if (keep_from) {
+        memmove(&q->epochs[0], &q->epochs[keep_from], (size_t)(q->nepochs - keep_from) * sizeof q->epochs[0]);
+        q->nepochs -= keep_from;
+    }
     pthread_mutex_unlock(&q->lock);
     for (int i = 0; i < ndrop; i++)
         snap_unref(drop[i]);

@@ -192,6 +192,44 @@ def test_malformed_queries_get_coded_errors(d):
 
 
 @test
+def test_past_time_and_snapshot_limit(d):
+    """A query at a past time gets the version in force then; after more than
+    three physics changes the oldest snapshot is gone (memory stays bounded)."""
+    async def run():
+        ws, hello = await connect(d)
+        v0 = hello["params_version"]
+        await ws.send(json.dumps({"type": "query", "id": 1, "points": [[3, 4]]}))
+        r0 = await recv_json(ws, lambda m: m.get("id") == 1)
+        t0, h0 = r0["sim_time"], r0["points"][0]["height"]
+        for i, w in enumerate((11, 12, 13, 14)):
+            await set_params(ws, {"wind_speed": w}, 10 + i)
+        # the current tick: the newest version
+        await ws.send(json.dumps({"type": "query", "id": 2, "points": [[3, 4]]}))
+        r = await recv_json(ws, lambda m: m.get("id") == 2)
+        check(r["type"] == "query_result" and r["params_version"] == v0 + 4, "current: %r" % r)
+        # before the four changes: that snapshot was the fourth oldest, now dropped
+        await ws.send(json.dumps({"type": "query", "id": 3, "points": [[3, 4]], "time": t0}))
+        r = await recv_json(ws, lambda m: m.get("id") == 3)
+        check(r["type"] == "error" and r["code"] == "time_out_of_window", "oldest snapshot kept: %r" % r)
+        await ws.close()
+
+    async def recent():
+        # With one change, the time before it is still answered with the old version and values.
+        ws, hello = await connect(d)
+        await ws.send(json.dumps({"type": "query", "id": 1, "points": [[3, 4]]}))
+        r0 = await recv_json(ws, lambda m: m.get("id") == 1)
+        p = await set_params(ws, {"wind_speed": 9}, 2)
+        await ws.send(json.dumps({"type": "query", "id": 3, "points": [[3, 4]], "time": r0["sim_time"]}))
+        r = await recv_json(ws, lambda m: m.get("id") == 3)
+        check(r["type"] == "query_result" and r["params_version"] == r0["params_version"], "past: %r" % r)
+        check(r["points"][0]["height"] == r0["points"][0]["height"], "past height differs: %r vs %r" % (r, r0))
+        check(p["params_version"] == r0["params_version"] + 1, "version")
+        await ws.close()
+    asyncio.run(run())
+    asyncio.run(recent())
+
+
+@test
 def test_query_budget_answers_busy():
     d = td.Daemon("--query-budget", "10")
     try:
