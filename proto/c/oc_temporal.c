@@ -1,0 +1,184 @@
+/* oc_temporal.c — the integer part of codec 3 (PROTOCOL.md §5.6-5.8): each
+ * code is predicted from the same sample's codes in the 1..4 previous frames of
+ * its chain (same grid), never from samples of the frame being decoded, so a
+ * whole tile's predictions are known before its residuals are read.
+ *
+ * With q1..q4 the reference codes (q1 = frame ref_seq, q2 = ref_seq - 1, ...),
+ * d1 = q1 - q2, d2 = q2 - q3, d3 = q3 - q4 and L(a) the 5-point Laplacian
+ * a[W] + a[E] + a[N] + a[S] - 4a inside the tile (indices clamped to the tile):
+ *   S = c0*d1 + c1*d2 + c2*d3 + c3*L(d1) + c4*L(q1)          (coefficients in 1/4096)
+ *   P = q1 + floor((S + 2048) / 4096),  q = (P + r) mod 2^32
+ * |S| < 2^51, so every step is exact in float64 (here and in JavaScript) and in int64.
+ * Measured on the simulation (docs/codec.md): the depth-4 set with both Laplacian
+ * terms beats 2*q1 - q2 by 0.35-0.6 bits/sample; it is a per-tile least-squares
+ * fit of the wave's own time evolution (the Laplacian terms stand in for the
+ * dispersion operator). */
+#include "oc_internal.h"
+
+#include <math.h>
+#include <string.h>
+
+/* Which coefficients a tile may use with `depth` references: d_k needs q_{k+1}. */
+unsigned oc_temporal_coef_mask(int depth)
+{
+    switch (depth) {
+    case 1: return 1u << 4;                                 /* L(q1) */
+    case 2: return (1u << 0) | (1u << 3) | (1u << 4);       /* d1, L(d1), L(q1) */
+    case 3: return (1u << 0) | (1u << 1) | (1u << 3) | (1u << 4);
+    case 4: return 0x1f;
+    default: return 0;
+    }
+}
+
+/* 5-point Laplacian of row j of a (w x h), indices clamped to the tile, exact in double. */
+static void lap_row(const int32_t *a, int w, int h, int j, double *out)
+{
+    const int32_t *row = a + (size_t)j * w;
+    const int32_t *up = a + (size_t)(j > 0 ? j - 1 : 0) * w;
+    const int32_t *dn = a + (size_t)(j + 1 < h ? j + 1 : h - 1) * w;
+    if (w == 1) { out[0] = (double)up[0] + dn[0] - 2.0 * row[0]; return; }
+    out[0] = (double)row[1] + up[0] + dn[0] - 3.0 * row[0];            /* W clamps to the sample itself */
+    for (int i = 1; i < w - 1; i++)
+        out[i] = (double)row[i - 1] + row[i + 1] + up[i] + dn[i] - 4.0 * row[i];
+    out[w - 1] = (double)row[w - 2] + up[w - 1] + dn[w - 1] - 3.0 * row[w - 1];
+}
+
+/* The five features of row j into f[k*w + i]; features the depth does not allow are 0. */
+static void features_row(const int32_t *const *refs, int depth, int w, int h, int j, double *f)
+{
+    const size_t o = (size_t)j * w;
+    double *d1 = f, *d2 = f + w, *d3 = f + 2 * (size_t)w, *ld1 = f + 3 * (size_t)w, *lq1 = f + 4 * (size_t)w;
+    lap_row(refs[0], w, h, j, lq1);
+    if (depth >= 2) {
+        lap_row(refs[1], w, h, j, ld1);                     /* L(q2) for now */
+        for (int i = 0; i < w; i++) {
+            d1[i] = (double)refs[0][o + i] - refs[1][o + i];
+            ld1[i] = lq1[i] - ld1[i];                       /* L(d1) = L(q1) - L(q2), exact */
+        }
+    } else {
+        memset(d1, 0, sizeof(double) * w);
+        memset(ld1, 0, sizeof(double) * w);
+    }
+    if (depth >= 3) for (int i = 0; i < w; i++) d2[i] = (double)refs[1][o + i] - refs[2][o + i];
+    else memset(d2, 0, sizeof(double) * w);
+    if (depth >= 4) for (int i = 0; i < w; i++) d3[i] = (double)refs[2][o + i] - refs[3][o + i];
+    else memset(d3, 0, sizeof(double) * w);
+}
+
+void oc_temporal_predict_row(const int32_t *const *refs, int depth, int w, int h, int j,
+                             const int16_t coef[OC_TEMPORAL_COEFS], double *f, uint32_t *pred)
+{
+    features_row(refs, depth, w, h, j, f);
+    const double c0 = coef[0], c1 = coef[1], c2 = coef[2], c3 = coef[3], c4 = coef[4];
+    const double *d1 = f, *d2 = f + w, *d3 = f + 2 * (size_t)w, *ld1 = f + 3 * (size_t)w, *lq1 = f + 4 * (size_t)w;
+    const int32_t *q1 = refs[0] + (size_t)j * w;
+    for (int i = 0; i < w; i++) {
+        double s = c0 * d1[i] + c1 * d2[i] + c2 * d3[i] + c3 * ld1[i] + c4 * lq1[i];   /* exact: |s| < 2^51 */
+        double t = floor((s + 2048.0) * (1.0 / 4096));
+        /* q1 + t fits int64 exactly (|t| < 2^40); the prediction is taken mod 2^32. */
+        pred[i] = (uint32_t)q1[i] + (uint32_t)(int64_t)t;
+    }
+}
+
+/* Least squares over every 4th row (the fit only steers the encoder; the
+ * coefficients travel in the payload). Unused features get coefficient 0. */
+#define FIT_ROW_STEP 4
+void oc_temporal_fit(const int32_t *const *refs, int depth, const int32_t *q, int w, int h,
+                     int16_t coef[OC_TEMPORAL_COEFS], double *f)
+{
+    enum { K = OC_TEMPORAL_COEFS };
+    memset(coef, 0, sizeof(int16_t) * K);
+    unsigned mask = oc_temporal_coef_mask(depth);
+    int idx[K], m = 0;
+    for (int k = 0; k < K; k++) if (mask & (1u << k)) idx[m++] = k;
+    double A[K][K + 1];
+    memset(A, 0, sizeof A);
+    for (int j = 0; j < h; j += FIT_ROW_STEP) {
+        features_row(refs, depth, w, h, j, f);
+        const int32_t *qr = q + (size_t)j * w, *q1 = refs[0] + (size_t)j * w;
+        for (int i = 0; i < w; i++) {
+            double x[K], y = (double)qr[i] - q1[i];
+            for (int a = 0; a < m; a++) x[a] = f[(size_t)idx[a] * w + i];
+            for (int a = 0; a < m; a++) {
+                for (int b = a; b < m; b++) A[a][b] += x[a] * x[b];
+                A[a][m] += x[a] * y;
+            }
+        }
+    }
+    for (int a = 0; a < m; a++)
+        for (int b = 0; b < a; b++) A[a][b] = A[b][a];
+    double scale = 0;
+    for (int a = 0; a < m; a++) scale = fmax(scale, A[a][a]);
+    if (!(scale > 0)) return;                               /* no motion: P = q1 */
+    for (int a = 0; a < m; a++) A[a][a] += scale * 1e-9;    /* tiny ridge: stable on flat tiles */
+    for (int c = 0; c < m; c++) {
+        int piv = c;
+        for (int r = c + 1; r < m; r++)
+            if (fabs(A[r][c]) > fabs(A[piv][c])) piv = r;
+        if (!(fabs(A[piv][c]) > scale * 1e-12)) return;
+        if (piv != c)
+            for (int k = 0; k <= m; k++) { double t = A[c][k]; A[c][k] = A[piv][k]; A[piv][k] = t; }
+        for (int r = 0; r < m; r++) {
+            if (r == c) continue;
+            double g = A[r][c] / A[c][c];
+            for (int k = c; k <= m; k++) A[r][k] -= g * A[c][k];
+        }
+    }
+    for (int a = 0; a < m; a++) {
+        double v = nearbyint(A[a][m] / A[a][a] * 4096.0);
+        if (!isfinite(v)) { memset(coef, 0, sizeof(int16_t) * K); return; }
+        coef[idx[a]] = (int16_t)(v < -32768 ? -32768 : v > 32767 ? 32767 : v);
+    }
+}
+
+/* Pair packing: one byte per two samples when both zigzag values are below 15
+ * (measured: at 1 cm most residuals are 0 or +-1, and DEFLATE's Huffman code
+ * spends at least one bit per byte; two samples per byte halves that floor). */
+size_t oc_pack_pairs(const uint32_t *zz, size_t count, uint8_t *out, uint32_t *esc_scratch,
+                     size_t *pair_esc_count, size_t *esc_count, int *esc_width)
+{
+    const size_t npairs = (count + 1) / 2;
+    size_t ny = 0;
+    uint32_t *y = esc_scratch + count;                     /* the escaped pairs' values (<= count + 1) */
+    for (size_t p = 0; p < npairs; p++) {
+        uint32_t z1 = zz[2 * p], z2 = 2 * p + 1 < count ? zz[2 * p + 1] : 0;
+        if (z1 < OC_PAIR_LIMIT && z2 < OC_PAIR_LIMIT) {
+            out[p] = (uint8_t)(OC_PAIR_LIMIT * z1 + z2);
+        } else {
+            out[p] = 255;
+            y[ny++] = z1;
+            y[ny++] = z2;
+        }
+    }
+    *pair_esc_count = ny / 2;
+    *esc_count = oc_pack_escapes(y, ny, out + npairs, esc_scratch, esc_width);
+    return npairs + ny + *esc_count * (size_t)*esc_width;
+}
+
+int oc_unpack_pairs(const uint8_t *in, size_t plain_len, size_t count, size_t pair_esc_count, size_t esc_count,
+                    int esc_width, uint32_t *zz, uint32_t *scratch)
+{
+    const size_t npairs = (count + 1) / 2, ny = 2 * pair_esc_count;
+    if (pair_esc_count > npairs || esc_count > ny) return OC_E_CORRUPT;
+    if (plain_len != npairs + ny + esc_count * (size_t)esc_width) return OC_E_CORRUPT;
+    int rc = oc_unpack_escapes(in + npairs, ny, esc_count, esc_width, scratch);
+    if (rc) return rc;
+    size_t e = 0;
+    for (size_t p = 0; p < npairs; p++) {
+        uint32_t b = in[p], z1, z2;
+        if (b < OC_PAIR_LIMIT * OC_PAIR_LIMIT) {
+            z1 = b / OC_PAIR_LIMIT;
+            z2 = b % OC_PAIR_LIMIT;
+        } else if (b == 255 && e < pair_esc_count) {
+            z1 = scratch[2 * e];
+            z2 = scratch[2 * e + 1];
+            e++;
+        } else {
+            return OC_E_CORRUPT;                            /* 225..254, or more escapes than declared */
+        }
+        zz[2 * p] = z1;
+        if (2 * p + 1 < count) zz[2 * p + 1] = z2;
+        else if (z2 != 0) return OC_E_CORRUPT;              /* the padding value of an odd count is 0 */
+    }
+    return e == pair_esc_count ? OC_OK : OC_E_CORRUPT;
+}
