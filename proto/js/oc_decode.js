@@ -8,9 +8,11 @@
 //     below 128x128 samples, where a stream's set-up cost dominates
 //     (STREAM_MIN_SAMPLES, measured).
 // Codec 2 (zstd) is optional: call setZstdDecompressor(fzstd.decompress) to
-// enable it. Every length is checked before it is read; bad input throws an
+// enable it. Codec 3 (temporal, predicted from the previous frames) needs a
+// DecoderState that lives as long as the stream: decodeFrame(buf, { state }). Every length is checked before it is read; bad input throws an
 // Error whose `code` is 'truncated' | 'magic' | 'version' | 'corrupt' |
-// 'too_large' | 'unsupported'.
+// 'too_large' | 'unsupported' | 'reference' (a predicted tile whose reference
+// frames this state has not decoded: wait for the keyframe the server sends next).
 
 export const PROTO_VERSION = 1;
 export const SUBPROTOCOL = 'oceand.v1';
@@ -18,11 +20,16 @@ export const FIELD_NAMES = Object.freeze(['height', 'dx', 'dz', 'slope_x', 'slop
 export const CODEC_RAW_F32 = 0;
 export const CODEC_QUANT_LORENZO = 1;       // deflate-raw entropy coder (default)
 export const CODEC_QUANT_LORENZO_ZSTD = 2;  // zstd entropy coder
+export const CODEC_TEMPORAL = 3;            // predicted from the previous 1..4 frames, deflate-raw
 export const FRAME_HEADER_SIZE = 48;
 export const TILE_HEADER_SIZE = 40;
 export const MAX_N = 2048;
 export const MAX_LOD = 4;
 const LOSSY_PREFIX = 16;
+const TEMPORAL_PREFIX = 40;
+const MAX_DEPTH = 4;
+const HISTORY_SLOTS = MAX_DEPTH + 1;
+const PAIR_LIMIT = 15;
 const nodeZlib = globalThis.process?.getBuiltinModule?.('node:zlib') ?? null;
 
 let zstdDecompress = null;
@@ -110,7 +117,7 @@ function readTileHeader(bytes, dv, pos, fh) {
   const grid = fh.n / fh.tileSize;
   if (t.tileX >= grid || t.tileZ >= grid) throw fail('corrupt', `tile (${t.tileX},${t.tileZ}) outside ${grid}x${grid}`);
   if (!Number.isFinite(t.bound) || t.bound < 0) throw fail('corrupt', `bound ${t.bound}`);
-  if (t.codec === CODEC_QUANT_LORENZO || t.codec === CODEC_QUANT_LORENZO_ZSTD) {
+  if (t.codec === CODEC_QUANT_LORENZO || t.codec === CODEC_QUANT_LORENZO_ZSTD || t.codec === CODEC_TEMPORAL) {
     if (!Number.isFinite(t.offset) || !Number.isFinite(t.scale) || !(t.scale > 0)) throw fail('corrupt', 'offset/scale');
   } else if (t.codec !== CODEC_RAW_F32) {
     throw fail('corrupt', `codec ${t.codec}`);
@@ -152,7 +159,8 @@ function inflateRawInstalled(src, n) {
 // fflate 2.5 ms, streams 4.7 ms; 12 tiles of 128x128, fflate 2.4 ms, streams 1.6 ms.
 const STREAM_MIN_SAMPLES = 128 * 128;
 const haveStreams = typeof DecompressionStream === 'function';
-const preferStream = (t) => t.codec === CODEC_QUANT_LORENZO && t.width * t.height >= STREAM_MIN_SAMPLES;
+const preferStream = (t) => (t.codec === CODEC_QUANT_LORENZO || t.codec === CODEC_TEMPORAL)
+  && t.width * t.height >= STREAM_MIN_SAMPLES;
 
 // One DecompressionStream per tile (async; decodeFrame runs them concurrently).
 async function inflateRawStream(src, n) {
@@ -326,29 +334,164 @@ function readLossyPrefix(t, bytes, start) {
   return { escWidth, escCount, coef, src, n: count + escCount * escWidth };
 }
 
-// One tile, synchronously; inflate = a synchronous raw-DEFLATE inflater.
-function decodeTileSync(t, bytes, start, inflate) {
-  if (t.codec === CODEC_RAW_F32) return decodeRaw(t, bytes, start);
-  const l = readLossyPrefix(t, bytes, start);
-  const packed = t.codec === CODEC_QUANT_LORENZO ? inflate(l.src, l.n) : unzstd(l.src, l.n);
-  return reconstruct(t, packed, l.escCount, l.escWidth, l.coef);
+// ---- codec 3: temporal prediction (PROTOCOL.md §5.6-5.8) ----
+
+/** The references of predicted tiles: the codes of the last frames of every tile. One per stream. */
+export class DecoderState {
+  constructor() { this.tiles = new Map(); }
+  /** Forget every reference (e.g. after resubscribing); predicted tiles then fail until the next keyframe. */
+  reset() { this.tiles.clear(); }
+}
+const tileKey = (h, t) => `${t.field}/${t.lod}/${t.tileX}/${t.tileZ}/${h.n}/${h.tileSize}`;
+// Coefficients a tile of each depth may use (bit k = coefficient k: d1, d2, d3, L(d1), L(q1)).
+const COEF_MASK = [0, 0b10000, 0b11001, 0b11011, 0b11111];
+
+// The 40-byte prefix of a codec 3 payload, validated, and its references looked up (in this order).
+function readTemporalPrefix(h, t, bytes, start, state) {
+  const count = t.width * t.height, npairs = (count + 1) >> 1;
+  if (t.payloadLen < TEMPORAL_PREFIX) throw fail('corrupt', 'temporal payload shorter than its prefix');
+  const dv = new DataView(bytes.buffer, bytes.byteOffset + start, TEMPORAL_PREFIX);
+  const depth = bytes[start], packing = bytes[start + 1], escWidth = bytes[start + 2];
+  const escCount = dv.getUint32(4, true), pairEsc = dv.getUint32(8, true);
+  const refSeq = dv.getBigUint64(16, true);
+  const coef = [0, 1, 2, 3, 4].map((k) => dv.getInt16(24 + 2 * k, true));
+  let zero = bytes[start + 3] | dv.getUint32(12, true);
+  for (let k = 34; k < TEMPORAL_PREFIX; k++) zero |= bytes[start + k];
+  if (depth < 1 || depth > MAX_DEPTH || packing > 1 || escWidth > 4 || zero) throw fail('corrupt', 'temporal prefix');
+  coef.forEach((c, k) => { if (c && !(COEF_MASK[depth] & (1 << k))) throw fail('corrupt', `coefficient ${k} at depth ${depth}`); });
+  if ((escCount === 0) !== (escWidth === 0)) throw fail('corrupt', 'esc_count/esc_width');
+  let n;
+  if (packing === 0) {
+    if (pairEsc || escCount > count) throw fail('corrupt', 'escape counts');
+    n = count + escCount * escWidth;
+  } else {
+    if (pairEsc > npairs || escCount > 2 * pairEsc) throw fail('corrupt', 'escape counts');
+    n = npairs + 2 * pairEsc + escCount * escWidth;
+  }
+  if (!state) throw fail('reference', 'a predicted tile (codec 3) needs decodeFrame(buf, { state })');
+  const slots = state.tiles.get(tileKey(h, t)) || [];
+  const refs = [];
+  for (let i = 0; i < depth; i++) {
+    const want = refSeq - BigInt(i);
+    const s = slots.find((x) => x.seq === want && x.offset === t.offset && x.scale === t.scale && x.bound === t.bound
+      && x.codes.length === count);
+    if (!s) throw fail('reference', `tile ${tileKey(h, t)}: reference frame ${want} missing or on another grid`);
+    refs.push(s);
+  }
+  return { depth, packing, escWidth, escCount, pairEsc, coef, refs, n, src: bytes.subarray(start + TEMPORAL_PREFIX, start + t.payloadLen) };
 }
 
-// One tile with DecompressionStream for codec 1 (the other codecs are synchronous).
-async function decodeTileStream(t, bytes, start) {
-  if (t.codec !== CODEC_QUANT_LORENZO) return decodeTileSync(t, bytes, start, null);
+// Pair packing: one byte per two samples (15*z1 + z2 when both are below 15, 255 = escaped pair).
+function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
+  const npairs = (count + 1) >> 1, ny = 2 * pairEsc;
+  const y = new Int32Array(ny);
+  unpackEscapes(y, packed.subarray(npairs), ny, escCount, escWidth);
+  const zz = new Int32Array(count + 1);
+  let e = 0;
+  for (let p = 0; p < npairs; p++) {
+    const b = packed[p];
+    if (b < PAIR_LIMIT * PAIR_LIMIT) {
+      zz[2 * p] = (b / PAIR_LIMIT) | 0;
+      zz[2 * p + 1] = b % PAIR_LIMIT;
+    } else if (b === 255 && e < pairEsc) {
+      zz[2 * p] = y[2 * e];
+      zz[2 * p + 1] = y[2 * e + 1];
+      e++;
+    } else {
+      throw fail('corrupt', `pair byte ${b}`);
+    }
+  }
+  if (e !== pairEsc) throw fail('corrupt', 'fewer escaped pairs than pair_esc_count');
+  if (count & 1 && zz[count] !== 0) throw fail('corrupt', 'padding value of an odd tile is not 0');
+  return zz;
+}
+
+// Predictions from the references (no sample of this frame is needed), plus the residuals.
+// Every sum is an exact integer below 2^53 in float64; `| 0` wraps the code to int32 as C does.
+function reconstructTemporal(t, packed, l) {
+  const w = t.width, h = t.height, count = w * h;
+  let zz;
+  if (l.packing === 1) zz = unpackPairs(packed, count, l.pairEsc, l.escCount, l.escWidth);
+  else if (l.escCount === 0) zz = packed;
+  else { zz = new Int32Array(count); unpackEscapes(zz, packed, count, l.escCount, l.escWidth); }
+  const q = new Int32Array(count), out = new Float32Array(count);
+  const [c0, c1, c2, c3, c4] = l.coef, depth = l.depth;
+  const q1 = l.refs[0].codes, q2 = depth >= 2 ? l.refs[1].codes : q1;
+  const q3 = depth >= 3 ? l.refs[2].codes : q1, q4 = depth >= 4 ? l.refs[3].codes : q1;
+  const off = t.offset, sc = t.scale;
+  for (let j = 0; j < h; j++) {
+    const r = j * w, up = (j > 0 ? j - 1 : 0) * w, dn = (j + 1 < h ? j + 1 : h - 1) * w;
+    for (let i = 0; i < w; i++) {
+      const k = r + i, il = r + (i > 0 ? i - 1 : 0), ir = r + (i + 1 < w ? i + 1 : w - 1);
+      const lq1 = q1[il] + q1[ir] + q1[up + i] + q1[dn + i] - 4 * q1[k];
+      let s = c4 * lq1;
+      if (depth >= 2) s += c0 * (q1[k] - q2[k]) + c3 * (lq1 - (q2[il] + q2[ir] + q2[up + i] + q2[dn + i] - 4 * q2[k]));
+      if (depth >= 3) s += c1 * (q2[k] - q3[k]);
+      if (depth >= 4) s += c2 * (q3[k] - q4[k]);
+      const z = zz[k];
+      const v = (q1[k] + Math.floor((s + 2048) / 4096) + ((z >>> 1) ^ -(z & 1))) | 0;
+      q[k] = v;
+      out[k] = off + v * sc;
+    }
+  }
+  return { samples: out, codes: q };
+}
+
+// One tile, synchronously; inflate = a synchronous raw-DEFLATE inflater. Returns {samples, codes}
+// (codes: the tile's int32 codes when a state keeps them, else null).
+function decodeTileSync(h, t, bytes, start, inflate, state) {
+  if (t.codec === CODEC_RAW_F32) return { samples: decodeRaw(t, bytes, start), codes: null };
+  if (t.codec === CODEC_TEMPORAL) {
+    const l = readTemporalPrefix(h, t, bytes, start, state);
+    return reconstructTemporal(t, inflate(l.src, l.n), l);
+  }
   const l = readLossyPrefix(t, bytes, start);
-  return reconstruct(t, await inflateRawStream(l.src, l.n), l.escCount, l.escWidth, l.coef);
+  const packed = t.codec === CODEC_QUANT_LORENZO ? inflate(l.src, l.n) : unzstd(l.src, l.n);
+  const samples = reconstruct(t, packed, l.escCount, l.escWidth, l.coef);
+  return { samples, codes: state ? scratch.slice(0, samples.length) : null };
+}
+
+// One tile with DecompressionStream for codec 1 and 3 (the other codecs are synchronous).
+async function decodeTileStream(h, t, bytes, start, state) {
+  if (t.codec === CODEC_TEMPORAL) {
+    const l = readTemporalPrefix(h, t, bytes, start, state);
+    return reconstructTemporal(t, await inflateRawStream(l.src, l.n), l);
+  }
+  if (t.codec !== CODEC_QUANT_LORENZO) return decodeTileSync(h, t, bytes, start, null, state);
+  const l = readLossyPrefix(t, bytes, start);
+  const samples = reconstruct(t, await inflateRawStream(l.src, l.n), l.escCount, l.escWidth, l.coef);
+  return { samples, codes: state ? scratch.slice(0, samples.length) : null };
+}
+
+// After a whole frame decoded: its lossy tiles become references (at most HISTORY_SLOTS per tile;
+// the oldest seq goes first).
+function commitReferences(state, header, metas, decoded) {
+  const seq = BigInt(header.seq);
+  metas.forEach(({ t }, i) => {
+    const codes = decoded[i].codes;
+    if (!codes) return;
+    const key = tileKey(header, t);
+    const slots = state.tiles.get(key) || [];
+    if (slots.length >= HISTORY_SLOTS) {
+      let oldest = 0;
+      slots.forEach((s, k) => { if (s.seq < slots[oldest].seq) oldest = k; });
+      slots.splice(oldest, 1);
+    }
+    slots.push({ seq, offset: t.offset, scale: t.scale, bound: t.bound, codes });
+    state.tiles.set(key, slots);
+  });
 }
 
 /**
  * Decode a whole binary frame: {header, tiles:[{field, fieldName, lod, codec, tileX, tileZ, width, height,
  * bound, offset, scale, samples: Float32Array}]}. options.useNodeZlib = false skips node's zlib under node
  * (then DecompressionStream and any setInflateRaw() inflater are used, as in a browser: the tests cover
- * the browser paths so).
+ * the browser paths so). options.state = a DecoderState: keeps the references predicted tiles (codec 3)
+ * need; decode the frames of one stream in order with the same state. A frame that throws leaves it as it was.
  */
 export async function decodeFrame(arrayBuffer, options = {}) {
   const useNodeZlib = options.useNodeZlib !== false;
+  const state = options.state || null;
   const bytes = asBytes(arrayBuffer);
   const header = readFrameHeader(bytes);
   const dv = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
@@ -365,26 +508,28 @@ export async function decodeFrame(arrayBuffer, options = {}) {
   let samples;
   if (nodeZlib && useNodeZlib) {
     // Synchronous: tile after tile, the first bad payload throws.
-    samples = metas.map(({ t, start }) => decodeTileSync(t, bytes, start, inflateRawNode));
+    samples = metas.map(({ t, start }) => decodeTileSync(header, t, bytes, start, inflateRawNode, state));
   } else if (inflateRawSync && !(haveStreams && metas.some(({ t }) => preferStream(t)))) {
-    samples = metas.map(({ t, start }) => decodeTileSync(t, bytes, start, inflateRawInstalled));
+    samples = metas.map(({ t, start }) => decodeTileSync(header, t, bytes, start, inflateRawInstalled, state));
   } else {
     // Some tiles through DecompressionStream, all in flight at once; the others synchronously.
     // The first bad payload in frame order wins.
     const decoded = await Promise.allSettled(metas.map(({ t, start }) => {
-      if (t.codec === CODEC_QUANT_LORENZO && (!inflateRawSync || preferStream(t))) return decodeTileStream(t, bytes, start);
+      if ((t.codec === CODEC_QUANT_LORENZO || t.codec === CODEC_TEMPORAL) && (!inflateRawSync || preferStream(t)))
+        return decodeTileStream(header, t, bytes, start, state);
       try {
-        return decodeTileSync(t, bytes, start, inflateRawInstalled);
+        return Promise.resolve(decodeTileSync(header, t, bytes, start, inflateRawInstalled, state));
       } catch (e) {
         return Promise.reject(e);
       }
     }));
     samples = decoded.map((d) => { if (d.status === 'rejected') throw d.reason; return d.value; });
   }
+  if (state) commitReferences(state, header, metas, samples);
   const tiles = metas.map(({ t }, i) => ({
     field: t.field, fieldName: FIELD_NAMES[t.field], lod: t.lod, codec: t.codec,
     tileX: t.tileX, tileZ: t.tileZ, width: t.width, height: t.height,
-    bound: t.bound, offset: t.offset, scale: t.scale, samples: samples[i],
+    bound: t.bound, offset: t.offset, scale: t.scale, samples: samples[i].samples,
   }));
   return { header, tiles };
 }
