@@ -65,24 +65,73 @@ static void features_row(const int32_t *const *refs, int depth, int w, int h, in
     else memset(d3, 0, sizeof(double) * w);
 }
 
+/* floor(x) for |x| < 2^51 with the round-to-nearest trick and a compare: unlike floor()
+ * it vectorises without -ffast-math. Exact: every step is. */
+static inline double floor_d(double x)
+{
+    double r = (x + 0x1.8p52) - 0x1.8p52;
+    return r - (double)(r > x);
+}
+
+/* t (an integer, |t| < 2^42, exact in double) modulo 2^32, as the int32 of the same bits:
+ * exact steps that vectorise (no double -> int64 conversion in AVX2). */
+static inline uint32_t wrap_u32(double t)
+{
+    double m = t - 4294967296.0 * floor_d(t * 0x1p-32);     /* [0, 2^32) */
+    return (uint32_t)(int32_t)(m - 2147483648.0) ^ 0x80000000u;   /* branch-free: shift into int32 range and back */
+}
+
+/* Samples i0 <= i < i1 of a row whose W/E neighbours are i-1/i+1 (no clamping).
+ * Depths below 4 pass q1 for the missing references: their coefficients are 0. */
+OC_VECTOR_CLONES
+static void predict_span(const int32_t *restrict a, const int32_t *restrict au, const int32_t *restrict ad,
+                         const int32_t *restrict b, const int32_t *restrict bu, const int32_t *restrict bd,
+                         const int32_t *restrict c, const int32_t *restrict d, int i0, int i1,
+                         double c0, double c1, double c2, double c3, double c4, uint32_t *restrict pred)
+{
+    for (int i = i0; i < i1; i++) {
+        double q1 = a[i], q2 = b[i];
+        double lq1 = (double)a[i - 1] + (double)a[i + 1] + (double)au[i] + (double)ad[i] - 4.0 * q1;
+        double lq2 = (double)b[i - 1] + (double)b[i + 1] + (double)bu[i] + (double)bd[i] - 4.0 * q2;
+        double s = c0 * (q1 - q2) + c1 * (q2 - (double)c[i]) + c2 * ((double)c[i] - (double)d[i])
+                   + c3 * (lq1 - lq2) + c4 * lq1;               /* exact: |s| < 2^51 */
+        double t = floor_d((s + 2048.0) * (1.0 / 4096));
+        pred[i] = (uint32_t)a[i] + wrap_u32(t);
+    }
+}
+
+/* One sample with clamped neighbours (the tile's first and last columns). */
+static uint32_t predict_at(const int32_t *a, const int32_t *au, const int32_t *ad, const int32_t *b,
+                           const int32_t *bu, const int32_t *bd, const int32_t *c, const int32_t *d, int i, int il,
+                           int ir, const double cf[OC_TEMPORAL_COEFS])
+{
+    double q1 = a[i], q2 = b[i];
+    double lq1 = (double)a[il] + (double)a[ir] + (double)au[i] + (double)ad[i] - 4.0 * q1;
+    double lq2 = (double)b[il] + (double)b[ir] + (double)bu[i] + (double)bd[i] - 4.0 * q2;
+    double s = cf[0] * (q1 - q2) + cf[1] * (q2 - (double)c[i]) + cf[2] * ((double)c[i] - (double)d[i])
+               + cf[3] * (lq1 - lq2) + cf[4] * lq1;
+    return (uint32_t)a[i] + wrap_u32(floor_d((s + 2048.0) * (1.0 / 4096)));
+}
+
 void oc_temporal_predict_row(const int32_t *const *refs, int depth, int w, int h, int j,
                              const int16_t coef[OC_TEMPORAL_COEFS], double *f, uint32_t *pred)
 {
-    features_row(refs, depth, w, h, j, f);
-    const double c0 = coef[0], c1 = coef[1], c2 = coef[2], c3 = coef[3], c4 = coef[4];
-    const double *d1 = f, *d2 = f + w, *d3 = f + 2 * (size_t)w, *ld1 = f + 3 * (size_t)w, *lq1 = f + 4 * (size_t)w;
-    const int32_t *q1 = refs[0] + (size_t)j * w;
-    for (int i = 0; i < w; i++) {
-        double s = c0 * d1[i] + c1 * d2[i] + c2 * d3[i] + c3 * ld1[i] + c4 * lq1[i];   /* exact: |s| < 2^51 */
-        double t = floor((s + 2048.0) * (1.0 / 4096));
-        /* q1 + t fits int64 exactly (|t| < 2^40); the prediction is taken mod 2^32. */
-        pred[i] = (uint32_t)q1[i] + (uint32_t)(int64_t)t;
-    }
+    (void)f;
+    const size_t r = (size_t)j * w, u = (size_t)(j > 0 ? j - 1 : 0) * w, dn = (size_t)(j + 1 < h ? j + 1 : h - 1) * w;
+    const int32_t *q1 = refs[0], *q2 = depth >= 2 ? refs[1] : q1, *q3 = depth >= 3 ? refs[2] : q1,
+                  *q4 = depth >= 4 ? refs[3] : q1;
+    const double cf[OC_TEMPORAL_COEFS] = { coef[0], coef[1], coef[2], coef[3], coef[4] };
+    /* Coefficients the depth does not allow are 0 (checked by the decoder, set so by the fit). */
+    pred[0] = predict_at(q1 + r, q1 + u, q1 + dn, q2 + r, q2 + u, q2 + dn, q3 + r, q4 + r, 0, 0, w > 1 ? 1 : 0, cf);
+    if (w == 1) return;
+    predict_span(q1 + r, q1 + u, q1 + dn, q2 + r, q2 + u, q2 + dn, q3 + r, q4 + r, 1, w - 1, cf[0], cf[1], cf[2],
+                 cf[3], cf[4], pred);
+    pred[w - 1] = predict_at(q1 + r, q1 + u, q1 + dn, q2 + r, q2 + u, q2 + dn, q3 + r, q4 + r, w - 1, w - 2, w - 1, cf);
 }
 
 /* Least squares over every 4th row (the fit only steers the encoder; the
  * coefficients travel in the payload). Unused features get coefficient 0. */
-#define FIT_ROW_STEP 4
+#define FIT_ROW_STEP 8
 void oc_temporal_fit(const int32_t *const *refs, int depth, const int32_t *q, int w, int h,
                      int16_t coef[OC_TEMPORAL_COEFS], double *f)
 {
