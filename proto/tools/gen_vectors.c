@@ -231,13 +231,15 @@ static void s_end(struct s_out *o)
 
 /* One frame of a stream: decode it with the stream's decoder; want = NULL (must decode:
  * expected and input written) or the error it must give. */
+static void s_frame_n(struct s_out *o, const uint8_t *data, size_t len, int k, int n, int ts);
 static void s_frame(struct s_out *o, const uint8_t *data, size_t len, int k, const char *want)
 {
+    if (!want) { s_frame_n(o, data, len, k, S_N, S_TS); return; }
     char fn[256];
     snprintf(fn, sizeof fn, "%s_%02d.bin", o->name, o->nframes);
     write_file(fn, data, len);
     fprintf(manifest, "%s\n      {\"file\":\"%s\"", o->nframes ? "," : "", fn);
-    float expected[2 * S_N * S_N], input[2 * S_N * S_N];
+    float expected[2 * S_N * S_N];
     struct { float *dst; size_t at; } ctx = { expected, 0 };
     struct oc_frame_header fh;
     int rc = oc_decode_frame(o->d, data, len, &fh, decode_cb, &ctx);
@@ -248,6 +250,21 @@ static void s_frame(struct s_out *o, const uint8_t *data, size_t len, int k, con
         o->nframes++;
         return;
     }
+    fprintf(stderr, "%s frame %d: unreachable\n", o->name, o->nframes);
+    exit(1);
+}
+
+/* A frame of a stream that must decode (fields n x n, tiles ts): expected and input written. */
+static void s_frame_n(struct s_out *o, const uint8_t *data, size_t len, int k, int n, int ts)
+{
+    char fn[256];
+    snprintf(fn, sizeof fn, "%s_%02d.bin", o->name, o->nframes);
+    write_file(fn, data, len);
+    fprintf(manifest, "%s\n      {\"file\":\"%s\"", o->nframes ? "," : "", fn);
+    float expected[2 * S_N * S_N], input[2 * S_N * S_N];
+    struct { float *dst; size_t at; } ctx = { expected, 0 };
+    struct oc_frame_header fh;
+    int rc = oc_decode_frame(o->d, data, len, &fh, decode_cb, &ctx);
     if (rc) { fprintf(stderr, "%s frame %d: %s\n", o->name, o->nframes, oc_strerror(rc)); exit(1); }
     /* Tiles and inputs in frame order. */
     fprintf(manifest, ",\"expected\":\"%s_%02d.expected.f32\",\"input\":\"%s_%02d.input.f32\",\"seq\":%llu,\"tiles\":[",
@@ -256,7 +273,7 @@ static void s_frame(struct s_out *o, const uint8_t *data, size_t len, int k, con
     for (int t = 0; t < fh.tile_count; t++) {
         const uint8_t *th = data + pos;
         int field = th[0], lod = th[1], codec = th[2], tx = th[4] | th[5] << 8, tz = th[6] | th[7] << 8;
-        int side = S_TS >> lod, step = 1 << lod, l = field == OC_FIELD_HEIGHT ? 0 : 1;
+        int side = ts >> lod, step = 1 << lod, l = field == OC_FIELD_HEIGHT ? 0 : 1;
         uint32_t plen;
         memcpy(&plen, th + 32, 4);
         const uint8_t *pl = th + OC_TILE_HEADER_SIZE;
@@ -271,7 +288,7 @@ static void s_frame(struct s_out *o, const uint8_t *data, size_t len, int k, con
         for (int j = 0; j < side; j++)
             for (int i = 0; i < side; i++)
                 input[at + (size_t)j * side + i] =
-                    s_fields[k][l][((size_t)tz * S_TS + (size_t)j * step) * S_N + (size_t)tx * S_TS + (size_t)i * step];
+                    s_fields[k][l][((size_t)tz * ts + (size_t)j * step) * n + (size_t)tx * ts + (size_t)i * step];
         at += (size_t)side * side;
         pos += OC_TILE_HEADER_SIZE + plen;
     }
@@ -339,6 +356,28 @@ static void emit_streams(void)
     buf.data[OC_FRAME_HEADER_SIZE + OC_TILE_HEADER_SIZE] = 5;
     s_frame(&badcoef, buf.data, frames[1].len, 1, "corrupt");
     s_end(&badcoef);
+    /* The worked example of PROTOCOL.md §8.2: one 4x4 height tile, keyframe then depth 1 and 2. */
+    {
+        struct oc_stream *tiny = oc_stream_new(4, 4, 0, OC_FIELD_HEIGHT, 0.01f);
+        struct s_out ex;
+        s_begin(&ex, "s06_tiny", "the PROTOCOL.md worked example: a 4x4 height tile at 1 cm, keyframe (seq 7), then depth 1 (seq 8) and depth 2 (seq 9)");
+        for (int k = 0; k < 3; k++) {
+            wave_field(s_fields[k][0], 4, k * 0.2, 1.0, 0);
+            if (oc_stream_encode(tiny, e, s_fields[k][0], 7 + (uint64_t)k)) exit(1);
+            const uint8_t *p;
+            size_t len;
+            oc_stream_tile(tiny, 0, 0, &p, &len);
+            struct oc_frame_header fh = { .seq = 7 + (uint64_t)k, .sim_time = k * 0.2, .params_version = 1, .n = 4,
+                                          .tile_size = 4, .patch_size = 4.0f, .tile_count = 1 };
+            buf.len = 0;
+            oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE + len);
+            oc_frame_header_write(buf.data, &fh);
+            memcpy(buf.data + OC_FRAME_HEADER_SIZE, p, len);
+            s_frame_n(&ex, buf.data, OC_FRAME_HEADER_SIZE + len, k, 4, 4);
+        }
+        s_end(&ex);
+        oc_stream_free(tiny);
+    }
     for (int k = 0; k < S_TICKS; k++) { oc_buf_free(&frames[k]); oc_buf_free(&bframes[k]); }
     oc_buf_free(&buf);
     for (int l = 0; l < 2; l++) oc_stream_free(s_layers[l].st);
