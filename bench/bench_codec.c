@@ -15,7 +15,9 @@
  *   --frames DIR   keep every encoded frame for the JS decode benchmark.
  *   --streams      only the temporal stream rows (codec_stream: 10 s at 30 Hz, all
  *                  fields, bounds 1 mm and 1 cm); --keyframe-interval K their periodic
- *                  keyframe interval in ticks (default OC_STREAM_KEYFRAME_INTERVAL). */
+ *                  keyframe interval in ticks (default OC_STREAM_KEYFRAME_INTERVAL, 0 = none);
+ *                  --stream-n N only that N (256 or 512).
+ *   --dump-fields N FRAMES FILE  write FRAMES ticks of all fields (raw float32) and exit. */
 #include "oc_proto.h"
 
 #include <fftw3.h>
@@ -269,6 +271,28 @@ static struct stats bench_zfp(const float *f, int n, float bound, int reps, doub
 }
 
 #ifdef HAVE_OCEAN
+/* --dump-fields N FRAMES FILE: FRAMES consecutive ticks at 30 Hz from t = 10 s, all six
+ * fields, raw float32 (frame-major, then field, then row-major): the input of
+ * proto/tools/temporal_predictors.py, which measured the predictor choice. */
+static int dump_fields(int n, int frames, const char *path)
+{
+    struct ocean_params prm;
+    params_defaults(&prm);
+    prm.resolution = n;
+    struct ocean_options opt = { .threads = 1, .wisdom_path = NULL, .plan_rigor = 0 };
+    char err[256];
+    struct ocean *o = ocean_create(&prm, &opt, err, sizeof err);
+    FILE *fp = fopen(path, "wb");
+    if (!o || !fp) { fprintf(stderr, "bench_codec: %s\n", o ? path : err); return 1; }
+    for (int k = 0; k < frames; k++) {
+        if (ocean_step(o, 10.0 + k / 30.0, OCEAN_ALL_FIELDS)) return 1;
+        for (int f = 0; f < OC_FIELD_COUNT; f++)
+            if (fwrite(ocean_field(o, (enum ocean_field)f), sizeof(float), (size_t)n * n, fp) != (size_t)n * n) return 1;
+    }
+    ocean_free(o);
+    return fclose(fp) != 0;
+}
+
 /* ---- temporal streams (codec 3): 10 s at 30 Hz of the real simulation ----
  * One oc_stream per field and bound, every tile of every tick: the shared
  * frame a receiver that keeps up gets (keyframes and headers included).
@@ -389,11 +413,16 @@ static void print(int n, const char *src, int field, float bound, const char *co
 
 int main(int argc, char **argv)
 {
-    int only_height = 0, only_streams = 0, interval = OC_STREAM_KEYFRAME_INTERVAL;
+    int only_height = 0, only_streams = 0, interval = OC_STREAM_KEYFRAME_INTERVAL, stream_n = 0;
     for (int i = 1; i < argc; i++) {
         if (strcmp(argv[i], "--height") == 0) only_height = 1;
         else if (strcmp(argv[i], "--frames") == 0 && i + 1 < argc) frames_dir = argv[++i];
         else if (strcmp(argv[i], "--streams") == 0) only_streams = 1;
+        else if (strcmp(argv[i], "--stream-n") == 0 && i + 1 < argc) stream_n = atoi(argv[++i]);
+#ifdef HAVE_OCEAN
+        else if (strcmp(argv[i], "--dump-fields") == 0 && i + 3 < argc)
+            return dump_fields(atoi(argv[i + 1]), atoi(argv[i + 2]), argv[i + 3]);
+#endif
         else if (strcmp(argv[i], "--keyframe-interval") == 0 && i + 1 < argc) interval = atoi(argv[++i]);
         else if (strcmp(argv[i], "--tile-size") == 0 && i + 1 < argc) {
             tile_size = atoi(argv[++i]);
@@ -401,12 +430,13 @@ int main(int argc, char **argv)
                 fprintf(stderr, "bench_codec: --tile-size must be a power of two in 1..%d\n", OC_MAX_N);
                 return 2;
             }
-        } else { fprintf(stderr, "usage: bench_codec [--height] [--streams] [--keyframe-interval K] [--tile-size T] [--frames DIR]\n"); return 2; }
+        } else { fprintf(stderr, "usage: bench_codec [--height] [--streams] [--stream-n N] [--keyframe-interval K] [--tile-size T] [--frames DIR]\n"); return 2; }
     }
     const int sizes[2] = { 256, 512 };
     const float bounds[2] = { 0.001f, 0.01f };
 #ifdef HAVE_OCEAN
-    for (int si = 0; si < 2; si++) bench_streams(sizes[si], interval);
+    for (int si = 0; si < 2; si++)
+        if (!stream_n || stream_n == sizes[si]) bench_streams(sizes[si], interval);
 #else
     (void)interval;
 #endif
