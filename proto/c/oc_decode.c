@@ -49,7 +49,7 @@ struct oc_decoder *oc_decoder_new(void)
     struct oc_decoder *d = calloc(1, sizeof *d);
     if (!d) return NULL;
     d->hist_limit = DEFAULT_HISTORY_LIMIT;
-    if (!(d->ent = oc_entropy_new()) || !(d->feat = malloc(sizeof(double) * OC_TEMPORAL_COEFS * OC_MAX_N))) {
+    if (!(d->ent = oc_entropy_new()) || !(d->feat = malloc(sizeof(double) * 1))) {
         oc_entropy_free(d->ent);
         free(d);
         return NULL;
@@ -243,7 +243,7 @@ static int decode_temporal(struct oc_decoder *d, const struct oc_frame_header *f
     for (int k = 0; k < OC_TEMPORAL_COEFS; k++) coef[k] = (int16_t)oc_get_u16(p + 24 + 2 * k);
     if (depth < 1 || depth > OC_TEMPORAL_MAX_DEPTH || packing > 1 || esc_width > 4 || p[3]) return OC_E_CORRUPT;
     if (oc_get_u32(p + 12)) return OC_E_CORRUPT;
-    for (int k = 34; k < OC_TEMPORAL_PREFIX; k++) if (p[k]) return OC_E_CORRUPT;
+    for (int k = 24 + 2 * OC_TEMPORAL_COEFS; k < OC_TEMPORAL_PREFIX; k++) if (p[k]) return OC_E_CORRUPT;
     unsigned mask = oc_temporal_coef_mask(depth);
     for (int k = 0; k < OC_TEMPORAL_COEFS; k++) if (coef[k] && !(mask & (1u << k))) return OC_E_CORRUPT;
     if ((esc_count == 0) != (esc_width == 0)) return OC_E_CORRUPT;

@@ -15,7 +15,7 @@ struct oc_encoder *oc_encoder_new(void)
     e->ent = oc_entropy_new();
     if (!e->ent) { free(e); return NULL; }
     e->codec = OC_CODEC_QUANT_LORENZO;
-    if (!(e->feat = malloc(sizeof(double) * OC_TEMPORAL_COEFS * OC_MAX_N))) { oc_entropy_free(e->ent); free(e); return NULL; }
+    if (!(e->feat = malloc(sizeof(double) * OC_FIT_SCRATCH * OC_MAX_N))) { oc_entropy_free(e->ent); free(e); return NULL; }
     return e;
 }
 

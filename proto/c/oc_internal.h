@@ -71,7 +71,7 @@ struct oc_encoder {
     uint8_t *packed;   /* streams A + B, input of the entropy coder */
     int8_t forced[OC_PRED_COEFS];
     int force;         /* test hook: use forced[] instead of fitting */
-    double *feat;      /* temporal predictor features of one row (OC_TEMPORAL_COEFS * OC_MAX_N) */
+    double *feat;      /* temporal predictor features of one row (OC_FIT_SCRATCH * OC_MAX_N) */
 };
 
 int oc_enc_reserve(struct oc_encoder *e, size_t count);
@@ -90,18 +90,19 @@ int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const i
  * Payload prefix, 40 bytes:
  *   0 u8 depth (1..4)  1 u8 packing (0 bytes, 1 pairs)  2 u8 esc_width  3 u8 0
  *   4 u32 esc_count    8 u32 pair_esc_count             12 u32 0
- *   16 u64 ref_seq     24 i16 coef[5] (d1, d2, d3, lap d1, lap q1; units of 1/4096)  34 u8[6] 0 */
+ *   16 u64 ref_seq     24 i16 coef[7] (d1, d2, d3, L(d1), L(d2), L(d3), L(q1); units of 1/4096)  38 u16 0 */
 #define OC_TEMPORAL_PREFIX 40
 #define OC_TEMPORAL_MAX_DEPTH 4
-#define OC_TEMPORAL_COEFS 5
-#define OC_PAIR_LIMIT 15        /* a pair byte holds two zigzag values below 15: 15*z1 + z2 */
+#define OC_TEMPORAL_COEFS 7
+#define OC_PAIR_LIMIT 15
+#define OC_FIT_SCRATCH (OC_TEMPORAL_COEFS + OC_TEMPORAL_MAX_DEPTH)   /* rows of w doubles oc_temporal_fit needs */        /* a pair byte holds two zigzag values below 15: 15*z1 + z2 */
 /* Coefficients a tile of this depth may use (others must be 0): bit k = coef k. */
 unsigned oc_temporal_coef_mask(int depth);
 /* Predictions (mod 2^32) of row j from the references refs[0..depth) (the codes of
- * frames ref_seq, ref_seq-1, ...; w*h each). f = scratch of 5*w doubles. */
+ * frames ref_seq, ref_seq-1, ...; w*h each). f: unused (may be NULL). */
 void oc_temporal_predict_row(const int32_t *const *refs, int depth, int w, int h, int j,
                              const int16_t coef[OC_TEMPORAL_COEFS], double *f, uint32_t *pred);
-/* Least-squares coefficients for codes q (encoder). f = scratch of 5*w doubles. */
+/* Least-squares coefficients for codes q (encoder). f = scratch of OC_FIT_SCRATCH*w doubles. */
 void oc_temporal_fit(const int32_t *const *refs, int depth, const int32_t *q, int w, int h,
                      int16_t coef[OC_TEMPORAL_COEFS], double *f);
 /* Pair packing (packing 1): out gets (count+1)/2 pair bytes, then the escaped pairs'

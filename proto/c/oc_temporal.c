@@ -6,13 +6,12 @@
  * With q1..q4 the reference codes (q1 = frame ref_seq, q2 = ref_seq - 1, ...),
  * d1 = q1 - q2, d2 = q2 - q3, d3 = q3 - q4 and L(a) the 5-point Laplacian
  * a[W] + a[E] + a[N] + a[S] - 4a inside the tile (indices clamped to the tile):
- *   S = c0*d1 + c1*d2 + c2*d3 + c3*L(d1) + c4*L(q1)          (coefficients in 1/4096)
+ *   S = c0*d1 + c1*d2 + c2*d3 + c3*L(d1) + c4*L(d2) + c5*L(d3) + c6*L(q1)   (units of 1/4096)
  *   P = q1 + floor((S + 2048) / 4096),  q = (P + r) mod 2^32
- * |S| < 2^51, so every step is exact in float64 (here and in JavaScript) and in int64.
- * Measured on the simulation (docs/codec.md): the depth-4 set with both Laplacian
- * terms beats 2*q1 - q2 by 0.35-0.6 bits/sample; it is a per-tile least-squares
- * fit of the wave's own time evolution (the Laplacian terms stand in for the
- * dispersion operator). */
+ * |S| < 2^52, so every step is exact in float64 (here and in JavaScript) and in int64.
+ * Measured on the simulation (docs/codec.md): a per-tile least-squares fit of the
+ * wave's own time evolution; the Laplacian terms stand in for the dispersion
+ * operator (not a local one), and take height at 1 mm from 2.2 bits (2*q1 - q2) to 1.5. */
 #include "oc_internal.h"
 
 #include <math.h>
@@ -22,10 +21,10 @@
 unsigned oc_temporal_coef_mask(int depth)
 {
     switch (depth) {
-    case 1: return 1u << 4;                                 /* L(q1) */
-    case 2: return (1u << 0) | (1u << 3) | (1u << 4);       /* d1, L(d1), L(q1) */
-    case 3: return (1u << 0) | (1u << 1) | (1u << 3) | (1u << 4);
-    case 4: return 0x1f;
+    case 1: return 0x40;        /* L(q1) */
+    case 2: return 0x49;        /* d1, L(d1), L(q1) */
+    case 3: return 0x5b;        /* + d2, L(d2) */
+    case 4: return 0x7f;        /* + d3, L(d3) */
     default: return 0;
     }
 }
@@ -43,26 +42,30 @@ static void lap_row(const int32_t *a, int w, int h, int j, double *out)
     out[w - 1] = (double)row[w - 2] + up[w - 1] + dn[w - 1] - 3.0 * row[w - 1];
 }
 
-/* The five features of row j into f[k*w + i]; features the depth does not allow are 0. */
+/* The seven features of row j into f[k*w + i] (for the fit), k = d1, d2, d3, L(d1), L(d2),
+ * L(d3), L(q1); those the depth does not allow are 0. f holds OC_FIT_SCRATCH rows of w:
+ * rows 7..10 keep L(q1)..L(q4). */
 static void features_row(const int32_t *const *refs, int depth, int w, int h, int j, double *f)
 {
     const size_t o = (size_t)j * w;
-    double *d1 = f, *d2 = f + w, *d3 = f + 2 * (size_t)w, *ld1 = f + 3 * (size_t)w, *lq1 = f + 4 * (size_t)w;
-    lap_row(refs[0], w, h, j, lq1);
-    if (depth >= 2) {
-        lap_row(refs[1], w, h, j, ld1);                     /* L(q2) for now */
-        for (int i = 0; i < w; i++) {
-            d1[i] = (double)refs[0][o + i] - refs[1][o + i];
-            ld1[i] = lq1[i] - ld1[i];                       /* L(d1) = L(q1) - L(q2), exact */
-        }
-    } else {
-        memset(d1, 0, sizeof(double) * w);
-        memset(ld1, 0, sizeof(double) * w);
+    double *lq[OC_TEMPORAL_MAX_DEPTH];
+    for (int k = 0; k < depth; k++) {
+        lq[k] = f + (size_t)(7 + k) * w;
+        lap_row(refs[k], w, h, j, lq[k]);
     }
-    if (depth >= 3) for (int i = 0; i < w; i++) d2[i] = (double)refs[1][o + i] - refs[2][o + i];
-    else memset(d2, 0, sizeof(double) * w);
-    if (depth >= 4) for (int i = 0; i < w; i++) d3[i] = (double)refs[2][o + i] - refs[3][o + i];
-    else memset(d3, 0, sizeof(double) * w);
+    memcpy(f + 6 * (size_t)w, lq[0], sizeof(double) * w);
+    for (int k = 1; k <= 3; k++) {
+        double *d = f + (size_t)(k - 1) * w, *ld = f + (size_t)(k + 2) * w;
+        if (depth > k) {
+            for (int i = 0; i < w; i++) {
+                d[i] = (double)refs[k - 1][o + i] - refs[k][o + i];
+                ld[i] = lq[k - 1][i] - lq[k][i];
+            }
+        } else {
+            memset(d, 0, sizeof(double) * w);
+            memset(ld, 0, sizeof(double) * w);
+        }
+    }
 }
 
 /* floor(x) for |x| < 2^51 with the round-to-nearest trick and a compare: unlike floor()
@@ -81,36 +84,42 @@ static inline uint32_t wrap_u32(double t)
     return (uint32_t)(int32_t)(m - 2147483648.0) ^ 0x80000000u;   /* branch-free: shift into int32 range and back */
 }
 
+/* The references' rows for one output row: row j and its clamped neighbours above and below. */
+struct ref_rows { const int32_t *r[OC_TEMPORAL_MAX_DEPTH], *u[OC_TEMPORAL_MAX_DEPTH], *d[OC_TEMPORAL_MAX_DEPTH]; };
+
 /* Samples i0 <= i < i1 of a row whose W/E neighbours are i-1/i+1 (no clamping).
  * Depths below 4 pass q1 for the missing references: their coefficients are 0. */
 OC_VECTOR_CLONES
-static void predict_span(const int32_t *restrict a, const int32_t *restrict au, const int32_t *restrict ad,
-                         const int32_t *restrict b, const int32_t *restrict bu, const int32_t *restrict bd,
-                         const int32_t *restrict c, const int32_t *restrict d, int i0, int i1,
-                         double c0, double c1, double c2, double c3, double c4, uint32_t *restrict pred)
+static void predict_span(const struct ref_rows *rr, int i0, int i1, const double *cf, uint32_t *restrict pred)
 {
+    const int32_t *restrict a = rr->r[0], *restrict b = rr->r[1], *restrict c = rr->r[2], *restrict d = rr->r[3];
+    const int32_t *restrict au = rr->u[0], *restrict bu = rr->u[1], *restrict cu = rr->u[2], *restrict du = rr->u[3];
+    const int32_t *restrict ad = rr->d[0], *restrict bd = rr->d[1], *restrict cd = rr->d[2], *restrict dd = rr->d[3];
+    const double c0 = cf[0], c1 = cf[1], c2 = cf[2], c3 = cf[3], c4 = cf[4], c5 = cf[5], c6 = cf[6];
     for (int i = i0; i < i1; i++) {
-        double q1 = a[i], q2 = b[i];
-        double lq1 = (double)a[i - 1] + (double)a[i + 1] + (double)au[i] + (double)ad[i] - 4.0 * q1;
-        double lq2 = (double)b[i - 1] + (double)b[i + 1] + (double)bu[i] + (double)bd[i] - 4.0 * q2;
-        double s = c0 * (q1 - q2) + c1 * (q2 - (double)c[i]) + c2 * ((double)c[i] - (double)d[i])
-                   + c3 * (lq1 - lq2) + c4 * lq1;               /* exact: |s| < 2^51 */
+        double q1 = a[i], q2 = b[i], q3 = c[i], q4 = d[i];
+        double l1 = (double)a[i - 1] + (double)a[i + 1] + (double)au[i] + (double)ad[i] - 4.0 * q1;
+        double l2 = (double)b[i - 1] + (double)b[i + 1] + (double)bu[i] + (double)bd[i] - 4.0 * q2;
+        double l3 = (double)c[i - 1] + (double)c[i + 1] + (double)cu[i] + (double)cd[i] - 4.0 * q3;
+        double l4 = (double)d[i - 1] + (double)d[i + 1] + (double)du[i] + (double)dd[i] - 4.0 * q4;
+        double s = c0 * (q1 - q2) + c1 * (q2 - q3) + c2 * (q3 - q4) + c3 * (l1 - l2) + c4 * (l2 - l3)
+                   + c5 * (l3 - l4) + c6 * l1;                  /* exact: |s| < 2^52 */
         double t = floor_d((s + 2048.0) * (1.0 / 4096));
         pred[i] = (uint32_t)a[i] + wrap_u32(t);
     }
 }
 
 /* One sample with clamped neighbours (the tile's first and last columns). */
-static uint32_t predict_at(const int32_t *a, const int32_t *au, const int32_t *ad, const int32_t *b,
-                           const int32_t *bu, const int32_t *bd, const int32_t *c, const int32_t *d, int i, int il,
-                           int ir, const double cf[OC_TEMPORAL_COEFS])
+static uint32_t predict_at(const struct ref_rows *rr, int i, int il, int ir, const double *cf)
 {
-    double q1 = a[i], q2 = b[i];
-    double lq1 = (double)a[il] + (double)a[ir] + (double)au[i] + (double)ad[i] - 4.0 * q1;
-    double lq2 = (double)b[il] + (double)b[ir] + (double)bu[i] + (double)bd[i] - 4.0 * q2;
-    double s = cf[0] * (q1 - q2) + cf[1] * (q2 - (double)c[i]) + cf[2] * ((double)c[i] - (double)d[i])
-               + cf[3] * (lq1 - lq2) + cf[4] * lq1;
-    return (uint32_t)a[i] + wrap_u32(floor_d((s + 2048.0) * (1.0 / 4096)));
+    double q[OC_TEMPORAL_MAX_DEPTH], l[OC_TEMPORAL_MAX_DEPTH];
+    for (int k = 0; k < OC_TEMPORAL_MAX_DEPTH; k++) {
+        q[k] = rr->r[k][i];
+        l[k] = (double)rr->r[k][il] + (double)rr->r[k][ir] + (double)rr->u[k][i] + (double)rr->d[k][i] - 4.0 * q[k];
+    }
+    double s = cf[0] * (q[0] - q[1]) + cf[1] * (q[1] - q[2]) + cf[2] * (q[2] - q[3]) + cf[3] * (l[0] - l[1])
+               + cf[4] * (l[1] - l[2]) + cf[5] * (l[2] - l[3]) + cf[6] * l[0];
+    return (uint32_t)rr->r[0][i] + wrap_u32(floor_d((s + 2048.0) * (1.0 / 4096)));
 }
 
 void oc_temporal_predict_row(const int32_t *const *refs, int depth, int w, int h, int j,
@@ -118,15 +127,19 @@ void oc_temporal_predict_row(const int32_t *const *refs, int depth, int w, int h
 {
     (void)f;
     const size_t r = (size_t)j * w, u = (size_t)(j > 0 ? j - 1 : 0) * w, dn = (size_t)(j + 1 < h ? j + 1 : h - 1) * w;
-    const int32_t *q1 = refs[0], *q2 = depth >= 2 ? refs[1] : q1, *q3 = depth >= 3 ? refs[2] : q1,
-                  *q4 = depth >= 4 ? refs[3] : q1;
-    const double cf[OC_TEMPORAL_COEFS] = { coef[0], coef[1], coef[2], coef[3], coef[4] };
-    /* Coefficients the depth does not allow are 0 (checked by the decoder, set so by the fit). */
-    pred[0] = predict_at(q1 + r, q1 + u, q1 + dn, q2 + r, q2 + u, q2 + dn, q3 + r, q4 + r, 0, 0, w > 1 ? 1 : 0, cf);
+    struct ref_rows rr;
+    for (int k = 0; k < OC_TEMPORAL_MAX_DEPTH; k++) {
+        const int32_t *q = k < depth ? refs[k] : refs[0];    /* coefficient 0 for the missing ones */
+        rr.r[k] = q + r;
+        rr.u[k] = q + u;
+        rr.d[k] = q + dn;
+    }
+    double cf[OC_TEMPORAL_COEFS];
+    for (int k = 0; k < OC_TEMPORAL_COEFS; k++) cf[k] = coef[k];
+    pred[0] = predict_at(&rr, 0, 0, w > 1 ? 1 : 0, cf);
     if (w == 1) return;
-    predict_span(q1 + r, q1 + u, q1 + dn, q2 + r, q2 + u, q2 + dn, q3 + r, q4 + r, 1, w - 1, cf[0], cf[1], cf[2],
-                 cf[3], cf[4], pred);
-    pred[w - 1] = predict_at(q1 + r, q1 + u, q1 + dn, q2 + r, q2 + u, q2 + dn, q3 + r, q4 + r, w - 1, w - 2, w - 1, cf);
+    predict_span(&rr, 1, w - 1, cf, pred);
+    pred[w - 1] = predict_at(&rr, w - 1, w - 2, w - 1, cf);
 }
 
 /* Least squares over every 4th row (the fit only steers the encoder; the

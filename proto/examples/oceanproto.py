@@ -33,9 +33,9 @@ LOSSY_PREFIX = struct.Struct("<BBHI6bH")         # 16 bytes (§5.1)
 assert (FRAME_HEADER.size, TILE_HEADER.size, LOSSY_PREFIX.size) == (48, 40, 16)
 
 CODEC_RAW_F32, CODEC_DEFLATE, CODEC_ZSTD, CODEC_TEMPORAL = 0, 1, 2, 3   # §5
-TEMPORAL_PREFIX = struct.Struct("<BBBBIIIQ5h6x")   # 40 bytes (§5.6)
+TEMPORAL_PREFIX = struct.Struct("<BBBBIIIQ7hH")   # 40 bytes (§5.6)
 assert TEMPORAL_PREFIX.size == 40
-COEF_MASK = (0, 0b10000, 0b11001, 0b11011, 0b11111)   # coefficients allowed per depth (§5.7)
+COEF_MASK = (0, 0x40, 0x49, 0x5B, 0x7F)   # coefficients allowed per depth (§5.6)
 MAX_DEPTH, PAIR_LIMIT = 4, 15
 
 
@@ -232,8 +232,9 @@ def _temporal(payload, key, offset, scale, bound, height, width, state):
     if len(payload) < TEMPORAL_PREFIX.size:
         raise ProtocolError("corrupt", "temporal payload shorter than its prefix")
     depth, packing, esc_width, zero1, esc_count, pair_esc, zero2, ref_seq, *coef = TEMPORAL_PREFIX.unpack_from(payload, 0)
-    if (not 1 <= depth <= MAX_DEPTH or packing > 1 or esc_width > 4 or zero1 or zero2
-            or any(payload[34:40]) or (esc_count == 0) != (esc_width == 0)
+    coef, zero3 = coef[:7], coef[7]
+    if (not 1 <= depth <= MAX_DEPTH or packing > 1 or esc_width > 4 or zero1 or zero2 or zero3
+            or (esc_count == 0) != (esc_width == 0)
             or any(c and not COEF_MASK[depth] >> k & 1 for k, c in enumerate(coef))):
         raise ProtocolError("corrupt", "bad temporal prefix")
     if packing == 0:
@@ -269,16 +270,12 @@ def _temporal(payload, key, offset, scale, bound, height, width, state):
             raise ProtocolError("corrupt", "padding value of an odd tile is not 0")
         z = z[:count]
     r = (z >> np.uint64(1)).astype(np.int64) ^ -(z & np.uint64(1)).astype(np.int64)
+    # Missing references (depth < 4) stand in as q1: their coefficients are 0.
     q = [refs[i] if i < depth else refs[0] for i in range(4)]
+    lap = [_lap(a) for a in q]
     c = coef
-    lq1 = _lap(q[0])
-    s = c[4] * lq1                                                    # exact in int64, |s| < 2^51
-    if depth >= 2:
-        s = s + c[0] * (q[0] - q[1]) + c[3] * (lq1 - _lap(q[1]))
-    if depth >= 3:
-        s = s + c[1] * (q[1] - q[2])
-    if depth >= 4:
-        s = s + c[2] * (q[2] - q[3])
+    s = (c[0] * (q[0] - q[1]) + c[1] * (q[1] - q[2]) + c[2] * (q[2] - q[3]) + c[3] * (lap[0] - lap[1])
+         + c[4] * (lap[1] - lap[2]) + c[5] * (lap[2] - lap[3]) + c[6] * lap[0])   # exact in int64, |s| < 2^52
     return _wrap32(q[0] + (s + 2048) // 4096 + r.reshape(height, width))
 
 

@@ -109,7 +109,7 @@ function readFrames(path) {
   return out;
 }
 for (const n of [256, 512]) {
-  const names = ['height', 'dx', 'dz'].map((fld) => files.length && readdirSync(dir).find((f) => f.startsWith(`stream_N${n}_${fld}_0.01_`)));
+  const names = ['height', 'dx', 'dz'].map((fld) => readdirSync(dir).find((f) => f.startsWith(`stream_N${n}_${fld}_0.01_`)));
   if (!names.every(Boolean)) continue;
   const perField = names.map((f) => readFrames(join(dir, f)));
   const ticks = perField[0].map((_, k) => joinFrames(perField.map((fr) => fr[k])));

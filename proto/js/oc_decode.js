@@ -343,8 +343,9 @@ export class DecoderState {
   reset() { this.tiles.clear(); }
 }
 const tileKey = (h, t) => `${t.field}/${t.lod}/${t.tileX}/${t.tileZ}/${h.n}/${h.tileSize}`;
-// Coefficients a tile of each depth may use (bit k = coefficient k: d1, d2, d3, L(d1), L(q1)).
-const COEF_MASK = [0, 0b10000, 0b11001, 0b11011, 0b11111];
+// Coefficients a tile of each depth may use (bit k = coefficient k: d1, d2, d3, L(d1), L(d2), L(d3), L(q1)).
+const COEF_MASK = [0, 0x40, 0x49, 0x5b, 0x7f];
+const TEMPORAL_COEFS = 7;
 
 // The 40-byte prefix of a codec 3 payload, validated, and its references looked up (in this order).
 function readTemporalPrefix(h, t, bytes, start, state) {
@@ -354,9 +355,10 @@ function readTemporalPrefix(h, t, bytes, start, state) {
   const depth = bytes[start], packing = bytes[start + 1], escWidth = bytes[start + 2];
   const escCount = dv.getUint32(4, true), pairEsc = dv.getUint32(8, true);
   const refSeq = dv.getBigUint64(16, true);
-  const coef = [0, 1, 2, 3, 4].map((k) => dv.getInt16(24 + 2 * k, true));
+  const coef = [];
+  for (let k = 0; k < TEMPORAL_COEFS; k++) coef.push(dv.getInt16(24 + 2 * k, true));
   let zero = bytes[start + 3] | dv.getUint32(12, true);
-  for (let k = 34; k < TEMPORAL_PREFIX; k++) zero |= bytes[start + k];
+  for (let k = 24 + 2 * TEMPORAL_COEFS; k < TEMPORAL_PREFIX; k++) zero |= bytes[start + k];
   if (depth < 1 || depth > MAX_DEPTH || packing > 1 || escWidth > 4 || zero) throw fail('corrupt', 'temporal prefix');
   coef.forEach((c, k) => { if (c && !(COEF_MASK[depth] & (1 << k))) throw fail('corrupt', `coefficient ${k} at depth ${depth}`); });
   if ((escCount === 0) !== (escWidth === 0)) throw fail('corrupt', 'esc_count/esc_width');
@@ -406,6 +408,22 @@ function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
   return zz;
 }
 
+// The 5-point Laplacian of a reference's codes, neighbours clamped to the tile, as exact float64
+// (|L| < 2^34); computed once per reference frame and kept with it.
+function laplacian(slot, w, h) {
+  if (slot.lap) return slot.lap;
+  const q = slot.codes, L = new Float64Array(w * h);
+  for (let j = 0; j < h; j++) {
+    const r = j * w, up = (j > 0 ? j - 1 : 0) * w, dn = (j + 1 < h ? j + 1 : h - 1) * w;
+    for (let i = 0; i < w; i++) {
+      const il = i > 0 ? i - 1 : 0, ir = i + 1 < w ? i + 1 : w - 1;
+      L[r + i] = q[r + il] + q[r + ir] + q[up + i] + q[dn + i] - 4 * q[r + i];
+    }
+  }
+  slot.lap = L;
+  return L;
+}
+
 // Predictions from the references (no sample of this frame is needed), plus the residuals.
 // Every sum is an exact integer below 2^53 in float64; `| 0` wraps the code to int32 as C does.
 function reconstructTemporal(t, packed, l) {
@@ -415,24 +433,20 @@ function reconstructTemporal(t, packed, l) {
   else if (l.escCount === 0) zz = packed;
   else { zz = new Int32Array(count); unpackEscapes(zz, packed, count, l.escCount, l.escWidth); }
   const q = new Int32Array(count), out = new Float32Array(count);
-  const [c0, c1, c2, c3, c4] = l.coef, depth = l.depth;
-  const q1 = l.refs[0].codes, q2 = depth >= 2 ? l.refs[1].codes : q1;
-  const q3 = depth >= 3 ? l.refs[2].codes : q1, q4 = depth >= 4 ? l.refs[3].codes : q1;
+  const [c0, c1, c2, c3, c4, c5, c6] = l.coef, depth = l.depth;
+  // Missing references (depth < 4) stand in as q1: their coefficients are 0.
+  const ref = (k) => l.refs[k < depth ? k : 0];
+  const q1 = ref(0).codes, q2 = ref(1).codes, q3 = ref(2).codes, q4 = ref(3).codes;
+  const L1 = laplacian(ref(0), w, h), L2 = laplacian(ref(1), w, h), L3 = laplacian(ref(2), w, h);
+  const L4 = laplacian(ref(3), w, h);
   const off = t.offset, sc = t.scale;
-  for (let j = 0; j < h; j++) {
-    const r = j * w, up = (j > 0 ? j - 1 : 0) * w, dn = (j + 1 < h ? j + 1 : h - 1) * w;
-    for (let i = 0; i < w; i++) {
-      const k = r + i, il = r + (i > 0 ? i - 1 : 0), ir = r + (i + 1 < w ? i + 1 : w - 1);
-      const lq1 = q1[il] + q1[ir] + q1[up + i] + q1[dn + i] - 4 * q1[k];
-      let s = c4 * lq1;
-      if (depth >= 2) s += c0 * (q1[k] - q2[k]) + c3 * (lq1 - (q2[il] + q2[ir] + q2[up + i] + q2[dn + i] - 4 * q2[k]));
-      if (depth >= 3) s += c1 * (q2[k] - q3[k]);
-      if (depth >= 4) s += c2 * (q3[k] - q4[k]);
-      const z = zz[k];
-      const v = (q1[k] + Math.floor((s + 2048) / 4096) + ((z >>> 1) ^ -(z & 1))) | 0;
-      q[k] = v;
-      out[k] = off + v * sc;
-    }
+  for (let k = 0; k < count; k++) {
+    const a = q1[k], b = q2[k], c = q3[k], l1 = L1[k], l2 = L2[k], l3 = L3[k];
+    const s = c0 * (a - b) + c1 * (b - c) + c2 * (c - q4[k]) + c3 * (l1 - l2) + c4 * (l2 - l3) + c5 * (l3 - L4[k]) + c6 * l1;
+    const z = zz[k];
+    const v = (a + Math.floor((s + 2048) / 4096) + ((z >>> 1) ^ -(z & 1))) | 0;
+    q[k] = v;
+    out[k] = off + v * sc;
   }
   return { samples: out, codes: q };
 }
