@@ -13,8 +13,8 @@ Prints one JSON line per field and bound: median bits/sample over the frames mea
     /usr/bin/python3 proto/tools/temporal_predictors.py FILE N FRAMES [STRIDE]
 
 Candidates: T1 = q1; T2 = 2 q1 - q2; T3 = 3 q1 - 3 q2 + q3; D3/D4/D5 = q1 + LS over the past
-differences d1..d(D-1) (D reference frames); +lap = also the Laplacians L(d1), L(q1) (the
-codec's choice is D4+lap); suffix P = pair packing (two samples per byte when both zigzag
+differences d1..d(D-1) (D reference frames); +lap = also the Laplacians L(d1), L(q1);
++lapall = L(d1), L(d2), L(d3), L(q1) (the codec's choice: D4+lapall P); suffix P = pair packing (two samples per byte when both zigzag
 values are below 15), else one byte per sample.
 """
 import json
@@ -91,6 +91,8 @@ def main():
                     cand[f"D{depth}"] = ls_residual(d[0], d[1:depth], n)
                 for depth in (3, 4, 5):
                     cand[f"D{depth}+lap"] = ls_residual(d[0], d[1:depth] + [lap(d[1]), lap(q[t - 1])], n)
+                # the codec's choice: every difference and its Laplacian, and L(q1)
+                cand["D4+lapall"] = ls_residual(d[0], d[1:4] + [lap(x) for x in d[1:4]] + [lap(q[t - 1])], n)
                 for k, r in cand.items():
                     acc.setdefault(k, []).append(bits(r, n, False))
                     if k.startswith("D"):
