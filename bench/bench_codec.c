@@ -296,13 +296,14 @@ static int dump_fields(int n, int frames, const char *path)
 /* ---- temporal streams (codec 3): 10 s at 30 Hz of the real simulation ----
  * One oc_stream per field and bound, every tile of every tick: the shared
  * frame a receiver that keeps up gets (keyframes and headers included).
- * Decoded by one decoder per stream; max_err against the simulation's floats. */
+ * Decoded by one decoder per stream; max_err against the simulation's floats.
+ * intra_bits / intra_enc_MBs: codec 1 on the same fresh fields in the same run. */
 #define STREAM_TICKS 300
 struct stream_run {
     struct oc_stream *st;
     struct oc_decoder *dec;
     struct oc_buf buf;
-    double bytes, max_err, t_enc, t_dec;
+    double bytes, max_err, t_enc, t_dec, t_intra, intra_bytes;
     float *dec_field;
     FILE *dump;
 };
@@ -324,7 +325,8 @@ static void bench_streams(int n, int interval)
     struct ocean *o = ocean_create(&prm, &opt, err, sizeof err);
     if (!o) { fprintf(stderr, "bench_codec: %s\n", err); return; }
     int tile = tile_size < n ? tile_size : n, grid = n / tile;
-    struct oc_encoder *e = oc_encoder_new();
+    struct oc_encoder *e = oc_encoder_new(), *e_intra = oc_encoder_new();
+    struct oc_buf intra = { 0 };
     struct stream_run run[OC_FIELD_COUNT][2];
     memset(run, 0, sizeof run);
     for (int f = 0; f < OC_FIELD_COUNT; f++)
@@ -366,6 +368,15 @@ static void bench_streams(int n, int interval)
                     }
                 r->t_enc += now() - t0;
                 r->bytes += (double)r->buf.len;
+                /* The intra codec on the same fresh field, for a same-conditions speed ratio. */
+                t0 = now();
+                for (int tz = 0; tz < grid; tz++)
+                    for (int tx = 0; tx < grid; tx++) {
+                        intra.len = 0;
+                        if (oc_encode_tile(e_intra, field, n, tile, tx, tz, 0, (enum oc_field)f, bounds[b], &intra)) abort();
+                        r->intra_bytes += (double)intra.len;
+                    }
+                r->t_intra += now() - t0;
                 float *ctx[1] = { r->dec_field };
                 struct oc_frame_header out;
                 t0 = now();
@@ -386,9 +397,12 @@ static void bench_streams(int n, int interval)
         for (int b = 0; b < 2; b++) {
             struct stream_run *r = &run[f][b];
             printf("{\"bench\":\"codec_stream\",\"N\":%d,\"field\":\"%s\",\"bound\":%g,\"tile\":%d,\"bits\":%.3f,"
-                   "\"max_err\":%.6g,\"keyframe_interval\":%d,\"ticks\":%d,\"enc_MBs\":%.0f,\"dec_MBs\":%.0f}\n",
+                   "\"max_err\":%.6g,\"keyframe_interval\":%d,\"ticks\":%d,\"enc_MBs\":%.0f,\"dec_MBs\":%.0f,"
+                   "\"intra_bits\":%.3f,\"intra_enc_MBs\":%.0f}\n",
                    n, oc_field_name((enum oc_field)f), bounds[b], tile, r->bytes * 8 / ((double)n * n * STREAM_TICKS),
-                   r->max_err, interval, STREAM_TICKS, mb / r->t_enc, mb / r->t_dec);
+                   r->max_err, interval, STREAM_TICKS, mb / r->t_enc, mb / r->t_dec,
+                   (r->intra_bytes + (double)OC_FRAME_HEADER_SIZE * STREAM_TICKS) * 8 / ((double)n * n * STREAM_TICKS),
+                   mb / r->t_intra);
             oc_stream_free(r->st);
             oc_decoder_free(r->dec);
             oc_buf_free(&r->buf);
@@ -397,6 +411,8 @@ static void bench_streams(int n, int interval)
         }
     fflush(stdout);
     oc_encoder_free(e);
+    oc_encoder_free(e_intra);
+    oc_buf_free(&intra);
     ocean_free(o);
 }
 #endif

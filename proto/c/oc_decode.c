@@ -36,7 +36,6 @@ struct oc_decoder {
     int32_t *q;
     uint32_t *zz, *zz2, *pred;
     uint8_t *packed;
-    double *feat;
     /* references, an open-addressing table keyed by tile identity */
     struct hist_entry *tab;
     size_t tab_cap, tab_used, hist_bytes, hist_limit;
@@ -49,7 +48,7 @@ struct oc_decoder *oc_decoder_new(void)
     struct oc_decoder *d = calloc(1, sizeof *d);
     if (!d) return NULL;
     d->hist_limit = DEFAULT_HISTORY_LIMIT;
-    if (!(d->ent = oc_entropy_new()) || !(d->feat = malloc(sizeof(double) * 1))) {
+    if (!(d->ent = oc_entropy_new())) {
         oc_entropy_free(d->ent);
         free(d);
         return NULL;
@@ -78,7 +77,7 @@ void oc_decoder_free(struct oc_decoder *d)
     if (!d) return;
     oc_decoder_reset(d);
     oc_entropy_free(d->ent);
-    free(d->samples); free(d->q); free(d->zz); free(d->zz2); free(d->pred); free(d->packed); free(d->feat);
+    free(d->samples); free(d->q); free(d->zz); free(d->zz2); free(d->pred); free(d->packed);
     free(d->pend);
     free(d);
 }
@@ -280,7 +279,7 @@ static int decode_temporal(struct oc_decoder *d, const struct oc_frame_header *f
     const int w = th->width, h = th->height;
     uint32_t *q = (uint32_t *)d->q;
     for (int j = 0; j < h; j++) {
-        oc_temporal_predict_row(refs, depth, w, h, j, coef, d->feat, d->pred);
+        oc_temporal_predict_row(refs, depth, w, h, j, coef, d->pred);
         const uint32_t *zz = d->zz + (size_t)j * w;
         uint32_t *row = q + (size_t)j * w;
         for (int i = 0; i < w; i++) row[i] = d->pred[i] + ((zz[i] >> 1) ^ (0u - (zz[i] & 1)));

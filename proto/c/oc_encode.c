@@ -15,7 +15,6 @@ struct oc_encoder *oc_encoder_new(void)
     e->ent = oc_entropy_new();
     if (!e->ent) { free(e); return NULL; }
     e->codec = OC_CODEC_QUANT_LORENZO;
-    if (!(e->feat = malloc(sizeof(double) * OC_FIT_SCRATCH * OC_MAX_N))) { oc_entropy_free(e->ent); free(e); return NULL; }
     return e;
 }
 
@@ -23,7 +22,7 @@ void oc_encoder_free(struct oc_encoder *e)
 {
     if (!e) return;
     oc_entropy_free(e->ent);
-    free(e->vals); free(e->q); free(e->zz); free(e->esc); free(e->packed); free(e->feat);
+    free(e->vals); free(e->q); free(e->zz); free(e->esc); free(e->packed);
     free(e);
 }
 

@@ -71,7 +71,6 @@ struct oc_encoder {
     uint8_t *packed;   /* streams A + B, input of the entropy coder */
     int8_t forced[OC_PRED_COEFS];
     int force;         /* test hook: use forced[] instead of fitting */
-    double *feat;      /* temporal predictor features of one row (OC_FIT_SCRATCH * OC_MAX_N) */
 };
 
 int oc_enc_reserve(struct oc_encoder *e, size_t count);
@@ -94,17 +93,21 @@ int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const i
 #define OC_TEMPORAL_PREFIX 40
 #define OC_TEMPORAL_MAX_DEPTH 4
 #define OC_TEMPORAL_COEFS 7
-#define OC_PAIR_LIMIT 15
-#define OC_FIT_SCRATCH (OC_TEMPORAL_COEFS + OC_TEMPORAL_MAX_DEPTH)   /* rows of w doubles oc_temporal_fit needs */        /* a pair byte holds two zigzag values below 15: 15*z1 + z2 */
+#define OC_PAIR_LIMIT 15        /* a pair byte holds two zigzag values below 15: 15*z1 + z2 */
+#define OC_TEMPORAL_CODE_MAX (1 << 27)   /* encoder chains keep |codes| below this (int32 Laplacians) */
 /* Coefficients a tile of this depth may use (others must be 0): bit k = coef k. */
 unsigned oc_temporal_coef_mask(int depth);
 /* Predictions (mod 2^32) of row j from the references refs[0..depth) (the codes of
- * frames ref_seq, ref_seq-1, ...; w*h each). f: unused (may be NULL). */
+ * frames ref_seq, ref_seq-1, ...; w*h each), for any int32 codes (the decoder). */
 void oc_temporal_predict_row(const int32_t *const *refs, int depth, int w, int h, int j,
-                             const int16_t coef[OC_TEMPORAL_COEFS], double *f, uint32_t *pred);
-/* Least-squares coefficients for codes q (encoder). f = scratch of OC_FIT_SCRATCH*w doubles. */
-void oc_temporal_fit(const int32_t *const *refs, int depth, const int32_t *q, int w, int h,
-                     int16_t coef[OC_TEMPORAL_COEFS], double *f);
+                             const int16_t coef[OC_TEMPORAL_COEFS], uint32_t *pred);
+/* Encoder side: Laplacians of a reference (|q| < OC_TEMPORAL_CODE_MAX), predictions of row j
+ * from the references and their Laplacians, and the least-squares coefficients for codes q. */
+void oc_temporal_laplacian(const int32_t *q, int w, int h, int32_t *L);
+void oc_temporal_predict_row_cached(const int32_t *const *refs, const int32_t *const *laps, int depth, int w, int j,
+                                    const int16_t coef[OC_TEMPORAL_COEFS], uint32_t *pred);
+void oc_temporal_fit(const int32_t *const *refs, const int32_t *const *laps, int depth, const int32_t *q, int w,
+                     int h, int16_t coef[OC_TEMPORAL_COEFS]);
 /* Pair packing (packing 1): out gets (count+1)/2 pair bytes, then the escaped pairs'
  * values packed as oc_pack_escapes does. out must hold 6*count+8 bytes; esc_scratch 2*count values.
  * Returns the plain length; sets the counts. */

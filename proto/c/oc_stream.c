@@ -24,6 +24,7 @@ struct stream_tile {
     int hist;                 /* consecutive ticks (up to the last encoded) with codes on the grid */
     double offset, scale;     /* the chain's grid */
     int32_t *ring[RING];      /* codes; ring[head] = the last encoded tick */
+    int32_t *lap[RING];       /* their Laplacians (codes stay below OC_TEMPORAL_CODE_MAX) */
     int depth;                /* this tick: references used by the shared tile, 0 = keyframe or raw */
     int key_ready;            /* this tick's keyframe is in key (or is the shared tile) */
     struct oc_buf shared, key;
@@ -63,7 +64,7 @@ void oc_stream_free(struct oc_stream *s)
 {
     if (!s) return;
     for (int t = 0; t < s->grid * s->grid; t++) {
-        for (int r = 0; r < RING; r++) free(s->tiles[t].ring[r]);
+        for (int r = 0; r < RING; r++) { free(s->tiles[t].ring[r]); free(s->tiles[t].lap[r]); }
         oc_buf_free(&s->tiles[t].shared);
         oc_buf_free(&s->tiles[t].key);
     }
@@ -101,17 +102,18 @@ static double entropy_bits(const uint32_t hist[256], size_t total)
 }
 
 static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q,
-                           const int32_t *const *refs, int depth, uint64_t ref_seq, struct oc_buf *out)
+                           const int32_t *const *refs, const int32_t *const *laps, int depth, uint64_t ref_seq,
+                           struct oc_buf *out)
 {
     const int w = th->width, h = th->height;
     const size_t count = (size_t)w * h, npairs = (count + 1) / 2;
     int rc = oc_enc_reserve(e, count);
     if (rc) return rc;
     int16_t coef[OC_TEMPORAL_COEFS];
-    oc_temporal_fit(refs, depth, q, w, h, coef, e->feat);
+    oc_temporal_fit(refs, laps, depth, q, w, h, coef);
     uint32_t pred[OC_MAX_N];   /* one row of predictions */
     for (int j = 0; j < h; j++) {
-        oc_temporal_predict_row(refs, depth, w, h, j, coef, e->feat, pred);
+        oc_temporal_predict_row_cached(refs, laps, depth, w, j, coef, pred);
         const int32_t *qr = q + (size_t)j * w;
         uint32_t *z = e->zz + (size_t)j * w;
         for (int i = 0; i < w; i++) {
@@ -180,23 +182,30 @@ static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *f
     float vmin, vmax;
     int rc = oc_enc_gather(e, field_data, s->n, s->tile_size, tx, tz, s->lod, &vmin, &vmax);
     if (rc) return rc;
-    for (int r = 0; r < RING; r++)
+    for (int r = 0; r < RING; r++) {
         if (!t->ring[r] && !(t->ring[r] = malloc(count * sizeof(int32_t)))) return OC_E_NOMEM;
+        if (!t->lap[r] && !(t->lap[r] = malloc(count * sizeof(int32_t)))) return OC_E_NOMEM;
+    }
     struct oc_tile_header th = {
         .field = (uint8_t)s->field, .lod = (uint8_t)s->lod, .tile_x = (uint16_t)tx, .tile_z = (uint16_t)tz,
         .width = (uint16_t)s->side, .height = (uint16_t)s->side, .bound = s->bound,
     };
     int32_t *cur = t->ring[s->head];
     if (s->bound > 0 && consecutive && !periodic && t->hist > 0
-        && oc_enc_quantise_on(e, count, vmin, vmax, s->bound, t->offset, t->scale)) {
+        && oc_enc_quantise_on(e, count, vmin, vmax, s->bound, t->offset, t->scale)
+        && oc_max_abs(e->q, count) < OC_TEMPORAL_CODE_MAX) {
         /* Predicted from the previous ticks of the chain. */
-        const int32_t *refs[OC_TEMPORAL_MAX_DEPTH];
+        const int32_t *refs[OC_TEMPORAL_MAX_DEPTH], *laps[OC_TEMPORAL_MAX_DEPTH];
         int depth = t->hist < OC_TEMPORAL_MAX_DEPTH ? t->hist : OC_TEMPORAL_MAX_DEPTH;
-        for (int i = 0; i < depth; i++) refs[i] = t->ring[(s->head + RING - 1 - i) % RING];
+        for (int i = 0; i < depth; i++) {
+            refs[i] = t->ring[(s->head + RING - 1 - i) % RING];
+            laps[i] = t->lap[(s->head + RING - 1 - i) % RING];
+        }
         memcpy(cur, e->q, count * sizeof(int32_t));
+        oc_temporal_laplacian(cur, s->side, s->side, t->lap[s->head]);
         th.offset = t->offset;
         th.scale = t->scale;
-        if ((rc = append_temporal(e, &th, cur, refs, depth, s->seq - 1, &t->shared))) return rc;
+        if ((rc = append_temporal(e, &th, cur, refs, laps, depth, s->seq - 1, &t->shared))) return rc;
         t->depth = depth;
         t->hist++;
         s->stats.predicted_tiles++;
@@ -205,11 +214,13 @@ static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *f
     /* Keyframe on a new grid (or raw when the tile cannot be quantised). */
     s->stats.key_tiles++;
     t->key_ready = 1;
-    if (s->bound == 0 || !oc_enc_quantise_new(e, count, vmin, vmax, s->bound, GRID_HEADROOM, &th.offset, &th.scale)) {
+    if (s->bound == 0 || !oc_enc_quantise_new(e, count, vmin, vmax, s->bound, GRID_HEADROOM, &th.offset, &th.scale)
+        || oc_max_abs(e->q, count) >= OC_TEMPORAL_CODE_MAX) {
         t->hist = 0;
         return oc_enc_append_raw(&t->shared, &th, e->vals, count);
     }
     memcpy(cur, e->q, count * sizeof(int32_t));
+    oc_temporal_laplacian(cur, s->side, s->side, t->lap[s->head]);
     t->offset = th.offset;
     t->scale = th.scale;
     t->hist = 1;

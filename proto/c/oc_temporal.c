@@ -29,42 +29,19 @@ unsigned oc_temporal_coef_mask(int depth)
     }
 }
 
-/* 5-point Laplacian of row j of a (w x h), indices clamped to the tile, exact in double. */
-static void lap_row(const int32_t *a, int w, int h, int j, double *out)
+/* The encoder keeps each reference's Laplacian (int32: its codes are below 2^27 in
+ * magnitude, so |L| < 2^30) and predicts from those; the decoder computes them on
+ * the fly in double. Both are exact integer arithmetic: the same predictions. */
+void oc_temporal_laplacian(const int32_t *q, int w, int h, int32_t *L)
 {
-    const int32_t *row = a + (size_t)j * w;
-    const int32_t *up = a + (size_t)(j > 0 ? j - 1 : 0) * w;
-    const int32_t *dn = a + (size_t)(j + 1 < h ? j + 1 : h - 1) * w;
-    if (w == 1) { out[0] = (double)up[0] + dn[0] - 2.0 * row[0]; return; }
-    out[0] = (double)row[1] + up[0] + dn[0] - 3.0 * row[0];            /* W clamps to the sample itself */
-    for (int i = 1; i < w - 1; i++)
-        out[i] = (double)row[i - 1] + row[i + 1] + up[i] + dn[i] - 4.0 * row[i];
-    out[w - 1] = (double)row[w - 2] + up[w - 1] + dn[w - 1] - 3.0 * row[w - 1];
-}
-
-/* The seven features of row j into f[k*w + i] (for the fit), k = d1, d2, d3, L(d1), L(d2),
- * L(d3), L(q1); those the depth does not allow are 0. f holds OC_FIT_SCRATCH rows of w:
- * rows 7..10 keep L(q1)..L(q4). */
-static void features_row(const int32_t *const *refs, int depth, int w, int h, int j, double *f)
-{
-    const size_t o = (size_t)j * w;
-    double *lq[OC_TEMPORAL_MAX_DEPTH];
-    for (int k = 0; k < depth; k++) {
-        lq[k] = f + (size_t)(7 + k) * w;
-        lap_row(refs[k], w, h, j, lq[k]);
-    }
-    memcpy(f + 6 * (size_t)w, lq[0], sizeof(double) * w);
-    for (int k = 1; k <= 3; k++) {
-        double *d = f + (size_t)(k - 1) * w, *ld = f + (size_t)(k + 2) * w;
-        if (depth > k) {
-            for (int i = 0; i < w; i++) {
-                d[i] = (double)refs[k - 1][o + i] - refs[k][o + i];
-                ld[i] = lq[k - 1][i] - lq[k][i];
-            }
-        } else {
-            memset(d, 0, sizeof(double) * w);
-            memset(ld, 0, sizeof(double) * w);
-        }
+    for (int j = 0; j < h; j++) {
+        const int32_t *row = q + (size_t)j * w, *up = q + (size_t)(j > 0 ? j - 1 : 0) * w,
+                      *dn = q + (size_t)(j + 1 < h ? j + 1 : h - 1) * w;
+        int32_t *o = L + (size_t)j * w;
+        if (w == 1) { o[0] = up[0] + dn[0] - 2 * row[0]; continue; }
+        o[0] = row[1] + up[0] + dn[0] - 3 * row[0];
+        for (int i = 1; i < w - 1; i++) o[i] = row[i - 1] + row[i + 1] + up[i] + dn[i] - 4 * row[i];
+        o[w - 1] = row[w - 2] + up[w - 1] + dn[w - 1] - 3 * row[w - 1];
     }
 }
 
@@ -123,9 +100,8 @@ static uint32_t predict_at(const struct ref_rows *rr, int i, int il, int ir, con
 }
 
 void oc_temporal_predict_row(const int32_t *const *refs, int depth, int w, int h, int j,
-                             const int16_t coef[OC_TEMPORAL_COEFS], double *f, uint32_t *pred)
+                             const int16_t coef[OC_TEMPORAL_COEFS], uint32_t *pred)
 {
-    (void)f;
     const size_t r = (size_t)j * w, u = (size_t)(j > 0 ? j - 1 : 0) * w, dn = (size_t)(j + 1 < h ? j + 1 : h - 1) * w;
     struct ref_rows rr;
     for (int k = 0; k < OC_TEMPORAL_MAX_DEPTH; k++) {
@@ -142,11 +118,44 @@ void oc_temporal_predict_row(const int32_t *const *refs, int depth, int w, int h
     pred[w - 1] = predict_at(&rr, w - 1, w - 2, w - 1, cf);
 }
 
-/* Least squares over every 4th row (the fit only steers the encoder; the
- * coefficients travel in the payload). Unused features get coefficient 0. */
-#define FIT_ROW_STEP 8
-void oc_temporal_fit(const int32_t *const *refs, int depth, const int32_t *q, int w, int h,
-                     int16_t coef[OC_TEMPORAL_COEFS], double *f)
+/* The encoder's predictions of row j from the references and their Laplacians
+ * (oc_temporal_laplacian): the same values as oc_temporal_predict_row. With codes
+ * below 2^27 every feature fits int32 and S is an exact int64 (|S| < 2^50); the
+ * floor division by 4096 is a logical shift of S + 2048 + 2^50 (no 64-bit arithmetic
+ * shift in AVX2), and P mod 2^32 is the low half of the int64 sum. */
+OC_VECTOR_CLONES
+static void predict_cached(const int32_t *restrict a, const int32_t *restrict b, const int32_t *restrict c,
+                           const int32_t *restrict d, const int32_t *restrict la, const int32_t *restrict lb,
+                           const int32_t *restrict lc, const int32_t *restrict ld, int w, const int16_t *cf,
+                           uint32_t *restrict pred)
+{
+    const int64_t c0 = cf[0], c1 = cf[1], c2 = cf[2], c3 = cf[3], c4 = cf[4], c5 = cf[5], c6 = cf[6];
+    for (int i = 0; i < w; i++) {
+        int64_t s = c0 * (int64_t)(a[i] - b[i]) + c1 * (int64_t)(b[i] - c[i]) + c2 * (int64_t)(c[i] - d[i])
+                    + c3 * (int64_t)(la[i] - lb[i]) + c4 * (int64_t)(lb[i] - lc[i]) + c5 * (int64_t)(lc[i] - ld[i])
+                    + c6 * (int64_t)la[i];
+        uint64_t t = ((uint64_t)(s + 2048) + (1ull << 50)) >> 12;   /* floor((s + 2048) / 4096) + 2^38 */
+        pred[i] = (uint32_t)a[i] + (uint32_t)t;                      /* 2^38 vanishes mod 2^32 */
+    }
+}
+
+void oc_temporal_predict_row_cached(const int32_t *const *refs, const int32_t *const *laps, int depth, int w, int j,
+                                    const int16_t coef[OC_TEMPORAL_COEFS], uint32_t *pred)
+{
+    const size_t o = (size_t)j * w;
+    const int32_t *q[OC_TEMPORAL_MAX_DEPTH], *l[OC_TEMPORAL_MAX_DEPTH];
+    for (int k = 0; k < OC_TEMPORAL_MAX_DEPTH; k++) {
+        q[k] = (k < depth ? refs[k] : refs[0]) + o;        /* coefficient 0 for the missing ones */
+        l[k] = (k < depth ? laps[k] : laps[0]) + o;
+    }
+    predict_cached(q[0], q[1], q[2], q[3], l[0], l[1], l[2], l[3], w, coef, pred);
+}
+
+/* Least squares over every FIT_ROW_STEP-th row (the fit only steers the encoder; the
+ * coefficients travel in the payload). Features the depth does not allow get 0. */
+#define FIT_ROW_STEP 16
+void oc_temporal_fit(const int32_t *const *refs, const int32_t *const *laps, int depth, const int32_t *q, int w,
+                     int h, int16_t coef[OC_TEMPORAL_COEFS])
 {
     enum { K = OC_TEMPORAL_COEFS };
     memset(coef, 0, sizeof(int16_t) * K);
@@ -155,12 +164,23 @@ void oc_temporal_fit(const int32_t *const *refs, int depth, const int32_t *q, in
     for (int k = 0; k < K; k++) if (mask & (1u << k)) idx[m++] = k;
     double A[K][K + 1];
     memset(A, 0, sizeof A);
-    for (int j = 0; j < h; j += FIT_ROW_STEP) {
-        features_row(refs, depth, w, h, j, f);
-        const int32_t *qr = q + (size_t)j * w, *q1 = refs[0] + (size_t)j * w;
+    const int32_t *qr[OC_TEMPORAL_MAX_DEPTH], *lr[OC_TEMPORAL_MAX_DEPTH];
+    for (int k = 0; k < OC_TEMPORAL_MAX_DEPTH; k++) {
+        qr[k] = k < depth ? refs[k] : refs[0];                /* missing ones: features 0 */
+        lr[k] = k < depth ? laps[k] : laps[0];
+    }
+    for (int j = FIT_ROW_STEP / 2 < h ? FIT_ROW_STEP / 2 : 0; j < h; j += FIT_ROW_STEP) {
+        const size_t o = (size_t)j * w;
         for (int i = 0; i < w; i++) {
-            double x[K], y = (double)qr[i] - q1[i];
-            for (int a = 0; a < m; a++) x[a] = f[(size_t)idx[a] * w + i];
+            double qq[OC_TEMPORAL_MAX_DEPTH], ll[OC_TEMPORAL_MAX_DEPTH], f[K], x[K];
+            for (int k = 0; k < OC_TEMPORAL_MAX_DEPTH; k++) {
+                qq[k] = qr[k][o + i];
+                ll[k] = lr[k][o + i];
+            }
+            f[0] = qq[0] - qq[1]; f[1] = qq[1] - qq[2]; f[2] = qq[2] - qq[3];
+            f[3] = ll[0] - ll[1]; f[4] = ll[1] - ll[2]; f[5] = ll[2] - ll[3]; f[6] = ll[0];
+            double y = (double)q[o + i] - qq[0];
+            for (int a = 0; a < m; a++) x[a] = f[idx[a]];
             for (int a = 0; a < m; a++) {
                 for (int b = a; b < m; b++) A[a][b] += x[a] * x[b];
                 A[a][m] += x[a] * y;
