@@ -596,6 +596,53 @@ static void test_stream_60s(void)
     oc_encoder_free(e);
 }
 
+/* Tiny tiles (1x1, 2x2, 3 rows of odd width do not exist: tiles are square powers of two)
+ * through a stream: the clamped Laplacian and odd pair counts at their edges. */
+static void test_stream_tiny_tiles(void)
+{
+    enum { N = 16 };
+    static float f[N * N];
+    struct oc_encoder *e = oc_encoder_new();
+    struct oc_buf buf = { 0 };
+    const int cases[3][2] = { { 2, 1 }, { 4, 1 }, { 1, 0 } };   /* tile_size, lod: sides 1, 2, 1 */
+    for (int c = 0; c < 3; c++) {
+        int ts = cases[c][0], lod = cases[c][1], grid = N / ts, predicted = 0;
+        struct oc_stream *st = oc_stream_new(N, ts, lod, OC_FIELD_DZ, 0.001f);
+        struct oc_decoder *d = oc_decoder_new();
+        double worst = 0;
+        for (int k = 0; k < 12; k++) {
+            sea(f, N, k / 30.0, 1.0);
+            CHECK(oc_stream_encode(st, e, f, 40 + (uint64_t)k) == OC_OK, "tiny tiles: encode");
+            struct oc_frame_header fh = { .seq = 40 + (uint64_t)k, .n = N, .tile_size = (uint16_t)ts, .patch_size = 16,
+                                          .tile_count = (uint16_t)(grid * grid) };
+            buf.len = 0;
+            oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE);
+            oc_frame_header_write(buf.data, &fh);
+            buf.len = OC_FRAME_HEADER_SIZE;
+            for (int tz = 0; tz < grid; tz++)
+                for (int tx = 0; tx < grid; tx++) {
+                    const uint8_t *p;
+                    size_t len;
+                    oc_stream_tile(st, tx, tz, &p, &len);
+                    predicted += p[2] == OC_CODEC_TEMPORAL;
+                    oc_buf_reserve(&buf, len);
+                    memcpy(buf.data + buf.len, p, len);
+                    buf.len += len;
+                }
+            struct bound_ctx bc = { { f, f }, N, { 0.001f, 0.001f }, { 0, 0 }, 0, 0 };
+            struct oc_frame_header out;
+            int rc = oc_decode_frame(d, buf.data, buf.len, &out, bound_tile, &bc);
+            CHECK(rc == OC_OK, "tiny tiles ts %d lod %d tick %d: %s", ts, lod, k, oc_strerror(rc));
+            worst = fmax(worst, fmax(bc.maxerr[0], bc.maxerr[1]));
+        }
+        CHECK(worst <= 0.001 && predicted > 0, "tiny tiles ts %d lod %d: max err %g, %d predicted", ts, lod, worst, predicted);
+        oc_stream_free(st);
+        oc_decoder_free(d);
+    }
+    oc_buf_free(&buf);
+    oc_encoder_free(e);
+}
+
 int main(int argc, char **argv)
 {
     if (argc != 2) { fprintf(stderr, "usage: test_proto VECTOR_DIR\n"); return 2; }
@@ -605,6 +652,7 @@ int main(int argc, char **argv)
     test_fuzz();
     test_stream_vectors(argv[1]);
     test_stream_60s();
+    test_stream_tiny_tiles();
     printf("%d checks, %d failed\n", checks, failures);
     if (failures) { printf("test_proto: FAILED\n"); return 1; }
     printf("test_proto: OK\n");
