@@ -91,8 +91,7 @@ void oc_stream_reset(struct oc_stream *s)
     s->need = 0;
 }
 
-/* Residuals of q against the temporal prediction, the smaller packing (estimated
- * from the byte histograms), DEFLATE; appends tile header + codec 3 payload. */
+/* Order-0 entropy of a byte histogram, in bits: the packing choice's size estimate. */
 static double entropy_bits(const uint32_t hist[256], size_t total)
 {
     double bits = 0;
@@ -101,6 +100,8 @@ static double entropy_bits(const uint32_t hist[256], size_t total)
     return bits;
 }
 
+/* Residuals of q against the temporal prediction, the smaller packing (estimated
+ * from the byte histograms), DEFLATE; appends tile header + codec 3 payload. */
 static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q,
                            const int32_t *const *refs, const int32_t *const *laps, int depth, uint64_t ref_seq,
                            struct oc_buf *out)
