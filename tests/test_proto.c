@@ -585,6 +585,28 @@ static void test_stream_60s(void)
           rec[2].frames, rec[2].predicted);
     CHECK(rec[3].predicted > 0 && rec[3].keyframes > 0, "rejoining receiver: %d predicted, %d keyframes", rec[3].predicted, rec[3].keyframes);
     CHECK(ref_errors > 10, "the receiver that ignores the rule saw only %d reference errors", ref_errors);
+    /* A decoder that keeps no references (limit 0) decodes keyframes and reports every predicted frame. */
+    struct oc_decoder *d0 = oc_decoder_new();
+    oc_decoder_set_history_limit(d0, 0);
+    struct oc_stream *s1 = oc_stream_new(N, N, 0, OC_FIELD_HEIGHT, 0.01f);
+    for (int k = 0; k < 2; k++) {
+        sea(f[0], N, k / 30.0, 1.5);
+        oc_stream_encode(s1, e, f[0], 10 + (uint64_t)k);
+        struct oc_frame_header fh1 = { .seq = 10 + (uint64_t)k, .n = N, .tile_size = N, .patch_size = 64, .tile_count = 1 };
+        buf.len = 0;
+        oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE);
+        oc_frame_header_write(buf.data, &fh1);
+        buf.len = OC_FRAME_HEADER_SIZE;
+        oc_stream_tile(s1, 0, 0, &p, &plen);
+        oc_buf_reserve(&buf, plen);
+        memcpy(buf.data + buf.len, p, plen);
+        buf.len += plen;
+        struct oc_frame_header out0;
+        int rc0 = oc_decode_frame(d0, buf.data, buf.len, &out0, NULL, NULL);
+        CHECK(rc0 == (k ? OC_E_REFERENCE : OC_OK), "history limit 0, tick %d: %s", k, oc_strerror(rc0));
+    }
+    oc_stream_free(s1);
+    oc_decoder_free(d0);
     CHECK(s0.key_tiles > 2 * (uint64_t)(GRID * GRID) * 20, "grid overflow / periodic keyframes: %llu key tiles",
           (unsigned long long)s0.key_tiles);
     printf("stream 60 s: %d ticks, receivers %d/%d/%d/%d frames all within the bound (%d wrong, %d over), "

@@ -114,35 +114,36 @@ static uint64_t tile_key(const struct oc_frame_header *fh, const struct oc_tile_
 
 static struct hist_entry *find_entry(struct oc_decoder *d, uint64_t key, int create)
 {
-    if (!d->tab_cap) {
-        if (!create) return NULL;
-    } else {
-        size_t mask = d->tab_cap - 1;
-        for (size_t i = (size_t)(key * 0x9E3779B97F4A7C15ull >> 20) & mask;; i = (i + 1) & mask) {
-            if (d->tab[i].key == key) return &d->tab[i];
-            if (!d->tab[i].key) {
-                if (!create) return NULL;
-                d->tab[i].key = key;
-                d->tab_used++;
-                return &d->tab[i];
-            }
+    if (!d->tab_cap) return NULL;
+    size_t mask = d->tab_cap - 1;
+    for (size_t i = (size_t)(key * 0x9E3779B97F4A7C15ull >> 20) & mask;; i = (i + 1) & mask) {
+        if (d->tab[i].key == key) return &d->tab[i];
+        if (!d->tab[i].key) {
+            if (!create || (d->tab_used + 1) * 2 > d->tab_cap) return NULL;   /* full: not kept */
+            d->tab[i].key = key;
+            d->tab_used++;
+            return &d->tab[i];
         }
     }
-    return NULL;
 }
 
-/* Room for `more` new entries without growing during a frame (entry pointers stay valid). */
+/* Room for `more` new entries without growing during a frame (entry pointers stay
+ * valid). The table counts against the history limit; when it cannot grow, new
+ * tiles are simply not kept (their successors report OC_E_REFERENCE). */
 static int reserve_entries(struct oc_decoder *d, size_t more)
 {
     if ((d->tab_used + more) * 2 <= d->tab_cap) return OC_OK;
     size_t cap = d->tab_cap ? d->tab_cap : 64;
     while ((d->tab_used + more) * 2 > cap) cap *= 2;
+    size_t old_bytes = d->tab_cap * sizeof *d->tab;
+    if (d->hist_bytes - old_bytes + cap * sizeof *d->tab > d->hist_limit) return OC_OK;
     struct hist_entry *old = d->tab;
     size_t old_cap = d->tab_cap;
     d->tab = calloc(cap, sizeof *d->tab);
     if (!d->tab) { d->tab = old; return OC_E_NOMEM; }
     d->tab_cap = cap;
     d->tab_used = 0;
+    d->hist_bytes += cap * sizeof *d->tab - old_bytes;
     for (size_t i = 0; i < old_cap; i++)
         if (old[i].key) *find_entry(d, old[i].key, 1) = old[i];
     free(old);

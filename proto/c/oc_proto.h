@@ -137,8 +137,9 @@ int oc_decode_frame(struct oc_decoder *d, const uint8_t *data, size_t len,
  * history; a predicted tile whose references are missing fails with
  * OC_E_REFERENCE before any sample is produced. */
 void oc_decoder_reset(struct oc_decoder *d);   /* forget every reference */
-/* Cap on the codes kept as references, in bytes (default 256 MiB). Tiles that
- * do not fit are not kept (their successors then fail with OC_E_REFERENCE). */
+/* Cap on the memory kept for references (codes and their table), in bytes (default
+ * 256 MiB; 0 keeps nothing: an intra-only client). Tiles that do not fit are not
+ * kept (their successors then fail with OC_E_REFERENCE). */
 void oc_decoder_set_history_limit(struct oc_decoder *d, size_t bytes);
 
 /* ---- Temporal streams (encoder side of codec 3), PROTOCOL.md §5.9 ----
