@@ -384,11 +384,13 @@ function readTemporalPrefix(h, t, bytes, start, state) {
 }
 
 // Pair packing: one byte per two samples (15*z1 + z2 when both are below 15, 255 = escaped pair).
+let pairScratch = new Int32Array(4097);
 function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
   const npairs = (count + 1) >> 1, ny = 2 * pairEsc;
   const y = new Int32Array(ny);
   unpackEscapes(y, packed.subarray(npairs), ny, escCount, escWidth);
-  const zz = new Int32Array(count + 1);
+  if (pairScratch.length < count + 1) pairScratch = new Int32Array(count + 1);
+  const zz = pairScratch; // consumed by reconstructTemporal before the next tile (no await in between)
   let e = 0;
   for (let p = 0; p < npairs; p++) {
     const b = packed[p];
@@ -415,10 +417,10 @@ function laplacian(slot, w, h) {
   const q = slot.codes, L = new Float64Array(w * h);
   for (let j = 0; j < h; j++) {
     const r = j * w, up = (j > 0 ? j - 1 : 0) * w, dn = (j + 1 < h ? j + 1 : h - 1) * w;
-    for (let i = 0; i < w; i++) {
-      const il = i > 0 ? i - 1 : 0, ir = i + 1 < w ? i + 1 : w - 1;
-      L[r + i] = q[r + il] + q[r + ir] + q[up + i] + q[dn + i] - 4 * q[r + i];
-    }
+    if (w === 1) { L[r] = q[up] + q[dn] - 2 * q[r]; continue; }
+    L[r] = q[r + 1] + q[up] + q[dn] - 3 * q[r]; // the W neighbour clamps to the sample itself
+    for (let i = 1; i < w - 1; i++) L[r + i] = q[r + i - 1] + q[r + i + 1] + q[up + i] + q[dn + i] - 4 * q[r + i];
+    L[r + w - 1] = q[r + w - 2] + q[up + w - 1] + q[dn + w - 1] - 3 * q[r + w - 1];
   }
   slot.lap = L;
   return L;
@@ -444,7 +446,7 @@ function reconstructTemporal(t, packed, l) {
     const a = q1[k], b = q2[k], c = q3[k], l1 = L1[k], l2 = L2[k], l3 = L3[k];
     const s = c0 * (a - b) + c1 * (b - c) + c2 * (c - q4[k]) + c3 * (l1 - l2) + c4 * (l2 - l3) + c5 * (l3 - L4[k]) + c6 * l1;
     const z = zz[k];
-    const v = (a + Math.floor((s + 2048) / 4096) + ((z >>> 1) ^ -(z & 1))) | 0;
+    const v = (a + Math.floor((s + 2048) * (1 / 4096)) + ((z >>> 1) ^ -(z & 1))) | 0; // exact: a power of two
     q[k] = v;
     out[k] = off + v * sc;
   }
