@@ -436,6 +436,9 @@ function reconstructTemporal(t, packed, l) {
   else { zz = new Int32Array(count); unpackEscapes(zz, packed, count, l.escCount, l.escWidth); }
   const q = new Int32Array(count), out = new Float32Array(count);
   const [c0, c1, c2, c3, c4, c5, c6] = l.coef, depth = l.depth;
+  // S of §5.8 regrouped per reference: S = Σ a_k·q_k + Σ b_k·L(q_k). The same integer (every
+  // partial sum stays below 2^53, so float64 is exact), with fewer operations per sample.
+  const a1 = c0, a2 = c1 - c0, a3 = c2 - c1, a4 = -c2, b1 = c3 + c6, b2 = c4 - c3, b3 = c5 - c4, b4 = -c5;
   // Missing references (depth < 4) stand in as q1: their coefficients are 0.
   const ref = (k) => l.refs[k < depth ? k : 0];
   const q1 = ref(0).codes, q2 = ref(1).codes, q3 = ref(2).codes, q4 = ref(3).codes;
@@ -443,10 +446,10 @@ function reconstructTemporal(t, packed, l) {
   const L4 = laplacian(ref(3), w, h);
   const off = t.offset, sc = t.scale;
   for (let k = 0; k < count; k++) {
-    const a = q1[k], b = q2[k], c = q3[k], l1 = L1[k], l2 = L2[k], l3 = L3[k];
-    const s = c0 * (a - b) + c1 * (b - c) + c2 * (c - q4[k]) + c3 * (l1 - l2) + c4 * (l2 - l3) + c5 * (l3 - L4[k]) + c6 * l1;
+    const a = q1[k];
+    const s = a1 * a + a2 * q2[k] + a3 * q3[k] + a4 * q4[k] + b1 * L1[k] + b2 * L2[k] + b3 * L3[k] + b4 * L4[k];
     const z = zz[k];
-    const v = (a + Math.floor((s + 2048) * (1 / 4096)) + ((z >>> 1) ^ -(z & 1))) | 0; // exact: a power of two
+    const v = (a + Math.floor((s + 2048) * (1 / 4096)) + ((z >>> 1) ^ -(z & 1))) | 0; // 1/4096: exact
     q[k] = v;
     out[k] = off + v * sc;
   }
