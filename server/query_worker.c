@@ -369,6 +369,18 @@ static void *worker_main(void *arg)
             pthread_mutex_lock(&q->lock);
             continue;
         }
+        if (q->cmds && !q->probe_busy) { /* probe set changes while no tick probes: apply them now, so
+                                          * a client toggling its probes cannot grow the list */
+            struct probe_cmd *cmds = q->cmds;
+            q->cmds = NULL;
+            q->cmds_tail = &q->cmds;
+            q->probe_busy = true;
+            pthread_mutex_unlock(&q->lock);
+            apply_cmds(q, cmds);
+            pthread_mutex_lock(&q->lock);
+            q->probe_busy = false;
+            continue;
+        }
         if (q->jobs) {
             struct job *j = q->jobs;
             q->jobs = j->next;
@@ -553,6 +565,7 @@ static void send_cmd(struct query_service *q, uint64_t serial, struct probe_clie
     pthread_mutex_lock(&q->lock);
     *q->cmds_tail = c;
     q->cmds_tail = &c->next;
+    pthread_cond_signal(&q->cond);
     pthread_mutex_unlock(&q->lock);
 }
 
