@@ -5,7 +5,8 @@
 #                                then the NATS integration test (starts its own nats-server on
 #                                127.0.0.1, kills and restarts it), normal and ASan+UBSan
 #   make test-cluster-valgrind   the unit test under valgrind
-# libnats is linked only into cluster targets until the daemon uses it.
+# oceand links the module for --role sim|edge (mk/daemon.mk); only the role
+# glue (server/role_*.c) sees server/cluster/.
 
 CLUSTER_SRCS    := $(sort $(wildcard server/cluster/*.c))
 CLUSTER_LIB     := $(BUILD)/libcluster.a
@@ -21,6 +22,8 @@ TESTS += test-cluster test-cluster-valgrind
 # internals, no daemon headers, no libwebsockets.
 $(patsubst %.c,$(BUILD)/obj/%.o,$(CLUSTER_SRCS)) $(patsubst %.c,$(BUILD)/san/%.o,$(CLUSTER_SRCS)): \
   INC := -Iserver/cluster -Iproto/c
+
+$(BUILD)/obj/server/role_%.o $(BUILD)/san/server/role_%.o: INC += -Iserver/cluster
 
 $(CLUSTER_LIB): $(patsubst %.c,$(BUILD)/obj/%.o,$(CLUSTER_SRCS))
 	@mkdir -p $(dir $@)

@@ -57,6 +57,15 @@ static const struct opt_def opt_table[] = {
     { "sim_nice", OPT_INT, O(sim_nice), -20, 19, "0", "nice value of the tick thread; below 0 (needs "
       "CAP_SYS_NICE) keeps the tick on time on a busy machine" },
     { "max_memory_mb", OPT_INT, O(max_memory_mb), 16, 1 << 20, "256", "memory cap for the simulation; limits N" },
+    { "role", OPT_STR, O(role), 0, 0, "all", "all = one process (no NATS); sim = simulate and publish on NATS "
+      "(serves /healthz and /metrics, no viewers); edge = serve viewers from the sim over NATS (docs/scaling.md)" },
+    { "nats", OPT_STR, O(nats_url), 0, 0, "", "NATS server URL(s) for --role sim|edge, e.g. nats://127.0.0.1:4222" },
+    { "nats_prefix", OPT_STR, O(nats_prefix), 0, 0, "oceand", "NATS subject prefix (several seas can share one NATS)" },
+    { "nats_name", OPT_STR, O(nats_name), 0, 0, "", "this daemon's name on NATS (\"\" = <role>-<host>-<pid>)" },
+    { "nats_creds", OPT_STR, O(nats_creds), 0, 0, "", "NATS credentials file (JWT + NKey seed)" },
+    { "nats_tls_ca", OPT_STR, O(nats_tls_ca), 0, 0, "", "PEM CA file to verify the NATS server (implies TLS)" },
+    { "nats_tls_cert", OPT_STR, O(nats_tls_cert), 0, 0, "", "PEM client certificate for NATS (with --nats-tls-key)" },
+    { "nats_tls_key", OPT_STR, O(nats_tls_key), 0, 0, "", "PEM private key of --nats-tls-cert" },
 };
 #undef O
 static const size_t opt_count = sizeof opt_table / sizeof opt_table[0];
@@ -418,6 +427,14 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
     }
     if (!dc->tls_cert[0] != !dc->tls_key[0]) {
         snprintf(err, errlen, "--tls-cert and --tls-key go together (one of them is missing)");
+        return -1;
+    }
+    if (strcmp(dc->role, "all") != 0 && strcmp(dc->role, "sim") != 0 && strcmp(dc->role, "edge") != 0) {
+        snprintf(err, errlen, "--role: \"%s\" is not all, sim or edge", dc->role);
+        return -1;
+    }
+    if (strcmp(dc->role, "all") != 0 && !dc->nats_url[0]) {
+        snprintf(err, errlen, "--role %s needs --nats URL (e.g. nats://127.0.0.1:4222)", dc->role);
         return -1;
     }
     resolve_wisdom_path(dc);
