@@ -5,6 +5,9 @@
 #                                then the NATS integration test (starts its own nats-server on
 #                                127.0.0.1, kills and restarts it), normal and ASan+UBSan
 #   make test-cluster-valgrind   the unit test under valgrind
+#   make test-cluster-roles      oceand --role sim|edge end to end (nats-server, a sim, edges,
+#                                WebSocket clients; kill/restart cycles), and the same against
+#                                the ASan+UBSan daemon (fewer cycles)
 # oceand links the module for --role sim|edge (mk/daemon.mk); only the role
 # glue (server/role_*.c) sees server/cluster/.
 
@@ -16,7 +19,7 @@ PROTO_LIB       ?= $(BUILD)/liboc_proto.a
 PROTO_SAN_LIB   ?= $(BUILD)/san/liboc_proto.a
 
 BINS  += $(CLUSTER_LIB) $(BUILD)/test_cluster_msg $(BUILD)/test_cluster_nats
-TESTS += test-cluster test-cluster-valgrind
+TESTS += test-cluster test-cluster-valgrind test-cluster-roles
 
 # The module sees only its own folder and the protocol's header: no sim
 # internals, no daemon headers, no libwebsockets.
@@ -49,3 +52,10 @@ test-cluster: $(BUILD)/test_cluster_msg $(BUILD)/san/test_cluster_msg $(BUILD)/t
 	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 $(BUILD)/san/test_cluster_nats
 test-cluster-valgrind: $(BUILD)/test_cluster_msg
 	valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite $(BUILD)/test_cluster_msg
+
+CLUSTER_ROLES_CYCLES ?= 5
+.PHONY: test-cluster-roles
+test-cluster-roles: $(BUILD)/oceand $(BUILD)/san/oceand
+	/usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand $(BUILD)/oceand --cycles $(CLUSTER_ROLES_CYCLES)
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  /usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand $(BUILD)/san/oceand --cycles 2
