@@ -59,3 +59,9 @@ test-cluster-roles: $(BUILD)/oceand $(BUILD)/san/oceand
 	/usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand $(BUILD)/oceand --cycles $(CLUSTER_ROLES_CYCLES)
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand $(BUILD)/san/oceand --cycles 2
+
+# 1 sim + 1, 2, 3 edges + nats-server on this machine vs --role all (docs/scaling.md).
+BENCHES += bench-cluster
+.PHONY: bench-cluster
+bench-cluster: $(BUILD)/oceand $(BUILD)/load_client
+	/usr/bin/python3 bench/cluster.py --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_CLUSTER_ARGS)
