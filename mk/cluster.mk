@@ -65,3 +65,10 @@ BENCHES += bench-cluster
 .PHONY: bench-cluster
 bench-cluster: $(BUILD)/oceand $(BUILD)/load_client
 	/usr/bin/python3 bench/cluster.py --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_CLUSTER_ARGS)
+
+# nats-server (installed by make deps if missing) + one sim + two edges on loopback.
+.PHONY: run-cluster
+run-cluster: deps
+	@$(MAKE) --no-print-directory build-all
+	@if [ ! -f $(BUILD)/web/index.html ]; then echo "run-cluster: no $(BUILD)/web/index.html, the edges serve a placeholder page"; fi
+	exec scripts/run-cluster.sh
