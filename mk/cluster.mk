@@ -58,7 +58,7 @@ CLUSTER_ROLES_CYCLES ?= 5
 test-cluster-roles: $(BUILD)/oceand $(BUILD)/san/oceand
 	/usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand $(BUILD)/oceand --cycles $(CLUSTER_ROLES_CYCLES)
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-	  /usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand $(BUILD)/san/oceand --cycles 2
+	  /usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand $(BUILD)/san/oceand --cycles 2 --recovery-s 6
 
 # 1 sim + 1, 2, 3 edges + nats-server on this machine vs --role all (docs/scaling.md).
 BENCHES += bench-cluster

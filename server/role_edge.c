@@ -14,6 +14,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "clock.h"
 #include "control.h"
 #include "log.h"
 #include "role_link.h"
@@ -39,6 +40,9 @@ struct role_edge {
     uint64_t frames;              /* frames handed to the fan-out (frame.index) */
     enum edge_state state;
     struct forward *forwards;
+    bool hello_needed;            /* ask the sim for hello (again) at the next chance */
+    bool hello_in_flight;
+    double hello_t;               /* when it was last asked */
 };
 
 /* ---- frames ---- */
@@ -148,10 +152,13 @@ static void on_reply(void *ctx, int status, const char *text, size_t len)
     struct forward *fw = ctx;
     struct role_edge *r = fw->r;
     if (fw->hello) {
-        if (status == 0 && net_adopt_hello(r->net, text, len) == 0)
+        r->hello_in_flight = false;
+        if (status == 0 && net_adopt_hello(r->net, text, len) == 0) {
+            r->hello_needed = false;
             LOGI("cluster: hello from the sim (params_version in force now)");
-        else if (status != 0)
-            LOGD("cluster: no hello from the sim: %s", cl_strerror(status));
+        } else {
+            LOGD("cluster: no hello from the sim: %s (asking again)", status ? cl_strerror(status) : "bad hello");
+        }
     } else if (status == 0) {
         char *copy = malloc(len + 1);
         if (copy) {
@@ -166,11 +173,23 @@ static void on_reply(void *ctx, int status, const char *text, size_t len)
     forward_free(fw);
 }
 
+/* One hello request at a time; retried (every HELLO_RETRY s, from the
+ * wake-ups) until one succeeds, so the cache catches up after any outage. */
+#define HELLO_RETRY 0.5
 static void request_hello(struct role_edge *r)
 {
+    r->hello_needed = true;
+    if (r->hello_in_flight)
+        return;
     struct forward *fw = forward_new(r, true, 0, NULL);
-    if (fw && cl_edge_request(r->link, CL_KIND_HELLO, "", "", 0, on_reply, fw) != CL_OK)
+    if (!fw)
+        return;
+    r->hello_t = mono_now();
+    r->hello_in_flight = true;
+    if (cl_edge_request(r->link, CL_KIND_HELLO, "", "", 0, on_reply, fw) != CL_OK) {
+        r->hello_in_flight = false;
         forward_free(fw);
+    }
 }
 
 static void edge_forward(void *user, uint64_t serial, const char *client_id, const void *id_json,
@@ -233,6 +252,8 @@ static void edge_on_wake(void *user)
 {
     struct role_edge *r = user;
     cl_link_dispatch(r->link);
+    if (r->hello_needed && !r->hello_in_flight && cl_link_connected(r->link) && mono_now() - r->hello_t >= HELLO_RETRY)
+        request_hello(r);
 }
 
 static const char *edge_health(void *user, char *extra, size_t cap)

@@ -189,6 +189,10 @@ struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, st
         free(r);
         return NULL;
     }
+    /* Edges keep their clients across a restart of the sim: seq must not go
+     * back, or they would wait for it to catch up. A tick runs at most once a
+     * period, so wall-clock periods since 1970 are always ahead of the last run's seq. */
+    sc->start_seq = (uint64_t)((double)unix_us() * 1e-6 * dc->tick_rate);
     sc->remote_demand = sim_remote_demand;
     sc->on_frame = sim_on_frame;
     sc->cluster_user = r;

@@ -404,6 +404,7 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     s->params = *p;
     s->version = cfg->start_version;
     s->sim_time = cfg->start_time;
+    s->seq = cfg->start_seq;
     s->pending_tail = &s->pending;
     s->answers_tail = &s->answers;
     const char *hook = getenv("OCEAND_TEST_FAIL_BUILD_SEED");

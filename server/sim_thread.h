@@ -58,6 +58,8 @@ struct sim_config {
     double start_time;          /* sim time to resume from */
     int nice;                   /* of the tick thread; 0 = leave as is */
     uint32_t start_version;
+    uint64_t start_seq;         /* seq of the tick before the first (0; --role sim: from the wall clock,
+                                   so that seq never goes back when the sim restarts under its edges) */
     void (*wake)(void *user);   /* called after every tick (lws_cancel_service) */
     void *wake_user;
     /* --role sim (server/role_sim.c); NULL otherwise. Both run on the tick

@@ -87,7 +87,7 @@ class Node:
     def start(self):
         args = [ARGS.oceand, "--port", str(self.port), "--state-file", self.state_file,
                 "--web-root", os.path.join(self.tmp, "web"), "--resolution", str(N), "--tick-rate", "30",
-                "--plan-rigor", "0", "--wisdom-file", "none", "--log-level", "debug"] + self.extra
+                "--plan-rigor", "0", "--wisdom-file", "none", "--log-level", "info"] + self.extra
         self.log = open(self.log_path, "ab")
         self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log, preexec_fn=_die_with_parent)
         deadline = time.time() + 20
@@ -414,6 +414,7 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
         p = await recv_json(ws, lambda m: m["type"] in ("params", "error"))
         check(p["type"] == "params", "set: %r" % p)
         version = p["params_version"]
+        hb, _ = await recv_frame(ws, lambda h_, m: h_["params_version"] == version)
         await await_for(lambda: os.path.exists(c.sim.state_file) and
                         json.load(open(c.sim.state_file)).get("params_version") == version, "state saved")
         c.sim.kill()
@@ -432,6 +433,7 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
         await expect_status(ws, "ok")
         h2, _ = await recv_frame(ws, timeout=5)
         check(h2["params_version"] == version, "version after restart %r, want %r" % (h2["params_version"], version))
+        check(h2["seq"] > hb["seq"], "seq went back after the sim restarted: %d after %d" % (h2["seq"], hb["seq"]))
         c3, h3 = await connect(c.edges[0])
         check(h3["params"]["wind_speed"] == 17 and h3["params_version"] == version, "params after restart")
         for w in (ws, late, c3):
@@ -468,13 +470,16 @@ def test_kill_restart_cycles_under_load(c):
     async def run():
         a = [(await connect(c.edges[0]))[0] for _ in range(4)]
 
-        async def fresh_frames(ws_list, timeout=10):
-            # drain, then a frame built after the recovery on every client
+        async def fresh_frames(ws_list):
+            # After the edge said ok: every client gets frames again within --recovery-s
+            # (2 s, the bound; more under sanitizers). Two, so one is newer than any queued.
+            deadline = time.time() + ARGS.recovery_s
             for ws in ws_list:
-                await recv_frame(ws, timeout=timeout)
-                await recv_frame(ws, timeout=timeout)
+                await recv_frame(ws, timeout=max(0.1, deadline - time.time()))
+                await recv_frame(ws, timeout=max(0.1, deadline - time.time()))
 
-        await fresh_frames(a)
+        for ws in a:
+            await recv_frame(ws)
         rss = []
         for cycle in range(ARGS.cycles):
             c.sim.kill()
@@ -489,6 +494,7 @@ def test_kill_restart_cycles_under_load(c):
             await fresh_frames(a)
             b, _ = await connect(c.edges[1])
             await recv_frame(b)
+            await b.close()
             c.edges[1].restart()
             wait_for(lambda: c.edges[1].health()["cluster"] == "ok", "edge B back")
             b, _ = await connect(c.edges[1])   # its clients reconnect
@@ -510,6 +516,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--oceand", required=True)
     ap.add_argument("--cycles", type=int, default=5)
+    ap.add_argument("--recovery-s", type=float, default=2.0, help="frames again this soon after recovery")
     ap.add_argument("-k", default="")
     ARGS = ap.parse_args()
     td.ARGS = ARGS
