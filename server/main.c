@@ -30,6 +30,16 @@ static void on_signal(int sig)
     alarm(3);
 }
 
+/* SIGHUP: save the state now (a daemon's usual "hang-up" duty). The
+ * configuration is read at start-up only, so it is not reloaded. */
+static volatile sig_atomic_t hangup;
+
+static void on_hangup(int sig)
+{
+    (void)sig;
+    hangup = 1;
+}
+
 /* mkdir -p of the folder that will hold path. */
 static int ensure_parent_dir(const char *path)
 {
@@ -59,6 +69,8 @@ static void install_signals(void)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
+    sa.sa_handler = on_hangup;
+    sigaction(SIGHUP, &sa, NULL);
 }
 
 /* --role edge: no simulation here; frames, hello and answers come from the
@@ -154,6 +166,11 @@ int main(int argc, char **argv)
     while (!interrupted) {
         if (net_service(net) < 0)
             break;
+        if (hangup) {
+            hangup = 0;
+            LOGI("SIGHUP: saving the state; the configuration is not reloaded (restart to apply it)");
+            state_saver_flush(&saver, sim_time_now(sim), true);
+        }
         state_saver_flush(&saver, sim_time_now(sim), false);
     }
 

@@ -314,7 +314,7 @@ struct role_edge *role_edge_open(const struct daemon_config *dc, struct net *n, 
     net_set_cluster(n, &h);
     update_state(r);
     request_hello(r);
-    LOGI("cluster: role edge as %s on %s (prefix %s)", cl_link_name(r->link), dc->nats_url,
+    LOGI("cluster: role edge as %s (prefix %s)", cl_link_name(r->link),
          dc->nats_prefix[0] ? dc->nats_prefix : CL_DEFAULT_PREFIX);
     return r;
 }

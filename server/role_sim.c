@@ -201,7 +201,7 @@ struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, st
         .health = sim_health, .metrics = sim_metrics,
     };
     net_set_cluster(n, &h);
-    LOGI("cluster: role sim as %s on %s (prefix %s)", cl_link_name(r->link), dc->nats_url,
+    LOGI("cluster: role sim as %s (prefix %s)", cl_link_name(r->link),
          dc->nats_prefix[0] ? dc->nats_prefix : CL_DEFAULT_PREFIX);
     return r;
 }
