@@ -228,6 +228,14 @@ def with_cluster(**kw):
 # ---------------------------------------------------------------- tests
 
 @test
+def test_role_flags_are_checked():
+    for args, want in ((["--role", "bogus"], "is not all, sim or edge"),
+                       (["--role", "edge"], "needs --nats"), (["--role", "sim"], "needs --nats")):
+        r = subprocess.run([ARGS.oceand, "--state-file", "none"] + args, capture_output=True, text=True, timeout=20)
+        check(r.returncode == 2 and want in r.stderr, "%r: exit %r, %r" % (args, r.returncode, r.stderr))
+
+
+@test
 @with_cluster(edges=2)
 def test_set_reaches_both_edges_and_frames_are_identical(c):
     async def run():
