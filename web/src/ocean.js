@@ -58,7 +58,8 @@ function farRingGeometry() {
 }
 
 export class Ocean {
-  constructor(renderer, { detail = 1 } = {}) {
+  // skyUniforms: the shared sky cube, key light and exposure (sky.js SkyModel.uniforms).
+  constructor(renderer, skyUniforms, { detail = 1 } = {}) {
     this.renderer = renderer;
     this.lodPixel = LOD_PIXEL / Math.max(detail, 0.05);
     this.scene = new THREE.Scene();
@@ -69,14 +70,13 @@ export class Ocean {
     this.lastArrival = 0;
     this.interval = 1000 / 30;
     this.hasData = false;
-    const sun = new THREE.Vector3(-0.55, 0.3, -0.78).normalize();
     this.uniforms = {
+      ...skyUniforms,
       uDispA: { value: null }, uDispB: { value: null },
       uSlopeA: { value: null }, uSlopeB: { value: null },
       uMix: { value: 1 }, uPatch: { value: 1 }, uTexel: { value: 1 },
       uHasSlope: { value: 0 }, uHasJac: { value: 0 },
       uFadeNear: { value: 1000 }, uFadeFar: { value: 3000 }, uSkirtDepth: { value: 2 },
-      uSunDir: { value: sun }, uSunColor: { value: new THREE.Color(1.0, 0.93, 0.8) },
       uDeep: { value: new THREE.Color(0.004, 0.035, 0.07) },
       uScatter: { value: new THREE.Color(0.02, 0.16, 0.16) },
       uFogDensity: { value: 0.00009 }, uFoam: { value: 1 },
@@ -86,7 +86,7 @@ export class Ocean {
       side: THREE.DoubleSide,
     });
     const sky = new THREE.Mesh(new THREE.SphereGeometry(1, 32, 16), new THREE.ShaderMaterial({
-      uniforms: { uSunDir: this.uniforms.uSunDir, uSunColor: this.uniforms.uSunColor },
+      uniforms: skyUniforms,
       vertexShader: skyVertex, fragmentShader: skyFragment, side: THREE.BackSide, depthWrite: false,
     }));
     sky.scale.setScalar(HORIZON * 0.9);

@@ -1,26 +1,33 @@
 // GLSL for the water surface and the sky. Written in GLSL ES 1 style
 // (attribute/varying/texture2D); three.js compiles it as GLSL ES 3 on WebGL2.
 
-// Shared lighting: one analytic sky, used for the dome, for reflections and for fog,
-// so the horizon is seamless.
+// Shared lighting: the sky cube rendered by sky.js (uEnv) is the one source for the
+// dome, the reflections, the ambient light and the fog, so the horizon is seamless.
 const SKY = /* glsl */`
-uniform vec3 uSunDir;
+uniform samplerCube uEnv;
+uniform vec3 uSunDir;      // key light: the sun by day, the moon by night
 uniform vec3 uSunColor;
-vec3 skyColor(vec3 d) {
-  float y = max(d.y, 0.0);
-  vec3 zenith  = vec3(0.07, 0.22, 0.52);
-  vec3 horizon = vec3(0.62, 0.74, 0.86);
-  vec3 c = mix(horizon, zenith, pow(y, 0.45));
-  float s = max(dot(d, uSunDir), 0.0);
-  c += uSunColor * (0.35 * pow(s, 10.0) + 0.9 * pow(s, 180.0));
-  return c;
+uniform float uDiscSize;   // cos of the key light's angular radius
+uniform vec3 uMoonDir;
+uniform vec3 uMoonColor;
+uniform float uStars;
+uniform float uExposure;
+vec3 skyColor(vec3 d, float lod) {
+  d.y = max(d.y, 0.0);     // below the horizon: the horizon's haze
+  return textureLod(uEnv, normalize(d + vec3(0.0, 1e-4, 0.0)), lod).rgb;
 }
+// Average light from the sky above: the cube's coarsest mip straight up.
+vec3 skyAmbient() { return textureLod(uEnv, vec3(0.0, 1.0, 0.0), 6.0).rgb; }
+float discMask(vec3 d, vec3 c, float cosR) { return smoothstep(cosR - 0.000015, cosR + 0.000005, dot(d, c)); }
 vec3 sunDisc(vec3 d) {
+  // The disc plus a narrow aureole; its colour is the transmitted sunlight.
   float s = max(dot(d, uSunDir), 0.0);
-  return uSunColor * 40.0 * smoothstep(0.99985, 0.99995, s);
+  return uSunColor * (60.0 * discMask(d, uSunDir, uDiscSize) + 0.25 * pow(s, 400.0));
 }
+vec3 moonDisc(vec3 d) { return uMoonColor * 60.0 * discMask(d, uMoonDir, 0.99999); }
 // ACES filmic fit (Narkowicz) and sRGB output: we write display-ready colour.
 vec3 toDisplay(vec3 c) {
+  c *= uExposure;
   c = clamp((c * (2.51 * c + 0.03)) / (c * (2.43 * c + 0.59) + 0.14), 0.0, 1.0);
   return pow(c, vec3(1.0 / 2.2));
 }
@@ -38,11 +45,18 @@ void main() {
 export const skyFragment = /* glsl */`
 ${SKY}
 varying vec3 vDir;
+float starHash(vec3 p) { return fract(sin(dot(p, vec3(12.9898, 78.233, 37.719))) * 43758.5453); }
 void main() {
   vec3 d = normalize(vDir);
-  vec3 c = skyColor(d) + sunDisc(d);
-  if (d.y < 0.0) c = skyColor(vec3(d.x, 0.0, d.z)); // below the horizon: haze
-  gl_FragColor = vec4(toDisplay(c * 1.05), 1.0);
+  vec3 c = skyColor(d, 0.0);
+  if (d.y > 0.0) {
+    c += sunDisc(d) + moonDisc(d);
+    // Stars: a fixed random field on a fine direction grid, dimmed by haze near the horizon.
+    vec3 g = floor(d * 700.0);
+    float st = step(0.9985, starHash(g)) * starHash(g + 1.0);
+    c += vec3(0.05) * st * uStars * smoothstep(0.05, 0.3, d.y);
+  }
+  gl_FragColor = vec4(toDisplay(c), 1.0);
 }`;
 
 // Displacement textures: RGBA = (dx, height, dz, jacobian), two frames (A older,
@@ -124,24 +138,27 @@ void main() {
   R.y = abs(R.y);
 
   float F = 0.02 + 0.98 * pow(1.0 - max(dot(n, V), 0.0), 5.0);
-  vec3 refl = skyColor(R);
-  // Water body: deep colour lit by the sun and sky, plus light scattered
+  // Reflection of the same sky, blurrier far away (unresolved slopes).
+  vec3 refl = skyColor(R, clamp(log2(dist / 400.0), 0.0, 3.0));
+  // Water body: deep colour lit by the sky and the key light, plus light scattered
   // through thin crests toward the viewer.
+  vec3 amb = skyAmbient();
   float diff = max(dot(n, L), 0.0);
-  vec3 body = uDeep * (0.35 + 0.65 * diff);
+  vec3 light = amb * 1.6 + uSunColor * diff * 0.7;
+  vec3 body = uDeep * light;
   float crest = clamp(vHeight * 0.25 + 0.3, 0.0, 1.0);
-  body += uScatter * crest * pow(max(dot(V, -L) * 0.5 + 0.5, 0.0), 3.0) * 0.6;
-  body += uScatter * 0.15 * crest;
+  body += uScatter * crest * (uSunColor * pow(max(dot(V, -L) * 0.5 + 0.5, 0.0), 3.0) * 0.6 + amb * 0.3);
   vec3 c = mix(body, refl, F);
-  // Sun glints: sharp Blinn-Phong lobe, widened with distance (unresolved waves).
+  // Glitter: a sharp Blinn-Phong lobe of the sun (or moon), widened with distance
+  // where single waves are no longer resolved.
   vec3 H = normalize(L + V);
   float shin = mix(900.0, 140.0, clamp(dist / 2500.0, 0.0, 1.0));
-  c += uSunColor * pow(max(dot(n, H), 0.0), shin) * (shin / 60.0) * F * 1.6;
+  c += uSunColor * pow(max(dot(n, H), 0.0), shin) * (shin / 60.0) * F * 1.6 * step(0.0, L.y);
   // Foam where the surface folds.
   float foam = smoothstep(0.7, 0.25, jac) * 0.9 * uFoam;
-  c = mix(c, vec3(0.82, 0.86, 0.88) * (0.55 + 0.45 * diff) + 0.12, foam);
+  c = mix(c, vec3(0.82, 0.86, 0.88) * light * 0.9, foam);
   // Aerial perspective into the horizon colour.
   float fog = 1.0 - exp(-dist * uFogDensity);
-  c = mix(c, skyColor(vec3(-V.x, 0.0, -V.z)), fog);
+  c = mix(c, skyColor(vec3(-V.x, 0.0, -V.z), 0.0), fog);
   gl_FragColor = vec4(toDisplay(c), 1.0);
 }`;
