@@ -298,6 +298,40 @@ try {
     }
   });
 
+  // Seen from above, choppy waves move patch edges sideways; where a fine patch meets a
+  // coarser one the edges used to part and the sky showed through as a bright dashed
+  // seam. With the edges stitched (and without the skirts, which only hide vertical
+  // cracks) no sky may show; without stitching it does, so the check can fail.
+  await check('no sky through the seams between patches of different detail', async () => {
+    const skyPixels = async (extra) => {
+      const p = await browser.newPage({ viewport: { width: 600, height: 600 } });
+      p.on('pageerror', (e) => pageErrors.push(e.message));
+      try {
+        await p.goto(`http://127.0.0.1:${server.port}/?test=1&aa=0&detail=0.5&ui=0&hour=17&cam=0,150,150&target=0,0,-100${extra}`);
+        await waitFor(p, 'rendering', () => window.oceand.connected && window.oceand.rendered > 3, null, 60000);
+        await renderedMore(p, 2);
+        const png = await p.screenshot({ type: 'png' });
+        return await p.evaluate(async (b64) => {
+          const img = new Image();
+          img.src = `data:image/png;base64,${b64}`;
+          await img.decode();
+          const c = document.createElement('canvas');
+          c.width = img.width; c.height = img.height;
+          const g = c.getContext('2d');
+          g.drawImage(img, 0, 0);
+          const d = g.getImageData(0, 0, c.width, c.height).data;
+          let n = 0; // the sky seen from above is near white; this water is not
+          for (let i = 0; i < d.length; i += 4) if (d[i] > 225 && d[i + 1] > 225 && d[i + 2] > 225) n++;
+          return n;
+        }, png.toString('base64'));
+      } finally { await p.close(); }
+    };
+    const open = await skyPixels('&skirt=0&stitch=0'), stitched = await skyPixels('&skirt=0'), normal = await skyPixels('');
+    console.log(`     sky pixels through the sea: unstitched ${open}, stitched ${stitched}, stitched + skirts ${normal}`);
+    assert(open >= 20, `the unstitched view shows only ${open} sky pixels: this view no longer tests the seams`);
+    assert(stitched <= open / 10 && normal <= open / 10, `sky shows through the seams: ${stitched} (stitched), ${normal} (with skirts)`);
+  });
+
   // Phones: playwright's device descriptors (viewport, touch, mobile user agent), with
   // deviceScaleFactor 1 so that SwiftShader renders 1/7 of the pixels (layout is in CSS px).
   const deadPort = await freePort();

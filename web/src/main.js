@@ -32,10 +32,14 @@ controls.listenToKeyEvents(window);            // arrow keys pan
 // Phones in either orientation (and small windows): panel closed, HUD compact.
 const compact = window.matchMedia('(max-width: 700px), (max-height: 480px)').matches;
 const sky = new SkyModel(renderer);
-const ocean = new Ocean(renderer, sky.uniforms, { detail: Number(query.get('detail') || 1) });
+// ?skirt=0 / ?stitch=0: turn off the crack fixes (to see, and test, what they hide);
+// ?hex=0: periodic normals to the horizon (to measure what the hex tiling breaks up).
+const ocean = new Ocean(renderer, sky.uniforms, { detail: Number(query.get('detail') || 1), skirts: query.get('skirt') !== '0', hexTiling: query.get('hex') !== '0' });
+ocean.uniforms.uStitch.value = query.get('stitch') === '0' ? 0 : 1;
 const stats = new Stats();
 const hud = new Hud(document.getElementById('hud'), document.getElementById('banner'), { compact });
 if (query.get('hud') === '0') hud.setVisible(false, false); // ?hud=0: hide for this visit only
+if (query.get('ui') === '0') document.body.classList.add('oc-no-ui'); // ?ui=0: the sea alone (pictures, measurements)
 
 // Everything a test or a curious user may read; window.oceand hands out copies.
 const st = {
@@ -113,6 +117,7 @@ const panel = new Panel({
   },
 }, { compact: compact || query.get('panel') === 'closed' });
 hud.onToggle = (on) => { view.hud = on; panel.refreshView(); };
+if (query.get('wireframe') === '1') { view.wireframe = true; ocean.wireframe = true; panel.refreshView(); }
 // H shows or hides the status (not while typing in a panel field).
 window.addEventListener('keydown', (ev) => {
   if ((ev.key === 'h' || ev.key === 'H') && !ev.ctrlKey && !ev.metaKey && !ev.altKey && !(ev.target instanceof HTMLInputElement)) hud.setVisible(!hud.visible);

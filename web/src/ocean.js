@@ -59,9 +59,11 @@ function farRingGeometry() {
 
 export class Ocean {
   // skyUniforms: the shared sky cube, key light and exposure (sky.js SkyModel.uniforms).
-  constructor(renderer, skyUniforms, { detail = 1 } = {}) {
+  constructor(renderer, skyUniforms, { detail = 1, skirts = true, hexTiling = true } = {}) {
     this.renderer = renderer;
     this.lodPixel = LOD_PIXEL / Math.max(detail, 0.05);
+    this.skirts = skirts;
+    this.hexTiling = hexTiling;
     this.scene = new THREE.Scene();
     this.m = 0;             // texture size (N >> lod)
     this.patch = 0;         // patch size, metres
@@ -76,7 +78,8 @@ export class Ocean {
       uSlopeA: { value: null }, uSlopeB: { value: null },
       uMix: { value: 1 }, uPatch: { value: 1 }, uTexel: { value: 1 },
       uHasSlope: { value: 0 }, uHasJac: { value: 0 },
-      uFadeNear: { value: 1000 }, uFadeFar: { value: 3000 }, uSkirtDepth: { value: 2 },
+      uFadeNear: { value: 1000 }, uFadeFar: { value: 3000 }, uSkirtDepth: { value: 2 }, uStitch: { value: 1 },
+      uHexNear: { value: 1e9 }, uHexFar: { value: 2e9 },
       uDeep: { value: new THREE.Color(0.004, 0.035, 0.07) },
       uScatter: { value: new THREE.Color(0.02, 0.16, 0.16) },
       uFogDensity: { value: 0.00009 }, uFoam: { value: 1 },
@@ -160,7 +163,9 @@ export class Ocean {
     this.ring = Math.min(MAX_RING, Math.ceil(NEAR_RANGE / patch));
     const maxInstances = (2 * this.ring + 1) ** 2;
     for (let g = Math.min(MAX_GRID, m); g >= MIN_GRID; g >>= 1) {
-      const mesh = new THREE.InstancedMesh(patchGeometry(g), this.material, maxInstances);
+      const geo = patchGeometry(g);
+      geo.setAttribute('aEdge', new THREE.InstancedBufferAttribute(new Float32Array(maxInstances * 4), 4));
+      const mesh = new THREE.InstancedMesh(geo, this.material, maxInstances);
       mesh.frustumCulled = false;
       mesh.count = 0;
       this.levels.push({ g, mesh });
@@ -168,7 +173,9 @@ export class Ocean {
     }
     u.uFadeFar.value = this.ring * patch * 0.95;
     u.uFadeNear.value = u.uFadeFar.value * 0.35;
-    u.uSkirtDepth.value = Math.max(0.5, patch / 100);
+    u.uSkirtDepth.value = this.skirts ? Math.max(0.5, patch / 100) : 0;
+    // Hex-tiled normals from one patch away (single waves still resolved nearer).
+    if (this.hexTiling) { u.uHexNear.value = patch; u.uHexFar.value = 2.5 * patch; }
     this.layoutKey = '';
   }
 
@@ -183,6 +190,8 @@ export class Ocean {
     const camY = Math.max(Math.abs(camera.position.y), 1);
     const mat = new THREE.Matrix4();
     for (const l of this.levels) l.mesh.count = 0;
+    // First the level of every patch, then the instances with their edges' levels.
+    const W = 2 * R + 1, lvls = new Int32Array(W * W);
     for (let j = cj - R; j <= cj + R; j++) for (let i = ci - R; i <= ci + R; i++) {
       const x0 = i * L, z0 = j * L;
       const dx = Math.max(x0 - camera.position.x, 0, camera.position.x - x0 - L);
@@ -191,11 +200,16 @@ export class Ocean {
       const want = L / (d * this.lodPixel);    // segments this patch deserves
       let lvl = this.levels.findIndex((l) => l.g <= want);
       if (lvl < 0) lvl = this.levels.length - 1;
-      const mesh = this.levels[lvl].mesh;
-      mat.makeScale(L, 1, L).setPosition(x0, 0, z0);
-      mesh.setMatrixAt(mesh.count++, mat);
+      lvls[(j - cj + R) * W + (i - ci + R)] = lvl;
     }
-    for (const l of this.levels) l.mesh.instanceMatrix.needsUpdate = true;
+    const gAt = (a, b, own) => (a < 0 || b < 0 || a >= W || b >= W ? own : Math.min(own, this.levels[lvls[b * W + a]].g));
+    for (let b = 0; b < W; b++) for (let a = 0; a < W; a++) {
+      const level = this.levels[lvls[b * W + a]], mesh = level.mesh, g = level.g, k = mesh.count++;
+      mat.makeScale(L, 1, L).setPosition((ci - R + a) * L, 0, (cj - R + b) * L);
+      mesh.setMatrixAt(k, mat);
+      mesh.geometry.attributes.aEdge.setXYZW(k, gAt(a - 1, b, g), gAt(a + 1, b, g), gAt(a, b - 1, g), gAt(a, b + 1, g));
+    }
+    for (const l of this.levels) { l.mesh.instanceMatrix.needsUpdate = true; l.mesh.geometry.attributes.aEdge.needsUpdate = true; }
     // Far ring: from the patch field's edge to the horizon.
     const a0 = (ci - R) * L, a1 = (ci + R + 1) * L, bx = camera.position.x, bz = camera.position.z;
     const p = this.far.geometry.attributes.position;

@@ -76,10 +76,22 @@ vec4 dispAt(vec2 xz) {
 export const waterVertex = /* glsl */`
 ${SAMPLE}
 attribute float skirt;
-uniform float uFadeNear, uFadeFar, uSkirtDepth;
+#ifdef USE_INSTANCING
+// Cells per side of the coarser of this patch and its neighbour, on each edge:
+// (x = 0, x = 1, z = 0, z = 1). Where a neighbour is coarser, this patch's edge
+// vertices between the neighbour's are put on the neighbour's straight edge, so the
+// two meet exactly (no T-junction gap: choppy waves move vertices sideways, and a
+// gap seen from above shows the sky as a bright seam or speck; skirts hang straight
+// down and cannot hide it).
+attribute vec4 aEdge;
+#endif
+uniform float uFadeNear, uFadeFar, uSkirtDepth, uStitch;
 varying vec3 vWorld;
 varying vec2 vGround;
 varying float vHeight;
+// Far away the grid is coarser than the waves: fade displacement out (the
+// fragment shader keeps the small waves in the normals).
+vec4 dispFaded(vec2 xz) { return dispAt(xz) * (1.0 - smoothstep(uFadeNear, uFadeFar, distance(xz, cameraPosition.xz))); }
 void main() {
 #ifdef USE_INSTANCING
   vec4 base = modelMatrix * instanceMatrix * vec4(position, 1.0);
@@ -87,10 +99,21 @@ void main() {
   vec4 base = modelMatrix * vec4(position, 1.0);
 #endif
   vec2 xz = base.xz;
-  // Far away the grid is coarser than the waves: fade displacement out (the
-  // fragment shader keeps the small waves in the normals).
-  float fade = 1.0 - smoothstep(uFadeNear, uFadeFar, distance(xz, cameraPosition.xz));
-  vec4 d = dispAt(xz) * fade;
+  vec4 d = dispFaded(xz);
+#ifdef USE_INSTANCING
+  float g = 0.0, t = 0.0;
+  vec2 along = vec2(0.0);
+  if (position.x == 0.0) { g = aEdge.x; t = position.z; along = vec2(0.0, 1.0); }
+  else if (position.x == 1.0) { g = aEdge.y; t = position.z; along = vec2(0.0, 1.0); }
+  else if (position.z == 0.0) { g = aEdge.z; t = position.x; along = vec2(1.0, 0.0); }
+  else if (position.z == 1.0) { g = aEdge.w; t = position.x; along = vec2(1.0, 0.0); }
+  float f = fract(t * g); // exact: t = i / 2^a, g = 2^b
+  if (g > 0.0 && f > 0.0 && uStitch > 0.5) {
+    float cell = instanceMatrix[0][0] / g;  // the neighbour's cell, metres
+    vec2 a = xz - along * (f * cell);       // its vertices, bit-identical to its own
+    d = mix(dispFaded(a), dispFaded(a + along * cell), f);
+  }
+#endif
   vec3 p = vec3(xz.x + d.x, d.y - skirt * uSkirtDepth, xz.y + d.z);
   vWorld = p;
   vGround = xz;
@@ -104,12 +127,43 @@ ${SAMPLE}
 uniform sampler2D uSlopeA;
 uniform sampler2D uSlopeB;
 uniform float uHasSlope, uHasJac, uFogDensity, uFoam;
+uniform float uHexNear, uHexFar; // metres: from periodic normals to hex-tiled ones
 uniform vec3 uDeep, uScatter;
 varying vec3 vWorld;
 varying vec2 vGround;
 varying float vHeight;
 
 vec3 surf(vec2 xz) { vec4 d = dispAt(xz); return vec3(xz.x + d.x, d.y, xz.y + d.z); }
+
+// Slope (dh/dx, dh/dz) of the displaced surface, averaged over +-e.
+vec2 slopeAt(vec2 xz, float e) {
+  vec3 tx = surf(xz + vec2(e, 0.0)) - surf(xz - vec2(e, 0.0));
+  vec3 tz = surf(xz + vec2(0.0, e)) - surf(xz - vec2(0.0, e));
+  vec3 n = cross(tz, tx);
+  return -n.xz / max(n.y, 1e-4);
+}
+vec2 hexHash(vec2 p) { return fract(sin(vec2(dot(p, vec2(127.1, 311.7)), dot(p, vec2(269.5, 183.3)))) * 43758.5453); }
+// Far away the periodic patch shows as a lattice. There the slopes are read from the
+// patch shifted by a random offset per cell of a triangular grid and blended with
+// weights normalised to keep the variance (Heitz & Neyret 2018, "High-performance
+// by-example noise using a histogram-preserving blending operator", sec. 3; slopes of a
+// linear sea are Gaussian, so the blend has the same statistics). Wind direction is
+// kept: offsets only, no rotations. The geometry stays periodic, so this is only used
+// where single waves are no longer resolved (uHexNear..uHexFar).
+vec3 hexSample(vec2 xz, float e) {
+  vec2 uv = xz / (0.8 * uPatch) * 3.4641016;              // cells a little smaller than the patch
+  vec2 sk = mat2(1.0, 0.0, -0.57735027, 1.15470054) * uv;  // skewed triangular grid
+  vec2 id = floor(sk);
+  vec3 t = vec3(fract(sk), 0.0);
+  t.z = 1.0 - t.x - t.y;
+  vec3 w; vec2 v1, v2, v3;
+  if (t.z > 0.0) { w = vec3(t.z, t.y, t.x); v1 = id; v2 = id + vec2(0.0, 1.0); v3 = id + vec2(1.0, 0.0); }
+  else { w = vec3(-t.z, 1.0 - t.y, 1.0 - t.x); v1 = id + vec2(1.0); v2 = id + vec2(1.0, 0.0); v3 = id + vec2(0.0, 1.0); }
+  vec2 o1 = xz + hexHash(v1) * uPatch, o2 = xz + hexHash(v2) * uPatch, o3 = xz + hexHash(v3) * uPatch;
+  vec3 s = w.x * vec3(slopeAt(o1, e), dispAt(o1).y) + w.y * vec3(slopeAt(o2, e), dispAt(o2).y)
+         + w.z * vec3(slopeAt(o3, e), dispAt(o3).y);
+  return s / max(length(w), 1e-3);   // (slope x, slope z, height)
+}
 
 void main() {
   vec2 xz = vGround;
@@ -125,6 +179,13 @@ void main() {
     vec2 uv = xz / uPatch + 0.5 * uTexel;
     vec2 s = mix(texture(uSlopeA, uv).xy, texture(uSlopeB, uv).xy, uMix);
     n = normalize(vec3(-s.x, 1.0, -s.y));
+  }
+  float hex = smoothstep(uHexNear, uHexFar, distance(vWorld, cameraPosition));
+  float height = vHeight;
+  if (hex > 0.0) {
+    vec3 hs = hexSample(xz, e);
+    n = normalize(mix(n, normalize(vec3(-hs.x, 1.0, -hs.y)), hex));
+    height = mix(height, hs.z, hex);
   }
   // Jacobian of the horizontal map: < 1 where crests fold, which is where foam forms.
   float jac = (tx.x * tz.z - tz.x * tx.z) / (4.0 * e * e);
@@ -146,7 +207,8 @@ void main() {
   float diff = max(dot(n, L), 0.0);
   vec3 light = amb * 1.6 + uSunColor * diff * 0.7;
   vec3 body = uDeep * light;
-  float crest = clamp(vHeight * 0.25 + 0.3, 0.0, 1.0);
+  // (Far away the height is hex-tiled too: the crests would print the lattice back.)
+  float crest = clamp(height * 0.25 + 0.3, 0.0, 1.0);
   body += uScatter * crest * (uSunColor * pow(max(dot(V, -L) * 0.5 + 0.5, 0.0), 3.0) * 0.6 + amb * 0.3);
   vec3 c = mix(body, refl, F);
   // Glitter: a sharp Blinn-Phong lobe of the sun (or moon), widened with distance
@@ -159,6 +221,12 @@ void main() {
   c = mix(c, vec3(0.82, 0.86, 0.88) * light * 0.9, foam);
   // Aerial perspective into the horizon colour.
   float fog = 1.0 - exp(-dist * uFogDensity);
-  c = mix(c, skyColor(vec3(-V.x, 0.0, -V.z), 0.0), fog);
+  // The haze takes the horizon's colour in the direction of view near the horizon,
+  // and the horizon's average looking down: the horizon's detail (clouds) would fan
+  // out as rays around the nadir.
+  vec3 hazeAvg = 0.25 * (skyColor(vec3(1.0, 0.0, 0.0), 3.0) + skyColor(vec3(-1.0, 0.0, 0.0), 3.0)
+                       + skyColor(vec3(0.0, 0.0, 1.0), 3.0) + skyColor(vec3(0.0, 0.0, -1.0), 3.0));
+  vec3 haze = mix(skyColor(vec3(-V.x, 0.0, -V.z) + vec3(1e-4, 0.0, 0.0), 0.0), hazeAvg, smoothstep(0.05, 0.4, V.y));
+  c = mix(c, haze, fog);
   gl_FragColor = vec4(toDisplay(c), 1.0);
 }`;
