@@ -36,6 +36,7 @@ const sky = new SkyModel(renderer);
 // ?hex=0: periodic normals to the horizon (to measure what the hex tiling breaks up).
 const ocean = new Ocean(renderer, sky.uniforms, { detail: Number(query.get('detail') || 1), skirts: query.get('skirt') !== '0', hexTiling: query.get('hex') !== '0' });
 ocean.uniforms.uStitch.value = query.get('stitch') === '0' ? 0 : 1;
+sky.uniforms.uGapProbe.value = query.get('gapprobe') === '1' ? 1 : 0; // ?gapprobe=1: magenta sky and skirts (tests)
 const stats = new Stats();
 const hud = new Hud(document.getElementById('hud'), document.getElementById('banner'), { compact });
 if (query.get('hud') === '0') hud.setVisible(false, false); // ?hud=0: hide for this visit only

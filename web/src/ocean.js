@@ -10,6 +10,8 @@ const NEAR_RANGE = 4000;     // metres of real geometry; beyond is the flat far 
 const MAX_RING = 40;         // patches from the camera patch, whatever the patch size
 const HORIZON = 60000;       // metres to the end of the far ring
 const LOD_PIXEL = 0.012;     // wanted segment length per metre of distance (at detail 1)
+const SKIRT_DEPTH = 0.1;     // metres
+const SKIRT_TOP = 0.05;      // the skirt top, as a fraction of its depth below the edge (5 mm)
 
 function floatTexture(data, m, format) {
   const t = new THREE.DataTexture(data, m, m, format, THREE.FloatType);
@@ -21,7 +23,8 @@ function floatTexture(data, m, format) {
 }
 
 // A patch of g×g cells on [0,1]² (scaled to the patch size by the instance matrix),
-// with a skirt hanging below its border to hide cracks between detail levels.
+// with a skirt hanging below its border (edges are stitched to coarser neighbours in the
+// vertex shader; the skirt only hides the pinholes float rounding leaves at T-junctions).
 function patchGeometry(g) {
   const pos = [], skirt = [], index = [];
   for (let j = 0; j <= g; j++) for (let i = 0; i <= g; i++) { pos.push(i / g, 0, j / g); skirt.push(0); }
@@ -34,10 +37,14 @@ function patchGeometry(g) {
   for (let j = 0; j < g; j++) ring.push(v(g, j));
   for (let i = g; i > 0; i--) ring.push(v(i, g));
   for (let j = g; j > 0; j--) ring.push(v(0, j));
-  const base = pos.length / 3;
+  // The skirt's top starts a hair below the edge (SKIRT_TOP of the skirt depth) rather than
+  // on it: sharing the edge, its pixels tied with the surface's in depth and won some,
+  // drawing a faint one-pixel line along every patch border.
+  const top = pos.length / 3, n = ring.length;
+  ring.forEach((r) => { pos.push(pos[3 * r], 0, pos[3 * r + 2]); skirt.push(SKIRT_TOP); });
   ring.forEach((r) => { pos.push(pos[3 * r], 0, pos[3 * r + 2]); skirt.push(1); });
-  for (let k = 0; k < ring.length; k++) {
-    const a = ring[k], b = ring[(k + 1) % ring.length], a2 = base + k, b2 = base + (k + 1) % ring.length;
+  for (let k = 0; k < n; k++) {
+    const a = top + k, b = top + (k + 1) % n, a2 = a + n, b2 = b + n;
     index.push(a, a2, b, b, a2, b2);
   }
   const geo = new THREE.BufferGeometry();
@@ -173,7 +180,8 @@ export class Ocean {
     }
     u.uFadeFar.value = this.ring * patch * 0.95;
     u.uFadeNear.value = u.uFadeFar.value * 0.35;
-    u.uSkirtDepth.value = this.skirts ? Math.max(0.5, patch / 100) : 0;
+    // Short: the stitched edges meet, so the skirt only has to fill rounding pinholes.
+    u.uSkirtDepth.value = this.skirts ? SKIRT_DEPTH : 0;
     // Hex-tiled normals from one patch away (single waves still resolved nearer).
     if (this.hexTiling) { u.uHexNear.value = patch; u.uHexFar.value = 2.5 * patch; }
     this.layoutKey = '';

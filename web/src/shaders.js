@@ -12,6 +12,7 @@ uniform vec3 uMoonDir;
 uniform vec3 uMoonColor;
 uniform float uStars;
 uniform float uExposure;
+uniform float uGapProbe;   // tests: paint sky and skirts magenta, so what shows in the seams is countable
 vec3 skyColor(vec3 d, float lod) {
   d.y = max(d.y, 0.0);     // below the horizon: the horizon's haze
   return textureLod(uEnv, normalize(d + vec3(0.0, 1e-4, 0.0)), lod).rgb;
@@ -56,7 +57,7 @@ void main() {
     float st = step(0.9985, starHash(g)) * starHash(g + 1.0);
     c += vec3(0.05) * st * uStars * smoothstep(0.05, 0.3, d.y);
   }
-  gl_FragColor = vec4(toDisplay(c), 1.0);
+  gl_FragColor = uGapProbe > 0.5 ? vec4(1.0, 0.0, 1.0, 1.0) : vec4(toDisplay(c), 1.0);
 }`;
 
 // Displacement textures: RGBA = (dx, height, dz, jacobian), two frames (A older,
@@ -86,6 +87,7 @@ attribute float skirt;
 attribute vec4 aEdge;
 #endif
 uniform float uFadeNear, uFadeFar, uSkirtDepth, uStitch;
+varying float vSkirt;
 varying vec3 vWorld;
 varying vec2 vGround;
 varying float vHeight;
@@ -116,6 +118,7 @@ void main() {
 #endif
   vec3 p = vec3(xz.x + d.x, d.y - skirt * uSkirtDepth, xz.y + d.z);
   vWorld = p;
+  vSkirt = skirt;
   vGround = xz;
   vHeight = d.y;
   gl_Position = projectionMatrix * viewMatrix * vec4(p, 1.0);
@@ -132,15 +135,19 @@ uniform vec3 uDeep, uScatter;
 varying vec3 vWorld;
 varying vec2 vGround;
 varying float vHeight;
+varying float vSkirt;
 
 vec3 surf(vec2 xz) { vec4 d = dispAt(xz); return vec3(xz.x + d.x, d.y, xz.y + d.z); }
 
-// Slope (dh/dx, dh/dz) of the displaced surface, averaged over +-e.
-vec2 slopeAt(vec2 xz, float e) {
-  vec3 tx = surf(xz + vec2(e, 0.0)) - surf(xz - vec2(e, 0.0));
-  vec3 tz = surf(xz + vec2(0.0, e)) - surf(xz - vec2(0.0, e));
+// Far-field sample: slope (dh/dx, dh/dz) by forward differences over e, and height,
+// from the newer frame only: 3 texture reads instead of 8 (this runs 3 times a pixel).
+vec3 farSample(vec2 xz, float e) {
+  vec4 c = textureLod(uDispB, xz / uPatch + 0.5 * uTexel, 0.0);
+  vec4 x = textureLod(uDispB, (xz + vec2(e, 0.0)) / uPatch + 0.5 * uTexel, 0.0);
+  vec4 z = textureLod(uDispB, (xz + vec2(0.0, e)) / uPatch + 0.5 * uTexel, 0.0);
+  vec3 tx = vec3(e + x.x - c.x, x.y - c.y, x.z - c.z), tz = vec3(z.x - c.x, z.y - c.y, e + z.z - c.z);
   vec3 n = cross(tz, tx);
-  return -n.xz / max(n.y, 1e-4);
+  return vec3(-n.xz / max(n.y, 1e-4), c.y);
 }
 vec2 hexHash(vec2 p) { return fract(sin(vec2(dot(p, vec2(127.1, 311.7)), dot(p, vec2(269.5, 183.3)))) * 43758.5453); }
 // Far away the periodic patch shows as a lattice. There the slopes are read from the
@@ -160,8 +167,7 @@ vec3 hexSample(vec2 xz, float e) {
   if (t.z > 0.0) { w = vec3(t.z, t.y, t.x); v1 = id; v2 = id + vec2(0.0, 1.0); v3 = id + vec2(1.0, 0.0); }
   else { w = vec3(-t.z, 1.0 - t.y, 1.0 - t.x); v1 = id + vec2(1.0); v2 = id + vec2(1.0, 0.0); v3 = id + vec2(0.0, 1.0); }
   vec2 o1 = xz + hexHash(v1) * uPatch, o2 = xz + hexHash(v2) * uPatch, o3 = xz + hexHash(v3) * uPatch;
-  vec3 s = w.x * vec3(slopeAt(o1, e), dispAt(o1).y) + w.y * vec3(slopeAt(o2, e), dispAt(o2).y)
-         + w.z * vec3(slopeAt(o3, e), dispAt(o3).y);
+  vec3 s = w.x * farSample(o1, e) + w.y * farSample(o2, e) + w.z * farSample(o3, e);
   return s / max(length(w), 1e-3);   // (slope x, slope z, height)
 }
 
@@ -228,5 +234,5 @@ void main() {
                        + skyColor(vec3(0.0, 0.0, 1.0), 3.0) + skyColor(vec3(0.0, 0.0, -1.0), 3.0));
   vec3 haze = mix(skyColor(vec3(-V.x, 0.0, -V.z) + vec3(1e-4, 0.0, 0.0), 0.0), hazeAvg, smoothstep(0.05, 0.4, V.y));
   c = mix(c, haze, fog);
-  gl_FragColor = vec4(toDisplay(c), 1.0);
+  gl_FragColor = uGapProbe > 0.5 && vSkirt > 0.0 ? vec4(1.0, 0.0, 1.0, 1.0) : vec4(toDisplay(c), 1.0);
 }`;

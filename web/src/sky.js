@@ -136,6 +136,7 @@ export class SkyModel {
       uMoonColor: { value: new THREE.Color(0, 0, 0) },
       uStars: { value: 0 },
       uExposure: { value: 1 },
+      uGapProbe: { value: 0 },
     };
     this.state = null;
   }
