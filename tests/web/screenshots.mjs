@@ -71,6 +71,7 @@ async function take(browser, port, s, file) {
   else if (s.target) q.set('target', s.target);
   if (!s.hud) q.set('hud', '0');
   if (!s.panel) q.set('panel', 'closed');
+  if (!s.hud && !s.panel) q.set('ui', '0'); // the sea alone
   await page.goto(`http://127.0.0.1:${port}/?${q}`);
   await waitFor(page, 'connected and rendering', () => window.oceand.connected && window.oceand.rendered > 2, null, 60000);
   const version = s.preset ? await applyPreset(port, s.preset) : null;
@@ -103,7 +104,7 @@ try {
   }
   if (!only.size || only.has('screenshot')) {
     // The README's picture: desktop, panel open, status shown, a fresh breeze.
-    const v = await take(browser, port, { name: 'screenshot', preset: 'fresh', hour: 17.5, hud: true, panel: true, face: { yaw: 25, dist: 100, ty: 2 } }, args.shot);
+    const v = await take(browser, port, { name: 'screenshot', preset: 'fresh', hour: 17.5, hud: true, panel: true, face: { yaw: 0, dist: 100, ty: 2 } }, args.shot);
     console.log(`${args.shot}  (sun ${v.sky.sunAltitudeDeg.toFixed(1)}°)`);
   }
 } finally {

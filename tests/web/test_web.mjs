@@ -107,7 +107,7 @@ const pageErrors = [];
 async function openPage() {
   const p = await browser.newPage({ viewport: VIEW });
   p.on('pageerror', (e) => pageErrors.push(e.message));
-  await p.goto(url);
+  await p.goto(url, { timeout: 120000 });
   return p;
 }
 
@@ -223,11 +223,11 @@ try {
 
   await check('view presets are local: night is darker than noon but not black', async () => {
     await a.click('[data-view=noon]');
-    await waitFor(a, 'noon', () => window.oceand.view.sky.sunAltitudeDeg > 50, null, 5000);
+    await waitFor(a, 'noon', () => window.oceand.view.sky.sunAltitudeDeg > 50);
     await renderedMore(a, 2);
     const noon = await shot(a, 'noon');
     await a.click('[data-view=night]');
-    await waitFor(a, 'night', () => window.oceand.view.sky.sunAltitudeDeg < -20, null, 5000);
+    await waitFor(a, 'night', () => window.oceand.view.sky.sunAltitudeDeg < -20);
     await renderedMore(a, 2);
     const night = await shot(a, 'night');
     fs.writeFileSync(path.join(args.out, 'night.png'), night.png);
@@ -242,7 +242,7 @@ try {
   await check('the HUD can be hidden (button and H key) and stays hidden after a reload', async () => {
     await b.click('[data-ui=hud-toggle]');
     assert(await b.locator('.oc-hud-text').isHidden(), 'HUD text still shown');
-    await b.reload();
+    await b.reload({ timeout: 120000 }); // slow while page A renders in software GL
     await waitFor(b, 'page B reconnected', () => window.oceand.connected);
     assert(await b.locator('.oc-hud-text').isHidden(), 'HUD shown again after a reload');
     await b.keyboard.press('h');

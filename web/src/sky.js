@@ -36,7 +36,7 @@ function dirFromAltAz(alt, az) {
 // (Beaufort 10, 24.5 m/s), which is what a sailor sees.
 export function weatherFromWind(u) {
   const s = (a, b, x) => { const t = Math.min(Math.max((x - a) / (b - a), 0), 1); return t * t * (3 - 2 * t); };
-  return { overcast: 0.12 + 0.88 * s(6, 24, u), darkening: 0.6 * s(10, 28, u) };
+  return { overcast: 0.12 + 0.88 * s(6, 24, u), darkening: 0.5 * s(10, 28, u) };
 }
 
 const s01 = (a, b, x) => { const t = Math.min(Math.max((x - a) / (b - a), 0), 1); return t * t * (3 - 2 * t); };
@@ -98,7 +98,8 @@ float oc_fbm(vec2 p) {
   return s;
 }
 vec3 weather(vec3 dir, vec3 clear) {
-  vec3 c = clear * uSkyGain + uNight * (0.55 + 0.45 * max(dir.y, 0.0));
+  // Under a spreading deck the clear sky left in the gaps is dimmer too.
+  vec3 c = clear * uSkyGain * (1.0 - 0.5 * uOvercast) + uNight * (0.55 + 0.45 * max(dir.y, 0.0));
   // A cloud layer seen as a plane overhead: cells shrink toward the horizon.
   float h = max(dir.y, 0.0);
   float n = oc_fbm(dir.xz / (h + 0.12) * 1.3);
@@ -171,19 +172,19 @@ export class SkyModel {
     lit.multiplyScalar(1 - darkening);
     // Key light: the sun, then the moon (fixed high in the south-east) once the sun is down.
     const sunT = sunTransmittance(sinAlt, turbidity);
-    const hidden = 1 - s01(0.55, 0.97, overcast); // a closed deck hides the disc
+    const hidden = 1 - s01(0.4, 0.85, overcast); // a closed deck hides the disc
     const moonDir = dirFromAltAz(38 * Math.PI / 180, 155 * Math.PI / 180);
     const night = 1 - s01(-0.12, 0.0, sinAlt);
     const U = this.uniforms;
     U.uMoonDir.value.copy(moonDir);
-    U.uMoonColor.value.setRGB(0.05, 0.056, 0.066).multiplyScalar(night * hidden);
+    U.uMoonColor.value.setRGB(0.035, 0.039, 0.046).multiplyScalar(night * hidden);
     if (sinAlt > -0.02) {
       U.uSunDir.value.copy(sun);
       U.uSunColor.value.copy(sunT).multiplyScalar(1.25 * hidden);
       U.uDiscSize.value = Math.cos(0.27 * Math.PI / 180);
     } else {
       U.uSunDir.value.copy(moonDir);
-      U.uSunColor.value.setRGB(0.05, 0.056, 0.066).multiplyScalar(night * hidden);
+      U.uSunColor.value.copy(U.uMoonColor.value);
       U.uDiscSize.value = Math.cos(0.26 * Math.PI / 180);
     }
     U.uStars.value = night * (1 - s01(0.3, 0.8, overcast));
