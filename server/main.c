@@ -13,6 +13,7 @@
 #include "log.h"
 #include "net.h"
 #include "query_worker.h"
+#include "roles.h"
 #include "sim_thread.h"
 #include "state_saver.h"
 
@@ -60,6 +61,42 @@ static int ensure_parent_dir(const char *path)
     return mkdir(dir, 0755) != 0 && errno != EEXIST ? -1 : 0;
 }
 
+static void install_signals(void)
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN);
+    sa.sa_handler = on_hangup;
+    sigaction(SIGHUP, &sa, NULL);
+}
+
+/* --role edge: no simulation here; frames, hello and answers come from the
+ * sim over NATS (server/role_edge.c). Nothing to save: an edge is stateless. */
+static int run_edge(const struct daemon_config *dc, struct net *net)
+{
+    char err[512];
+    struct role_edge *edge = role_edge_open(dc, net, err, sizeof err);
+    if (!edge) {
+        LOGE("%s", err);
+        net_destroy(net);
+        return 1;
+    }
+    LOGI("oceand edge listening on %s://%s:%d/ (web root %s)", dc->tls_cert[0] ? "https" : "http", dc->bind,
+         net_port(net), dc->web_root);
+    while (!interrupted)
+        if (net_service(net) < 0)
+            break;
+    LOGI("stopping");
+    role_edge_close(edge);
+    net_destroy(net);
+    LOGI("bye");
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     struct daemon_config dc;
@@ -89,6 +126,9 @@ int main(int argc, char **argv)
         LOGE("%s", err);
         return 1;
     }
+    install_signals();
+    if (strcmp(dc.role, "edge") == 0)
+        return run_edge(&dc, net); /* no simulation here: no point queries either */
     struct query_config qc = {
         .threads = dc.query_threads, .window = dc.query_window, .budget = dc.query_budget,
         .queue = dc.query_queue, .probe_max_points = dc.probe_max_points, .probe_max_total = dc.probe_max_total,
@@ -112,10 +152,19 @@ int main(int argc, char **argv)
         .wake_user = net,
         .queries = queries,
     };
+    /* --role sim: the NATS link feeds demand in and takes frames out. */
+    struct role_sim *cluster = NULL;
+    if (strcmp(dc.role, "sim") == 0 && !(cluster = role_sim_open(&dc, net, &sc, err, sizeof err))) {
+        LOGE("%s", err);
+        query_service_free(queries);
+        net_destroy(net);
+        return 1;
+    }
     struct sim *sim = sim_start(&params, &sc, err, sizeof err);
     if (!sim) {
         LOGE("simulation: %s", err);
         query_service_free(queries);
+        role_sim_close(cluster);
         net_destroy(net);
         return 1;
     }
@@ -125,16 +174,6 @@ int main(int argc, char **argv)
     struct state_saver saver;
     state_saver_init(&saver, dc.state_file, &params, res.params_version);
     net_on_params(net, state_saver_on_params, &saver);
-
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal;
-    sigemptyset(&sa.sa_mask);
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-    signal(SIGPIPE, SIG_IGN);
-    sa.sa_handler = on_hangup;
-    sigaction(SIGHUP, &sa, NULL);
 
     LOGI("oceand listening on %s://%s:%d/ (N=%d, %g Hz, web root %s)", dc.tls_cert[0] ? "https" : "http", dc.bind, net_port(net),
          params.resolution, dc.tick_rate, dc.web_root);
@@ -157,6 +196,7 @@ int main(int argc, char **argv)
     net_attach_queries(net, NULL);
     query_service_free(queries); /* after the tick: it no longer hands over grids */
     net_attach_sim(net, NULL);
+    role_sim_close(cluster); /* after the tick (it publishes), before net (it holds requests) */
     net_destroy(net);
     LOGI("bye");
     return 0;
