@@ -197,7 +197,8 @@ try {
     console.log(`     buoy at (${r.p[0].toFixed(1)}, ${r.p[1].toFixed(1)}): probe - exact = ${(diff * 1000).toFixed(1)} mm`);
     assert(diff < 0.05, `probe ${r.e.probeHeight} vs exact ${r.e.height}`);
     assert(r.label && r.label.includes('exact query'), `no buoy label: ${r.label}`);
-    await a.keyboard.press('Escape');
+    await a.getByText(/^buoy \(/).dblclick();           // double-clicking the label removes the buoy
+    await waitFor(a, 'buoy removed', () => window.oceandProbe.point === null, null, 5000);
   });
 
   const b = await openPage();
