@@ -57,6 +57,10 @@ static const struct opt_def opt_table[] = {
     { "sim_nice", OPT_INT, O(sim_nice), -20, 19, "0", "nice value of the tick thread; below 0 (needs "
       "CAP_SYS_NICE) keeps the tick on time on a busy machine" },
     { "max_memory_mb", OPT_INT, O(max_memory_mb), 16, 1 << 20, "256", "memory cap for the simulation; limits N" },
+    { "server_name", OPT_STR, O(server_name), 0, 0, "", "Host names the daemon answers to besides localhost and the "
+      "--bind address (comma list, e.g. ocean.example.org); other Host headers get 421 (DNS rebinding); \"*\" = any" },
+    { "output_limit_kb", OPT_INT, O(output_limit_kb), 16, 1 << 20, "1024", "JSON replies queued for one client (KiB); "
+      "a client over it is closed with 1008 (it is not reading)" },
 };
 #undef O
 static const size_t opt_count = sizeof opt_table / sizeof opt_table[0];

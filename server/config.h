@@ -40,6 +40,8 @@ struct daemon_config {
     int    sim_nice;           /* nice value of the tick thread (< 0 needs CAP_SYS_NICE) */
     char   tls_cert[512];      /* PEM certificate (chain): "" = plain http/ws */
     char   tls_key[512];       /* PEM private key of tls_cert */
+    char   server_name[512];   /* extra Host names accepted (comma list); "*" = any Host */
+    int    output_limit_kb;    /* JSON replies queued per client (KiB) before it is closed */
 };
 
 /* What config_load found besides the values. */
