@@ -122,6 +122,8 @@ static void answer(struct net *n, const struct sim_set *a)
     }
     struct session *origin = session_find(n, r->serial);
     if (a->status == SIM_SET_APPLIED) {
+        if (a->changed & resolution_bit())
+            n->trim_due = mono_now() + TRIM_DELAY_S;
         if (n->on_params)
             n->on_params(n->on_params_user, &n->applied, n->applied_version);
         char *all = control_print(params_msg(n, a, r->by, NULL));

@@ -32,6 +32,7 @@
 
 #define CHUNK_SIZE (32 * 1024)    /* bytes per lws_write of a frame */
 #define MAX_TEXT_QUEUE 256        /* a client this far behind on JSON is not reading: drop it */
+#define TRIM_DELAY_S 0.5          /* after a change of N: time for the builder to free the old grids */
 #define FD_RESERVE_MIN 16         /* descriptors kept free below RLIMIT_NOFILE (plus 1/64 of it) */
 
 /* One queued JSON message. */
@@ -119,6 +120,7 @@ struct net {
     struct ocean_params view;     /* applied + every pending request: what the next set is checked on */
     net_params_fn on_params;      /* main writes (net_on_params) before the loop: applied-change listener */
     void *on_params_user;         /* its argument (main's state saver, used on this thread) */
+    double trim_due;              /* mono time to malloc_trim after a change of N, 0 = none */
     bool placeholder;             /* no index.html in the web root */
     int port;                     /* the port really listened on (--port 0) */
     int fd_limit;                 /* RLIMIT_NOFILE at start */

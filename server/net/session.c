@@ -271,6 +271,15 @@ static void on_sim_wakeup(struct net *n)
         return;
     fanout_take_latest(n);
     dispatch_answers(n);
+    if (n->trim_due > 0 && mono_now() >= n->trim_due) {
+        /* The builder freed the grids of the old N by now. glibc keeps them
+         * on the heap (its mmap threshold grew past their size at the first
+         * free), so RSS would stay at the largest N ever used: return the
+         * free pages to the system. Once per change of N, on this thread,
+         * never on the tick. */
+        n->trim_due = 0;
+        malloc_trim(0);
+    }
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
         struct session *s = session_of(d);
         if (s->tq.count || fanout_want_write(n, s))

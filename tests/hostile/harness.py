@@ -41,7 +41,7 @@ def free_port():
 class Daemon:
     """One oceand with its own port, temp dir, state file and log."""
 
-    def __init__(self, oceand, *extra, resolution=64, tick_rate=30, web=False, nofile=None):
+    def __init__(self, oceand, *extra, resolution=64, tick_rate=30, web=False, nofile=None, env=None):
         self.tmp = tempfile.mkdtemp(prefix="oceand-hostile-")
         if web:   # a real web root (static file mount) instead of the placeholder page
             os.makedirs(os.path.join(self.tmp, "web"))
@@ -62,7 +62,8 @@ class Daemon:
 
             def preexec():
                 resource.setrlimit(resource.RLIMIT_NOFILE, (nofile, nofile))
-        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log, preexec_fn=preexec)
+        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log, preexec_fn=preexec,
+                                     env=dict(os.environ, **(env or {})))
         self.url = "ws://127.0.0.1:%d/" % self.port
         self.http = "http://127.0.0.1:%d" % self.port
         deadline = time.time() + 20

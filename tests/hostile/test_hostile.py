@@ -1033,6 +1033,189 @@ def symlink_web_root(d, fig):
     check(d.metric('oceand_http_refused_total{reason="symlink"}') >= 3, "symlink refusals not counted")
 
 
+# ---------------------------------------------------------------- issue 16: new attacks (second battery)
+
+@case(args=LIBERAL)
+def ws_ping_flood(d, fig):
+    """20 000 WebSocket-level pings (opcode 9, 125-byte payloads) from a client
+    that never reads: lws answers them below the JSON rate limit, so the
+    answers must not pile up in memory."""
+    s, r = attacker(d, rcvbuf=4096)
+    s.setblocking(False)
+    ping = ws_frame(9, b"p" * 125)
+    rss0 = d.rss_kb()
+    sent = 0
+    deadline = time.time() + 8
+    buf = ping * 100
+    while sent < 20000 and time.time() < deadline:
+        try:
+            k = s.send(buf)
+            sent += k // len(ping)
+            if k < len(buf):
+                time.sleep(0.01)
+        except BlockingIOError:
+            time.sleep(0.01)
+        except OSError:
+            break
+    time.sleep(0.5)
+    grow = d.rss_kb() - rss0
+    s.close()
+    fig.update(pings_sent=sent, rss_growth_during_kb=grow)
+    log("    %d WebSocket pings from a client that never reads: RSS %+d kB" % (sent, grow))
+    check(grow < 2048, "RSS grew %d kB under a ping flood" % grow)
+
+
+@case(args=LIBERAL)
+def interleaved_control(d, fig):
+    """Framing corner cases: one JSON message in 2000 fragments with a ping
+    between each (legal, one answer); then fragmented control frames, a
+    control frame over 125 bytes, a continuation with nothing to continue and
+    a new message inside an unfinished one (each a protocol error: 1002)."""
+    s, r = attacker(d)
+    msg = ('{"type":"ping","id":7,"pad":"%s"}' % ("z" * 31900)).encode()
+    parts = [msg[i:i + 16] for i in range(0, len(msg), 16)]
+    out = b""
+    for i, p in enumerate(parts):
+        out += ws_frame(OP_TEXT if i == 0 else OP_CONT, p, fin=i == len(parts) - 1) + ws_frame(9, b"x")
+    send_quiet(s, out)
+    r.until(lambda r: any(t.get("type") == "pong" for t in r.texts), 10)
+    pongs = [t.get("id") for t in r.texts if t.get("type") == "pong"]
+    s.close()
+    fig["fragments"] = len(parts)
+    check(pongs == [7], "fragmented ping with interleaved pings: answers %r" % pongs)
+    bad = {
+        "fragmented ping": ws_frame(9, b"ab", fin=False) + ws_frame(OP_CONT, b"cd"),
+        "ping of 126 bytes": ws_header(9, 126) + b"\0" * 126,
+        "lone continuation": ws_frame(OP_CONT, b'{"type":"ping"}'),
+        "text inside text": ws_frame(OP_TEXT, b'{"type":', fin=False) + ws_frame(OP_TEXT, b'{"type":"ping"}'),
+        "reserved opcode 3": ws_frame(3, b"xx"),
+        "close with 1 byte": ws_frame(8, b"\x03"),
+    }
+    codes = {}
+    for name, data in bad.items():
+        s, r = attacker(d)
+        send_quiet(s, data)
+        r.until(lambda r: r.close_code is not None, 3)
+        codes[name] = r.close_code if r.close_code is not None else ("eof" if r.eof else None)
+        s.close()
+    fig["close_codes"] = codes
+    log("    %d fragments with interleaved pings: %r; protocol errors: %r" % (len(parts), pongs, codes))
+    # lws 4.1 echoes a 1-byte close body as a close without status (1005): closed all the same.
+    check(all(c in (1002, "eof") for n, c in codes.items() if n != "close with 1 byte"),
+          "protocol errors not closed with 1002: %r" % codes)
+    check(codes["close with 1 byte"] is not None, "a close frame with a 1-byte body left the connection open")
+
+
+@case(args=LIBERAL, resolution=128)
+def subscription_churn(d, fig):
+    """4 clients each send 1500 subscribes cycling through fields x LOD x
+    bound as fast as they can, then vanish: demand must come back to what the
+    observer alone asks for (no layer encoded for nobody), memory flat."""
+    enc0 = d.metrics()
+    time.sleep(1.5)
+    enc0b = d.metrics()
+    fields = ["height", "dx", "dz", "slope_x", "slope_z", "jacobian"]
+    bounds = [0, 0.001, 0.01, 0.05]
+    errors = []
+
+    def churn(k):
+        s, r = attacker(d)
+        for b in range(15):        # batches of 100 (under the 256 unread replies a client may have)
+            batch = b""
+            for i in range(b * 100, b * 100 + 100):
+                sub = {"type": "subscribe", "id": i, "fields": fields[:1 + (i + k) % 6], "lod": (i // 6) % 3,
+                       "bound": bounds[(i // 18) % 4]}
+                batch += ws_frame(OP_TEXT, json.dumps(sub))
+            if not send_quiet(s, batch):
+                errors.append("client %d closed by the daemon (close %r)" % (k, r.close_code))
+                break
+            n = b * 100 + 100
+            if not r.until(lambda r: sum(1 for t in r.texts if t.get("type") == "subscribed") >= n, 10):
+                errors.append("client %d: %d of %d subscribes answered" % (
+                    k, sum(1 for t in r.texts if t.get("type") == "subscribed"), n))
+                break
+        rst_close(s)
+    ts = [threading.Thread(target=churn, args=(k,)) for k in range(4)]
+    for t in ts:
+        t.start()
+    for t in ts:
+        t.join()
+    wait_until(lambda: d.metric("oceand_clients") == 1, 10)
+    time.sleep(1.0)
+    m1 = d.metrics()
+    time.sleep(2.0)
+    m2 = d.metrics()
+    # encode time per tick now vs before the churn (only the observer's layer should be encoded)
+    def per_tick(a, b):
+        n = b["oceand_encode_duration_seconds_count"] - a["oceand_encode_duration_seconds_count"]
+        return (b["oceand_encode_duration_seconds_sum"] - a["oceand_encode_duration_seconds_sum"]) / max(1, n)
+    fig.update(subscribes=6000, encode_ms_per_tick_before=round(1000 * per_tick(enc0, enc0b), 3),
+               encode_ms_per_tick_after=round(1000 * per_tick(m1, m2), 3),
+               bytes_per_frame_after=round((m2["oceand_bytes_sent_total"] - m1["oceand_bytes_sent_total"])
+                                           / max(1, m2["oceand_frames_sent_total"] - m1["oceand_frames_sent_total"])))
+    s, r = attacker(d)
+    m = ask(s, r, '{"type":"subscribe","id":1,"fields":["height"]}')
+    s.close()
+    log("    6000 subscribes from 4 vanishing clients; encode per tick %.3f ms before, %.3f ms after; %d bytes per frame"
+        % (fig["encode_ms_per_tick_before"], fig["encode_ms_per_tick_after"], fig["bytes_per_frame_after"]))
+    # Layers nobody asks for any more would be encoded every tick: several times the observer's one.
+    check(fig["encode_ms_per_tick_after"] < 2.5 * fig["encode_ms_per_tick_before"] + 0.2,
+          "encode time per tick %.3f ms after the churn, %.3f ms before: demand left behind?"
+          % (fig["encode_ms_per_tick_after"], fig["encode_ms_per_tick_before"]))
+    check(not errors, "; ".join(errors[:2]))
+    check(m and m.get("type") == "subscribed", "subscribe after the churn: %r" % (m,))
+    check(fig["bytes_per_frame_after"] < 2 * (enc0.get("oceand_bytes_sent_total", 1) /
+                                              max(1, enc0.get("oceand_frames_sent_total", 1))) + 1024,
+          "frames larger after the churn: demand left behind?")
+
+
+@case()
+def http_pipeline_flood(d, fig):
+    """30 keep-alive connections each pipeline 400 GET /metrics and never read:
+    one answer in flight per connection, memory flat, the stream unharmed."""
+    req = b"GET /metrics HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n" * 400
+    socks = []
+    rss0 = d.rss_kb()
+    for _ in range(30):
+        s = socket.socket()
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        s.connect(("127.0.0.1", d.port))
+        s.setblocking(False)
+        try:
+            s.send(req)
+        except (BlockingIOError, OSError):
+            pass
+        socks.append(s)
+    time.sleep(3.0)
+    grow = d.rss_kb() - rss0
+    for s in socks:
+        s.close()
+    n_ok = sum(1 for _ in range(20) if d.get("/healthz"))
+    fig.update(connections=30, requests=12000, rss_growth_during_kb=grow, healthz_after=n_ok)
+    log("    30 connections x 400 pipelined /metrics, never read: RSS %+d kB; /healthz %d/20 after" % (grow, n_ok))
+    check(grow < 4096, "RSS grew %d kB" % grow)
+
+
+@case(resolution=64, changes_params=True, rss_slack_kb=8192)
+def resolution_flapping(d, fig):
+    """Minor: N 64 -> 512 -> 64, five times: once back at 64 the memory of the
+    big grids goes back to the system (RSS near where it started)."""
+    s, r = attacker(d)
+    rss = [d.rss_kb()]
+    for i in range(5):
+        for n in (512, 64):
+            m = ask(s, r, '{"type":"set","id":%d,"params":{"resolution":%d}}' % (i * 2 + (n == 64), n), timeout=15)
+            check(m and m.get("type") == "params", "set resolution %d: %r" % (n, m))
+            time.sleep(0.6)
+        rss.append(d.rss_kb())
+    s.close()
+    time.sleep(1.0)
+    rss.append(d.rss_kb())
+    fig.update(rss_kb=rss, settled_growth_kb=rss[-1] - rss[0])
+    log("    RSS at N=64 before and after each 64->512->64 round: %s kB" % rss)
+    check(rss[-1] - rss[0] < 8192, "RSS settles %d kB above the start after flapping" % (rss[-1] - rss[0]))
+
+
 # ---------------------------------------------------------------- runner
 
 def run_case(fn, fig):
