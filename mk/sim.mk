@@ -49,3 +49,33 @@ test-sim-valgrind: $(BUILD)/test_ocean
 # FFTW_MEASURE plans, cached in $(SIM_WISDOM) across runs.
 bench-step: $(BUILD)/bench_step
 	$(BUILD)/bench_step $(SIM_WISDOM)
+
+# Point queries (server/sim/ocean_query.c): exact surface values at any (x, z).
+#   make test-query             against a brute-force reference (tests/test_query.c)
+#   make test-query-asan        the same with ASan+UBSan
+#   make test-query-valgrind    a reduced run (OCEAN_TEST_QUICK=1) under valgrind
+#   make bench-query            cost per point at N = 256 and 512, JSON lines
+BINS    += $(BUILD)/test_query $(BUILD)/bench_query
+TESTS   += test-query test-query-asan test-query-valgrind
+BENCHES += bench-query
+$(BUILD)/obj/tests/test_query.o $(BUILD)/san/tests/test_query.o $(BUILD)/obj/bench/bench_query.o: \
+  INC := -Iserver/sim/include -Iserver/sim
+$(BUILD)/test_query: $(BUILD)/obj/tests/test_query.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/san/test_query: $(BUILD)/san/tests/test_query.o $(OCEAN_SAN_LIB)
+	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/bench_query: $(BUILD)/obj/bench/bench_query.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+.PHONY: test-query test-query-asan test-query-valgrind bench-query
+test-query: $(BUILD)/test_query
+	$(BUILD)/test_query
+test-query-asan: $(BUILD)/san/test_query
+	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 OCEAN_TEST_QUICK=1 $(BUILD)/san/test_query
+test-query-valgrind: $(BUILD)/test_query
+	OCEAN_TEST_QUICK=1 valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
+	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_query
+bench-query: $(BUILD)/bench_query
+	$(BUILD)/bench_query
+# The query's per-mode sums are reductions: OpenMP's simd pragma (no
+# runtime, no threads) lets them vectorise without -ffast-math.
+$(BUILD)/obj/server/sim/ocean_query.o $(BUILD)/san/server/sim/ocean_query.o: CFLAGS += -fopenmp-simd
