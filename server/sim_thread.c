@@ -21,7 +21,7 @@
 
 /* A batch of sets the builder has prepared for one tick boundary. */
 struct built {
-    struct ocean *ocean;          /* new simulation, or NULL when only playback changed */
+    struct ocean_prepared *prepared; /* new state for s->ocean (ocean_prepare), or NULL when only playback changed */
     struct ocean_params params;   /* in force after the batch */
     struct sim_set *sets;         /* in order; each has ->prev, or a failed ->status */
 };
@@ -35,7 +35,9 @@ struct sim {
     atomic_bool stop;             /* sim_stop writes; tick and builder read */
     int test_fail_seed;           /* sim_start writes (OCEAND_TEST_FAIL_BUILD_SEED, -1 = none); builder reads */
 
-    struct ocean *ocean;          /* tick only: the simulation in force */
+    struct ocean *ocean;          /* sim_start writes the pointer, never changed after; tick steps and
+                                   * commits it; builder runs ocean_prepare against it (allowed while
+                                   * the tick steps, ocean.h), never while a commit runs (lock) */
     struct ocean_params params;   /* tick only: the parameters in force */
     uint32_t version;             /* tick only: params_version in force */
     double sim_time;              /* tick only: the clock (copied to now_time) */
@@ -54,7 +56,7 @@ struct sim {
     struct sim_set *pending, **pending_tail;  /* lws appends (sim_submit); builder takes */
     struct built ready;               /* builder writes; tick takes at a tick boundary */
     bool ready_full;                  /* builder sets, tick clears */
-    struct ocean *to_free;            /* tick writes (swapped-out ocean); builder frees it */
+    struct ocean_prepared *to_free;   /* tick writes (the state a commit swapped out); builder frees it */
     struct sim_set *answers, **answers_tail;  /* tick appends; lws takes (sim_take_answers) */
 
     atomic_int demand[LAYER_KEYS];    /* atomic: lws writes (subscriptions); tick reads */
@@ -136,8 +138,8 @@ static void set_failed(struct sim_set *set, enum sim_set_status status, const ch
     snprintf(set->message, sizeof set->message, "%s", msg);
 }
 
-/* ocean_create, or the test hook's simulated out-of-memory (see sim_thread.h). */
-static struct ocean *build_ocean(struct sim *s, const struct ocean_params *p, enum sim_set_status *why,
+/* ocean_prepare, or the test hook's simulated out-of-memory (see sim_thread.h). */
+static struct ocean_prepared *build_ocean(struct sim *s, const struct ocean_params *p, enum sim_set_status *why,
                                  char *err, size_t errlen)
 {
     if (s->test_fail_seed >= 0 && p->seed == s->test_fail_seed) {
@@ -147,7 +149,7 @@ static struct ocean *build_ocean(struct sim *s, const struct ocean_params *p, en
         return NULL;
     }
     *why = SIM_SET_INVALID;
-    return ocean_create(p, &s->cfg.opts, err, errlen);
+    return ocean_prepare(s->ocean, p, err, errlen);
 }
 
 /* Check each set of a batch on top of the previous one (all or nothing per
@@ -167,11 +169,11 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
         set->prev = cur;
         cur = next;
     }
-    out->ocean = NULL;
+    out->prepared = NULL;
     if (physics_differ(&s->build_base, &cur)) {
         enum sim_set_status why;
-        out->ocean = build_ocean(s, &cur, &why, err, sizeof err);
-        if (!out->ocean) {
+        out->prepared = build_ocean(s, &cur, &why, err, sizeof err);
+        if (!out->prepared) {
             LOGW("applying parameters failed: %s", err);
             for (struct sim_set *set = sets; set; set = set->next)
                 if (set->status == SIM_SET_QUEUED)
@@ -190,10 +192,10 @@ static void *builder_main(void *arg)
     pthread_mutex_lock(&s->lock);
     while (!atomic_load(&s->stop)) {
         if (s->to_free) {
-            struct ocean *old = s->to_free;
+            struct ocean_prepared *old = s->to_free;
             s->to_free = NULL;
             pthread_mutex_unlock(&s->lock);
-            ocean_free(old);
+            ocean_prepared_free(old);
             pthread_mutex_lock(&s->lock);
             continue;
         }
@@ -228,28 +230,39 @@ static void apply_pending(struct sim *s)
     pthread_mutex_lock(&s->lock);
     bool have = s->ready_full;
     struct built b = s->ready;
+    int commit_rc = 0, old_n = ocean_resolution(s->ocean);
+    /* Commit under the lock, before the builder is told `ready` is free:
+     * it may then start the next ocean_prepare, which must not overlap a
+     * commit. The commit only swaps pointers (ocean.h). */
+    if (have && b.prepared)
+        commit_rc = ocean_commit(s->ocean, b.prepared);
     s->ready_full = false;
     if (have)
         pthread_cond_signal(&s->cond);
     pthread_mutex_unlock(&s->lock);
     if (!have)
         return;
-    if (b.ocean) {
-        struct ocean *old = s->ocean;
-        s->ocean = b.ocean;
-        if (ocean_resolution(old) != ocean_resolution(s->ocean)) {
+    if (b.prepared) {
+        if (commit_rc != 0) {
+            LOGE("applying parameters failed: the prepared state was stale");
+            for (struct sim_set *set = b.sets; set; set = set->next)
+                if (set->status == SIM_SET_QUEUED)
+                    set_failed(set, SIM_SET_INVALID, "internal: stale prepared state");
+            b.params = s->params;
+        } else if (old_n != ocean_resolution(s->ocean)) {
             atomic_fetch_add(&g_metrics.replans, 1);
             LOGI("resolution now %d", ocean_resolution(s->ocean));
         }
+        /* b.prepared now holds the old state (or the unused new one). */
         pthread_mutex_lock(&s->lock);
         bool slot_free = s->to_free == NULL;
         if (slot_free) {
-            s->to_free = old; /* freeing 10-100 MB is the builder's job, not the tick's */
+            s->to_free = b.prepared; /* freeing 10-100 MB is the builder's job, not the tick's */
             pthread_cond_signal(&s->cond);
         }
         pthread_mutex_unlock(&s->lock);
         if (!slot_free)
-            ocean_free(old);
+            ocean_prepared_free(b.prepared);
     }
     struct sim_set *last = NULL;
     for (struct sim_set *set = b.sets; set; set = set->next) {
@@ -477,11 +490,11 @@ void sim_stop(struct sim *s)
     free_sets(s->answers);
     if (s->ready_full) {
         free_sets(s->ready.sets);
-        if (s->ready.ocean)
-            ocean_free(s->ready.ocean);
+        if (s->ready.prepared)
+            ocean_prepared_free(s->ready.prepared);
     }
     if (s->to_free)
-        ocean_free(s->to_free);
+        ocean_prepared_free(s->to_free);
     frame_unref(s->latest);
     ocean_free(s->ocean);
     oc_encoder_free(s->enc);

@@ -32,7 +32,8 @@ enum ocean_field {
 #define OCEAN_TIME_MAX 1.0e9
 
 struct ocean_options {
-    int threads;               /* worker threads for the step (fill + transforms), >= 1 */
+    int threads;               /* worker threads for the step (fill + transforms), >= 1;
+                                * 0 = one per online core (ocean_threads) */
     const char *wisdom_path;   /* FFTW wisdom cache file, NULL = none */
     int plan_rigor;            /* 0 = FFTW_ESTIMATE (tests), 1 = FFTW_MEASURE */
 };
@@ -46,13 +47,38 @@ struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_opti
  * jumps); a change of N re-plans. On error returns -1, the simulation is
  * unchanged and err says why. */
 int ocean_reconfigure(struct ocean *o, const struct ocean_params *p, char *err, size_t errlen);
+/* Parameter changes prepared off the stepping thread (the daemon's builder).
+ * ocean_prepare computes everything new parameters change into a separate
+ * object: for the same N, the amplitudes and frequencies (reusing the
+ * per-mode random numbers cached for the seed and the per-|k| table, so it
+ * costs a fraction of ocean_create); for another N, a whole new grid with
+ * its FFT plans. It only reads what `o` does not change while stepping, so
+ * it MAY RUN ON ANOTHER THREAD WHILE ocean_step / ocean_field run; it uses
+ * its own worker threads (o's thread count), made on first use. Two
+ * prepares on one ocean must not overlap. Returns NULL with a message in
+ * err on invalid parameters or no memory (o unchanged either way).
+ * ocean_commit swaps the prepared state in: O(1), no allocation or freeing,
+ * on the stepping thread (it must not overlap ocean_step, ocean_field's
+ * readers or an ocean_prepare on the same ocean). It returns -1 and changes
+ * nothing if `o` was committed or reconfigured since the prepare. Either
+ * way pr then holds the old state: free it with ocean_prepared_free (on
+ * any thread). ocean_reconfigure = prepare + commit + free, on the
+ * stepping thread's own workers. */
+struct ocean_prepared;
+struct ocean_prepared *ocean_prepare(struct ocean *o, const struct ocean_params *p, char *err, size_t errlen);
+int ocean_commit(struct ocean *o, struct ocean_prepared *pr);
+void ocean_prepared_free(struct ocean_prepared *pr);
 /* Compute the fields in the mask (OCEAN_FIELD_BIT...) at time t seconds. */
 int ocean_step(struct ocean *o, double t, unsigned fields);
 /* Output of the last step; valid until the next step/reconfigure/free. */
 const float *ocean_field(const struct ocean *o, enum ocean_field f);
 const struct ocean_params *ocean_get_params(const struct ocean *o);
 int ocean_resolution(const struct ocean *o);
-/* Bytes one simulation of resolution n with `threads` workers allocates for
+/* The thread count ocean_create uses for options.threads = requested:
+ * 0 = one per online core (sysconf), with no cap but OCEAN_MAX_THREADS (64);
+ * below 0 = 1; above 64 = 64. */
+int ocean_threads(int requested);
+/* Bytes one simulation of resolution n with `threads` workers (as above) allocates for
  * its grids (spectra, FFT work arrays, output fields): what a memory cap
  * should count. FFTW's plans are not included (small beside the arrays). */
 size_t ocean_memory_bytes(int n, int threads);
