@@ -142,6 +142,13 @@ bool net_host_allowed(struct net *n, struct lws *wsi);      /* the request's Hos
 int upgrade_confirm(struct net *n, struct lws *wsi, const char *upgrade); /* 0 = go on, 1 = refused (answered) */
 bool upgrade_allowed(struct net *n, struct lws *wsi);
 
+/* rx_guard.c: RFC 6455 §5.1 masking, which lws 4.1 does not check (plain sockets) */
+void rx_guard_start(void);                                   /* net_create, plain ws only */
+void rx_guard_stop(void);
+void rx_guard_accept(int fd);                                /* a new client connection */
+bool rx_guard_in_sync(int fd);                               /* at the upgrade */
+bool rx_guard_tripped(int fd);                               /* an unmasked frame was replaced by close 1002 */
+
 /* session.c */
 int cb_ws(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len);
 void session_queue_text(struct session *s, const char *msg, bool front);
@@ -161,13 +168,6 @@ void fanout_take_latest(struct net *n);                      /* after a wake-up 
 bool fanout_want_write(const struct net *n, const struct session *s); /* a frame is ready for s */
 int fanout_write(struct net *n, struct session *s);          /* one lws_write of a frame */
 void fanout_session_free(struct session *s);
-
-/* rx_guard.c: RFC 6455 §5.1 masking, which lws 4.1 does not check (plain sockets) */
-void rx_guard_start(void);                                   /* net_create, plain ws only */
-void rx_guard_stop(void);
-void rx_guard_accept(int fd);                                /* a new client connection */
-bool rx_guard_in_sync(int fd);                               /* at the upgrade */
-bool rx_guard_tripped(int fd);                               /* an unmasked frame was replaced by close 1002 */
 
 /* http.c */
 int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len);

@@ -271,6 +271,11 @@ static void on_sim_wakeup(struct net *n)
         return;
     fanout_take_latest(n);
     dispatch_answers(n);
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
+        struct session *s = session_of(d);
+        if (s->tq.count || fanout_want_write(n, s))
+            lws_callback_on_writable(s->wsi);
+    }
     if (n->trim_due > 0 && mono_now() >= n->trim_due) {
         /* The builder freed the grids of the old N by now. glibc keeps them
          * on the heap (its mmap threshold grew past their size at the first
@@ -279,11 +284,6 @@ static void on_sim_wakeup(struct net *n)
          * never on the tick. */
         n->trim_due = 0;
         malloc_trim(0);
-    }
-    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
-        struct session *s = session_of(d);
-        if (s->tq.count || fanout_want_write(n, s))
-            lws_callback_on_writable(s->wsi);
     }
 }
 
