@@ -4,7 +4,6 @@
  * also refuses WebSocket upgrades that do not ask for oceand.v1. */
 #include "net_internal.h"
 
-#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -60,7 +59,7 @@ static bool static_path_has_symlink(const struct net *n, const char *uri)
     if (len <= 0 || (size_t)len >= sizeof path - 16)
         return true; /* longer than any file we serve: refuse */
     size_t root = strlen(n->dc.web_root);
-    struct stat st;
+    struct stat st = { 0 };
     for (size_t i = root + 1; i <= (size_t)len; i++) {
         if (path[i] != '/' && path[i] != 0)
             continue;
