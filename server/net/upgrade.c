@@ -149,9 +149,11 @@ bool net_host_allowed(struct net *n, struct lws *wsi)
 
 /* ---- the WebSocket handshake ---- */
 
-/* A short refusal: status, optional Sec-WebSocket-Version (426), a body. */
+/* A short refusal: status, optional Sec-WebSocket-Version (426), a body.
+ * The connection stays in HTTP (keep-alive). */
 static int refuse(struct lws *wsi, unsigned int status, const char *why)
 {
+    rx_guard_upgrade_refused(lws_get_socket_fd(wsi));
     unsigned char buf[LWS_PRE + 512], *start = buf + LWS_PRE, *p = start, *end = buf + sizeof buf - 1;
     size_t blen = strlen(why);
     if (lws_add_http_header_status(wsi, status, &p, end) ||

@@ -867,6 +867,33 @@ def handshake_rules(d, fig):
     check(got["POST"] == "405", "POST upgrade: %r" % got["POST"])
     check(got["empty Origin"] != "101", "empty Origin accepted")
     check(got["good"] == "101", "a good handshake refused: %r" % got["good"])
+    # A refused upgrade is answered over HTTP (lws answers it as HTTP/1.0 and then
+    # closes); what follows on the connection is never taken for WebSocket frames.
+    unmasked0 = d.metric('oceand_clients_closed_total{reason="unmasked"}')
+    s = socket.create_connection(("127.0.0.1", p), timeout=5)
+    s.sendall(handshake_request(p).replace(b"Version: 13", b"Version: 8"))
+    time.sleep(0.3)
+    s.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+    out = b""
+    deadline = time.time() + 5
+    closed = False
+    while time.time() < deadline and b'"status":"ok"' not in out:
+        try:
+            c = s.recv(4096)
+        except socket.timeout:
+            break
+        except OSError:
+            c = b""
+        if not c:
+            closed = True
+            break
+        out += c
+    s.close()
+    fig["after_426"] = "healthz answered" if b'"status":"ok"' in out else "closed" if closed else "silent"
+    check(out.startswith(b"HTTP/1.0 426") or out.startswith(b"HTTP/1.1 426"), "426 expected first: %r" % out[:60])
+    check(fig["after_426"] != "silent", "connection neither answered nor closed after a 426: %r" % out[-200:])
+    check(d.metric('oceand_clients_closed_total{reason="unmasked"}') == unmasked0,
+          "an HTTP request after a refused upgrade was taken for an unmasked frame")
 
 
 @case(resolution=64, rss_slack_kb=16384)
