@@ -33,6 +33,7 @@
 #define CHUNK_SIZE (32 * 1024)    /* bytes per lws_write of a frame */
 #define MAX_TEXT_QUEUE 256        /* a client this far behind on JSON is not reading: drop it */
 #define TRIM_DELAY_S 0.5          /* after a change of N: time for the builder to free the old grids */
+#define CUT_OFF_GRACE_S 10        /* a client cut off (1008) that does not read its close frame: hung up after */
 #define FD_RESERVE_MIN 16         /* descriptors kept free below RLIMIT_NOFILE (plus 1/64 of it) */
 
 /* One queued JSON message. */

@@ -46,7 +46,7 @@ static void session_cut_off(struct session *s, int status, const char *reason)
         return;
     s->closing = status;
     s->close_reason = reason;
-    lws_set_timeout(s->wsi, PENDING_TIMEOUT_CLOSE_SEND, 3);
+    lws_set_timeout(s->wsi, PENDING_TIMEOUT_CLOSE_SEND, CUT_OFF_GRACE_S);
     lws_callback_on_writable(s->wsi);
 }
 

@@ -951,19 +951,23 @@ def output_limit_close(d, fig):
                 sent += 1
             except (BlockingIOError, OSError):
                 break
-    ok = wait_until(lambda: d.metric('oceand_clients_closed_total{reason="output_limit"}') >= 8, 10)
-    codes = []
+    # Read at once, all together: the close frame follows what is already in flight.
+    deadline = time.time() + 15
+    while time.time() < deadline and not all(r.close_code is not None or r.eof for _, r in socks):
+        for s, r in socks:
+            r.pump(0.02)
+    codes = [r.close_code if r.close_code is not None else ("eof" if r.eof else None) for _, r in socks]
     for s, r in socks:
-        s.setblocking(True)
-        r.until(lambda r: r.close_code is not None or r.eof, 5)
-        codes.append(r.close_code if r.close_code is not None else ("eof" if r.eof else None))
         s.close()
+    ok = wait_until(lambda: d.metric('oceand_clients_closed_total{reason="output_limit"}') >= 8, 5)
     fig.update(closed_counted=d.metric('oceand_clients_closed_total{reason="output_limit"}'), close_codes=codes)
     log("    8 clients over a 32 KiB reply limit: counted %d, close codes %s"
         % (fig["closed_counted"], sorted(set(map(str, codes)))))
     check(ok, "clients over the output limit not closed/counted: %g" % fig["closed_counted"])
     check(all(c is not None for c in codes), "a client over the limit is still open")
-    check(1008 in codes, "no client saw close 1008: %r" % codes)
+    # The close frame can be lost to a TCP reset when lws closes with the client's
+    # unread pings still in its receive queue: EOF is a close too, but some must see 1008.
+    check(1008 in codes and set(codes) <= {1008, "eof"}, "close codes %r, want 1008 (or EOF)" % codes)
 
 
 @case(nofile=96, args=("--max-clients", "500"))
