@@ -122,5 +122,6 @@ void net_destroy(struct net *n)
     rx_guard_stop();
     frame_unref(n->latest);
     dispatch_free_requests(n);
+    free(n->status_text);
     free(n);
 }
