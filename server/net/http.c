@@ -172,6 +172,7 @@ int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void 
         return 0;
     }
     case LWS_CALLBACK_CLOSED_HTTP:
+        rx_guard_forget(lws_get_socket_fd(wsi));
         if (hs) {
             free(hs->body);
             hs->body = NULL;

@@ -157,6 +157,7 @@ void rx_guard_start(void);                                   /* net_create, plai
 void rx_guard_stop(void);
 void rx_guard_accept(int fd);                                /* a new client connection */
 bool rx_guard_in_sync(int fd);                               /* at the upgrade */
+void rx_guard_forget(int fd);                                /* the connection is closing */
 void rx_guard_upgrade_refused(int fd);                       /* refused with an HTTP answer: back to heads */
 bool rx_guard_tripped(int fd);                               /* an unmasked frame was replaced by close 1002 */
 

@@ -214,6 +214,15 @@ bool rx_guard_in_sync(int fd)
     return g && g->phase == G_WS && g->hpos == 0 && g->left == 0;
 }
 
+/* The connection is closing: its fd number may next belong to a socket
+ * that is not a client's. */
+void rx_guard_forget(int fd)
+{
+    struct rx_guard *g = guard_of(fd);
+    if (g)
+        g->phase = G_NONE;
+}
+
 /* The upgrade was refused with an HTTP answer and the connection stays in
  * HTTP: what follows is the next request's head, not frames. */
 void rx_guard_upgrade_refused(int fd)

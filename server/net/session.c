@@ -302,6 +302,7 @@ int cb_ws(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *i
         session_open(n, s, wsi);
         return 0;
     case LWS_CALLBACK_CLOSED:
+        rx_guard_forget(lws_get_socket_fd(wsi));
         if (s && s->wsi)
             session_close(n, s);
         return 0;
