@@ -222,7 +222,8 @@ def test_past_time_and_snapshot_limit(d):
         await ws.send(json.dumps({"type": "query", "id": 3, "points": [[3, 4]], "time": r0["sim_time"]}))
         r = await recv_json(ws, lambda m: m.get("id") == 3)
         check(r["type"] == "query_result" and r["params_version"] == r0["params_version"], "past: %r" % r)
-        check(r["points"][0]["height"] == r0["points"][0]["height"], "past height differs: %r vs %r" % (r, r0))
+        # same snapshot, time and point: equal up to the summation order of the vector loops
+        check(abs(r["points"][0]["height"] - r0["points"][0]["height"]) < 1e-9, "past height differs: %r vs %r" % (r, r0))
         check(p["params_version"] == r0["params_version"] + 1, "version")
         await ws.close()
     asyncio.run(run())
