@@ -1,6 +1,7 @@
 # mk/daemon.mk — the oceand daemon (issue 4): binary, integration tests, load bench, `make run`.
 
 DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c server/frame.c \
+              server/encode_pool.c server/capacity.c server/net/capacity.c \
               server/net/context.c server/net/upgrade.c server/net/session.c server/net/dispatch.c \
               server/net/fanout.c server/net/http.c \
               server/metrics.c server/state.c server/state_saver.c server/log.c

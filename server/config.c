@@ -47,7 +47,11 @@ static const struct opt_def opt_table[] = {
       "on the same port (needs --tls-key)" },
     { "tls_key", OPT_STR, O(tls_key), 0, 0, "", "PEM private key file of --tls-cert" },
     { "fft_threads", OPT_INT, O(fft_threads), 0, 64, "0", "worker threads for the simulation step and for "
-      "rebuilding the spectrum after a change (0 = one per core, at most 8)" },
+      "rebuilding the spectrum after a change (0 = one per core, every core)" },
+    { "encode_threads", OPT_INT, O(encode_threads), 0, 64, "0", "threads that encode frames, pipelined with the "
+      "next step (0 = one per core)" },
+    { "encode_budget", OPT_INT, O(encode_budget), 0, 1 << 30, "0", "samples encoded per tick at most, over all "
+      "distinct layers (0 = derived from the tick time measured at start-up); a subscription beyond it gets `busy`" },
     { "plan_rigor", OPT_INT, O(plan_rigor), 0, 1, "1", "1 = FFTW_MEASURE (faster steps; the first plan of "
       "each N takes a moment, then it is cached in --wisdom-file), 0 = FFTW_ESTIMATE" },
     { "wisdom_file", OPT_STR, O(wisdom_file), 0, 0, "auto", "FFTW wisdom cache: \"auto\" = "
@@ -56,7 +60,8 @@ static const struct opt_def opt_table[] = {
       "small keeps a slow client's queue, and so its latency, short" },
     { "sim_nice", OPT_INT, O(sim_nice), -20, 19, "0", "nice value of the tick thread; below 0 (needs "
       "CAP_SYS_NICE) keeps the tick on time on a busy machine" },
-    { "max_memory_mb", OPT_INT, O(max_memory_mb), 16, 1 << 20, "256", "memory cap for the simulation; limits N" },
+    { "max_memory_mb", OPT_INT, O(max_memory_mb), 0, 1 << 20, "0", "memory cap for the simulation; limits N "
+      "(0 = a quarter of the machine's memory: MemTotal or the cgroup limit, whichever is lower)" },
 };
 #undef O
 static const size_t opt_count = sizeof opt_table / sizeof opt_table[0];
@@ -322,6 +327,34 @@ static void resolve_wisdom_path(struct daemon_config *dc)
         dc->wisdom_file[0] = '\0';
 }
 
+/* A quarter of what the machine (or its cgroup) gives us, at least 256 MB:
+ * the simulation's share of a box that runs other things too. */
+int config_default_memory_mb(void)
+{
+    double total = 0;
+    FILE *f = fopen("/proc/meminfo", "r");
+    if (f) {
+        char line[128];
+        while (fgets(line, sizeof line, f))
+            if (sscanf(line, "MemTotal: %lf kB", &total) == 1)
+                break;
+        fclose(f);
+        total *= 1024.0;
+    }
+    static const char *const cgroup_limits[] = { "/sys/fs/cgroup/memory.max",
+                                                 "/sys/fs/cgroup/memory/memory.limit_in_bytes" };
+    for (size_t i = 0; i < sizeof cgroup_limits / sizeof cgroup_limits[0]; i++) {
+        FILE *c = fopen(cgroup_limits[i], "r");
+        double lim = 0;
+        if (c && fscanf(c, "%lf", &lim) == 1 && lim > 0 && (total <= 0 || lim < total))
+            total = lim; /* "max" (no limit) does not parse as a number */
+        if (c)
+            fclose(c);
+    }
+    double mb = total / 4.0 / 1048576.0;
+    return mb < 256 ? 256 : mb > (1 << 20) ? (1 << 20) : (int)mb;
+}
+
 int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_params *p,
                 struct config_result *res, char *err, size_t errlen)
 {
@@ -421,10 +454,13 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         return -1;
     }
     resolve_wisdom_path(dc);
-    if (dc->fft_threads == 0) {
-        long cores = sysconf(_SC_NPROCESSORS_ONLN);
-        dc->fft_threads = cores < 1 ? 1 : cores > 8 ? 8 : (int)cores;
-    }
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    if (dc->fft_threads == 0) /* every core: the step scales to 16 threads (issue 15) */
+        dc->fft_threads = cores < 1 ? 1 : cores > 64 ? 64 : (int)cores;
+    if (dc->encode_threads == 0)
+        dc->encode_threads = cores < 1 ? 1 : cores > 64 ? 64 : (int)cores;
+    if (dc->max_memory_mb == 0)
+        dc->max_memory_mb = config_default_memory_mb();
     char verr[200];
     if (params_validate(p, verr, sizeof verr) != 0) {
         snprintf(err, errlen, "parameters: %s", verr);

@@ -86,6 +86,10 @@ int main(int argc, char **argv)
         .start_time = res.sim_time,
         .nice = dc.sim_nice,
         .start_version = res.params_version,
+        .encode_threads = dc.encode_threads,
+        .encode_budget = dc.encode_budget,
+        .max_memory_mb = dc.max_memory_mb,
+        .cores = (int)sysconf(_SC_NPROCESSORS_ONLN),
         .wake = net_wake,
         .wake_user = net,
     };

@@ -2,9 +2,13 @@
  * crosses between them and the network (lws) thread. docs/threads.md has
  * the whole threading contract.
  *
- * A tick: apply the parameters the builder prepared -> step the ocean for
- * the fields somebody subscribes to -> encode each subscribed layer once
- * (frame.c) -> publish the frame -> wake the network thread.
+ * A tick (the tick thread, a clock on absolute deadlines): apply the
+ * parameters the builder prepared -> plan which subscription groups are due
+ * and at which LOD (capacity.h) -> hand the frame to the producer thread,
+ * which steps the ocean for those fields, copies them out and starts their
+ * encode on the encode pool (frame.c, encode_pool.h) -> the pool's last
+ * thread publishes the frame and wakes the network thread. The encode of
+ * tick t runs while the producer steps tick t+1.
  * Parameter sets are built off the tick path by the builder (a new ocean
  * for the batch: spectrum, and FFT plans for a new N) and swapped in at the
  * next tick boundary. The mutex is held only to swap pointers and move list
@@ -16,6 +20,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "capacity.h"
 #include "frame.h"
 #include "ocean.h"
 
@@ -58,7 +63,11 @@ struct sim_config {
     double start_time;          /* sim time to resume from */
     int nice;                   /* of the tick thread; 0 = leave as is */
     uint32_t start_version;
-    void (*wake)(void *user);   /* called after every tick (lws_cancel_service) */
+    int encode_threads;         /* threads that encode (pool + the producer helping), >= 1 */
+    long encode_budget;         /* --encode-budget: samples per tick at most, 0 = derived */
+    int max_memory_mb;          /* for the capacity announcement */
+    int cores;                  /* same */
+    void (*wake)(void *user);   /* called after every tick and every frame (lws_cancel_service) */
     void *wake_user;
 };
 
@@ -81,5 +90,15 @@ struct frame *sim_latest(struct sim *s);                     /* this tick's fram
 uint64_t sim_seq(struct sim *s);                             /* seq of the last tick run */
 void sim_demand(struct sim *s, int layer_key, int delta);   /* subscriptions in force */
 double sim_time_now(struct sim *s);
+/* What this daemon can do at the N in force (capacity.h), for hello/params. */
+void sim_capacity(struct sim *s, struct capacity_info *out);
+/* The plan in force (which subscription groups are degraded, and how) and
+ * its generation (+1 per change). */
+uint32_t sim_plan(struct sim *s, struct plan *out);
+/* Whether replacing subscription old (NULL = none) by want keeps the
+ * distinct layers within the encode budget; need and budget in samples per
+ * tick. Layers somebody already gets are free. Call on the thread that
+ * changes demand (sim_demand), before changing it. */
+bool sim_admit(struct sim *s, const struct subscription *old, const struct subscription *want, long *need, long *budget);
 
 #endif
