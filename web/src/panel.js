@@ -5,6 +5,27 @@ import GUI from 'lil-gui';
 
 function label(s) { return s.unit ? `${s.name} (${s.unit})` : s.name; }
 
+// hello/params.capacity (PROTOCOL.md §7.2): resolutions the server would refuse
+// (over its memory cap) are shown disabled with the reason, so the panel cannot
+// pick them; those that would stream degraded with the subscribed fields say so.
+export function showCapacity(ctrl, capacity, nfields) {
+  const select = ctrl?.$select, values = ctrl?._values;
+  if (!select || !values || !capacity) return;
+  const sizes = new Map((capacity.resolutions || []).map((z) => [z.n, z]));
+  values.forEach((n, i) => {
+    const opt = select.options[i], z = sizes.get(Number(n));
+    if (!opt) return;
+    const over = Number(n) > capacity.max_resolution;
+    opt.disabled = over;
+    opt.dataset.capacity = over ? 'memory' : (z && z.full_rate_fields < nfields ? 'degraded' : 'ok');
+    opt.textContent = String(n) + (over ? ' (over memory cap)' : opt.dataset.capacity === 'degraded' ? ' (degraded)' : '');
+    opt.title = over ? `the server's memory cap of ${capacity.memory_cap_mb} MB allows N ≤ ${capacity.max_resolution}`
+      : opt.dataset.capacity === 'degraded'
+        ? `about ${z.est_ms[Math.min(nfields, 6) - 1]} ms per frame with ${nfields} fields, the tick allows ${capacity.budget_ms} ms: served at a coarser LOD or lower rate`
+        : '';
+  });
+}
+
 export class Panel {
   // actions: { set(params), subscribe(sub), view: {wireframe, freeze} object, onView(key, value) }
   constructor(actions) {
@@ -40,6 +61,8 @@ export class Panel {
     this.sim = this.gui.addFolder(this.readOnly ? 'Simulation (view only)' : 'Simulation');
     for (const s of hello.schema || []) this.addParam(s);
     this.buildSubscription(hello);
+    this.capacity = hello.capacity;
+    this.refreshCapacity();
     this.note.textContent = `connected as ${hello.client_id} (${hello.role}), params v${hello.params_version}`;
   }
 
@@ -96,6 +119,11 @@ export class Panel {
     this.sub.close();
   }
 
+  refreshCapacity() {
+    const nfields = (this.lastFields || ['height', 'dx', 'dz']).length;
+    showCapacity(this.ctrls.resolution, this.capacity, nfields);
+  }
+
   // Connection lost: the values shown are the last known ones.
   disconnected() {
     this.note.textContent = 'disconnected — showing the last known values';
@@ -108,6 +136,7 @@ export class Panel {
     if (s.bound !== undefined) this.subValues.bound = s.bound;
     if (s.fields) for (const k of Object.keys(this.subValues)) if (k in this.subCtrls && k !== 'lod' && k !== 'bound') this.subValues[k] = s.fields.includes(k);
     for (const c of Object.values(this.subCtrls)) c.updateDisplay();
+    if (s.fields) { this.lastFields = s.fields; this.refreshCapacity(); }
   }
 
   // params broadcast: new values, and who changed what.
@@ -115,6 +144,7 @@ export class Panel {
     this.params = { ...msg.params };
     Object.assign(this.values, msg.params);
     for (const c of Object.values(this.ctrls)) c.updateDisplay();
+    if (msg.capacity) { this.capacity = msg.capacity; this.refreshCapacity(); }
     const changed = msg.changed || [];
     for (const name of changed) {
       const el = this.ctrls[name]?.domElement;
