@@ -669,6 +669,7 @@ static void measure_model(struct sim *s)
     LOGI("capacity at N=%d: step %.2f ms (height) / %.2f ms (6 fields), encode %.2f ns/sample on %d threads; "
          "encode budget %ld samples per tick", n, best1 * 1e3, best6 * 1e3, m->enc_s_per_sample * 1e9,
          encode_pool_threads(s->pool) + 1, cost_encode_budget(m, n));
+    /* (the producer helps the pool in measure_model, as it does while it waits for a frame) */
 }
 
 static void sim_free_parts(struct sim *s)
@@ -710,10 +711,10 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
         sim_free_parts(s);
         return NULL;
     }
-    /* The encode pool: encode_threads - 1 threads, plus the producer, which
+    /* The encode pool: encode_threads threads (while the producer sleeps
+     * until the next tick every core may encode), plus the producer, which
      * helps while it waits for the previous frame (encode_pool_wait). */
-    int pool_threads = s->cfg.encode_threads > 1 ? s->cfg.encode_threads - 1 : 1;
-    s->pool = encode_pool_new(pool_threads);
+    s->pool = encode_pool_new(s->cfg.encode_threads);
     s->job = s->pool ? frame_job_new(encode_pool_threads(s->pool)) : NULL;
     if (!s->pool || !s->job) {
         snprintf(err, errlen, "out of memory (encoder threads)");
