@@ -1,15 +1,25 @@
 /* bench_step.c — how long a simulation step takes, and how much of it is FFTW.
  *
- * Usage: bench_step [WISDOM_FILE]   (make bench-step passes build/fftw-wisdom)
+ * Usage: bench_step [WISDOM_FILE [GROUP]]   (make bench-step passes build/fftw-wisdom;
+ * GROUP = step, pack, layout, reconfigure or dft runs only that one)
  * One JSON object per line on stdout, medians over repetitions:
  *   {"bench":"step","N":..,"threads":..,"step_ms":..,"fftw_ms":..,"ratio":..}
+ *     for threads = 1, 2, 4, ... up to the online cores (the scaling curve);
  *     a full step (all six fields: 8 real transforms) vs, in the same
  *     process and interleaved with it, the bare FFTW executes that step runs
  *     (same plans, arrays and threads); also the step's process CPU time
  *     (all threads) and its fastest repetition, since the machine is shared;
+ *     fftw_cpu_ms and cpu_ratio: the same with process CPU time (on a busy
+ *     shared machine the least noisy ratio);
  *   {"bench":"pack_vs_c2r",...}  the transforms of a full step done our way
  *     (split c2r), as 8 plain 2-D c2r, and as 4 c2c carrying two real
  *     fields each (plus the de-interleave packing needs);
+ *   {"bench":"z_to_rows",...}    one spectrum's z + row pass with the
+ *     transposition as FFTW's rank-0 copy, as our own copy, or folded into
+ *     FFTW's strided transforms (column-major or row-major in between);
+ *   {"bench":"reconfigure",...}  a parameter change at the same N: ms and
+ *     cpu_ms of ocean_reconfigure, prepare_ms + commit_ms of the builder's
+ *     path, and create_ms of a whole new ocean (the old builder path);
  *   {"bench":"dft_vs_fft",...}   the thesis's Table IV.1: brute-force DFT vs
  *     FFT step, all fields, one thread.
  * Plans use FFTW_MEASURE with the wisdom file, as the daemon does. */
@@ -73,7 +83,8 @@ static void bench_step(int n, int threads, const char *wisdom)
     if (!o)
         return;
     int reps = reps_for(n);
-    double *st = malloc(reps * sizeof *st), *ft = malloc(reps * sizeof *ft), *sc = malloc(reps * sizeof *sc);
+    double *st = malloc(reps * sizeof *st), *ft = malloc(reps * sizeof *ft), *sc = malloc(reps * sizeof *sc),
+           *fc = malloc(reps * sizeof *fc);
     double best = 1e300;
     ocean_step(o, 0.5, OCEAN_ALL_FIELDS); /* warm caches and pages */
     for (int r = 0; r < reps; r++) {
@@ -81,17 +92,19 @@ static void bench_step(int n, int threads, const char *wisdom)
         ocean_step(o, 1.0 + r * 0.033, OCEAN_ALL_FIELDS);
         double t1 = now_ms(), c1 = cpu_ms();
         ocean_fft_only(o, OCEAN_ALL_FIELDS);
-        double t2 = now_ms();
+        double t2 = now_ms(), c2 = cpu_ms();
         st[r] = t1 - t0;
         ft[r] = t2 - t1;
         best = st[r] < best ? st[r] : best;
         sc[r] = c1 - c0;
+        fc[r] = c2 - c1;
     }
-    double s = median(st, reps), f = median(ft, reps), c = median(sc, reps);
+    double s = median(st, reps), f = median(ft, reps), c = median(sc, reps), fcpu = median(fc, reps);
     printf("{\"bench\":\"step\",\"N\":%d,\"threads\":%d,\"fields\":\"all\",\"step_ms\":%.3f,\"fftw_ms\":%.3f,"
-           "\"ratio\":%.3f,\"step_cpu_ms\":%.3f,\"step_min_ms\":%.3f,\"reps\":%d}\n", n, threads, s, f, s / f, c,
-           best, reps);
+           "\"ratio\":%.3f,\"step_cpu_ms\":%.3f,\"fftw_cpu_ms\":%.3f,\"cpu_ratio\":%.3f,\"step_min_ms\":%.3f,"
+           "\"reps\":%d}\n", n, threads, s, f, s / f, c, fcpu, c / fcpu, best, reps);
     free(sc);
+    free(fc);
     fflush(stdout);
     free(st);
     free(ft);
@@ -173,6 +186,167 @@ static void bench_pack(int n, int threads, const char *wisdom)
     ocean_free(o);
 }
 
+/* Why the transposition between the z and the row pass is an FFTW rank-0
+ * plan (ocean.c, store_plan), and why the spectrum between the passes is
+ * block-major. One spectrum's two passes (N/2 columns, N rows), one
+ * thread, process CPU time, four ways:
+ *   ours:      z pass in place on a contiguous tile, then the copy into the
+ *              block-major spectrum (FFTW rank-0 guru plan), then the row
+ *              c2r reading blocks of 8 interleaved rows;
+ *   ours with the copy as our own loop (memcpy of 8 complex per column),
+ *              as before this round; copy_only_* time the copy alone;
+ *   colmajor:  FFTW's z pass out of place straight into a column-major
+ *              spectrum, row c2r reading it with input stride N;
+ *   rowmajor:  FFTW's z pass out of place into a row-major spectrum (output
+ *              stride N/2+1), row c2r over contiguous rows.
+ * The last two put the whole transposition inside FFTW's transforms. */
+static void bench_layout(int n, const char *wisdom)
+{
+    const int T = 16, B = OCEAN_ROW_BLOCK, nh = n / 2 + 1, sd = ocean_tile_dist(n);
+    float *tile = fftwf_malloc(sizeof(float) * 2 * T * sd);
+    fftwf_complex *col = fftwf_malloc(sizeof(fftwf_complex) * (size_t)n * nh);
+    float *out = fftwf_malloc(sizeof(float) * (size_t)n * n);
+    unsigned fl = FFTW_MEASURE;
+    fftwf_iodim store_dims[3] = {{T, sd, B}, {n / B, B, nh * B}, {B, 1, 1}};
+    ocean_fftw_init();
+    ocean_fftw_lock();
+    if (wisdom)
+        fftwf_import_wisdom_from_filename(wisdom);
+    fftwf_plan_with_nthreads(1);
+    fftwf_plan z_in = fftwf_plan_many_dft(1, &n, T, (fftwf_complex *)tile, NULL, 1, sd, (fftwf_complex *)tile, NULL,
+                                          1, sd, FFTW_BACKWARD, fl);
+    fftwf_plan copy = fftwf_plan_guru_dft(0, NULL, 3, store_dims, (fftwf_complex *)tile, col, FFTW_BACKWARD, fl);
+    fftwf_plan r_blk = fftwf_plan_many_dft_c2r(1, &n, B, col, NULL, B, 1, out, NULL, 1, n, fl);
+    fftwf_plan z_cm = fftwf_plan_many_dft(1, &n, T, (fftwf_complex *)tile, NULL, 1, sd, col, NULL, 1, n,
+                                          FFTW_BACKWARD, fl);
+    fftwf_plan r_cm = fftwf_plan_many_dft_c2r(1, &n, B, col, NULL, n, 1, out, NULL, 1, n, fl);
+    fftwf_plan z_rm = fftwf_plan_many_dft(1, &n, T, (fftwf_complex *)tile, NULL, 1, sd, col, NULL, nh, 1,
+                                          FFTW_BACKWARD, fl);
+    fftwf_plan r_rm = fftwf_plan_many_dft_c2r(1, &n, B, col, NULL, 1, nh, out, NULL, 1, n, fl);
+    if (wisdom)
+        fftwf_export_wisdom_to_filename(wisdom);
+    ocean_fftw_unlock();
+    memset(tile, 0, sizeof(float) * 2 * T * sd);
+    memset(col, 0, sizeof(fftwf_complex) * (size_t)n * nh);
+    int reps = reps_for(n);
+    double *v[6];
+    for (int i = 0; i < 6; i++)
+        v[i] = malloc(reps * sizeof(double));
+    for (int r = 0; r < reps; r++) {
+        double c0 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++) {
+            fftwf_execute_dft(z_in, (fftwf_complex *)tile, (fftwf_complex *)tile);
+            fftwf_execute_dft(copy, (fftwf_complex *)tile, col + (size_t)tl * T * B);
+        }
+        for (int b = 0; b < n / B; b++)
+            fftwf_execute_dft_c2r(r_blk, col + (size_t)b * nh * B, out + (size_t)b * B * n);
+        double c1 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++) {
+            fftwf_execute_dft(z_in, (fftwf_complex *)tile, (fftwf_complex *)tile);
+            for (int b = 0; b < n / B; b++) {
+                float *dst = (float *)col + 2 * (((size_t)b * nh + tl * T) * B);
+                for (int j = 0; j < T; j++)
+                    memcpy(dst + 2 * j * B, tile + 2 * ((size_t)j * sd + b * B), 2 * B * sizeof(float));
+            }
+        }
+        for (int b = 0; b < n / B; b++)
+            fftwf_execute_dft_c2r(r_blk, col + (size_t)b * nh * B, out + (size_t)b * B * n);
+        double c2 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++)
+            fftwf_execute_dft(z_cm, (fftwf_complex *)tile, col + (size_t)tl * T * n);
+        for (int b = 0; b < n / B; b++)
+            fftwf_execute_dft_c2r(r_cm, col + (size_t)b * B, out + (size_t)b * B * n);
+        double c3 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++)
+            fftwf_execute_dft(z_rm, (fftwf_complex *)tile, col + tl * T);
+        for (int b = 0; b < n / B; b++)
+            fftwf_execute_dft_c2r(r_rm, col + (size_t)b * B * nh, out + (size_t)b * B * n);
+        double c4 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++)
+            fftwf_execute_dft(copy, (fftwf_complex *)tile, col + (size_t)tl * T * B);
+        double c5 = cpu_ms();
+        for (int tl = 0; tl < n / 2 / T; tl++)
+            for (int b = 0; b < n / B; b++) {
+                float *dst = (float *)col + 2 * (((size_t)b * nh + tl * T) * B);
+                for (int j = 0; j < T; j++)
+                    memcpy(dst + 2 * j * B, tile + 2 * ((size_t)j * sd + b * B), 2 * B * sizeof(float));
+            }
+        double c6 = cpu_ms();
+        v[0][r] = c1 - c0;
+        v[1][r] = c2 - c1;
+        v[2][r] = c3 - c2;
+        v[3][r] = c4 - c3;
+        v[4][r] = c5 - c4;
+        v[5][r] = c6 - c5;
+    }
+    printf("{\"bench\":\"z_to_rows\",\"N\":%d,\"threads\":1,\"ours_fftw_copy_cpu_ms\":%.3f,"
+           "\"ours_own_copy_cpu_ms\":%.3f,\"colmajor_cpu_ms\":%.3f,\"rowmajor_cpu_ms\":%.3f,"
+           "\"copy_only_fftw_cpu_ms\":%.3f,\"copy_only_own_cpu_ms\":%.3f}\n", n, median(v[0], reps),
+           median(v[1], reps), median(v[2], reps), median(v[3], reps), median(v[4], reps), median(v[5], reps));
+    fflush(stdout);
+    for (int i = 0; i < 6; i++)
+        free(v[i]);
+    ocean_fftw_lock();
+    fftwf_plan plans[] = {z_in, copy, r_blk, z_cm, r_cm, z_rm, r_rm};
+    for (size_t i = 0; i < sizeof plans / sizeof plans[0]; i++)
+        fftwf_destroy_plan(plans[i]);
+    ocean_fftw_unlock();
+    fftwf_free(tile);
+    fftwf_free(col);
+    fftwf_free(out);
+}
+
+/* A parameter change at the same N (wind speed, alternating), three ways:
+ * ocean_reconfigure on the stepping thread (its pool), ocean_prepare (what
+ * a builder thread runs; its own workers) followed by the O(1)
+ * ocean_commit, and a whole new ocean_create with the same wisdom (what
+ * the daemon's builder did per batch before ocean_prepare existed). */
+static void bench_reconfigure(int n, int threads, const char *wisdom)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = n;
+    struct ocean *o = make(n, threads, wisdom, 1);
+    if (!o)
+        return;
+    int reps = n <= 256 ? 21 : n <= 512 ? 11 : 7;
+    double *rt = malloc(reps * sizeof *rt), *rc = malloc(reps * sizeof *rc), *pt = malloc(reps * sizeof *pt),
+           *ct = malloc(reps * sizeof *ct), *commit = malloc(reps * sizeof *commit);
+    char err[256];
+    ocean_step(o, 0.5, OCEAN_ALL_FIELDS);
+    for (int r = 0; r < reps; r++) {
+        p.wind_speed = r % 2 ? 10.0 : 12.0;
+        double c0 = cpu_ms(), t0 = now_ms();
+        ocean_reconfigure(o, &p, err, sizeof err);
+        double t1 = now_ms(), c1 = cpu_ms();
+        p.wind_speed = r % 2 ? 11.0 : 13.0;
+        struct ocean_prepared *pr = ocean_prepare(o, &p, err, sizeof err);
+        double t2 = now_ms();
+        ocean_commit(o, pr);
+        double t3 = now_ms();
+        ocean_prepared_free(pr);
+        double t4 = now_ms();
+        struct ocean *fresh = make(n, threads, wisdom, 1);
+        double t5 = now_ms();
+        ocean_free(fresh);
+        rt[r] = t1 - t0;
+        rc[r] = c1 - c0;
+        pt[r] = t2 - t1;
+        commit[r] = t3 - t2;
+        ct[r] = t5 - t4;
+    }
+    printf("{\"bench\":\"reconfigure\",\"N\":%d,\"threads\":%d,\"change\":\"wind_speed\",\"ms\":%.3f,"
+           "\"cpu_ms\":%.3f,\"prepare_ms\":%.3f,\"commit_ms\":%.4f,\"create_ms\":%.3f,\"reps\":%d}\n", n, threads,
+           median(rt, reps), median(rc, reps), median(pt, reps), median(commit, reps), median(ct, reps), reps);
+    fflush(stdout);
+    free(rt);
+    free(rc);
+    free(pt);
+    free(ct);
+    free(commit);
+    ocean_free(o);
+}
+
 static void bench_dft(int n, const char *wisdom)
 {
     struct ocean *o = make(n, 1, wisdom, 1);
@@ -201,7 +375,9 @@ static void bench_dft(int n, const char *wisdom)
 
 int main(int argc, char **argv)
 {
-    const char *wisdom = argc > 1 ? argv[1] : NULL;
+    const char *wisdom = argc > 1 && *argv[1] ? argv[1] : NULL;
+    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, pack, layout, reconfigure, dft */
+#define WANT(name) (!only || strcmp(only, name) == 0)
     /* The machine is shared: say how busy it was. */
     double load[3] = {0, 0, 0};
     FILE *la = fopen("/proc/loadavg", "r");
@@ -212,13 +388,21 @@ int main(int argc, char **argv)
     }
     printf("{\"bench\":\"env\",\"cpus\":%ld,\"loadavg_1min\":%.2f,\"wisdom\":\"%s\"}\n",
            sysconf(_SC_NPROCESSORS_ONLN), load[0], wisdom ? wisdom : "");
-    for (int n = 64; n <= 2048; n *= 2)
-        for (int threads = 1; threads <= 2; threads++)
+    /* Thread scaling: 1, 2, 4, ... up to the machine's cores (at least 1 and 2). */
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    int max_threads = cores > 2 ? (cores < OCEAN_MAX_THREADS ? (int)cores : OCEAN_MAX_THREADS) : 2;
+    for (int n = 64; n <= 2048 && WANT("step"); n *= 2)
+        for (int threads = 1; threads <= max_threads; threads *= 2)
             bench_step(n, threads, wisdom);
-    for (int n = 256; n <= 1024; n *= 4)
+    for (int n = 256; n <= 1024 && WANT("pack"); n *= 4)
         for (int threads = 1; threads <= 2; threads++)
             bench_pack(n, threads, wisdom);
-    for (int n = 16; n <= 128; n *= 2)
+    for (int n = 256; n <= 2048 && WANT("layout"); n *= 2)
+        bench_layout(n, wisdom);
+    for (int n = 256; n <= 1024 && WANT("reconfigure"); n *= 2)
+        for (int threads = 1; threads <= 2; threads++)
+            bench_reconfigure(n, threads, wisdom);
+    for (int n = 16; n <= 128 && WANT("dft"); n *= 2)
         bench_dft(n, wisdom);
     return 0;
 }

@@ -12,12 +12,15 @@ FUZZ_FLAGS   := -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=fuzzer,address,undefine
 FUZZ_SECONDS ?= 60
 FUZZ_CI_SECONDS ?= $(if $(CI),60,10)
 FUZZ_TARGETS := control frame config
+FUZZ_TARGETS += cluster
 
 SIM_SRCS_FOR_FUZZ = $(wildcard server/sim/*.c)
 FUZZ_SRCS_control = fuzz/fuzz_control.c server/control.c $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_frame   = fuzz/fuzz_frame.c $(wildcard proto/c/*.c)
 FUZZ_SRCS_config  = fuzz/fuzz_config.c server/config.c server/control.c server/state.c server/log.c \
                     $(SIM_SRCS_FOR_FUZZ)
+FUZZ_SRCS_cluster = fuzz/fuzz_cluster.c $(wildcard server/cluster/cluster_*.c) proto/c/oc_header.c
+$(BUILD)/fuzz/fuzz_cluster: $(wildcard server/cluster/*.[ch])
 
 $(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*.c server/*.h server/sim/*.[ch] server/sim/include/*.h proto/c/*.c proto/c/*.h)
 	@mkdir -p $(dir $@)

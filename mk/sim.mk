@@ -3,6 +3,8 @@
 #   make test-sim               physics + FFT-vs-DFT suite (tests/test_ocean.c)
 #   make test-sim-asan          the same suite built with ASan+UBSan
 #   make test-sim-valgrind      a reduced run (OCEAN_TEST_QUICK=1) under valgrind
+#   make test-sim-tsan          a reduced run under ThreadSanitizer (clang): the pool,
+#                               and ocean_prepare on one thread while another steps
 #   make bench-step             step / FFTW / DFT timings, JSON lines
 # See docs/simulation.md.
 
@@ -12,7 +14,7 @@ OCEAN_SAN_LIB := $(BUILD)/san/libocean.a
 SIM_WISDOM    := $(BUILD)/fftw-wisdom
 
 BINS    += $(OCEAN_LIB) $(BUILD)/test_ocean $(BUILD)/bench_step
-TESTS   += test-sim test-sim-asan test-sim-valgrind
+TESTS   += test-sim test-sim-asan test-sim-valgrind test-sim-tsan
 BENCHES += bench-step
 
 $(OCEAN_LIB): $(patsubst %.c,$(BUILD)/obj/%.o,$(SIM_SRCS))
@@ -37,7 +39,15 @@ $(BUILD)/san/test_ocean: $(BUILD)/san/tests/test_ocean.o $(OCEAN_SAN_LIB)
 $(BUILD)/bench_step: $(BUILD)/obj/bench/bench_step.o $(OCEAN_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 
-.PHONY: test-sim test-sim-asan test-sim-valgrind bench-step
+# ThreadSanitizer build: clang, the whole library compiled in. target_clones
+# is compiled out (TSan crashes inside the ifunc resolvers, which run before
+# it is initialised); FFTW itself is not instrumented (one thread per plan).
+$(BUILD)/tsan/test_ocean: tests/test_ocean.c $(SIM_SRCS) $(wildcard server/sim/*.h server/sim/include/*.h)
+	@mkdir -p $(dir $@)
+	clang -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=thread $(WARN) '-Dtarget_clones(...)=unused' \
+	  -Iserver/sim/include -Iserver/sim tests/test_ocean.c $(SIM_SRCS) -o $@ -lfftw3f -lfftw3f_threads -lm -pthread
+
+.PHONY: test-sim test-sim-asan test-sim-valgrind test-sim-tsan bench-step
 # Tests plan with FFTW_ESTIMATE and no wisdom file: deterministic and quick.
 test-sim: $(BUILD)/test_ocean
 	$(BUILD)/test_ocean
@@ -46,6 +56,38 @@ test-sim-asan: $(BUILD)/san/test_ocean
 test-sim-valgrind: $(BUILD)/test_ocean
 	OCEAN_TEST_QUICK=1 valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
 	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_ocean
+test-sim-tsan: $(BUILD)/tsan/test_ocean
+	OCEAN_TEST_QUICK=1 TSAN_OPTIONS=halt_on_error=1:exitcode=66 $(BUILD)/tsan/test_ocean
 # FFTW_MEASURE plans, cached in $(SIM_WISDOM) across runs.
 bench-step: $(BUILD)/bench_step
 	$(BUILD)/bench_step $(SIM_WISDOM)
+
+# Point queries (server/sim/ocean_query.c): exact surface values at any (x, z).
+#   make test-query             against a brute-force reference (tests/test_query.c)
+#   make test-query-asan        the same with ASan+UBSan
+#   make test-query-valgrind    a reduced run (OCEAN_TEST_QUICK=1) under valgrind
+#   make bench-query            cost per point at N = 256 and 512, JSON lines
+BINS    += $(BUILD)/test_query $(BUILD)/bench_query
+TESTS   += test-query test-query-asan test-query-valgrind
+BENCHES += bench-query
+$(BUILD)/obj/tests/test_query.o $(BUILD)/san/tests/test_query.o $(BUILD)/obj/bench/bench_query.o: \
+  INC := -Iserver/sim/include -Iserver/sim
+$(BUILD)/test_query: $(BUILD)/obj/tests/test_query.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/san/test_query: $(BUILD)/san/tests/test_query.o $(OCEAN_SAN_LIB)
+	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/bench_query: $(BUILD)/obj/bench/bench_query.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+.PHONY: test-query test-query-asan test-query-valgrind bench-query
+test-query: $(BUILD)/test_query
+	$(BUILD)/test_query
+test-query-asan: $(BUILD)/san/test_query
+	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 OCEAN_TEST_QUICK=1 $(BUILD)/san/test_query
+test-query-valgrind: $(BUILD)/test_query
+	OCEAN_TEST_QUICK=1 valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
+	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_query
+bench-query: $(BUILD)/bench_query
+	$(BUILD)/bench_query
+# The query's per-mode sums are reductions: OpenMP's simd pragma (no
+# runtime, no threads) lets them vectorise without -ffast-math.
+$(BUILD)/obj/server/sim/ocean_query.o $(BUILD)/san/server/sim/ocean_query.o: CFLAGS += -fopenmp-simd

@@ -17,20 +17,30 @@ WEBDIR     = $(PREFIX)/share/oceand/web
 UNITDIR    = $(PREFIX)/lib/systemd/system
 WEB_BUILD  := $(BUILD)/web
 
-TAP_OBJS := $(addprefix $(BUILD)/obj/tools/,ocean-tap.o tap_frame.o tap_write.o)
+TAP_OBJS := $(addprefix $(BUILD)/obj/tools/,ocean-tap.o tap_frame.o tap_write.o tap_exr.o)
+# OpenEXR 3.1 (Debian libopenexr-dev) for --format exr: its C API
+# (OpenEXRCore) and Imath's half floats; --as-needed drops its C++ libraries.
+EXR_CFLAGS = $(shell pkg-config --cflags OpenEXR 2>/dev/null)
+EXR_LIBS   = -Wl,--as-needed $(shell pkg-config --libs OpenEXR 2>/dev/null) -Wl,--no-as-needed
+$(BUILD)/obj/tools/tap_exr.o $(BUILD)/obj/tests/tap/exr_read.o: PKG_CFLAGS += $(EXR_CFLAGS)
 
 BINS  += $(BUILD)/ocean-tap $(BUILD)/gen-config-doc
 TESTS += test-tap test-ops
 
 $(BUILD)/ocean-tap: $(TAP_OBJS) $(PROTO_LIB)
-	$(CC) $(CFLAGS) -o $@ $(TAP_OBJS) $(PROTO_LIB) $(PKG_LIBS)
+	$(CC) $(CFLAGS) -o $@ $(TAP_OBJS) $(PROTO_LIB) $(PKG_LIBS) $(EXR_LIBS)
+
+# Test helper: reads an EXR back with the OpenEXR library (tests/tap/run.sh).
+BINS += $(BUILD)/exr-read
+$(BUILD)/exr-read: $(BUILD)/obj/tests/tap/exr_read.o
+	$(CC) $(CFLAGS) -o $@ $^ $(EXR_LIBS)
 
 $(BUILD)/gen-config-doc: $(BUILD)/obj/scripts/gen-config-doc.o $(OCEAN_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 
 # ---- tests (budget: < 90 s together) -------------------------------------
 .PHONY: test-tap test-ops config-doc install uninstall
-test-tap: $(BUILD)/ocean-tap $(BUILD)/oceand
+test-tap: $(BUILD)/ocean-tap $(BUILD)/oceand $(BUILD)/exr-read
 	@tests/tap/run.sh $(BUILD)
 
 test-ops: $(BUILD)/gen-config-doc $(BUILD)/oceand $(BUILD)/ocean-tap $(WEB_BUILD)/index.html

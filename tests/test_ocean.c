@@ -5,7 +5,9 @@
  * seeds) for valgrind. Plans use FFTW_ESTIMATE and no wisdom: deterministic.
  * Build and run: make test-sim (see mk/sim.mk). */
 #include <complex.h>
+#include <malloc.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -486,6 +488,51 @@ static void test_periodic(void)
     ocean_free(o);
 }
 
+/* The end of the documented time range (ocean.h, OCEAN_TIME_MAX): the FFT
+ * path's phases at t = 1e9 s must match the double-precision reference as
+ * well as at small t, for a sea that loops and one that does not, and for
+ * a tiny patch whose short waves have the largest w t of any setting. */
+static void test_time_max(void)
+{
+    struct {
+        const char *what;
+        int n;
+        double patch, loop, cutoff;
+    } cases[] = {{"default", 32, 256, 0, 0.5}, {"loop_20s", 32, 256, 20, 0.5}, {"patch_1m", 64, 1, 0, 0}};
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        if (quick && c == 2)
+            continue; /* N = 64 DFT: slow under valgrind */
+        struct ocean_params p;
+        params_defaults(&p);
+        p.resolution = cases[c].n;
+        p.patch_size = cases[c].patch;
+        p.loop_period = cases[c].loop;
+        p.small_wave_cutoff = cases[c].cutoff;
+        struct ocean *o = make(&p, 1);
+        if (!o)
+            continue;
+        size_t nn = (size_t)p.resolution * p.resolution;
+        double times[2] = {37.25, OCEAN_TIME_MAX}, err[2] = {0, 0};
+        for (int ti = 0; ti < 2; ti++) {
+            float *fft[OCEAN_FIELD_COUNT];
+            ocean_step_fft(o, times[ti], OCEAN_ALL_FIELDS);
+            for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+                fft[f] = copy_field(o, f);
+            ocean_step_dft(o, times[ti], OCEAN_ALL_FIELDS);
+            for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
+                err[ti] = fmax(err[ti], rel_err(fft[f], ocean_field(o, f), nn));
+                free(fft[f]);
+            }
+        }
+        char name[64];
+        snprintf(name, sizeof name, "time.max.%s", cases[c].what);
+        check(err[1] <= 1e-5 && err[0] <= 1e-5, name,
+              "N=%d L=%g m loop %g s: FFT vs double reference, all fields, at t = %.0e s %.1e, at t = %.2f s %.1e "
+              "(limit 1e-5 for both)", p.resolution, p.patch_size, p.loop_period, times[1], err[1], times[0], err[0]);
+        ocean_free(o);
+    }
+}
+
 /* ---- energy ------------------------------------------------------------------ */
 
 static void test_parseval(void)
@@ -594,6 +641,190 @@ static void test_significant_height(void)
               seeds, hs_ref, 100 * (hs / hs_ref - 1), 100 * tol);
         ocean_free(o);
     }
+}
+
+/* ---- horizontal displacement in finite depth -------------------------------- */
+
+/* F(k) = 1/N^2 sum f(x) e^{-i k.x} at every index (ix, iz), separably, in
+ * double: the outputs' own Fourier coefficients, independent of our FFT. */
+static void forward_dft(const float *f, int n, double complex *out)
+{
+    double complex *rows = malloc((size_t)n * n * sizeof *rows), *w = malloc((size_t)n * sizeof *w);
+    for (int j = 0; j < n; j++)
+        w[j] = cexp(-2.0 * M_PI * I * j / n);
+    for (int z = 0; z < n; z++)
+        for (int kx = 0; kx < n; kx++) {
+            double complex s = 0;
+            for (int x = 0; x < n; x++)
+                s += f[(size_t)z * n + x] * w[(kx * x) & (n - 1)];
+            rows[(size_t)z * n + kx] = s;
+        }
+    for (int kz = 0; kz < n; kz++)
+        for (int kx = 0; kx < n; kx++) {
+            double complex s = 0;
+            for (int z = 0; z < n; z++)
+                s += rows[(size_t)z * n + kx] * w[(kz * z) & (n - 1)];
+            out[(size_t)kz * n + kx] = s / ((double)n * n);
+        }
+    free(rows);
+    free(w);
+}
+
+/* Linear theory (Dean & Dalrymple, Water Wave Mechanics for Engineers and
+ * Scientists, 1991, §4.4; US Army Corps of Engineers, Coastal Engineering
+ * Manual EM 1110-2-1100 Part II-1, eqs. II-1-29 and II-1-30): a surface
+ * particle of a wave h = H/2 cos(theta) in depth d moves by
+ *   xi = -H/2 cosh(kd)/sinh(kd) sin(theta) along k, zeta = H/2 cos(theta) up,
+ * an ellipse whose horizontal semi-axis is coth(kd) times the vertical one.
+ * Per Fourier mode that is D^(k) = i (k/|k|) coth(kd) h^(k) for lambda = 1
+ * (both the +k and the -k travelling wave of a mode obey it). The check
+ * reads h, Dx and Dz back from the output fields (forward DFT in double)
+ * and compares with cosh/sinh written out here. */
+static double orbit_error(const struct ocean *o, double depth, double *kd_lo, double *kd_hi, double *from_deep)
+{
+    int n = ocean_resolution(o);
+    size_t nn = (size_t)n * n;
+    double L = ocean_get_params(o)->patch_size;
+    double complex *H = malloc(nn * sizeof *H), *X = malloc(nn * sizeof *X), *Z = malloc(nn * sizeof *Z);
+    forward_dft(ocean_field(o, OCEAN_HEIGHT), n, H);
+    forward_dft(ocean_field(o, OCEAN_DX), n, X);
+    forward_dft(ocean_field(o, OCEAN_DZ), n, Z);
+    double hmax = 0;
+    for (size_t i = 0; i < nn; i++)
+        hmax = fmax(hmax, cabs(H[i]));
+    double worst = 0, deep = 0;
+    *kd_lo = 1e9;
+    *kd_hi = 0;
+    for (int iz = 0; iz < n; iz++)
+        for (int ix = 0; ix < n; ix++) {
+            size_t i = (size_t)iz * n + ix;
+            if (cabs(H[i]) < 1e-3 * hmax)
+                continue; /* float rounding dominates the tiny modes */
+            double kx = 2 * M_PI * (ix - n * (ix > n / 2)) / L, kz = 2 * M_PI * (iz - n * (iz > n / 2)) / L;
+            double k = hypot(kx, kz), kd = k * depth;
+            double ratio = cosh(kd) / sinh(kd); /* horizontal / vertical semi-axis */
+            double complex ex = I * kx / k * ratio * H[i], ez = I * kz / k * ratio * H[i];
+            double e = (cabs(X[i] - ex) + cabs(Z[i] - ez)) / (ratio * cabs(H[i]));
+            worst = fmax(worst, e);
+            /* how far the deep-water displacement i k/|k| h^ would be off */
+            deep = fmax(deep, (cabs(X[i] - I * kx / k * H[i]) + cabs(Z[i] - I * kz / k * H[i])) / (ratio * cabs(H[i])));
+            *kd_lo = fmin(*kd_lo, kd);
+            *kd_hi = fmax(*kd_hi, kd);
+        }
+    *from_deep = deep;
+    free(H);
+    free(X);
+    free(Z);
+    return worst;
+}
+
+static void test_depth_displacement(void)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = 64;
+    p.patch_size = 128; /* k up to 1.57 rad/m */
+    p.depth = 4;        /* kd from ~0.3 (the peak) to ~6 (Nyquist) */
+    p.choppiness = 1;
+    p.small_wave_cutoff = 0;
+    unsigned hxz = OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_DX) | OCEAN_FIELD_BIT(OCEAN_DZ);
+    struct ocean *o = make(&p, 1);
+    if (!o)
+        return;
+    for (int path = 0; path < (quick ? 1 : 2); path++) {
+        if (path == 0)
+            ocean_step_fft(o, 17.3, hxz);
+        else
+            ocean_step_dft(o, 17.3, hxz);
+        double lo, hi, deep;
+        double e = orbit_error(o, p.depth, &lo, &hi, &deep);
+        char name[64];
+        snprintf(name, sizeof name, "displacement.finite_depth.%s", path ? "dft" : "fft");
+        check(e < 1e-3 && lo < 0.5 && hi > 3 && deep > 0.3, name,
+              "depth %.0f m, modes with kd %.2f..%.2f: |D^ - i k/|k| coth(kd) h^| / (coth |h^|) <= %.1e (limit 1e-3); "
+              "the deep-water formula would be off by %.2f", p.depth, lo, hi, e, deep);
+    }
+    /* Deep water is unchanged: D^ = i k/|k| h^ to float precision. */
+    p.depth = 1000;
+    char err[256];
+    ocean_reconfigure(o, &p, err, sizeof err);
+    ocean_step_fft(o, 17.3, hxz);
+    double lo, hi, deep;
+    double e = orbit_error(o, p.depth, &lo, &hi, &deep);
+    check(e < 1e-3 && deep < 1e-3 && hi > lo, "displacement.deep_unchanged",
+          "depth 1000 m (kd >= %.0f): off the deep-water i k/|k| h^ by %.1e, off coth by %.1e", lo, deep, e);
+    ocean_free(o);
+}
+
+/* ---- fetch laws ------------------------------------------------------------ */
+
+/* m0 = integral of S(w) dw over the whole spectrum (Simpson on a log grid
+ * from wp/10 to 50 wp: outside, S is below 1e-30 resp. 2e-7 of the total). */
+static double spectrum_m0(const struct spectrum_model *m)
+{
+    int n = 20000;
+    double a = log(m->omega_p / 10), b = log(m->omega_p * 50), h = (b - a) / n, sum = 0;
+    for (int i = 0; i <= n; i++) {
+        double w = exp(a + i * h);
+        sum += spectrum_frequency(m, w) * w * (i == 0 || i == n ? 1 : (i % 2 ? 4 : 2));
+    }
+    return sum * h / 3;
+}
+
+/* Our JONSWAP sea against published fetch laws (chi = g F / U^2, eps = g^2 E / U^4):
+ *   JONSWAP, Hasselmann et al. 1973: eps = 1.6e-7 chi, f_p = 3.5 (g/U) chi^-0.33;
+ *   SPM 1984 (deep water, Shore Protection Manual vol. I ch. 3, eqs. 3-28a, 3-33a):
+ *     g Hm0 / UA^2 = 1.6e-3 (g F / UA^2)^1/2, UA = 0.71 U^1.23, at most 0.2433;
+ *   Kahma & Calkoen 1992 (composite, p. 1404): eps = 5.2e-7 chi^0.9.
+ * The assertions hold us to the JONSWAP energy law; the other two are
+ * printed for docs/simulation.md's table. */
+static void test_fetch_laws(void)
+{
+    const double g = OCEAN_G;
+    static const double cases[][2] = {{5, 1}, {5, 10}, {10, 1}, {10, 10}, {10, 15}, {10, 100}, {10, 190},
+                                      {20, 10}, {20, 50}, {20, 100}, {20, 700}};
+    double worst_near = 0, worst_far = 0, worst_peak = 0;
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        double U = cases[c][0], F = cases[c][1] * 1000, chi = g * F / (U * U);
+        struct ocean_params p;
+        params_defaults(&p);
+        p.spectrum = SPECTRUM_JONSWAP;
+        p.wind_speed = U;
+        p.fetch = cases[c][1];
+        struct spectrum_model m;
+        spectrum_model_init(&m, &p);
+        double hs = 4 * sqrt(spectrum_m0(&m));
+        double hs_jonswap = 4 * sqrt(1.6e-7 * chi) * U * U / g;
+        double ua = 0.71 * pow(U, 1.23);
+        double hs_spm = fmin(1.6e-3 * sqrt(g * F / (ua * ua)), 0.2433) * ua * ua / g;
+        double hs_kc = 4 * sqrt(5.2e-7 * pow(chi, 0.9)) * U * U / g;
+        /* The spectrum's maximum sits at Hasselmann's f_p (below the fully
+         * developed cap, chi ~ 18800): golden-section search for the peak. */
+        double a = 0.3 * m.omega_p, b = 3 * m.omega_p, r = (sqrt(5) - 1) / 2;
+        for (int it = 0; it < 100; it++) {
+            double x1 = b - r * (b - a), x2 = a + r * (b - a);
+            if (spectrum_frequency(&m, x1) > spectrum_frequency(&m, x2))
+                b = x2;
+            else
+                a = x1;
+        }
+        double fp_paper = 3.5 * (g / U) * pow(chi, -0.33), fp = 0.5 * (a + b) / (2 * M_PI);
+        if (chi < 18000)
+            worst_peak = fmax(worst_peak, fabs(fp / fp_paper - 1));
+        double dev = fabs(hs / hs_jonswap - 1);
+        if (chi <= 1500)
+            worst_near = fmax(worst_near, dev);
+        else if (chi < 18000)
+            worst_far = fmax(worst_far, dev);
+        printf("     U %4.1f m/s, fetch %5.0f km, chi %7.0f: Hs ours %6.3f m | JONSWAP %6.3f (%+5.1f%%) | "
+               "SPM 1984 %6.3f | Kahma-Calkoen %6.3f | fp %.4f Hz (paper %.4f)\n",
+               U, F / 1000, chi, hs, hs_jonswap, 100 * (hs / hs_jonswap - 1), hs_spm, hs_kc, fp, fp_paper);
+    }
+    check(worst_peak < 1e-4, "fetch.jonswap_peak", "spectral peak at Hasselmann's f_p = 3.5 (g/U) chi^-0.33: "
+          "worst rel diff %.1e", worst_peak);
+    check(worst_near <= 0.15 && worst_far <= 0.30, "fetch.jonswap_energy_law",
+          "Hs = 4 sqrt(m0) vs JONSWAP 4 sqrt(1.6e-7 chi) U^2/g: within %.1f%% for chi <= 1500 (limit 15%%), "
+          "%.1f%% up to the fully developed cap (limit 30%%)", 100 * worst_near, 100 * worst_far);
 }
 
 /* ---- robustness ------------------------------------------------------------ */
@@ -831,6 +1062,189 @@ static void test_reconfigure(void)
     ocean_free(o);
 }
 
+/* ---- parameter changes off the stepping thread ------------------------------- */
+
+struct prep_job {
+    struct ocean *o;
+    struct ocean_params p;
+    struct ocean_prepared *pr;
+    char err[256];
+};
+
+static void *prep_thread(void *arg)
+{
+    struct prep_job *j = arg;
+    j->pr = ocean_prepare(j->o, &j->p, j->err, sizeof j->err);
+    return NULL;
+}
+
+static int same_fields(const struct ocean *a, const struct ocean *b)
+{
+    int n = ocean_resolution(a);
+    if (n != ocean_resolution(b))
+        return 0;
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+        if (memcmp(ocean_field(a, f), ocean_field(b, f), (size_t)n * n * sizeof(float)) != 0)
+            return 0;
+    return 1;
+}
+
+static void test_prepare_commit(void)
+{
+    struct ocean_params p, q;
+    params_defaults(&p);
+    p.resolution = quick ? 32 : 256;
+    struct ocean *o = make(&p, 2);
+    if (!o)
+        return;
+    char err[256];
+    /* Every kind of change through the cache (wind, seed, patch, depth,
+     * spectrum, spreading, N) gives the bits a fresh ocean_create gives:
+     * nothing stale survives in the cached normals, rings or k tables. */
+    struct ocean_params steps[6];
+    for (int i = 0; i < 6; i++)
+        steps[i] = p;
+    steps[0].wind_speed = 17;
+    steps[1].seed = 7;
+    steps[2].patch_size = 400;
+    steps[3].depth = 6;
+    steps[3].spectrum = SPECTRUM_TMA;
+    steps[4].directional_spread = 0.3;
+    steps[4].wind_direction = 130;
+    steps[5].resolution = quick ? 64 : 128;
+    int fresh_same = 0;
+    for (int i = 0; i < 6; i++) {
+        q = steps[i];
+        ocean_reconfigure(o, &q, err, sizeof err);
+        struct ocean *f = make(&q, 1);
+        if (!f)
+            continue;
+        ocean_step(o, 21.5, OCEAN_ALL_FIELDS);
+        ocean_step(f, 21.5, OCEAN_ALL_FIELDS);
+        fresh_same += same_fields(o, f);
+        ocean_free(f);
+    }
+    check(fresh_same == 6, "reconfigure.equals_fresh", "%d/6 changes (wind, seed, patch, depth+tma, spread+direction, "
+          "N) bit-identical to a fresh ocean_create", fresh_same);
+
+    /* Prepared on another thread while this one steps; committed here. */
+    ocean_reconfigure(o, &p, err, sizeof err);
+    struct prep_job job = {o, p, NULL, ""};
+    job.p.wind_speed = 14;
+    job.p.seed = 3;
+    pthread_t th;
+    int started = pthread_create(&th, NULL, prep_thread, &job) == 0;
+    for (int i = 0; i < 5; i++)
+        ocean_step(o, 1.0 + i, OCEAN_ALL_FIELDS);
+    if (started)
+        pthread_join(th, NULL);
+    else
+        prep_thread(&job);
+    int before_commit = ocean_get_params(o)->seed == p.seed; /* prepare changed nothing yet */
+    int rc = ocean_commit(o, job.pr);
+    ocean_prepared_free(job.pr);
+    struct ocean *f = make(&job.p, 1);
+    int same = 0;
+    if (f) {
+        ocean_step(o, 8.25, OCEAN_ALL_FIELDS);
+        ocean_step(f, 8.25, OCEAN_ALL_FIELDS);
+        same = same_fields(o, f);
+        ocean_free(f);
+    }
+    check(started && before_commit && rc == 0 && same && ocean_get_params(o)->seed == 3, "prepare.other_thread",
+          "prepared on a second thread during 5 steps, committed: fields equal a fresh ocean's %s", same ? "yes" : "NO");
+
+    /* A stale prepare is refused and changes nothing; bad parameters give NULL. */
+    q = p;
+    q.wind_speed = 5;
+    struct ocean_prepared *stale = ocean_prepare(o, &q, err, sizeof err);
+    ocean_reconfigure(o, &p, err, sizeof err);
+    ocean_step(o, 3.0, OCEAN_ALL_FIELDS);
+    float *h = copy_field(o, OCEAN_HEIGHT);
+    int stale_rc = ocean_commit(o, stale);
+    ocean_prepared_free(stale);
+    ocean_step(o, 3.0, OCEAN_ALL_FIELDS);
+    size_t nn = (size_t)p.resolution * p.resolution;
+    int unchanged = ocean_get_params(o)->wind_speed == p.wind_speed &&
+                    memcmp(h, ocean_field(o, OCEAN_HEIGHT), nn * sizeof(float)) == 0;
+    free(h);
+    q = p;
+    q.resolution = 100;
+    err[0] = 0;
+    struct ocean_prepared *bad = ocean_prepare(o, &q, err, sizeof err);
+    check(stale != NULL && stale_rc == -1 && unchanged && !bad && strstr(err, "power of two"), "prepare.stale_and_invalid",
+          "commit after another reconfigure: %d (unchanged: %s); N=100: %s", stale_rc, unchanged ? "yes" : "NO", err);
+    ocean_free(o);
+}
+
+/* ---- memory accounting -------------------------------------------------------- */
+
+/* Heap bytes in use according to glibc (small blocks + mmapped blocks). */
+static size_t heap_in_use(void)
+{
+    struct mallinfo2 mi = mallinfo2();
+    return mi.uordblks + mi.hblkhd;
+}
+
+/* ocean_memory_bytes is what a memory cap counts: it must match what an
+ * ocean really allocates. Two independent counts: the bytes that went
+ * through the library's array allocator during ocean_create (the test
+ * hook ocean_alloc_bytes), and glibc's own mallinfo2 before and after
+ * (everything: plans, pool, structs), when the allocator is glibc's
+ * (not under ASan or valgrind, which bring their own). */
+static void test_memory_bytes(void)
+{
+    int sizes[] = {64, 256, 512, 1024};
+    int first = quick ? 0 : 1, last = quick ? 1 : 3;
+    /* Is mallinfo2 telling the truth here? A known 3 MB block must show. */
+    size_t h0 = heap_in_use();
+    void *volatile probe = malloc(3u << 20); /* volatile: the compiler may not elide it */
+    if (probe)
+        memset(probe, 1, 3u << 20);
+    size_t h1 = heap_in_use();
+    free(probe);
+    int glibc = h1 - h0 >= (3u << 20) && h1 - h0 < (3u << 20) + 65536;
+    double worst_hook = 0, worst_heap = 0;
+    char line[512] = "";
+    for (int i = first; i <= last; i++) {
+        int n = sizes[i];
+        struct ocean_params p;
+        params_defaults(&p);
+        p.resolution = n;
+        size_t want = ocean_memory_bytes(n, 2);
+        size_t hook0 = ocean_alloc_bytes, heap0 = heap_in_use();
+        struct ocean *o = make(&p, 2);
+        size_t hook = ocean_alloc_bytes - hook0, heap = heap_in_use() - heap0;
+        ocean_free(o);
+        double eh = fabs((double)hook / want - 1), ep = fabs((double)heap / want - 1);
+        worst_hook = fmax(worst_hook, eh);
+        if (glibc)
+            worst_heap = fmax(worst_heap, ep);
+        size_t len = strlen(line);
+        snprintf(line + len, sizeof line - len, "%sN=%d: %.2f MB said, arrays %.2f, heap %s%.2f", i > first ? "; " : "",
+                 n, want / 1e6, hook / 1e6, glibc ? "" : "(n/a) ", heap / 1e6);
+    }
+    /* threads = 0 means every online core, uncapped below 64 (issue 15). */
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    int want_threads = cores < 1 ? 1 : cores > OCEAN_MAX_THREADS ? OCEAN_MAX_THREADS : (int)cores;
+    struct ocean_params p0;
+    params_defaults(&p0);
+    p0.resolution = 64;
+    struct ocean_options opt0 = {0, NULL, 0};
+    char err0[256];
+    struct ocean *o0 = ocean_create(&p0, &opt0, err0, sizeof err0);
+    int got_threads = o0 ? o0->opt.threads : -1;
+    ocean_free(o0);
+    check(got_threads == want_threads && ocean_threads(0) == want_threads && ocean_threads(100) == 64 &&
+          ocean_threads(-3) == 1 && ocean_threads(12) == 12 &&
+          ocean_memory_bytes(512, 0) == ocean_memory_bytes(512, want_threads),
+          "threads.zero_is_every_core", "threads 0 -> %d (cores online %ld; 12 -> %d, 100 -> %d, -3 -> %d)", got_threads,
+          cores, ocean_threads(12), ocean_threads(100), ocean_threads(-3));
+    check(worst_hook <= 0.10 && worst_heap <= 0.10, "memory.bytes_match",
+          "%s (limit 10%%: arrays %.1f%%, heap %s%.1f%%)", line, 100 * worst_hook, glibc ? "" : "not measured ",
+          100 * worst_heap);
+}
+
 static double seconds(void)
 {
     struct timespec ts;
@@ -899,12 +1313,17 @@ int main(void)
     RUN(test_layout);
     RUN(test_slopes);
     RUN(test_periodic);
+    RUN(test_time_max);
     RUN(test_parseval);
     RUN(test_variance_vs_n);
     RUN(test_significant_height);
+    RUN(test_depth_displacement);
+    RUN(test_fetch_laws);
     RUN(test_sweep);
     RUN(test_determinism);
     RUN(test_reconfigure);
+    RUN(test_prepare_commit);
+    RUN(test_memory_bytes);
     RUN(test_wisdom);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;

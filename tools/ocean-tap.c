@@ -1,7 +1,7 @@
 /* ocean-tap — a command-line client of oceand for scripts and pipelines.
  *
  *   ocean-tap ws://host:8080 --frames 100 --fields height,dx,dz --lod 1 \
- *             --bound 0.001 --out DIR --format npy|raw|pgm|pgm8
+ *             --bound 0.001 --out DIR --format npy|raw|pgm|pgm8|exr
  *   ocean-tap ws://host:8080 --set wind_speed=20 --set spectrum=jonswap
  *   ocean-tap ws://host:8080 --watch
  *
@@ -23,6 +23,7 @@
 #include <time.h>
 
 #include "oc_proto.h"
+#include "tap_exr.h"
 #include "tap_frame.h"
 #include "tap_write.h"
 
@@ -58,8 +59,12 @@ static void usage(FILE *to)
         "                      0 = lossless float32 (default: the server's, 0.01)\n"
         "  --max-rate HZ       at most HZ frames per second\n"
         "  --out DIR           write every frame, one file per field: DIR/<field>-<seq>.<ext>\n"
-        "  --format F          npy (default; numpy.load), raw (float32 + .json sidecar),\n"
-        "                      pgm (16-bit greyscale, min..max), pgm8 (8-bit)\n"
+        "  --format F          npy (default; numpy.load), raw (float32), pgm (16-bit\n"
+        "                      greyscale, min..max), pgm8 (8-bit); each file gets a .json\n"
+        "                      sidecar with seq, sim_time and params_version.\n"
+        "                      exr: a Blender ocean-modifier bake, DIR/disp_NNNN.exr,\n"
+        "                      normal_NNNN.exr, foam_NNNN.exr (+ frame_NNNN.json), frames\n"
+        "                      numbered 1, 2, ...; subscribes to all six fields\n"
         "  --stats             print frames/s, bytes and latency (each second to stderr,\n"
         "                      summary on stdout at exit)\n"
         "Control:\n"
@@ -160,7 +165,7 @@ static int parse_args(int argc, char **argv, struct opts *o)
         case 'o': o->out_dir = optarg; break;
         case 'F':
             o->format = tap_format_from_name(optarg);
-            if (o->format < 0) return usage_error("--format must be npy, raw, pgm or pgm8");
+            if (o->format < 0) return usage_error("--format must be npy, raw, pgm, pgm8 or exr");
             break;
         case 's': o->stats = 1; break;
         case 'S':
@@ -179,6 +184,7 @@ static int parse_args(int argc, char **argv, struct opts *o)
         default: return usage_error("unknown option");
         }
     }
+    if (o->format == TAP_EXR) o->fields = (1u << OC_FIELD_COUNT) - 1u; /* the bake needs all six */
     if (optind != argc - 1) return usage_error(optind >= argc ? "missing URL" : "one URL only");
     if (strlen(argv[optind]) >= sizeof o->url - 8) return usage_error("URL too long");
     snprintf(o->url, sizeof o->url, "%s%s", strstr(argv[optind], "://") ? "" : "ws://", argv[optind]);
@@ -450,8 +456,32 @@ static void on_text(struct session *s, const char *text, size_t len)
     cJSON_Delete(msg);
 }
 
+/* --format exr: one Blender bake frame (tap_exr.h) from the six fields. */
+static int write_bake(struct session *s, const struct oc_frame_header *fh)
+{
+    const float *f[OC_FIELD_COUNT];
+    int side = 0;
+    float bound = 0, b;
+    for (int i = 0; i < OC_FIELD_COUNT; i++) {
+        f[i] = tap_frame_field(s->grid, i, &side, &b);
+        bound = b > bound ? b : bound;
+    }
+    struct tap_exr_fields ef = {f[OC_FIELD_HEIGHT], f[OC_FIELD_DX], f[OC_FIELD_DZ],
+                                f[OC_FIELD_SLOPE_X], f[OC_FIELD_SLOPE_Z], f[OC_FIELD_JACOBIAN]};
+    struct tap_meta m = {.field = "bake", .seq = fh->seq, .sim_time = fh->sim_time,
+                         .params_version = fh->params_version, .n = fh->n, .lod = s->o->lod,
+                         .patch_size = fh->patch_size, .bound = bound, .server_time_us = fh->server_time_us};
+    char err[512];
+    if (tap_exr_bake(s->o->out_dir, (int)s->frames_done, side, &ef, &m, err, sizeof err) != 0) {
+        fail(s, EXIT_OUTPUT, "cannot write the bake: %s", err);
+        return -1;
+    }
+    return 0;
+}
+
 static int write_frame(struct session *s, const struct oc_frame_header *fh)
 {
+    if (s->o->format == TAP_EXR) return write_bake(s, fh);
     for (int f = 0; f < OC_FIELD_COUNT; f++) {
         int side;
         float bound;

@@ -16,6 +16,7 @@ int tap_format_from_name(const char *name)
     if (!strcmp(name, "raw")) return TAP_RAW;
     if (!strcmp(name, "pgm") || !strcmp(name, "pgm16")) return TAP_PGM16;
     if (!strcmp(name, "pgm8")) return TAP_PGM8;
+    if (!strcmp(name, "exr")) return TAP_EXR;
     return -1;
 }
 
@@ -24,6 +25,7 @@ const char *tap_format_ext(enum tap_format f)
     switch (f) {
     case TAP_NPY: return "npy";
     case TAP_RAW: return "f32";
+    case TAP_EXR: return "exr";
     default: return "pgm";
     }
 }
@@ -63,15 +65,11 @@ static int write_npy(const char *path, const float *data, int side)
     return finish(f, ok);
 }
 
-static int write_raw(const char *path, const float *data, int side, const struct tap_meta *m)
+/* Sidecar of every output file: same name, ".json" in place of the
+ * extension, with the frame's header (seq, sim_time, params_version, ...). */
+static int write_sidecar(const char *path, const char *format, const char *dtype, int side, const struct tap_meta *m,
+                         const char *extra)
 {
-    FILE *f = fopen(path, "wb");
-    if (!f) return -1;
-    size_t count = (size_t)side * (size_t)side;
-    int ok = fwrite(data, sizeof(float), count, f) == count;
-    if (finish(f, ok) != 0) return -1;
-
-    /* Sidecar: same name, .json instead of .f32. */
     char json[4096];
     const char *dot = strrchr(path, '.');
     size_t stem = dot ? (size_t)(dot - path) : strlen(path);
@@ -80,25 +78,37 @@ static int write_raw(const char *path, const float *data, int side, const struct
     strcpy(json + stem, ".json");
     const char *base = strrchr(path, '/');
     base = base ? base + 1 : path;
-    f = fopen(json, "w");
+    FILE *f = fopen(json, "w");
     if (!f) return -1;
-    ok = fprintf(f,
-                 "{\n  \"file\": \"%s\",\n  \"dtype\": \"float32\",\n  \"byte_order\": \"little\",\n"
+    int ok = fprintf(f,
+                 "{\n  \"file\": \"%s\",\n  \"format\": \"%s\",\n  \"dtype\": \"%s\",\n"
+                 "  \"byte_order\": \"%s\",\n"
                  "  \"shape\": [%d, %d],\n  \"order\": \"row-major, rows are z, columns are x\",\n"
                  "  \"field\": \"%s\",\n  \"seq\": %llu,\n  \"sim_time\": %.17g,\n"
                  "  \"params_version\": %u,\n  \"n\": %d,\n  \"lod\": %d,\n"
                  "  \"patch_size\": %.9g,\n  \"spacing\": %.9g,\n  \"bound\": %.9g,\n"
-                 "  \"server_time_us\": %llu\n}\n",
-                 base, side, side, m->field, (unsigned long long)m->seq, m->sim_time,
+                 "  \"server_time_us\": %llu%s\n}\n",
+                 base, format, dtype, strcmp(dtype, "uint16") ? "little" : "big", side, side, m->field,
+                 (unsigned long long)m->seq, m->sim_time,
                  (unsigned)m->params_version, m->n, m->lod, (double)m->patch_size,
                  (double)m->patch_size / side, (double)m->bound,
-                 (unsigned long long)m->server_time_us) > 0;
+                 (unsigned long long)m->server_time_us, extra ? extra : "") > 0;
     return finish(f, ok);
+}
+
+static int write_raw(const char *path, const float *data, int side, const struct tap_meta *m)
+{
+    FILE *f = fopen(path, "wb");
+    if (!f) return -1;
+    size_t count = (size_t)side * (size_t)side;
+    int ok = fwrite(data, sizeof(float), count, f) == count;
+    if (finish(f, ok) != 0) return -1;
+    return write_sidecar(path, "raw", "float32", side, m, NULL);
 }
 
 /* PGM P5: maxval 255 (one byte) or 65535 (two bytes, big-endian as the
  * format requires). The min/max used for normalising go in a comment. */
-static int write_pgm(const char *path, const float *data, int side, int bits)
+static int write_pgm(const char *path, const float *data, int side, int bits, const struct tap_meta *m)
 {
     size_t count = (size_t)side * (size_t)side;
     float lo = INFINITY, hi = -INFINITY;
@@ -118,11 +128,16 @@ static int write_pgm(const char *path, const float *data, int side, int bits)
     }
     FILE *f = fopen(path, "wb");
     if (!f) { free(px); return -1; }
-    int ok = fprintf(f, "P5\n# min=%.9g max=%.9g\n%d %d\n%u\n", (double)lo, (double)hi,
+    int ok = fprintf(f, "P5\n# min=%.9g max=%.9g seq=%llu sim_time=%.17g params_version=%u\n%d %d\n%u\n",
+                     (double)lo, (double)hi, (unsigned long long)m->seq, m->sim_time, (unsigned)m->params_version,
                      side, side, maxval) > 0 &&
              fwrite(px, bpp, count, f) == count;
     free(px);
-    return finish(f, ok);
+    if (finish(f, ok) != 0) return -1;
+    char extra[128];
+    snprintf(extra, sizeof extra, ",\n  \"min\": %.9g,\n  \"max\": %.9g,\n  \"maxval\": %u", (double)lo, (double)hi,
+             maxval);
+    return write_sidecar(path, bits == 8 ? "pgm8" : "pgm", bits == 8 ? "uint8" : "uint16", side, m, extra);
 }
 
 int tap_write_field(enum tap_format fmt, const char *path, const float *data, int side,
@@ -130,10 +145,13 @@ int tap_write_field(enum tap_format fmt, const char *path, const float *data, in
 {
     errno = 0;
     switch (fmt) {
-    case TAP_NPY: return write_npy(path, data, side);
+    case TAP_NPY:
+        if (write_npy(path, data, side) != 0) return -1;
+        return write_sidecar(path, "npy", "float32", side, meta, NULL);
     case TAP_RAW: return write_raw(path, data, side, meta);
-    case TAP_PGM16: return write_pgm(path, data, side, 16);
-    case TAP_PGM8: return write_pgm(path, data, side, 8);
+    case TAP_PGM16: return write_pgm(path, data, side, 16, meta);
+    case TAP_PGM8: return write_pgm(path, data, side, 8, meta);
+    case TAP_EXR: break; /* whole frames: tap_exr_bake */
     }
     errno = EINVAL;
     return -1;

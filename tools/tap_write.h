@@ -2,19 +2,23 @@
  *
  * Formats:
  *   npy   NumPy .npy v1.0, '<f4', C order, shape (rows, cols): np.load() opens it
- *   raw   little-endian float32 samples, row-major, plus a .json sidecar with shape and metadata
- *   pgm   binary PGM (P5), values normalised min..max of this field, 16-bit (pgm) or 8-bit (pgm8)
+ *   raw   little-endian float32 samples, row-major
+ *   pgm   binary PGM (P5), values normalised min..max of this field, 16-bit (pgm) or 8-bit (pgm8);
+ *         the comment line also carries seq, sim_time and params_version
+ *   exr   Blender ocean bakes, whole frames: tap_exr.h
+ * Every file gets a .json sidecar (same name, .json for the extension) with
+ * the frame header: seq, sim_time, params_version, n, lod, patch_size, bound. 
  * Functions return 0, or -1 with errno set (a write or open failed). */
 #ifndef OCEAND_TAP_WRITE_H
 #define OCEAND_TAP_WRITE_H
 
 #include <stdint.h>
 
-enum tap_format { TAP_NPY, TAP_RAW, TAP_PGM16, TAP_PGM8 };
+enum tap_format { TAP_NPY, TAP_RAW, TAP_PGM16, TAP_PGM8, TAP_EXR };
 
-/* Parse "npy", "raw", "pgm" (16-bit), "pgm8"; -1 if unknown. */
+/* Parse "npy", "raw", "pgm" (16-bit), "pgm8", "exr"; -1 if unknown. */
 int tap_format_from_name(const char *name);
-/* File extension of the main file: "npy", "f32", "pgm". */
+/* File extension of the main file: "npy", "f32", "pgm", "exr". */
 const char *tap_format_ext(enum tap_format f);
 
 /* What the sidecar records about one field of one frame. */
@@ -28,8 +32,8 @@ struct tap_meta {
     uint64_t server_time_us;
 };
 
-/* Write side*side floats (row-major, row = z) to path (the sidecar, for raw,
- * goes next to it with ".json" in place of the extension). */
+/* Write side*side floats (row-major, row = z) to path, and its sidecar
+ * next to it with ".json" in place of the extension. Not for TAP_EXR. */
 int tap_write_field(enum tap_format fmt, const char *path, const float *data, int side,
                     const struct tap_meta *meta);
 

@@ -1,10 +1,14 @@
-/* ocean.c — lifetime of a simulation: create, reconfigure, step, free.
+/* ocean.c — lifetime of a simulation: create, prepare + commit
+ * (reconfigure), step, free.
  *
- * The N-dependent state (amplitudes, spectra, outputs, FFT plan) lives in
- * struct ocean_grid so that a change of N builds a complete new grid and
- * swaps it in only when everything succeeded: on error the old one is
- * untouched. The per-step work is in ocean_step.c (FFT) and ocean_dft.c
- * (brute force); the physics in ocean_spectrum.c. */
+ * The N-dependent state (amplitudes, spectra, outputs, FFT plans, the
+ * cached per-mode normals and rings) lives in struct ocean_grid. Every
+ * parameter change is prepared beside the live state (new amplitudes, or
+ * for a new N a complete new grid) and swapped in by pointers only when
+ * everything succeeded: on error the old state is untouched, and the
+ * preparing may run on another thread than the stepping. The per-step
+ * work is in ocean_step.c (FFT) and ocean_dft.c (brute force); the
+ * physics in ocean_spectrum.c. */
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -202,6 +206,36 @@ void ocean_parallel(struct ocean_pool *pool, int threads, int items,
 
 /* ---- grid: allocation, plan, amplitudes ---------------------------------- */
 
+/* The amplitude arrays a step reads: what a parameter change replaces. */
+struct ocean_amps {
+    float *a, *b, *d, *e;
+    double *omega;
+    float *ampc;
+};
+
+static void amps_free(struct ocean_amps *s)
+{
+    float *floats[] = {s->a, s->b, s->d, s->e};
+    for (size_t i = 0; i < sizeof floats / sizeof floats[0]; i++)
+        fftwf_free(floats[i]);
+    fftwf_free(s->omega);
+    fftwf_free(s->ampc);
+    memset(s, 0, sizeof *s);
+}
+
+/* Swap the amplitude arrays of a grid with a set (commit: O(1)). */
+static void amps_swap(struct ocean_grid *g, struct ocean_amps *s)
+{
+    struct ocean_amps t = {g->a, g->b, g->d, g->e, g->omega, g->ampc};
+    g->a = s->a;
+    g->b = s->b;
+    g->d = s->d;
+    g->e = s->e;
+    g->omega = s->omega;
+    g->ampc = s->ampc;
+    *s = t;
+}
+
 static void grid_free(struct ocean_grid *g)
 {
     if (!g)
@@ -211,12 +245,16 @@ static void grid_free(struct ocean_grid *g)
         fftwf_destroy_plan(g->col_plan);
     if (g->row_plan)
         fftwf_destroy_plan(g->row_plan);
+    if (g->store_plan)
+        fftwf_destroy_plan(g->store_plan);
     ocean_fftw_unlock();
-    float *floats[] = {g->a, g->b, g->d, g->e, g->kx, g->kz};
-    for (size_t i = 0; i < sizeof floats / sizeof floats[0]; i++)
-        fftwf_free(floats[i]);
-    fftwf_free(g->omega);
-    fftwf_free(g->amp);
+    struct ocean_amps amps = {g->a, g->b, g->d, g->e, g->omega, g->ampc};
+    amps_free(&amps);
+    fftwf_free(g->kx);
+    fftwf_free(g->kz);
+    fftwf_free(g->gauss);
+    fftwf_free(g->ring);
+    fftwf_free(g->ring_m2);
     for (int i = 0; i < COL_COUNT; i++)
         fftwf_free(g->col[i]);
     fftwf_free(g->scratch);
@@ -227,14 +265,101 @@ static void grid_free(struct ocean_grid *g)
     free(g);
 }
 
+_Atomic size_t ocean_alloc_bytes;
+
 static void *zalloc(size_t bytes, bool *ok)
 {
     void *p = fftwf_malloc(bytes); /* SIMD-aligned, as FFTW's new-array execute needs */
-    if (p)
+    if (p) {
         memset(p, 0, bytes);
+        atomic_fetch_add_explicit(&ocean_alloc_bytes, bytes, memory_order_relaxed);
+    }
     else
         *ok = false;
     return p;
+}
+
+static bool amps_alloc(struct ocean_amps *s, int n)
+{
+    bool ok = true;
+    size_t modes = (size_t)n * (n / 2 + 1);
+    s->a = zalloc(modes * sizeof(float), &ok);
+    s->b = zalloc(modes * sizeof(float), &ok);
+    s->d = zalloc(modes * sizeof(float), &ok);
+    s->e = zalloc(modes * sizeof(float), &ok);
+    s->omega = zalloc(modes * sizeof(double), &ok);
+    s->ampc = zalloc((size_t)(n / 2) * OCEAN_AMP_COL_FLOATS(n) * sizeof(float), &ok);
+    if (!ok)
+        amps_free(s);
+    return ok;
+}
+
+/* Rings: the distinct values of |m|^2 = mx^2 + mz^2 over the modes of the
+ * half spectrum (Nyquist row and column left out, they are zero). Marks
+ * them in `seen` (one byte per value 0..max_m2) and returns their count. */
+static size_t ring_mark(int n, unsigned char *seen)
+{
+    size_t count = 0;
+    for (int iz = 0; iz < n; iz++) {
+        if (iz == n / 2)
+            continue;
+        int mz = iz > n / 2 ? iz - n : iz;
+        for (int mx = 0; mx < n / 2; mx++) {
+            size_t m2 = (size_t)mx * mx + (size_t)mz * mz;
+            count += !seen[m2];
+            seen[m2] = 1;
+        }
+    }
+    return count;
+}
+
+static size_t ring_max_m2(int n)
+{
+    size_t h = (size_t)n / 2;
+    return 2 * h * h; /* bound: |mx|, |mz| <= N/2 */
+}
+
+static size_t ring_count(int n)
+{
+    unsigned char *seen = calloc(ring_max_m2(n) + 1, 1);
+    if (!seen)
+        return (size_t)n * (n / 2 + 1); /* an upper bound */
+    size_t c = ring_mark(n, seen);
+    free(seen);
+    return c;
+}
+
+/* g->ring[mode] = index of the mode's |m|^2 in g->ring_m2 (ascending). */
+static bool grid_build_rings(struct ocean_grid *g)
+{
+    int n = g->n;
+    size_t max = ring_max_m2(n);
+    unsigned char *seen = calloc(max + 1, 1);
+    uint32_t *index = malloc((max + 1) * sizeof *index);
+    bool ok = seen && index;
+    if (ok) {
+        g->rings = ring_mark(n, seen);
+        g->ring_m2 = zalloc((g->rings ? g->rings : 1) * sizeof *g->ring_m2, &ok);
+    }
+    if (ok) {
+        uint32_t r = 0;
+        for (size_t m2 = 0; m2 <= max; m2++)
+            if (seen[m2]) {
+                index[m2] = r;
+                g->ring_m2[r++] = (uint32_t)m2;
+            }
+        for (int iz = 0; iz < n; iz++) {
+            int mz = iz > n / 2 ? iz - n : iz;
+            for (int ix = 0; ix < g->nh; ix++) {
+                size_t i = (size_t)iz * g->nh + ix;
+                bool nyquist = ix == n / 2 || iz == n / 2;
+                g->ring[i] = nyquist ? 0 : index[(size_t)ix * ix + (size_t)mz * mz];
+            }
+        }
+    }
+    free(seen);
+    free(index);
+    return ok;
 }
 
 /* Write wisdom atomically (temp file + rename) so a concurrent reader never
@@ -250,19 +375,31 @@ static void export_wisdom(const char *path)
         remove(tmp);
 }
 
+int ocean_threads(int requested)
+{
+    if (requested == 0) {
+        long cores = sysconf(_SC_NPROCESSORS_ONLN);
+        requested = cores < 1 ? 1 : cores > OCEAN_MAX_THREADS ? OCEAN_MAX_THREADS : (int)cores;
+    }
+    return requested < 1 ? 1 : requested > OCEAN_MAX_THREADS ? OCEAN_MAX_THREADS : requested;
+}
+
 size_t ocean_memory_bytes(int n, int threads)
 {
     if (n < 2)
         return 0;
+    threads = ocean_threads(threads);
     size_t nh = (size_t)n / 2 + 1, modes = (size_t)n * nh, nn = (size_t)n * n;
     int tile = n / 2 < OCEAN_COL_TILE ? n / 2 : OCEAN_COL_TILE;
-    int workers = threads < 1 ? 1 : threads < OCEAN_MAX_THREADS ? threads : OCEAN_MAX_THREADS;
+    int workers = threads;
     size_t fill_floats = ocean_tile_floats(n, tile), row_floats = (size_t)2 * OCEAN_ROW_BLOCK * nh * 2;
     size_t scratch = ((fill_floats > row_floats ? fill_floats : row_floats) + 15) & ~(size_t)15;
     /* The same arrays as grid_new, in the same order. */
     return modes * (4 * sizeof(float) + sizeof(double))                   /* a, b, d, e, omega */
-         + (size_t)(n / 2 / tile) * n * sizeof(struct ocean_tile_row)      /* amp */
+         + (size_t)(n / 2) * OCEAN_AMP_COL_FLOATS(n) * sizeof(float)      /* ampc */
          + (nh + (size_t)n) * sizeof(float)                               /* kx, kz */
+         + modes * (4 * sizeof(float) + sizeof(uint32_t))                 /* gauss, ring */
+         + ring_count(n) * sizeof(uint32_t)                               /* ring_m2 */
          + COL_COUNT * modes * 2 * sizeof(float)                          /* col */
          + (size_t)workers * scratch * sizeof(float)                      /* scratch */
          + (OCEAN_FIELD_COUNT + 3) * nn * sizeof(float);                  /* out, jac */
@@ -281,14 +418,13 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
     g->modes = (size_t)n * g->nh;
     g->tile = n / 2 < OCEAN_COL_TILE ? n / 2 : OCEAN_COL_TILE;
     size_t nn = (size_t)n * n;
-    g->a = zalloc(g->modes * sizeof(float), &ok);
-    g->b = zalloc(g->modes * sizeof(float), &ok);
-    g->d = zalloc(g->modes * sizeof(float), &ok);
-    g->e = zalloc(g->modes * sizeof(float), &ok);
-    g->omega = zalloc(g->modes * sizeof(double), &ok);
-    g->amp = zalloc((size_t)(n / 2 / g->tile) * n * sizeof *g->amp, &ok);
+    struct ocean_amps amps = {0};
+    ok = amps_alloc(&amps, n);
+    amps_swap(g, &amps);
     g->kx = zalloc((size_t)g->nh * sizeof(float), &ok);
     g->kz = zalloc((size_t)n * sizeof(float), &ok);
+    g->gauss = zalloc(g->modes * 4 * sizeof(float), &ok);
+    g->ring = zalloc(g->modes * sizeof(uint32_t), &ok);
     for (int i = 0; i < COL_COUNT; i++)
         g->col[i] = zalloc(g->modes * 2 * sizeof(float), &ok);
     g->workers = opt->threads < OCEAN_MAX_THREADS ? opt->threads : OCEAN_MAX_THREADS;
@@ -302,6 +438,8 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
         g->out[i] = zalloc(nn * sizeof(float), &ok);
     for (int i = 0; i < 3; i++)
         g->jac[i] = zalloc(nn * sizeof(float), &ok);
+    if (ok)
+        ok = grid_build_rings(g);
     if (!ok) {
         snprintf(err, errlen, "out of memory for resolution %d", n);
         grid_free(g);
@@ -322,82 +460,296 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
      * the plans do not depend on the thread count (same bits on 1 or 2).
      * Columns: `tile` in-place N-point c2c over the contiguous columns of
      * a worker's fill tile (ocean_step.c).
-     * Rows: a block of N-point c2r from a worker's scratch to the output. */
+     * Rows: a block of N-point c2r from a worker's scratch to the output.
+     * Between them, the transposition: a tile's transformed columns into
+     * the block-major half spectrum (see ocean_grid.col), as FFTW's own
+     * rank-0 (copy-only) guru plan over three loops: T columns (in: stride
+     * dist, out: B), N/B blocks (in: B, out: nh*B), B rows (1, 1). The same
+     * copy as a hand-written loop (measured equal: docs/simulation.md), but
+     * part of the FFTW plan set, like the transposition inside FFTW's 2-D
+     * transforms. */
     fftwf_complex *tile = (fftwf_complex *)ocean_tile_spectrum(g->scratch, n, g->tile);
     int dist = ocean_tile_dist(n);
+    const int B = OCEAN_ROW_BLOCK;
+    fftwf_iodim store_dims[3] = {{g->tile, dist, B}, {n / B, B, g->nh * B}, {B, 1, 1}};
     fftwf_plan_with_nthreads(1);
     g->col_plan = fftwf_plan_many_dft(1, &n, g->tile, tile, NULL, 1, dist, tile, NULL, 1, dist, FFTW_BACKWARD, flags);
-    g->row_plan = fftwf_plan_many_dft_c2r(1, &n, OCEAN_ROW_BLOCK, (fftwf_complex *)g->scratch, NULL,
-                                          OCEAN_ROW_BLOCK, 1, g->out[0], NULL, 1, n, flags);
-    if (g->col_plan && g->row_plan && opt->plan_rigor && opt->wisdom_path && *opt->wisdom_path)
+    g->row_plan = fftwf_plan_many_dft_c2r(1, &n, B, (fftwf_complex *)g->scratch, NULL,
+                                          B, 1, g->out[0], NULL, 1, n, flags);
+    g->store_plan = fftwf_plan_guru_dft(0, NULL, 3, store_dims, tile, (fftwf_complex *)g->col[0], FFTW_BACKWARD, flags);
+    if (g->col_plan && g->row_plan && g->store_plan && opt->plan_rigor && opt->wisdom_path && *opt->wisdom_path)
         export_wisdom(opt->wisdom_path);
     ocean_fftw_unlock();
-    if (!g->col_plan || !g->row_plan) {
+    if (!g->col_plan || !g->row_plan || !g->store_plan) {
         snprintf(err, errlen, "FFTW could not plan a %dx%d transform", n, n);
         grid_free(g);
         return NULL;
     }
-    return g; /* kx, kz and the amplitudes: grid_set_amplitudes */
+    return g; /* the normals, kx, kz (they depend on L) and the amplitudes: prepare() */
 }
 
-struct amp_ctx {
-    struct ocean_grid *g;
-    const struct spectrum_model *m;
+/* ---- amplitudes ------------------------------------------------------------ */
+
+/* Per mode of the half spectrum, the standard normals of h~0(k) and
+ * h~0(-k): a pure function of (seed, integer k), cached because the hash,
+ * log and sincos are a fifth of a rebuild. */
+struct gauss_ctx {
+    int n, nh;
+    uint32_t seed;
+    float *gauss;
 };
 
-static void amp_rows(void *arg, int r0, int r1, int worker)
+static void gauss_rows(void *arg, int r0, int r1, int worker)
 {
-    struct amp_ctx *c = arg;
-    struct ocean_grid *g = c->g;
-    const struct spectrum_model *m = c->m;
-    int n = g->n;
-    double dk = 2.0 * M_PI / m->patch;
+    const struct gauss_ctx *c = arg;
     for (int iz = r0; iz < r1; iz++) {
-        int mz = iz > n / 2 ? iz - n : iz;
-        for (int ix = 0; ix < g->nh; ix++) {
-            size_t i = (size_t)iz * g->nh + ix;
-            int mx = ix;
-            /* Nyquist row and column stay zero: their -k aliases onto
-             * themselves, so they could not be both hermitian and random. */
-            if (ix == n / 2 || iz == n / 2) {
-                g->a[i] = g->b[i] = g->d[i] = g->e[i] = 0;
-                g->omega[i] = 0;
-                continue;
-            }
-            double complex p = spectrum_h0(m, mx, mz);
-            double complex q = conj(spectrum_h0(m, -mx, -mz));
-            g->a[i] = (float)(creal(p) + creal(q));
-            g->b[i] = (float)(cimag(p) - cimag(q));
-            g->d[i] = (float)(cimag(p) + cimag(q));
-            g->e[i] = (float)(creal(p) - creal(q));
-            g->omega[i] = spectrum_mode_omega(m, dk * hypot(mx, mz));
-        }
-        for (int ix = 0; ix < n / 2; ix++) { /* the fill's copy, in tile order */
-            size_t i = (size_t)iz * g->nh + ix;
-            struct ocean_tile_row *t = g->amp + (size_t)(ix / g->tile) * n + iz;
-            int j = ix % g->tile;
-            t->a[j] = g->a[i];
-            t->b[j] = g->b[i];
-            t->d[j] = g->d[i];
-            t->e[j] = g->e[i];
-            t->omega[j] = g->omega[i];
-            double k = dk * hypot(ix, mz);
-            t->invk[j] = k > 0 ? (float)(1.0 / k) : 0.0f;
+        int mz = iz > c->n / 2 ? iz - c->n : iz;
+        for (int mx = 0; mx < c->nh; mx++) {
+            float *q = c->gauss + 4 * ((size_t)iz * c->nh + mx);
+            double a, b, ma, mb;
+            spectrum_gauss_pair(c->seed, mx, mz, &a, &b);
+            spectrum_gauss_pair(c->seed, -mx, -mz, &ma, &mb);
+            q[0] = (float)a;
+            q[1] = (float)b;
+            q[2] = (float)ma;
+            q[3] = (float)mb;
         }
     }
 }
 
-/* h~0 and w for every mode. Depends only on the parameters (the random
- * numbers on seed and integer k), so reconfiguring keeps the sea's phases. */
-static void grid_set_amplitudes(struct ocean_grid *g, const struct spectrum_model *m, struct ocean_pool *pool,
-                                int threads)
+static void gauss_compute(int n, uint32_t seed, float *gauss, struct ocean_pool *pool, int threads)
+{
+    struct gauss_ctx c = {n, n / 2 + 1, seed, gauss};
+    ocean_parallel(pool, threads, n, gauss_rows, &c);
+}
+
+/* The radial table (spectrum_radial_at per ring), in `chunks` pieces. */
+struct radial_ctx {
+    const struct spectrum_model *m;
+    const uint32_t *ring_m2;
+    struct spectrum_radial *out;
+    size_t rings;
+    int chunks;
+};
+
+static void radial_chunks(void *arg, int c0, int c1, int worker)
+{
+    const struct radial_ctx *c = arg;
+    double dk = 2.0 * M_PI / c->m->patch;
+    size_t per = (c->rings + c->chunks - 1) / c->chunks;
+    for (size_t r = (size_t)c0 * per; r < (size_t)c1 * per && r < c->rings; r++)
+        spectrum_radial_at(c->m, dk * sqrt((double)c->ring_m2[r]), &c->out[r]);
+}
+
+struct amp_ctx {
+    const struct ocean_grid *g;       /* n, ring */
+    const struct spectrum_model *m;
+    double lambda;                    /* choppiness, folded into linvk */
+    const struct spectrum_radial *radial;
+    const float *gauss;
+    struct ocean_amps *amps;
+};
+
+/* h~0(k) and h~0(-k) per mode from the radial table, the spreading's angle
+ * and the cached normals; then a, b, d, e and omega (see ocean_grid). */
+static void amp_rows(void *arg, int r0, int r1, int worker)
+{
+    const struct amp_ctx *c = arg;
+    const struct ocean_grid *g = c->g;
+    const struct spectrum_model *m = c->m;
+    struct ocean_amps *s = c->amps;
+    const int n = g->n, nh = g->nh;
+    const double half_dk = 0.5 * 2.0 * M_PI / m->patch, wx = cos(m->wind_angle), wz = sin(m->wind_angle);
+    for (int iz = r0; iz < r1; iz++) {
+        int mz = iz > n / 2 ? iz - n : iz;
+        for (int ix = 0; ix < nh; ix++) {
+            size_t i = (size_t)iz * nh + ix;
+            int mx = ix;
+            /* Nyquist row and column stay zero: their -k aliases onto
+             * themselves, so they could not be both hermitian and random. */
+            if (ix == n / 2 || iz == n / 2) {
+                s->a[i] = s->b[i] = s->d[i] = s->e[i] = 0;
+                s->omega[i] = 0;
+                continue;
+            }
+            const struct spectrum_radial *r = &c->radial[g->ring[i]];
+            double len = sqrt((double)mx * mx + (double)mz * mz);
+            double cs = len > 0 ? (mx * wx + mz * wz) / len : 0; /* cos(angle of k - wind) */
+            double psi_p = r->psi_k > 0 ? r->psi_k * spectrum_spreading_cos(m, r, cs) : 0;
+            double psi_m = r->psi_k > 0 ? r->psi_k * spectrum_spreading_cos(m, r, -cs) : 0;
+            double ap = psi_p > 0 ? half_dk * sqrt(psi_p) : 0, am = psi_m > 0 ? half_dk * sqrt(psi_m) : 0;
+            const float *q = c->gauss + 4 * i;
+            /* p = h~0(k), conj(h~0(-k)) = mr - i mi */
+            double pr = ap * q[0], pi = ap * q[1], mr = am * q[2], mi = -am * q[3];
+            s->a[i] = (float)(pr + mr);
+            s->b[i] = (float)(pi - mi);
+            s->d[i] = (float)(pi + mi);
+            s->e[i] = (float)(pr - mr);
+            s->omega[i] = r->omega;
+        }
+    }
+}
+
+/* The fill's column-major copy (ocean_amp_col), columns [c0, c1). */
+static void amp_columns(void *arg, int c0, int c1, int worker)
+{
+    const struct amp_ctx *c = arg;
+    const struct ocean_grid *g = c->g;
+    struct ocean_amps *s = c->amps;
+    const int n = g->n, nh = g->nh;
+    const double lambda = c->lambda;
+    for (int ix = c0; ix < c1; ix++) {
+        float *col = ocean_amp_col(s->ampc, n, ix);
+        double *omega = (double *)(col + 5 * (size_t)n);
+        for (int iz = 0; iz < n; iz++) {
+            size_t i = (size_t)iz * nh + ix;
+            col[iz] = s->a[i];
+            col[n + iz] = s->b[i];
+            col[2 * n + iz] = s->d[i];
+            col[3 * n + iz] = s->e[i];
+            col[4 * n + iz] = iz == n / 2 ? 0.0f : (float)(lambda * c->radial[g->ring[i]].disp);
+            omega[iz] = s->omega[i];
+        }
+    }
+}
+
+/* h~0 and w for every mode into `amps`, for grid g's N and rings, from the
+ * normals `gauss`. Depends only on the parameters (the random numbers on
+ * seed and integer k), so reconfiguring keeps the sea's phases. Returns
+ * false without memory for the radial table. */
+static bool amps_compute(const struct ocean_grid *g, const struct spectrum_model *m, double lambda,
+                         const float *gauss, struct ocean_amps *amps, struct ocean_pool *pool, int threads)
+{
+    struct spectrum_radial *radial = malloc((g->rings ? g->rings : 1) * sizeof *radial);
+    if (!radial)
+        return false;
+    struct radial_ctx rc = {m, g->ring_m2, radial, g->rings, 64};
+    ocean_parallel(pool, threads, rc.chunks, radial_chunks, &rc);
+    struct amp_ctx c = {g, m, lambda, radial, gauss, amps};
+    ocean_parallel(pool, threads, g->n, amp_rows, &c);
+    ocean_parallel(pool, threads, g->n / 2, amp_columns, &c);
+    free(radial);
+    return true;
+}
+
+/* ---- parameter changes: prepare, commit ------------------------------------- */
+
+struct ocean_prepared {
+    struct ocean_params p;
+    struct spectrum_model model;
+    struct ocean_grid *grid;   /* a new N: the whole new grid (after commit: the old one) */
+    struct ocean_amps amps;    /* same N: the new amplitudes (after commit: the old ones) */
+    float *gauss;              /* same N, new seed: its normals (after commit: the old ones) */
+    uint32_t seed;             /* of `gauss` */
+    unsigned long generation;  /* o->generation prepared against */
+};
+
+void ocean_prepared_free(struct ocean_prepared *pr)
+{
+    if (!pr)
+        return;
+    grid_free(pr->grid);
+    amps_free(&pr->amps);
+    fftwf_free(pr->gauss);
+    free(pr);
+}
+
+static void set_k_tables(struct ocean_grid *g, double patch)
 {
     for (int i = 0; i < g->nh; i++)
-        g->kx[i] = (float)ocean_wavenumber(i, g->n, m->patch);
+        g->kx[i] = (float)ocean_wavenumber(i, g->n, patch);
     for (int i = 0; i < g->n; i++)
-        g->kz[i] = (float)ocean_wavenumber(i, g->n, m->patch);
-    struct amp_ctx c = {g, m};
-    ocean_parallel(pool, threads, g->n, amp_rows, &c);
+        g->kz[i] = (float)ocean_wavenumber(i, g->n, patch);
+}
+
+/* Everything new parameters need, beside the live grid (read only). */
+static struct ocean_prepared *prepare(const struct ocean *o, const struct ocean_params *p, struct ocean_pool *pool,
+                                      int threads, char *err, size_t errlen)
+{
+    if (params_validate(p, err, errlen) != 0)
+        return NULL;
+    struct ocean_prepared *pr = calloc(1, sizeof *pr);
+    if (!pr) {
+        snprintf(err, errlen, "out of memory");
+        return NULL;
+    }
+    pr->p = *p;
+    spectrum_model_init(&pr->model, p);
+    pr->generation = o->generation;
+    pr->seed = (uint32_t)p->seed;
+    const struct ocean_grid *g = o->g;
+    if (!g || g->n != p->resolution) {
+        pr->grid = grid_new(p->resolution, &o->opt, err, errlen);
+        if (!pr->grid) {
+            free(pr);
+            return NULL;
+        }
+        pr->grid->seed = pr->seed;
+        gauss_compute(pr->grid->n, pr->seed, pr->grid->gauss, pool, threads);
+        set_k_tables(pr->grid, p->patch_size);
+        struct ocean_amps amps = {pr->grid->a, pr->grid->b, pr->grid->d, pr->grid->e, pr->grid->omega,
+                                  pr->grid->ampc};
+        if (!amps_compute(pr->grid, &pr->model, p->choppiness, pr->grid->gauss, &amps, pool, threads))
+            goto oom;
+        return pr;
+    }
+    if (!amps_alloc(&pr->amps, g->n))
+        goto oom;
+    const float *gauss = g->gauss;
+    if (pr->seed != g->seed) {
+        bool ok = true;
+        pr->gauss = zalloc(g->modes * 4 * sizeof(float), &ok);
+        if (!ok)
+            goto oom;
+        gauss_compute(g->n, pr->seed, pr->gauss, pool, threads);
+        gauss = pr->gauss;
+    }
+    if (!amps_compute(g, &pr->model, p->choppiness, gauss, &pr->amps, pool, threads))
+        goto oom;
+    return pr;
+oom:
+    snprintf(err, errlen, "out of memory for resolution %d", p->resolution);
+    ocean_prepared_free(pr);
+    return NULL;
+}
+
+struct ocean_prepared *ocean_prepare(struct ocean *o, const struct ocean_params *p, char *err, size_t errlen)
+{
+    if (!o || !p) {
+        snprintf(err, errlen, "no simulation or no parameters");
+        return NULL;
+    }
+    /* Not o->pool: that one is the stepping thread's. Made on first use
+     * (only this function touches it; prepares must not overlap). */
+    if (!o->prep_pool && o->opt.threads > 1)
+        o->prep_pool = ocean_pool_new(o->opt.threads);
+    return prepare(o, p, o->prep_pool, o->opt.threads, err, errlen);
+}
+
+int ocean_commit(struct ocean *o, struct ocean_prepared *pr)
+{
+    if (!o || !pr || pr->generation != o->generation)
+        return -1; /* prepared against another state: nothing changes */
+    o->p = pr->p;
+    o->model = pr->model;
+    if (pr->grid) {
+        struct ocean_grid *old = o->g;
+        o->g = pr->grid;
+        pr->grid = old;
+    } else {
+        amps_swap(o->g, &pr->amps);
+        if (pr->gauss) {
+            float *t = o->g->gauss;
+            o->g->gauss = pr->gauss;
+            pr->gauss = t;
+            uint32_t s = o->g->seed;
+            o->g->seed = pr->seed;
+            pr->seed = s;
+        }
+        set_k_tables(o->g, pr->p.patch_size); /* N + 1 floats */
+    }
+    o->generation++; /* also refuses a second commit of the same object */
+    return 0;
 }
 
 /* ---- public API ------------------------------------------------------- */
@@ -408,8 +760,7 @@ struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_opti
     struct ocean_options o_opt = {1, NULL, 0};
     if (opt)
         o_opt = *opt;
-    if (o_opt.threads < 1)
-        o_opt.threads = 1;
+    o_opt.threads = ocean_threads(o_opt.threads);
     if (!p) {
         snprintf(err, errlen, "no parameters");
         return NULL;
@@ -421,7 +772,6 @@ struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_opti
         snprintf(err, errlen, "out of memory");
         return NULL;
     }
-    o->p = *p;
     o->opt = o_opt;
     if (o_opt.wisdom_path && *o_opt.wisdom_path) { /* the caller's string may not outlive us */
         o->wisdom_path = strdup(o_opt.wisdom_path);
@@ -432,15 +782,16 @@ struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_opti
         }
         o->opt.wisdom_path = o->wisdom_path;
     }
-    spectrum_model_init(&o->model, p);
-    o->g = grid_new(p->resolution, &o->opt, err, errlen);
-    if (!o->g) {
+    o->pool = ocean_pool_new(o->opt.threads); /* NULL (one thread) is fine: slower, same result */
+    struct ocean_prepared *pr = prepare(o, p, o->pool, o->opt.threads, err, errlen);
+    if (!pr) {
+        ocean_pool_free(o->pool);
         free(o->wisdom_path);
         free(o);
         return NULL;
     }
-    o->pool = ocean_pool_new(o->opt.threads); /* NULL (one thread) is fine: slower, same result */
-    grid_set_amplitudes(o->g, &o->model, o->pool, o->opt.threads);
+    ocean_commit(o, pr);
+    ocean_prepared_free(pr); /* holds the NULL grid we started with */
     return o;
 }
 
@@ -450,22 +801,11 @@ int ocean_reconfigure(struct ocean *o, const struct ocean_params *p, char *err, 
         snprintf(err, errlen, "no simulation or no parameters");
         return -1;
     }
-    if (params_validate(p, err, errlen) != 0)
+    struct ocean_prepared *pr = prepare(o, p, o->pool, o->opt.threads, err, errlen);
+    if (!pr)
         return -1;
-    struct ocean_grid *g = o->g;
-    if (p->resolution != g->n) {
-        g = grid_new(p->resolution, &o->opt, err, errlen);
-        if (!g)
-            return -1;
-    }
-    /* Nothing below can fail: commit. */
-    o->p = *p;
-    spectrum_model_init(&o->model, p);
-    grid_set_amplitudes(g, &o->model, o->pool, o->opt.threads);
-    if (g != o->g) {
-        grid_free(o->g);
-        o->g = g;
-    }
+    ocean_commit(o, pr); /* cannot fail: prepared against o->g just now */
+    ocean_prepared_free(pr);
     return 0;
 }
 
@@ -501,6 +841,7 @@ void ocean_free(struct ocean *o)
     if (!o)
         return;
     ocean_pool_free(o->pool);
+    ocean_pool_free(o->prep_pool);
     grid_free(o->g);
     free(o->wisdom_path);
     free(o);

@@ -31,7 +31,7 @@ void ocean_reference_spectrum(const struct ocean *o, double t, enum ocean_transf
             double w = spectrum_mode_omega(m, k);
             double complex e = cexp(-I * w * tt);
             double complex h = spectrum_h0(m, mx, mz) * e + conj(spectrum_h0(m, -mx, -mz)) * conj(e);
-            double ik = k > 0 ? 1.0 / k : 0.0;
+            double ik = displacement_over_k(k, m->depth); /* coth(kd)/k */
             switch (tr) {
             case TR_H: *dst = h; break;
             case TR_DX: *dst = I * lam * kx * ik * h; break;

@@ -4,6 +4,7 @@
 #define OCEAND_OCEAN_INTERNAL_H
 
 #include <complex.h>
+#include <stdint.h>
 #include <fftw3.h>
 
 #include "ocean.h"
@@ -21,20 +22,24 @@ enum ocean_transform { TR_H, TR_DX, TR_DZ, TR_SX, TR_SZ, TR_JXX, TR_JZZ, TR_JXZ,
  *   COL_KZ      i kz h~         -> slope_z (1)
  *   COL_INVK    lambda h~/k     -> Dx (i kx), dDx/dx (-kx^2)
  *   COL_KZINVK  i lambda kz h~/k -> Dz (1), dDx/dz (i kx)
- *   COL_KZ2INVK -lambda kz^2 h~/k -> dDz/dz (1) */
+ *   COL_KZ2INVK -lambda kz^2 h~/k -> dDz/dz (1)
+ * ("1/k" is coth(kD)/k throughout: displacement_over_k, depth D.) */
 enum ocean_column { COL_H, COL_KZ, COL_INVK, COL_KZINVK, COL_KZ2INVK, COL_COUNT };
 #define OCEAN_ROW_BLOCK 8    /* rows per c2r batch (measured: 8 beats 4 and 16) */
 #define OCEAN_COL_TILE 16    /* kx columns per fill + z-pass tile (fewer if N/2 < 16) */
 #define OCEAN_MAX_THREADS 64
 #define OCEAN_THREADS_FROM_N 256 /* smaller grids run on one thread (at 128 a second thread did not pay, measured) */
 
-/* One row of one fill tile: per mode, a, b, d, e and omega as below, and
- * 1/k (0 at k = 0), so the step needs no division or square root. */
-struct ocean_tile_row {
-    float a[OCEAN_COL_TILE], b[OCEAN_COL_TILE], d[OCEAN_COL_TILE], e[OCEAN_COL_TILE];
-    float invk[OCEAN_COL_TILE];
-    double omega[OCEAN_COL_TILE];
-};
+/* The fill's copy of the amplitudes, one kx column (ix < N/2) after the
+ * other, each column-major along kz: a, b, d, e (as below), linvk =
+ * lambda coth(kD)/k (0 at k = 0; lambda folded in, so the step needs no
+ * division, square root or scaling), each N floats, then omega, N doubles.
+ * A tile's columns are one sequential stream, and the fill writes h~ down
+ * a column with no transposition. */
+#define OCEAN_AMP_COL_FLOATS(n) (7 * (size_t)(n)) /* 5 float + 1 double arrays of N */
+static inline float *ocean_amp_col(float *ampc, int n, int ix) { return ampc + (size_t)ix * OCEAN_AMP_COL_FLOATS(n); }
+/* Within a column: a = col, b = col + N, d = col + 2N, e = col + 3N,
+ * linvk = col + 4N, omega = (double *)(col + 5N). */
 
 /* Everything whose size depends on N: made together, swapped together. */
 struct ocean_grid {
@@ -48,11 +53,19 @@ struct ocean_grid {
     float *a, *b, *d, *e;
     double *omega;             /* rad/s, per mode */
     float *kx, *kz;            /* rad/m, per column / per row (layout formula) */
-    /* The same amplitudes in the order the fill reads them: tile tl, row iz
-     * at amp[tl*N + iz] (columns tl*tile .. +tile; the Nyquist column, zero,
-     * is left out). A sequential stream instead of a 64-byte piece of each
-     * row of five arrays. */
-    struct ocean_tile_row *amp;
+    /* What a parameter change keeps (ocean.c, prepare): per mode, the four
+     * standard normals of h~0(k) and h~0(-k) for `seed` (xi_r, xi_i of +k,
+     * of -k), and its ring: the index of |m|^2 = mx^2 + mz^2 in ring_m2
+     * (ascending, `rings` distinct values), since all of Psi but the
+     * spreading's angle depends on |k| alone. */
+    float *gauss;
+    uint32_t seed;
+    uint32_t *ring, *ring_m2;
+    size_t rings;
+    /* The same amplitudes as the fill reads them: OCEAN_AMP_COL_FLOATS(N)
+     * per column ix = 0 .. N/2-1 (the Nyquist column, zero, left out), see
+     * ocean_amp_col. */
+    float *ampc;
     /* z-pass spectra (after the z pass), block-major: the values of rows
      * iz = b*B + r (B = OCEAN_ROW_BLOCK) are at col[k][2*((b*nh + ix)*B + r)],
      * so a block of B rows is one contiguous piece that row_plan reads as
@@ -64,6 +77,7 @@ struct ocean_grid {
     size_t scratch_floats;
     int workers;               /* scratch slots */
     fftwf_plan col_plan;       /* in place, `tile` contiguous N-point c2c (one thread each) */
+    fftwf_plan store_plan;     /* rank 0 (a copy): a transformed tile -> its columns of col[k] */
     fftwf_plan row_plan;       /* OCEAN_ROW_BLOCK N-point c2r along x, input interleaved
                                 * (stride ROW_BLOCK), rows out contiguous (one thread each) */
 };
@@ -89,7 +103,13 @@ struct ocean {
     struct spectrum_model model;
     struct ocean_grid *g;
     struct ocean_pool *pool;   /* opt.threads - 1 workers; NULL for one thread */
+    struct ocean_pool *prep_pool; /* ocean_prepare's own (another thread's), made on first use */
+    unsigned long generation;  /* commits so far: a prepare made before the last one is stale */
 };
+
+/* Test hook: bytes ever allocated for the library's arrays (grids,
+ * amplitudes, normals), summed; never decreases. */
+extern _Atomic size_t ocean_alloc_bytes;
 
 /* Transforms needed for an OCEAN_FIELD_BIT mask. */
 unsigned ocean_transforms_for(unsigned fields);

@@ -11,9 +11,12 @@
 
 #define PM_ALPHA 0.0081            /* Phillips constant */
 #define PM_PEAK 0.855              /* PM: w_p = 0.855 g / U10 (Horvath 2015, eq. 27) */
-/* JONSWAP: fetch beyond which the sea is fully developed, where the
- * JONSWAP w_p reaches the PM one: (22 / 0.855)^3 in units of U^2/g. */
-#define FULLY_DEVELOPED_FETCH 17036.0
+/* JONSWAP fetch laws (Hasselmann et al. 1973, Dtsch. Hydrogr. Z. Suppl. A8(12)):
+ * f_p = 3.5 (g/U) chi^-0.33, alpha = 0.076 chi^-0.22, chi = g F / U^2. */
+#define JONSWAP_FP_COEF 3.5
+#define JONSWAP_FP_EXP (-0.33)
+#define JONSWAP_ALPHA_COEF 0.076
+#define JONSWAP_ALPHA_EXP (-0.22)
 
 void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p)
 {
@@ -34,12 +37,15 @@ void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p)
     m->alpha = PM_ALPHA;
     m->omega_p = m->calm ? 1.0 : PM_PEAK * g / U;
     if (!m->calm && (m->kind == SPECTRUM_JONSWAP || m->kind == SPECTRUM_TMA)) {
-        /* Hasselmann et al. 1973 fetch laws, capped at the fully developed sea. */
+        /* Hasselmann et al. 1973 fetch laws, capped at the fully developed
+         * sea: the fetch (about 18770 U^2/g) where the JONSWAP w_p falls
+         * to the PM one, 0.855 g/U. */
         double chi = g * p->fetch * 1000.0 / (U * U);
-        if (chi > FULLY_DEVELOPED_FETCH)
-            chi = FULLY_DEVELOPED_FETCH;
-        m->alpha = 0.076 * pow(chi, -0.22);
-        m->omega_p = 22.0 * (g / U) * pow(chi, -1.0 / 3.0);
+        double chi_full = pow(PM_PEAK / (2.0 * M_PI * JONSWAP_FP_COEF), 1.0 / JONSWAP_FP_EXP);
+        if (chi > chi_full)
+            chi = chi_full;
+        m->alpha = JONSWAP_ALPHA_COEF * pow(chi, JONSWAP_ALPHA_EXP);
+        m->omega_p = 2.0 * M_PI * JONSWAP_FP_COEF * (g / U) * pow(chi, JONSWAP_FP_EXP);
     }
 }
 
@@ -112,6 +118,17 @@ static double spreading_exponent(const struct spectrum_model *m, double w)
     return s + 16.0 * tanh(r) * m->swell * m->swell;
 }
 
+/* Hasselmann's normaliser Q(s) = 2^(2s-1) Gamma(s+1)^2 / (pi Gamma(2s+1)),
+ * via lgamma for large s. */
+static double spreading_norm(double s)
+{
+    /* lgamma_r, not lgamma: lgamma writes the global signgam, a data race
+     * when the pool's threads build the spectrum together (ThreadSanitizer). */
+    int sign;
+    double g1 = lgamma_r(s + 1.0, &sign), g2 = lgamma_r(2.0 * s + 1.0, &sign);
+    return exp((2.0 * s - 1.0) * M_LN2 + 2.0 * g1 - g2) / M_PI;
+}
+
 double spectrum_spreading(const struct spectrum_model *m, double w, double theta)
 {
     /* Tessendorf's |k.w|^2, normalised over the full circle. */
@@ -121,8 +138,12 @@ double spectrum_spreading(const struct spectrum_model *m, double w, double theta
     /* Hasselmann cos^2s(theta/2) with its normaliser
      * Q(s) = 2^(2s-1) Gamma(s+1)^2 / (pi Gamma(2s+1)), via lgamma for large s. */
     double s = spreading_exponent(m, w);
-    double q = exp((2.0 * s - 1.0) * M_LN2 + 2.0 * lgamma(s + 1.0) - lgamma(2.0 * s + 1.0)) / M_PI;
-    double d_h = q * pow(fabs(cos(0.5 * theta)), 2.0 * s);
+    double q = spreading_norm(s);
+    /* |cos(theta/2)|^2s as ((1 + cos theta)/2)^s: the same, but exactly 0
+     * straight upwind (cos(pi/2) is 6e-17 in double, and (6e-17)^2s is not
+     * small for the small s of short waves), as on the fast path. */
+    double half = 0.5 * (1.0 + c);
+    double d_h = q * pow(half > 0 ? half : 0.0, s);
     return (1.0 - m->blend) * d_cos2 + m->blend * d_h;
 }
 
@@ -135,6 +156,43 @@ double spectrum_directional(const struct spectrum_model *m, double kx, double kz
     double theta = remainder(atan2(kz, kx) - m->wind_angle, 2.0 * M_PI);
     double damp = m->cutoff > 0 ? exp(-pow(k * m->cutoff / (2.0 * M_PI), 2)) : 1.0;
     return m->amplitude * spectrum_omni_k(m, k) * spectrum_spreading(m, w, theta) / k * damp;
+}
+
+double displacement_over_k(double k, double depth)
+{
+    if (!(k > 0))
+        return 0.0;
+    /* Linear theory's particle orbits (docs/simulation.md): at the surface
+     * the horizontal semi-axis is coth(kd) times the vertical one. tanh is
+     * exactly 1 in double beyond kd ~ 19, so deep water is 1/k. */
+    return 1.0 / (k * tanh(k * depth));
+}
+
+void spectrum_radial_at(const struct spectrum_model *m, double k, struct spectrum_radial *r)
+{
+    r->psi_k = r->s = r->q = 0.0;
+    r->omega = spectrum_mode_omega(m, k);
+    r->disp = displacement_over_k(k, m->depth);
+    if (m->calm || !(k > 0))
+        return;
+    double damp = m->cutoff > 0 ? exp(-pow(k * m->cutoff / (2.0 * M_PI), 2)) : 1.0;
+    r->psi_k = m->amplitude * spectrum_omni_k(m, k) / k * damp;
+    if (m->blend > 0) {
+        r->s = spreading_exponent(m, dispersion_omega(k, m->depth));
+        r->q = spreading_norm(r->s);
+    }
+}
+
+double spectrum_spreading_cos(const struct spectrum_model *m, const struct spectrum_radial *r, double c)
+{
+    double d_cos2 = c * c / M_PI;
+    if (m->blend <= 0)
+        return d_cos2;
+    double half = 0.5 * (1.0 + c); /* cos^2(theta/2) */
+    /* powf: a third of the cost of pow, and the amplitudes end up in float
+     * anyway (relative error ~1e-7 against spectrum_spreading). */
+    double d_h = r->q * powf(half > 0 ? (float)half : 0.0f, (float)r->s);
+    return (1.0 - m->blend) * d_cos2 + m->blend * d_h;
 }
 
 double spectrum_mode_omega(const struct spectrum_model *m, double k)

@@ -52,6 +52,26 @@ double spectrum_spreading(const struct spectrum_model *m, double omega, double t
  * the integral of Psi over the plane. Includes amplitude and cutoff. */
 double spectrum_directional(const struct spectrum_model *m, double kx, double kz);
 
+/* Psi(k) split for the fast amplitude path (ocean.c): everything but the
+ * spreading's angle depends on |k| alone, so it is evaluated once per
+ * distinct |k| ("ring") instead of twice per mode:
+ *   Psi(kx, kz) = psi_k * spectrum_spreading_cos(m, r, cos theta). */
+struct spectrum_radial {
+    double psi_k;   /* amplitude * F(k) / k * cutoff damping, m^4 */
+    double s, q;    /* Mitsuyasu exponent s(w) and normaliser Q(s) (0 when unused) */
+    double omega;   /* spectrum_mode_omega(k) */
+    double disp;    /* displacement_over_k(k) */
+};
+void spectrum_radial_at(const struct spectrum_model *m, double k, struct spectrum_radial *r);
+/* D(w, theta) of spectrum_spreading from c = cos(theta) (theta relative to
+ * the wind) and the ring's s, q: (1-b) c^2/pi + b q ((1+c)/2)^s. */
+double spectrum_spreading_cos(const struct spectrum_model *m, const struct spectrum_radial *r, double c);
+
+/* coth(k d) / k, 0 at k = 0: the horizontal displacement of linear waves in
+ * depth d is D~ = i lambda (kx, kz) coth(k d)/k h~ (1/k in deep water; the
+ * orbit's horizontal semi-axis is coth(k d) times the vertical one). */
+double displacement_over_k(double k, double depth);
+
 /* Angular frequency of a mode, quantised to multiples of 2 pi / loop_period. */
 double spectrum_mode_omega(const struct spectrum_model *m, double k);
 

@@ -4,7 +4,11 @@
  * (a wave h~0 e^{i(k.x - wt)} travels along +k, i.e. downwind), then each
  * requested real field's spectrum is h~ times a factor:
  *   height 1, Dx i lambda kx/k, Dz i lambda kz/k, slopes i kx, i kz,
- *   Jacobian terms -lambda kx^2/k, -lambda kz^2/k, -lambda kx kz/k.
+ *   Jacobian terms -lambda kx^2/k, -lambda kz^2/k, -lambda kx kz/k,
+ * where every "1/k" is coth(kD)/k in water of depth D (linear theory's
+ * orbits are wider than tall in shallow water; 1/k in deep water): the
+ * per-mode "invk" below (the amplitudes' linvk, lambda folded in) holds
+ * lambda times that, displacement_over_k().
  * (lambda > 0 moves points toward crests and sharpens them; Tessendorf writes
  * the same with D = -i k/k h~ and a negative lambda.)
  *
@@ -30,7 +34,10 @@
 /* sin and cos of w*t for n modes. Quadrant reduction by the 1.5*2^52 trick:
  * adding it rounds to an integer whose low bits are the quadrant; no
  * libm calls, so the loop vectorises. Valid for |w t| < 2^50 rad. The
- * polynomials are Taylor to degree 9/10 on [-pi/4, pi/4]: error < 4e-8. */
+ * polynomials are the Cephes library's single-precision minimax ones
+ * (S. Moshier, sinf.c / cosf.c: degree 7 / 8 on [-pi/4, pi/4]), error
+ * < 8e-8 against double sin/cos: as good as Taylor to degree 9/10, one
+ * term shorter each. */
 static inline void sincos_row(const double *restrict omega, double t, int n, float *restrict s_out,
                        float *restrict c_out)
 {
@@ -44,8 +51,9 @@ static inline void sincos_row(const double *restrict omega, double t, int n, flo
         q -= magic;
         float r = (float)((y - q * pio2_hi) - q * pio2_lo);
         float r2 = r * r;
-        float sn = r * (1.0f + r2 * (-1.0f / 6 + r2 * (1.0f / 120 + r2 * (-1.0f / 5040 + r2 * (1.0f / 362880)))));
-        float cs = 1.0f + r2 * (-0.5f + r2 * (1.0f / 24 + r2 * (-1.0f / 720 + r2 * (1.0f / 40320 + r2 * (-1.0f / 3628800)))));
+        float sn = r + r * r2 * (-1.6666654611e-1f + r2 * (8.3321608736e-3f + r2 * -1.9515295891e-4f));
+        float cs = 1.0f - 0.5f * r2 + r2 * r2 * (4.166664568298827e-2f + r2 * (-1.388731625493765e-3f +
+                                                                                 r2 * 2.443315711809948e-5f));
         unsigned quad = (unsigned)bits & 3u;
         float s1 = (quad & 1u) ? cs : sn;     /* quadrants 1, 3 swap sin and cos */
         float c1 = (quad & 1u) ? sn : cs;
@@ -59,7 +67,6 @@ struct fill_ctx {
     double t;
     unsigned cols;  /* ocean_column bits */
     unsigned tm;    /* transforms (fields) */
-    float lambda;
     int fft_only;   /* benchmark: run the same FFTW executes, skip our own work */
 };
 
@@ -76,7 +83,7 @@ static unsigned columns_for(unsigned tm)
 }
 
 /* One column (fixed kx) of a z-pass spectrum, N values along kz, from h~
- * and lambda/k of that column; kz and constants folded in (enum ocean_column). */
+ * and lambda coth(kD)/k of that column; kz and constants folded in (enum ocean_column). */
 __attribute__((target_clones("avx2", "default")))
 static void column_spectrum(float *restrict out, const float *restrict hr, const float *restrict hi,
                             const float *restrict invk, const float *restrict kz, int col, int n)
@@ -117,88 +124,68 @@ static void column_spectrum(float *restrict out, const float *restrict hr, const
     }
 }
 
-/* A worker's fill scratch for one tile of T columns: h~ (real, imaginary)
- * and lambda/k, column-major with column stride tile_ld floats; then the
- * spectrum being transformed, T columns of N complex, stride tile_sd. The
- * strides are N plus a cache line, so that T columns, a multiple of 4 KiB
- * apart otherwise, do not all fall into the same L1 set. */
+/* A worker's fill scratch for one tile of T columns: h~ (real, imaginary),
+ * column-major with column stride tile_ld floats; then the spectrum being
+ * transformed, T columns of N complex, stride tile_sd. The strides are N
+ * plus a cache line, so that T columns, a multiple of 4 KiB apart
+ * otherwise, do not all fall into the same L1 set. */
 static size_t tile_ld(int n) { return (size_t)n + 16; }
 static size_t tile_sd(int n) { return (size_t)n + 8; }
-size_t ocean_tile_floats(int n, int tile) { return (size_t)tile * (3 * tile_ld(n) + 2 * tile_sd(n)); }
-float *ocean_tile_spectrum(float *scratch, int n, int tile) { return scratch + (size_t)3 * tile * tile_ld(n); }
+size_t ocean_tile_floats(int n, int tile) { return (size_t)tile * (2 * tile_ld(n) + 2 * tile_sd(n)); }
+float *ocean_tile_spectrum(float *scratch, int n, int tile) { return scratch + (size_t)2 * tile * tile_ld(n); }
 int ocean_tile_dist(int n) { return (int)tile_sd(n); }
 
-/* The fill's per-row work for the T modes of one row of a tile, read from
- * the tile-ordered amplitudes: h~ = (a c + b s) + i (d c - e s), and
- * lambda/k. */
+/* h~(k, t) down one kx column (N modes, N a multiple of 16), from its
+ * column-major amplitudes (ocean_amp_col): h~ = (a c + b s) + i (d c - e s),
+ * 16 modes at a time (a fixed trip count vectorises fully). */
 __attribute__((target_clones("avx2", "default")))
-static void tile_row(const struct ocean_tile_row *restrict r, double t, float lam, float *restrict hr,
-                     float *restrict hi, float *restrict lk)
+static void fill_column(const float *restrict col, double t, int n, float *restrict hr, float *restrict hi)
 {
-    /* Always the full OCEAN_COL_TILE (a narrower tile, N < 32, has zero
-     * amplitudes in the unused slots): a fixed trip count vectorises fully. */
-    float s[OCEAN_COL_TILE], c[OCEAN_COL_TILE];
-    sincos_row(r->omega, t, OCEAN_COL_TILE, s, c);
-    for (int i = 0; i < OCEAN_COL_TILE; i++) {
-        hr[i] = r->a[i] * c[i] + r->b[i] * s[i];
-        hi[i] = r->d[i] * c[i] - r->e[i] * s[i];
-        lk[i] = lam * r->invk[i];
-    }
-}
-
-/* Transformed tile -> its columns of the block-major half spectrum: per
- * block of B rows, the tile's T columns are T*B contiguous complex values
- * (1 KiB), copied as T pieces of B values. */
-static void store_tile(float *restrict col, const float *restrict spec, size_t sd, int n, int nh, int c0, int T)
-{
-    enum { B = OCEAN_ROW_BLOCK };
-    for (int b = 0; b < n / B; b++) {
-        float *dst = col + 2 * (((size_t)b * nh + c0) * B);
-        for (int j = 0; j < T; j++)
-            memcpy(dst + 2 * (size_t)j * B, spec + 2 * ((size_t)j * sd + (size_t)b * B), 2 * B * sizeof(float));
+    const float *a = col, *b = col + n, *d = col + 2 * (size_t)n, *e = col + 3 * (size_t)n;
+    const double *omega = (const double *)(col + 5 * (size_t)n);
+    for (int i0 = 0; i0 < n; i0 += 16) {
+        float s[16], c[16];
+        sincos_row(omega + i0, t, 16, s, c);
+        for (int i = 0; i < 16; i++) {
+            hr[i0 + i] = a[i0 + i] * c[i] + b[i0 + i] * s[i];
+            hi[i0 + i] = d[i0 + i] * c[i] - e[i0 + i] * s[i];
+        }
     }
 }
 
 /* Fill and z pass of tiles [t0, t1) of T kx columns, fused so that each
  * spectrum is transformed while it is in cache: h~(k,t) of the tile is
- * computed row by row (from amplitudes stored in tile order, a sequential
- * stream) into a column-major scratch; then per z-pass spectrum the tile's
- * T columns are written contiguously, transformed in place by col_plan
- * (contiguous columns: ~3x faster than FFTW's strided column transform over
- * a row-major array, which copies every column in and out), and stored in
- * the block-major layout that the row pass reads without any reshuffling. */
+ * computed column by column (from the column-major amplitudes, a
+ * sequential stream) into the scratch; then per z-pass spectrum the tile's
+ * T columns are written contiguously (with lambda coth(kD)/k and kz read
+ * straight from the amplitudes and the k table), transformed in place by
+ * col_plan (contiguous columns: ~3x faster than FFTW's strided column
+ * transform over a row-major array, which copies every column in and out),
+ * and stored by store_plan (FFTW's copy) in the block-major layout that the
+ * row pass reads without any reshuffling. */
 static void fill_tiles(void *arg, int t0, int t1, int worker)
 {
     const struct fill_ctx *c = arg;
     struct ocean_grid *g = c->o->g;
     const int n = g->n, T = g->tile;
     const size_t ld = tile_ld(n), sd = tile_sd(n);
-    const float *kz = g->kz, lam = c->lambda;
+    const float *kz = g->kz;
     float *scratch = g->scratch + (size_t)worker * g->scratch_floats;
-    float *hr = scratch, *hi = hr + (size_t)T * ld, *invk = hi + (size_t)T * ld; /* column-major */
+    float *hr = scratch, *hi = hr + (size_t)T * ld; /* column-major */
     float *spec = ocean_tile_spectrum(scratch, n, T);
-    float rr[OCEAN_COL_TILE], ri[OCEAN_COL_TILE], rk[OCEAN_COL_TILE];
     for (int tl = t0; tl < t1; tl++) {
         const int c0 = tl * T;
-        if (!c->fft_only) {
-            const struct ocean_tile_row *row = g->amp + (size_t)tl * n;
-            for (int iz = 0; iz < n; iz++) {
-                tile_row(row + iz, c->t, lam, rr, ri, rk);
-                for (int j = 0; j < T; j++) {
-                    hr[(size_t)j * ld + iz] = rr[j];
-                    hi[(size_t)j * ld + iz] = ri[j];
-                    invk[(size_t)j * ld + iz] = rk[j];
-                }
-            }
-        }
+        for (int j = 0; j < T && !c->fft_only; j++)
+            fill_column(ocean_amp_col(g->ampc, n, c0 + j), c->t, n, hr + j * ld, hi + j * ld);
         for (int k = 0; k < COL_COUNT; k++) {
             if (!(c->cols & (1u << k)))
                 continue;
             for (int j = 0; j < T && !c->fft_only; j++)
-                column_spectrum(spec + 2 * j * sd, hr + j * ld, hi + j * ld, invk + j * ld, kz, k, n);
+                column_spectrum(spec + 2 * j * sd, hr + j * ld, hi + j * ld,
+                                ocean_amp_col(g->ampc, n, c0 + j) + 4 * (size_t)n, kz, k, n);
             fftwf_execute_dft(g->col_plan, (fftwf_complex *)spec, (fftwf_complex *)spec);
-            if (!c->fft_only)
-                store_tile(g->col[k], spec, sd, n, g->nh, c0, T);
+            fftwf_execute_dft(g->store_plan, (fftwf_complex *)spec,
+                              (fftwf_complex *)(g->col[k] + 2 * (size_t)c0 * OCEAN_ROW_BLOCK));
         }
     }
 }
@@ -295,7 +282,7 @@ static int step_threads(const struct ocean *o)
 void ocean_fft_only(struct ocean *o, unsigned fields)
 {
     unsigned tm = ocean_transforms_for(fields);
-    struct fill_ctx c = {o, 0, columns_for(tm), tm, 0, 1};
+    struct fill_ctx c = {o, 0, columns_for(tm), tm, 1};
     run_step(&c, step_threads(o));
 }
 
@@ -304,7 +291,7 @@ int ocean_step_fft(struct ocean *o, double t, unsigned fields)
     unsigned tm = ocean_transforms_for(fields);
     if (!tm)
         return 0;
-    struct fill_ctx c = {o, ocean_phase_time(o, t), columns_for(tm), tm, (float)o->p.choppiness, 0};
+    struct fill_ctx c = {o, ocean_phase_time(o, t), columns_for(tm), tm, 0};
     run_step(&c, step_threads(o));
     return 0;
 }

@@ -43,7 +43,7 @@ const struct param_def param_table[] = {
      "open water upwind (jonswap, tma); long fetches saturate at the fully developed sea",
      OFF(fetch), 0},
     {"depth", PARAM_FLOAT, "m", 0.5, 10000, 1000, NULL,
-     "water depth: dispersion w^2 = g k tanh(k d) for all spectra, plus the TMA attenuation",
+     "water depth: dispersion w^2 = g k tanh(k d) and horizontal displacement coth(k d) for all spectra, plus the TMA attenuation",
      OFF(depth), 0},
     {"gamma", PARAM_FLOAT, "", 1, 10, 3.3, NULL,
      "JONSWAP peak enhancement (1 = Pierson-Moskowitz shape)", OFF(gamma), 0},

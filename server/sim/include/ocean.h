@@ -32,7 +32,8 @@ enum ocean_field {
 #define OCEAN_TIME_MAX 1.0e9
 
 struct ocean_options {
-    int threads;               /* worker threads for the step (fill + transforms), >= 1 */
+    int threads;               /* worker threads for the step (fill + transforms), >= 1;
+                                * 0 = one per online core (ocean_threads) */
     const char *wisdom_path;   /* FFTW wisdom cache file, NULL = none */
     int plan_rigor;            /* 0 = FFTW_ESTIMATE (tests), 1 = FFTW_MEASURE */
 };
@@ -46,13 +47,38 @@ struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_opti
  * jumps); a change of N re-plans. On error returns -1, the simulation is
  * unchanged and err says why. */
 int ocean_reconfigure(struct ocean *o, const struct ocean_params *p, char *err, size_t errlen);
+/* Parameter changes prepared off the stepping thread (the daemon's builder).
+ * ocean_prepare computes everything new parameters change into a separate
+ * object: for the same N, the amplitudes and frequencies (reusing the
+ * per-mode random numbers cached for the seed and the per-|k| table, so it
+ * costs a fraction of ocean_create); for another N, a whole new grid with
+ * its FFT plans. It only reads what `o` does not change while stepping, so
+ * it MAY RUN ON ANOTHER THREAD WHILE ocean_step / ocean_field run; it uses
+ * its own worker threads (o's thread count), made on first use. Two
+ * prepares on one ocean must not overlap. Returns NULL with a message in
+ * err on invalid parameters or no memory (o unchanged either way).
+ * ocean_commit swaps the prepared state in: O(1), no allocation or freeing,
+ * on the stepping thread (it must not overlap ocean_step, ocean_field's
+ * readers or an ocean_prepare on the same ocean). It returns -1 and changes
+ * nothing if `o` was committed or reconfigured since the prepare. Either
+ * way pr then holds the old state: free it with ocean_prepared_free (on
+ * any thread). ocean_reconfigure = prepare + commit + free, on the
+ * stepping thread's own workers. */
+struct ocean_prepared;
+struct ocean_prepared *ocean_prepare(struct ocean *o, const struct ocean_params *p, char *err, size_t errlen);
+int ocean_commit(struct ocean *o, struct ocean_prepared *pr);
+void ocean_prepared_free(struct ocean_prepared *pr);
 /* Compute the fields in the mask (OCEAN_FIELD_BIT...) at time t seconds. */
 int ocean_step(struct ocean *o, double t, unsigned fields);
 /* Output of the last step; valid until the next step/reconfigure/free. */
 const float *ocean_field(const struct ocean *o, enum ocean_field f);
 const struct ocean_params *ocean_get_params(const struct ocean *o);
 int ocean_resolution(const struct ocean *o);
-/* Bytes one simulation of resolution n with `threads` workers allocates for
+/* The thread count ocean_create uses for options.threads = requested:
+ * 0 = one per online core (sysconf), with no cap but OCEAN_MAX_THREADS (64);
+ * below 0 = 1; above 64 = 64. */
+int ocean_threads(int requested);
+/* Bytes one simulation of resolution n with `threads` workers (as above) allocates for
  * its grids (spectra, FFT work arrays, output fields): what a memory cap
  * should count. FFTW's plans are not included (small beside the arrays). */
 size_t ocean_memory_bytes(int n, int threads);
@@ -60,5 +86,59 @@ void ocean_free(struct ocean *o);
 
 /* Stable lowercase names: "height", "dx", "dz", "slope_x", "slope_z", "jacobian". */
 const char *ocean_field_name(enum ocean_field f);
+
+/* ---- point queries (ocean_query.c) ---------------------------------------
+ *
+ * Exact values of the displaced surface at any world point (x, z), from the
+ * spectral sum over the simulation's modes (not from the FFT grid): see
+ * docs/simulation.md, "Point queries". A query works on a snapshot of the
+ * amplitudes (struct ocean_surface) that never changes once made, so any
+ * number of threads may query one snapshot at once while the owner of the
+ * struct ocean keeps stepping it. ocean_surface_new reads only what
+ * ocean_create/ocean_reconfigure write (never what ocean_step writes): it
+ * must not run concurrently with ocean_reconfigure or ocean_free of the same
+ * ocean, and may run concurrently with ocean_step. */
+struct ocean_surface;
+
+/* Per queried world point (x, z), metres; y is up. */
+struct ocean_point {
+    double height;                /* m, surface height above (x, z): h at the surface
+                                   * point that lands on (x, z) after displacement */
+    double displacement[2];       /* m, [Dx, Dz] of that surface point */
+    double source[2];             /* m, its undisplaced position (x0, z0): x0 + Dx = x */
+    double normal[3];             /* unit normal [nx, ny, nz] of the displaced surface;
+                                   * ny < 0 where the surface folds over (jacobian < 0) */
+    double jacobian;              /* det d(x0 + D)/d(x0): 1 = flat, <= 0 folded (foam) */
+    double vertical_velocity;     /* m/s, d height / dt at the fixed world point (x, z):
+                                   * the heave a probe at (x, z) sees */
+    double vertical_acceleration; /* m/s^2, d^2 height / dt^2 at (x, z) */
+    double particle_velocity;     /* m/s, dh/dt of the surface point itself (fixed x0) */
+    double particle_acceleration; /* m/s^2, d^2h/dt^2 at fixed x0 */
+    int iterations;               /* Newton steps taken to invert the displacement */
+    int converged;                /* 1 when |x0 + D(x0) - x| < 1e-9 m was reached */
+};
+
+/* Snapshot the current amplitudes and parameters for queries: O(N^2) time
+ * and memory (56 bytes per mode). Returns NULL with err on no memory. */
+struct ocean_surface *ocean_surface_new(const struct ocean *o, char *err, size_t errlen);
+void ocean_surface_free(struct ocean_surface *s);
+/* Values at npoints world points xz[i] = {x, z} at simulation time t (s).
+ * Any finite coordinates (the sea is periodic). Returns 0, or -1 (nothing
+ * written) when t or a coordinate is not finite, npoints < 0, or no memory.
+ * Thread-safe: s is only read. */
+int ocean_surface_query(const struct ocean_surface *s, double t, const double (*xz)[2], int npoints,
+                        struct ocean_point *out);
+/* The same, with a guess of each point's source (x0, z0) to start the
+ * inversion from, e.g. the `source` a probe's previous tick returned: the
+ * sea moves little in a tick, so this saves most Newton steps. start may be
+ * NULL; a guess further than L/4 from its point is ignored. */
+int ocean_surface_query_from(const struct ocean_surface *s, double t, const double (*xz)[2],
+                             const double (*start)[2], int npoints, struct ocean_point *out);
+/* Modes with a non-zero amplitude in the snapshot (each costs the same). */
+int ocean_surface_modes(const struct ocean_surface *s);
+/* The parameters the snapshot was made from. */
+const struct ocean_params *ocean_surface_params(const struct ocean_surface *s);
+/* One-shot convenience: snapshot, query, free. */
+int ocean_query(const struct ocean *o, double t, const double (*xz)[2], int npoints, struct ocean_point *out);
 
 #endif

@@ -1,0 +1,379 @@
+/* cluster.h — one simulation, many edge daemons, over NATS (issue 12).
+ *
+ * The transport between `oceand --role sim` and `oceand --role edge`: the
+ * subject scheme, the binary message formats, the demand table, and a NATS
+ * link that publishes and receives them. No physics and no libwebsockets:
+ * layers are opaque encoded tiles, control messages opaque JSON text. The
+ * design, subjects and failure states are in docs/scaling.md.
+ *
+ * ---- Threads (to be merged into docs/threads.md) --------------------------
+ * A link (struct cl_link) runs on three kinds of threads:
+ *
+ *   NATS library threads  read the socket, deliver messages (one shared
+ *                         delivery thread for all of a link's subscriptions,
+ *                         so delivery order is the publisher's order) and
+ *                         report connection events. Our callbacks there only
+ *                         parse, take a short mutex and append to a queue;
+ *                         they never call back into the daemon.
+ *   the link's pump       one pthread per link. It is the only thread that
+ *                         writes to NATS: it drains the outbox (layers, params
+ *                         events, replies, requests), sends heartbeats (sim:
+ *                         status; edge: demand), changes the edge's layer
+ *                         subscriptions, and times out requests. A slow or
+ *                         dead NATS server blocks at most this thread (write
+ *                         deadline 2 s), never the tick or the lws thread.
+ *   the caller's threads  the tick thread calls cl_sim_publish_layer and
+ *                         cl_sim_demand (a mutex held for a copy of 32 bytes
+ *                         per edge: no I/O, no waiting on the network); the
+ *                         lws thread calls everything else, including
+ *                         cl_link_dispatch.
+ *
+ * Data into the daemon crosses through one locked inbox per link: every
+ * handler in struct cl_handlers runs inside cl_link_dispatch, on the thread
+ * that calls it (the lws thread), never on a NATS thread. When the inbox
+ * goes from empty to non-empty the link calls cfg.wake(cfg.wake_user) from
+ * the NATS or pump thread; the daemon passes a function that calls
+ * lws_cancel_service, exactly as the sim thread does today, and calls
+ * cl_link_dispatch on LWS_CALLBACK_EVENT_WAIT_CANCELLED.
+ * Bounded everywhere: the outbox drops the oldest layers beyond
+ * outbox_max_bytes (latest wins), the inbox keeps only the newest complete
+ * layer of each (field, LOD, bound) and at most CL_INBOX_MAX other events;
+ * every drop is counted in struct cl_stats.
+ *
+ * ---- Subjects (PREFIX is --nats-prefix, default "oceand") ----------------
+ *   PREFIX.frame.<field>.<lod>.<bound>  sim -> edges: layer parts (OCNL), e.g. oceand.frame.height.0.2
+ *   PREFIX.params                       sim -> edges: params events (OCNE kind PARAMS)
+ *   PREFIX.status                       sim -> edges: sim heartbeat (OCNE kind STATUS)
+ *   PREFIX.ctl                          edge -> sim request/reply: set, pause, resume (OCNE CTL -> REPLY)
+ *   PREFIX.hello                        edge -> sim request/reply: current params + schema (OCNE HELLO -> REPLY)
+ *   PREFIX.demand                       edges -> sim: demand heartbeats with expiry (OCNE DEMAND)
+ * Several seas share one NATS cluster by using different prefixes.
+ */
+#ifndef OCEAND_CLUSTER_H
+#define OCEAND_CLUSTER_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+/* ---- layer keys --------------------------------------------------------
+ * A layer is one field at one LOD and one error bound. Its key is the same
+ * number as the daemon's sim_demand_key (the daemon checks the constants
+ * agree at compile time). */
+#define CL_FIELDS    6   /* OC_FIELD_COUNT */
+#define CL_LODS      5   /* OC_MAX_LOD + 1 */
+#define CL_BOUNDS    5   /* CTL_BOUND_COUNT */
+#define CL_KEYS      (CL_FIELDS * CL_LODS * CL_BOUNDS)
+#define CL_KEY_BYTES 32  /* bitmaps of keys: 256 bits, room to grow */
+static inline int cl_key(int field, int lod, int bound_index)
+{
+    return (field * CL_LODS + lod) * CL_BOUNDS + bound_index;
+}
+static inline bool cl_bit(const uint8_t bits[CL_KEY_BYTES], int key)
+{
+    return (bits[key >> 3] >> (key & 7)) & 1;
+}
+static inline void cl_bit_set(uint8_t bits[CL_KEY_BYTES], int key, bool on)
+{
+    if (on)
+        bits[key >> 3] = (uint8_t)(bits[key >> 3] | (1u << (key & 7)));
+    else
+        bits[key >> 3] = (uint8_t)(bits[key >> 3] & ~(1u << (key & 7)));
+}
+
+/* Errors: negative return values. */
+enum cl_error {
+    CL_OK = 0,
+    CL_E_TRUNCATED = -1,     /* shorter than its headers say */
+    CL_E_MAGIC = -2,         /* not one of our messages */
+    CL_E_VERSION = -3,       /* format version not supported */
+    CL_E_CORRUPT = -4,       /* inconsistent fields */
+    CL_E_TOO_LARGE = -5,     /* beyond the format's limits */
+    CL_E_NOMEM = -6,
+    CL_E_ARG = -7,           /* invalid argument */
+    CL_E_FULL = -8,          /* a bounded table or queue is full */
+    CL_E_NOT_CONNECTED = -9, /* no NATS connection at the moment */
+    CL_E_TIMEOUT = -10,      /* no reply in time */
+    CL_E_NO_RESPONDERS = -11,/* nobody serves the subject: the sim is not running */
+    CL_E_NATS = -12,         /* the NATS library refused (message in the log / err text) */
+};
+const char *cl_strerror(int err);
+
+/* ---- subjects ------------------------------------------------------------ */
+#define CL_PREFIX_MAX  64
+#define CL_SUBJECT_MAX 128
+#define CL_DEFAULT_PREFIX "oceand"
+/* A prefix is 1..64 characters: dot-separated non-empty tokens of
+ * [A-Za-z0-9_-] (no wildcards, no spaces). */
+bool cl_prefix_valid(const char *prefix);
+enum cl_subject { CL_SUBJ_PARAMS, CL_SUBJ_STATUS, CL_SUBJ_CTL, CL_SUBJ_HELLO, CL_SUBJ_DEMAND };
+int cl_subject(char *out, size_t cap, const char *prefix, enum cl_subject which);
+int cl_subject_layer(char *out, size_t cap, const char *prefix, int field, int lod, int bound_index);
+/* Inverse of cl_subject_layer: the key, or a negative CL_E_*. */
+int cl_subject_layer_parse(const char *subject, const char *prefix);
+
+/* ---- layer parts (OCNL) ---------------------------------------------------
+ * One NATS message carries tiles [tile_first, tile_first + tile_count) of
+ * one layer at one tick: a whole layer when it fits the server's
+ * max_payload, else consecutive parts. Little-endian:
+ *   0  "OCNL"            38 u8  field          48 u64 server_time_us
+ *   4  u16 version (1)   39 u8  lod            56 u32 data_len
+ *   6  u16 header_size   40 u8  bound_index    60 u32 reserved (0)
+ *   8  u64 seq           41 u8  layer_flags    64 u8[32] encoded: keys the
+ *   16 f64 sim_time      42 u16 tiles_per_side        sim encoded this tick
+ *   24 u32 params_version 44 u16 tile_first
+ *   28 u16 n             46 u16 tile_count
+ *   30 u16 tile_size
+ *   32 f32 patch_size
+ *   36 u16 frame_flags
+ *   96 u32 off[tile_count + 1]: tile i of the part is data[off[i], off[i+1])
+ *      then data_len bytes: the tiles as on the WebSocket (tile header + payload)
+ * Bytes 8..47 carry the fields of the WebSocket frame header, so an edge
+ * rebuilds byte-identical frames. */
+#define CL_LAYER_MAGIC       "OCNL"
+#define CL_LAYER_VERSION     1
+#define CL_LAYER_HEADER_SIZE 96
+#define CL_MAX_TILES_PER_SIDE 256
+#define CL_MAX_LAYER_BYTES   (64u << 20)
+
+struct cl_layer_info {
+    uint64_t seq;
+    double sim_time;
+    uint32_t params_version;
+    uint16_t n, tile_size;
+    float patch_size;
+    uint16_t frame_flags;
+    uint64_t server_time_us;
+    uint8_t field, lod, bound_index, layer_flags;
+    uint16_t tiles_per_side;
+    uint8_t encoded[CL_KEY_BYTES];
+};
+
+/* A parsed part: pointers into the message, valid while it lives. */
+struct cl_layer_part {
+    struct cl_layer_info info;
+    uint16_t tile_first, tile_count;
+    const uint8_t *off;     /* tile_count + 1 little-endian u32 (unaligned) */
+    const uint8_t *data;
+    uint32_t data_len;
+};
+uint32_t cl_part_off(const struct cl_layer_part *p, int i);
+/* Checks every field and every tile's framing (OC tile header: field, lod,
+ * 40 + payload_len == its span). Returns 0 or a negative CL_E_*. */
+int cl_layer_part_parse(const uint8_t *msg, size_t len, struct cl_layer_part *out);
+/* Bytes of a part with tile_count tiles and data_len bytes of tiles. */
+size_t cl_layer_part_size(int tile_count, size_t data_len);
+/* Writes tiles [tile_first, tile_first + tile_count) of a whole layer
+ * (data with tile_off[tps^2 + 1] absolute offsets) into dst; returns the
+ * bytes written or a negative CL_E_*. */
+long cl_layer_part_write(uint8_t *dst, size_t cap, const struct cl_layer_info *info,
+                         int tile_first, int tile_count, const uint8_t *data, const uint32_t *tile_off);
+/* How many tiles from tile_first fit one message of at most max_payload
+ * bytes (at least 1 unless that one tile does not fit: then 0). */
+int cl_layer_part_tiles(const uint32_t *tile_off, int tile_first, int tiles_total, size_t max_payload);
+
+/* A whole layer (assembled on the edge). data/tile_off are malloc'd; the
+ * daemon may take them over (set to NULL) before cl_layer_free. */
+struct cl_layer {
+    struct cl_layer_info info;
+    uint8_t *data;
+    size_t len;
+    uint32_t *tile_off;     /* tiles_per_side^2 + 1 offsets into data */
+};
+void cl_layer_free(struct cl_layer *l);
+
+/* Reassembles parts into whole layers, one slot per key. Parts of one layer
+ * come in order (NATS keeps a publisher's order per subscription); a part
+ * that does not continue the slot's layer, or a new layer before the old one
+ * is complete, drops the incomplete one (counted). Not thread-safe. */
+struct cl_assembler;
+struct cl_assembler *cl_assembler_new(void);
+void cl_assembler_free(struct cl_assembler *a);
+/* Returns 1 and a complete layer in *out (caller frees), 0 when more parts
+ * are needed, or a negative CL_E_* (the part is ignored). */
+int cl_assembler_add(struct cl_assembler *a, const struct cl_layer_part *p, struct cl_layer **out);
+uint64_t cl_assembler_dropped(const struct cl_assembler *a);
+
+/* Groups an edge's complete layers into frames: all layers of one seq. A
+ * frame is complete when every layer the edge wants (want) and the sim
+ * encoded at that seq (info.encoded) has arrived. A layer of a newer seq
+ * hands out the older frame as it is (partial: some layer was lost or
+ * superseded; counted) so a lost layer never stalls the stream; an older
+ * seq is dropped. Layers of one seq must agree on the frame header fields.
+ * Not thread-safe (the lws thread owns it). */
+struct cl_frame_set {
+    struct cl_layer_info hdr;          /* frame fields (seq .. server_time_us, encoded) of its layers */
+    int nlayers;
+    struct cl_layer *layers[CL_KEYS];  /* in key order, NULL-free up to nlayers */
+    bool partial;
+};
+void cl_frame_set_free(struct cl_frame_set *f);
+struct cl_collector;
+struct cl_collector *cl_collector_new(void);
+void cl_collector_free(struct cl_collector *c);
+/* Takes the layer. Returns how many frames it wrote to out[0..1] (0, 1 or
+ * 2: the older partial one, then the completed new one), or a negative
+ * CL_E_* (the layer is freed). The caller frees each frame. */
+int cl_collector_add(struct cl_collector *c, struct cl_layer *l, const uint8_t want[CL_KEY_BYTES],
+                     struct cl_frame_set *out[2]);
+/* The pending frame if it is complete for want now (a viewer left), else NULL. */
+struct cl_frame_set *cl_collector_check(struct cl_collector *c, const uint8_t want[CL_KEY_BYTES]);
+struct cl_collector_stats { uint64_t frames, partial, stale, mismatched; };
+void cl_collector_stats(const struct cl_collector *c, struct cl_collector_stats *out);
+/* Whether the fields of one layer are consistent (what cl_layer_part_write checks). */
+bool cl_layer_info_valid(const struct cl_layer_info *info);
+
+/* ---- envelopes (OCNE): everything that is not a layer ---------------------
+ *   0 "OCNE"  4 u8 version (1)  5 u8 kind  6 u8 origin_len  7 u8 by_len
+ *   8 u32 body_len  12 origin, by, body (exactly; nothing after)
+ * origin = the daemon that sent it (edge or sim name); by = the WebSocket
+ * client it acts for ("" if none). Both printable ASCII, at most 63 bytes. */
+#define CL_ENV_MAGIC    "OCNE"
+#define CL_ENV_VERSION  1
+#define CL_ENV_HEADER   12
+#define CL_NAME_MAX     64   /* incl. NUL */
+#define CL_BODY_MAX     (1u << 20)
+enum cl_kind {
+    CL_KIND_CTL = 1,     /* edge -> sim request: a client's set/pause/resume JSON */
+    CL_KIND_HELLO = 2,   /* edge -> sim request: body empty */
+    CL_KIND_REPLY = 3,   /* sim -> edge: the JSON answer */
+    CL_KIND_PARAMS = 4,  /* sim -> edges: params event JSON; origin/by = who caused it */
+    CL_KIND_STATUS = 5,  /* sim -> edges: heartbeat; body = JSON status text */
+    CL_KIND_DEMAND = 6,  /* edge -> sim: body = u32 ttl_ms + u8[32] keys */
+};
+struct cl_envelope {
+    enum cl_kind kind;
+    char origin[CL_NAME_MAX], by[CL_NAME_MAX];
+    const uint8_t *body;    /* into the message */
+    uint32_t body_len;
+};
+int cl_envelope_parse(const uint8_t *msg, size_t len, struct cl_envelope *out);
+size_t cl_envelope_size(const char *origin, const char *by, size_t body_len);
+long cl_envelope_write(uint8_t *dst, size_t cap, enum cl_kind kind, const char *origin, const char *by,
+                       const void *body, size_t body_len);
+#define CL_DEMAND_BODY 36
+void cl_demand_body_write(uint8_t dst[CL_DEMAND_BODY], uint32_t ttl_ms, const uint8_t bits[CL_KEY_BYTES]);
+int cl_demand_body_parse(const uint8_t *body, size_t len, uint32_t *ttl_ms, uint8_t bits[CL_KEY_BYTES]);
+
+/* ---- demand table (sim side) ----------------------------------------------
+ * Edge name -> (keys, expiry). The sim encodes the union of the live
+ * entries; an edge that stops heartbeating drops out at its expiry, one
+ * that sends an empty set drops out at once. Thread-safe (one mutex); time
+ * is passed in (monotonic seconds) so expiry is testable without sleeping. */
+#define CL_DEMAND_TTL_MIN 0.2
+#define CL_DEMAND_TTL_MAX 60.0
+struct cl_demand;
+struct cl_demand *cl_demand_new(int max_edges);
+void cl_demand_free(struct cl_demand *d);
+/* ttl is clamped to [CL_DEMAND_TTL_MIN, CL_DEMAND_TTL_MAX]. CL_E_FULL when
+ * max_edges live edges are known already; CL_E_ARG for an empty name. */
+int cl_demand_update(struct cl_demand *d, const char *edge, const uint8_t bits[CL_KEY_BYTES], double ttl, double now);
+/* Drops expired entries, writes the union of the others; returns how many are live. */
+int cl_demand_union(struct cl_demand *d, double now, uint8_t out[CL_KEY_BYTES]);
+
+/* ---- the NATS link ------------------------------------------------------- */
+enum cl_role { CL_ROLE_SIM, CL_ROLE_EDGE };
+enum cl_event {
+    CL_EV_CONNECTED,     /* first connection made (also after a failed first try) */
+    CL_EV_DISCONNECTED,  /* lost NATS; reconnecting with backoff */
+    CL_EV_RECONNECTED,
+    CL_EV_CLOSED,        /* gave up or closed: final */
+    CL_EV_SIM_UP,        /* edge: sim heartbeats arrive (again) */
+    CL_EV_SIM_DOWN,      /* edge: none for sim_timeout_s */
+};
+const char *cl_event_name(enum cl_event ev);
+
+/* A request that reached the sim. Answer it exactly once, from any thread,
+ * with cl_request_reply (which frees it), now or later (a `set` is answered
+ * when the tick applies it). */
+struct cl_request {
+    enum cl_kind kind;       /* CL_KIND_CTL or CL_KIND_HELLO */
+    char origin[CL_NAME_MAX];/* the edge */
+    char by[CL_NAME_MAX];    /* the client on that edge */
+    char *body;              /* NUL-terminated copy (JSON text for CTL) */
+    size_t len;
+    char reply_to[CL_SUBJECT_MAX];
+};
+
+struct cl_handlers {
+    void (*on_state)(void *user, enum cl_event ev);
+    /* sim role */
+    void (*on_request)(void *user, struct cl_request *req);
+    /* edge role: the layer is the handler's (cl_layer_free it) */
+    void (*on_layer)(void *user, struct cl_layer *layer);
+    void (*on_params)(void *user, const char *origin, const char *by, const char *text, size_t len);
+};
+
+/* Called for each request the edge sent: status 0 with the sim's reply text,
+ * or CL_E_TIMEOUT / CL_E_NO_RESPONDERS / CL_E_NOT_CONNECTED (text NULL). */
+typedef void (*cl_reply_fn)(void *ctx, int status, const char *text, size_t len);
+
+struct cl_config {
+    enum cl_role role;
+    const char *url;            /* "nats://127.0.0.1:4222", comma-separated list allowed */
+    const char *prefix;         /* NULL = CL_DEFAULT_PREFIX */
+    const char *name;           /* this daemon in origin fields; NULL = "<role>-<host>-<pid>" */
+    const char *creds_file;     /* --nats-creds (JWT + NKey seed file), or NULL */
+    const char *tls_ca;         /* --nats-tls-ca: trust these CAs (implies TLS) */
+    const char *tls_cert, *tls_key; /* --nats-tls-cert/-key: client certificate (both or neither) */
+    double heartbeat_s;         /* edge demand / sim status period; 0 = 1.0 (edge) / 0.5 (sim) */
+    double demand_ttl_s;        /* edge: expiry it announces; 0 = 3 */
+    double sim_timeout_s;       /* edge: sim down after this long without status; 0 = 2 */
+    double request_timeout_s;   /* edge: 0 = 2 */
+    double reconnect_min_s, reconnect_max_s; /* backoff; 0 = 0.1, 2 */
+    size_t outbox_max_bytes;    /* 0 = 64 MiB */
+    void (*wake)(void *user);   /* called from NATS/pump threads when there is something to dispatch */
+    void *wake_user;
+    struct cl_handlers h;
+    void *user;                 /* passed to the handlers */
+};
+
+struct cl_stats {
+    uint64_t layers_published, parts_published, bytes_published;
+    uint64_t layers_dropped_outbox;   /* outbox over outbox_max_bytes: oldest layer dropped */
+    uint64_t layers_dropped_offline;  /* not connected when the pump got to it */
+    uint64_t layers_too_large;        /* a tile larger than the server's max_payload */
+    uint64_t parts_received, layers_received, layers_dropped_incomplete, layers_dropped_inbox;
+    uint64_t bad_messages;            /* failed to parse: ignored */
+    uint64_t requests_sent, replies_received, request_timeouts, no_responders;
+    uint64_t requests_received, requests_dropped;
+    uint64_t events_dropped;          /* inbox full */
+    uint64_t disconnects, reconnects;
+    int demand_edges;                 /* sim: live edges at the last cl_sim_demand */
+};
+
+#define CL_INBOX_MAX 4096
+
+struct cl_link;
+/* Connects in the background: returns a link even when NATS is not up yet
+ * (state events tell when it is). NULL and err only for bad options. */
+struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errlen);
+/* Stops the pump, closes the connection, waits for the NATS callbacks to
+ * finish, releases queued layers and drops pending requests silently. */
+void cl_link_close(struct cl_link *l);
+/* Runs the queued handlers on the calling thread; returns how many. */
+int cl_link_dispatch(struct cl_link *l);
+bool cl_link_connected(struct cl_link *l);
+bool cl_link_sim_up(struct cl_link *l);   /* edge */
+const char *cl_link_name(const struct cl_link *l);
+void cl_link_stats(struct cl_link *l, struct cl_stats *out);
+/* After every link is closed, at exit: lets the NATS library free its globals. */
+void cl_library_shutdown(void);
+
+/* Sim role. The layer's bytes stay the caller's until release(ctx) is
+ * called (on the pump thread, or at once on error): the tick thread neither
+ * copies nor waits. Returns 0 or a negative CL_E_*. */
+int cl_sim_publish_layer(struct cl_link *l, const struct cl_layer_info *info, const uint8_t *data, size_t len,
+                         const uint32_t *tile_off, void (*release)(void *ctx), void *ctx);
+int cl_sim_publish_params(struct cl_link *l, const char *origin, const char *by, const char *text, size_t len);
+void cl_sim_set_status(struct cl_link *l, const char *text, size_t len);  /* body of the next heartbeats */
+int cl_sim_demand(struct cl_link *l, uint8_t out[CL_KEY_BYTES]);          /* tick thread; returns live edges */
+/* text NULL: drop without answering. */
+void cl_request_reply(struct cl_link *l, struct cl_request *req, const char *text, size_t len);
+
+/* Edge role. */
+int cl_edge_set_demand(struct cl_link *l, const uint8_t bits[CL_KEY_BYTES]); /* subscribes + heartbeats now */
+int cl_edge_request(struct cl_link *l, enum cl_kind kind, const char *by, const char *body, size_t len,
+                    cl_reply_fn done, void *ctx);
+
+#endif

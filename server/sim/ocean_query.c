@@ -1,0 +1,566 @@
+/* ocean_query.c — exact surface values at arbitrary world points.
+ *
+ * Method: the spectral sum itself, evaluated at the point, over every mode
+ * of the simulation's half spectrum (the same h~0 and w that the FFT path
+ * uses), in double precision:
+ *     f(x, z) = Re sum_k w_k F~(k, t) e^{i(kx x + kz z)},   w_k = 1 (kx = 0) or 2,
+ * with F~ = h~ times the factor of the field (i kx, i lambda kx/k, ...).
+ * This is the DFT reference evaluated off the grid, so there is no
+ * interpolation error at all; what the FFT grid cannot give (values between
+ * samples, exact derivatives in time and space) comes out of the same sums.
+ *
+ * The height "above (x, z)" belongs to the surface point that lands on
+ * (x, z): the displaced surface is x0 -> (x0 + D(x0), h(x0)), so we solve
+ * x0 + D(x0) = x by Newton's method on the exact D and its exact Jacobian
+ * (quadratic convergence, typically 3-5 steps to 1e-9 m), then evaluate
+ * h, the tangents (normal) and the time derivatives at x0. The vertical
+ * velocity and acceleration at the fixed world point follow by the chain
+ * rule through x0(t) (dx0/dt = -A^-1 dD/dt, A = I + grad D).
+ *
+ * Cost: O(modes) per evaluation, ~26 multiply-adds per mode for the final
+ * evaluation and 5 per Newton step; bench/bench_query.c measures it. No
+ * mode is left out: a rigorous bound on what dropped modes could add (the
+ * sum of their amplitudes) stays above 1 mm unless almost all are kept
+ * (measured for the default sea: dropping the weakest 1000 of 32639 modes
+ * at N = 256 already allows 0.1 m), so truncation would buy nothing safe.
+ *
+ * Coordinates are reduced modulo the patch L first (kx L = 2 pi mx exactly,
+ * so this changes no phase), which keeps the phases exact for any finite x. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "ocean_internal.h"
+
+#define NEWTON_TOL 1e-9   /* m, |x0 + D(x0) - x| */
+
+struct ocean_surface {
+    struct ocean_params p;
+    double lambda, patch, loop;     /* choppiness, L, loop period (0 = none) */
+    int n, nh, rows;                /* N, N/2 + 1, rows that hold kept modes */
+    int modes, spans;               /* non-zero modes; entries of the row spans */
+    /* Rows: the modes of row r are [row_start[r], row_start[r + 1]), the
+     * columns mx = row_c0[r], row_c0[r] + 1, ... in order (a contiguous
+     * span, so the inner loops vectorise; a mode inside a span may be
+     * zero), all with kz = row_kz[r] and integer wavenumber row_mz[r]. */
+    int *row_start, *row_mz, *row_c0;
+    double *row_kz;
+    /* Per mode: kx, 1/k (0 at k = 0), w, and a, b, d, e (ocean_internal.h)
+     * with the weight w_k (1 for kx = 0, else 2: the mirrored half) folded in. */
+    double *kx, *invk, *omega, *a, *b, *d, *e;
+};
+
+struct ocean_surface *ocean_surface_new(const struct ocean *o, char *err, size_t errlen)
+{
+    if (!o) {
+        snprintf(err, errlen, "no simulation");
+        return NULL;
+    }
+    const struct ocean_grid *g = o->g;
+    const int n = g->n, nh = g->nh;
+    const double L = o->p.patch_size, lam = o->p.choppiness;
+    struct ocean_surface *s = calloc(1, sizeof *s);
+    char *keep = calloc(g->modes, 1);
+    if (!s || !keep)
+        goto nomem;
+    s->p = o->p;
+    s->lambda = lam;
+    s->patch = L;
+    s->loop = o->p.loop_period > 0 ? o->p.loop_period : 0;
+    s->n = n;
+    s->nh = nh;
+
+    /* Modes with zero amplitude (the Nyquist row and column, k = 0, a
+     * calm sea) add nothing: rows and row ends made of them are left out. */
+    for (size_t i = 0; i < g->modes; i++)
+        keep[i] = g->a[i] != 0 || g->b[i] != 0 || g->d[i] != 0 || g->e[i] != 0;
+
+    /* Each row keeps the span from its first to its last kept column. */
+    size_t span = 0, kept = 0;
+    for (int iz = 0; iz < n; iz++) {
+        int c0 = -1, c1 = -1;
+        for (int ix = 0; ix < nh; ix++)
+            if (keep[(size_t)iz * nh + ix]) {
+                c0 = c0 < 0 ? ix : c0;
+                c1 = ix;
+                kept++;
+            }
+        span += c0 < 0 ? 0 : (size_t)(c1 - c0 + 1);
+    }
+    s->modes = (int)kept;
+    size_t m = span ? span : 1;
+    s->spans = (int)span;
+    s->row_start = malloc((size_t)(n + 1) * sizeof *s->row_start);
+    s->row_mz = malloc((size_t)n * sizeof *s->row_mz);
+    s->row_c0 = malloc((size_t)n * sizeof *s->row_c0);
+    s->row_kz = malloc((size_t)n * sizeof *s->row_kz);
+    double **arrays[] = {&s->kx, &s->invk, &s->omega, &s->a, &s->b, &s->d, &s->e};
+    for (size_t j = 0; j < sizeof arrays / sizeof arrays[0]; j++)
+        *arrays[j] = calloc(m, sizeof(double));
+    if (!s->row_start || !s->row_mz || !s->row_c0 || !s->row_kz || !s->kx || !s->invk || !s->omega || !s->a ||
+        !s->b || !s->d || !s->e)
+        goto nomem;
+    size_t at = 0;
+    for (int iz = 0; iz < n; iz++) {
+        int c0 = -1, c1 = -1;
+        for (int ix = 0; ix < nh; ix++)
+            if (keep[(size_t)iz * nh + ix]) {
+                c0 = c0 < 0 ? ix : c0;
+                c1 = ix;
+            }
+        if (c0 < 0)
+            continue;
+        double kz = ocean_wavenumber(iz, n, L);
+        s->row_start[s->rows] = (int)at;
+        s->row_mz[s->rows] = iz > n / 2 ? iz - n : iz;
+        s->row_c0[s->rows] = c0;
+        s->row_kz[s->rows] = kz;
+        s->rows++;
+        for (int ix = c0; ix <= c1; ix++, at++) {
+            size_t i = (size_t)iz * nh + ix;
+            double kx = ocean_wavenumber(ix, n, L), k = hypot(kx, kz), w = ix == 0 ? 1.0 : 2.0;
+            s->kx[at] = kx;
+            s->invk[at] = k > 0 ? 1.0 / k : 0.0;
+            s->omega[at] = g->omega[i];
+            if (!keep[i])
+                continue; /* zero amplitude: stays 0 */
+            s->a[at] = w * g->a[i];
+            s->b[at] = w * g->b[i];
+            s->d[at] = w * g->d[i];
+            s->e[at] = w * g->e[i];
+        }
+    }
+    s->row_start[s->rows] = (int)at;
+    free(keep);
+    return s;
+nomem:
+    free(keep);
+    ocean_surface_free(s);
+    snprintf(err, errlen, "out of memory for a query snapshot");
+    return NULL;
+}
+
+void ocean_surface_free(struct ocean_surface *s)
+{
+    if (!s)
+        return;
+    free(s->row_start);
+    free(s->row_mz);
+    free(s->row_c0);
+    free(s->row_kz);
+    free(s->kx);
+    free(s->invk);
+    free(s->omega);
+    free(s->a);
+    free(s->b);
+    free(s->d);
+    free(s->e);
+    free(s);
+}
+
+int ocean_surface_modes(const struct ocean_surface *s)
+{
+    return s ? s->modes : 0;
+}
+
+const struct ocean_params *ocean_surface_params(const struct ocean_surface *s)
+{
+    return s ? &s->p : NULL;
+}
+
+/* ---- evaluation ------------------------------------------------------------ */
+
+/* Per query call: the time-dependent part of every kept mode, P = w h~(k,t)
+ * and Q = w dh~/dt (complex), and per point the x phase table. */
+struct work {
+    double *pr, *pi, *qr, *qi;
+    double *cx, *sx;       /* cos, sin(2 pi mx x / L), mx = 0 .. N/2 */
+    double *cz, *sz;       /* cos, sin(2 pi mz z / L), mz = 0 .. N/2 */
+};
+
+/* Everything the outputs need, at one undisplaced point x0. */
+struct surface_sums {
+    double h, hx, hz, hxx, hxz, hzz;           /* height and its space derivatives */
+    double ht, htx, htz, htt;                  /* time derivatives */
+    double dx, dz, dxx, dxz, dzz;              /* displacement, its gradient (symmetric) */
+    double dtx, dtz, dttx, dttz;               /* dD/dt, d2D/dt2 */
+    double dtxx, dtxz, dtzz;                   /* grad dD/dt */
+    double d3xxx, d3xxz, d3xzz, d3zzz;         /* second derivatives of D: D = grad psi,
+                                                * these are psi's third derivatives */
+};
+
+/* x in [0, L) * 2 pi / L as a fraction u in [0, 1): exact for any finite x
+ * (fmod is exact), so e^{i kx x} = e^{2 pi i mx u} loses nothing. */
+static double turns(double x, double L)
+{
+    double r = fmod(x, L);
+    if (r < 0)
+        r += L;
+    double u = r / L;
+    return u < 1.0 ? u : 0.0;
+}
+
+/* c[m] + i s[m] = e^{2 pi i m u}, m = 0 .. count-1: by the angle-addition
+ * recurrence (one complex multiply per entry instead of a sin and a cos,
+ * which were a quarter of an evaluation), re-anchored with an exact
+ * sin/cos every 16 entries so rounding cannot build up (error ~1e-15). */
+static void phase_table(double u, int count, double *c, double *s)
+{
+    double ang1 = 2.0 * M_PI * u, c1 = cos(ang1), s1 = sin(ang1);
+    for (int m = 0; m < count; m++) {
+        if (m % 16 == 0) {
+            double ang = 2.0 * M_PI * fmod(m * u, 1.0);
+            c[m] = cos(ang);
+            s[m] = sin(ang);
+        } else {
+            c[m] = c[m - 1] * c1 - s[m - 1] * s1;
+            s[m] = s[m - 1] * c1 + c[m - 1] * s1;
+        }
+    }
+}
+
+/* e^{i kz z} of row r from the table of |mz| (rows with mz < 0: conjugate). */
+static inline void row_phase(const struct ocean_surface *s, const struct work *w, int r, double *cz, double *sz)
+{
+    int mz = s->row_mz[r];
+    *cz = w->cz[mz < 0 ? -mz : mz];
+    *sz = mz < 0 ? -w->sz[-mz] : w->sz[mz];
+}
+
+/* D and grad D only: what one Newton step needs (5 sums instead of 26). */
+__attribute__((target_clones("avx2", "default")))
+static void eval_displacement(const struct ocean_surface *s, struct work *w, double ux, double uz,
+                              struct surface_sums *o)
+{
+    phase_table(ux, s->nh, w->cx, w->sx);
+    phase_table(uz, s->nh, w->cz, w->sz);
+    double dx = 0, dz = 0, dxx = 0, dxz = 0, dzz = 0;
+    for (int r = 0; r < s->rows; r++) {
+        double cz, sz, kz = s->row_kz[r];
+        row_phase(s, w, r, &cz, &sz);
+        double rdx = 0, rdz = 0, rdxx = 0, rdxz = 0, rdzz = 0;
+        const int m0 = s->row_start[r], m1 = s->row_start[r + 1];
+        const double *cxr = w->cx + s->row_c0[r] - m0, *sxr = w->sx + s->row_c0[r] - m0; /* index by mode */
+#pragma omp simd reduction(+ : rdx, rdz, rdxx, rdxz, rdzz)
+        for (int m = m0; m < m1; m++) {
+            double cx = cxr[m], sx = sxr[m];
+            double er = cx * cz - sx * sz, ei = cx * sz + sx * cz;
+            double pr = w->pr[m] * er - w->pi[m] * ei, pi = w->pr[m] * ei + w->pi[m] * er;
+            double g = s->invk[m], kx = s->kx[m], gpi = g * pi, gpr = g * pr;
+            rdx += kx * gpi;
+            rdz += gpi;
+            rdxx += kx * kx * gpr;
+            rdxz += kx * gpr;
+            rdzz += gpr;
+        }
+        dx -= rdx;
+        dz -= kz * rdz;
+        dxx -= rdxx;
+        dxz -= kz * rdxz;
+        dzz -= kz * kz * rdzz;
+    }
+    const double lam = s->lambda;
+    o->dx = lam * dx;
+    o->dz = lam * dz;
+    o->dxx = lam * dxx;
+    o->dxz = lam * dxz;
+    o->dzz = lam * dzz;
+}
+
+/* Every sum, for the outputs. Per mode, with P = w h~ e^{ik.x0} and
+ * Q = w dh~/dt e^{ik.x0}: h = Re P, dh/dx = Re(i kx P) = -kx Im P,
+ * Dx = Re(i lambda kx/k P), d/dt h~ = Q, d2/dt2 h~ = -w^2 h~, and so on;
+ * factors that depend on kz only are applied once per row. */
+__attribute__((target_clones("avx2", "default")))
+static void eval_all(const struct ocean_surface *s, struct work *w, double ux, double uz, struct surface_sums *o)
+{
+    phase_table(ux, s->nh, w->cx, w->sx);
+    phase_table(uz, s->nh, w->cz, w->sz);
+    memset(o, 0, sizeof *o);
+    for (int r = 0; r < s->rows; r++) {
+        double cz, sz;
+        row_phase(s, w, r, &cz, &sz);
+        double kz = s->row_kz[r], kz2 = kz * kz;
+        double h = 0, hx = 0, spi = 0, hxx = 0, kxpr = 0, ht = 0, htx = 0, sqi = 0, htt = 0;
+        double dx = 0, dz = 0, dxx = 0, dxz = 0, dzz = 0, dtx = 0, dtz = 0, dttx = 0, dttz = 0;
+        double dtxx = 0, dtxz = 0, dtzz = 0, d3xxx = 0, d3xxz = 0;
+        const int m0 = s->row_start[r], m1 = s->row_start[r + 1];
+        const double *cxr = w->cx + s->row_c0[r] - m0, *sxr = w->sx + s->row_c0[r] - m0;
+#pragma omp simd reduction(+ : h, hx, spi, hxx, kxpr, ht, htx, sqi, htt, dx, dz, dxx, dxz, dzz, dtx, dtz, dttx, \
+                                   dttz, dtxx, dtxz, dtzz, d3xxx, d3xxz)
+        for (int m = m0; m < m1; m++) {
+            double cx = cxr[m], sx = sxr[m];
+            double er = cx * cz - sx * sz, ei = cx * sz + sx * cz;
+            double pr = w->pr[m] * er - w->pi[m] * ei, pi = w->pr[m] * ei + w->pi[m] * er;
+            double qr = w->qr[m] * er - w->qi[m] * ei, qi = w->qr[m] * ei + w->qi[m] * er;
+            double g = s->invk[m], kx = s->kx[m], kx2 = kx * kx, om2 = s->omega[m] * s->omega[m];
+            double gpi = g * pi, gpr = g * pr, gqi = g * qi, gqr = g * qr;
+            h += pr;
+            hx += kx * pi;
+            spi += pi;
+            hxx += kx2 * pr;
+            kxpr += kx * pr;
+            ht += qr;
+            htx += kx * qi;
+            sqi += qi;
+            htt += om2 * pr;
+            dx += kx * gpi;
+            dz += gpi;
+            dxx += kx2 * gpr;
+            dxz += kx * gpr;
+            dzz += gpr;
+            dtx += kx * gqi;
+            dtz += gqi;
+            dttx += om2 * kx * gpi;
+            dttz += om2 * gpi;
+            dtxx += kx2 * gqr;
+            dtxz += kx * gqr;
+            dtzz += gqr;
+            d3xxx += kx2 * kx * gpi;
+            d3xxz += kx2 * gpi;
+        }
+        o->h += h;
+        o->hx -= hx;
+        o->hz -= kz * spi;
+        o->hxx -= hxx;
+        o->hxz -= kz * kxpr;
+        o->hzz -= kz2 * h;
+        o->ht += ht;
+        o->htx -= htx;
+        o->htz -= kz * sqi;
+        o->htt -= htt;
+        o->dx -= dx;
+        o->dz -= kz * dz;
+        o->dxx -= dxx;
+        o->dxz -= kz * dxz;
+        o->dzz -= kz2 * dzz;
+        o->dtx -= dtx;
+        o->dtz -= kz * dtz;
+        o->dttx += dttx;
+        o->dttz += kz * dttz;
+        o->dtxx -= dtxx;
+        o->dtxz -= kz * dtxz;
+        o->dtzz -= kz2 * dtzz;
+        o->d3xxx += d3xxx;
+        o->d3xxz += kz * d3xxz;
+        o->d3xzz += kz2 * dx;
+        o->d3zzz += kz2 * kz * dz;
+    }
+    const double lam = s->lambda;
+    double *dterms[] = {&o->dx, &o->dz, &o->dxx, &o->dxz, &o->dzz, &o->dtx, &o->dtz, &o->dttx, &o->dttz,
+                        &o->dtxx, &o->dtxz, &o->dtzz, &o->d3xxx, &o->d3xxz, &o->d3xzz, &o->d3zzz};
+    for (size_t i = 0; i < sizeof dterms / sizeof dterms[0]; i++)
+        *dterms[i] *= lam;
+}
+
+/* Newton's method with a backtracking line search for x0 + D(x0) = (xr, zr)
+ * (reduced coordinates, metres) from the start (x, z); where the map is
+ * singular (det A ~ 0, the crest of a fold) a fixed-point step is taken.
+ * Returns the final residual |x0 + D(x0) - x|; *steps += iterations. */
+static double newton(const struct ocean_surface *s, struct work *w, double xr, double zr, double x, double z,
+                     int max_steps, double *x0, double *z0, int *steps)
+{
+    const double L = s->patch;
+    struct surface_sums d;
+    eval_displacement(s, w, turns(x, L), turns(z, L), &d);
+    double rx = x + d.dx - xr, rz = z + d.dz - zr, res = hypot(rx, rz);
+    for (int it = 0; it < max_steps && res >= NEWTON_TOL; it++) {
+        double a11 = 1 + d.dxx, a12 = d.dxz, a22 = 1 + d.dzz, det = a11 * a22 - a12 * a12;
+        double sx = rx, sz = rz; /* fixed-point step: x0 <- x - D(x0) */
+        if (fabs(det) > 1e-3) {
+            sx = (a22 * rx - a12 * rz) / det;
+            sz = (a11 * rz - a12 * rx) / det;
+        }
+        double len = hypot(sx, sz), cap = 0.125 * L;
+        if (len > cap) {
+            sx *= cap / len;
+            sz *= cap / len;
+        }
+        double step = 1.0, nx = x, nz = z, nrx = rx, nrz = rz, nres = res;
+        for (int tries = 0; tries < 8; tries++, step *= 0.5) {
+            nx = x - step * sx;
+            nz = z - step * sz;
+            eval_displacement(s, w, turns(nx, L), turns(nz, L), &d);
+            nrx = nx + d.dx - xr;
+            nrz = nz + d.dz - zr;
+            nres = hypot(nrx, nrz);
+            if (nres < res)
+                break;
+        }
+        x = nx;
+        z = nz;
+        rx = nrx;
+        rz = nrz;
+        res = nres;
+        ++*steps;
+    }
+    *x0 = x;
+    *z0 = z;
+    return res;
+}
+
+/* Source of the world point (xr, zr). Newton from the point itself almost
+ * always converges; where the surface folds it can stall in a local minimum
+ * of the residual, and then it is restarted from points around, at the
+ * distance of the displacement found so far (a fold has several sources:
+ * any converged one is a correct answer). */
+static void invert_displacement(const struct ocean_surface *s, struct work *w, double xr, double zr, double sx0,
+                                double sz0, double *x0, double *z0, int *iterations, int *converged)
+{
+    *iterations = 0;
+    *converged = 0;
+    if (s->lambda == 0) { /* no horizontal displacement: the point is its own source */
+        *x0 = xr;
+        *z0 = zr;
+        *converged = 1;
+        return;
+    }
+    double bx, bz, best = newton(s, w, xr, zr, sx0, sz0, 30, &bx, &bz, iterations);
+    if (best >= NEWTON_TOL && (sx0 != xr || sz0 != zr)) { /* a poor guess: start over from the point */
+        double cx, cz, res = newton(s, w, xr, zr, xr, zr, 30, &cx, &cz, iterations);
+        if (res < best) {
+            best = res;
+            bx = cx;
+            bz = cz;
+        }
+    }
+    double radius = fmax(hypot(bx - xr, bz - zr), 1e-3 * s->patch);
+    for (int k = 0; k < 24 && best >= NEWTON_TOL; k++) {
+        double ang = 2.0 * M_PI * k / 8.0, r = radius * (0.5 + 0.5 * (k / 8)); /* 3 rings of 8 */
+        double cx, cz, res = newton(s, w, xr, zr, xr + r * cos(ang), zr + r * sin(ang), 30, &cx, &cz, iterations);
+        if (res < best) {
+            best = res;
+            bx = cx;
+            bz = cz;
+        }
+    }
+    *converged = best < NEWTON_TOL;
+    *x0 = bx;
+    *z0 = bz;
+}
+
+/* The outputs from the sums at the source point (see struct ocean_point). */
+static void fill_point(const struct surface_sums *q, struct ocean_point *p)
+{
+    p->height = q->h;
+    p->displacement[0] = q->dx;
+    p->displacement[1] = q->dz;
+    /* Tangents of the displaced surface x0 -> (x0 + Dx, h, z0 + Dz):
+     * Tx = (1 + Dxx, hx, Dxz), Tz = (Dxz, hz, 1 + Dzz); normal = Tz x Tx. */
+    double a11 = 1 + q->dxx, a12 = q->dxz, a22 = 1 + q->dzz, det = a11 * a22 - a12 * a12;
+    double nx = q->hz * a12 - a22 * q->hx, ny = det, nz = a12 * q->hx - q->hz * a11;
+    double len = sqrt(nx * nx + ny * ny + nz * nz);
+    if (len > 0) {
+        nx /= len;
+        ny /= len;
+        nz /= len;
+    } else {
+        nx = nz = 0;
+        ny = 1;
+    }
+    p->normal[0] = nx;
+    p->normal[1] = ny;
+    p->normal[2] = nz;
+    p->jacobian = det;
+    p->particle_velocity = q->ht;
+    p->particle_acceleration = q->htt;
+    /* The surface point over a fixed (x, z) moves: x0(t) with
+     * A dx0/dt = -dD/dt. Chain rule for height(t) = h(x0(t), t). */
+    if (fabs(det) < 1e-12) { /* crest of a fold: the source does not move smoothly */
+        p->vertical_velocity = q->ht;
+        p->vertical_acceleration = q->htt;
+        return;
+    }
+    double vx = -(a22 * q->dtx - a12 * q->dtz) / det, vz = -(a11 * q->dtz - a12 * q->dtx) / det;
+    p->vertical_velocity = q->ht + q->hx * vx + q->hz * vz;
+    /* A dv/dt = -(d2D/dt2 + 2 (grad dD/dt) v + (grad grad D)[v, v]) */
+    double fx = q->dttx + 2 * (q->dtxx * vx + q->dtxz * vz) + q->d3xxx * vx * vx + 2 * q->d3xxz * vx * vz +
+                q->d3xzz * vz * vz;
+    double fz = q->dttz + 2 * (q->dtxz * vx + q->dtzz * vz) + q->d3xxz * vx * vx + 2 * q->d3xzz * vx * vz +
+                q->d3zzz * vz * vz;
+    double ax = -(a22 * fx - a12 * fz) / det, az = -(a11 * fz - a12 * fx) / det;
+    p->vertical_acceleration = q->htt + 2 * (q->htx * vx + q->htz * vz) + q->hxx * vx * vx +
+                               2 * q->hxz * vx * vz + q->hzz * vz * vz + q->hx * ax + q->hz * az;
+}
+
+int ocean_surface_query(const struct ocean_surface *s, double t, const double (*xz)[2], int npoints,
+                        struct ocean_point *out)
+{
+    return ocean_surface_query_from(s, t, xz, NULL, npoints, out);
+}
+
+int ocean_surface_query_from(const struct ocean_surface *s, double t, const double (*xz)[2],
+                             const double (*start)[2], int npoints, struct ocean_point *out)
+{
+    if (!s || !isfinite(t) || npoints < 0 || (npoints > 0 && (!xz || !out)))
+        return -1;
+    for (int i = 0; i < npoints; i++)
+        if (!isfinite(xz[i][0]) || !isfinite(xz[i][1]) ||
+            (start && (!isfinite(start[i][0]) || !isfinite(start[i][1]))))
+            return -1;
+    if (npoints == 0)
+        return 0;
+    size_t m = s->spans ? (size_t)s->spans : 1;
+    struct work w;
+    double *buf = malloc((4 * m + 4 * (size_t)s->nh) * sizeof *buf);
+    if (!buf)
+        return -1;
+    w.pr = buf;
+    w.pi = w.pr + m;
+    w.qr = w.pi + m;
+    w.qi = w.qr + m;
+    w.cx = w.qi + m;
+    w.sx = w.cx + s->nh;
+    w.cz = w.sx + s->nh;
+    w.sz = w.cz + s->nh;
+    /* Phases at t (wrapped into the loop period when the sea loops: the
+     * modes' w are whole multiples of 2 pi / period, so this is exact). */
+    double tt = t;
+    if (s->loop > 0) {
+        tt = fmod(t, s->loop);
+        if (tt < 0)
+            tt += s->loop;
+    }
+    for (int i = 0; i < s->spans; i++) {
+        double om = s->omega[i], c = cos(om * tt), sn = sin(om * tt);
+        w.pr[i] = s->a[i] * c + s->b[i] * sn;
+        w.pi[i] = s->d[i] * c - s->e[i] * sn;
+        w.qr[i] = om * (s->b[i] * c - s->a[i] * sn);
+        w.qi[i] = -om * (s->d[i] * sn + s->e[i] * c);
+    }
+    for (int i = 0; i < npoints; i++) {
+        const double L = s->patch;
+        double x = xz[i][0], z = xz[i][1];
+        double xr = turns(x, L) * L, zr = turns(z, L) * L; /* in [0, L) */
+        double x0, z0;
+        struct ocean_point *p = &out[i];
+        memset(p, 0, sizeof *p);
+        /* The guess, as an offset from the point, moved to the reduced point;
+         * guesses further than L/4 away are not guesses. */
+        double gx = xr, gz = zr;
+        if (start && fabs(start[i][0] - x) < 0.25 * L && fabs(start[i][1] - z) < 0.25 * L) {
+            gx = xr + (start[i][0] - x);
+            gz = zr + (start[i][1] - z);
+        }
+        invert_displacement(s, &w, xr, zr, gx, gz, &x0, &z0, &p->iterations, &p->converged);
+        struct surface_sums q;
+        eval_all(s, &w, turns(x0, L), turns(z0, L), &q);
+        fill_point(&q, p);
+        p->source[0] = x + (x0 - xr);
+        p->source[1] = z + (z0 - zr);
+    }
+    free(buf);
+    return 0;
+}
+
+int ocean_query(const struct ocean *o, double t, const double (*xz)[2], int npoints, struct ocean_point *out)
+{
+    char err[128];
+    struct ocean_surface *s = ocean_surface_new(o, err, sizeof err);
+    if (!s)
+        return -1;
+    int r = ocean_surface_query(s, t, xz, npoints, out);
+    ocean_surface_free(s);
+    return r;
+}

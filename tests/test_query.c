@@ -1,0 +1,553 @@
+/* test_query.c — point queries (ocean_query.c) against a brute-force reference.
+ *
+ * The reference is computed here, independently of ocean_query.c: the full
+ * N x N spectrum h~(k, t) from ocean_reference_spectrum (double precision,
+ * amplitudes recomputed from the spectrum model, not the stored floats),
+ * every field summed directly as Re sum_k F~(k) e^{i k.x} with the raw
+ * (unreduced) coordinates, and the displacement inverted by its own Newton
+ * iteration. Checks, at random points including negative and very large
+ * coordinates, choppiness 0, 1 and 2, N = 32 .. 512:
+ *   - the returned source x0 maps onto the queried point under the
+ *     reference displacement, and the height is the reference height there
+ *     (<= 1 mm; in fact ~1e-9 m);
+ *   - the normal is the reference normal of the displaced surface (<= 0.5 deg);
+ *   - vertical velocity / acceleration match central finite differences in
+ *     time of the reference height over the fixed world point, and the
+ *     particle values match differences at the fixed source point;
+ *   - periodicity, agreement with the FFT grid, bad input, thread safety.
+ * One line per check, then "N passed, M failed"; exit 1 on any failure.
+ * OCEAN_TEST_QUICK=1 (valgrind) skips N >= 256. Build: make test-query. */
+#include <complex.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "ocean_internal.h"
+
+static int passed, failed, quick;
+
+static void check(int ok, const char *name, const char *fmt, ...)
+{
+    va_list ap;
+    printf("%s %s: ", ok ? "ok  " : "FAIL", name);
+    va_start(ap, fmt);
+    vprintf(fmt, ap);
+    va_end(ap);
+    printf("\n");
+    fflush(stdout);
+    if (ok)
+        passed++;
+    else
+        failed++;
+}
+
+static struct ocean *make(int n, double chop, int spectrum)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = n;
+    p.choppiness = chop;
+    p.spectrum = spectrum;
+    p.wind_speed = 12;
+    p.patch_size = n <= 64 ? 64 : 256;
+    char err[256] = "";
+    struct ocean_options opt = {1, NULL, 0};
+    struct ocean *o = ocean_create(&p, &opt, err, sizeof err);
+    if (!o)
+        check(0, "create", "ocean_create failed: %s", err);
+    return o;
+}
+
+/* xorshift: reproducible random points without libc's rand state. */
+static unsigned long long rng = 0x9e3779b97f4a7c15ull;
+static double uniform(void)
+{
+    rng ^= rng << 13;
+    rng ^= rng >> 7;
+    rng ^= rng << 17;
+    return (rng >> 11) * 0x1.0p-53;
+}
+
+/* ---- the reference ------------------------------------------------------- */
+
+enum { R_H, R_DX, R_DZ, R_SX, R_SZ, R_JXX, R_JZZ, R_JXZ, R_COUNT };
+
+struct reference {
+    int n;
+    double L, lambda;
+    double complex *h;  /* N x N spectrum of the height at time t */
+    double *kx, *kz;    /* per index */
+};
+
+static void ref_init(struct reference *r, const struct ocean *o, double t)
+{
+    r->n = ocean_resolution(o);
+    r->L = ocean_get_params(o)->patch_size;
+    r->lambda = ocean_get_params(o)->choppiness;
+    size_t nn = (size_t)r->n * r->n;
+    r->h = malloc(nn * sizeof *r->h);
+    r->kx = malloc((size_t)r->n * sizeof *r->kx);
+    r->kz = malloc((size_t)r->n * sizeof *r->kz);
+    ocean_reference_spectrum(o, t, TR_H, r->h);
+    for (int i = 0; i < r->n; i++)
+        r->kx[i] = r->kz[i] = 2.0 * M_PI * (i <= r->n / 2 ? i : i - r->n) / r->L;
+}
+
+static void ref_free(struct reference *r)
+{
+    free(r->h);
+    free(r->kx);
+    free(r->kz);
+}
+
+/* All eight fields at the world point (x, z), straight from their definition. */
+static void ref_eval(const struct reference *r, double x, double z, double v[R_COUNT])
+{
+    double complex s[R_COUNT] = {0};
+    for (int iz = 0; iz < r->n; iz++) {
+        for (int ix = 0; ix < r->n; ix++) {
+            double complex h = r->h[(size_t)iz * r->n + ix];
+            if (h == 0)
+                continue;
+            double kx = r->kx[ix], kz = r->kz[iz], k = hypot(kx, kz), ik = k > 0 ? 1.0 / k : 0.0;
+            double complex f = h * cexp(I * (kx * x + kz * z));
+            s[R_H] += f;
+            s[R_DX] += I * r->lambda * kx * ik * f;
+            s[R_DZ] += I * r->lambda * kz * ik * f;
+            s[R_SX] += I * kx * f;
+            s[R_SZ] += I * kz * f;
+            s[R_JXX] += -r->lambda * kx * kx * ik * f;
+            s[R_JZZ] += -r->lambda * kz * kz * ik * f;
+            s[R_JXZ] += -r->lambda * kx * kz * ik * f;
+        }
+    }
+    for (int i = 0; i < R_COUNT; i++)
+        v[i] = creal(s[i]);
+}
+
+/* Source x0 of the world point (x, z): x0 + D(x0) = x, by Newton from x.
+ * Returns 1 when converged to tol. */
+static int ref_invert(const struct reference *r, double x, double z, double tol, double *x0, double *z0)
+{
+    double a = x, b = z, v[R_COUNT];
+    for (int it = 0; it < 80; it++) {
+        ref_eval(r, a, b, v);
+        double rx = a + v[R_DX] - x, rz = b + v[R_DZ] - z;
+        if (hypot(rx, rz) < tol) {
+            *x0 = a;
+            *z0 = b;
+            return 1;
+        }
+        double a11 = 1 + v[R_JXX], a12 = v[R_JXZ], a22 = 1 + v[R_JZZ], det = a11 * a22 - a12 * a12;
+        double sx = rx, sz = rz;
+        if (fabs(det) > 1e-2) {
+            sx = (a22 * rx - a12 * rz) / det;
+            sz = (a11 * rz - a12 * rx) / det;
+        }
+        double damp = it < 20 ? 1.0 : 0.5;
+        a -= damp * sx;
+        b -= damp * sz;
+    }
+    *x0 = a;
+    *z0 = b;
+    return 0;
+}
+
+static void ref_normal(const double v[R_COUNT], double n[3])
+{
+    double tx[3] = {1 + v[R_JXX], v[R_SX], v[R_JXZ]}, tz[3] = {v[R_JXZ], v[R_SZ], 1 + v[R_JZZ]};
+    n[0] = tz[1] * tx[2] - tz[2] * tx[1];
+    n[1] = tz[2] * tx[0] - tz[0] * tx[2];
+    n[2] = tz[0] * tx[1] - tz[1] * tx[0];
+    double l = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (int i = 0; i < 3; i++)
+        n[i] /= l;
+}
+
+static double angle_deg(const double a[3], const double b[3])
+{
+    double c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+    double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    return atan2(sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]), dot) * 180.0 / M_PI;
+}
+
+/* Random query points: a third near the origin (both signs), a third far
+ * (|x| up to 1e7 m), the rest in between. */
+static void random_points(double (*xz)[2], int count, double L)
+{
+    for (int i = 0; i < count; i++) {
+        double scale = i % 3 == 0 ? 2 * L : i % 3 == 1 ? 1e7 : 1e4;
+        xz[i][0] = (2 * uniform() - 1) * scale;
+        xz[i][1] = (2 * uniform() - 1) * scale;
+    }
+    xz[0][0] = -0.0; /* a grid point, and a negative-zero sign */
+    xz[0][1] = 0.0;
+}
+
+/* ---- accuracy against the reference ---------------------------------------- */
+
+static void test_accuracy(int n, double chop, int spectrum, int count)
+{
+    struct ocean *o = make(n, chop, spectrum);
+    if (!o)
+        return;
+    const double t = 37.25, L = ocean_get_params(o)->patch_size;
+    double(*xz)[2] = malloc((size_t)count * sizeof *xz);
+    struct ocean_point *out = malloc((size_t)count * sizeof *out);
+    random_points(xz, count, L);
+    struct reference r;
+    ref_init(&r, o, t);
+    int rc = ocean_query(o, t, (const double(*)[2])xz, count, out);
+    double worst_h = 0, worst_map = 0, worst_n = 0, worst_d = 0, hmax = 0;
+    int unconverged = 0, folded = 0, ref_agree = 0, ref_tried = 0;
+    for (int i = 0; i < count && rc == 0; i++) {
+        const struct ocean_point *p = &out[i];
+        double v[R_COUNT], nref[3];
+        /* Solution-agnostic: wherever our source lies, the reference must
+         * map it onto the queried point and give our height there. */
+        ref_eval(&r, p->source[0], p->source[1], v);
+        double map = hypot(p->source[0] + v[R_DX] - xz[i][0], p->source[1] + v[R_DZ] - xz[i][1]);
+        worst_map = fmax(worst_map, map);
+        worst_h = fmax(worst_h, fabs(p->height - v[R_H]));
+        worst_d = fmax(worst_d, fmax(fabs(p->displacement[0] - v[R_DX]), fabs(p->displacement[1] - v[R_DZ])));
+        hmax = fmax(hmax, fabs(v[R_H]));
+        ref_normal(v, nref);
+        worst_n = fmax(worst_n, angle_deg(p->normal, nref));
+        unconverged += !p->converged;
+        folded += p->jacobian <= 0;
+        /* Where the surface does not fold, the source is unique: the
+         * reference's own inversion must find the same height. */
+        if (p->jacobian > 0.2) {
+            double x0, z0;
+            ref_tried++;
+            if (ref_invert(&r, xz[i][0], xz[i][1], 1e-8, &x0, &z0)) {
+                double w[R_COUNT];
+                ref_eval(&r, x0, z0, w);
+                ref_agree += fabs(w[R_H] - p->height) <= 1e-3;
+            }
+        }
+    }
+    char name[96];
+    snprintf(name, sizeof name, "query.accuracy.N%d.%s.chop%g", n, param_enum_name(param_find("spectrum"), spectrum),
+             chop);
+    check(rc == 0 && worst_h <= 1e-3 && worst_map <= 1e-6 && worst_n <= 0.5 && worst_d <= 1e-3 &&
+              unconverged == 0 && ref_agree == ref_tried && hmax > 0,
+          name,
+          "%d points (|x| to 1e7 m): height err %.2e m (max |h| %.2f m), |x0+D(x0)-x| %.1e m, disp err %.1e m, "
+          "normal %.2e deg, unconverged %d, folded %d, reference inversion agrees %d/%d",
+          count, worst_h, hmax, worst_map, worst_d, worst_n, unconverged, folded, ref_agree, ref_tried);
+    ref_free(&r);
+    free(xz);
+    free(out);
+    ocean_free(o);
+}
+
+/* A steep, very choppy sea folds over: several surface points land on one
+ * (x, z). Whichever the query picks, the reference must map it there. */
+static void test_folds(void)
+{
+    struct ocean *o = make(64, 4.0, SPECTRUM_JONSWAP);
+    if (!o)
+        return;
+    struct ocean_params p = *ocean_get_params(o);
+    p.wind_speed = 20;
+    p.amplitude = 3;
+    char err[128];
+    ocean_reconfigure(o, &p, err, sizeof err);
+    enum { COUNT = 200 };
+    double(*xz)[2] = malloc(COUNT * sizeof *xz);
+    struct ocean_point *out = malloc(COUNT * sizeof *out);
+    random_points(xz, COUNT, p.patch_size);
+    struct reference r;
+    ref_init(&r, o, 3.0);
+    int rc = ocean_query(o, 3.0, (const double(*)[2])xz, COUNT, out);
+    int folded = 0, converged = 0;
+    double worst_map = 0, worst_h = 0;
+    for (int i = 0; i < COUNT && rc == 0; i++) {
+        double v[R_COUNT];
+        ref_eval(&r, out[i].source[0], out[i].source[1], v);
+        folded += out[i].jacobian <= 0;
+        converged += out[i].converged;
+        worst_map = fmax(worst_map, hypot(out[i].source[0] + v[R_DX] - xz[i][0], out[i].source[1] + v[R_DZ] - xz[i][1]));
+        worst_h = fmax(worst_h, fabs(out[i].height - v[R_H]));
+    }
+    check(rc == 0 && folded > 0 && converged == COUNT && worst_map <= 1e-6 && worst_h <= 1e-3, "query.folds",
+          "chop 4, amplitude 3: %d of %d sources on folded sheets, %d converged, |x0+D(x0)-x| %.1e m, height %.1e m",
+          folded, COUNT, converged, worst_map, worst_h);
+    ref_free(&r);
+    free(xz);
+    free(out);
+    ocean_free(o);
+}
+
+/* ---- time derivatives against finite differences --------------------------- */
+
+static void test_derivatives(int n, double chop)
+{
+    struct ocean *o = make(n, chop, SPECTRUM_JONSWAP);
+    if (!o)
+        return;
+    const double t = 12.5, dt = 1e-3, L = ocean_get_params(o)->patch_size;
+    enum { COUNT = 8 };
+    double xz[COUNT][2];
+    random_points(xz, COUNT, L);
+    struct ocean_point out[COUNT];
+    int rc = ocean_query(o, t, (const double(*)[2])xz, COUNT, out);
+    struct reference rm, r0, rp;
+    ref_init(&rm, o, t - dt);
+    ref_init(&r0, o, t);
+    ref_init(&rp, o, t + dt);
+    double ev = 0, ea = 0, epv = 0, epa = 0, vmax = 0, amax = 0, euler_vs_particle = 0;
+    int used = 0;
+    for (int i = 0; i < COUNT && rc == 0; i++) {
+        const struct ocean_point *p = &out[i];
+        if (p->jacobian < 0.2)
+            continue; /* near a fold the source jumps: no smooth height(t) */
+        double hs[3], ps[3];
+        const struct reference *rs[3] = {&rm, &r0, &rp};
+        int ok = 1;
+        for (int k = 0; k < 3; k++) {
+            double x0, z0, v[R_COUNT];
+            ok &= ref_invert(rs[k], xz[i][0], xz[i][1], 1e-12 * fmax(1.0, fabs(xz[i][0]) + fabs(xz[i][1])), &x0, &z0);
+            ref_eval(rs[k], x0, z0, v);
+            hs[k] = v[R_H];
+            ref_eval(rs[k], p->source[0], p->source[1], v);
+            ps[k] = v[R_H];
+        }
+        if (!ok)
+            continue;
+        used++;
+        double fv = (hs[2] - hs[0]) / (2 * dt), fa = (hs[2] - 2 * hs[1] + hs[0]) / (dt * dt);
+        double pv = (ps[2] - ps[0]) / (2 * dt), pa = (ps[2] - 2 * ps[1] + ps[0]) / (dt * dt);
+        ev = fmax(ev, fabs(p->vertical_velocity - fv));
+        ea = fmax(ea, fabs(p->vertical_acceleration - fa));
+        epv = fmax(epv, fabs(p->particle_velocity - pv));
+        epa = fmax(epa, fabs(p->particle_acceleration - pa));
+        vmax = fmax(vmax, fabs(fv));
+        amax = fmax(amax, fabs(fa));
+        euler_vs_particle = fmax(euler_vs_particle, fabs(fv - pv));
+    }
+    char name[64];
+    snprintf(name, sizeof name, "query.time_derivatives.N%d.chop%g", n, chop);
+    /* Tolerances: finite-difference truncation (dt^2 w^3 a) and rounding
+     * (1e-12 m / dt^2 for the acceleration) are far below these. */
+    check(rc == 0 && used >= COUNT / 2 && ev <= 1e-5 + 1e-4 * vmax && ea <= 1e-3 + 1e-3 * amax && epv <= 1e-5 &&
+              epa <= 1e-3,
+          name,
+          "%d points: d(height)/dt err %.1e m/s (max %.2f), d2/dt2 err %.1e m/s^2 (max %.2f); particle %.1e, %.1e; "
+          "|Eulerian - particle| up to %.2e m/s",
+          used, ev, vmax, ea, amax, epv, epa, euler_vs_particle);
+    ref_free(&rm);
+    ref_free(&r0);
+    ref_free(&rp);
+    ocean_free(o);
+}
+
+/* ---- properties ---------------------------------------------------------- */
+
+static void test_periodic_and_grid(void)
+{
+    struct ocean *o = make(64, 1.0, SPECTRUM_JONSWAP);
+    if (!o)
+        return;
+    const double L = ocean_get_params(o)->patch_size, t = 5.0;
+    double xz[4][2] = {{3.3, -7.1}, {3.3 + 1000 * L, -7.1 - 7 * L}, {-3.3, 7.1}, {-3.3 - 250 * L, 7.1 + 99 * L}};
+    struct ocean_point out[4];
+    int rc = ocean_query(o, t, (const double(*)[2])xz, 4, out);
+    double d = 0;
+    for (int k = 0; k < 2; k++) {
+        const struct ocean_point *a = &out[2 * k], *b = &out[2 * k + 1];
+        d = fmax(d, fabs(a->height - b->height));
+        d = fmax(d, fabs(a->normal[0] - b->normal[0]) + fabs(a->vertical_velocity - b->vertical_velocity));
+        d = fmax(d, fabs((b->source[0] - xz[2 * k + 1][0]) - (a->source[0] - xz[2 * k][0])));
+    }
+    check(rc == 0 && d < 1e-8, "query.periodic", "(x, z) vs (x + 1000 L, z - 7 L) and (x - 250 L, z + 99 L): max diff %.1e",
+          d);
+
+    /* Choppiness 0: the height at a grid sample is the FFT's sample there. */
+    struct ocean_params p = *ocean_get_params(o);
+    p.choppiness = 0;
+    char err[128];
+    int re = ocean_reconfigure(o, &p, err, sizeof err);
+    ocean_step(o, t, OCEAN_ALL_FIELDS);
+    const float *h = ocean_field(o, OCEAN_HEIGHT), *sx = ocean_field(o, OCEAN_SLOPE_X);
+    int n = ocean_resolution(o);
+    double gxz[3][2] = {{0, 0}, {5 * L / n, 17 * L / n}, {(n - 1) * L / n, 9 * L / n}};
+    int gi[3] = {0, 17 * n + 5, 9 * n + n - 1};
+    struct ocean_point g[3];
+    rc = ocean_query(o, t, (const double(*)[2])gxz, 3, g);
+    double e = 0, es = 0;
+    for (int k = 0; k < 3; k++) {
+        e = fmax(e, fabs(g[k].height - h[gi[k]]));
+        /* slope from the normal: n = (-sx, 1, -sz) / |.| when nothing folds */
+        es = fmax(es, fabs(-g[k].normal[0] / g[k].normal[1] - sx[gi[k]]));
+    }
+    check(re == 0 && rc == 0 && e < 1e-5 && es < 1e-4, "query.grid",
+          "chop 0, 3 grid samples vs the FFT step: height %.1e m, slope_x %.1e", e, es);
+    ocean_free(o);
+}
+
+static void test_bad_input(void)
+{
+    struct ocean *o = make(32, 1.0, SPECTRUM_JONSWAP);
+    if (!o)
+        return;
+    char err[128];
+    struct ocean_surface *s = ocean_surface_new(o, err, sizeof err);
+    struct ocean_point out[2], sentinel;
+    memset(&sentinel, 0x5a, sizeof sentinel);
+    double good[2][2] = {{1, 2}, {3, 4}};
+    double nan_x[2][2] = {{1, 2}, {NAN, 4}}, inf_z[2][2] = {{1, INFINITY}, {3, 4}};
+    int fails = 0, untouched = 1;
+    struct {
+        const char *what;
+        int rc;
+    } cases[] = {
+        {"NaN x", 0}, {"inf z", 0}, {"t NaN", 0}, {"t inf", 0}, {"npoints < 0", 0}, {"NULL points", 0}, {"NULL snapshot", 0},
+    };
+    out[0] = out[1] = sentinel;
+    cases[0].rc = ocean_surface_query(s, 1.0, (const double(*)[2])nan_x, 2, out);
+    cases[1].rc = ocean_surface_query(s, 1.0, (const double(*)[2])inf_z, 2, out);
+    cases[2].rc = ocean_surface_query(s, NAN, (const double(*)[2])good, 2, out);
+    cases[3].rc = ocean_surface_query(s, INFINITY, (const double(*)[2])good, 2, out);
+    cases[4].rc = ocean_surface_query(s, 1.0, (const double(*)[2])good, -1, out);
+    cases[5].rc = ocean_surface_query(s, 1.0, NULL, 2, out);
+    cases[6].rc = ocean_surface_query(NULL, 1.0, (const double(*)[2])good, 2, out);
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
+        fails += cases[i].rc == -1;
+    untouched = !memcmp(&out[0], &sentinel, sizeof sentinel) && !memcmp(&out[1], &sentinel, sizeof sentinel);
+    int zero = ocean_surface_query(s, 1.0, NULL, 0, NULL);
+    int okq = ocean_surface_query(s, 1.0, (const double(*)[2])good, 2, out);
+    check(s && fails == (int)(sizeof cases / sizeof cases[0]) && untouched && zero == 0 && okq == 0, "query.bad_input",
+          "%d/%zu bad calls return -1 and write nothing; 0 points ok; a good call after them works", fails,
+          sizeof cases / sizeof cases[0]);
+    ocean_surface_free(s);
+
+    /* A calm sea (no wind): every amplitude is zero; flat water, normal up. */
+    struct ocean_params p = *ocean_get_params(o);
+    p.wind_speed = 0;
+    ocean_reconfigure(o, &p, err, sizeof err);
+    struct ocean_point calm[2];
+    int rc = ocean_query(o, 4.0, (const double(*)[2])good, 2, calm);
+    check(rc == 0 && calm[1].height == 0 && calm[1].normal[1] == 1 && calm[1].vertical_velocity == 0 &&
+              calm[1].converged && calm[1].source[0] == 3 && calm[1].jacobian == 1,
+          "query.calm", "wind 0: height %g, normal y %g, source (%g, %g)", calm[1].height, calm[1].normal[1],
+          calm[1].source[0], calm[1].source[1]);
+    ocean_free(o);
+}
+
+/* The snapshot is read-only: queries from several threads at once give
+ * exactly the single-threaded answers, and the owner may step meanwhile. */
+struct thread_job {
+    const struct ocean_surface *s;
+    double (*xz)[2];
+    int count, rc;
+    struct ocean_point *out;
+};
+
+static void *query_thread(void *arg)
+{
+    struct thread_job *j = arg;
+    for (int rep = 0; rep < 3; rep++)
+        j->rc |= ocean_surface_query(j->s, 9.0, (const double(*)[2])j->xz, j->count, j->out);
+    return NULL;
+}
+
+static void test_threads_and_snapshot(void)
+{
+    struct ocean *o = make(64, 1.5, SPECTRUM_JONSWAP);
+    if (!o)
+        return;
+    char err[128];
+    struct ocean_surface *s = ocean_surface_new(o, err, sizeof err);
+    enum { COUNT = 16, THREADS = 3 };
+    double xz[COUNT][2];
+    random_points(xz, COUNT, 64);
+    struct ocean_point ref[COUNT], got[THREADS][COUNT];
+    int rc = ocean_surface_query(s, 9.0, (const double(*)[2])xz, COUNT, ref);
+    pthread_t tid[THREADS];
+    struct thread_job jobs[THREADS];
+    for (int i = 0; i < THREADS; i++) {
+        jobs[i] = (struct thread_job){s, xz, COUNT, 0, got[i]};
+        pthread_create(&tid[i], NULL, query_thread, &jobs[i]);
+    }
+    for (int k = 0; k < 5; k++) /* the owner keeps stepping meanwhile */
+        ocean_step(o, 9.0 + k, OCEAN_ALL_FIELDS);
+    int same = 1;
+    for (int i = 0; i < THREADS; i++) {
+        pthread_join(tid[i], NULL);
+        same &= jobs[i].rc == 0 && !memcmp(got[i], ref, sizeof ref);
+    }
+    check(s && rc == 0 && same, "query.threads", "%d threads x 3 queries on one snapshot while stepping: bit-identical",
+          THREADS);
+
+    /* A snapshot keeps the sea it was made from: reconfiguring the ocean
+     * afterwards changes new snapshots, not this one. */
+    struct ocean_params p = *ocean_get_params(o);
+    p.wind_speed = 20;
+    ocean_reconfigure(o, &p, err, sizeof err);
+    struct ocean_surface *s2 = ocean_surface_new(o, err, sizeof err);
+    struct ocean_point after[COUNT], other[COUNT];
+    ocean_surface_query(s, 9.0, (const double(*)[2])xz, COUNT, after);
+    ocean_surface_query(s2, 9.0, (const double(*)[2])xz, COUNT, other);
+    check(!memcmp(after, ref, sizeof ref) && memcmp(other, ref, sizeof ref) != 0 &&
+              ocean_surface_params(s)->wind_speed == 12 && ocean_surface_params(s2)->wind_speed == 20,
+          "query.snapshot", "old snapshot unchanged by reconfigure; new one sees wind 20 m/s");
+    /* Every mode off the Nyquist row and column (and k = 0) is non-zero. */
+    check(ocean_surface_modes(s) == 63 * 32 - 1, "query.modes", "N=64: %d non-zero modes in the snapshot (expected %d)",
+          ocean_surface_modes(s), 63 * 32 - 1);
+    /* Warm start, as a probe does: sources of the previous tick as guesses.
+     * Same answers, fewer Newton steps. */
+    struct ocean_point prev[COUNT], cold[COUNT], warm[COUNT];
+    double guess[COUNT][2];
+    ocean_surface_query(s2, 9.0, (const double(*)[2])xz, COUNT, prev);
+    for (int i = 0; i < COUNT; i++) {
+        guess[i][0] = prev[i].source[0];
+        guess[i][1] = prev[i].source[1];
+    }
+    int rc1 = ocean_surface_query(s2, 9.0 + 1.0 / 30, (const double(*)[2])xz, COUNT, cold);
+    int rc2 = ocean_surface_query_from(s2, 9.0 + 1.0 / 30, (const double(*)[2])xz, (const double(*)[2])guess, COUNT, warm);
+    int steps_cold = 0, steps_warm = 0, all = 1;
+    double dh = 0;
+    for (int i = 0; i < COUNT; i++) {
+        steps_cold += cold[i].iterations;
+        steps_warm += warm[i].iterations;
+        all &= cold[i].converged && warm[i].converged;
+        dh = fmax(dh, fabs(cold[i].height - warm[i].height) + fabs(cold[i].vertical_velocity - warm[i].vertical_velocity));
+    }
+    check(rc1 == 0 && rc2 == 0 && all && dh < 1e-7 && steps_warm < steps_cold, "query.warm_start",
+          "%d points one tick later: %d Newton steps from the previous sources vs %d from the points, same values (%.1e)",
+          COUNT, steps_warm, steps_cold, dh);
+    ocean_surface_free(s);
+    ocean_surface_free(s2);
+    ocean_free(o);
+}
+
+int main(void)
+{
+    const char *q = getenv("OCEAN_TEST_QUICK");
+    quick = q && *q && strcmp(q, "0") != 0;
+    test_bad_input();
+    test_periodic_and_grid();
+    test_threads_and_snapshot();
+    test_folds();
+    const double chops[] = {0, 1, 2};
+    for (int c = 0; c < 3; c++) {
+        test_accuracy(32, chops[c], SPECTRUM_PHILLIPS, 24);
+        test_accuracy(64, chops[c], SPECTRUM_JONSWAP, 24);
+        if (!quick) {
+            test_accuracy(128, chops[c], SPECTRUM_PIERSON_MOSKOWITZ, 16);
+            test_accuracy(256, chops[c], SPECTRUM_JONSWAP, 8);
+        }
+        test_derivatives(32, chops[c]);
+        if (!quick)
+            test_derivatives(64, chops[c]);
+    }
+    if (!quick)
+        test_accuracy(512, 1.0, SPECTRUM_JONSWAP, 4);
+    printf("%d passed, %d failed\n", passed, failed);
+    return failed ? 1 : 0;
+}

@@ -1,0 +1,37 @@
+/* tap_exr.h — ocean-tap's OpenEXR bakes, in the layout Blender's ocean
+ * modifier bakes and reads back (see docs/operations.md, "Baking for Blender").
+ *
+ * Per frame, three files in the output directory, numbered 1, 2, 3, ... in
+ * the order written (Blender wants consecutive frame numbers):
+ *   disp_NNNN.exr    R = Dx, G = height, B = Dz (m, y up), A = 1
+ *   normal_NNNN.exr  R G B = unit normal (-slope_x, 1, -slope_z)/|.|, A = 1
+ *   foam_NNNN.exr    R = G = B = foam = clamp(1 - jacobian, 0, 1), A = 1
+ * RGBA half float, ZIP compression, scanline image; image column = x, and
+ * the first scanline is the last grid row (z = N-1), as Blender writes its
+ * bottom-up images. Every file carries string attributes oceand_seq,
+ * oceand_sim_time, oceand_params_version, oceand_patch_size, oceand_field;
+ * frame_NNNN.json beside them says the same for scripts. */
+#ifndef OCEAND_TAP_EXR_H
+#define OCEAND_TAP_EXR_H
+
+#include <stddef.h>
+
+#include "tap_write.h"
+
+/* Fields of one frame, side*side floats each, row-major (row = z). */
+struct tap_exr_fields {
+    const float *height, *dx, *dz, *slope_x, *slope_z, *jacobian;
+};
+
+/* Write the three files and the JSON of Blender frame `frame` into dir.
+ * Returns 0, or -1 with a message in err. */
+int tap_exr_bake(const char *dir, int frame, int side, const struct tap_exr_fields *f, const struct tap_meta *m,
+                 char *err, size_t errlen);
+
+/* One RGBA half-float image (rgba[c] = side*side floats, row-major, NULL =
+ * constant 1); rows are written last first. attrs: NULL-terminated
+ * name/value pairs of string attributes. Returns 0 or -1 with err. */
+int tap_exr_write(const char *path, int side, const float *const rgba[4], const char *const *attrs, char *err,
+                  size_t errlen);
+
+#endif
