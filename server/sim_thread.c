@@ -23,7 +23,9 @@
 
 /* A batch of sets the builder has prepared for one tick boundary. */
 struct built {
-    struct ocean *ocean;          /* new simulation, or NULL when only playback changed */
+    struct ocean_prepared *prepared; /* the new state for the ocean in force (ocean_prepare:
+                                        new amplitudes, or a new grid and plans for a new N),
+                                        or NULL when only playback changed */
     struct ocean_params params;   /* in force after the batch */
     struct sim_set *sets;         /* in order; each has ->prev, or a failed ->status */
 };
@@ -70,7 +72,7 @@ struct sim {
     struct sim_set *pending, **pending_tail;  /* lws appends (sim_submit); builder takes */
     struct built ready;               /* builder writes; tick takes at a tick boundary */
     bool ready_full;                  /* builder sets, tick clears */
-    struct ocean *to_free;            /* tick writes (swapped-out ocean); builder frees it */
+    struct ocean_prepared *to_free;   /* tick writes (the state a commit swapped out); builder frees it */
     struct sim_set *answers, **answers_tail;  /* tick appends; lws takes (sim_take_answers) */
     pthread_cond_t prod_cond;         /* tick signals, producer waits */
     bool prod_busy;                   /* producer: stepping a frame or waiting for the encode before
@@ -218,9 +220,13 @@ static void set_failed(struct sim_set *set, enum sim_set_status status, const ch
     snprintf(set->message, sizeof set->message, "%s", msg);
 }
 
-/* ocean_create, or the test hook's simulated out-of-memory (see sim_thread.h). */
-static struct ocean *build_ocean(struct sim *s, const struct ocean_params *p, enum sim_set_status *why,
-                                 char *err, size_t errlen)
+/* ocean_prepare against the ocean in force, or the test hook's simulated
+ * out-of-memory (see sim_thread.h). ocean_prepare only reads what the
+ * producer's ocean_step does not change, so it runs while frames are made;
+ * it never overlaps a commit (the tick commits before it clears ready_full,
+ * and the builder prepares only while ready_full is clear). */
+static struct ocean_prepared *build_state(struct sim *s, const struct ocean_params *p, enum sim_set_status *why,
+                                          char *err, size_t errlen)
 {
     if (s->test_fail_seed >= 0 && p->seed == s->test_fail_seed) {
         usleep(500 * 1000); /* long enough for a test to queue another set behind this one */
@@ -229,13 +235,13 @@ static struct ocean *build_ocean(struct sim *s, const struct ocean_params *p, en
         return NULL;
     }
     *why = SIM_SET_INVALID;
-    return ocean_create(p, &s->cfg.opts, err, errlen);
+    return ocean_prepare(s->ocean, p, err, errlen);
 }
 
 /* Check each set of a batch on top of the previous one (all or nothing per
- * set) and build ONE new ocean for the whole batch if any physics changed.
- * Allocates nothing but the ocean: whatever fails, every set is answered
- * and build_base moves only to what was really built. */
+ * set) and prepare ONE new state for the whole batch if any physics changed.
+ * Allocates nothing but that state: whatever fails, every set is answered
+ * and build_base moves only to what was really prepared. */
 static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
 {
     struct ocean_params cur = s->build_base;
@@ -249,11 +255,11 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
         set->prev = cur;
         cur = next;
     }
-    out->ocean = NULL;
+    out->prepared = NULL;
     if (physics_differ(&s->build_base, &cur)) {
         enum sim_set_status why;
-        out->ocean = build_ocean(s, &cur, &why, err, sizeof err);
-        if (!out->ocean) {
+        out->prepared = build_state(s, &cur, &why, err, sizeof err);
+        if (!out->prepared) {
             LOGW("applying parameters failed: %s", err);
             for (struct sim_set *set = sets; set; set = set->next)
                 if (set->status == SIM_SET_QUEUED)
@@ -272,10 +278,10 @@ static void *builder_main(void *arg)
     pthread_mutex_lock(&s->lock);
     while (!atomic_load(&s->stop)) {
         if (s->to_free) {
-            struct ocean *old = s->to_free;
+            struct ocean_prepared *old = s->to_free;
             s->to_free = NULL;
             pthread_mutex_unlock(&s->lock);
-            ocean_free(old);
+            ocean_prepared_free(old);
             pthread_mutex_lock(&s->lock);
             continue;
         }
@@ -310,29 +316,33 @@ static void apply_pending(struct sim *s)
     pthread_mutex_lock(&s->lock);
     bool have = s->ready_full;
     struct built b = s->ready;
-    s->ready_full = false;
-    if (have)
-        pthread_cond_signal(&s->cond);
     pthread_mutex_unlock(&s->lock);
     if (!have)
         return;
-    if (b.ocean) {
-        struct ocean *old = s->ocean;
-        s->ocean = b.ocean;
-        if (ocean_resolution(old) != ocean_resolution(s->ocean)) {
+    if (b.prepared) {
+        /* O(1), and the producer is idle (our caller checked): no step or
+         * field reader overlaps it, nor a prepare (ready_full is still set). */
+        int n_before = ocean_resolution(s->ocean);
+        if (ocean_commit(s->ocean, b.prepared) != 0) {
+            LOGE("a prepared parameter change no longer fits the simulation; refused");
+            for (struct sim_set *set = b.sets; set; set = set->next)
+                if (set->status == SIM_SET_QUEUED)
+                    set_failed(set, SIM_SET_INVALID, "internal: prepared against another state");
+            b.params = s->params;
+        } else if (n_before != ocean_resolution(s->ocean)) {
             atomic_fetch_add(&g_metrics.replans, 1);
             LOGI("resolution now %d", ocean_resolution(s->ocean));
         }
-        pthread_mutex_lock(&s->lock);
-        bool slot_free = s->to_free == NULL;
-        if (slot_free) {
-            s->to_free = old; /* freeing 10-100 MB is the builder's job, not the tick's */
-            pthread_cond_signal(&s->cond);
-        }
-        pthread_mutex_unlock(&s->lock);
-        if (!slot_free)
-            ocean_free(old);
     }
+    pthread_mutex_lock(&s->lock);
+    s->ready_full = false;
+    pthread_cond_signal(&s->cond);
+    bool slot_free = b.prepared && s->to_free == NULL;
+    if (slot_free)
+        s->to_free = b.prepared; /* the old state: freeing 10-100 MB is the builder's job, not the tick's */
+    pthread_mutex_unlock(&s->lock);
+    if (b.prepared && !slot_free)
+        ocean_prepared_free(b.prepared);
     struct sim_set *last = NULL;
     for (struct sim_set *set = b.sets; set; set = set->next) {
         if (set->status == SIM_SET_QUEUED) {
@@ -798,11 +808,9 @@ void sim_stop(struct sim *s)
     free_sets(s->answers);
     if (s->ready_full) {
         free_sets(s->ready.sets);
-        if (s->ready.ocean)
-            ocean_free(s->ready.ocean);
+        ocean_prepared_free(s->ready.prepared);
     }
-    if (s->to_free)
-        ocean_free(s->to_free);
+    ocean_prepared_free(s->to_free);
     frame_unref(s->latest);
     sim_free_parts(s);
 }
