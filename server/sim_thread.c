@@ -569,8 +569,15 @@ static void tick(struct sim *s, double t_tick)
         return; /* let the producer drain so that the parameter change applies next tick */
     if (queued) {
         /* The producer has not even started the frame before: this one cannot
-         * start on time. Counted as an overrun; the plan's model learns from it. */
+         * start on time. Counted as an overrun, and taken as proof that the
+         * model is optimistic (a shared machine, a slower N): costs up by a
+         * quarter at once, so the next plan degrades; the per-frame EWMAs
+         * bring them back down when frames come in on time again. */
         atomic_fetch_add(&g_metrics.overruns, 1);
+        pthread_mutex_lock(&s->lock);
+        s->model.step_scale *= 1.25;
+        s->model.enc_s_per_sample *= 1.25;
+        pthread_mutex_unlock(&s->lock);
         return;
     }
     for (int g = 0; g < PLAN_GROUPS; g++)
