@@ -97,6 +97,7 @@ def run(args, n, k, fields=None):
         line = lc.stderr.readline()          # "measuring": the window starts
         cpu0, t0, wait0 = cpu_seconds(d.pid), time.monotonic(), runq_wait_seconds(d.pid)
         over0 = metric(port, "oceand_tick_overruns_total")
+        late0 = metric(port, "oceand_tick_late_total")
         tsum0, tcnt0 = metric(port, "oceand_tick_duration_seconds_sum"), metric(port, "oceand_tick_duration_seconds_count")
         tb0 = hist_p50_ms(port, "oceand_tick_duration_seconds")
         rss = [rss_mb(d.pid)]
@@ -105,6 +106,7 @@ def run(args, n, k, fields=None):
             rss.append(rss_mb(d.pid))
         cpu1, t1, wait1 = cpu_seconds(d.pid), time.monotonic(), runq_wait_seconds(d.pid)
         over1 = metric(port, "oceand_tick_overruns_total")
+        late1 = metric(port, "oceand_tick_late_total")
         tsum1, tcnt1 = metric(port, "oceand_tick_duration_seconds_sum"), metric(port, "oceand_tick_duration_seconds_count")
         tb1 = hist_p50_ms(port, "oceand_tick_duration_seconds")
         degraded = metric(port, "oceand_degraded_groups")
@@ -119,6 +121,7 @@ def run(args, n, k, fields=None):
                "daemon_cpu": round((cpu1 - cpu0) / (t1 - t0), 2),
                "daemon_runq_wait": round((wait1 - wait0) / (t1 - t0), 2), "rss_mb": round(max(rss), 1),
                "rss_mb_start": round(rss[0], 1), "overruns": int(over1 - over0),
+               "overruns_clock_late": int(late1 - late0) if late1 == late1 else None,  # of them: the tick thread not run in time
                "tick_ms_mean": round(1000 * (tsum1 - tsum0) / max(1, tcnt1 - tcnt0), 2),
                "tick_ms_p50_bucket": bucket_median(tb0, tb1),   # deadline -> frame published, histogram bucket
                "degraded_groups_at_end": int(degraded),
@@ -178,7 +181,7 @@ def capacity(args):
             print(line, flush=True)
             runs.append(json.loads(line))
         med = {"bench": "capacity", "N": n, "clients": k, "fields": runs[0]["fields"], "runs": len(runs)}
-        for key in ("fps_median", "fps_min", "delivered", "overruns", "tick_ms_mean", "tick_ms_p50_bucket",
+        for key in ("fps_median", "fps_min", "delivered", "overruns", "overruns_clock_late", "tick_ms_mean", "tick_ms_p50_bucket",
                     "lat_p50_ms", "daemon_cpu", "daemon_runq_wait", "rss_mb", "degraded_groups_at_end", "loadavg_1m"):
             med[key] = statistics.median(r[key] for r in runs)
         print(json.dumps(med), flush=True)

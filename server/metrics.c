@@ -72,6 +72,9 @@ size_t metrics_render(char *buf, size_t cap)
     counter(&o, "oceand_tick_overruns_total", "Ticks that started a whole period late (skipped, not queued), "
             "or whose frame could not start because the one before was still being stepped.",
             atomic_load(&m->overruns));
+    counter(&o, "oceand_tick_late_total", "Of the overruns, the ticks whose clock thread itself woke a whole "
+            "period late (the machine did not run it); the rest are frames the producer could not start.",
+            atomic_load(&m->ticks_late));
     gauge(&o, "oceand_degraded_groups", "Subscription groups (LOD, bound) encoded at a coarser LOD or a lower "
           "rate than asked, because demand exceeds the encode budget.", atomic_load(&m->degraded_groups));
     counter(&o, "oceand_subscriptions_refused_busy_total", "Subscriptions refused with `busy` (encode budget).",

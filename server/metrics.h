@@ -17,6 +17,7 @@ extern const double metrics_hist_le[METRICS_HIST_BUCKETS]; /* upper bounds, seco
 struct metrics {
     struct histogram tick_seconds, encode_seconds, step_seconds;
     atomic_uint_least64_t ticks, overruns, replans;
+    atomic_uint_least64_t ticks_late;  /* the overruns where the clock itself woke late (descheduled) */
     atomic_uint_least64_t frames_sent, bytes_sent, text_sent;
     atomic_uint_least64_t dropped_slow, dropped_rate;
     atomic_uint_least64_t control_messages, control_errors, param_changes;

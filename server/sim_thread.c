@@ -376,6 +376,15 @@ static void publish(struct sim *s, struct frame *f)
     frame_unref(old);
 }
 
+/* The cost model follows each frame: up slowly (one slow frame on a shared
+ * machine is noise; overruns raise it at once, see tick), down quickly (an
+ * overrun's raise must not keep a plan degraded for long). */
+static double ewma(double model, double measured)
+{
+    double a = measured < model ? 0.25 : 0.1;
+    return (1 - a) * model + a * measured;
+}
+
 /* ---- encode (pool threads) ---- */
 
 static void encode_item(void *ctx, int item, int worker) { frame_job_item(((struct sim *)ctx)->job, item, worker); }
@@ -395,7 +404,7 @@ static void encode_done(void *ctx)
     histogram_observe(&g_metrics.tick_seconds, now - s->job_t_tick);
     if (s->job_samples >= 4096) { /* tiny jobs are all overhead: they would skew the per-sample cost */
         pthread_mutex_lock(&s->lock);
-        s->model.enc_s_per_sample = 0.95 * s->model.enc_s_per_sample + 0.05 * enc / (double)s->job_samples;
+        s->model.enc_s_per_sample = ewma(s->model.enc_s_per_sample, enc / (double)s->job_samples);
         pthread_mutex_unlock(&s->lock);
     }
     if (s->cfg.wake)
@@ -424,7 +433,7 @@ static void produce(struct sim *s, const struct prod_job *pj)
     pthread_mutex_lock(&s->lock);
     double predicted = cost_step_s(&s->model, ocean_resolution(s->ocean), popcount_u(pj->want.fields)) / s->model.step_scale;
     if (predicted > 0)
-        s->model.step_scale = 0.95 * s->model.step_scale + 0.05 * t_step / predicted;
+        s->model.step_scale = ewma(s->model.step_scale, t_step / predicted);
     pthread_mutex_unlock(&s->lock);
     /* The previous frame's encode overlapped this step; its buffers are about
      * to be reused, so it must be done (we help rather than sleep). */
@@ -628,6 +637,7 @@ static void *sim_main(void *arg)
         if (late > 0) {
             long skip = (long)(late / period) + 1;
             atomic_fetch_add(&g_metrics.overruns, 1);
+            atomic_fetch_add(&g_metrics.ticks_late, 1);
             steps += skip;
             long long ns = (long long)next.tv_nsec + (long long)skip * period_ns;
             next.tv_sec += (time_t)(ns / 1000000000LL);
