@@ -25,10 +25,10 @@ $(BUILD)/san/oceand: $(DAEMON_SAN_OBJ) $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB)
 # Unit test of the pure control module (parse/validate), and the frame checker
 # the integration tests use to decode frames and compare with the library.
 $(BUILD)/test_control: $(BUILD)/obj/tests/daemon/test_control.o $(BUILD)/obj/server/control.o \
-                       $(BUILD)/obj/server/capacity.o $(BUILD)/obj/server/config.o $(BUILD)/obj/server/state.o $(BUILD)/obj/server/log.o $(OCEAN_LIB)
+                       $(BUILD)/obj/server/capacity.o $(BUILD)/obj/server/config.o $(BUILD)/obj/server/state.o $(BUILD)/obj/server/log.o $(OCEAN_LIB) $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 $(BUILD)/san/test_control: $(BUILD)/san/tests/daemon/test_control.o $(BUILD)/san/server/control.o \
-                       $(BUILD)/san/server/capacity.o $(BUILD)/san/server/config.o $(BUILD)/san/server/state.o $(BUILD)/san/server/log.o $(OCEAN_SAN_LIB)
+                       $(BUILD)/san/server/capacity.o $(BUILD)/san/server/config.o $(BUILD)/san/server/state.o $(BUILD)/san/server/log.o $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB)
 	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
 $(BUILD)/frame_check: $(BUILD)/obj/tests/daemon/frame_check.o $(BUILD)/obj/server/control.o $(OCEAN_LIB) $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)

@@ -24,6 +24,7 @@ static const char *type_name(enum param_type t)
     case PARAM_FLOAT: return "float";
     case PARAM_ENUM: return "enum";
     case PARAM_BOOL: return "bool";
+    case PARAM_STRING: return "string";
     }
     return "?";
 }

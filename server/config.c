@@ -3,155 +3,105 @@
 
 #include <cjson/cJSON.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "control.h"
 #include "log.h"
 #include "state.h"
 
-enum opt_kind { OPT_INT, OPT_FLOAT, OPT_STR, OPT_LOGLEVEL };
-
-/* The daemon's own options (the sea parameters live in params.c). */
-struct opt_def {
-    const char *name;
-    enum opt_kind kind;
-    size_t offset, size;
-    double min, max;
-    const char *def;
-    const char *help;
+/* The daemon's own options: rows of the same shape as the sea parameters'
+ * table (server/sim/params.c), checked by the same setters, with offsets into
+ * struct daemon_config. All are read at start-up only (PARAM_RESTART). */
+#define OPT(name_, type_, field_, min_, max_, def_, choices_, flags_, help_)                          \
+    { .name = name_, .type = type_, .unit = "", .min = min_, .max = max_, .def = def_,                \
+      .choices = choices_, .description = help_, .offset = offsetof(struct daemon_config, field_),   \
+      .flags = (flags_) | PARAM_RESTART }
+#define OPT_STR(name_, field_, def_, flags_, help_)                                                   \
+    { .name = name_, .type = PARAM_STRING, .unit = "", .description = help_,                         \
+      .offset = offsetof(struct daemon_config, field_), .flags = (flags_) | PARAM_RESTART,           \
+      .size = sizeof(((struct daemon_config *)0)->field_), .def_text = def_ }
+static const struct param_def opt_table[] = {
+    OPT("port", PARAM_INT, port, 0, 65535, 8080, NULL, 0, "TCP port for HTTP and WebSocket (0 = any free port)"),
+    OPT_STR("bind", bind, "127.0.0.1", 0, "address to listen on (0.0.0.0 = all interfaces)"),
+    OPT_STR("web_root", web_root, "build/web", 0, "directory served at / (the web client)"),
+    OPT("tick_rate", PARAM_FLOAT, tick_rate, 1, 240, 30, NULL, 0, "simulation steps per second"),
+    OPT("log_level", PARAM_ENUM, log_level, 0, 3, OLOG_INFO, log_level_names, 0, "error, warn, info or debug"),
+    OPT_STR("state_file", state_file, "", 0, "where parameters are saved and restored "
+      "(default $XDG_STATE_HOME/oceand-state.json, else build/oceand-state.json; \"none\" = off)"),
+    OPT("max_clients", PARAM_INT, max_clients, 1, 100000, 512, NULL, 0, "WebSocket clients at once; more are refused"),
+    OPT("max_message", PARAM_INT, max_message, 256, 16777216, 65536, NULL, 0, "largest JSON message in bytes; larger closes with 1009"),
+    OPT("control_rate", PARAM_FLOAT, control_rate, 0.1, 10000, 20, NULL, 0, "control messages per second per client (sustained)"),
+    OPT("control_burst", PARAM_INT, control_burst, 1, 10000, 40, NULL, 0, "control messages per client in a burst"),
+    OPT("ping_interval", PARAM_INT, ping_interval, 1, 3600, 20, NULL, 0, "seconds of silence before the server pings"),
+    OPT("idle_timeout", PARAM_INT, idle_timeout, 2, 7200, 60, NULL, 0, "seconds of silence before the server hangs up"),
+    OPT_STR("allowed_origins", allowed_origins, "", 0, "WebSocket Origins allowed: \"\" = same host "
+      "or none, \"*\" = any, else comma-separated list like http://example.org:8080"),
+    OPT_STR("control_token", control_token, "", PARAM_SECRET, "if set, `set` needs this token (others are viewers)"),
+    OPT_STR("tls_cert", tls_cert, "", 0, "PEM certificate file: serve https/wss instead of http/ws "
+      "on the same port (needs --tls-key)"),
+    OPT_STR("tls_key", tls_key, "", 0, "PEM private key file of --tls-cert"),
+    OPT("fft_threads", PARAM_INT, fft_threads, 0, 64, 0, NULL, 0, "worker threads for the simulation step and for "
+      "rebuilding the spectrum after a change (0 = one per core, every core)"),
+    OPT("encode_threads", PARAM_INT, encode_threads, 0, 64, 0, NULL, 0, "threads that encode frames, pipelined "
+      "with the next step (0 = one per core)"),
+    OPT("encode_budget", PARAM_INT, encode_budget, 0, 1 << 30, 0, NULL, 0, "samples encoded per tick at most, over "
+      "all distinct layers (0 = derived from the tick time measured at start-up); a subscription beyond it gets `busy`"),
+    OPT("plan_rigor", PARAM_INT, plan_rigor, 0, 1, 1, NULL, 0, "1 = FFTW_MEASURE (faster steps; the first plan of "
+      "each N takes a moment, then it is cached in --wisdom-file), 0 = FFTW_ESTIMATE"),
+    OPT_STR("wisdom_file", wisdom_file, "auto", 0, "FFTW wisdom cache: \"auto\" = "
+      "$XDG_CACHE_HOME/oceand/fftw-wisdom, else ~/.cache/oceand/fftw-wisdom; \"none\" = no cache"),
+    OPT("send_buffer_kb", PARAM_INT, send_buffer_kb, 16, 65536, 512, NULL, 0, "kernel send buffer per client (KiB): "
+      "small keeps a slow client's queue, and so its latency, short"),
+    OPT("sim_nice", PARAM_INT, sim_nice, -20, 19, 0, NULL, 0, "nice value of the tick thread; below 0 (needs "
+      "CAP_SYS_NICE) keeps the tick on time on a busy machine"),
+    OPT("max_memory_mb", PARAM_INT, max_memory_mb, 0, 1 << 20, 0, NULL, 0, "memory cap for the simulation; limits N "
+      "(0 = a quarter of the machine's memory: MemTotal or the cgroup limit, whichever is lower)"),
 };
 
-#define O(f) offsetof(struct daemon_config, f), sizeof(((struct daemon_config *)0)->f)
-static const struct opt_def opt_table[] = {
-    { "port", OPT_INT, O(port), 0, 65535, "8080", "TCP port for HTTP and WebSocket (0 = any free port)" },
-    { "bind", OPT_STR, O(bind), 0, 0, "127.0.0.1", "address to listen on (0.0.0.0 = all interfaces)" },
-    { "web_root", OPT_STR, O(web_root), 0, 0, "build/web", "directory served at / (the web client)" },
-    { "tick_rate", OPT_FLOAT, O(tick_rate), 1, 240, "30", "simulation steps per second" },
-    { "log_level", OPT_LOGLEVEL, O(log_level), 0, 3, "info", "error, warn, info or debug" },
-    { "state_file", OPT_STR, O(state_file), 0, 0, "", "where parameters are saved and restored "
-      "(default $XDG_STATE_HOME/oceand-state.json, else build/oceand-state.json; \"none\" = off)" },
-    { "max_clients", OPT_INT, O(max_clients), 1, 100000, "512", "WebSocket clients at once; more are refused" },
-    { "max_message", OPT_INT, O(max_message), 256, 16777216, "65536", "largest JSON message in bytes; larger closes with 1009" },
-    { "control_rate", OPT_FLOAT, O(control_rate), 0.1, 10000, "20", "control messages per second per client (sustained)" },
-    { "control_burst", OPT_INT, O(control_burst), 1, 10000, "40", "control messages per client in a burst" },
-    { "ping_interval", OPT_INT, O(ping_interval), 1, 3600, "20", "seconds of silence before the server pings" },
-    { "idle_timeout", OPT_INT, O(idle_timeout), 2, 7200, "60", "seconds of silence before the server hangs up" },
-    { "allowed_origins", OPT_STR, O(allowed_origins), 0, 0, "", "WebSocket Origins allowed: \"\" = same host "
-      "or none, \"*\" = any, else comma-separated list like http://example.org:8080" },
-    { "control_token", OPT_STR, O(control_token), 0, 0, "", "if set, `set` needs this token (others are viewers)" },
-    { "tls_cert", OPT_STR, O(tls_cert), 0, 0, "", "PEM certificate file: serve https/wss instead of http/ws "
-      "on the same port (needs --tls-key)" },
-    { "tls_key", OPT_STR, O(tls_key), 0, 0, "", "PEM private key file of --tls-cert" },
-    { "fft_threads", OPT_INT, O(fft_threads), 0, 64, "0", "worker threads for the simulation step and for "
-      "rebuilding the spectrum after a change (0 = one per core, every core)" },
-    { "encode_threads", OPT_INT, O(encode_threads), 0, 64, "0", "threads that encode frames, pipelined with the "
-      "next step (0 = one per core)" },
-    { "encode_budget", OPT_INT, O(encode_budget), 0, 1 << 30, "0", "samples encoded per tick at most, over all "
-      "distinct layers (0 = derived from the tick time measured at start-up); a subscription beyond it gets `busy`" },
-    { "plan_rigor", OPT_INT, O(plan_rigor), 0, 1, "1", "1 = FFTW_MEASURE (faster steps; the first plan of "
-      "each N takes a moment, then it is cached in --wisdom-file), 0 = FFTW_ESTIMATE" },
-    { "wisdom_file", OPT_STR, O(wisdom_file), 0, 0, "auto", "FFTW wisdom cache: \"auto\" = "
-      "$XDG_CACHE_HOME/oceand/fftw-wisdom, else ~/.cache/oceand/fftw-wisdom; \"none\" = no cache" },
-    { "send_buffer_kb", OPT_INT, O(send_buffer_kb), 16, 65536, "512", "kernel send buffer per client (KiB): "
-      "small keeps a slow client's queue, and so its latency, short" },
-    { "sim_nice", OPT_INT, O(sim_nice), -20, 19, "0", "nice value of the tick thread; below 0 (needs "
-      "CAP_SYS_NICE) keeps the tick on time on a busy machine" },
-    { "max_memory_mb", OPT_INT, O(max_memory_mb), 0, 1 << 20, "0", "memory cap for the simulation; limits N "
-      "(0 = a quarter of the machine's memory: MemTotal or the cgroup limit, whichever is lower)" },
-};
-#undef O
+#undef OPT
+#undef OPT_STR
 static const size_t opt_count = sizeof opt_table / sizeof opt_table[0];
 
-static const struct opt_def *opt_find(const char *name)
+static const struct param_def *opt_find(const char *name)
 {
     for (size_t i = 0; i < opt_count; i++)
-        if (strcmp(opt_table[i].name, name) == 0)
+        if (opt_table[i].name[0] == name[0] && strcmp(opt_table[i].name, name) == 0)
             return &opt_table[i];
     return NULL;
 }
 
-static int opt_set_text(struct daemon_config *dc, const struct opt_def *o, const char *text, char *err, size_t errlen)
-{
-    char *field = (char *)dc + o->offset;
-    char *end;
-    double v;
-    switch (o->kind) {
-    case OPT_STR:
-        if (strlen(text) >= o->size) {
-            snprintf(err, errlen, "%s: value too long", o->name);
-            return -1;
-        }
-        memcpy(field, text, strlen(text) + 1);
-        return 0;
-    case OPT_LOGLEVEL: {
-        int l = log_level_from_name(text);
-        if (l < 0) {
-            snprintf(err, errlen, "log_level: \"%s\" is not error, warn, info or debug", text);
-            return -1;
-        }
-        *(int *)field = l;
-        return 0;
-    }
-    case OPT_INT:
-    case OPT_FLOAT:
-        errno = 0;
-        v = strtod(text, &end);
-        if (errno || end == text || *end || !isfinite(v) || (o->kind == OPT_INT && v != floor(v))) {
-            snprintf(err, errlen, "%s: \"%s\" is not a %s", o->name, text, o->kind == OPT_INT ? "whole number" : "number");
-            return -1;
-        }
-        if (v < o->min || v > o->max) {
-            snprintf(err, errlen, "%s: %g is outside %g..%g", o->name, v, o->min, o->max);
-            return -1;
-        }
-        if (o->kind == OPT_INT)
-            *(int *)field = (int)v;
-        else
-            *(double *)field = v;
-        return 0;
-    }
-    return -1;
-}
-
-/* Option or parameter from a JSON value (config file). */
+/* Option or parameter from a JSON value (config file): the same JSON rules
+ * as a `set` (control_set_json), onto dc or p. */
 static int set_from_json(struct daemon_config *dc, struct ocean_params *p, const cJSON *item, char *err, size_t errlen)
 {
-    const struct opt_def *o = opt_find(item->string);
-    if (o) {
-        char text[64];
-        const char *s = cJSON_GetStringValue(item);
-        if (!s && cJSON_IsNumber(item)) {
-            snprintf(text, sizeof text, "%.17g", item->valuedouble);
-            s = text;
-        }
-        if (!s) {
-            snprintf(err, errlen, "%s: wrong JSON type", o->name);
-            return -1;
-        }
-        return opt_set_text(dc, o, s, err, errlen);
+    const struct param_def *d = opt_find(item->string);
+    void *base = dc;
+    if (!d) {
+        d = param_find(item->string);
+        base = p;
     }
-    if (!param_find(item->string)) {
-        snprintf(err, errlen, "unknown setting \"%s\"", item->string);
+    if (!d) {
+        snprintf(err, errlen, "unknown setting \"%.60s\"", item->string);
         return -1;
     }
-    cJSON *one = cJSON_CreateObject();
-    cJSON_AddItemToObject(one, item->string, cJSON_Duplicate(item, 1));
     struct ctl_error e;
-    struct ocean_params np;
-    int rc = control_apply_params(one, p, NULL, &np, NULL, &e);
-    cJSON_Delete(one);
-    if (rc) {
+    if (control_set_json(base, d, item, &e) != 0) {
         snprintf(err, errlen, "%s", e.message);
         return -1;
     }
-    *p = np;
     return 0;
 }
 
+/* Flags are parsed by hand, not with getopt_long: its option list would be
+ * built from both tables at run time, and it does not take --wind_speed and
+ * --wind-speed alike. "--name" -> "name", dashes to underscores, up to '='. */
 static void norm_name(char *dst, size_t n, const char *src)
 {
     size_t i = 0;
@@ -176,11 +126,11 @@ void config_usage(FILE *out, const char *argv0)
         for (char *c = n; *c; c++)
             if (*c == '_')
                 *c = '-';
-        fprintf(out, "  --%s (default \"%s\")\n      %s\n", n, opt_table[i].def, opt_table[i].help);
+        char def[64];
+        setting_default_text(&opt_table[i], def, sizeof def);
+        fprintf(out, "  --%s (default \"%s\")\n      %s\n", n, def, opt_table[i].description);
     }
     fprintf(out, "\nSea parameters (also settable live with a JSON `set`):\n");
-    struct ocean_params defs;
-    params_defaults(&defs);
     for (size_t i = 0; i < param_count; i++) {
         const struct param_def *d = &param_table[i];
         char n[64], range[160] = "";
@@ -198,47 +148,87 @@ void config_usage(FILE *out, const char *argv0)
             snprintf(range, sizeof range, "%g..%g%s%s%s", d->min, d->max, d->unit && *d->unit ? " " : "",
                      d->unit ? d->unit : "", (d->flags & PARAM_POW2) ? ", power of two" : "");
         }
-        double v = param_get(&defs, d);
         char def[64];
-        if (d->type == PARAM_ENUM)
-            snprintf(def, sizeof def, "%s", param_enum_name(d, (int)v) ? param_enum_name(d, (int)v) : "?");
-        else if (d->type == PARAM_BOOL)
-            snprintf(def, sizeof def, "%s", v ? "true" : "false");
-        else
-            snprintf(def, sizeof def, "%g", v);
+        setting_default_text(d, def, sizeof def);
         fprintf(out, "  --%s (%s, default %s)\n      %s\n", n, range, def, d->description ? d->description : "");
     }
     fprintf(out, "\n  -h, --help  this text\n");
 }
 
-static int read_file(const char *path, char **text, size_t *len, char *err, size_t errlen)
+/* Hand-written: none of the libraries we link reads a file (cJSON parses
+ * text only), and the checks below are the point. */
+int config_read_file(const char *path, size_t max, char **text, size_t *len, char *err, size_t errlen)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        snprintf(err, errlen, "%s: %s", path, strerror(errno));
+    /* O_NONBLOCK: opening a FIFO for reading would otherwise wait for a
+     * writer forever; for a regular file the flag changes nothing. */
+    int fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY);
+    if (fd < 0) {
+        int e = errno;
+        snprintf(err, errlen, "%s: %s", path, strerror(e));
+        errno = e;
         return -1;
     }
-    size_t cap = 1 << 16, n = 0;
-    char *buf = malloc(cap);
-    size_t r;
-    while (buf && (r = fread(buf + n, 1, cap - n, f)) > 0) {
-        n += r;
-        if (n == cap) {
-            if (cap >= (1u << 24))
-                break;
-            char *nb = realloc(buf, cap *= 2);
-            if (!nb) {
-                free(buf);
-                buf = NULL;
-            }
-            buf = nb;
-        }
+    struct stat st;
+    if (fstat(fd, &st) != 0) {
+        snprintf(err, errlen, "%s: %s", path, strerror(errno));
+        close(fd);
+        return -1;
     }
-    fclose(f);
+    if (!S_ISREG(st.st_mode)) {
+        const char *kind = S_ISFIFO(st.st_mode) ? "a FIFO" : S_ISDIR(st.st_mode) ? "a directory"
+                         : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device"
+                         : S_ISSOCK(st.st_mode) ? "a socket" : "not a plain file";
+        snprintf(err, errlen, "%s: not a regular file (%s)", path, kind);
+        close(fd);
+        return -2;
+    }
+    if ((uintmax_t)st.st_size > max) {
+        snprintf(err, errlen, "%s: %jd bytes, more than the %zu bytes (%zu MiB) allowed; refusing it",
+                 path, (intmax_t)st.st_size, max, max >> 20);
+        close(fd);
+        return -1;
+    }
+    /* One byte more than the size, to see a file that grew meanwhile. */
+    size_t cap = (size_t)st.st_size + 1, n = 0;
+    char *buf = malloc(cap + 1);
     if (!buf) {
         snprintf(err, errlen, "%s: out of memory", path);
+        close(fd);
         return -1;
     }
+    for (;;) {
+        ssize_t r = read(fd, buf + n, cap - n);
+        if (r < 0 && errno == EINTR)
+            continue;
+        if (r < 0) {
+            snprintf(err, errlen, "%s: %s", path, strerror(errno));
+            free(buf);
+            close(fd);
+            return -1;
+        }
+        if (r == 0)
+            break;
+        n += (size_t)r;
+        if (n == cap) {
+            if (n > max) {
+                snprintf(err, errlen, "%s: more than the %zu bytes allowed (it grew while read); refusing it", path, max);
+                free(buf);
+                close(fd);
+                return -1;
+            }
+            char *nb = realloc(buf, 2 * cap + 1);
+            if (!nb) {
+                snprintf(err, errlen, "%s: out of memory", path);
+                free(buf);
+                close(fd);
+                return -1;
+            }
+            buf = nb;
+            cap *= 2;
+        }
+    }
+    close(fd);
+    buf[n] = '\0';
     *text = buf;
     *len = n;
     return 0;
@@ -354,6 +344,8 @@ int config_default_memory_mb(void)
     double mb = total / 4.0 / 1048576.0;
     return mb < 256 ? 256 : mb > (1 << 20) ? (1 << 20) : (int)mb;
 }
+/* A config file larger than this is refused, not truncated. */
+#define CONFIG_MAX_BYTES (16u << 20)
 
 int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_params *p,
                 struct config_result *res, char *err, size_t errlen)
@@ -362,8 +354,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
     memset(res, 0, sizeof *res);
     params_defaults(p);
     for (size_t i = 0; i < opt_count; i++)
-        if (opt_set_text(dc, &opt_table[i], opt_table[i].def, err, errlen) != 0)
-            return -1;
+        setting_set_default(dc, &opt_table[i]);
     dc->tile_size = 128; /* tiles are min(128, N): meets the 6.5 bits/sample target at N=256, encodes faster than 64 */
 
     /* Pass 1: --help, --config and --state-file decide what else to read. */
@@ -393,7 +384,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
     if (config_path) {
         char *text;
         size_t len;
-        if (read_file(config_path, &text, &len, err, errlen) != 0)
+        if (config_read_file(config_path, CONFIG_MAX_BYTES, &text, &len, err, errlen) != 0)
             return -1;
         cfg = parse_config_text(text, len, config_path, err, errlen);
         free(text);
@@ -413,13 +404,27 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         snprintf(dc->state_file, sizeof dc->state_file, "build/oceand-state.json");
 
     int rc = 0;
+    /* The resolution before the saved state, to fall back to if the saved
+     * one does not fit the memory cap that the flags set below. */
+    const int resolution_before_state = p->resolution;
+    bool resolution_from_state = false;
     if (dc->state_file[0]) {
         char serr[256];
         int s = state_load(dc->state_file, p, &res->params_version, &res->sim_time, serr, sizeof serr);
+        if (s == -2) {
+            /* Not something we wrote (a FIFO, a directory...): a misconfigured
+             * path, refused rather than read, waited on, or replaced. */
+            snprintf(err, errlen, "state file %s; choose another --state-file (or \"none\")", serr);
+            cJSON_Delete(cfg);
+            return -1;
+        }
         if (s < 0)
             LOGW("ignoring saved state: %s", serr);  /* a corrupt state file must not stop the daemon */
         res->state_loaded = s > 0;
+        resolution_from_state = s > 0 && p->resolution != resolution_before_state;
     }
+    if (cJSON_GetObjectItemCaseSensitive(cfg, "resolution"))
+        resolution_from_state = false;
     rc = apply_config_object(dc, p, cfg, err, errlen);
     cJSON_Delete(cfg);
     if (rc)
@@ -433,19 +438,21 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         const char *v = flag_value(argc, argv, &i);
         if (strcmp(name, "config") == 0 || strcmp(name, "state_file") == 0)
             continue;
-        const struct opt_def *o = opt_find(name);
-        const struct param_def *d = o ? NULL : param_find(name);
-        if (o) {
-            if (opt_set_text(dc, o, v, err, errlen) != 0)
-                return -1;
-        } else if (d) {
-            char perr[200];
-            if (param_set_text(p, d, v, perr, sizeof perr) != 0) {
-                snprintf(err, errlen, "%s: %s", flag, perr);
-                return -1;
-            }
-        } else {
+        const struct param_def *d = opt_find(name);
+        void *base = dc;
+        if (!d) {
+            d = param_find(name);
+            base = p;
+        }
+        if (!d) {
             snprintf(err, errlen, "unknown option %s (see --help)", flag);
+            return -1;
+        }
+        if (base == p && strcmp(d->name, "resolution") == 0)
+            resolution_from_state = false;
+        char perr[200];
+        if (setting_set_text(base, d, v, perr, sizeof perr) != PARAM_OK) {
+            snprintf(err, errlen, "--%s: %s", name, perr);
             return -1;
         }
     }
@@ -465,6 +472,16 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
     if (params_validate(p, verr, sizeof verr) != 0) {
         snprintf(err, errlen, "parameters: %s", verr);
         return -1;
+    }
+    if (!control_fits_memory(p->resolution, dc->max_memory_mb) && resolution_from_state) {
+        /* Like every other bad saved value: warn and fall back. */
+        LOGW("ignoring the saved resolution %d: it exceeds --max-memory-mb %d; using %d", p->resolution,
+             dc->max_memory_mb, resolution_before_state);
+        p->resolution = resolution_before_state;
+        if (params_validate(p, verr, sizeof verr) != 0) {
+            snprintf(err, errlen, "parameters: %s", verr);
+            return -1;
+        }
     }
     if (!control_fits_memory(p->resolution, dc->max_memory_mb)) {
         snprintf(err, errlen, "resolution %d exceeds --max-memory-mb %d", p->resolution, dc->max_memory_mb);

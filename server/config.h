@@ -2,8 +2,8 @@
  *
  * Precedence, lowest first: built-in defaults <- saved state file <-
  * --config FILE (JSON) <- command-line flags. Sea parameters come from the
- * params table (server/params.h); daemon options from the small table in
- * config.c. Both are accepted in the config file and as flags, e.g.
+ * params table (server/sim/include/params.h); daemon options from the table
+ * of the same shape in config.c, checked by the same setters. Both are accepted in the config file and as flags, e.g.
  * --wind-speed 20 or --wind_speed=20, --port 9000. */
 #ifndef OCEAND_CONFIG_H
 #define OCEAND_CONFIG_H
@@ -20,7 +20,7 @@ struct daemon_config {
     char   bind[64];
     char   web_root[512];
     double tick_rate;
-    int    log_level;          /* enum log_level */
+    int    log_level;          /* enum log_level (an ENUM setting: stored as int) */
     char   state_file[512];    /* "" = do not save state */
     char   config_file[512];
     int    max_clients;
@@ -64,5 +64,11 @@ void config_usage(FILE *out, const char *argv0);
 /* The default --max-memory-mb: a quarter of MemTotal or of the cgroup's
  * memory limit, whichever is lower, at least 256. */
 int config_default_memory_mb(void);
+/* Read a whole regular file of at most max bytes into a malloc'd,
+ * NUL-terminated *text (free()). Returns 0; -1 with a message in err (errno
+ * kept: ENOENT for a missing file; a larger file is refused, never cut);
+ * -2 when path is not a regular file (a FIFO, directory, device), refused
+ * at once without reading or blocking. Used for the config and state files. */
+int config_read_file(const char *path, size_t max, char **text, size_t *len, char *err, size_t errlen);
 
 #endif

@@ -2,13 +2,29 @@
  * See control.h; the wire contract is proto/PROTOCOL.md. */
 #include "control.h"
 
+#include <ctype.h>
+#include <inttypes.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "oc_proto.h"
 #include "ocean.h"
+
+/* The library's field numbering is the wire's (frames carry ocean_field
+ * values as oc_field ids), and so are the LOD limit and the mask width.
+ * Checked here, the one daemon file that sees both headers: the library may
+ * not include protocol headers. */
+#define SAME_NUMBER(a, b) ((int)(a) == (int)(b))
+_Static_assert(SAME_NUMBER(OCEAN_HEIGHT, OC_FIELD_HEIGHT) && SAME_NUMBER(OCEAN_DX, OC_FIELD_DX) &&
+                   SAME_NUMBER(OCEAN_DZ, OC_FIELD_DZ) && SAME_NUMBER(OCEAN_SLOPE_X, OC_FIELD_SLOPE_X) &&
+                   SAME_NUMBER(OCEAN_SLOPE_Z, OC_FIELD_SLOPE_Z) && SAME_NUMBER(OCEAN_JACOBIAN, OC_FIELD_JACOBIAN),
+               "ocean_field and oc_field must number the fields alike");
+_Static_assert(SAME_NUMBER(OCEAN_FIELD_COUNT, OC_FIELD_COUNT), "ocean_field and oc_field must have the same fields");
+_Static_assert(CTL_MAX_LOD == OC_MAX_LOD, "CTL_MAX_LOD must be the wire's OC_MAX_LOD");
+_Static_assert(PARAM_COUNT <= 64, "the `changed` masks (uint64_t) have one bit per parameter");
 
 const float ctl_bounds[CTL_BOUND_COUNT] = { 0.0f, 0.001f, 0.005f, 0.01f, 0.05f };
 
@@ -40,11 +56,7 @@ static bool is_scalar(const cJSON *j)
     return cJSON_IsString(j) || cJSON_IsNumber(j) || cJSON_IsBool(j) || cJSON_IsNull(j);
 }
 
-static bool is_hex(char c)
-{
-    return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f') || (c >= 'A' && c <= 'F');
-}
-
+/* JSON's four blanks (RFC 8259), not isspace(): that also takes \v and \f. */
 static bool is_json_space(char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; }
 
 /* What cJSON 1.7 lets through but RFC 8259 (or we) do not: raw control bytes
@@ -63,7 +75,8 @@ static int prescan(const char *text, size_t len, struct ctl_error *e)
         if (i + 1 < len && text[i + 1] == 'u') {
             if (i + 6 > len)
                 return fail(e, "bad_json", NULL, "truncated \\u escape at offset %zu", i);
-            if (!is_hex(text[i + 2]) || !is_hex(text[i + 3]) || !is_hex(text[i + 4]) || !is_hex(text[i + 5]))
+            if (!isxdigit((unsigned char)text[i + 2]) || !isxdigit((unsigned char)text[i + 3]) ||
+                !isxdigit((unsigned char)text[i + 4]) || !isxdigit((unsigned char)text[i + 5]))
                 return fail(e, "bad_json", NULL, "invalid \\u escape at offset %zu", i);
             if (memcmp(text + i + 2, "0000", 4) == 0)
                 return fail(e, "bad_json", NULL, "\\u0000 (NUL) in a string is not accepted");
@@ -73,6 +86,15 @@ static int prescan(const char *text, size_t len, struct ctl_error *e)
         }
     }
     return 0;
+}
+
+/* Whether the id prints in at most CTL_MAX_ID_BYTES. cJSON prints into our
+ * stack buffer and fails when it does not fit (it wants 5 spare bytes), so
+ * a huge id costs no allocation. */
+static bool id_fits(const cJSON *id)
+{
+    char buf[CTL_MAX_ID_BYTES + 6];
+    return cJSON_PrintPreallocated((cJSON *)id, buf, (int)sizeof buf, 0) && strlen(buf) <= CTL_MAX_ID_BYTES;
 }
 
 int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_out, struct ctl_error *e)
@@ -104,6 +126,11 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
     if (id && !is_scalar(id)) {
         cJSON_Delete(root);
         return fail(e, "bad_message", NULL, "\"id\" must be a JSON scalar");
+    }
+    if (id && !id_fits(id)) {
+        /* Not echoed: the cap exists so that replies stay small. */
+        cJSON_Delete(root);
+        return fail(e, "bad_message", NULL, "\"id\" longer than %d bytes of JSON", CTL_MAX_ID_BYTES);
     }
     const cJSON *type = cJSON_GetObjectItemCaseSensitive(root, "type");
     const char *ts = cJSON_GetStringValue(type);
@@ -162,52 +189,51 @@ bool control_fits_memory(int n, int max_memory_mb)
     return bytes <= (double)max_memory_mb * 1048576.0;
 }
 
-static bool is_pow2(double v)
+const char *control_error_code(enum param_error r)
 {
-    long n = (long)v;
-    return n > 0 && (n & (n - 1)) == 0;
+    switch (r) {
+    case PARAM_OK: break;
+    case PARAM_ERR_UNKNOWN: return "unknown_param";
+    case PARAM_ERR_TYPE:
+    case PARAM_ERR_NOT_FINITE:
+    case PARAM_ERR_NOT_INTEGER: return "bad_type";
+    case PARAM_ERR_RANGE:
+    case PARAM_ERR_NOT_POW2:
+    case PARAM_ERR_BAD_ENUM:
+    case PARAM_ERR_TOO_LONG: return "out_of_range";
+    case PARAM_ERR_INVALID: return "invalid";
+    }
+    return "internal";
 }
 
-/* Check one member against its table entry and store it into *p. */
-static int apply_one(const cJSON *item, const struct param_def *d, struct ocean_params *p, struct ctl_error *e)
+int control_set_json(void *base, const struct param_def *d, const cJSON *item, struct ctl_error *e)
 {
-    char err[160];
-    double v;
+    char err[sizeof e->message];
+    enum param_error r;
+    /* Only the JSON type is checked here; the value is params.c's business. */
     switch (d->type) {
     case PARAM_INT:
     case PARAM_FLOAT:
         if (!cJSON_IsNumber(item))
             return fail(e, "bad_type", d->name, "%s must be a number", d->name);
-        v = item->valuedouble;
-        if (!isfinite(v))
-            return fail(e, "bad_type", d->name, "%s must be finite", d->name);
-        if (d->type == PARAM_INT && v != floor(v))
-            return fail(e, "bad_type", d->name, "%s must be a whole number", d->name);
-        if (v < d->min || v > d->max)
-            return fail(e, "out_of_range", d->name, "%s = %g is outside %g..%g", d->name, v, d->min, d->max);
-        if ((d->flags & PARAM_POW2) && !is_pow2(v))
-            return fail(e, "out_of_range", d->name, "%s = %g is not a power of two", d->name, v);
+        r = setting_set_number(base, d, item->valuedouble, err, sizeof err);
         break;
-    case PARAM_ENUM: {
-        const char *s = cJSON_GetStringValue(item);
-        if (!s)
+    case PARAM_ENUM:
+    case PARAM_STRING:
+        if (!cJSON_IsString(item))
             return fail(e, "bad_type", d->name, "%s must be a string", d->name);
-        int idx = param_enum_index(d, s);
-        if (idx < 0)
-            return fail(e, "out_of_range", d->name, "%s: unknown choice \"%.40s\"", d->name, s);
-        v = idx;
+        r = setting_set_text(base, d, item->valuestring, err, sizeof err);
         break;
-    }
     case PARAM_BOOL:
         if (!cJSON_IsBool(item))
             return fail(e, "bad_type", d->name, "%s must be true or false", d->name);
-        v = cJSON_IsTrue(item) ? 1 : 0;
+        r = setting_set_number(base, d, cJSON_IsTrue(item) ? 1 : 0, err, sizeof err);
         break;
     default:
         return fail(e, "internal", d->name, "unknown parameter type");
     }
-    if (param_set(p, d, v, err, sizeof err) != 0)
-        return fail(e, "out_of_range", d->name, "%s", err);
+    if (r != PARAM_OK)
+        return fail(e, control_error_code(r), d->name, "%s", err);
     return 0;
 }
 
@@ -223,7 +249,9 @@ int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const
         if (!d)
             return fail(e, "unknown_param", item->string, "unknown parameter \"%.40s\"",
                         item->string ? item->string : "");
-        if (apply_one(item, d, &p, e) != 0)
+        if (!(d->flags & PARAM_LIVE))
+            return fail(e, "invalid", d->name, "%s is read at start-up only", d->name);
+        if (control_set_json(&p, d, item, e) != 0)
             return -1;
     }
     char err[160];
@@ -233,7 +261,7 @@ int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const
         return fail(e, "invalid", "resolution", "resolution %d exceeds the memory cap of %d MB",
                     p.resolution, lim->max_memory_mb);
     uint64_t mask = 0;
-    for (size_t i = 0; i < param_count && i < 64; i++)
+    for (size_t i = 0; i < param_count; i++)
         if (param_get(&p, &param_table[i]) != param_get(cur, &param_table[i]))
             mask |= 1ull << i;
     *out = p;
@@ -284,6 +312,15 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
         if (!cJSON_IsNumber(j) || !isfinite(j->valuedouble) || j->valuedouble <= 0)
             return fail(e, "bad_subscription", NULL, "\"max_rate\" must be a positive number");
         tmp.max_rate = j->valuedouble > lim->tick_rate ? lim->tick_rate : j->valuedouble;
+    }
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "codec"))) {
+        /* One encoding per layer is shared by every client, so a client
+         * cannot pick the entropy coder: codec 1 is the only one to ask for
+         * (codec 0 comes with bound 0); zstd (2) is refused, not ignored. */
+        if (!cJSON_IsNumber(j) || j->valuedouble != 1)
+            return fail(e, "bad_subscription", NULL,
+                        "\"codec\": only 1 (DEFLATE) can be asked for; raw float32 is \"bound\":0, "
+                        "and this server does not send codec 2 (zstd)");
     }
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "tiles"))) {
         const char *s = cJSON_GetStringValue(j);
@@ -435,7 +472,7 @@ cJSON *control_params_msg(const struct ocean_params *p, uint32_t version, uint64
     cJSON_AddItemToObject(o, "params", control_params_object(p));
     cJSON_AddNumberToObject(o, "params_version", version);
     cJSON *c = cJSON_AddArrayToObject(o, "changed");
-    for (size_t i = 0; i < param_count && i < 64; i++)
+    for (size_t i = 0; i < param_count; i++)
         if (changed & (1ull << i))
             cJSON_AddItemToArray(c, cJSON_CreateString(param_table[i].name));
     if (by)
@@ -460,7 +497,11 @@ cJSON *control_pong_msg(const cJSON *id, bool has_t, double t, uint64_t server_t
     add_id(o, id);
     if (has_t)
         cJSON_AddNumberToObject(o, "t", t);
-    cJSON_AddNumberToObject(o, "server_time_us", (double)server_time_us);
+    /* An exact integer, never "1.7637192001234e+15": cJSON prints numbers
+     * as doubles (%.15g/%.17g), so print it ourselves and add it raw. */
+    char us[24];
+    snprintf(us, sizeof us, "%" PRIu64, server_time_us);
+    cJSON_AddRawToObject(o, "server_time_us", us);
     return o;
 }
 
@@ -534,7 +575,9 @@ cJSON *control_capacity_object(const struct capacity_info *c)
 bool control_token_equal(const char *given, const char *secret)
 {
     /* Constant time in the content: always walk the whole secret, never stop
-     * at the first difference (only the secret's length shows in the timing). */
+     * at the first difference (only the secret's length shows in the timing).
+     * Hand-written: OpenSSL's CRYPTO_memcmp does this, but the daemon does not
+     * link libcrypto itself (only libwebsockets may, and only with TLS built in). */
     size_t lg = strlen(given), ls = strlen(secret);
     unsigned char diff = (unsigned char)(lg != ls);
     for (size_t i = 0; i < ls; i++)

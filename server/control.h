@@ -16,7 +16,8 @@
 #define CTL_MAX_TILES 1024            /* 32 x 32: tile coordinates are 0..31 (no duplicates kept) */
 #define CTL_BOUND_COUNT 5
 extern const float ctl_bounds[CTL_BOUND_COUNT]; /* 0 = lossless, then lossy bounds (m) */
-#define CTL_MAX_LOD 4
+#define CTL_MAX_LOD 4                 /* = OC_MAX_LOD (checked in control.c) */
+#define CTL_MAX_ID_BYTES 256          /* a request "id" longer than this, as JSON, is bad_message */
 
 /* One error reply: code from the spec, human message, parameter at fault. */
 struct ctl_error {
@@ -69,6 +70,16 @@ void ctl_msg_free(struct ctl_msg *m);
  * *changed = bit i set for param_table[i] whose value differs. */
 int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const struct ctl_limits *lim,
                          struct ocean_params *out, uint64_t *changed, struct ctl_error *e);
+
+/* One JSON value onto one setting of either table (a sea parameter, or a
+ * daemon option of server/config.c), base being the struct the table's
+ * offsets point into. Only the JSON type is checked here (numbers for int
+ * and float, strings for enum and string, booleans for bool); the value is
+ * checked by params.c's setters. Returns 0, or -1 with e filled and *base
+ * unchanged. */
+int control_set_json(void *base, const struct param_def *d, const cJSON *item, struct ctl_error *e);
+/* The wire error code (PROTOCOL.md §7.2) of a params.c refusal. */
+const char *control_error_code(enum param_error r);
 
 /* Merge the members of a "subscribe" message onto *cur into *out. */
 int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, const struct ctl_limits *lim,

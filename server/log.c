@@ -9,18 +9,18 @@
 #include <time.h>
 #include <unistd.h>
 
-static enum log_level current = LOG_INFO;
-static const char *const names[] = { "error", "warn", "info", "debug" };
+static enum log_level current = OLOG_INFO;
+const char *const log_level_names[] = { "error", "warn", "info", "debug", NULL };
 
 int log_level_from_name(const char *name)
 {
     for (int i = 0; i < 4; i++)
-        if (strcmp(name, names[i]) == 0)
+        if (strcmp(name, log_level_names[i]) == 0)
             return i;
     return -1;
 }
 
-const char *log_level_name(enum log_level l) { return names[l]; }
+const char *log_level_name(enum log_level l) { return log_level_names[l]; }
 void log_set_level(enum log_level l) { current = l; }
 enum log_level log_get_level(void) { return current; }
 
@@ -31,8 +31,9 @@ static void vlog(enum log_level l, const char *prefix, const char *fmt, va_list 
     struct tm tm;
     clock_gettime(CLOCK_REALTIME, &ts);
     gmtime_r(&ts.tv_sec, &tm);
-    int n = snprintf(line, sizeof line, "%02d:%02d:%02d.%03ld %-5s %s", tm.tm_hour, tm.tm_min,
-                     tm.tm_sec, ts.tv_nsec / 1000000, names[l], prefix);
+    char hms[16];
+    strftime(hms, sizeof hms, "%H:%M:%S", &tm);
+    int n = snprintf(line, sizeof line, "%s.%03ld %-5s %s", hms, ts.tv_nsec / 1000000, log_level_names[l], prefix);
     if (n < 0 || (size_t)n >= sizeof line)
         return;
     int m = vsnprintf(line + n, sizeof line - (size_t)n, fmt, ap);
@@ -58,8 +59,8 @@ void log_msg(enum log_level l, const char *fmt, ...)
 
 static void lws_emit(int lws_level, const char *line)
 {
-    enum log_level l = lws_level == LLL_ERR ? LOG_ERROR : lws_level == LLL_WARN ? LOG_WARN
-                     : lws_level == LLL_NOTICE ? LOG_INFO : LOG_DEBUG;
+    enum log_level l = lws_level == LLL_ERR ? OLOG_ERROR : lws_level == LLL_WARN ? OLOG_WARN
+                     : lws_level == LLL_NOTICE ? OLOG_INFO : OLOG_DEBUG;
     log_msg(l, "lws: %s", line);
 }
 
@@ -67,9 +68,9 @@ void log_route_lws(void)
 {
     /* lws is chatty at NOTICE; keep it quiet unless we are debugging. */
     int mask = LLL_ERR;
-    if (current >= LOG_WARN)
+    if (current >= OLOG_WARN)
         mask |= LLL_WARN;
-    if (current >= LOG_DEBUG)
+    if (current >= OLOG_DEBUG)
         mask |= LLL_NOTICE | LLL_INFO;
     lws_set_log_level(mask, lws_emit);
 }

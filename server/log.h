@@ -3,7 +3,11 @@
 #ifndef OCEAND_LOG_H
 #define OCEAND_LOG_H
 
-enum log_level { LOG_ERROR, LOG_WARN, LOG_INFO, LOG_DEBUG };
+/* OLOG_, not LOG_: <syslog.h> defines LOG_INFO and LOG_DEBUG as macros. */
+enum log_level { OLOG_ERROR, OLOG_WARN, OLOG_INFO, OLOG_DEBUG };
+/* "error", "warn", "info", "debug", NULL: indexed by enum log_level (the
+ * choices of the log_level option). */
+extern const char *const log_level_names[];
 
 /* Parse "error", "warn", "info", "debug"; -1 if unknown. */
 int  log_level_from_name(const char *name);
@@ -14,9 +18,9 @@ enum log_level log_get_level(void);
 void log_route_lws(void);
 
 void log_msg(enum log_level l, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-#define LOGE(...) log_msg(LOG_ERROR, __VA_ARGS__)
-#define LOGW(...) log_msg(LOG_WARN, __VA_ARGS__)
-#define LOGI(...) log_msg(LOG_INFO, __VA_ARGS__)
-#define LOGD(...) log_msg(LOG_DEBUG, __VA_ARGS__)
+#define LOGE(...) log_msg(OLOG_ERROR, __VA_ARGS__)
+#define LOGW(...) log_msg(OLOG_WARN, __VA_ARGS__)
+#define LOGI(...) log_msg(OLOG_INFO, __VA_ARGS__)
+#define LOGD(...) log_msg(OLOG_DEBUG, __VA_ARGS__)
 
 #endif

@@ -29,6 +29,16 @@ static void on_signal(int sig)
     alarm(3);
 }
 
+/* SIGHUP: save the state now (a daemon's usual "hang-up" duty). The
+ * configuration is read at start-up only, so it is not reloaded. */
+static volatile sig_atomic_t hangup;
+
+static void on_hangup(int sig)
+{
+    (void)sig;
+    hangup = 1;
+}
+
 /* mkdir -p of the folder that will hold path. */
 static int ensure_parent_dir(const char *path)
 {
@@ -112,6 +122,8 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
+    sa.sa_handler = on_hangup;
+    sigaction(SIGHUP, &sa, NULL);
 
     LOGI("oceand listening on %s://%s:%d/ (N=%d, %g Hz, web root %s)", dc.tls_cert[0] ? "https" : "http", dc.bind, net_port(net),
          params.resolution, dc.tick_rate, dc.web_root);
@@ -120,6 +132,11 @@ int main(int argc, char **argv)
     while (!interrupted) {
         if (net_service(net) < 0)
             break;
+        if (hangup) {
+            hangup = 0;
+            LOGI("SIGHUP: saving the state; the configuration is not reloaded (restart to apply it)");
+            state_saver_flush(&saver, sim_time_now(sim), true);
+        }
         state_saver_flush(&saver, sim_time_now(sim), false);
     }
 

@@ -39,7 +39,11 @@ struct sim {
     atomic_bool stop;             /* sim_stop writes; tick and builder read */
     int test_fail_seed;           /* sim_start writes (OCEAND_TEST_FAIL_BUILD_SEED, -1 = none); builder reads */
 
-    struct ocean *ocean;          /* tick only, and the producer's while prod_busy (handed over under lock) */
+    struct ocean *ocean;          /* sim_start writes the pointer, never changed after; the producer steps
+                                   * it while prod_busy/prod_has_job, the tick commits into it only while
+                                   * the producer is idle (handed over under the lock); the builder runs
+                                   * ocean_prepare against it (allowed while it is stepped, ocean.h),
+                                   * never while a commit runs (ready_full is cleared after the commit) */
     struct ocean_params params;   /* tick only: the parameters in force */
     uint32_t version;             /* tick only: params_version in force */
     double sim_time;              /* tick only: the clock (copied to now_time) */

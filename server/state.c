@@ -5,12 +5,16 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
+#include "config.h"
 #include "control.h"
+#include "log.h"
+#include "ocean.h"
 
 int state_save(const char *path, const struct ocean_params *p, uint32_t version, double sim_time,
                char *err, size_t errlen)
@@ -61,26 +65,34 @@ int state_save(const char *path, const struct ocean_params *p, uint32_t version,
     return rc;
 }
 
+/* A state file is about 1 KB; anything near this is not ours. */
+#define STATE_MAX_BYTES (1u << 20)
+
 int state_load(const char *path, struct ocean_params *p, uint32_t *version, double *sim_time,
                char *err, size_t errlen)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        if (errno == ENOENT)
-            return 0;
-        snprintf(err, errlen, "%s: %s", path, strerror(errno));
-        return -1;
-    }
-    char buf[16384];
-    size_t len = fread(buf, 1, sizeof buf, f);
-    fclose(f);
-    cJSON *root = cJSON_ParseWithLength(buf, len);
+    char *buf;
+    size_t len;
+    int rc = config_read_file(path, STATE_MAX_BYTES, &buf, &len, err, errlen);
+    if (rc == -1 && errno == ENOENT)
+        return 0;
+    if (rc != 0)
+        return rc;
+    const char *end = NULL;
+    cJSON *root = cJSON_ParseWithLengthOpts(buf, len, &end, 0);
     const cJSON *params = cJSON_GetObjectItemCaseSensitive(root, "params");
     if (!cJSON_IsObject(params)) {
         snprintf(err, errlen, "%s: not a state file (no \"params\" object)", path);
         cJSON_Delete(root);
+        free(buf);
         return -1;
     }
+    /* We write one object and a newline: anything else after it was added. */
+    while (end && end < buf + len && (*end == ' ' || *end == '\t' || *end == '\n' || *end == '\r'))
+        end++;
+    if (end && end < buf + len)
+        LOGW("%s: %zu bytes of trailing data after the state object; ignored", path, (size_t)(buf + len - end));
+    free(buf);
     struct ctl_error e;
     struct ocean_params np;
     if (control_apply_params(params, p, NULL, &np, NULL, &e) != 0) {
@@ -89,12 +101,26 @@ int state_load(const char *path, struct ocean_params *p, uint32_t *version, doub
         return -1;
     }
     *p = np;
+    /* Versions count changes from 0; the next change must still fit a u32. */
     const cJSON *v = cJSON_GetObjectItemCaseSensitive(root, "params_version");
+    uint32_t ver = 0;
+    if (cJSON_IsNumber(v) && v->valuedouble >= 0 && v->valuedouble < (double)UINT32_MAX &&
+        v->valuedouble == floor(v->valuedouble))
+        ver = (uint32_t)v->valuedouble;
+    else if (v)
+        LOGW("%s: params_version is not a whole number in 0..%u; starting from 0", path, UINT32_MAX - 1);
     if (version)
-        *version = cJSON_IsNumber(v) && v->valuedouble >= 0 && v->valuedouble < 4e9 ? (uint32_t)v->valuedouble : 0;
+        *version = ver;
+    /* Phases are accurate up to OCEAN_TIME_MAX (ocean.h); beyond it the sea
+     * would freeze or blow up, so a saved time outside is not used. */
     const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "sim_time");
+    double st = 0;
+    if (cJSON_IsNumber(t) && t->valuedouble >= 0 && t->valuedouble <= OCEAN_TIME_MAX)
+        st = t->valuedouble;
+    else if (t)
+        LOGW("%s: sim_time is not a number in [0, %.0f] s; starting from 0", path, OCEAN_TIME_MAX);
     if (sim_time)
-        *sim_time = cJSON_IsNumber(t) && isfinite(t->valuedouble) && t->valuedouble >= 0 ? t->valuedouble : 0;
+        *sim_time = st;
     cJSON_Delete(root);
     return 1;
 }

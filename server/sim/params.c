@@ -17,66 +17,66 @@
 static const char *const spectrum_names[] = {"phillips", "pierson_moskowitz", "jonswap", "tma", NULL};
 static const char *const transform_names[] = {"fft", "dft", NULL};
 
-#define OFF(f) offsetof(struct ocean_params, f)
+/* Every sea parameter may change live (a JSON `set`). */
+#define P(name_, type_, unit_, min_, max_, def_, choices_, desc_, field_, flags_)                         \
+    { .name = name_, .type = type_, .unit = unit_, .min = min_, .max = max_, .def = def_,               \
+      .choices = choices_, .description = desc_, .offset = offsetof(struct ocean_params, field_),        \
+      .flags = (flags_) | PARAM_LIVE }
 
 /* Largest N for transform=dft: the brute-force sum costs 8*N^4 complex
  * multiply-adds per step (~0.1 s at 64, ~2 s at 128). */
 #define DFT_MAX_N 64
 
 const struct param_def param_table[] = {
-    {"resolution", PARAM_INT, "", 16, 2048, 256, NULL,
-     "grid samples per side N (power of two); changing it re-plans the FFT", OFF(resolution),
-     PARAM_POW2 | PARAM_REPLAN},
-    {"patch_size", PARAM_FLOAT, "m", 1, 10000, 256, NULL,
-     "side L of the periodic square patch", OFF(patch_size), 0},
-    {"wind_speed", PARAM_FLOAT, "m/s", 0, 40, 10, NULL,
-     "wind speed U10, 10 m above the sea", OFF(wind_speed), 0},
-    {"wind_direction", PARAM_FLOAT, "deg", -360, 360, 0, NULL,
-     "direction the wind blows toward: 0 = +x, 90 = +z", OFF(wind_direction), 0},
-    {"amplitude", PARAM_FLOAT, "", 0, 10, 1, NULL,
-     "multiplier of the spectrum (wave heights scale with its square root)", OFF(amplitude), 0},
-    {"spectrum", PARAM_ENUM, "", 0, 3, SPECTRUM_JONSWAP, spectrum_names,
+    P("resolution", PARAM_INT, "", 16, 2048, 256, NULL,
+     "grid samples per side N (power of two); changing it re-plans the FFT", resolution,
+     PARAM_POW2 | PARAM_REPLAN),
+    P("patch_size", PARAM_FLOAT, "m", 1, 10000, 256, NULL,
+     "side L of the periodic square patch", patch_size, 0),
+    P("wind_speed", PARAM_FLOAT, "m/s", 0, 40, 10, NULL,
+     "wind speed U10, 10 m above the sea", wind_speed, 0),
+    P("wind_direction", PARAM_FLOAT, "deg", -360, 360, 0, NULL,
+     "direction the wind blows toward: 0 = +x, 90 = +z", wind_direction, 0),
+    P("amplitude", PARAM_FLOAT, "", 0, 10, 1, NULL,
+     "multiplier of the spectrum (wave heights scale with its square root)", amplitude, 0),
+    P("spectrum", PARAM_ENUM, "", 0, 3, SPECTRUM_JONSWAP, spectrum_names,
      "wave spectrum: phillips (Tessendorf), pierson_moskowitz (fully developed), "
      "jonswap (fetch limited), tma (jonswap in finite depth)",
-     OFF(spectrum), 0},
-    {"fetch", PARAM_FLOAT, "km", 0.1, 10000, 100, NULL,
+     spectrum, 0),
+    P("fetch", PARAM_FLOAT, "km", 0.1, 10000, 100, NULL,
      "open water upwind (jonswap, tma); long fetches saturate at the fully developed sea",
-     OFF(fetch), 0},
-    {"depth", PARAM_FLOAT, "m", 0.5, 10000, 1000, NULL,
+     fetch, 0),
+    P("depth", PARAM_FLOAT, "m", 0.5, 10000, 1000, NULL,
      "water depth: dispersion w^2 = g k tanh(k d) and horizontal displacement coth(k d) for all spectra, plus the TMA attenuation",
-     OFF(depth), 0},
-    {"gamma", PARAM_FLOAT, "", 1, 10, 3.3, NULL,
-     "JONSWAP peak enhancement (1 = Pierson-Moskowitz shape)", OFF(gamma), 0},
-    {"directional_spread", PARAM_FLOAT, "", 0, 1, 1, NULL,
+     depth, 0),
+    P("gamma", PARAM_FLOAT, "", 1, 10, 3.3, NULL,
+     "JONSWAP peak enhancement (1 = Pierson-Moskowitz shape)", gamma, 0),
+    P("directional_spread", PARAM_FLOAT, "", 0, 1, 1, NULL,
      "directional spreading: 0 = Tessendorf's cos^2 (up- and downwind), "
      "1 = Mitsuyasu-Hasselmann cos^2s(theta/2) (downwind, narrower near the peak); blends between",
-     OFF(directional_spread), 0},
-    {"swell", PARAM_FLOAT, "", 0, 1, 0, NULL,
-     "swell: longer crests, by narrowing the cos^2s part of the spreading (Horvath 2015)", OFF(swell), 0},
-    {"choppiness", PARAM_FLOAT, "", 0, 4, 1, NULL,
+     directional_spread, 0),
+    P("swell", PARAM_FLOAT, "", 0, 1, 0, NULL,
+     "swell: longer crests, by narrowing the cos^2s part of the spreading (Horvath 2015)", swell, 0),
+    P("choppiness", PARAM_FLOAT, "", 0, 4, 1, NULL,
      "lambda, horizontal displacement scale: > 0 sharpens crests, 0 = plain heights",
-     OFF(choppiness), 0},
-    {"small_wave_cutoff", PARAM_FLOAT, "m", 0, 100, 0.5, NULL,
+     choppiness, 0),
+    P("small_wave_cutoff", PARAM_FLOAT, "m", 0, 100, 0.5, NULL,
      "waves shorter than this wavelength are damped (exp(-(k l / 2 pi)^2))",
-     OFF(small_wave_cutoff), 0},
-    {"loop_period", PARAM_FLOAT, "s", 0, 3600, 0, NULL,
+     small_wave_cutoff, 0),
+    P("loop_period", PARAM_FLOAT, "s", 0, 3600, 0, NULL,
      "the sea repeats exactly after this time (wave frequencies quantised); 0 = never",
-     OFF(loop_period), 0},
-    {"seed", PARAM_INT, "", 0, 2147483647, 1, NULL,
-     "random seed; the same seed gives the same waves at any resolution", OFF(seed), 0},
-    {"transform", PARAM_ENUM, "", 0, 1, TRANSFORM_FFT, transform_names,
-     "fft (FFTW) or dft (the brute-force O(N^4) sum, N <= 64 only)", OFF(transform), 0},
-    {"time_scale", PARAM_FLOAT, "", 0, 16, 1, NULL,
-     "playback speed: simulated seconds per wall-clock second", OFF(time_scale), PARAM_PLAYBACK},
-    {"paused", PARAM_BOOL, "", 0, 1, 0, NULL,
-     "stop the simulation clock", OFF(paused), PARAM_PLAYBACK},
+     loop_period, 0),
+    P("seed", PARAM_INT, "", 0, 2147483647, 1, NULL,
+     "random seed; the same seed gives the same waves at any resolution", seed, 0),
+    P("transform", PARAM_ENUM, "", 0, 1, TRANSFORM_FFT, transform_names,
+     "fft (FFTW) or dft (the brute-force O(N^4) sum, N <= 64 only)", transform, 0),
+    P("time_scale", PARAM_FLOAT, "", 0, 16, 1, NULL,
+     "playback speed: simulated seconds per wall-clock second", time_scale, PARAM_PLAYBACK),
+    P("paused", PARAM_BOOL, "", 0, 1, 0, NULL,
+     "stop the simulation clock", paused, PARAM_PLAYBACK),
 };
 const size_t param_count = sizeof param_table / sizeof param_table[0];
-
-static void *field_ptr(struct ocean_params *p, const struct param_def *d)
-{
-    return (char *)p + d->offset;
-}
+_Static_assert(sizeof param_table / sizeof param_table[0] == PARAM_COUNT, "PARAM_COUNT must match the table");
 
 double param_get(const struct ocean_params *p, const struct param_def *d)
 {
@@ -86,18 +86,32 @@ double param_get(const struct ocean_params *p, const struct param_def *d)
     case PARAM_ENUM: { int v; memcpy(&v, f, sizeof v); return v; }
     case PARAM_BOOL: { bool v; memcpy(&v, f, sizeof v); return v ? 1.0 : 0.0; }
     case PARAM_FLOAT: { double v; memcpy(&v, f, sizeof v); return v; }
+    case PARAM_STRING: break; /* not a number; no sea parameter is a string */
     }
     return 0;
 }
 
-static void store(struct ocean_params *p, const struct param_def *d, double v)
+/* Store an already checked number. */
+static void store(void *base, const struct param_def *d, double v)
 {
-    void *f = field_ptr(p, d);
+    char *f = (char *)base + d->offset;
     switch (d->type) {
     case PARAM_INT:
     case PARAM_ENUM: { int i = (int)v; memcpy(f, &i, sizeof i); break; }
     case PARAM_BOOL: { bool b = v != 0; memcpy(f, &b, sizeof b); break; }
     case PARAM_FLOAT: memcpy(f, &v, sizeof v); break;
+    case PARAM_STRING: break;
+    }
+}
+
+void setting_set_default(void *base, const struct param_def *d)
+{
+    if (d->type == PARAM_STRING) {
+        const char *t = d->def_text ? d->def_text : "";
+        char *f = (char *)base + d->offset;
+        snprintf(f, d->size, "%s", t);
+    } else {
+        store(base, d, d->def);
     }
 }
 
@@ -105,7 +119,7 @@ void params_defaults(struct ocean_params *p)
 {
     memset(p, 0, sizeof *p);
     for (size_t i = 0; i < param_count; i++)
-        store(p, &param_table[i], param_table[i].def);
+        setting_set_default(p, &param_table[i]);
 }
 
 const struct param_def *param_find(const char *name)
@@ -113,50 +127,61 @@ const struct param_def *param_find(const char *name)
     if (!name)
         return NULL;
     for (size_t i = 0; i < param_count; i++)
-        if (strcmp(param_table[i].name, name) == 0)
+        if (param_table[i].name[0] == name[0] && strcmp(param_table[i].name, name) == 0)
             return &param_table[i];
     return NULL;
 }
 
-/* The single-value check shared by param_set and params_validate. */
-static int check_value(const struct param_def *d, double v, char *err, size_t errlen)
+/* The one check of a single value against its row, shared by every setter
+ * and by params_validate: nothing else in the tree re-checks ranges. */
+enum param_error setting_check(const struct param_def *d, double v, char *err, size_t errlen)
 {
+    if (d->type == PARAM_STRING) {
+        snprintf(err, errlen, "%s: needs text, not a number", d->name);
+        return PARAM_ERR_TYPE;
+    }
     if (!isfinite(v)) {
         snprintf(err, errlen, "%s: value must be a finite number", d->name);
-        return -1;
+        return PARAM_ERR_NOT_FINITE;
     }
     if (d->type != PARAM_FLOAT && v != floor(v)) {
-        snprintf(err, errlen, "%s: %g is not a whole number", d->name, v);
-        return -1;
+        snprintf(err, errlen, "%s: %.10g is not a whole number", d->name, v);
+        return PARAM_ERR_NOT_INTEGER;
     }
     if (v < d->min || v > d->max) {
-        if (d->type == PARAM_ENUM)
-            snprintf(err, errlen, "%s: index %g out of range 0..%g", d->name, v, d->max);
-        else
-            snprintf(err, errlen, "%s: %g%s%s out of range [%g, %g]", d->name, v,
-                     *d->unit ? " " : "", d->unit, d->min, d->max);
-        return -1;
+        if (d->type == PARAM_ENUM) {
+            snprintf(err, errlen, "%s: index %.10g out of range 0..%.10g", d->name, v, d->max);
+            return PARAM_ERR_BAD_ENUM;
+        }
+        snprintf(err, errlen, "%s: %.10g%s%s out of range [%.10g, %.10g]", d->name, v,
+                 d->unit && *d->unit ? " " : "", d->unit ? d->unit : "", d->min, d->max);
+        return PARAM_ERR_RANGE;
     }
     if (d->flags & PARAM_POW2) {
         long n = (long)v;
         if (n <= 0 || (n & (n - 1)) != 0) {
             snprintf(err, errlen, "%s: %ld is not a power of two", d->name, n);
-            return -1;
+            return PARAM_ERR_NOT_POW2;
         }
     }
-    return 0;
+    return PARAM_OK;
+}
+
+enum param_error setting_set_number(void *base, const struct param_def *d, double v, char *err, size_t errlen)
+{
+    if (!base || !d) {
+        snprintf(err, errlen, "unknown parameter");
+        return PARAM_ERR_UNKNOWN;
+    }
+    enum param_error rc = setting_check(d, v, err, errlen);
+    if (rc == PARAM_OK)
+        store(base, d, v);
+    return rc;
 }
 
 int param_set(struct ocean_params *p, const struct param_def *d, double v, char *err, size_t errlen)
 {
-    if (!p || !d) {
-        snprintf(err, errlen, "unknown parameter");
-        return -1;
-    }
-    if (check_value(d, v, err, errlen) != 0)
-        return -1;
-    store(p, d, v);
-    return 0;
+    return setting_set_number(p, d, v, err, errlen) == PARAM_OK ? 0 : -1;
 }
 
 const char *param_enum_name(const struct param_def *d, int index)
@@ -179,6 +204,7 @@ int param_enum_index(const struct param_def *d, const char *name)
     return -1;
 }
 
+/* strtod, with surrounding blanks allowed and nothing else after the number. */
 static int parse_number(const char *text, double *v)
 {
     char *end;
@@ -192,42 +218,85 @@ static int parse_number(const char *text, double *v)
     return *end ? -1 : 0;
 }
 
-int param_set_text(struct ocean_params *p, const struct param_def *d, const char *text, char *err,
-                   size_t errlen)
+enum param_error setting_set_text(void *base, const struct param_def *d, const char *text, char *err,
+                                  size_t errlen)
 {
     double v;
-    if (!d || !text) {
+    if (!base || !d || !text) {
         snprintf(err, errlen, "unknown parameter or no value");
-        return -1;
+        return PARAM_ERR_UNKNOWN;
     }
-    if (d->type == PARAM_BOOL) {
+    /* A secret's value never appears in a message. */
+    const char *shown = (d->flags & PARAM_SECRET) ? "(secret)" : text;
+    switch (d->type) {
+    case PARAM_STRING: {
+        size_t len = strlen(text);
+        if (len >= d->size) {
+            snprintf(err, errlen, "%s: value too long (%zu bytes, at most %zu)", d->name, len, d->size - 1);
+            return PARAM_ERR_TOO_LONG;
+        }
+        memcpy((char *)base + d->offset, text, len + 1);
+        return PARAM_OK;
+    }
+    case PARAM_BOOL: {
         static const char *const yes[] = {"true", "1", "yes", "on"}, *const no[] = {"false", "0", "no", "off"};
         for (int i = 0; i < 4; i++) {
             if (strcasecmp(text, yes[i]) == 0)
-                return param_set(p, d, 1, err, errlen);
+                return setting_set_number(base, d, 1, err, errlen);
             if (strcasecmp(text, no[i]) == 0)
-                return param_set(p, d, 0, err, errlen);
+                return setting_set_number(base, d, 0, err, errlen);
         }
-        snprintf(err, errlen, "%s: '%s' is not true or false", d->name, text);
-        return -1;
+        snprintf(err, errlen, "%s: '%.60s' is not true or false", d->name, shown);
+        return PARAM_ERR_TYPE;
     }
-    if (d->type == PARAM_ENUM) {
+    case PARAM_ENUM: {
         int i = param_enum_index(d, text);
         if (i >= 0)
-            return param_set(p, d, i, err, errlen);
+            return setting_set_number(base, d, i, err, errlen);
         char list[256] = "";
-        for (int c = 0; d->choices[c]; c++) {
+        for (int c = 0; d->choices && d->choices[c]; c++) {
             strncat(list, c ? ", " : "", sizeof list - strlen(list) - 1);
             strncat(list, d->choices[c], sizeof list - strlen(list) - 1);
         }
-        snprintf(err, errlen, "%s: '%s' is not one of %s", d->name, text, list);
-        return -1;
+        snprintf(err, errlen, "%s: '%.60s' is not one of %s", d->name, shown, list);
+        return PARAM_ERR_BAD_ENUM;
+    }
+    case PARAM_INT:
+    case PARAM_FLOAT:
+        break;
     }
     if (parse_number(text, &v) != 0) {
-        snprintf(err, errlen, "%s: '%s' is not a number", d->name, text);
-        return -1;
+        snprintf(err, errlen, "%s: '%.60s' is not a number", d->name, shown);
+        return PARAM_ERR_TYPE;
     }
-    return param_set(p, d, v, err, errlen);
+    return setting_set_number(base, d, v, err, errlen);
+}
+
+int param_set_text(struct ocean_params *p, const struct param_def *d, const char *text, char *err,
+                   size_t errlen)
+{
+    return setting_set_text(p, d, text, err, errlen) == PARAM_OK ? 0 : -1;
+}
+
+void setting_default_text(const struct param_def *d, char *buf, size_t len)
+{
+    switch (d->type) {
+    case PARAM_STRING:
+        snprintf(buf, len, "%s", d->def_text ? d->def_text : "");
+        break;
+    case PARAM_ENUM: {
+        const char *n = param_enum_name(d, (int)d->def);
+        snprintf(buf, len, "%s", n ? n : "?");
+        break;
+    }
+    case PARAM_BOOL:
+        snprintf(buf, len, "%s", d->def != 0 ? "true" : "false");
+        break;
+    case PARAM_INT:
+    case PARAM_FLOAT:
+        snprintf(buf, len, "%.10g", d->def);
+        break;
+    }
 }
 
 int params_validate(const struct ocean_params *p, char *err, size_t errlen)
@@ -237,7 +306,7 @@ int params_validate(const struct ocean_params *p, char *err, size_t errlen)
         return -1;
     }
     for (size_t i = 0; i < param_count; i++)
-        if (check_value(&param_table[i], param_get(p, &param_table[i]), err, errlen) != 0)
+        if (setting_check(&param_table[i], param_get(p, &param_table[i]), err, errlen) != PARAM_OK)
             return -1;
     if (p->transform == TRANSFORM_DFT && p->resolution > DFT_MAX_N) {
         snprintf(err, errlen,

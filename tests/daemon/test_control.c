@@ -2,15 +2,21 @@
  * and server/config.c precedence, plus a small fuzz loop: random mutations
  * of valid messages must never crash and must leave the params unchanged
  * unless accepted. Prints "N passed, M failed". */
+#include <fcntl.h>
+#include <inttypes.h>
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "capacity.h"
 #include "config.h"
 #include "control.h"
+#include "log.h"
+#include "oc_proto.h"
 #include "ocean.h"
 #include "state.h"
 
@@ -283,6 +289,365 @@ static void test_state_and_config(void)
     rmdir(dir);
 }
 
+/* ---- stderr capture: the daemon's warnings are part of the contract ---- */
+
+static char captured[16384];
+static int capture_fd = -1, saved_stderr = -1;
+
+static void capture_begin(void)
+{
+    char tmpl[] = "/tmp/oceand-ctl-log-XXXXXX";
+    fflush(stderr);
+    capture_fd = mkstemp(tmpl);
+    unlink(tmpl);
+    saved_stderr = dup(STDERR_FILENO);
+    dup2(capture_fd, STDERR_FILENO);
+}
+
+static const char *capture_end(void)
+{
+    fflush(stderr);
+    dup2(saved_stderr, STDERR_FILENO);
+    close(saved_stderr);
+    lseek(capture_fd, 0, SEEK_SET);
+    ssize_t n = read(capture_fd, captured, sizeof captured - 1);
+    captured[n > 0 ? n : 0] = '\0';
+    close(capture_fd);
+    return captured;
+}
+
+static void write_text(const char *path, const char *text)
+{
+    FILE *f = fopen(path, "w");
+    if (f) {
+        fputs(text, f);
+        fclose(f);
+    }
+}
+
+/* Issue 10: one validation path. The same fault gets the same reason from
+ * the JSON `set`, the config file and the command line, and each reason maps
+ * to one documented wire code. */
+static void test_one_validation_path(void)
+{
+    static const struct { enum param_error r; const char *code; } map[] = {
+        { PARAM_ERR_UNKNOWN, "unknown_param" }, { PARAM_ERR_TYPE, "bad_type" },
+        { PARAM_ERR_NOT_FINITE, "bad_type" },   { PARAM_ERR_NOT_INTEGER, "bad_type" },
+        { PARAM_ERR_RANGE, "out_of_range" },    { PARAM_ERR_NOT_POW2, "out_of_range" },
+        { PARAM_ERR_BAD_ENUM, "out_of_range" }, { PARAM_ERR_TOO_LONG, "out_of_range" },
+        { PARAM_ERR_INVALID, "invalid" },
+    };
+    for (size_t i = 0; i < sizeof map / sizeof map[0]; i++)
+        CHECK(strcmp(control_error_code(map[i].r), map[i].code) == 0, "param_error %d -> %s, want %s",
+              (int)map[i].r, control_error_code(map[i].r), map[i].code);
+    /* Spec gap (PROTOCOL.md §7.2): a bad enum name, a non-power-of-two N and a
+     * fractional int, over JSON. */
+    static const struct { const char *text, *code, *words; } cases[] = {
+        { "{\"type\":\"set\",\"params\":{\"spectrum\":\"bretschneider\"}}", "out_of_range", "not one of" },
+        { "{\"type\":\"set\",\"params\":{\"resolution\":100}}", "out_of_range", "power of two" },
+        { "{\"type\":\"set\",\"params\":{\"seed\":2.5}}", "bad_type", "whole number" },
+        { "{\"type\":\"set\",\"params\":{\"resolution\":4096}}", "out_of_range", "out of range" },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        struct ocean_params out;
+        struct ctl_error e = { 0 };
+        const char *code = try_set(cases[i].text, &out, NULL, &e);
+        CHECK(strcmp(code, cases[i].code) == 0 && strstr(e.message, cases[i].words), "%s -> %s (%s), want %s (%s)",
+              cases[i].text, code, e.message, cases[i].code, cases[i].words);
+    }
+    /* The same reasons through config_load: flag and config file. */
+    char dir[] = "/tmp/oceand-ctl-XXXXXX";
+    if (!mkdtemp(dir)) {
+        CHECK(0, "mkdtemp");
+        return;
+    }
+    char cfg[128], err[512];
+    snprintf(cfg, sizeof cfg, "%s/c.json", dir);
+    struct daemon_config dc;
+    struct config_result res;
+    struct ocean_params q;
+    static const struct { const char *flag, *value, *json, *words; } same[] = {
+        { "--resolution", "100", "{\"resolution\": 100}", "power of two" },
+        { "--seed", "2.5", "{\"seed\": 2.5}", "whole number" },
+        { "--spectrum", "bretschneider", "{\"spectrum\": \"bretschneider\"}", "not one of" },
+        { "--port", "70000", "{\"port\": 70000}", "out of range" },
+        { "--log-level", "loud", "{\"log_level\": \"loud\"}", "not one of" },
+        { "--tick-rate", "fast", "{\"tick_rate\": \"fast\"}", "" },
+    };
+    for (size_t i = 0; i < sizeof same / sizeof same[0]; i++) {
+        char *argv[] = { "oceand", "--state-file", "none", (char *)same[i].flag, (char *)same[i].value, NULL };
+        int rc = config_load(5, argv, &dc, &q, &res, err, sizeof err);
+        CHECK(rc != 0 && strstr(err, same[i].words), "%s %s: rc %d, \"%s\"", same[i].flag, same[i].value, rc, err);
+        write_text(cfg, same[i].json);
+        char *argv2[] = { "oceand", "--state-file", "none", "--config", cfg, NULL };
+        rc = config_load(5, argv2, &dc, &q, &res, err, sizeof err);
+        CHECK(rc != 0 && strstr(err, same[i].words), "config %s: rc %d, \"%s\"", same[i].json, rc, err);
+    }
+    /* Daemon options and sea parameters share the JSON typing of a `set`. */
+    write_text(cfg, "{\"log_level\": \"debug\", \"bind\": \"0.0.0.0\", \"tick_rate\": 12.5, \"paused\": true}");
+    char *ok[] = { "oceand", "--state-file", "none", "--config", cfg, NULL };
+    CHECK(config_load(5, ok, &dc, &q, &res, err, sizeof err) == 0 && dc.log_level == OLOG_DEBUG &&
+              strcmp(dc.bind, "0.0.0.0") == 0 && dc.tick_rate == 12.5 && q.paused,
+          "config file with options and parameters: %s", err);
+    /* A secret is never echoed in an error. */
+    char long_token[300];
+    memset(long_token, 'k', sizeof long_token - 1);
+    long_token[sizeof long_token - 1] = '\0';
+    char *tok[] = { "oceand", "--state-file", "none", "--control-token", long_token, NULL };
+    CHECK(config_load(5, tok, &dc, &q, &res, err, sizeof err) != 0 && !strstr(err, "kkkkkkkk"),
+          "too long a token: \"%s\"", err);
+    unlink(cfg);
+    rmdir(dir);
+}
+
+/* Issue 16 (3): an echoed id is capped at CTL_MAX_ID_BYTES of JSON. */
+static void test_id_cap(void)
+{
+    char id[CTL_MAX_ID_BYTES + 64], text[CTL_MAX_ID_BYTES + 128];
+    struct ctl_msg m;
+    struct ctl_error e;
+    cJSON *id_out = NULL;
+    /* "..." with 254 characters: 256 bytes of JSON, the most allowed. */
+    memset(id, 'a', CTL_MAX_ID_BYTES - 2);
+    id[CTL_MAX_ID_BYTES - 2] = '\0';
+    snprintf(text, sizeof text, "{\"type\":\"ping\",\"id\":\"%s\"}", id);
+    CHECK(control_parse(text, strlen(text), &m, &id_out, &e) == 0, "id of %d bytes refused: %s", CTL_MAX_ID_BYTES,
+          e.message);
+    if (m.root)
+        ctl_msg_free(&m);
+    strcat(id, "a");
+    snprintf(text, sizeof text, "{\"type\":\"ping\",\"id\":\"%s\"}", id);
+    int rc = control_parse(text, strlen(text), &m, &id_out, &e);
+    CHECK(rc != 0 && strcmp(e.code, "bad_message") == 0 && id_out == NULL,
+          "id of %d bytes: rc %d code %s, echoed %s", CTL_MAX_ID_BYTES + 1, rc, rc ? e.code : "-", id_out ? "yes" : "no");
+    cJSON_Delete(id_out);
+    /* Escapes count as printed: 60 "\n" are 120 bytes, 200 of them 400. */
+    char esc[1024] = "{\"type\":\"ping\",\"id\":\"";
+    for (int i = 0; i < 200; i++)
+        strcat(esc, "\\n");
+    strcat(esc, "\"}");
+    id_out = NULL;
+    rc = control_parse(esc, strlen(esc), &m, &id_out, &e);
+    CHECK(rc != 0 && strcmp(e.code, "bad_message") == 0 && id_out == NULL, "escaped long id accepted");
+    cJSON_Delete(id_out);
+    /* A long id on an unknown type is not echoed either. */
+    char big[2048];
+    memset(id, 'b', sizeof id - 1);
+    id[sizeof id - 1] = '\0';
+    snprintf(big, sizeof big, "{\"type\":\"jump\",\"id\":\"%s\"}", id);
+    id_out = NULL;
+    rc = control_parse(big, strlen(big), &m, &id_out, &e);
+    CHECK(rc != 0 && id_out == NULL, "long id echoed on an error");
+    cJSON_Delete(id_out);
+}
+
+/* Spec gap: pong.server_time_us is an exact integer, never 1e+15. */
+static void test_pong_integer(void)
+{
+    static const struct { uint64_t us; const char *text; } cases[] = {
+        { 1000000000000000ull, "\"server_time_us\":1000000000000000" },
+        { 1763719200123456ull, "\"server_time_us\":1763719200123456" },
+        { 9007199254740993ull, "\"server_time_us\":9007199254740993" },
+        { UINT64_MAX, "\"server_time_us\":18446744073709551615" },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        char *s = control_print(control_pong_msg(NULL, false, 0, cases[i].us));
+        const char *at = s ? strstr(s, cases[i].text) : NULL;
+        CHECK(at && at[strlen(cases[i].text)] == '}', "pong %s, want %s", s ? s : "(null)", cases[i].text);
+        free(s);
+    }
+}
+
+/* Spec gap: the `codec` member of subscribe is a coded error, not ignored. */
+static void test_subscribe_codec(void)
+{
+    struct subscription cur, *out = malloc(sizeof *out);
+    subscription_default(&cur, 30);
+    struct ctl_error e;
+    static const struct { const char *text; int ok; } cases[] = {
+        { "{\"codec\":1}", 1 }, { "{\"codec\":2}", 0 }, { "{\"codec\":0}", 0 }, { "{\"codec\":\"zstd\"}", 0 },
+        { "{\"codec\":1.5}", 0 },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        cJSON *m = cJSON_Parse(cases[i].text);
+        int rc = control_apply_subscribe(m, &cur, &lim, out, &e);
+        CHECK(cases[i].ok ? rc == 0 : rc != 0 && strcmp(e.code, "bad_subscription") == 0, "%s: rc %d", cases[i].text, rc);
+        cJSON_Delete(m);
+    }
+    free(out);
+}
+
+/* Spec gap: the live hello has the shape of proto/vectors/control/01_hello.json
+ * (every member, schema row by row, paused included); descriptions are free
+ * text and not compared. */
+static void strip_descriptions(cJSON *hello)
+{
+    cJSON *row;
+    cJSON_ArrayForEach(row, cJSON_GetObjectItem(hello, "schema"))
+        cJSON_DeleteItemFromObject(row, "description");
+}
+
+static void test_hello_matches_vector(void)
+{
+    char *text, err[256];
+    size_t len;
+    if (config_read_file("proto/vectors/control/01_hello.json", 1 << 20, &text, &len, err, sizeof err) != 0) {
+        CHECK(0, "vector: %s (run from the repository root)", err);
+        return;
+    }
+    cJSON *want = cJSON_Parse(text);
+    free(text);
+    struct ocean_params p;
+    params_defaults(&p);
+    struct subscription sub;
+    subscription_default(&sub, 30);
+    struct hello_info h = { "c7", true, &p, 12, 30, 64, &sub, NULL };
+    cJSON *have = control_hello_msg(&h);
+    strip_descriptions(want);
+    strip_descriptions(have);
+    const cJSON *ws = cJSON_GetObjectItem(want, "schema"), *hs = cJSON_GetObjectItem(have, "schema");
+    for (int i = 0; i < cJSON_GetArraySize(hs); i++) {
+        const cJSON *a = cJSON_GetArrayItem(hs, i), *b = cJSON_GetArrayItem(ws, i);
+        if (!cJSON_Compare(a, b, 1)) {
+            char *x = cJSON_PrintUnformatted(a), *y = cJSON_PrintUnformatted(b);
+            CHECK(0, "schema row %d: live %s, vector %s", i, x, y ? y : "(missing)");
+            free(x);
+            free(y);
+        }
+    }
+    CHECK(want && cJSON_Compare(have, want, 1), "hello differs from 01_hello.json beyond the descriptions");
+    cJSON_Delete(want);
+    cJSON_Delete(have);
+}
+
+/* Spec gap (PROTOCOL.md §6.1): under 8 bytes a binary message is `truncated`
+ * whatever its bytes; `magic` needs the 8 bytes of magic + version. */
+static void test_short_frames(void)
+{
+    static const uint8_t ocn[8] = { 'O', 'C', 'N', 'F', 1, 0, 48, 0 }, junk[8] = "XYZWXYZ";
+    struct oc_frame_header h;
+    for (size_t len = 0; len < 8; len++) {
+        CHECK(oc_frame_header_read(ocn, len, &h) == OC_E_TRUNCATED, "%zu bytes of OCNF: not truncated", len);
+        CHECK(oc_frame_header_read(junk, len, &h) == OC_E_TRUNCATED, "%zu junk bytes: not truncated", len);
+    }
+    CHECK(oc_frame_header_read(junk, 8, &h) == OC_E_MAGIC, "8 junk bytes: not magic");
+    CHECK(oc_frame_header_read(ocn, 8, &h) == OC_E_TRUNCATED, "8 bytes of a header: not truncated");
+}
+
+/* Issue 10 (3): a config file over 16 MiB is refused, not cut; issue 16 (6):
+ * a FIFO as the config or state file is refused at once (it used to block
+ * start-up forever: the alarm turns a hang into a failure). */
+static void test_config_file_limits(void)
+{
+    char dir[] = "/tmp/oceand-ctl-XXXXXX";
+    if (!mkdtemp(dir)) {
+        CHECK(0, "mkdtemp");
+        return;
+    }
+    char cfg[128], fifo[128], err[512];
+    snprintf(cfg, sizeof cfg, "%s/big.json", dir);
+    snprintf(fifo, sizeof fifo, "%s/fifo", dir);
+    /* A valid object, blanks up to exactly 16 MiB, then a stray byte: cut at
+     * 16 MiB it would be accepted. */
+    FILE *f = fopen(cfg, "w");
+    const char *obj = "{\"wind_speed\": 8}";
+    fputs(obj, f);
+    static char blanks[1 << 16];
+    memset(blanks, ' ', sizeof blanks);
+    size_t left = (16u << 20) - strlen(obj);
+    while (left > 0) {
+        size_t k = left < sizeof blanks ? left : sizeof blanks;
+        fwrite(blanks, 1, k, f);
+        left -= k;
+    }
+    fputc('x', f);
+    fclose(f);
+    struct daemon_config dc;
+    struct config_result res;
+    struct ocean_params q;
+    char *big[] = { "oceand", "--state-file", "none", "--config", cfg, NULL };
+    int rc = config_load(5, big, &dc, &q, &res, err, sizeof err);
+    CHECK(rc != 0 && strstr(err, "16 MiB"), "config file over 16 MiB: rc %d, \"%s\"", rc, err);
+    truncate(cfg, 16u << 20); /* exactly 16 MiB: the object and blanks */
+    rc = config_load(5, big, &dc, &q, &res, err, sizeof err);
+    CHECK(rc == 0 && q.wind_speed == 8, "config file of exactly 16 MiB: rc %d, \"%s\"", rc, err);
+    unlink(cfg);
+
+    CHECK(mkfifo(fifo, 0600) == 0, "mkfifo");
+    alarm(20);
+    char *cfg_fifo[] = { "oceand", "--state-file", "none", "--config", fifo, NULL };
+    rc = config_load(5, cfg_fifo, &dc, &q, &res, err, sizeof err);
+    CHECK(rc != 0 && strstr(err, "not a regular file") && strstr(err, "FIFO"), "FIFO config: rc %d, \"%s\"", rc, err);
+    char *state_fifo[] = { "oceand", "--state-file", fifo, NULL };
+    rc = config_load(3, state_fifo, &dc, &q, &res, err, sizeof err);
+    CHECK(rc != 0 && strstr(err, "not a regular file"), "FIFO state file: rc %d, \"%s\"", rc, err);
+    char *state_dir[] = { "oceand", "--state-file", dir, NULL };
+    rc = config_load(3, state_dir, &dc, &q, &res, err, sizeof err);
+    CHECK(rc != 0 && strstr(err, "directory"), "directory as state file: rc %d, \"%s\"", rc, err);
+    alarm(0);
+    unlink(fifo);
+    rmdir(dir);
+}
+
+/* Issue 16 (4, 5, minor): bad saved values are warned about and fall back;
+ * none stops the daemon. */
+static void test_state_values(void)
+{
+    char dir[] = "/tmp/oceand-ctl-XXXXXX";
+    if (!mkdtemp(dir)) {
+        CHECK(0, "mkdtemp");
+        return;
+    }
+    char state[128], err[512];
+    snprintf(state, sizeof state, "%s/state.json", dir);
+    struct daemon_config dc;
+    struct config_result res;
+    struct ocean_params q;
+    char *argv[] = { "oceand", "--state-file", state, "--max-memory-mb", "64", NULL };
+
+    /* A saved N above the memory cap: warn, fall back to the default N. */
+    write_text(state, "{\"params\":{\"resolution\":2048,\"wind_speed\":7},\"params_version\":3,\"sim_time\":5}");
+    capture_begin();
+    int rc = config_load(5, argv, &dc, &q, &res, err, sizeof err);
+    const char *log = capture_end();
+    CHECK(rc == 0 && q.resolution == 256 && q.wind_speed == 7 && res.params_version == 3,
+          "saved N=2048 over a 64 MB cap: rc %d (%s), N %d", rc, rc ? err : "", q.resolution);
+    CHECK(strstr(log, "resolution 2048") != NULL, "no warning about the saved resolution: %s", log);
+    /* ... but the same N on the command line is still an error. */
+    char *cli[] = { "oceand", "--state-file", "none", "--max-memory-mb", "64", "--resolution", "2048", NULL };
+    CHECK(config_load(7, cli, &dc, &q, &res, err, sizeof err) != 0, "N=2048 over the cap from the command line accepted");
+
+    static const struct { const char *file; double sim_time; uint32_t version; const char *warning; } cases[] = {
+        { "{\"params\":{},\"params_version\":12,\"sim_time\":1e15}", 0, 12, "sim_time" },
+        { "{\"params\":{},\"params_version\":12,\"sim_time\":1e9}", OCEAN_TIME_MAX, 12, NULL },
+        { "{\"params\":{},\"params_version\":12,\"sim_time\":1000000000.5}", 0, 12, "sim_time" },
+        { "{\"params\":{},\"params_version\":12,\"sim_time\":-1}", 0, 12, "sim_time" },
+        { "{\"params\":{},\"params_version\":12,\"sim_time\":\"soon\"}", 0, 12, "sim_time" },
+        { "{\"params\":{},\"params_version\":4294967295,\"sim_time\":2}", 2, 0, "params_version" },
+        { "{\"params\":{},\"params_version\":4294967294,\"sim_time\":2}", 2, 4294967294u, NULL },
+        { "{\"params\":{},\"params_version\":1e30,\"sim_time\":2}", 2, 0, "params_version" },
+        { "{\"params\":{},\"params_version\":-7,\"sim_time\":2}", 2, 0, "params_version" },
+        { "{\"params\":{},\"params_version\":7.5,\"sim_time\":2}", 2, 0, "params_version" },
+        { "{\"params\":{},\"params_version\":7,\"sim_time\":2}\nnot json", 2, 7, "trailing data" },
+        { "{\"params\":{},\"params_version\":7,\"sim_time\":2}\n \n", 2, 7, NULL },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        write_text(state, cases[i].file);
+        capture_begin();
+        rc = config_load(5, argv, &dc, &q, &res, err, sizeof err);
+        log = capture_end();
+        CHECK(rc == 0 && res.state_loaded && res.sim_time == cases[i].sim_time && res.params_version == cases[i].version,
+              "state %s: rc %d, sim_time %.17g, version %u", cases[i].file, rc, res.sim_time, res.params_version);
+        if (cases[i].warning)
+            CHECK(strstr(log, cases[i].warning) != NULL, "state %s: no warning about %s (log: %s)", cases[i].file,
+                  cases[i].warning, log);
+        else
+            CHECK(log[0] == '\0', "state %s: unexpected warning %s", cases[i].file, log);
+    }
+    unlink(state);
+    rmdir(dir);
+}
+
 /* Random mutations of valid messages: no crash, and a rejected set leaves
  * the output untouched (run under ASan by test-daemon-asan). */
 static void fuzz(void)
@@ -397,6 +762,14 @@ int main(void)
     test_token_equal();
     test_builders();
     test_state_and_config();
+    test_one_validation_path();
+    test_id_cap();
+    test_pong_integer();
+    test_subscribe_codec();
+    test_hello_matches_vector();
+    test_short_frames();
+    test_config_file_limits();
+    test_state_values();
     fuzz();
     printf("test_control: %d passed, %d failed\n", passed, failed);
     return failed != 0;

@@ -1116,6 +1116,53 @@ def test_rate_limited_error_has_id(d):
             answered.append(m["id"])
         check(limited > 0, "rate limit not reached")
         check(sorted(answered) == sorted(sent), "ids answered do not match the ids sent")
+
+
+# ------------------------------------------- spec gaps and hardening (issues 10, 16)
+
+@test
+def test_spec_gaps_codec_tiles_id_pong(d):
+    """PROTOCOL.md §7: `codec` other than 1 is bad_subscription; tiles outside
+    the grid are kept in the list and skipped in frames, also across changes
+    of N; an id over 256 bytes of JSON is bad_message without the id; pong's
+    server_time_us is a plain integer in the text."""
+    async def run():
+        a, hello = await connect(d)
+        await a.send('{"type":"subscribe","id":"z","codec":2}')
+        e = await recv_json(a, lambda m: m["type"] in ("error", "subscribed"))
+        check(e["type"] == "error" and e["code"] == "bad_subscription" and e["id"] == "z", "codec 2: %r" % e)
+        want = [[0, 0], [1, 1], [31, 31]]
+        await a.send(json.dumps({"type": "subscribe", "id": "t", "fields": ["height"], "tiles": want}))
+        s = await recv_json(a, lambda m: m["type"] == "subscribed")
+        check(s["subscription"]["tiles"] == want, "tile list not kept as given: %r" % s)
+
+        async def tiles_at(version):
+            h, m = await recv_frame(a, lambda h, m: h["params_version"] == version, timeout=20)
+            tps = h["n"] // h["tile_size"]
+            got = {(t["tx"], t["tz"]) for t in tiles(m)}
+            check(got == {(x, z) for x, z in want if x < tps and z < tps},
+                  "N=%d (%d tiles a side): tiles %r" % (h["n"], tps, sorted(got)))
+            return h["n"]
+
+        n0 = await tiles_at(hello["params_version"])
+        for n in (n0 * 2, n0):                   # N changes: the list stays, the grid decides
+            await a.send(json.dumps({"type": "set", "params": {"resolution": n}}))
+            p = await recv_json(a, lambda m: m["type"] in ("params", "error"), timeout=20)
+            check(p["type"] == "params", "set resolution %d: %r" % (n, p))
+            check(await tiles_at(p["params_version"]) == n, "frames not at N=%d" % n)
+
+        await a.send(json.dumps({"type": "ping", "id": "x" * 300}))
+        e = await recv_json(a, lambda m: m["type"] in ("error", "pong"))
+        check(e["type"] == "error" and e["code"] == "bad_message" and "id" not in e, "long id: %r" % e)
+        await a.send(json.dumps({"type": "ping", "id": "y" * 254}))
+        e = await recv_json(a, lambda m: m["type"] in ("error", "pong"))
+        check(e["type"] == "pong" and e["id"] == "y" * 254, "id of 256 bytes of JSON refused: %r" % e)
+        await a.send('{"type":"ping","id":1}')
+        while True:
+            raw = await asyncio.wait_for(a.recv(), 5)
+            if isinstance(raw, str) and '"pong"' in raw:
+                break
+        check(re.search(r'"server_time_us":[0-9]+[,}]', raw), "server_time_us not a plain integer: %s" % raw)
         await a.close()
     asyncio.run(run())
 
@@ -1150,6 +1197,137 @@ def test_state_saved_on_change():
 
 
 TESTS.append(test_state_saved_on_change)
+
+
+@test
+def test_refused_upgrade_is_closed_without_response(d):
+    """PROTOCOL.md §1: a refused upgrade (no oceand.v1 offered, or a foreign
+    Origin) gets no HTTP response at all: the server closes the connection."""
+    for extra in ("", "Sec-WebSocket-Protocol: chat\r\n",
+                  "Sec-WebSocket-Protocol: oceand.v1\r\nOrigin: http://evil.example\r\n"):
+        with socket.create_connection(("127.0.0.1", d.port), timeout=5) as s:
+            s.sendall(("GET / HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                       "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n%s\r\n"
+                       % (d.port, extra)).encode())
+            got = b""
+            try:
+                while True:
+                    c = s.recv(4096)
+                    if not c:
+                        break
+                    got += c
+            except ConnectionResetError:
+                pass
+            check(got == b"", "refused upgrade (%r) answered %r" % (extra, got[:80]))
+    s = raw_ws_socket(d.port)          # the same request with the subprotocol is accepted
+    s.close()
+
+
+def test_sighup_saves_state():
+    """Issue 16 (7): SIGHUP saves the state (a set acknowledged just before is
+    kept) and the daemon keeps running; the configuration is not reloaded."""
+    tmp = tempfile.mkdtemp(prefix="oceand-test-")
+    state = os.path.join(tmp, "state.json")
+    d = Daemon(state_file=state, tmpdir=tmp)
+    try:
+        async def run():
+            a, _ = await connect(d)
+            await a.send('{"type":"set","params":{"wind_speed":13.25}}')
+            p = await recv_json(a, lambda m: m["type"] == "params")
+            check(p["params"]["wind_speed"] == 13.25, "set: %r" % p)
+            d.proc.send_signal(signal.SIGHUP)
+            deadline = time.time() + 3
+            saved = None
+            while time.time() < deadline:
+                try:
+                    saved = json.load(open(state))
+                    if saved["params"]["wind_speed"] == 13.25:
+                        break
+                except (OSError, ValueError):
+                    pass
+                await asyncio.sleep(0.05)
+            check(saved and saved["params"]["wind_speed"] == 13.25, "state not saved on SIGHUP: %r" % saved)
+            check(d.proc.poll() is None, "SIGHUP ended the daemon (exit %r)" % d.proc.poll())
+            await a.send('{"type":"ping","id":2}')
+            await recv_json(a, lambda m: m["type"] == "pong")   # still serving
+            await a.close()
+        asyncio.run(run())
+        check("SIGHUP" in d.read_log(), "SIGHUP not logged")
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+    finally:
+        d.kill()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+TESTS.append(test_sighup_saves_state)
+
+
+def test_bad_state_files_do_not_stop_the_daemon():
+    """Issue 16 (4, 5, 6): a saved N over the memory cap and a sim_time out of
+    range are warned about and replaced; a FIFO as the state file is refused
+    at once (exit 2), not waited on."""
+    tmp = tempfile.mkdtemp(prefix="oceand-test-")
+    state = os.path.join(tmp, "state.json")
+    try:
+        with open(state, "w") as f:
+            json.dump({"params": {"resolution": 2048, "wind_speed": 7}, "params_version": 5, "sim_time": 1e15}, f)
+        d = Daemon("--max-memory-mb", "64", state_file=state, tmpdir=tmp)
+        try:
+            async def run():
+                a, h = await connect(d)
+                check(h["params"]["wind_speed"] == 7 and h["params_version"] == 5, "state not used: %r" % h)
+                fh, _ = await recv_frame(a)
+                check(fh["sim_time"] < 100, "sim_time 1e15 from the state file used: %r" % fh["sim_time"])
+                await a.close()
+            asyncio.run(run())
+            log = d.read_log()
+            check("sim_time" in log, "no warning about sim_time:\n" + log)
+            rc, _ = d.stop()
+            check(rc == 0, "exit code %r" % rc)
+        finally:
+            d.kill()
+        # Without --resolution on the command line (Daemon() sets one), so that
+        # the saved N=2048 is the one in force: the daemon must start at the default.
+        with open(state, "w") as f:
+            json.dump({"params": {"resolution": 2048}, "params_version": 5}, f)
+        port = free_port()
+        proc = subprocess.Popen([ARGS.oceand, "--port", str(port), "--state-file", state, "--max-memory-mb", "64",
+                                 "--wisdom-file", "none", "--plan-rigor", "0", "--web-root", tmp],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.time() + 20
+            while True:
+                if proc.poll() is not None:
+                    raise TestFailure("saved N=2048 over --max-memory-mb 64 stopped the daemon: exit %r, %s"
+                                      % (proc.returncode, proc.stderr.read()))
+                try:
+                    body = urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=1).read()
+                    break
+                except (urllib.error.URLError, ConnectionError, OSError):
+                    check(time.time() < deadline, "no /healthz")
+                    time.sleep(0.05)
+            proc.send_signal(signal.SIGTERM)
+            _, err = proc.communicate(timeout=10)
+            check(proc.returncode == 0 and "resolution 2048" in err, "exit %r, log %r" % (proc.returncode, err))
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        fifo = os.path.join(tmp, "fifo")
+        os.mkfifo(fifo)
+        for flag in ("--state-file", "--config"):
+            args = [ARGS.oceand, "--port", "0", "--state-file", "none", "--wisdom-file", "none", flag, fifo]
+            try:
+                r = subprocess.run(args, capture_output=True, text=True, timeout=10)
+            except subprocess.TimeoutExpired:
+                raise TestFailure("%s FIFO: start-up blocked" % flag)
+            check(r.returncode == 2 and "not a regular file" in r.stderr, "%s FIFO: exit %d, %r" % (flag, r.returncode, r.stderr))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+TESTS.append(test_bad_state_files_do_not_stop_the_daemon)
 
 
 # ------------------------------------------- capacity (issue 15, issue 16 defect 2)

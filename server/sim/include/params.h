@@ -37,12 +37,19 @@ struct ocean_params {
     bool   paused;              /* playback pause (used by the daemon) */
 };
 
-enum param_type { PARAM_INT, PARAM_FLOAT, PARAM_ENUM, PARAM_BOOL };
+/* One settings-table shape for everything configurable: the sea parameters
+ * below (param_table, offsets into struct ocean_params) and the daemon's own
+ * options (server/config.c, offsets into its struct daemon_config) are rows
+ * of struct param_def, and both are checked by the same setters here. */
+enum param_type { PARAM_INT, PARAM_FLOAT, PARAM_ENUM, PARAM_BOOL, PARAM_STRING };
 
 enum param_flags {
     PARAM_POW2      = 1u << 0, /* integer must be a power of two */
     PARAM_REPLAN    = 1u << 1, /* changing it rebuilds FFT plans (N) */
     PARAM_PLAYBACK  = 1u << 2, /* read by the daemon's clock, not the physics */
+    PARAM_LIVE      = 1u << 3, /* may change while running (a JSON `set`) */
+    PARAM_RESTART   = 1u << 4, /* read at start-up only (daemon options) */
+    PARAM_SECRET    = 1u << 5, /* value never printed (help, errors, logs) */
 };
 
 struct param_def {
@@ -53,11 +60,32 @@ struct param_def {
     double def;                  /* default; for ENUM the index */
     const char *const *choices;  /* ENUM only: NULL-terminated names */
     const char *description;
-    size_t offset;               /* offsetof(struct ocean_params, field) */
+    size_t offset;               /* offsetof(struct ..., field) in the table's struct */
     unsigned flags;              /* enum param_flags */
+    size_t size;                 /* STRING only: bytes of the char array, NUL included */
+    const char *def_text;        /* STRING only: the default */
 };
 
-extern const struct param_def param_table[];
+/* Why a value was refused. The daemon maps these to its wire error codes
+ * (server/control.c), so every path (config file, flags, JSON `set`, state
+ * file) reports the same fault the same way. */
+enum param_error {
+    PARAM_OK = 0,
+    PARAM_ERR_UNKNOWN,      /* no setting of that name */
+    PARAM_ERR_TYPE,         /* text is not a number / true-false; wrong JSON type */
+    PARAM_ERR_NOT_FINITE,   /* NaN or infinity */
+    PARAM_ERR_NOT_INTEGER,  /* fractional value for an int */
+    PARAM_ERR_RANGE,        /* outside [min, max] */
+    PARAM_ERR_NOT_POW2,     /* int that must be a power of two is not */
+    PARAM_ERR_BAD_ENUM,     /* not one of the choices */
+    PARAM_ERR_TOO_LONG,     /* string longer than its field */
+    PARAM_ERR_INVALID,      /* whole-set rule (params_validate) */
+};
+
+/* The number of sea parameters, as a constant: the daemon's `changed` masks
+ * are uint64_t, and it checks PARAM_COUNT <= 64 at compile time. */
+#define PARAM_COUNT 18
+extern const struct param_def param_table[PARAM_COUNT];
 extern const size_t param_count;
 
 /* Fill with the defaults from the table. */
@@ -79,5 +107,20 @@ int param_enum_index(const struct param_def *d, const char *name);
 /* Whole-set checks that no single range can express (e.g. DFT only for
  * small N). Returns 0, or -1 with a message in err. */
 int params_validate(const struct ocean_params *p, char *err, size_t errlen);
+
+/* The checks and setters behind all of the above, for any table of this
+ * shape: base is the struct the table's offsets point into. Each returns
+ * PARAM_OK, or the reason with a message in err and *base unchanged. */
+enum param_error setting_check(const struct param_def *d, double v, char *err, size_t errlen);
+/* INT, FLOAT, ENUM (index), BOOL (0/1) from a number. */
+enum param_error setting_set_number(void *base, const struct param_def *d, double v, char *err, size_t errlen);
+/* Any type from text: numbers, true/false/yes/no/on/off/1/0, enum names
+ * (any case), strings as they are. */
+enum param_error setting_set_text(void *base, const struct param_def *d, const char *text, char *err,
+                                  size_t errlen);
+/* The default of one setting onto base (STRING: def_text). */
+void setting_set_default(void *base, const struct param_def *d);
+/* The default of a setting as text ("8080", "jonswap", "true", "127.0.0.1"). */
+void setting_default_text(const struct param_def *d, char *buf, size_t len);
 
 #endif
