@@ -5,6 +5,7 @@
 #include "clock.h"
 
 #include <errno.h>
+#include <malloc.h>
 #include <math.h>
 #include <pthread.h>
 #include <signal.h>
@@ -694,6 +695,20 @@ static void measure_model(struct sim *s)
         if (frame_job_samples(s->job) > 0)
             best_enc = fmin(best_enc, (t4 - t3) / (double)frame_job_samples(s->job));
     }
+    /* Warm every encoder (its compressor and scratch) now: one first used
+     * minutes later (the producer helps only now and then) would show as
+     * memory growth under load. Item 0 of the last job, once per encoder. */
+    struct frame_want all = { .fields = OCEAN_ALL_FIELDS, .nkeys = OCEAN_FIELD_COUNT };
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
+        all.keys[f] = (uint16_t)layer_key(f, 0, 3 /* 1 cm */);
+        all.lod[f] = 0;
+    }
+    struct oc_frame_header h0 = { 0 };
+    int nitems = frame_job_begin(s->job, s->ocean, s->cfg.tile_size, &all, &h0);
+    int per_field = nitems > 0 ? nitems / OCEAN_FIELD_COUNT : 0;
+    for (int w = 0; per_field && w <= encode_pool_threads(s->pool); w++)
+        for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+            frame_job_item(s->job, f * per_field, w);
     m->step1_s = best1;
     m->step6_s = fmax(best6, best1);
     m->enc_s_per_sample = best_enc < 1e9 ? best_enc : 1e-8;
@@ -733,6 +748,15 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     s->test_fail_seed = hook && *hook ? atoi(hook) : -1;
     if (s->test_fail_seed >= 0)
         LOGW("test hook: builds with seed %d will fail (OCEAND_TEST_FAIL_BUILD_SEED)", s->test_fail_seed);
+    /* Frames are allocated on whichever encode thread finishes them and freed
+     * on the lws thread: with one malloc arena per thread, each would keep its
+     * own cache of freed frames (RSS creeping up by megabytes); one arena
+     * reuses them. Allocations are a few per frame: no contention to speak of. */
+    mallopt(M_ARENA_MAX, 1);
+    /* Fixed thresholds (setting them turns glibc's dynamic ones off, which
+     * after one large free keep megabytes of freed frames in the heap). */
+    mallopt(M_MMAP_THRESHOLD, 128 * 1024);
+    mallopt(M_TRIM_THRESHOLD, 256 * 1024);
     pthread_mutex_init(&s->lock, NULL);
     pthread_cond_init(&s->cond, NULL);
     pthread_cond_init(&s->prod_cond, NULL);
