@@ -103,9 +103,10 @@ static uint64_t resolution_bit(void)
 static cJSON *params_msg(struct net *n, const struct sim_set *a, const char *by, const cJSON *id)
 {
     cJSON *m = control_params_msg(&a->params, a->version, a->changed, by, id);
-    if (m && (a->changed & resolution_bit()))
+    if (m && (a->changed & resolution_bit())) {
         cJSON_AddNumberToObject(m, "tile_size", net_tile_size(n));
-    net_capacity_add(n, m);
+        net_capacity_add(n, m); /* the encode budget follows N; ~1.5 kB, so only then */
+    }
     return m;
 }
 
