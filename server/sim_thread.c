@@ -402,7 +402,11 @@ static void encode_done(void *ctx)
     double now = mono_now();
     if (f) {
         f->index = s->published++;
+        frame_ref(f); /* for on_frame: publish() may hand the last reference on at once */
         publish(s, f);
+        if (s->cfg.on_frame)
+            s->cfg.on_frame(s->cfg.cluster_user, f); /* on this encode thread (frames are published in order) */
+        frame_unref(f);
     }
     double enc = now - s->job_t_enc;
     histogram_observe(&g_metrics.encode_seconds, enc);
@@ -545,8 +549,15 @@ static void tick(struct sim *s, double t_tick)
 
     int demand[LAYER_KEYS];
     bool any = false;
-    for (int k = 0; k < LAYER_KEYS; k++)
-        any |= (demand[k] = atomic_load(&s->demand[k])) > 0;
+    uint8_t remote[SIM_DEMAND_BYTES] = { 0 };
+    if (s->cfg.remote_demand) /* --role sim: the layer keys other daemons want */
+        s->cfg.remote_demand(s->cfg.cluster_user, remote);
+    for (int k = 0; k < LAYER_KEYS; k++) {
+        demand[k] = atomic_load(&s->demand[k]);
+        if (demand[k] <= 0 && ((remote[k >> 3] >> (k & 7)) & 1))
+            demand[k] = 1;
+        any |= demand[k] > 0;
+    }
     if (!any) {
         if (s->had_demand)
             publish(s, NULL); /* nobody is ever handed a frame from before an idle period */
@@ -742,6 +753,7 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     s->params = *p;
     s->version = cfg->start_version;
     s->sim_time = cfg->start_time;
+    s->seq = cfg->start_seq;
     s->pending_tail = &s->pending;
     s->answers_tail = &s->answers;
     const char *hook = getenv("OCEAND_TEST_FAIL_BUILD_SEED");

@@ -67,9 +67,22 @@ struct sim_config {
     long encode_budget;         /* --encode-budget: samples per tick at most, 0 = derived */
     int max_memory_mb;          /* for the capacity announcement */
     int cores;                  /* same */
+    uint64_t start_seq;         /* seq of the tick before the first (0; --role sim: from the wall clock,
+                                   so that seq never goes back when the sim restarts under its edges) */
     void (*wake)(void *user);   /* called after every tick and every frame (lws_cancel_service) */
     void *wake_user;
+    /* --role sim (server/role_sim.c); NULL otherwise. remote_demand runs on
+     * the tick thread, on_frame on the encode thread that publishes the
+     * frame (one at a time, in seq order); neither may block: remote_demand ORs the layer keys other
+     * daemons want into bits (SIM_DEMAND_BYTES, bit k = layer key k) before
+     * the demand snapshot; on_frame sees each frame right after it is
+     * published (frame_ref it to keep it). */
+    void (*remote_demand)(void *user, uint8_t bits[]);
+    void (*on_frame)(void *user, struct frame *f);
+    void *cluster_user;
 };
+#define SIM_DEMAND_BYTES 32         /* bitmap of layer keys handed to remote_demand */
+_Static_assert(LAYER_KEYS <= SIM_DEMAND_BYTES * 8, "layer keys fit the remote demand bitmap");
 
 struct sim;
 /* Creates the ocean (may take a while at large N) and starts the tick
