@@ -20,7 +20,8 @@
 #define SAME_NUMBER(a, b) ((int)(a) == (int)(b))
 _Static_assert(SAME_NUMBER(OCEAN_HEIGHT, OC_FIELD_HEIGHT) && SAME_NUMBER(OCEAN_DX, OC_FIELD_DX) &&
                    SAME_NUMBER(OCEAN_DZ, OC_FIELD_DZ) && SAME_NUMBER(OCEAN_SLOPE_X, OC_FIELD_SLOPE_X) &&
-                   SAME_NUMBER(OCEAN_SLOPE_Z, OC_FIELD_SLOPE_Z) && SAME_NUMBER(OCEAN_JACOBIAN, OC_FIELD_JACOBIAN),
+                   SAME_NUMBER(OCEAN_SLOPE_Z, OC_FIELD_SLOPE_Z) && SAME_NUMBER(OCEAN_JACOBIAN, OC_FIELD_JACOBIAN) &&
+                   SAME_NUMBER(OCEAN_FOAM, OC_FIELD_FOAM),
                "ocean_field and oc_field must number the fields alike");
 _Static_assert(SAME_NUMBER(OCEAN_FIELD_COUNT, OC_FIELD_COUNT), "ocean_field and oc_field must have the same fields");
 _Static_assert(CTL_MAX_LOD == OC_MAX_LOD, "CTL_MAX_LOD must be the wire's OC_MAX_LOD");
