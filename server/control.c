@@ -416,6 +416,11 @@ cJSON *control_schema(void)
         if (d->flags & PARAM_PLAYBACK)
             cJSON_AddTrueToObject(o, "playback");
         cJSON_AddStringToObject(o, "description", d->description ? d->description : "");
+        /* For people (the panel): a row without UI text falls back to its name. */
+        const struct param_ui *ui = param_ui(d);
+        cJSON_AddStringToObject(o, "label", ui ? ui->label : d->name);
+        cJSON_AddStringToObject(o, "group", param_group_name(ui ? ui->group : PARAM_GROUP_ADVANCED));
+        cJSON_AddStringToObject(o, "help", ui ? ui->help : "");
         cJSON_AddItemToArray(a, o);
     }
     return a;

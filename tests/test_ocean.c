@@ -1397,6 +1397,27 @@ static void test_foam(void)
     ocean_free(b);
 }
 
+/* Every sea parameter has a label, a group and a one-line help for the
+ * panel (params.h, struct param_ui), and no UI row names a missing one. */
+static void test_param_ui(void)
+{
+    int missing = 0, groups[3] = {0};
+    const char *first = "";
+    for (size_t i = 0; i < param_count; i++) {
+        const struct param_ui *u = param_ui(&param_table[i]);
+        bool ok = u && u->label && *u->label && u->help && *u->help && strlen(u->help) <= 100 &&
+                  !strchr(u->help, '\n') && (unsigned)u->group <= PARAM_GROUP_DEVELOPER;
+        if (!ok && !missing++)
+            first = param_table[i].name;
+        if (ok)
+            groups[u->group]++;
+    }
+    check(missing == 0 && groups[PARAM_GROUP_SEA] > 0 && groups[PARAM_GROUP_DEVELOPER] > 0 &&
+              strcmp(param_group_name(PARAM_GROUP_DEVELOPER), "developer") == 0,
+          "params.ui", "%d of %zu parameters without label/group/help (first: %s); sea %d, advanced %d, developer %d",
+          missing, param_count, first, groups[0], groups[1], groups[2]);
+}
+
 int main(void)
 {
     const char *qenv = getenv("OCEAN_TEST_QUICK");
@@ -1422,6 +1443,7 @@ int main(void)
     RUN(test_memory_bytes);
     RUN(test_wisdom);
     RUN(test_foam);
+    RUN(test_param_ui);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }

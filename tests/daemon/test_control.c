@@ -120,7 +120,7 @@ static void test_subscribe(void)
           "subscribed text %s", s);
     free(s);
     cJSON_Delete(m);
-    const char *bad[] = { "{\"fields\":[]}", "{\"fields\":[\"foam\"]}", "{\"lod\":5}", "{\"lod\":1.5}",
+    const char *bad[] = { "{\"fields\":[]}", "{\"fields\":[\"spray\"]}", "{\"lod\":5}", "{\"lod\":1.5}",
                           "{\"bound\":0.002}", "{\"max_rate\":0}", "{\"tiles\":\"some\"}", "{\"tiles\":[[0,40]]}",
                           "{\"tiles\":[[0]]}" };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {

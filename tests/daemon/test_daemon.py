@@ -342,7 +342,7 @@ BAD_SETS = [
     ('{"type":"fly","id":19}', "unknown_type", None),
     ('{"type":"subscribe","id":20,"lod":9}', "bad_subscription", None),
     ('{"type":"subscribe","id":21,"bound":0.02}', "bad_subscription", None),
-    ('{"type":"subscribe","id":22,"fields":["height","foam"]}', "bad_subscription", None),
+    ('{"type":"subscribe","id":22,"fields":["height","spray"]}', "bad_subscription", None),
 ]
 
 
