@@ -55,7 +55,16 @@ static void rebuild_view(struct net *n)
         n->view = params_with(&n->view, &request_of(d)->values, request_of(d)->mask);
 }
 
-static void submit_set(struct net *n, struct session *s, const cJSON *params, const cJSON *id)
+/* `params` names who caused it: the client id, and the display name if any. */
+static cJSON *with_name(cJSON *m, const char *name)
+{
+    if (m && name && name[0])
+        cJSON_AddStringToObject(m, "by_name", name);
+    return m;
+}
+
+/* name: the set's own checked "name" (applied with the set), or NULL. */
+static void submit_set(struct net *n, struct session *s, const cJSON *params, const char *name, const cJSON *id)
 {
     struct ctl_error e;
     struct ocean_params out;
@@ -64,8 +73,10 @@ static void submit_set(struct net *n, struct session *s, const cJSON *params, co
         session_send_error(s, &e, id);
         return;
     }
+    if (name)
+        snprintf(s->name, sizeof s->name, "%s", name);
     if (!changed) {
-        session_queue_json(s, control_params_msg(&n->view, n->applied_version, 0, s->client_id, id));
+        session_queue_json(s, with_name(control_params_msg(&n->view, n->applied_version, 0, s->client_id, id), s->name));
         return;
     }
     struct sim_set *set = calloc(1, sizeof *set);
@@ -82,6 +93,7 @@ static void submit_set(struct net *n, struct session *s, const cJSON *params, co
     r->tag = set->tag = ++n->next_tag;
     r->serial = s->serial;
     memcpy(r->by, s->client_id, sizeof r->by);
+    memcpy(r->by_name, s->name, sizeof r->by_name);
     r->id = idc;
     r->values = set->values = out;
     r->mask = set->mask = changed;
@@ -100,9 +112,9 @@ static uint64_t resolution_bit(void)
 
 /* `params` for one applied set; with tile_size when N changed, since the
  * tile side follows N below the configured size (hello has it too). */
-static cJSON *params_msg(struct net *n, const struct sim_set *a, const char *by, const cJSON *id)
+static cJSON *params_msg(struct net *n, const struct sim_set *a, const struct request *r, const cJSON *id)
 {
-    cJSON *m = control_params_msg(&a->params, a->version, a->changed, by, id);
+    cJSON *m = with_name(control_params_msg(&a->params, a->version, a->changed, r->by, id), r->by_name);
     if (m && (a->changed & resolution_bit()))
         cJSON_AddNumberToObject(m, "tile_size", net_tile_size(n));
     return m;
@@ -124,13 +136,13 @@ static void answer(struct net *n, const struct sim_set *a)
     if (a->status == SIM_SET_APPLIED) {
         if (n->on_params)
             n->on_params(n->on_params_user, &n->applied, n->applied_version);
-        char *all = control_print(params_msg(n, a, r->by, NULL));
+        char *all = control_print(params_msg(n, a, r, NULL));
         for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
             if (session_of(d) != origin)
                 session_queue_text(session_of(d), all, false);
         free(all);
         if (origin)
-            session_queue_json(origin, params_msg(n, a, r->by, r->id));
+            session_queue_json(origin, params_msg(n, a, r, r->id));
     } else if (origin) {
         struct ctl_error e = { .code = a->status == SIM_SET_NO_MEMORY ? "internal" : "invalid" };
         snprintf(e.message, sizeof e.message, "%s", a->message);
@@ -220,11 +232,11 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
             break;
         }
         if (m.type == CTL_SET) {
-            submit_set(n, s, m.params, m.id);
+            submit_set(n, s, m.params, m.name, m.id);
         } else {
             cJSON *p = cJSON_CreateObject();
             cJSON_AddBoolToObject(p, "paused", m.type == CTL_PAUSE);
-            submit_set(n, s, p, m.id);
+            submit_set(n, s, p, NULL, m.id);
             cJSON_Delete(p);
         }
         break;
@@ -246,6 +258,10 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
     }
     case CTL_PING:
         session_queue_json(s, control_pong_msg(m.id, m.has_t, m.t, unix_us()));
+        break;
+    case CTL_NAME: /* anyone may name themselves: the name only labels their own changes */
+        snprintf(s->name, sizeof s->name, "%s", m.name);
+        session_queue_json(s, control_named_msg(s->name, m.id));
         break;
     }
     ctl_msg_free(&m);
