@@ -12,7 +12,12 @@
  *   bench_codec [--height] [--tile-size T] [--frames DIR]
  *   --height       height field only;  --tile-size T  tile side of the tiled runs
  *   (power of two, default 64 = the daemon's default; clamped to N);
- *   --frames DIR   keep every encoded frame for the JS decode benchmark. */
+ *   --frames DIR   keep every encoded frame for the JS decode benchmark.
+ *   --streams      only the temporal stream rows (codec_stream: 10 s at 30 Hz, all
+ *                  fields, bounds 1 mm and 1 cm); --keyframe-interval K their periodic
+ *                  keyframe interval in ticks (default OC_STREAM_KEYFRAME_INTERVAL, 0 = none);
+ *                  --stream-n N only that N (256 or 512).
+ *   --dump-fields N FRAMES FILE  write FRAMES ticks of all fields (raw float32) and exit. */
 #include "oc_proto.h"
 
 #include <fftw3.h>
@@ -265,6 +270,153 @@ static struct stats bench_zfp(const float *f, int n, float bound, int reps, doub
     return s;
 }
 
+#ifdef HAVE_OCEAN
+/* --dump-fields N FRAMES FILE: FRAMES consecutive ticks at 30 Hz from t = 10 s, all six
+ * fields, raw float32 (frame-major, then field, then row-major): the input of
+ * proto/tools/temporal_predictors.py, which measured the predictor choice. */
+static int dump_fields(int n, int frames, const char *path)
+{
+    struct ocean_params prm;
+    params_defaults(&prm);
+    prm.resolution = n;
+    struct ocean_options opt = { .threads = 1, .wisdom_path = NULL, .plan_rigor = 0 };
+    char err[256];
+    struct ocean *o = ocean_create(&prm, &opt, err, sizeof err);
+    FILE *fp = fopen(path, "wb");
+    if (!o || !fp) { fprintf(stderr, "bench_codec: %s\n", o ? path : err); return 1; }
+    for (int k = 0; k < frames; k++) {
+        if (ocean_step(o, 10.0 + k / 30.0, OCEAN_ALL_FIELDS)) return 1;
+        for (int f = 0; f < OC_FIELD_COUNT; f++)
+            if (fwrite(ocean_field(o, (enum ocean_field)f), sizeof(float), (size_t)n * n, fp) != (size_t)n * n) return 1;
+    }
+    ocean_free(o);
+    return fclose(fp) != 0;
+}
+
+/* ---- temporal streams (codec 3): 10 s at 30 Hz of the real simulation ----
+ * One oc_stream per field and bound, every tile of every tick: the shared
+ * frame a receiver that keeps up gets (keyframes and headers included).
+ * Decoded by one decoder per stream; max_err against the simulation's floats.
+ * intra_bits / intra_enc_MBs: codec 1 on the same fresh fields in the same run. */
+#define STREAM_TICKS 300
+struct stream_run {
+    struct oc_stream *st;
+    struct oc_decoder *dec;
+    struct oc_buf buf;
+    double bytes, max_err, t_enc, t_dec, t_intra, intra_bytes;
+    float *dec_field;
+    FILE *dump;
+};
+
+static int stream_tile_cb(void *user, const struct oc_frame_header *fh, const struct oc_tile_header *th,
+                          const float *s)
+{
+    return check_tile(user, fh, th, s);
+}
+
+static void bench_streams(int n, int interval)
+{
+    const float bounds[2] = { 0.001f, 0.01f };
+    struct ocean_params prm;
+    params_defaults(&prm);
+    prm.resolution = n;
+    struct ocean_options opt = { .threads = 1, .wisdom_path = NULL, .plan_rigor = 0 };
+    char err[256];
+    struct ocean *o = ocean_create(&prm, &opt, err, sizeof err);
+    if (!o) { fprintf(stderr, "bench_codec: %s\n", err); return; }
+    int tile = tile_size < n ? tile_size : n, grid = n / tile;
+    struct oc_encoder *e = oc_encoder_new(), *e_intra = oc_encoder_new();
+    struct oc_buf intra = { 0 };
+    struct stream_run run[OC_FIELD_COUNT][2];
+    memset(run, 0, sizeof run);
+    for (int f = 0; f < OC_FIELD_COUNT; f++)
+        for (int b = 0; b < 2; b++) {
+            run[f][b].st = oc_stream_new(n, tile, 0, (enum oc_field)f, bounds[b]);
+            oc_stream_set_keyframe_interval(run[f][b].st, interval);
+            run[f][b].dec = oc_decoder_new();
+            run[f][b].dec_field = malloc(sizeof(float) * n * n);
+            if (frames_dir && f < 3 && b == 1) {   /* the web client's default layers, for bench_decode.mjs */
+                char path[512];
+                snprintf(path, sizeof path, "%s/stream_N%d_%s_%g_t%d.frames", frames_dir, n,
+                         oc_field_name((enum oc_field)f), bounds[b], tile);
+                run[f][b].dump = fopen(path, "wb");
+            }
+        }
+    for (int tick = 0; tick < STREAM_TICKS; tick++) {
+        if (ocean_step(o, 10.0 + tick / 30.0, OCEAN_ALL_FIELDS)) abort();
+        for (int f = 0; f < OC_FIELD_COUNT; f++) {
+            const float *field = ocean_field(o, (enum ocean_field)f);
+            for (int b = 0; b < 2; b++) {
+                struct stream_run *r = &run[f][b];
+                struct oc_frame_header fh = { .seq = 1000 + (uint64_t)tick, .sim_time = tick / 30.0, .n = (uint16_t)n,
+                                              .tile_size = (uint16_t)tile, .patch_size = 256,
+                                              .tile_count = (uint16_t)(grid * grid) };
+                double t0 = now();
+                if (oc_stream_encode(r->st, e, field, fh.seq)) abort();
+                r->buf.len = 0;
+                oc_buf_reserve(&r->buf, OC_FRAME_HEADER_SIZE);
+                oc_frame_header_write(r->buf.data, &fh);
+                r->buf.len = OC_FRAME_HEADER_SIZE;
+                for (int tz = 0; tz < grid; tz++)
+                    for (int tx = 0; tx < grid; tx++) {
+                        const uint8_t *p;
+                        size_t len;
+                        oc_stream_tile(r->st, tx, tz, &p, &len);
+                        oc_buf_reserve(&r->buf, len);
+                        memcpy(r->buf.data + r->buf.len, p, len);
+                        r->buf.len += len;
+                    }
+                r->t_enc += now() - t0;
+                r->bytes += (double)r->buf.len;
+                /* The intra codec on the same fresh field, for a same-conditions speed ratio. */
+                t0 = now();
+                for (int tz = 0; tz < grid; tz++)
+                    for (int tx = 0; tx < grid; tx++) {
+                        intra.len = 0;
+                        if (oc_encode_tile(e_intra, field, n, tile, tx, tz, 0, (enum oc_field)f, bounds[b], &intra)) abort();
+                        r->intra_bytes += (double)intra.len;
+                    }
+                r->t_intra += now() - t0;
+                float *ctx[1] = { r->dec_field };
+                struct oc_frame_header out;
+                t0 = now();
+                int rc = oc_decode_frame(r->dec, r->buf.data, r->buf.len, &out, stream_tile_cb, ctx);
+                r->t_dec += now() - t0;
+                if (rc) { fprintf(stderr, "bench_codec: stream decode: %s\n", oc_strerror(rc)); abort(); }
+                r->max_err = fmax(r->max_err, max_err(field, r->dec_field, (size_t)n * n));
+                if (r->dump) {
+                    uint32_t len32 = (uint32_t)r->buf.len;
+                    fwrite(&len32, 4, 1, r->dump);
+                    fwrite(r->buf.data, 1, r->buf.len, r->dump);
+                }
+            }
+        }
+    }
+    double mb = 4.0 * n * n * STREAM_TICKS / 1e6;
+    for (int f = 0; f < OC_FIELD_COUNT; f++)
+        for (int b = 0; b < 2; b++) {
+            struct stream_run *r = &run[f][b];
+            printf("{\"bench\":\"codec_stream\",\"N\":%d,\"field\":\"%s\",\"bound\":%g,\"tile\":%d,\"bits\":%.3f,"
+                   "\"max_err\":%.6g,\"keyframe_interval\":%d,\"ticks\":%d,\"enc_MBs\":%.0f,\"dec_MBs\":%.0f,"
+                   "\"intra_bits\":%.3f,\"intra_enc_MBs\":%.0f}\n",
+                   n, oc_field_name((enum oc_field)f), bounds[b], tile, r->bytes * 8 / ((double)n * n * STREAM_TICKS),
+                   r->max_err, interval, STREAM_TICKS, mb / r->t_enc, mb / r->t_dec,
+                   (r->intra_bytes + (double)OC_FRAME_HEADER_SIZE * STREAM_TICKS) * 8 / ((double)n * n * STREAM_TICKS),
+                   mb / r->t_intra);
+            oc_stream_free(r->st);
+            oc_decoder_free(r->dec);
+            oc_buf_free(&r->buf);
+            free(r->dec_field);
+            if (r->dump) fclose(r->dump);
+        }
+    fflush(stdout);
+    oc_encoder_free(e);
+    oc_encoder_free(e_intra);
+    oc_buf_free(&intra);
+    ocean_free(o);
+}
+#endif
+
 static void print(int n, const char *src, int field, float bound, const char *codec, int tile, struct stats s,
                   const char *extra)
 {
@@ -277,21 +429,34 @@ static void print(int n, const char *src, int field, float bound, const char *co
 
 int main(int argc, char **argv)
 {
-    int only_height = 0;
+    int only_height = 0, only_streams = 0, interval = OC_STREAM_KEYFRAME_INTERVAL, stream_n = 0;
     for (int i = 1; i < argc; i++) {
         if (strcmp(argv[i], "--height") == 0) only_height = 1;
         else if (strcmp(argv[i], "--frames") == 0 && i + 1 < argc) frames_dir = argv[++i];
+        else if (strcmp(argv[i], "--streams") == 0) only_streams = 1;
+        else if (strcmp(argv[i], "--stream-n") == 0 && i + 1 < argc) stream_n = atoi(argv[++i]);
+#ifdef HAVE_OCEAN
+        else if (strcmp(argv[i], "--dump-fields") == 0 && i + 3 < argc)
+            return dump_fields(atoi(argv[i + 1]), atoi(argv[i + 2]), argv[i + 3]);
+#endif
+        else if (strcmp(argv[i], "--keyframe-interval") == 0 && i + 1 < argc) interval = atoi(argv[++i]);
         else if (strcmp(argv[i], "--tile-size") == 0 && i + 1 < argc) {
             tile_size = atoi(argv[++i]);
             if (tile_size < 1 || tile_size > OC_MAX_N || (tile_size & (tile_size - 1))) {
                 fprintf(stderr, "bench_codec: --tile-size must be a power of two in 1..%d\n", OC_MAX_N);
                 return 2;
             }
-        } else { fprintf(stderr, "usage: bench_codec [--height] [--tile-size T] [--frames DIR]\n"); return 2; }
+        } else { fprintf(stderr, "usage: bench_codec [--height] [--streams] [--stream-n N] [--keyframe-interval K] [--tile-size T] [--frames DIR]\n"); return 2; }
     }
     const int sizes[2] = { 256, 512 };
     const float bounds[2] = { 0.001f, 0.01f };
-    for (int si = 0; si < 2; si++) {
+#ifdef HAVE_OCEAN
+    for (int si = 0; si < 2; si++)
+        if (!stream_n || stream_n == sizes[si]) bench_streams(sizes[si], interval);
+#else
+    (void)interval;
+#endif
+    for (int si = 0; si < 2 && !only_streams; si++) {
         int n = sizes[si], reps = n == 256 ? 21 : 9, tile = tile_size < n ? tile_size : n;
         float *fields[OC_FIELD_COUNT];
         for (int f = 0; f < OC_FIELD_COUNT; f++) fields[f] = malloc(sizeof(float) * n * n);

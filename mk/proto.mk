@@ -63,3 +63,7 @@ bench-codec: $(BUILD)/bench_codec
 # are written to auto-vectorise; -O3 turns that on for proto/ objects only
 # (sanitizer objects keep SAN_FLAGS' -O1, which comes later on the command line).
 $(BUILD)/obj/proto/%.o: CFLAGS += -O3
+# The temporal predictor's row loop vectorises only when GCC may assume FP
+# operations do not trap (we never enable FP traps). No value changes: it
+# does not allow reassociation or contraction, so results stay bit-exact.
+$(BUILD)/obj/proto/c/oc_temporal.o: CFLAGS += -fno-trapping-math

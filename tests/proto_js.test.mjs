@@ -9,7 +9,7 @@ import { fileURLToPath } from 'node:url';
 import { dirname, join } from 'node:path';
 import { createRequire } from 'node:module';
 import {
-  decodeFrame, parseFrameHeader, setZstdDecompressor, FIELD_NAMES, PROTO_VERSION, SUBPROTOCOL,
+  decodeFrame, parseFrameHeader, setZstdDecompressor, DecoderState, FIELD_NAMES, PROTO_VERSION, SUBPROTOCOL,
 } from '../proto/js/oc_decode.js';
 import { mutateAndDecode } from './proto_js_mutate.mjs';
 
@@ -77,6 +77,49 @@ for (const [b, useNodeZlib] of manifest.bad.flatMap((x) => [[x, true], [x, false
     });
   });
 }
+
+// Temporal streams (codec 3): one DecoderState per stream, frames in order; every frame decodes to the
+// expected bits within its bound, or fails with the listed code (and then changes nothing).
+for (const [st, useNodeZlib] of manifest.streams.flatMap((x) => [[x, true], [x, false]])) {
+  test(`stream ${st.name} (${useNodeZlib ? 'node zlib' : 'DecompressionStream'})`, async () => {
+    const state = new DecoderState();
+    for (const [i, f] of st.frames.entries()) {
+      if (f.error) {
+        await assert.rejects(decodeFrame(load(f.file), { useNodeZlib, state }), (e) => {
+          assert.equal(e.code, f.error, `frame ${i}: ${e.message}`);
+          return true;
+        });
+        continue;
+      }
+      const frame = await decodeFrame(load(f.file), { useNodeZlib, state });
+      assert.equal(frame.header.seq, f.seq);
+      const expected = new Uint32Array(load(f.expected));
+      const input = new Float32Array(load(f.input));
+      assert.equal(frame.tiles.length, f.tiles.length);
+      frame.tiles.forEach((t, k) => {
+        const m = f.tiles[k];
+        for (const key of ['lod', 'codec', 'tileX', 'tileZ', 'width']) assert.equal(t[key], m[key], key);
+        const got = new Uint32Array(t.samples.buffer, t.samples.byteOffset, t.samples.length);
+        assert.deepEqual(got, expected.subarray(m.sampleOffset, m.sampleOffset + got.length), `frame ${i} tile ${k}: float32 bits`);
+        for (let j = 0; j < t.samples.length; j++) assert.ok(Math.abs(t.samples[j] - input[m.sampleOffset + j]) <= t.bound);
+      });
+    }
+  });
+}
+
+test('a predicted frame without a DecoderState is a reference error', async () => {
+  const f = manifest.streams.find((x) => x.name === 's01_chain').frames[1];
+  await assert.rejects(decodeFrame(load(f.file)), (e) => e.code === 'reference');
+});
+
+test('random truncations and bit flips of a predicted frame are rejected or decode', async () => {
+  const chain = manifest.streams.find((x) => x.name === 's01_chain').frames;
+  const state = new DecoderState();
+  for (const f of chain.slice(0, 5)) await decodeFrame(load(f.file), { state });
+  // every mutation decodes against the same references (a failed frame changes nothing; a decoded
+  // one adds seq 105's codes, which the next mutation of 105 may still use)
+  await mutateAndDecode(load(chain[5].file), 777, (it) => ({ useNodeZlib: it % 4 < 2, state }), ['reference']);
+});
 
 test('typed-array views and offsets are accepted', async () => {
   const v = manifest.vectors[0];

@@ -1,7 +1,8 @@
 // proto_js_browser.test.mjs — the JavaScript decoder inside headless Chromium
 // (node --test): the browser path (DecompressionStream('deflate-raw'), no node
 // zlib) must give the same float32 bits as the C decoder on every deflate
-// vector and reject every bad input with the listed code. Skipped when no
+// vector and reject every bad input with the listed code, and decode the temporal streams
+// (codec 3) frame by frame with one DecoderState. Skipped when no
 // Chromium is installed.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
@@ -21,11 +22,15 @@ test('decoder in headless Chromium reproduces the vectors', { skip: !chromium &&
   const good = manifest.vectors.filter((v) => v.tiles.every((t) => t.codec !== 2))
     .map((v) => ({ name: v.name, bin: b64(v.file), exp: b64(v.expected) }));
   const bad = manifest.bad.map((b) => ({ name: b.name, bin: b64(b.file), error: b.error }));
+  // Temporal streams: frames in order through one DecoderState.
+  const streams = manifest.streams.map((st) => ({ name: st.name,
+    frames: st.frames.map((f) => ({ bin: b64(f.file), exp: f.expected && b64(f.expected), error: f.error })) }));
+  const nStreamFrames = streams.reduce((c, st) => c + st.frames.length, 0);
   // The module has no imports: inline it as a classic module script without its `export`s.
   const lib = readFileSync(join(root, 'proto/js/oc_decode.js'), 'utf8').replace(/^export /gm, '');
   const page = `<!doctype html><pre id=out>running</pre><script type=module>
 ${lib.replace(/<\/script/g, '<\\/script')}
-const good = ${JSON.stringify(good)}, bad = ${JSON.stringify(bad)};
+const good = ${JSON.stringify(good)}, bad = ${JSON.stringify(bad)}, streams = ${JSON.stringify(streams)};
 const ab = (s) => Uint8Array.from(atob(s), (c) => c.charCodeAt(0)).buffer;
 const res = { ok: 0, fail: [] , node: typeof process !== 'undefined' };
 for (const v of good) {
@@ -41,6 +46,19 @@ for (const b of bad) {
   try { await decodeFrame(ab(b.bin)); res.fail.push(b.name + ': accepted'); }
   catch (err) { if (err.code === b.error) res.ok++; else res.fail.push(b.name + ': ' + err.code + ' != ' + b.error); }
 }
+for (const st of streams) {
+  const state = new DecoderState();
+  for (const [i, f] of st.frames.entries()) {
+    try {
+      const fr = await decodeFrame(ab(f.bin), { state });
+      if (f.error) { res.fail.push(st.name + ' ' + i + ': accepted'); continue; }
+      const e = new Uint32Array(ab(f.exp));
+      let k = 0, same = true;
+      for (const t of fr.tiles) { const u = new Uint32Array(t.samples.buffer); for (let j = 0; j < u.length; j++) same &&= u[j] === e[k++]; }
+      if (same && k === e.length) res.ok++; else res.fail.push(st.name + ' ' + i + ': samples differ');
+    } catch (err) { if (f.error && err.code === f.error) res.ok++; else res.fail.push(st.name + ' ' + i + ': ' + err.message); }
+  }
+}
 document.getElementById('out').textContent = 'RESULT' + JSON.stringify(res) + 'END';
 </script>`;
   const dir = mkdtempSync(join(tmpdir(), 'oceand-proto-'));
@@ -53,7 +71,7 @@ document.getElementById('out').textContent = 'RESULT' + JSON.stringify(res) + 'E
     assert.ok(m, 'page did not finish: ' + dom.slice(0, 300));
     const res = JSON.parse(m[1].replace(/&quot;/g, '"').replace(/&amp;/g, '&').replace(/&lt;/g, '<').replace(/&gt;/g, '>'));
     assert.deepEqual(res.fail, []);
-    assert.equal(res.ok, good.length + bad.length);
+    assert.equal(res.ok, good.length + bad.length + nStreamFrames);
     assert.equal(res.node, false);
   } finally {
     rmSync(dir, { recursive: true, force: true });

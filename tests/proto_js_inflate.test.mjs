@@ -9,7 +9,7 @@ import { readFileSync, existsSync } from 'node:fs';
 import { fileURLToPath } from 'node:url';
 import { dirname, join } from 'node:path';
 import { createRequire } from 'node:module';
-import { decodeFrame, setInflateRaw } from '../proto/js/oc_decode.js';
+import { decodeFrame, setInflateRaw, DecoderState } from '../proto/js/oc_decode.js';
 import { mutateAndDecode } from './proto_js_mutate.mjs';
 
 const root = join(dirname(fileURLToPath(import.meta.url)), '..');
@@ -114,3 +114,25 @@ test('random truncations and bit flips are rejected or decode (setInflateRaw + f
   const frame = load(manifest.vectors.find((v) => v.name === 'v03_height_1mm').file);
   await mutateAndDecode(frame, 777, () => opts);
 });
+
+// Temporal streams (codec 3) through the installed inflater: frames in order, one DecoderState.
+for (const st of manifest.streams) {
+  test(`stream ${st.name} (setInflateRaw + fflate)`, { skip }, async () => {
+    const state = new DecoderState();
+    for (const [i, f] of st.frames.entries()) {
+      if (f.error) {
+        await assert.rejects(decodeFrame(load(f.file), { ...opts, state }), (e) => e.code === f.error);
+        continue;
+      }
+      const frame = await decodeFrame(load(f.file), { ...opts, state });
+      const expected = new Uint32Array(load(f.expected));
+      let k = 0;
+      for (const t of frame.tiles) {
+        assert.deepEqual(new Uint32Array(t.samples.buffer, t.samples.byteOffset, t.samples.length),
+          expected.subarray(k, k + t.samples.length), `frame ${i}: float32 bits`);
+        k += t.samples.length;
+      }
+      assert.equal(k, expected.length);
+    }
+  });
+}

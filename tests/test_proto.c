@@ -86,6 +86,7 @@ static const char *err_name(int rc)
     case OC_E_VERSION: return "version";
     case OC_E_CORRUPT: return "corrupt";
     case OC_E_TOO_LARGE: return "too_large";
+    case OC_E_REFERENCE: return "reference";
     default: return oc_strerror(rc);
     }
 }
@@ -352,7 +353,7 @@ static void test_fuzz(void)
                 if (rc == OC_OK) accepted++; else rejected++;
                 CHECK(rc != OC_E_TRUNCATED || delivered == 0, "fuzz: %d tiles delivered from a truncated frame",
                       delivered);
-                CHECK(rc <= 0 && rc >= OC_E_TOO_LARGE, "fuzz: unexpected return %d", rc);
+                CHECK(rc <= 0 && (rc >= OC_E_TOO_LARGE || rc == OC_E_REFERENCE), "fuzz: unexpected return %d", rc);
                 CHECK(kind != 0 || len == buf.len || rc != OC_OK, "fuzz: truncated frame accepted (%zu of %zu)",
                       len, buf.len);
                 free(exact);
@@ -367,6 +368,303 @@ static void test_fuzz(void)
     oc_decoder_free(d);
 }
 
+/* ---- 7. temporal streams (codec 3) ---- */
+static int cb(void *u, const struct oc_frame_header *h, const struct oc_tile_header *th, const float *s);
+
+/* The vectors' streams: one decoder per stream, frames in order; each frame decodes
+ * bit-exactly within its bound, or fails with the listed error. A receiver that joined
+ * late (s02) gets the same samples as one that kept up (s01) at equal seq. */
+static void test_stream_vectors(const char *dir)
+{
+    size_t mlen;
+    char *mtext = (char *)read_all(dir, "manifest.json", &mlen);
+    if (!mtext) return;
+    mtext = realloc(mtext, mlen + 1);
+    mtext[mlen] = 0;
+    cJSON *m = cJSON_Parse(mtext);
+    cJSON *streams = cJSON_GetObjectItem(m, "streams"), *st;
+    int frames = 0, errors = 0, same = 0, packings[2] = { 0, 0 };
+    float *chain_exp[64] = { 0 };   /* s01's expected samples by seq - 100 */
+    size_t chain_len[64] = { 0 };
+    cJSON_ArrayForEach(st, streams) {
+        const char *name = cJSON_GetObjectItem(st, "name")->valuestring;
+        struct oc_decoder *d = oc_decoder_new();
+        cJSON *f;
+        cJSON_ArrayForEach(f, cJSON_GetObjectItem(st, "frames")) {
+            size_t blen, elen, ilen;
+            uint8_t *bin = read_all(dir, cJSON_GetObjectItem(f, "file")->valuestring, &blen);
+            struct oc_frame_header fh;
+            cJSON *err = cJSON_GetObjectItem(f, "error");
+            if (err) {
+                int delivered = 0;
+                int rc = oc_decode_frame(d, bin, blen, &fh, count_tile, &delivered);
+                CHECK(strcmp(err_name(rc), err->valuestring) == 0 || (rc == OC_E_REFERENCE && !strcmp(err->valuestring, "reference")),
+                      "%s: got %s, want %s", name, oc_strerror(rc), err->valuestring);
+                errors++;
+                free(bin);
+                continue;
+            }
+            float *exp = (float *)read_all(dir, cJSON_GetObjectItem(f, "expected")->valuestring, &elen);
+            float *in = (float *)read_all(dir, cJSON_GetObjectItem(f, "input")->valuestring, &ilen);
+            cJSON *tiles = cJSON_GetObjectItem(f, "tiles"), *t;
+            /* the vec_tile checker wants offset/scale/bound in the manifest: check samples here instead */
+            struct { const float *exp, *in; size_t at, n; int bad; double maxerr; float bound; } c = { exp, in, 0, elen / 4, 0, 0, 0 };
+            int rc = oc_decode_frame(d, bin, blen, &fh, cb, &c);
+            CHECK(rc == OC_OK, "%s frame %d: %s", name, frames, oc_strerror(rc));
+            CHECK(c.at == elen / 4 && !c.bad, "%s seq %llu: samples differ from expected (%zu of %zu)", name,
+                  (unsigned long long)fh.seq, c.at, elen / 4);
+            CHECK(c.maxerr <= c.bound, "%s: max error %g > bound", name, c.maxerr);
+            CHECK(fh.seq == (uint64_t)cJSON_GetObjectItem(f, "seq")->valuedouble, "%s: seq", name);
+            cJSON_ArrayForEach(t, tiles) {
+                cJSON *pk = cJSON_GetObjectItem(t, "packing");
+                if (pk) packings[pk->valueint & 1]++;
+            }
+            uint64_t k = fh.seq - 100;
+            if (k < 64 && !strcmp(name, "s01_chain")) {
+                chain_exp[k] = exp; chain_len[k] = elen; exp = NULL;
+            } else if (k < 64 && !strcmp(name, "s02_join_skip") && chain_exp[k]) {
+                CHECK(chain_len[k] == elen && !memcmp(chain_exp[k], exp, elen), "s02 seq %llu differs from s01", (unsigned long long)fh.seq);
+                same++;
+            }
+            free(bin); free(exp); free(in);
+            frames++;
+        }
+        oc_decoder_free(d);
+    }
+    for (int k = 0; k < 64; k++) free(chain_exp[k]);
+    CHECK(frames >= 20 && errors >= 5 && same >= 8 && packings[0] && packings[1],
+          "stream vectors: %d frames, %d errors, %d equal to s01, packings %d/%d", frames, errors, same, packings[0], packings[1]);
+    printf("stream vectors: %d frames bit-exact, %d broken-chain/bad frames rejected, %d join frames equal to the chain\n",
+           frames, errors, same);
+    cJSON_Delete(m);
+    free(mtext);
+}
+
+static int cb(void *u, const struct oc_frame_header *h, const struct oc_tile_header *th, const float *s)
+{
+    struct { const float *exp, *in; size_t at, n; int bad; double maxerr; float bound; } *c = u;
+    size_t count = (size_t)th->width * th->height;
+    if (c->at + count > c->n) { c->bad = 1; return 1; }
+    if (memcmp(s, c->exp + c->at, count * 4)) c->bad = 1;
+    for (size_t k = 0; k < count; k++) c->maxerr = fmax(c->maxerr, fabs((double)s[k] - c->in[c->at + k]));
+    if (th->bound > c->bound) c->bound = th->bound;
+    c->at += count;
+    return 0;
+}
+
+/* A synthetic sea evolving in time: a few dispersive travelling waves (omega^2 = g k). */
+static void sea(float *f, int n, double t, double amp)
+{
+    static const double kx[5] = { 1, 2, -3, 4, 1 }, kz[5] = { 0, 1, 2, -1, 5 }, a[5] = { 1, 0.5, 0.3, 0.2, 0.1 };
+    for (int z = 0; z < n; z++)
+        for (int x = 0; x < n; x++) {
+            double v = 0;
+            for (int m = 0; m < 5; m++) {
+                double k = 2 * M_PI / 64.0 * sqrt(kx[m] * kx[m] + kz[m] * kz[m]);
+                v += a[m] * sin(2 * M_PI * (kx[m] * x + kz[m] * z) / n - sqrt(9.81 * k) * t + m);
+            }
+            f[(size_t)z * n + x] = (float)(amp * v);
+        }
+}
+
+/* A receiver of a stream, following the daemon's rule (PROTOCOL.md §5.9): for each tick
+ * it gets, the shared tiles if it received the previous `need` ticks, else the keyframe tiles. */
+struct receiver {
+    const char *name;
+    struct oc_decoder *d;
+    long last, run;
+    int frames, keyframes, predicted;
+};
+
+struct bound_ctx { const float *fields[2]; int n; float bound[2]; double maxerr[2]; int codec3, tiles; };
+static int bound_tile(void *user, const struct oc_frame_header *fh, const struct oc_tile_header *th, const float *s)
+{
+    struct bound_ctx *c = user;
+    int l = th->field == OC_FIELD_HEIGHT ? 0 : 1, step = 1 << th->lod;
+    for (int j = 0; j < th->height; j++)
+        for (int i = 0; i < th->width; i++) {
+            float v = c->fields[l][((size_t)th->tile_z * fh->tile_size + (size_t)j * step) * c->n
+                                   + (size_t)th->tile_x * fh->tile_size + (size_t)i * step];
+            double e = fabs((double)s[(size_t)j * th->width + i] - v);
+            if (!(e <= c->maxerr[l])) c->maxerr[l] = e;     /* NaN-safe */
+        }
+    c->codec3 += th->codec == OC_CODEC_TEMPORAL;
+    c->tiles++;
+    return 0;
+}
+
+static void test_stream_60s(void)
+{
+    enum { N = 64, TS = 16, GRID = N / TS, TICKS = 1800, NREC = 5 };
+    const float bounds[2] = { 0.01f, 1e-4f };
+    const int lods[2] = { 0, 1 };
+    struct oc_encoder *e = oc_encoder_new();
+    struct oc_stream *st[2];
+    for (int l = 0; l < 2; l++) {
+        st[l] = oc_stream_new(N, TS, lods[l], l ? OC_FIELD_JACOBIAN : OC_FIELD_HEIGHT, bounds[l]);
+        oc_stream_set_keyframe_interval(st[l], 90);   /* periodic keyframes every 3 s, staggered */
+    }
+    const uint8_t *p;
+    size_t plen;
+    CHECK(oc_stream_tile(st[0], 0, 0, &p, &plen) == OC_E_ARG, "stream tile before any encode");
+    CHECK(oc_stream_new(48, 16, 0, OC_FIELD_HEIGHT, 0.01f) == NULL, "stream with n 48 created");
+    static const char *const names[NREC] = { "keeps up", "skips 10 %", "10 Hz", "rejoins", "ignores the rule" };
+    struct receiver rec[NREC];
+    memset(rec, 0, sizeof rec);
+    for (int r = 0; r < NREC; r++) { rec[r].name = names[r]; rec[r].d = oc_decoder_new(); rec[r].last = -10; }
+    static float f[2][N * N];
+    struct oc_buf buf = { 0 };
+    int ref_errors = 0, wrong = 0, bad_bound = 0, nan_tick = 1234;
+    for (long k = 0; k < TICKS; k++) {
+        uint64_t seq = 5000 + (uint64_t)k;
+        double t = k / 30.0;
+        sea(f[0], N, t, 1.5);
+        /* the second layer grows 1000x at 40 s: its grid (bound 0.1 mm) no longer fits, new chains */
+        sea(f[1], N, t + 3, k < 1200 ? 0.8 : 800.0);
+        if (k == nan_tick) f[1][0] = NAN;   /* bad input: the stream resets, the next tick is a keyframe */
+        int need = 0;
+        for (int l = 0; l < 2; l++) {
+            int rc = oc_stream_encode(st[l], e, f[l], seq);
+            if (k == nan_tick && l == 1) {   /* rejected; the same tick again with valid data starts new chains */
+                CHECK(rc == OC_E_ARG, "NaN input: %d", rc);
+                f[1][0] = 0;
+                rc = oc_stream_encode(st[l], e, f[l], seq);
+                CHECK(oc_stream_need(st[l]) == 0, "after a reset: need %d", oc_stream_need(st[l]));
+            }
+            CHECK(rc == OC_OK, "stream encode tick %ld: %s", k, oc_strerror(rc));
+            if (oc_stream_need(st[l]) > need) need = oc_stream_need(st[l]);
+        }
+        for (int r = 0; r < NREC; r++) {
+            struct receiver *R = &rec[r];
+            int gets = 1;
+            if (r == 1) gets = rnd() % 10 != 0;                        /* latest-frame-wins drops */
+            if (r == 2) gets = k % 3 == 0;                              /* max_rate 10 */
+            if (r == 3 && k % 97 == 50) { oc_decoder_reset(R->d); R->run = 0; R->last = -10; }   /* resubscribe */
+            if (r == 3) gets = k % 97 >= 50 || k % 97 < 30;             /* away 20 ticks of every 97 */
+            if (r == 4) gets = rnd() % 7 != 0;
+            if (!gets) continue;
+            R->run = R->last == k - 1 ? R->run : 0;
+            int key = r == 4 ? 0 : R->run < need;
+            struct oc_frame_header fh = { .seq = seq, .sim_time = t, .n = N, .tile_size = TS, .patch_size = 64,
+                                          .tile_count = 2 * GRID * GRID };
+            buf.len = 0;
+            oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE);
+            oc_frame_header_write(buf.data, &fh);
+            buf.len = OC_FRAME_HEADER_SIZE;
+            for (int l = 0; l < 2; l++)
+                for (int tz = 0; tz < GRID; tz++)
+                    for (int tx = 0; tx < GRID; tx++) {
+                        int rc = key ? oc_stream_keyframe_tile(st[l], e, tx, tz, &p, &plen) : oc_stream_tile(st[l], tx, tz, &p, &plen);
+                        CHECK(rc == OC_OK, "stream tile: %s", oc_strerror(rc));
+                        oc_buf_reserve(&buf, plen);
+                        memcpy(buf.data + buf.len, p, plen);
+                        buf.len += plen;
+                    }
+            struct bound_ctx c = { { f[0], f[1] }, N, { bounds[0], bounds[1] }, { 0, 0 }, 0, 0 };
+            struct oc_frame_header out;
+            int rc = oc_decode_frame(R->d, buf.data, buf.len, &out, bound_tile, &c);
+            if (r == 4 && rc == OC_E_REFERENCE) { ref_errors++; R->run = 0; R->last = k; continue; }
+            if (rc != OC_OK) { wrong++; CHECK(0, "%s: tick %ld (%s frame): %s", R->name, k, key ? "key" : "shared", oc_strerror(rc)); }
+            else if (!(c.maxerr[0] <= bounds[0] && c.maxerr[1] <= bounds[1])) {
+                bad_bound++;
+                CHECK(0, "%s tick %ld: max error %g / %g over the bound", R->name, k, c.maxerr[0], c.maxerr[1]);
+            }
+            R->frames++;
+            R->keyframes += key;
+            R->predicted += c.codec3 > 0;
+            R->last = k;
+            R->run++;
+        }
+    }
+    struct oc_stream_stats s0;
+    oc_stream_stats(st[1], &s0);
+    CHECK(rec[0].predicted > TICKS * 9 / 10 && rec[0].keyframes == 0, "keeps-up receiver: %d predicted of %d",
+          rec[0].predicted, rec[0].frames);
+    CHECK(rec[1].predicted > 0 && rec[1].keyframes > 0, "skipping receiver: %d predicted, %d keyframes", rec[1].predicted, rec[1].keyframes);
+    CHECK(rec[2].frames == TICKS / 3 && rec[2].predicted == 0, "10 Hz receiver: %d frames, %d predicted",
+          rec[2].frames, rec[2].predicted);
+    CHECK(rec[3].predicted > 0 && rec[3].keyframes > 0, "rejoining receiver: %d predicted, %d keyframes", rec[3].predicted, rec[3].keyframes);
+    CHECK(ref_errors > 10, "the receiver that ignores the rule saw only %d reference errors", ref_errors);
+    /* A decoder that keeps no references (limit 0) decodes keyframes and reports every predicted frame. */
+    struct oc_decoder *d0 = oc_decoder_new();
+    oc_decoder_set_history_limit(d0, 0);
+    struct oc_stream *s1 = oc_stream_new(N, N, 0, OC_FIELD_HEIGHT, 0.01f);
+    for (int k = 0; k < 2; k++) {
+        sea(f[0], N, k / 30.0, 1.5);
+        oc_stream_encode(s1, e, f[0], 10 + (uint64_t)k);
+        struct oc_frame_header fh1 = { .seq = 10 + (uint64_t)k, .n = N, .tile_size = N, .patch_size = 64, .tile_count = 1 };
+        buf.len = 0;
+        oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE);
+        oc_frame_header_write(buf.data, &fh1);
+        buf.len = OC_FRAME_HEADER_SIZE;
+        oc_stream_tile(s1, 0, 0, &p, &plen);
+        oc_buf_reserve(&buf, plen);
+        memcpy(buf.data + buf.len, p, plen);
+        buf.len += plen;
+        struct oc_frame_header out0;
+        int rc0 = oc_decode_frame(d0, buf.data, buf.len, &out0, NULL, NULL);
+        CHECK(rc0 == (k ? OC_E_REFERENCE : OC_OK), "history limit 0, tick %d: %s", k, oc_strerror(rc0));
+    }
+    oc_stream_free(s1);
+    oc_decoder_free(d0);
+    CHECK(s0.key_tiles > 2 * (uint64_t)(GRID * GRID) * 20, "grid overflow / periodic keyframes: %llu key tiles",
+          (unsigned long long)s0.key_tiles);
+    printf("stream 60 s: %d ticks, receivers %d/%d/%d/%d frames all within the bound (%d wrong, %d over), "
+           "%d reference errors for the rule breaker\n", TICKS, rec[0].frames, rec[1].frames, rec[2].frames, rec[3].frames,
+           wrong, bad_bound, ref_errors);
+    for (int r = 0; r < NREC; r++) oc_decoder_free(rec[r].d);
+    for (int l = 0; l < 2; l++) oc_stream_free(st[l]);
+    oc_buf_free(&buf);
+    oc_encoder_free(e);
+}
+
+/* Tiny tiles (1x1, 2x2, 3 rows of odd width do not exist: tiles are square powers of two)
+ * through a stream: the clamped Laplacian and odd pair counts at their edges. */
+static void test_stream_tiny_tiles(void)
+{
+    enum { N = 16 };
+    static float f[N * N];
+    struct oc_encoder *e = oc_encoder_new();
+    struct oc_buf buf = { 0 };
+    const int cases[3][2] = { { 2, 1 }, { 4, 1 }, { 1, 0 } };   /* tile_size, lod: sides 1, 2, 1 */
+    for (int c = 0; c < 3; c++) {
+        int ts = cases[c][0], lod = cases[c][1], grid = N / ts, predicted = 0;
+        struct oc_stream *st = oc_stream_new(N, ts, lod, OC_FIELD_DZ, 0.001f);
+        struct oc_decoder *d = oc_decoder_new();
+        double worst = 0;
+        for (int k = 0; k < 12; k++) {
+            sea(f, N, k / 30.0, 1.0);
+            CHECK(oc_stream_encode(st, e, f, 40 + (uint64_t)k) == OC_OK, "tiny tiles: encode");
+            struct oc_frame_header fh = { .seq = 40 + (uint64_t)k, .n = N, .tile_size = (uint16_t)ts, .patch_size = 16,
+                                          .tile_count = (uint16_t)(grid * grid) };
+            buf.len = 0;
+            oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE);
+            oc_frame_header_write(buf.data, &fh);
+            buf.len = OC_FRAME_HEADER_SIZE;
+            for (int tz = 0; tz < grid; tz++)
+                for (int tx = 0; tx < grid; tx++) {
+                    const uint8_t *p;
+                    size_t len;
+                    oc_stream_tile(st, tx, tz, &p, &len);
+                    predicted += p[2] == OC_CODEC_TEMPORAL;
+                    oc_buf_reserve(&buf, len);
+                    memcpy(buf.data + buf.len, p, len);
+                    buf.len += len;
+                }
+            struct bound_ctx bc = { { f, f }, N, { 0.001f, 0.001f }, { 0, 0 }, 0, 0 };
+            struct oc_frame_header out;
+            int rc = oc_decode_frame(d, buf.data, buf.len, &out, bound_tile, &bc);
+            CHECK(rc == OC_OK, "tiny tiles ts %d lod %d tick %d: %s", ts, lod, k, oc_strerror(rc));
+            worst = fmax(worst, fmax(bc.maxerr[0], bc.maxerr[1]));
+        }
+        CHECK(worst <= 0.001 && predicted > 0, "tiny tiles ts %d lod %d: max err %g, %d predicted", ts, lod, worst, predicted);
+        oc_stream_free(st);
+        oc_decoder_free(d);
+    }
+    oc_buf_free(&buf);
+    oc_encoder_free(e);
+}
+
 int main(int argc, char **argv)
 {
     if (argc != 2) { fprintf(stderr, "usage: test_proto VECTOR_DIR\n"); return 2; }
@@ -374,6 +672,9 @@ int main(int argc, char **argv)
     test_headers();
     test_bounds();
     test_fuzz();
+    test_stream_vectors(argv[1]);
+    test_stream_60s();
+    test_stream_tiny_tiles();
     printf("%d checks, %d failed\n", checks, failures);
     if (failures) { printf("test_proto: FAILED\n"); return 1; }
     printf("test_proto: OK\n");

@@ -7,18 +7,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-struct oc_encoder {
-    struct oc_entropy *ent;
-    int codec, level;
-    size_t cap;        /* samples the scratch arrays hold */
-    float *vals;       /* gathered samples */
-    int32_t *q;        /* quantised codes */
-    uint32_t *zz;      /* zigzagged prediction residuals */
-    uint32_t *esc;     /* escaped residuals */
-    uint8_t *packed;   /* streams A + B, input of the entropy coder */
-    int8_t forced[OC_PRED_COEFS];
-    int force;         /* test hook: use forced[] instead of fitting */
-};
 
 struct oc_encoder *oc_encoder_new(void)
 {
@@ -53,15 +41,15 @@ int oc_encoder_set_codec(struct oc_encoder *e, enum oc_codec codec, int level)
     return OC_OK;
 }
 
-static int reserve_scratch(struct oc_encoder *e, size_t count)
+int oc_enc_reserve(struct oc_encoder *e, size_t count)
 {
     if (count <= e->cap) return OC_OK;
     free(e->vals); free(e->q); free(e->zz); free(e->esc); free(e->packed);
     e->vals = malloc(count * sizeof(float));
     e->q = malloc(count * sizeof(int32_t));
     e->zz = malloc(count * sizeof(uint32_t));
-    e->esc = malloc(count * sizeof(uint32_t));
-    e->packed = malloc(count * 5);
+    e->esc = malloc((2 * count + 2) * sizeof(uint32_t));   /* pair packing: escapes + the escaped pairs' values */
+    e->packed = malloc(count * 6 + 8);
     if (!e->vals || !e->q || !e->zz || !e->esc || !e->packed) {
         free(e->vals); free(e->q); free(e->zz); free(e->esc); free(e->packed);
         e->vals = NULL; e->q = NULL; e->zz = NULL; e->esc = NULL; e->packed = NULL;
@@ -102,13 +90,15 @@ static int quantise_pass(const float *restrict v, int32_t *restrict q, size_t co
 }
 
 /* Quantise vals to codes whose reconstruction float32(offset + q*scale) is
- * within bound of every input. Returns 1 if done, 0 if the tile must go raw. */
-static int quantise(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound,
-                    double *offset_out, double *scale_out)
+ * within bound of every input, on a new grid. Returns 1 if done, 0 if the tile must go raw. */
+int oc_enc_quantise_new(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound, double headroom,
+                        double *offset_out, double *scale_out)
 {
     const float *v = e->vals;
     int32_t *q = e->q;
-    double maxabs = fmax(fabs((double)vmin), fabs((double)vmax)) + bound;
+    /* headroom > 1 (temporal chains): later frames on the same grid may reach
+     * headroom times today's magnitude and still get the float32 margin right. */
+    double maxabs = headroom * fmax(fabs((double)vmin), fabs((double)vmax)) + bound;
     /* Rounding the reconstruction to float32 moves it by up to half an ulp:
      * take that off the budget, plus a sliver for double rounding. */
     double half_ulp = maxabs * 0x1p-24 + 0x1p-149;
@@ -138,6 +128,23 @@ done:
     return 1;
 }
 
+/* Quantise vals on a given grid (a temporal chain's): 1 if every sample meets
+ * the bound with codes below 2^30 in magnitude, 0 if the grid no longer fits. */
+int oc_enc_quantise_on(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound, double offset,
+                       double scale)
+{
+    if (fmax(fabs((double)vmax - offset), fabs((double)vmin - offset)) / scale > 0x1p30) return 0;
+    if (!quantise_pass(e->vals, e->q, count, offset, scale, bound)) return 1;
+    for (size_t k = 0; k < count; k++) {
+        const float v = e->vals[k];
+        if (fabs((double)oc_dequant(e->q[k], offset, scale) - (double)v) <= bound) continue;
+        if (fabs((double)oc_dequant(e->q[k] - 1, offset, scale) - (double)v) <= bound) e->q[k] -= 1;
+        else if (fabs((double)oc_dequant(e->q[k] + 1, offset, scale) - (double)v) <= bound) e->q[k] += 1;
+        else return 0;
+    }
+    return 1;
+}
+
 /* Min, max and finiteness through an order-preserving integer key of the
  * float bits: integer min/max vectorise, float ones (NaN rules) do not. */
 static inline int32_t float_key(uint32_t u) { return (int32_t)(u ^ ((0u - (u >> 31)) & 0x7fffffffu)); }
@@ -150,7 +157,7 @@ static inline float key_float(int32_t k)
 }
 
 OC_VECTOR_CLONES
-static int scan_range(const float *restrict v, size_t count, float *vmin, float *vmax)
+int oc_enc_scan_range(const float *restrict v, size_t count, float *vmin, float *vmax)
 {
     int32_t lo = INT32_MAX, hi = INT32_MIN;
     uint32_t nonfinite = 0;
@@ -167,7 +174,7 @@ static int scan_range(const float *restrict v, size_t count, float *vmin, float 
     return nonfinite != 0;
 }
 
-static int append_raw(struct oc_buf *out, struct oc_tile_header *th, const float *vals, size_t count)
+int oc_enc_append_raw(struct oc_buf *out, struct oc_tile_header *th, const float *vals, size_t count)
 {
     th->codec = OC_CODEC_RAW_F32;
     th->bound = 0;
@@ -184,24 +191,15 @@ static int append_raw(struct oc_buf *out, struct oc_tile_header *th, const float
     return OC_OK;
 }
 
-int oc_encode_tile(struct oc_encoder *e, const float *field_data, int n, int tile_size,
-                   int tile_x, int tile_z, int lod, enum oc_field field, float bound,
-                   struct oc_buf *out)
+/* Gather tile (tile_x, tile_z) of field_data at its LOD stride into e->vals
+ * (side*side samples) and find its range; OC_E_ARG on NaN/Inf. */
+int oc_enc_gather(struct oc_encoder *e, const float *field_data, int n, int tile_size, int tile_x, int tile_z,
+                  int lod, float *vmin, float *vmax)
 {
-    if (!e || !field_data || !out) return OC_E_ARG;
-    if (n > OC_MAX_N) return OC_E_TOO_LARGE;
-    if (!is_pow2(n) || !is_pow2(tile_size) || tile_size > n) return OC_E_ARG;
-    if (lod < 0 || lod > OC_MAX_LOD || (tile_size >> lod) == 0) return OC_E_ARG;
-    if (tile_x < 0 || tile_z < 0 || tile_x >= n / tile_size || tile_z >= n / tile_size) return OC_E_ARG;
-    if ((unsigned)field >= OC_FIELD_COUNT) return OC_E_ARG;
-    if (!isfinite(bound) || bound < 0) return OC_E_ARG;
-
     const int side = tile_size >> lod, step = 1 << lod;
     const size_t count = (size_t)side * side;
-    int rc = reserve_scratch(e, count);
+    int rc = oc_enc_reserve(e, count);
     if (rc) return rc;
-
-    /* Gather the tile at its LOD stride; reject NaN/Inf; find the range. */
     for (int j = 0; j < side; j++) {
         const float *row = field_data + ((size_t)tile_z * tile_size + (size_t)j * step) * n
                            + (size_t)tile_x * tile_size;
@@ -209,22 +207,25 @@ int oc_encode_tile(struct oc_encoder *e, const float *field_data, int n, int til
         if (step == 1) memcpy(dst, row, sizeof(float) * side);
         else for (int i = 0; i < side; i++) dst[i] = row[(size_t)i * step];
     }
-    float vmin, vmax;
-    if (scan_range(e->vals, count, &vmin, &vmax)) return OC_E_ARG;
+    return oc_enc_scan_range(e->vals, count, vmin, vmax) ? OC_E_ARG : OC_OK;
+}
 
-    struct oc_tile_header th = {
-        .field = (uint8_t)field, .lod = (uint8_t)lod, .codec = (uint8_t)e->codec, .flags = 0,
-        .tile_x = (uint16_t)tile_x, .tile_z = (uint16_t)tile_z,
-        .width = (uint16_t)side, .height = (uint16_t)side, .bound = bound,
-    };
-    if (bound == 0 || !quantise(e, count, vmin, vmax, bound, &th.offset, &th.scale))
-        return append_raw(out, &th, e->vals, count);
-
+/* Append the intra (codec 1/2) tile of codes q with th's grid. allow_raw: send
+ * codec 0 when the lossy payload is not smaller (never for chain keyframes,
+ * whose codes the receiver must keep). */
+int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q, int allow_raw,
+                        struct oc_buf *out)
+{
+    const int side = th->width;
+    const size_t count = (size_t)side * side;
+    int rc = oc_enc_reserve(e, count);
+    if (rc) return rc;
+    th->codec = (uint8_t)e->codec;
     int8_t coef[OC_PRED_COEFS];
-    uint32_t maxabs = oc_max_abs(e->q, count);
+    uint32_t maxabs = oc_max_abs(q, count);
     if (e->force) memcpy(coef, e->forced, OC_PRED_COEFS);
-    else oc_predict_fit_m(e->q, side, side, maxabs, coef);
-    oc_predict_residuals_m(e->q, side, side, maxabs, coef, e->zz);
+    else oc_predict_fit_m(q, side, side, maxabs, coef);
+    oc_predict_residuals_m(q, side, side, maxabs, coef, e->zz);
     int esc_width;
     size_t esc_count = oc_pack_escapes(e->zz, count, e->packed, e->esc, &esc_width);
     size_t plain = count + esc_count * (size_t)esc_width;
@@ -241,10 +242,38 @@ int oc_encode_tile(struct oc_encoder *e, const float *field_data, int n, int til
     size_t clen = oc_entropy_compress(e->ent, e->codec, level, e->packed, plain, payload + OC_LOSSY_PREFIX,
                                       cap - OC_LOSSY_PREFIX);
     if (clen == 0) return OC_E_NOMEM;
-    if (OC_LOSSY_PREFIX + clen >= count * 4)           /* incompressible: raw is smaller and exact */
-        return append_raw(out, &th, e->vals, count);
-    th.payload_len = (uint32_t)(OC_LOSSY_PREFIX + clen);
-    oc_tile_header_write(out->data + out->len, &th);
-    out->len += OC_TILE_HEADER_SIZE + th.payload_len;
+    if (allow_raw && OC_LOSSY_PREFIX + clen >= count * 4)   /* incompressible: raw is smaller and exact */
+        return oc_enc_append_raw(out, th, e->vals, count);
+    th->payload_len = (uint32_t)(OC_LOSSY_PREFIX + clen);
+    oc_tile_header_write(out->data + out->len, th);
+    out->len += OC_TILE_HEADER_SIZE + th->payload_len;
     return OC_OK;
+}
+
+int oc_encode_tile(struct oc_encoder *e, const float *field_data, int n, int tile_size,
+                   int tile_x, int tile_z, int lod, enum oc_field field, float bound,
+                   struct oc_buf *out)
+{
+    if (!e || !field_data || !out) return OC_E_ARG;
+    if (n > OC_MAX_N) return OC_E_TOO_LARGE;
+    if (!is_pow2(n) || !is_pow2(tile_size) || tile_size > n) return OC_E_ARG;
+    if (lod < 0 || lod > OC_MAX_LOD || (tile_size >> lod) == 0) return OC_E_ARG;
+    if (tile_x < 0 || tile_z < 0 || tile_x >= n / tile_size || tile_z >= n / tile_size) return OC_E_ARG;
+    if ((unsigned)field >= OC_FIELD_COUNT) return OC_E_ARG;
+    if (!isfinite(bound) || bound < 0) return OC_E_ARG;
+
+    const int side = tile_size >> lod;
+    const size_t count = (size_t)side * side;
+    float vmin, vmax;
+    int rc = oc_enc_gather(e, field_data, n, tile_size, tile_x, tile_z, lod, &vmin, &vmax);
+    if (rc) return rc;
+
+    struct oc_tile_header th = {
+        .field = (uint8_t)field, .lod = (uint8_t)lod, .codec = (uint8_t)e->codec, .flags = 0,
+        .tile_x = (uint16_t)tile_x, .tile_z = (uint16_t)tile_z,
+        .width = (uint16_t)side, .height = (uint16_t)side, .bound = bound,
+    };
+    if (bound == 0 || !oc_enc_quantise_new(e, count, vmin, vmax, bound, 1.0, &th.offset, &th.scale))
+        return oc_enc_append_raw(out, &th, e->vals, count);
+    return oc_enc_append_intra(e, &th, e->q, 1, out);
 }

@@ -21,6 +21,7 @@ const char *oc_strerror(int err)
     case OC_E_TOO_LARGE: return "too large: dimensions beyond protocol limits";
     case OC_E_NOMEM: return "out of memory";
     case OC_E_ARG: return "invalid argument";
+    case OC_E_REFERENCE: return "reference missing: a predicted tile names frames this decoder has not decoded";
     default: return "unknown error";
     }
 }
@@ -168,6 +169,7 @@ int oc_tile_header_parse(const uint8_t *src, size_t len, const struct oc_frame_h
         break;
     case OC_CODEC_QUANT_LORENZO:
     case OC_CODEC_QUANT_LORENZO_ZSTD:
+    case OC_CODEC_TEMPORAL:
         if (!isfinite(t->offset) || !isfinite(t->scale) || !(t->scale > 0)) return OC_E_CORRUPT;
         break;
     default:

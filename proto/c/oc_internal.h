@@ -4,6 +4,8 @@
 
 #include "oc_proto.h"
 
+#include <stdint.h>
+
 /* Hot loops get an AVX2 clone picked at load time (GCC ifunc); elsewhere plain C. */
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
 #define OC_VECTOR_CLONES __attribute__((target_clones("avx2", "default")))
@@ -56,6 +58,64 @@ static inline float oc_dequant(int32_t q, double offset, double scale)
 {
     return (float)(offset + (double)q * scale);
 }
+
+/* The encoder (oc_encode.c); its pieces are shared with the temporal streams (oc_stream.c). */
+struct oc_encoder {
+    struct oc_entropy *ent;
+    int codec, level;
+    size_t cap;        /* samples the scratch arrays hold */
+    float *vals;       /* gathered samples */
+    int32_t *q;        /* quantised codes */
+    uint32_t *zz;      /* zigzagged prediction residuals */
+    uint32_t *esc;     /* escaped residuals */
+    uint8_t *packed;   /* streams A + B, input of the entropy coder */
+    int8_t forced[OC_PRED_COEFS];
+    int force;         /* test hook: use forced[] instead of fitting */
+};
+
+int oc_enc_reserve(struct oc_encoder *e, size_t count);
+int oc_enc_scan_range(const float *v, size_t count, float *vmin, float *vmax);   /* nonzero: NaN/Inf */
+int oc_enc_gather(struct oc_encoder *e, const float *field_data, int n, int tile_size, int tile_x, int tile_z,
+                  int lod, float *vmin, float *vmax);
+int oc_enc_quantise_new(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound, double headroom,
+                        double *offset, double *scale);
+int oc_enc_quantise_on(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound, double offset,
+                       double scale);
+int oc_enc_append_raw(struct oc_buf *out, struct oc_tile_header *th, const float *vals, size_t count);
+int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q, int allow_raw,
+                        struct oc_buf *out);
+
+/* Temporal prediction (codec 3, oc_temporal.c), PROTOCOL.md §5.6-5.8.
+ * Payload prefix, 40 bytes:
+ *   0 u8 depth (1..4)  1 u8 packing (0 bytes, 1 pairs)  2 u8 esc_width  3 u8 0
+ *   4 u32 esc_count    8 u32 pair_esc_count             12 u32 0
+ *   16 u64 ref_seq     24 i16 coef[7] (d1, d2, d3, L(d1), L(d2), L(d3), L(q1); units of 1/4096)  38 u16 0 */
+#define OC_TEMPORAL_PREFIX 40
+#define OC_TEMPORAL_MAX_DEPTH 4
+#define OC_TEMPORAL_COEFS 7
+#define OC_PAIR_LIMIT 15        /* a pair byte holds two zigzag values below 15: 15*z1 + z2 */
+#define OC_TEMPORAL_CODE_MAX (1 << 27)   /* encoder chains keep |codes| below this (int32 Laplacians) */
+/* Coefficients a tile of this depth may use (others must be 0): bit k = coef k. */
+unsigned oc_temporal_coef_mask(int depth);
+/* Predictions (mod 2^32) of row j from the references refs[0..depth) (the codes of
+ * frames ref_seq, ref_seq-1, ...; w*h each), for any int32 codes (the decoder). */
+void oc_temporal_predict_row(const int32_t *const *refs, int depth, int w, int h, int j,
+                             const int16_t coef[OC_TEMPORAL_COEFS], uint32_t *pred);
+/* Encoder side: Laplacians of a reference (|q| < OC_TEMPORAL_CODE_MAX), predictions of row j
+ * from the references and their Laplacians, and the least-squares coefficients for codes q. */
+void oc_temporal_laplacian(const int32_t *q, int w, int h, int32_t *L);
+void oc_temporal_predict_row_cached(const int32_t *const *refs, const int32_t *const *laps, int depth, int w, int j,
+                                    const int16_t coef[OC_TEMPORAL_COEFS], uint32_t *pred);
+void oc_temporal_fit(const int32_t *const *refs, const int32_t *const *laps, int depth, const int32_t *q, int w,
+                     int h, int16_t coef[OC_TEMPORAL_COEFS]);
+/* Pair packing (packing 1): out gets (count+1)/2 pair bytes, then the escaped pairs'
+ * values packed as oc_pack_escapes does. out must hold 6*count+8 bytes; esc_scratch 2*count values.
+ * Returns the plain length; sets the counts. */
+size_t oc_pack_pairs(const uint32_t *zz, size_t count, uint8_t *out, uint32_t *esc_scratch,
+                     size_t *pair_esc_count, size_t *esc_count, int *esc_width);
+/* Inverse; plain_len is checked against the counts. OC_E_CORRUPT on any inconsistency. */
+int oc_unpack_pairs(const uint8_t *in, size_t plain_len, size_t count, size_t pair_esc_count, size_t esc_count,
+                    int esc_width, uint32_t *zz, uint32_t *scratch);
 
 /* Test hook (gen_vectors): force predictor coefficients instead of fitting; NULL = fit. */
 void oc_encoder_force_predictor(struct oc_encoder *e, const int8_t *coef);

@@ -49,7 +49,9 @@ enum oc_codec {
                                    6-neighbour predictor inside), zigzag, escape packing, raw
                                    DEFLATE (RFC 1951); the default. Bit-exact rules: PROTOCOL.md §5 */
     OC_CODEC_QUANT_LORENZO_ZSTD = 2, /* proto area addition: same pipeline, zstd frame as the entropy coder */
-    /* 3.. reserved: temporal prediction */
+    OC_CODEC_TEMPORAL = 3,  /* predicted from the same tile's codes in the previous 1..4 frames
+                               (same quantisation grid), residuals pair-packed, raw DEFLATE.
+                               Needs a decoder that kept those frames: PROTOCOL.md §5.6-5.9 */
 };
 
 /* Errors: negative return values. */
@@ -62,6 +64,8 @@ enum oc_error {
     OC_E_TOO_LARGE = -5,   /* dimensions beyond protocol limits */
     OC_E_NOMEM = -6,
     OC_E_ARG = -7,         /* invalid argument to an encoder function */
+    OC_E_REFERENCE = -8,   /* a predicted tile (codec 3) names reference frames the decoder does
+                              not hold (missed, not yet received, other grid): wait for a keyframe */
 };
 const char *oc_strerror(int err);
 const char *oc_field_name(enum oc_field f); /* "height","dx","dz","slope_x","slope_z","jacobian" */
@@ -125,6 +129,53 @@ typedef int (*oc_tile_fn)(void *user, const struct oc_frame_header *fh,
 int oc_decode_frame(struct oc_decoder *d, const uint8_t *data, size_t len,
                     struct oc_frame_header *fh, oc_tile_fn fn, void *user);
 /* Returns OC_OK, a negative OC_E_* (bytes after the last tile: OC_E_CORRUPT),
- * or the first nonzero value fn returned (decoding stops there). fn may be NULL. */
+ * or the first nonzero value fn returned (decoding stops there). fn may be NULL.
+ *
+ * The decoder keeps the codes of the lossy tiles (codec 1, 2, 3) of the last
+ * frames per tile (field, lod, tile_x, tile_z, n, tile_size): the references
+ * of predicted tiles (codec 3). So one decoder per stream, frames in order.
+ * A frame that fails (any error, or fn returning nonzero) adds nothing to that
+ * history; a predicted tile whose references are missing fails with
+ * OC_E_REFERENCE before any sample is produced. */
+void oc_decoder_reset(struct oc_decoder *d);   /* forget every reference */
+/* Cap on the memory kept for references (codes and their table), in bytes (default
+ * 256 MiB; 0 keeps nothing: an intra-only client). Tiles that do not fit are not
+ * kept (their successors then fail with OC_E_REFERENCE). */
+void oc_decoder_set_history_limit(struct oc_decoder *d, size_t bytes);
+
+/* ---- Temporal streams (encoder side of codec 3), PROTOCOL.md §5.9 ----
+ * One oc_stream per layer = (field, lod, bound) of a field of side n cut into
+ * tile_size tiles. Each tick the owner calls oc_stream_encode once with the
+ * new field: it quantises every tile on the layer's grid and encodes the
+ * shared frame (each tile predicted from the previous ticks, or a keyframe).
+ * A receiver that lacks the references of this tick's shared tiles gets the
+ * keyframe tiles of the same tick instead (oc_stream_keyframe_tile): encoded
+ * on first request, once per tick, identical codes, so a receiver continues
+ * the shared chain from the next tick on. Nothing here depends on the number
+ * of receivers. */
+struct oc_stream;
+struct oc_stream *oc_stream_new(int n, int tile_size, int lod, enum oc_field field, float bound);
+void oc_stream_free(struct oc_stream *s);
+/* A periodic keyframe every `ticks` frames (0 = only when needed). Default OC_STREAM_KEYFRAME_INTERVAL. */
+#define OC_STREAM_KEYFRAME_INTERVAL 300
+void oc_stream_set_keyframe_interval(struct oc_stream *s, int ticks);
+/* Forget the chain: the next oc_stream_encode writes keyframes on a new grid. */
+void oc_stream_reset(struct oc_stream *s);
+/* Encode this tick's shared frame of the layer. field_data = the full n*n field,
+ * seq = the frame's seq. A seq that does not follow the previous call's by 1
+ * starts a new chain (keyframes). Non-finite input: OC_E_ARG (stream reset). */
+int oc_stream_encode(struct oc_stream *s, struct oc_encoder *e, const float *field_data, uint64_t seq);
+/* Ticks of history a receiver needs for this tick's shared tiles: it must have
+ * received this layer (the same tiles, shared or keyframe) in each of the
+ * ticks seq-1 ... seq-need. 0 = the shared frame is all keyframes (or raw). */
+int oc_stream_need(const struct oc_stream *s);
+/* This tick's shared tile (tile header + payload): a pointer into the stream, valid until the next encode. */
+int oc_stream_tile(const struct oc_stream *s, int tile_x, int tile_z, const uint8_t **data, size_t *len);
+/* This tick's keyframe tile, encoded on first request (then cached until the next encode). */
+int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_x, int tile_z,
+                            const uint8_t **data, size_t *len);
+/* Counters for metrics and benchmarks: shared tiles encoded as keyframes, keyframe tiles made on demand. */
+struct oc_stream_stats { uint64_t ticks, key_tiles, predicted_tiles, demand_key_tiles; };
+void oc_stream_stats(const struct oc_stream *s, struct oc_stream_stats *out);
 
 #endif

@@ -6,6 +6,7 @@ Needs only numpy and the standard library; zstd-coded tiles (codec 2) use the
 system libzstd through ctypes, since Debian 12 has no python3 zstd module.
 
     frame = decode_frame(message_bytes)       # -> Frame, or raises ProtocolError
+    state = DecoderState(); frame = decode_frame(message_bytes, state)   # a stream with codec 3 tiles
     frame.seq, frame.sim_time, frame.n, ...
     for tile in frame.tiles: tile.field, tile.lod, tile.x, tile.z, tile.samples (float32 2D)
     grid = Assembler(["height"], lod=1); grid.add(frame); grid.fields["height"]  # (N>>lod)^2
@@ -31,12 +32,17 @@ TILE_HEADER = struct.Struct("<BBBBHHHHfddII")    # 40 bytes
 LOSSY_PREFIX = struct.Struct("<BBHI6bH")         # 16 bytes (§5.1)
 assert (FRAME_HEADER.size, TILE_HEADER.size, LOSSY_PREFIX.size) == (48, 40, 16)
 
-CODEC_RAW_F32, CODEC_DEFLATE, CODEC_ZSTD = 0, 1, 2   # §5
+CODEC_RAW_F32, CODEC_DEFLATE, CODEC_ZSTD, CODEC_TEMPORAL = 0, 1, 2, 3   # §5
+TEMPORAL_PREFIX = struct.Struct("<BBBBIIIQ7hH")   # 40 bytes (§5.6)
+assert TEMPORAL_PREFIX.size == 40
+COEF_MASK = (0, 0x40, 0x49, 0x5B, 0x7F)   # coefficients allowed per depth (§5.6)
+MAX_DEPTH, PAIR_LIMIT = 4, 15
 
 
 class ProtocolError(ValueError):
     """Not a valid v1 frame. code is one of the names of §6.1:
-    truncated, magic, version, corrupt, too_large."""
+    truncated, magic, version, corrupt, too_large, reference (a predicted tile
+    whose reference frames this DecoderState does not hold)."""
 
     def __init__(self, code, message):
         super().__init__(f"{code}: {message}")
@@ -183,11 +189,102 @@ def _unpredict(r, coef):
     return q[:, 2:, 2:w + 2]
 
 
+# ---- codec 3: temporal prediction (§5.6-5.8) -----------------------------------------
+
+class DecoderState:
+    """The references of predicted tiles: the codes of the last frames of every tile.
+    One per stream; decode its frames in order. A frame that fails changes nothing."""
+
+    def __init__(self):
+        self.tiles = {}   # (field, lod, x, z, n, tile_size) -> list of (seq, offset, scale, bound, codes)
+
+    def reset(self):
+        self.tiles.clear()
+
+
+def _escaped_values(raw, count, esc_count, esc_width):
+    """§5.2: count bytes (255 = escaped) + byte planes -> uint64 zigzag values."""
+    a = np.frombuffer(raw, np.uint8, count)
+    z = a.astype(np.uint64)
+    escaped = np.flatnonzero(a == 255)
+    if len(escaped) != esc_count:
+        raise ProtocolError("corrupt", f"{len(escaped)} escapes, prefix says {esc_count}")
+    if esc_count:
+        planes = np.frombuffer(raw, np.uint8, esc_count * esc_width, count).reshape(esc_width, esc_count)
+        x = np.zeros(esc_count, np.uint64)
+        for p in range(esc_width):
+            x |= planes[p].astype(np.uint64) << np.uint64(8 * p)
+        if (x > 2**32 - 256).any():
+            raise ProtocolError("corrupt", "escaped residual out of range")
+        z[escaped] = 255 + x
+    return z
+
+
+def _lap(a):
+    """5-point Laplacian inside the tile, neighbours clamped to the tile (edge samples repeat)."""
+    p = np.pad(a, 1, mode="edge")
+    return p[1:-1, :-2] + p[1:-1, 2:] + p[:-2, 1:-1] + p[2:, 1:-1] - 4 * a
+
+
+def _temporal(payload, key, offset, scale, bound, height, width, state):
+    """A codec 3 payload -> int64 codes (height, width), checked in the order of §5.6."""
+    count, npairs = width * height, (width * height + 1) // 2
+    if len(payload) < TEMPORAL_PREFIX.size:
+        raise ProtocolError("corrupt", "temporal payload shorter than its prefix")
+    depth, packing, esc_width, zero1, esc_count, pair_esc, zero2, ref_seq, *coef = TEMPORAL_PREFIX.unpack_from(payload, 0)
+    coef, zero3 = coef[:7], coef[7]
+    if (not 1 <= depth <= MAX_DEPTH or packing > 1 or esc_width > 4 or zero1 or zero2 or zero3
+            or (esc_count == 0) != (esc_width == 0)
+            or any(c and not COEF_MASK[depth] >> k & 1 for k, c in enumerate(coef))):
+        raise ProtocolError("corrupt", "bad temporal prefix")
+    if packing == 0:
+        if pair_esc or esc_count > count:
+            raise ProtocolError("corrupt", "bad escape counts")
+        size = count + esc_count * esc_width
+    else:
+        if pair_esc > npairs or esc_count > 2 * pair_esc:
+            raise ProtocolError("corrupt", "bad escape counts")
+        size = npairs + 2 * pair_esc + esc_count * esc_width
+    if state is None:
+        raise ProtocolError("reference", "a predicted tile (codec 3) needs a DecoderState")
+    refs = []
+    for i in range(depth):
+        found = [s for s in state.tiles.get(key, []) if s[0] == ref_seq - i and s[1:4] == (offset, scale, bound)
+                 and s[4].shape == (height, width)]
+        if not found:
+            raise ProtocolError("reference", f"tile {key}: reference frame {ref_seq - i} missing or on another grid")
+        refs.append(found[0][4])
+    raw = _inflate(payload[TEMPORAL_PREFIX.size:], size)
+    if packing == 0:
+        z = _escaped_values(raw, count, esc_count, esc_width)
+    else:
+        a = np.frombuffer(raw, np.uint8, npairs)
+        if ((a >= PAIR_LIMIT * PAIR_LIMIT) & (a != 255)).any() or np.count_nonzero(a == 255) != pair_esc:
+            raise ProtocolError("corrupt", "bad pair bytes")
+        y = _escaped_values(raw[npairs:], 2 * pair_esc, esc_count, esc_width)
+        z = np.zeros(2 * npairs, np.uint64)
+        z[0::2], z[1::2] = a // PAIR_LIMIT, a % PAIR_LIMIT
+        esc = np.flatnonzero(a == 255)
+        z[2 * esc], z[2 * esc + 1] = y[0::2], y[1::2]
+        if count % 2 and z[count]:
+            raise ProtocolError("corrupt", "padding value of an odd tile is not 0")
+        z = z[:count]
+    r = (z >> np.uint64(1)).astype(np.int64) ^ -(z & np.uint64(1)).astype(np.int64)
+    # Missing references (depth < 4) stand in as q1: their coefficients are 0.
+    q = [refs[i] if i < depth else refs[0] for i in range(4)]
+    lap = [_lap(a) for a in q]
+    c = coef
+    s = (c[0] * (q[0] - q[1]) + c[1] * (q[1] - q[2]) + c[2] * (q[2] - q[3]) + c[3] * (lap[0] - lap[1])
+         + c[4] * (lap[1] - lap[2]) + c[5] * (lap[2] - lap[3]) + c[6] * lap[0])   # exact in int64, |s| < 2^52
+    return _wrap32(q[0] + (s + 2048) // 4096 + r.reshape(height, width))
+
+
 # ---- frames (§3) -------------------------------------------------------------------
 
-def decode_frame(data):
+def decode_frame(data, state=None):
     """Decode one binary WebSocket message into a Frame, checking every length
-    and field in the order of §6.1 before using it."""
+    and field in the order of §6.1 before using it. state: a DecoderState,
+    needed for predicted tiles (codec 3); it keeps this frame's codes as references."""
     data = memoryview(data)
     if len(data) < FRAME_HEADER.size:
         raise ProtocolError("truncated", "shorter than a frame header")
@@ -210,7 +307,7 @@ def decode_frame(data):
     grid_tiles = n // tile_size
 
     # Pass 1: headers, raw tiles, and the residuals of lossy tiles.
-    pos, decoded, lossy = header_size, [], {}
+    pos, decoded, lossy, codes = header_size, [], {}, {}
     for index in range(tile_count):
         if len(data) - pos < TILE_HEADER.size:
             raise ProtocolError("truncated", f"tile {index}: truncated tile header")
@@ -220,7 +317,7 @@ def decode_frame(data):
         if payload_len > len(data) - pos:
             raise ProtocolError("truncated", f"tile {index}: payload_len past the end")
         side = tile_size >> lod if lod <= MAX_LOD else 0
-        if (fid >= len(FIELDS) or lod > MAX_LOD or codec > CODEC_ZSTD or tx >= grid_tiles
+        if (fid >= len(FIELDS) or lod > MAX_LOD or codec > CODEC_TEMPORAL or tx >= grid_tiles
                 or tz >= grid_tiles or side < 1 or width != side or height != side
                 or not (math.isfinite(bound) and bound >= 0)):
             raise ProtocolError("corrupt", f"tile {index}: bad tile header")
@@ -231,6 +328,13 @@ def decode_frame(data):
             if payload_len != 4 * count:
                 raise ProtocolError("corrupt", f"tile {index}: raw payload of {payload_len} bytes")
             samples = np.frombuffer(payload, "<f4").reshape(height, width).astype(np.float32)
+        elif codec == CODEC_TEMPORAL:
+            if not (math.isfinite(offset) and math.isfinite(scale) and scale > 0):
+                raise ProtocolError("corrupt", f"tile {index}: bad offset/scale")
+            key = (fid, lod, tx, tz, n, tile_size)
+            q = _temporal(payload, key, offset, scale, bound, height, width, state)
+            codes[index] = (key, offset, scale, bound, q)
+            samples = (offset + q.astype(np.float64) * scale).astype(np.float32)
         else:
             if not (math.isfinite(offset) and math.isfinite(scale) and scale > 0):
                 raise ProtocolError("corrupt", f"tile {index}: bad offset/scale")
@@ -245,9 +349,18 @@ def decode_frame(data):
     # value = float32(offset + q*scale) in float64 (numpy does not fuse the multiply-add).
     for (height, width), group in lossy.items():
         q = _unpredict(np.stack([g[1] for g in group]), np.stack([g[2] for g in group]))
-        for (index, _r, _c, offset, scale), codes in zip(group, q):
-            decoded[index].samples = (offset + codes.astype(np.float64) * scale).astype(np.float32)
+        for (index, _r, _c, offset, scale), qt in zip(group, q):
+            decoded[index].samples = (offset + qt.astype(np.float64) * scale).astype(np.float32)
+            t = decoded[index]
+            key = (FIELDS.index(t.field), t.lod, t.x, t.z, n, tile_size)
+            codes[index] = (key, offset, scale, t.bound, qt)
     frame.tiles = decoded
+    if state is not None:   # the whole frame decoded: its codes become references (5 per tile, oldest out)
+        for key, offset, scale, bound, qt in codes.values():
+            slots = state.tiles.setdefault(key, [])
+            if len(slots) > MAX_DEPTH:
+                slots.remove(min(slots, key=lambda s: s[0]))
+            slots.append((seq, offset, scale, bound, qt))
     return frame
 
 

@@ -6,14 +6,17 @@
 // web/node_modules, the way the browser client decodes: fflate's inflateSync through
 // setInflateRaw() for tiles below 128x128 samples, DecompressionStream for larger ones
 // ('fflate+streams'). Codec 2 (zstd) frames are measured only when fzstd is installed there.
-// Last, `codec_js_decode_frame` lines: the web client's default subscription (height, dx, dz
+// Then `codec_js_decode_frame` lines: the web client's default subscription (height, dx, dz
 // at 1 cm, 64×64 tiles) joined into one frame per N, decoded with each inflater, including
 // the no-dependency browser fallback (one DecompressionStream per tile).
+// Last, `codec_js_decode_stream` lines: the temporal streams bench_codec wrote (stream_N*_*.frames,
+// 10 s at 30 Hz of height, dx, dz at 1 cm, joined into one frame per tick), decoded in order with
+// one DecoderState; ms = median per frame (predicted frames dominate), per inflater.
 import { readFileSync, readdirSync, existsSync } from 'node:fs';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { createRequire } from 'node:module';
-import { decodeFrame, setZstdDecompressor, setInflateRaw } from './oc_decode.js';
+import { decodeFrame, setZstdDecompressor, setInflateRaw, DecoderState } from './oc_decode.js';
 
 const root = join(dirname(fileURLToPath(import.meta.url)), '../..');
 const dir = process.argv[2] || join(root, 'build/bench_frames');
@@ -92,6 +95,44 @@ for (const n of [256, 512]) {
     console.log(JSON.stringify({
       bench: 'codec_js_decode_frame', N: n, fields: 'height,dx,dz', bound: 0.01, tile: 64, codec: 1,
       inflate: inf.name, bytes: buf.byteLength, ms: Number(ms.toFixed(2)), cpu_ms: Number(cpuMs.toFixed(2)),
+    }));
+  }
+}
+// Temporal streams: one frame per tick holding height, dx and dz (the web client's default layers).
+function readFrames(path) {
+  const b = readFileSync(path), out = [];
+  for (let p = 0; p + 4 <= b.length;) {
+    const len = b.readUInt32LE(p);
+    out.push(b.subarray(p + 4, p + 4 + len));
+    p += 4 + len;
+  }
+  return out;
+}
+for (const n of [256, 512]) {
+  const names = ['height', 'dx', 'dz'].map((fld) => readdirSync(dir).find((f) => f.startsWith(`stream_N${n}_${fld}_0.01_`)));
+  if (!names.every(Boolean)) continue;
+  const perField = names.map((f) => readFrames(join(dir, f)));
+  const ticks = perField[0].map((_, k) => joinFrames(perField.map((fr) => fr[k])));
+  const bytes = ticks.reduce((c, t) => c + t.byteLength, 0);
+  const stream = { name: 'DecompressionStream', opts: { useNodeZlib: false }, fn: null };
+  for (const inf of [...inflaters, stream]) {
+    setInflateRaw(inf.fn);
+    const times = [];
+    const cpu0 = process.cpuUsage();
+    for (let rep = 0; rep < 2; rep++) {
+      const state = new DecoderState();
+      for (const t of ticks) {
+        const t0 = performance.now();
+        await decodeFrame(t, { ...inf.opts, state });
+        if (rep) times.push(performance.now() - t0);
+      }
+    }
+    const cpu = process.cpuUsage(cpu0);
+    times.sort((x, y) => x - y);
+    console.log(JSON.stringify({
+      bench: 'codec_js_decode_stream', N: n, fields: 'height,dx,dz', bound: 0.01, codec: 3, inflate: inf.name,
+      frames: ticks.length, mbytes_per_s_30hz: Number((bytes / ticks.length * 30 / 1e6).toFixed(3)),
+      ms: Number(times[times.length >> 1].toFixed(2)), cpu_ms: Number(((cpu.user + cpu.system) / 1e3 / (2 * ticks.length)).toFixed(2)),
     }));
   }
 }

@@ -8,9 +8,11 @@
 //     below 128x128 samples, where a stream's set-up cost dominates
 //     (STREAM_MIN_SAMPLES, measured).
 // Codec 2 (zstd) is optional: call setZstdDecompressor(fzstd.decompress) to
-// enable it. Every length is checked before it is read; bad input throws an
+// enable it. Codec 3 (temporal, predicted from the previous frames) needs a
+// DecoderState that lives as long as the stream: decodeFrame(buf, { state }). Every length is checked before it is read; bad input throws an
 // Error whose `code` is 'truncated' | 'magic' | 'version' | 'corrupt' |
-// 'too_large' | 'unsupported'.
+// 'too_large' | 'unsupported' | 'reference' (a predicted tile whose reference
+// frames this state has not decoded: wait for the keyframe the server sends next).
 
 export const PROTO_VERSION = 1;
 export const SUBPROTOCOL = 'oceand.v1';
@@ -18,11 +20,16 @@ export const FIELD_NAMES = Object.freeze(['height', 'dx', 'dz', 'slope_x', 'slop
 export const CODEC_RAW_F32 = 0;
 export const CODEC_QUANT_LORENZO = 1;       // deflate-raw entropy coder (default)
 export const CODEC_QUANT_LORENZO_ZSTD = 2;  // zstd entropy coder
+export const CODEC_TEMPORAL = 3;            // predicted from the previous 1..4 frames, deflate-raw
 export const FRAME_HEADER_SIZE = 48;
 export const TILE_HEADER_SIZE = 40;
 export const MAX_N = 2048;
 export const MAX_LOD = 4;
 const LOSSY_PREFIX = 16;
+const TEMPORAL_PREFIX = 40;
+const MAX_DEPTH = 4;
+const HISTORY_SLOTS = MAX_DEPTH + 1;
+const PAIR_LIMIT = 15;
 const nodeZlib = globalThis.process?.getBuiltinModule?.('node:zlib') ?? null;
 
 let zstdDecompress = null;
@@ -110,7 +117,7 @@ function readTileHeader(bytes, dv, pos, fh) {
   const grid = fh.n / fh.tileSize;
   if (t.tileX >= grid || t.tileZ >= grid) throw fail('corrupt', `tile (${t.tileX},${t.tileZ}) outside ${grid}x${grid}`);
   if (!Number.isFinite(t.bound) || t.bound < 0) throw fail('corrupt', `bound ${t.bound}`);
-  if (t.codec === CODEC_QUANT_LORENZO || t.codec === CODEC_QUANT_LORENZO_ZSTD) {
+  if (t.codec === CODEC_QUANT_LORENZO || t.codec === CODEC_QUANT_LORENZO_ZSTD || t.codec === CODEC_TEMPORAL) {
     if (!Number.isFinite(t.offset) || !Number.isFinite(t.scale) || !(t.scale > 0)) throw fail('corrupt', 'offset/scale');
   } else if (t.codec !== CODEC_RAW_F32) {
     throw fail('corrupt', `codec ${t.codec}`);
@@ -152,7 +159,8 @@ function inflateRawInstalled(src, n) {
 // fflate 2.5 ms, streams 4.7 ms; 12 tiles of 128x128, fflate 2.4 ms, streams 1.6 ms.
 const STREAM_MIN_SAMPLES = 128 * 128;
 const haveStreams = typeof DecompressionStream === 'function';
-const preferStream = (t) => t.codec === CODEC_QUANT_LORENZO && t.width * t.height >= STREAM_MIN_SAMPLES;
+const preferStream = (t) => (t.codec === CODEC_QUANT_LORENZO || t.codec === CODEC_TEMPORAL)
+  && t.width * t.height >= STREAM_MIN_SAMPLES;
 
 // One DecompressionStream per tile (async; decodeFrame runs them concurrently).
 async function inflateRawStream(src, n) {
@@ -326,29 +334,183 @@ function readLossyPrefix(t, bytes, start) {
   return { escWidth, escCount, coef, src, n: count + escCount * escWidth };
 }
 
-// One tile, synchronously; inflate = a synchronous raw-DEFLATE inflater.
-function decodeTileSync(t, bytes, start, inflate) {
-  if (t.codec === CODEC_RAW_F32) return decodeRaw(t, bytes, start);
-  const l = readLossyPrefix(t, bytes, start);
-  const packed = t.codec === CODEC_QUANT_LORENZO ? inflate(l.src, l.n) : unzstd(l.src, l.n);
-  return reconstruct(t, packed, l.escCount, l.escWidth, l.coef);
+// ---- codec 3: temporal prediction (PROTOCOL.md §5.6-5.8) ----
+
+/** The references of predicted tiles: the codes of the last frames of every tile. One per stream. */
+export class DecoderState {
+  constructor() { this.tiles = new Map(); }
+  /** Forget every reference (e.g. after resubscribing); predicted tiles then fail until the next keyframe. */
+  reset() { this.tiles.clear(); }
+}
+const tileKey = (h, t) => `${t.field}/${t.lod}/${t.tileX}/${t.tileZ}/${h.n}/${h.tileSize}`;
+// Coefficients a tile of each depth may use (bit k = coefficient k: d1, d2, d3, L(d1), L(d2), L(d3), L(q1)).
+const COEF_MASK = [0, 0x40, 0x49, 0x5b, 0x7f];
+const TEMPORAL_COEFS = 7;
+
+// The 40-byte prefix of a codec 3 payload, validated, and its references looked up (in this order).
+function readTemporalPrefix(h, t, bytes, start, state) {
+  const count = t.width * t.height, npairs = (count + 1) >> 1;
+  if (t.payloadLen < TEMPORAL_PREFIX) throw fail('corrupt', 'temporal payload shorter than its prefix');
+  const dv = new DataView(bytes.buffer, bytes.byteOffset + start, TEMPORAL_PREFIX);
+  const depth = bytes[start], packing = bytes[start + 1], escWidth = bytes[start + 2];
+  const escCount = dv.getUint32(4, true), pairEsc = dv.getUint32(8, true);
+  const refSeq = dv.getBigUint64(16, true);
+  const coef = [];
+  for (let k = 0; k < TEMPORAL_COEFS; k++) coef.push(dv.getInt16(24 + 2 * k, true));
+  let zero = bytes[start + 3] | dv.getUint32(12, true);
+  for (let k = 24 + 2 * TEMPORAL_COEFS; k < TEMPORAL_PREFIX; k++) zero |= bytes[start + k];
+  if (depth < 1 || depth > MAX_DEPTH || packing > 1 || escWidth > 4 || zero) throw fail('corrupt', 'temporal prefix');
+  coef.forEach((c, k) => { if (c && !(COEF_MASK[depth] & (1 << k))) throw fail('corrupt', `coefficient ${k} at depth ${depth}`); });
+  if ((escCount === 0) !== (escWidth === 0)) throw fail('corrupt', 'esc_count/esc_width');
+  let n;
+  if (packing === 0) {
+    if (pairEsc || escCount > count) throw fail('corrupt', 'escape counts');
+    n = count + escCount * escWidth;
+  } else {
+    if (pairEsc > npairs || escCount > 2 * pairEsc) throw fail('corrupt', 'escape counts');
+    n = npairs + 2 * pairEsc + escCount * escWidth;
+  }
+  if (!state) throw fail('reference', 'a predicted tile (codec 3) needs decodeFrame(buf, { state })');
+  const slots = state.tiles.get(tileKey(h, t)) || [];
+  const refs = [];
+  for (let i = 0; i < depth; i++) {
+    const want = refSeq - BigInt(i);
+    const s = slots.find((x) => x.seq === want && x.offset === t.offset && x.scale === t.scale && x.bound === t.bound
+      && x.codes.length === count);
+    if (!s) throw fail('reference', `tile ${tileKey(h, t)}: reference frame ${want} missing or on another grid`);
+    refs.push(s);
+  }
+  return { depth, packing, escWidth, escCount, pairEsc, coef, refs, n, src: bytes.subarray(start + TEMPORAL_PREFIX, start + t.payloadLen) };
 }
 
-// One tile with DecompressionStream for codec 1 (the other codecs are synchronous).
-async function decodeTileStream(t, bytes, start) {
-  if (t.codec !== CODEC_QUANT_LORENZO) return decodeTileSync(t, bytes, start, null);
+// Pair packing: one byte per two samples (15*z1 + z2 when both are below 15, 255 = escaped pair).
+let pairScratch = new Int32Array(4097);
+function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
+  const npairs = (count + 1) >> 1, ny = 2 * pairEsc;
+  const y = new Int32Array(ny);
+  unpackEscapes(y, packed.subarray(npairs), ny, escCount, escWidth);
+  if (pairScratch.length < count + 1) pairScratch = new Int32Array(count + 1);
+  const zz = pairScratch; // consumed by reconstructTemporal before the next tile (no await in between)
+  let e = 0;
+  for (let p = 0; p < npairs; p++) {
+    const b = packed[p];
+    if (b < PAIR_LIMIT * PAIR_LIMIT) {
+      zz[2 * p] = (b / PAIR_LIMIT) | 0;
+      zz[2 * p + 1] = b % PAIR_LIMIT;
+    } else if (b === 255 && e < pairEsc) {
+      zz[2 * p] = y[2 * e];
+      zz[2 * p + 1] = y[2 * e + 1];
+      e++;
+    } else {
+      throw fail('corrupt', `pair byte ${b}`);
+    }
+  }
+  if (e !== pairEsc) throw fail('corrupt', 'fewer escaped pairs than pair_esc_count');
+  if (count & 1 && zz[count] !== 0) throw fail('corrupt', 'padding value of an odd tile is not 0');
+  return zz;
+}
+
+// The 5-point Laplacian of a reference's codes, neighbours clamped to the tile, as exact float64
+// (|L| < 2^34); computed once per reference frame and kept with it.
+function laplacian(slot, w, h) {
+  if (slot.lap) return slot.lap;
+  const q = slot.codes, L = new Float64Array(w * h);
+  for (let j = 0; j < h; j++) {
+    const r = j * w, up = (j > 0 ? j - 1 : 0) * w, dn = (j + 1 < h ? j + 1 : h - 1) * w;
+    if (w === 1) { L[r] = q[up] + q[dn] - 2 * q[r]; continue; }
+    L[r] = q[r + 1] + q[up] + q[dn] - 3 * q[r]; // the W neighbour clamps to the sample itself
+    for (let i = 1; i < w - 1; i++) L[r + i] = q[r + i - 1] + q[r + i + 1] + q[up + i] + q[dn + i] - 4 * q[r + i];
+    L[r + w - 1] = q[r + w - 2] + q[up + w - 1] + q[dn + w - 1] - 3 * q[r + w - 1];
+  }
+  slot.lap = L;
+  return L;
+}
+
+// Predictions from the references (no sample of this frame is needed), plus the residuals.
+// Every sum is an exact integer below 2^53 in float64; `| 0` wraps the code to int32 as C does.
+function reconstructTemporal(t, packed, l) {
+  const w = t.width, h = t.height, count = w * h;
+  let zz;
+  if (l.packing === 1) zz = unpackPairs(packed, count, l.pairEsc, l.escCount, l.escWidth);
+  else if (l.escCount === 0) zz = packed;
+  else { zz = new Int32Array(count); unpackEscapes(zz, packed, count, l.escCount, l.escWidth); }
+  const q = new Int32Array(count), out = new Float32Array(count);
+  const [c0, c1, c2, c3, c4, c5, c6] = l.coef, depth = l.depth;
+  // S of §5.8 regrouped per reference: S = Σ a_k·q_k + Σ b_k·L(q_k). The same integer (every
+  // partial sum stays below 2^53, so float64 is exact), with fewer operations per sample.
+  const a1 = c0, a2 = c1 - c0, a3 = c2 - c1, a4 = -c2, b1 = c3 + c6, b2 = c4 - c3, b3 = c5 - c4, b4 = -c5;
+  // Missing references (depth < 4) stand in as q1: their coefficients are 0.
+  const ref = (k) => l.refs[k < depth ? k : 0];
+  const q1 = ref(0).codes, q2 = ref(1).codes, q3 = ref(2).codes, q4 = ref(3).codes;
+  const L1 = laplacian(ref(0), w, h), L2 = laplacian(ref(1), w, h), L3 = laplacian(ref(2), w, h);
+  const L4 = laplacian(ref(3), w, h);
+  const off = t.offset, sc = t.scale;
+  for (let k = 0; k < count; k++) {
+    const a = q1[k];
+    const s = a1 * a + a2 * q2[k] + a3 * q3[k] + a4 * q4[k] + b1 * L1[k] + b2 * L2[k] + b3 * L3[k] + b4 * L4[k];
+    const z = zz[k];
+    const v = (a + Math.floor((s + 2048) * (1 / 4096)) + ((z >>> 1) ^ -(z & 1))) | 0; // 1/4096: exact
+    q[k] = v;
+    out[k] = off + v * sc;
+  }
+  return { samples: out, codes: q };
+}
+
+// One tile, synchronously; inflate = a synchronous raw-DEFLATE inflater. Returns {samples, codes}
+// (codes: the tile's int32 codes when a state keeps them, else null).
+function decodeTileSync(h, t, bytes, start, inflate, state) {
+  if (t.codec === CODEC_RAW_F32) return { samples: decodeRaw(t, bytes, start), codes: null };
+  if (t.codec === CODEC_TEMPORAL) {
+    const l = readTemporalPrefix(h, t, bytes, start, state);
+    return reconstructTemporal(t, inflate(l.src, l.n), l);
+  }
   const l = readLossyPrefix(t, bytes, start);
-  return reconstruct(t, await inflateRawStream(l.src, l.n), l.escCount, l.escWidth, l.coef);
+  const packed = t.codec === CODEC_QUANT_LORENZO ? inflate(l.src, l.n) : unzstd(l.src, l.n);
+  const samples = reconstruct(t, packed, l.escCount, l.escWidth, l.coef);
+  return { samples, codes: state ? scratch.slice(0, samples.length) : null };
+}
+
+// One tile with DecompressionStream for codec 1 and 3 (the other codecs are synchronous).
+async function decodeTileStream(h, t, bytes, start, state) {
+  if (t.codec === CODEC_TEMPORAL) {
+    const l = readTemporalPrefix(h, t, bytes, start, state);
+    return reconstructTemporal(t, await inflateRawStream(l.src, l.n), l);
+  }
+  if (t.codec !== CODEC_QUANT_LORENZO) return decodeTileSync(h, t, bytes, start, null, state);
+  const l = readLossyPrefix(t, bytes, start);
+  const samples = reconstruct(t, await inflateRawStream(l.src, l.n), l.escCount, l.escWidth, l.coef);
+  return { samples, codes: state ? scratch.slice(0, samples.length) : null };
+}
+
+// After a whole frame decoded: its lossy tiles become references (at most HISTORY_SLOTS per tile;
+// the oldest seq goes first).
+function commitReferences(state, header, metas, decoded) {
+  const seq = BigInt(header.seq);
+  metas.forEach(({ t }, i) => {
+    const codes = decoded[i].codes;
+    if (!codes) return;
+    const key = tileKey(header, t);
+    const slots = state.tiles.get(key) || [];
+    if (slots.length >= HISTORY_SLOTS) {
+      let oldest = 0;
+      slots.forEach((s, k) => { if (s.seq < slots[oldest].seq) oldest = k; });
+      slots.splice(oldest, 1);
+    }
+    slots.push({ seq, offset: t.offset, scale: t.scale, bound: t.bound, codes });
+    state.tiles.set(key, slots);
+  });
 }
 
 /**
  * Decode a whole binary frame: {header, tiles:[{field, fieldName, lod, codec, tileX, tileZ, width, height,
  * bound, offset, scale, samples: Float32Array}]}. options.useNodeZlib = false skips node's zlib under node
  * (then DecompressionStream and any setInflateRaw() inflater are used, as in a browser: the tests cover
- * the browser paths so).
+ * the browser paths so). options.state = a DecoderState: keeps the references predicted tiles (codec 3)
+ * need; decode the frames of one stream in order with the same state. A frame that throws leaves it as it was.
  */
 export async function decodeFrame(arrayBuffer, options = {}) {
   const useNodeZlib = options.useNodeZlib !== false;
+  const state = options.state || null;
   const bytes = asBytes(arrayBuffer);
   const header = readFrameHeader(bytes);
   const dv = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
@@ -365,26 +527,28 @@ export async function decodeFrame(arrayBuffer, options = {}) {
   let samples;
   if (nodeZlib && useNodeZlib) {
     // Synchronous: tile after tile, the first bad payload throws.
-    samples = metas.map(({ t, start }) => decodeTileSync(t, bytes, start, inflateRawNode));
+    samples = metas.map(({ t, start }) => decodeTileSync(header, t, bytes, start, inflateRawNode, state));
   } else if (inflateRawSync && !(haveStreams && metas.some(({ t }) => preferStream(t)))) {
-    samples = metas.map(({ t, start }) => decodeTileSync(t, bytes, start, inflateRawInstalled));
+    samples = metas.map(({ t, start }) => decodeTileSync(header, t, bytes, start, inflateRawInstalled, state));
   } else {
     // Some tiles through DecompressionStream, all in flight at once; the others synchronously.
     // The first bad payload in frame order wins.
     const decoded = await Promise.allSettled(metas.map(({ t, start }) => {
-      if (t.codec === CODEC_QUANT_LORENZO && (!inflateRawSync || preferStream(t))) return decodeTileStream(t, bytes, start);
+      if ((t.codec === CODEC_QUANT_LORENZO || t.codec === CODEC_TEMPORAL) && (!inflateRawSync || preferStream(t)))
+        return decodeTileStream(header, t, bytes, start, state);
       try {
-        return decodeTileSync(t, bytes, start, inflateRawInstalled);
+        return Promise.resolve(decodeTileSync(header, t, bytes, start, inflateRawInstalled, state));
       } catch (e) {
         return Promise.reject(e);
       }
     }));
     samples = decoded.map((d) => { if (d.status === 'rejected') throw d.reason; return d.value; });
   }
+  if (state) commitReferences(state, header, metas, samples);
   const tiles = metas.map(({ t }, i) => ({
     field: t.field, fieldName: FIELD_NAMES[t.field], lod: t.lod, codec: t.codec,
     tileX: t.tileX, tileZ: t.tileZ, width: t.width, height: t.height,
-    bound: t.bound, offset: t.offset, scale: t.scale, samples: samples[i],
+    bound: t.bound, offset: t.offset, scale: t.scale, samples: samples[i].samples,
   }));
   return { header, tiles };
 }

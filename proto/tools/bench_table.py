@@ -32,3 +32,14 @@ if js:
     for r in js:
         if r["codec"] == 1:
             print(f"| {r['N']} | {r['field']} | {r['bound']} | {r['tile']} | {r['dec_MBs']} | {r['dec_MBs_cpu']} |")
+
+# Temporal streams (codec 3): the README's table.
+st = [r for r in rows if r.get("bench") == "codec_stream"]
+if st:
+    print()
+    print("| N | field | bound | bits/sample (intra, same fields) | max error (every sample of 300 frames) | encode MB/s (intra, same run) | decode MB/s |")
+    print("|---|---|---|---|---|---|---|")
+    for d in st:
+        b = "1 mm" if d["bound"] == 0.001 else "1 cm" if d["bound"] == 0.01 else d["bound"]
+        print(f"| {d['N']} | {d['field']} | {b} | **{d['bits']:.2f}** ({d['intra_bits']:.2f}) | {d['max_err']:.6f} "
+              f"| {d['enc_MBs']} ({d['intra_enc_MBs']}) | {d['dec_MBs']} |")

@@ -164,6 +164,226 @@ static void emit_crafted(void)
             esc_count, esc_width, th.bound, scale);
 }
 
+/* ---- temporal streams (codec 3): frames decoded in order by one decoder ---- */
+
+/* A sea-like field at time t: travelling waves (for the temporal predictor). */
+static void wave_field(float *f, int n, double t, double amp, double bias)
+{
+    for (int z = 0; z < n; z++)
+        for (int x = 0; x < n; x++) {
+            double a = 2 * M_PI * x / n, b = 2 * M_PI * z / n;
+            double v = amp * (0.6 * sin(a + 0.3 - 1.1 * t) + 0.3 * sin(2 * a + 3 * b + 1.1 - 2.3 * t)
+                              + 0.1 * cos(5 * b - 4 * a - 3.7 * t));
+            f[(size_t)z * n + x] = (float)(bias + v);
+        }
+}
+
+#define S_N 16
+#define S_TS 8
+#define S_TICKS 12
+#define S_SEQ0 100
+struct s_layer { enum oc_field field; int lod; float bound; struct oc_stream *st; };
+static struct s_layer s_layers[2] = { { OC_FIELD_HEIGHT, 0, 0.01f, NULL }, { OC_FIELD_DX, 1, 0.0001f, NULL } };
+static float s_fields[S_TICKS][2][S_N * S_N];
+
+/* The frame a receiver gets at tick k: the shared tiles, or this tick's keyframe tiles. */
+static void stream_frame(struct oc_encoder *e, int k, int keyframes, struct oc_buf *buf)
+{
+    const int grid = S_N / S_TS;
+    struct oc_frame_header fh = { .seq = S_SEQ0 + (uint64_t)k, .sim_time = k / 30.0, .params_version = 3,
+                                  .n = S_N, .tile_size = S_TS, .patch_size = 16.0f,
+                                  .tile_count = (uint16_t)(2 * grid * grid), .server_time_us = 1763719200000000ull };
+    buf->len = 0;
+    oc_buf_reserve(buf, OC_FRAME_HEADER_SIZE);
+    oc_frame_header_write(buf->data, &fh);
+    buf->len = OC_FRAME_HEADER_SIZE;
+    for (int l = 0; l < 2; l++)
+        for (int tz = 0; tz < grid; tz++)
+            for (int tx = 0; tx < grid; tx++) {
+                const uint8_t *p;
+                size_t len;
+                int rc = keyframes ? oc_stream_keyframe_tile(s_layers[l].st, e, tx, tz, &p, &len)
+                                   : oc_stream_tile(s_layers[l].st, tx, tz, &p, &len);
+                if (rc) { fprintf(stderr, "stream tile: %s\n", oc_strerror(rc)); exit(1); }
+                oc_buf_reserve(buf, len);
+                memcpy(buf->data + buf->len, p, len);
+                buf->len += len;
+            }
+}
+
+struct s_out { const char *name; struct oc_decoder *d; int nframes; };
+static int first_stream = 1;
+
+static void s_begin(struct s_out *o, const char *name, const char *desc)
+{
+    o->name = name;
+    o->d = oc_decoder_new();
+    o->nframes = 0;
+    fprintf(manifest, "%s\n    {\"name\":\"%s\",\"description\":\"%s\",\"frames\":[", first_stream ? "" : ",", name, desc);
+    first_stream = 0;
+}
+
+static void s_end(struct s_out *o)
+{
+    fprintf(manifest, "]}");
+    oc_decoder_free(o->d);
+}
+
+/* One frame of a stream: decode it with the stream's decoder; want = NULL (must decode:
+ * expected and input written) or the error it must give. */
+static void s_frame_n(struct s_out *o, const uint8_t *data, size_t len, int k, int n, int ts);
+static void s_frame(struct s_out *o, const uint8_t *data, size_t len, int k, const char *want)
+{
+    if (!want) { s_frame_n(o, data, len, k, S_N, S_TS); return; }
+    char fn[256];
+    snprintf(fn, sizeof fn, "%s_%02d.bin", o->name, o->nframes);
+    write_file(fn, data, len);
+    fprintf(manifest, "%s\n      {\"file\":\"%s\"", o->nframes ? "," : "", fn);
+    float expected[2 * S_N * S_N];
+    struct { float *dst; size_t at; } ctx = { expected, 0 };
+    struct oc_frame_header fh;
+    int rc = oc_decode_frame(o->d, data, len, &fh, decode_cb, &ctx);
+    if (want) {
+        const char *got = rc == OC_E_REFERENCE ? "reference" : rc == OC_E_CORRUPT ? "corrupt" : "?";
+        if (strcmp(got, want)) { fprintf(stderr, "%s frame %d: %s, want %s\n", o->name, o->nframes, oc_strerror(rc), want); exit(1); }
+        fprintf(manifest, ",\"error\":\"%s\"}", want);
+        o->nframes++;
+        return;
+    }
+    fprintf(stderr, "%s frame %d: unreachable\n", o->name, o->nframes);
+    exit(1);
+}
+
+/* A frame of a stream that must decode (fields n x n, tiles ts): expected and input written. */
+static void s_frame_n(struct s_out *o, const uint8_t *data, size_t len, int k, int n, int ts)
+{
+    char fn[256];
+    snprintf(fn, sizeof fn, "%s_%02d.bin", o->name, o->nframes);
+    write_file(fn, data, len);
+    fprintf(manifest, "%s\n      {\"file\":\"%s\"", o->nframes ? "," : "", fn);
+    float expected[2 * S_N * S_N], input[2 * S_N * S_N];
+    struct { float *dst; size_t at; } ctx = { expected, 0 };
+    struct oc_frame_header fh;
+    int rc = oc_decode_frame(o->d, data, len, &fh, decode_cb, &ctx);
+    if (rc) { fprintf(stderr, "%s frame %d: %s\n", o->name, o->nframes, oc_strerror(rc)); exit(1); }
+    /* Tiles and inputs in frame order. */
+    fprintf(manifest, ",\"expected\":\"%s_%02d.expected.f32\",\"input\":\"%s_%02d.input.f32\",\"seq\":%llu,\"tiles\":[",
+            o->name, o->nframes, o->name, o->nframes, (unsigned long long)fh.seq);
+    size_t pos = OC_FRAME_HEADER_SIZE, at = 0;
+    for (int t = 0; t < fh.tile_count; t++) {
+        const uint8_t *th = data + pos;
+        int field = th[0], lod = th[1], codec = th[2], tx = th[4] | th[5] << 8, tz = th[6] | th[7] << 8;
+        int side = ts >> lod, step = 1 << lod, l = field == OC_FIELD_HEIGHT ? 0 : 1;
+        uint32_t plen;
+        memcpy(&plen, th + 32, 4);
+        const uint8_t *pl = th + OC_TILE_HEADER_SIZE;
+        fprintf(manifest, "%s{\"field\":\"%s\",\"lod\":%d,\"codec\":%d,\"tileX\":%d,\"tileZ\":%d,\"width\":%d,"
+                "\"sampleOffset\":%zu", t ? "," : "", oc_field_name((enum oc_field)field), lod, codec, tx, tz, side, at);
+        if (codec == OC_CODEC_TEMPORAL) {
+            uint64_t ref;
+            memcpy(&ref, pl + 16, 8);
+            fprintf(manifest, ",\"depth\":%d,\"packing\":%d,\"refSeq\":%llu", pl[0], pl[1], (unsigned long long)ref);
+        }
+        fprintf(manifest, "}");
+        for (int j = 0; j < side; j++)
+            for (int i = 0; i < side; i++)
+                input[at + (size_t)j * side + i] =
+                    s_fields[k][l][((size_t)tz * ts + (size_t)j * step) * n + (size_t)tx * ts + (size_t)i * step];
+        at += (size_t)side * side;
+        pos += OC_TILE_HEADER_SIZE + plen;
+    }
+    fprintf(manifest, "]}");
+    snprintf(fn, sizeof fn, "%s_%02d.expected.f32", o->name, o->nframes); write_file(fn, expected, sizeof(float) * at);
+    snprintf(fn, sizeof fn, "%s_%02d.input.f32", o->name, o->nframes); write_file(fn, input, sizeof(float) * at);
+    o->nframes++;
+}
+
+static void emit_streams(void)
+{
+    struct oc_encoder *e = oc_encoder_new();
+    for (int l = 0; l < 2; l++) s_layers[l].st = oc_stream_new(S_N, S_TS, s_layers[l].lod, s_layers[l].field, s_layers[l].bound);
+    struct s_out chain, join, broken, mismatch, badcoef;
+    struct oc_buf buf = { 0 }, frames[S_TICKS];
+    memset(frames, 0, sizeof frames);
+    /* Receiver B joins at tick 2 and misses tick 7 (latest-frame-wins): it gets this tick's
+     * keyframe tiles until it has held the layer for `need` consecutive ticks. */
+    int run_b = 0, last_b = -2;
+    struct oc_buf bframes[S_TICKS];
+    int bticks[S_TICKS], nb = 0;
+    memset(bframes, 0, sizeof bframes);
+    for (int k = 0; k < S_TICKS; k++) {
+        for (int l = 0; l < 2; l++) {
+            wave_field(s_fields[k][l], S_N, k / 30.0 * 4, l ? 0.7 : 1.5, l ? 0.1 : 0);
+            if (oc_stream_encode(s_layers[l].st, e, s_fields[k][l], S_SEQ0 + (uint64_t)k)) { fprintf(stderr, "stream encode\n"); exit(1); }
+        }
+        stream_frame(e, k, 0, &frames[k]);
+        if (k >= 2 && k != 7) {
+            int need = oc_stream_need(s_layers[0].st) > oc_stream_need(s_layers[1].st) ? oc_stream_need(s_layers[0].st)
+                                                                                       : oc_stream_need(s_layers[1].st);
+            run_b = last_b == k - 1 ? run_b : 0;
+            stream_frame(e, k, run_b < need, &bframes[nb]);
+            bticks[nb++] = k;
+            run_b++;
+            last_b = k;
+        }
+    }
+    s_begin(&chain, "s01_chain", "a receiver that keeps up: keyframe, then predicted tiles of depth 1, 2, 3, 4 (height 1 cm, pair packing; dx LOD 1 at 0.1 mm, byte packing)");
+    for (int k = 0; k < S_TICKS; k++) s_frame(&chain, frames[k].data, frames[k].len, k, NULL);
+    s_end(&chain);
+    s_begin(&join, "s02_join_skip", "a receiver that joins at seq 102 and misses seq 107: keyframe tiles (codec 1 on the chain's grid) until it holds 4 consecutive ticks, then the shared predicted tiles; same samples as s01 at equal seq");
+    for (int i = 0; i < nb; i++) s_frame(&join, bframes[i].data, bframes[i].len, bticks[i], NULL);
+    s_end(&join);
+    s_begin(&broken, "s03_broken_chain", "seq 102 missing: the predicted tiles of seq 103 name it as a reference, a decoder reports reference (and again for 104, whose reference 103 was rejected)");
+    s_frame(&broken, frames[0].data, frames[0].len, 0, NULL);
+    s_frame(&broken, frames[1].data, frames[1].len, 1, NULL);
+    s_frame(&broken, frames[3].data, frames[3].len, 3, "reference");
+    s_frame(&broken, frames[4].data, frames[4].len, 4, "reference");
+    s_end(&broken);
+    s_begin(&mismatch, "s04_grid_mismatch", "seq 101 with the first tile's offset changed by one ulp: its reference is on another grid (reference); the rejected frame changes nothing, the intact seq 101 then decodes");
+    s_frame(&mismatch, frames[0].data, frames[0].len, 0, NULL);
+    oc_buf_reserve(&buf, frames[1].len);
+    memcpy(buf.data, frames[1].data, frames[1].len);
+    buf.data[OC_FRAME_HEADER_SIZE + 16] ^= 1;
+    s_frame(&mismatch, buf.data, frames[1].len, 1, "reference");
+    s_frame(&mismatch, frames[1].data, frames[1].len, 1, NULL);
+    s_end(&mismatch);
+    s_begin(&badcoef, "s05_bad_prefix", "seq 101 (depth 1) with a d1 coefficient, then with depth 5: corrupt (checked before the references)");
+    s_frame(&badcoef, frames[0].data, frames[0].len, 0, NULL);
+    memcpy(buf.data, frames[1].data, frames[1].len);
+    buf.data[OC_FRAME_HEADER_SIZE + OC_TILE_HEADER_SIZE + 24] = 1;
+    s_frame(&badcoef, buf.data, frames[1].len, 1, "corrupt");
+    memcpy(buf.data, frames[1].data, frames[1].len);
+    buf.data[OC_FRAME_HEADER_SIZE + OC_TILE_HEADER_SIZE] = 5;
+    s_frame(&badcoef, buf.data, frames[1].len, 1, "corrupt");
+    s_end(&badcoef);
+    /* The worked example of PROTOCOL.md §8.2: one 4x4 height tile, keyframe then depth 1 and 2. */
+    {
+        struct oc_stream *tiny = oc_stream_new(4, 4, 0, OC_FIELD_HEIGHT, 0.01f);
+        struct s_out ex;
+        s_begin(&ex, "s06_tiny", "the PROTOCOL.md worked example: a 4x4 height tile at 1 cm, keyframe (seq 7), then depth 1 (seq 8) and depth 2 (seq 9)");
+        for (int k = 0; k < 3; k++) {
+            wave_field(s_fields[k][0], 4, k * 0.2, 1.0, 0);
+            if (oc_stream_encode(tiny, e, s_fields[k][0], 7 + (uint64_t)k)) exit(1);
+            const uint8_t *p;
+            size_t len;
+            oc_stream_tile(tiny, 0, 0, &p, &len);
+            struct oc_frame_header fh = { .seq = 7 + (uint64_t)k, .sim_time = k * 0.2, .params_version = 1, .n = 4,
+                                          .tile_size = 4, .patch_size = 4.0f, .tile_count = 1 };
+            buf.len = 0;
+            oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE + len);
+            oc_frame_header_write(buf.data, &fh);
+            memcpy(buf.data + OC_FRAME_HEADER_SIZE, p, len);
+            s_frame_n(&ex, buf.data, OC_FRAME_HEADER_SIZE + len, k, 4, 4);
+        }
+        s_end(&ex);
+        oc_stream_free(tiny);
+    }
+    for (int k = 0; k < S_TICKS; k++) { oc_buf_free(&frames[k]); oc_buf_free(&bframes[k]); }
+    oc_buf_free(&buf);
+    for (int l = 0; l < 2; l++) oc_stream_free(s_layers[l].st);
+    oc_encoder_free(e);
+}
+
 static int first_bad = 1;
 static void bad(const char *name, const char *desc, const uint8_t *p, size_t len, const char *err)
 {
@@ -254,6 +474,8 @@ int main(int argc, char **argv)
     bad("bad_payload_len", "payload_len one byte longer than the frame", tmp, tiny.len, "truncated");
     memcpy(tmp, tiny.data, tiny.len); tmp[OC_FRAME_HEADER_SIZE + OC_TILE_HEADER_SIZE + OC_LOSSY_PREFIX] |= 0x06; /* BTYPE 3 */
     bad("bad_deflate", "deflate block type 3 (invalid)", tmp, tiny.len, "corrupt");
+    fprintf(manifest, "\n ],\n \"streams\":[");
+    emit_streams();
     fprintf(manifest, "\n ]\n}\n");
     fclose(manifest);
     oc_buf_free(&tiny); oc_buf_free(&big);

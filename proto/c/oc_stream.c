@@ -1,0 +1,302 @@
+/* oc_stream.c — temporal streams: the encoder side of codec 3 (PROTOCOL.md §5.9).
+ *
+ * One stream per layer (field, lod, bound). Each tile of the layer keeps a
+ * chain: a quantisation grid (offset, scale) fixed at the chain's keyframe and
+ * the codes of its last OC_TEMPORAL_MAX_DEPTH + 1 ticks. Codes are a pure
+ * function of the sample values and the grid, so the keyframe of a tick
+ * (intra, codec 1) and its predicted tile (codec 3) give a receiver the same
+ * codes: a receiver that got either can follow the chain on the next tick.
+ * That is what lets the daemon encode one shared predicted frame per layer and
+ * tick, plus at most one keyframe of the same tick for all receivers that lack
+ * references (joined, skipped, throttled). */
+#include "oc_internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define RING (OC_TEMPORAL_MAX_DEPTH + 1)
+/* New grids leave room for values 4x today's magnitude before the float32 margin
+ * (PROTOCOL.md §5.5 step 2) runs out; beyond that the tile starts a new chain. */
+#define GRID_HEADROOM 4.0
+
+struct stream_tile {
+    int hist;                 /* consecutive ticks (up to the last encoded) with codes on the grid */
+    double offset, scale;     /* the chain's grid */
+    int32_t *ring[RING];      /* codes; ring[head] = the last encoded tick */
+    int32_t *lap[RING];       /* their Laplacians (codes stay below OC_TEMPORAL_CODE_MAX) */
+    int depth;                /* this tick: references used by the shared tile, 0 = keyframe or raw */
+    int key_ready;            /* this tick's keyframe is in key (or is the shared tile) */
+    struct oc_buf shared, key;
+};
+
+struct oc_stream {
+    int n, tile_size, lod, side, grid;
+    enum oc_field field;
+    float bound;
+    int interval;
+    uint64_t seq, ticks;
+    int encoded;              /* oc_stream_encode succeeded at least once since the last reset */
+    int head, need;
+    struct stream_tile *tiles;
+    struct oc_stream_stats stats;
+};
+
+static int is_pow2(int v) { return v > 0 && !(v & (v - 1)); }
+
+struct oc_stream *oc_stream_new(int n, int tile_size, int lod, enum oc_field field, float bound)
+{
+    if (n > OC_MAX_N || !is_pow2(n) || !is_pow2(tile_size) || tile_size > n) return NULL;
+    if (lod < 0 || lod > OC_MAX_LOD || (tile_size >> lod) == 0) return NULL;
+    if ((unsigned)field >= OC_FIELD_COUNT || !isfinite(bound) || bound < 0) return NULL;
+    struct oc_stream *s = calloc(1, sizeof *s);
+    if (!s) return NULL;
+    s->n = n; s->tile_size = tile_size; s->lod = lod; s->field = field; s->bound = bound;
+    s->side = tile_size >> lod;
+    s->grid = n / tile_size;
+    s->interval = OC_STREAM_KEYFRAME_INTERVAL;
+    s->tiles = calloc((size_t)s->grid * s->grid, sizeof *s->tiles);
+    if (!s->tiles) { free(s); return NULL; }
+    return s;
+}
+
+void oc_stream_free(struct oc_stream *s)
+{
+    if (!s) return;
+    for (int t = 0; t < s->grid * s->grid; t++) {
+        for (int r = 0; r < RING; r++) { free(s->tiles[t].ring[r]); free(s->tiles[t].lap[r]); }
+        oc_buf_free(&s->tiles[t].shared);
+        oc_buf_free(&s->tiles[t].key);
+    }
+    free(s->tiles);
+    free(s);
+}
+
+void oc_stream_set_keyframe_interval(struct oc_stream *s, int ticks)
+{
+    if (s) s->interval = ticks > 0 ? ticks : 0;
+}
+
+void oc_stream_reset(struct oc_stream *s)
+{
+    if (!s) return;
+    for (int t = 0; t < s->grid * s->grid; t++) {
+        s->tiles[t].hist = 0;
+        s->tiles[t].depth = 0;
+        s->tiles[t].key_ready = 0;
+        s->tiles[t].shared.len = 0;
+        s->tiles[t].key.len = 0;
+    }
+    s->encoded = 0;
+    s->need = 0;
+}
+
+/* Order-0 entropy of a byte histogram, in bits: the packing choice's size estimate. */
+static double entropy_bits(const uint32_t hist[256], size_t total)
+{
+    double bits = 0;
+    for (int b = 0; b < 256; b++)
+        if (hist[b]) bits += hist[b] * log2((double)total / hist[b]);
+    return bits;
+}
+
+/* Residuals of q against the temporal prediction, the smaller packing (estimated
+ * from the byte histograms), DEFLATE; appends tile header + codec 3 payload. */
+static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q,
+                           const int32_t *const *refs, const int32_t *const *laps, int depth, uint64_t ref_seq,
+                           struct oc_buf *out)
+{
+    const int w = th->width, h = th->height;
+    const size_t count = (size_t)w * h, npairs = (count + 1) / 2;
+    int rc = oc_enc_reserve(e, count);
+    if (rc) return rc;
+    int16_t coef[OC_TEMPORAL_COEFS];
+    oc_temporal_fit(refs, laps, depth, q, w, h, coef);
+    uint32_t pred[OC_MAX_N];   /* one row of predictions */
+    for (int j = 0; j < h; j++) {
+        oc_temporal_predict_row_cached(refs, laps, depth, w, j, coef, pred);
+        const int32_t *qr = q + (size_t)j * w;
+        uint32_t *z = e->zz + (size_t)j * w;
+        for (int i = 0; i < w; i++) {
+            uint32_t r = (uint32_t)qr[i] - pred[i];
+            z[i] = (r << 1) ^ (0u - (r >> 31));
+        }
+    }
+    /* Which packing: byte per sample or pairs, by the order-0 entropy of the bytes each gives. */
+    uint32_t h1[256] = { 0 }, h2[256] = { 0 };
+    size_t wide1 = 0, n2 = npairs, wide2 = 0;
+    for (size_t p = 0; p < npairs; p++) {
+        uint32_t z1 = e->zz[2 * p], z2 = 2 * p + 1 < count ? e->zz[2 * p + 1] : 0;
+        h1[z1 < 255 ? z1 : 255]++;
+        wide1 += z1 >= 255;
+        if (2 * p + 1 < count) { h1[z2 < 255 ? z2 : 255]++; wide1 += z2 >= 255; }
+        if (z1 < OC_PAIR_LIMIT && z2 < OC_PAIR_LIMIT) {
+            h2[OC_PAIR_LIMIT * z1 + z2]++;
+        } else {
+            h2[255]++;
+            h2[z1 < 255 ? z1 : 255]++;
+            h2[z2 < 255 ? z2 : 255]++;
+            n2 += 2;
+            wide2 += (z1 >= 255) + (z2 >= 255);
+        }
+    }
+    const int pairs = entropy_bits(h2, n2) + 16.0 * wide2 < entropy_bits(h1, count) + 16.0 * wide1;
+    int esc_width;
+    size_t esc_count, pair_esc = 0, plain;
+    if (pairs) {
+        plain = oc_pack_pairs(e->zz, count, e->packed, e->esc, &pair_esc, &esc_count, &esc_width);
+    } else {
+        esc_count = oc_pack_escapes(e->zz, count, e->packed, e->esc, &esc_width);
+        plain = count + esc_count * (size_t)esc_width;
+    }
+    size_t cap = OC_TEMPORAL_PREFIX + oc_entropy_bound(OC_CODEC_QUANT_LORENZO, plain);
+    if ((rc = oc_buf_reserve(out, OC_TILE_HEADER_SIZE + cap))) return rc;
+    uint8_t *payload = out->data + out->len + OC_TILE_HEADER_SIZE;
+    memset(payload, 0, OC_TEMPORAL_PREFIX);
+    payload[0] = (uint8_t)depth;
+    payload[1] = (uint8_t)pairs;
+    payload[2] = (uint8_t)esc_width;
+    oc_put_u32(payload + 4, (uint32_t)esc_count);
+    oc_put_u32(payload + 8, (uint32_t)pair_esc);
+    oc_put_u64(payload + 16, ref_seq);
+    for (int k = 0; k < OC_TEMPORAL_COEFS; k++) oc_put_u16(payload + 24 + 2 * k, (uint16_t)coef[k]);
+    size_t clen = oc_entropy_compress(e->ent, OC_CODEC_QUANT_LORENZO, 1, e->packed, plain,
+                                      payload + OC_TEMPORAL_PREFIX, cap - OC_TEMPORAL_PREFIX);
+    if (clen == 0) return OC_E_NOMEM;
+    th->codec = OC_CODEC_TEMPORAL;
+    th->payload_len = (uint32_t)(OC_TEMPORAL_PREFIX + clen);
+    oc_tile_header_write(out->data + out->len, th);
+    out->len += OC_TILE_HEADER_SIZE + th->payload_len;
+    return OC_OK;
+}
+
+/* Encode one tile of this tick into t->shared. */
+static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *field_data, int tx, int tz,
+                       int consecutive, int periodic)
+{
+    struct stream_tile *t = &s->tiles[tz * s->grid + tx];
+    const size_t count = (size_t)s->side * s->side;
+    t->shared.len = 0;
+    t->key.len = 0;
+    t->key_ready = 0;
+    t->depth = 0;
+    float vmin, vmax;
+    int rc = oc_enc_gather(e, field_data, s->n, s->tile_size, tx, tz, s->lod, &vmin, &vmax);
+    if (rc) return rc;
+    for (int r = 0; r < RING; r++) {
+        if (!t->ring[r] && !(t->ring[r] = malloc(count * sizeof(int32_t)))) return OC_E_NOMEM;
+        if (!t->lap[r] && !(t->lap[r] = malloc(count * sizeof(int32_t)))) return OC_E_NOMEM;
+    }
+    struct oc_tile_header th = {
+        .field = (uint8_t)s->field, .lod = (uint8_t)s->lod, .tile_x = (uint16_t)tx, .tile_z = (uint16_t)tz,
+        .width = (uint16_t)s->side, .height = (uint16_t)s->side, .bound = s->bound,
+    };
+    int32_t *cur = t->ring[s->head];
+    if (s->bound > 0 && consecutive && !periodic && t->hist > 0
+        && oc_enc_quantise_on(e, count, vmin, vmax, s->bound, t->offset, t->scale)
+        && oc_max_abs(e->q, count) < OC_TEMPORAL_CODE_MAX) {
+        /* Predicted from the previous ticks of the chain. */
+        const int32_t *refs[OC_TEMPORAL_MAX_DEPTH], *laps[OC_TEMPORAL_MAX_DEPTH];
+        int depth = t->hist < OC_TEMPORAL_MAX_DEPTH ? t->hist : OC_TEMPORAL_MAX_DEPTH;
+        for (int i = 0; i < depth; i++) {
+            refs[i] = t->ring[(s->head + RING - 1 - i) % RING];
+            laps[i] = t->lap[(s->head + RING - 1 - i) % RING];
+        }
+        memcpy(cur, e->q, count * sizeof(int32_t));
+        oc_temporal_laplacian(cur, s->side, s->side, t->lap[s->head]);
+        th.offset = t->offset;
+        th.scale = t->scale;
+        if ((rc = append_temporal(e, &th, cur, refs, laps, depth, s->seq - 1, &t->shared))) return rc;
+        t->depth = depth;
+        t->hist++;
+        s->stats.predicted_tiles++;
+        return OC_OK;
+    }
+    /* Keyframe on a new grid (or raw when the tile cannot be quantised). */
+    s->stats.key_tiles++;
+    t->key_ready = 1;
+    if (s->bound == 0 || !oc_enc_quantise_new(e, count, vmin, vmax, s->bound, GRID_HEADROOM, &th.offset, &th.scale)
+        || oc_max_abs(e->q, count) >= OC_TEMPORAL_CODE_MAX) {
+        t->hist = 0;
+        return oc_enc_append_raw(&t->shared, &th, e->vals, count);
+    }
+    memcpy(cur, e->q, count * sizeof(int32_t));
+    oc_temporal_laplacian(cur, s->side, s->side, t->lap[s->head]);
+    t->offset = th.offset;
+    t->scale = th.scale;
+    t->hist = 1;
+    return oc_enc_append_intra(e, &th, cur, 0, &t->shared);
+}
+
+int oc_stream_encode(struct oc_stream *s, struct oc_encoder *e, const float *field_data, uint64_t seq)
+{
+    if (!s || !e || !field_data) return OC_E_ARG;
+    const int consecutive = s->encoded && seq == s->seq + 1;
+    const int ntiles = s->grid * s->grid;
+    s->seq = seq;
+    s->head = (s->head + 1) % RING;
+    s->need = 0;
+    s->encoded = 0;
+    for (int k = 0; k < ntiles; k++) {
+        /* Periodic keyframes are staggered over the tiles, so no tick carries them all. */
+        int periodic = s->interval > 0 && (s->ticks + (uint64_t)k * s->interval / ntiles) % s->interval == 0
+                       && s->ticks > 0;
+        int rc = encode_tile(s, e, field_data, k % s->grid, k / s->grid, consecutive, periodic);
+        if (rc) { oc_stream_reset(s); return rc; }
+        if (s->tiles[k].depth > s->need) s->need = s->tiles[k].depth;
+    }
+    s->encoded = 1;
+    s->ticks++;
+    s->stats.ticks++;
+    return OC_OK;
+}
+
+int oc_stream_need(const struct oc_stream *s)
+{
+    return s ? s->need : 0;
+}
+
+static struct stream_tile *tile_at(const struct oc_stream *s, int tx, int tz)
+{
+    if (!s || !s->encoded || tx < 0 || tz < 0 || tx >= s->grid || tz >= s->grid) return NULL;
+    return &s->tiles[tz * s->grid + tx];
+}
+
+int oc_stream_tile(const struct oc_stream *s, int tile_x, int tile_z, const uint8_t **data, size_t *len)
+{
+    struct stream_tile *t = tile_at(s, tile_x, tile_z);
+    if (!t || !data || !len) return OC_E_ARG;
+    *data = t->shared.data;
+    *len = t->shared.len;
+    return OC_OK;
+}
+
+int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_x, int tile_z,
+                            const uint8_t **data, size_t *len)
+{
+    struct stream_tile *t = tile_at(s, tile_x, tile_z);
+    if (!t || !e || !data || !len) return OC_E_ARG;
+    if (t->key_ready) {                 /* the shared tile is this tick's keyframe */
+        *data = t->depth == 0 ? t->shared.data : t->key.data;
+        *len = t->depth == 0 ? t->shared.len : t->key.len;
+        return OC_OK;
+    }
+    struct oc_tile_header th = {
+        .field = (uint8_t)s->field, .lod = (uint8_t)s->lod, .tile_x = (uint16_t)tile_x, .tile_z = (uint16_t)tile_z,
+        .width = (uint16_t)s->side, .height = (uint16_t)s->side, .bound = s->bound,
+        .offset = t->offset, .scale = t->scale,
+    };
+    t->key.len = 0;
+    int rc = oc_enc_append_intra(e, &th, t->ring[s->head], 0, &t->key);
+    if (rc) return rc;
+    t->key_ready = 1;
+    s->stats.demand_key_tiles++;
+    *data = t->key.data;
+    *len = t->key.len;
+    return OC_OK;
+}
+
+void oc_stream_stats(const struct oc_stream *s, struct oc_stream_stats *out)
+{
+    if (s && out) *out = s->stats;
+}
