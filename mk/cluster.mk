@@ -5,7 +5,11 @@
 #                                then the NATS integration test (starts its own nats-server on
 #                                127.0.0.1, kills and restarts it), normal and ASan+UBSan
 #   make test-cluster-valgrind   the unit test under valgrind
-# libnats is linked only into cluster targets until the daemon uses it.
+#   make test-cluster-roles      oceand --role sim|edge end to end (nats-server, a sim, edges,
+#                                WebSocket clients; kill/restart cycles), and the same against
+#                                the ASan+UBSan daemon (fewer cycles)
+# oceand links the module for --role sim|edge (mk/daemon.mk); only the role
+# glue (server/role_*.c) sees server/cluster/.
 
 CLUSTER_SRCS    := $(sort $(wildcard server/cluster/*.c))
 CLUSTER_LIB     := $(BUILD)/libcluster.a
@@ -15,12 +19,14 @@ PROTO_LIB       ?= $(BUILD)/liboc_proto.a
 PROTO_SAN_LIB   ?= $(BUILD)/san/liboc_proto.a
 
 BINS  += $(CLUSTER_LIB) $(BUILD)/test_cluster_msg $(BUILD)/test_cluster_nats
-TESTS += test-cluster test-cluster-valgrind
+TESTS += test-cluster test-cluster-valgrind test-cluster-roles
 
 # The module sees only its own folder and the protocol's header: no sim
 # internals, no daemon headers, no libwebsockets.
 $(patsubst %.c,$(BUILD)/obj/%.o,$(CLUSTER_SRCS)) $(patsubst %.c,$(BUILD)/san/%.o,$(CLUSTER_SRCS)): \
   INC := -Iserver/cluster -Iproto/c
+
+$(BUILD)/obj/server/role_%.o $(BUILD)/san/server/role_%.o: INC += -Iserver/cluster
 
 $(CLUSTER_LIB): $(patsubst %.c,$(BUILD)/obj/%.o,$(CLUSTER_SRCS))
 	@mkdir -p $(dir $@)
@@ -46,3 +52,23 @@ test-cluster: $(BUILD)/test_cluster_msg $(BUILD)/san/test_cluster_msg $(BUILD)/t
 	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 $(BUILD)/san/test_cluster_nats
 test-cluster-valgrind: $(BUILD)/test_cluster_msg
 	valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite $(BUILD)/test_cluster_msg
+
+CLUSTER_ROLES_CYCLES ?= 5
+.PHONY: test-cluster-roles
+test-cluster-roles: $(BUILD)/oceand $(BUILD)/san/oceand
+	/usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand $(BUILD)/oceand --cycles $(CLUSTER_ROLES_CYCLES)
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  /usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand $(BUILD)/san/oceand --cycles 2 --recovery-s 6
+
+# 1 sim + 1, 2, 3 edges + nats-server on this machine vs --role all (docs/scaling.md).
+BENCHES += bench-cluster
+.PHONY: bench-cluster
+bench-cluster: $(BUILD)/oceand $(BUILD)/load_client
+	/usr/bin/python3 bench/cluster.py --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_CLUSTER_ARGS)
+
+# nats-server (installed by make deps if missing) + one sim + two edges on loopback.
+.PHONY: run-cluster
+run-cluster: deps
+	@$(MAKE) --no-print-directory build-all
+	@if [ ! -f $(BUILD)/web/index.html ]; then echo "run-cluster: no $(BUILD)/web/index.html, the edges serve a placeholder page"; fi
+	exec scripts/run-cluster.sh

@@ -2,7 +2,8 @@
 
 DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c server/frame.c \
               server/net/context.c server/net/upgrade.c server/net/session.c server/net/dispatch.c \
-              server/net/fanout.c server/net/http.c \
+              server/net/fanout.c server/net/http.c server/net/cluster.c \
+              server/role_sim.c server/role_edge.c server/role_link.c \
               server/metrics.c server/state.c server/state_saver.c server/log.c
 DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o)
 DAEMON_SAN_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/san/%.o)
@@ -15,11 +16,12 @@ BINS += $(BUILD)/oceand
 TESTS += test-daemon test-daemon-asan test-daemon-valgrind
 BENCHES += bench-load
 
-$(BUILD)/oceand: $(DAEMON_OBJ) $(OCEAN_LIB) $(PROTO_LIB)
-	$(CC) $(CFLAGS) -o $@ $(DAEMON_OBJ) $(OCEAN_LIB) $(PROTO_LIB) $(PKG_LIBS)
+# The cluster roles (--role sim|edge) link the NATS transport (mk/cluster.mk).
+$(BUILD)/oceand: $(DAEMON_OBJ) $(OCEAN_LIB) $(PROTO_LIB) $(CLUSTER_LIB)
+	$(CC) $(CFLAGS) -o $@ $(DAEMON_OBJ) $(OCEAN_LIB) $(CLUSTER_LIB) $(PROTO_LIB) $(PKG_LIBS) $(CLUSTER_LIBS)
 
-$(BUILD)/san/oceand: $(DAEMON_SAN_OBJ) $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB)
-	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $(DAEMON_SAN_OBJ) $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB) $(PKG_LIBS)
+$(BUILD)/san/oceand: $(DAEMON_SAN_OBJ) $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB) $(CLUSTER_SAN_LIB)
+	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $(DAEMON_SAN_OBJ) $(OCEAN_SAN_LIB) $(CLUSTER_SAN_LIB) $(PROTO_SAN_LIB) $(PKG_LIBS) $(CLUSTER_LIBS)
 
 # Unit test of the pure control module (parse/validate), and the frame checker
 # the integration tests use to decode frames and compare with the library.

@@ -58,6 +58,15 @@ static const struct param_def opt_table[] = {
     OPT("sim_nice", PARAM_INT, sim_nice, -20, 19, 0, NULL, 0, "nice value of the tick thread; below 0 (needs "
       "CAP_SYS_NICE) keeps the tick on time on a busy machine"),
     OPT("max_memory_mb", PARAM_INT, max_memory_mb, 16, 1 << 20, 256, NULL, 0, "memory cap for the simulation; limits N"),
+    OPT_STR("role", role, "all", 0, "all = one process (no NATS); sim = simulate and publish on NATS "
+      "(serves /healthz and /metrics, no viewers); edge = serve viewers from the sim over NATS (docs/scaling.md)"),
+    OPT_STR("nats", nats_url, "", PARAM_SECRET, "NATS server URL(s) (may hold user:password) for --role sim|edge, e.g. nats://127.0.0.1:4222"),
+    OPT_STR("nats_prefix", nats_prefix, "oceand", 0, "NATS subject prefix (several seas can share one NATS)"),
+    OPT_STR("nats_name", nats_name, "", 0, "this daemon's name on NATS (\"\" = <role>-<host>-<pid>)"),
+    OPT_STR("nats_creds", nats_creds, "", 0, "NATS credentials file (JWT + NKey seed)"),
+    OPT_STR("nats_tls_ca", nats_tls_ca, "", 0, "PEM CA file to verify the NATS server (implies TLS)"),
+    OPT_STR("nats_tls_cert", nats_tls_cert, "", 0, "PEM client certificate for NATS (with --nats-tls-key)"),
+    OPT_STR("nats_tls_key", nats_tls_key, "", 0, "PEM private key of --nats-tls-cert"),
 };
 #undef OPT
 #undef OPT_STR
@@ -425,6 +434,14 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
     }
     if (!dc->tls_cert[0] != !dc->tls_key[0]) {
         snprintf(err, errlen, "--tls-cert and --tls-key go together (one of them is missing)");
+        return -1;
+    }
+    if (strcmp(dc->role, "all") != 0 && strcmp(dc->role, "sim") != 0 && strcmp(dc->role, "edge") != 0) {
+        snprintf(err, errlen, "--role: \"%s\" is not all, sim or edge", dc->role);
+        return -1;
+    }
+    if (strcmp(dc->role, "all") != 0 && !dc->nats_url[0]) {
+        snprintf(err, errlen, "--role %s needs --nats URL (e.g. nats://127.0.0.1:4222)", dc->role);
         return -1;
     }
     resolve_wisdom_path(dc);

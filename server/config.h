@@ -40,6 +40,15 @@ struct daemon_config {
     int    sim_nice;           /* nice value of the tick thread (< 0 needs CAP_SYS_NICE) */
     char   tls_cert[512];      /* PEM certificate (chain): "" = plain http/ws */
     char   tls_key[512];       /* PEM private key of tls_cert */
+    /* Cluster (issue 12, docs/scaling.md): --role all needs none of these. */
+    char   role[8];            /* "all", "sim" or "edge" */
+    char   nats_url[512];      /* --nats: nats://HOST:4222 (comma-separated list allowed) */
+    char   nats_prefix[72];    /* subject prefix: several seas share one NATS */
+    char   nats_name[64];      /* this daemon's name on NATS ("" = <role>-<host>-<pid>) */
+    char   nats_creds[512];    /* JWT + NKey seed file */
+    char   nats_tls_ca[512];   /* trust these CAs (implies TLS) */
+    char   nats_tls_cert[512]; /* client certificate ... */
+    char   nats_tls_key[512];  /* ... and its key */
 };
 
 /* What config_load found besides the values. */

@@ -147,12 +147,6 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
         if (tok && !cJSON_IsString(tok))
             rc = fail(e, "bad_message", NULL, "\"token\" must be a string");
         m->token = cJSON_GetStringValue(tok);
-        const cJSON *nm = cJSON_GetObjectItemCaseSensitive(root, "name");
-        if (!rc && nm && !cJSON_IsString(nm))
-            rc = fail(e, "bad_name", NULL, "\"name\" must be a string");
-        if (!rc && nm && control_check_name(nm->valuestring, e) != 0)
-            rc = -1;
-        m->name = nm ? cJSON_GetStringValue(nm) : NULL;
     } else if (strcmp(ts, "name") == 0) {
         m->type = CTL_NAME;
         const cJSON *nm = cJSON_GetObjectItemCaseSensitive(root, "name");
@@ -176,6 +170,15 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
         m->t = t ? t->valuedouble : 0;
     } else {
         rc = fail(e, "unknown_type", NULL, "unknown message type \"%.40s\"", ts);
+    }
+    if (!rc && (m->type == CTL_SET || m->type == CTL_PAUSE || m->type == CTL_RESUME)) {
+        /* Optional on the requests that change the sea: the sender's display name. */
+        const cJSON *nm = cJSON_GetObjectItemCaseSensitive(root, "name");
+        if (nm && !cJSON_IsString(nm))
+            rc = fail(e, "bad_name", NULL, "\"name\" must be a string");
+        else if (nm && control_check_name(nm->valuestring, e) != 0)
+            rc = -1;
+        m->name = cJSON_GetStringValue(nm);
     }
     if (rc) {
         if (id_out && id)

@@ -8,6 +8,20 @@
 
 #include "log.h"
 
+struct frame *frame_new(int nlayers)
+{
+    struct frame *f = calloc(1, sizeof *f);
+    if (!f)
+        return NULL;
+    atomic_init(&f->refs, 1);
+    f->layers = calloc(nlayers > 0 ? (size_t)nlayers : 1, sizeof *f->layers);
+    if (!f->layers) {
+        free(f);
+        return NULL;
+    }
+    return f;
+}
+
 void frame_ref(struct frame *f) { atomic_fetch_add(&f->refs, 1); }
 
 void frame_unref(struct frame *f)

@@ -63,6 +63,12 @@ struct frame_want {
 struct frame *frame_encode(const struct ocean *o, struct oc_encoder *enc, int tile_size,
                            const struct frame_want *want, const struct oc_frame_header *hdr);
 
+/* An empty frame with room for nlayers layers (nlayers = 0 so far), one
+ * reference: for frames not encoded here (an edge rebuilds them from the
+ * sim's layers, server/role_edge.c). Each layer's buf.data and tile_off
+ * must be malloc'd: frame_unref frees them. NULL when out of memory. */
+struct frame *frame_new(int nlayers);
+
 void frame_ref(struct frame *f);
 void frame_unref(struct frame *f);     /* NULL is fine */
 /* The layer for (field, lod, bound), or NULL if nobody asked for it this tick. */

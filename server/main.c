@@ -12,6 +12,7 @@
 #include "config.h"
 #include "log.h"
 #include "net.h"
+#include "roles.h"
 #include "sim_thread.h"
 #include "state_saver.h"
 
@@ -59,6 +60,42 @@ static int ensure_parent_dir(const char *path)
     return mkdir(dir, 0755) != 0 && errno != EEXIST ? -1 : 0;
 }
 
+static void install_signals(void)
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN);
+    sa.sa_handler = on_hangup;
+    sigaction(SIGHUP, &sa, NULL);
+}
+
+/* --role edge: no simulation here; frames, hello and answers come from the
+ * sim over NATS (server/role_edge.c). Nothing to save: an edge is stateless. */
+static int run_edge(const struct daemon_config *dc, struct net *net)
+{
+    char err[512];
+    struct role_edge *edge = role_edge_open(dc, net, err, sizeof err);
+    if (!edge) {
+        LOGE("%s", err);
+        net_destroy(net);
+        return 1;
+    }
+    LOGI("oceand edge listening on %s://%s:%d/ (web root %s)", dc->tls_cert[0] ? "https" : "http", dc->bind,
+         net_port(net), dc->web_root);
+    while (!interrupted)
+        if (net_service(net) < 0)
+            break;
+    LOGI("stopping");
+    role_edge_close(edge);
+    net_destroy(net);
+    LOGI("bye");
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     struct daemon_config dc;
@@ -88,6 +125,9 @@ int main(int argc, char **argv)
         LOGE("%s", err);
         return 1;
     }
+    install_signals();
+    if (strcmp(dc.role, "edge") == 0)
+        return run_edge(&dc, net);
     struct sim_config sc = {
         .tick_rate = dc.tick_rate,
         .tile_size = dc.tile_size,
@@ -99,9 +139,17 @@ int main(int argc, char **argv)
         .wake = net_wake,
         .wake_user = net,
     };
+    /* --role sim: the NATS link feeds demand in and takes frames out. */
+    struct role_sim *cluster = NULL;
+    if (strcmp(dc.role, "sim") == 0 && !(cluster = role_sim_open(&dc, net, &sc, err, sizeof err))) {
+        LOGE("%s", err);
+        net_destroy(net);
+        return 1;
+    }
     struct sim *sim = sim_start(&params, &sc, err, sizeof err);
     if (!sim) {
         LOGE("simulation: %s", err);
+        role_sim_close(cluster);
         net_destroy(net);
         return 1;
     }
@@ -110,16 +158,6 @@ int main(int argc, char **argv)
     struct state_saver saver;
     state_saver_init(&saver, dc.state_file, &params, res.params_version);
     net_on_params(net, state_saver_on_params, &saver);
-
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal;
-    sigemptyset(&sa.sa_mask);
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-    signal(SIGPIPE, SIG_IGN);
-    sa.sa_handler = on_hangup;
-    sigaction(SIGHUP, &sa, NULL);
 
     LOGI("oceand listening on %s://%s:%d/ (N=%d, %g Hz, web root %s)", dc.tls_cert[0] ? "https" : "http", dc.bind, net_port(net),
          params.resolution, dc.tick_rate, dc.web_root);
@@ -140,6 +178,7 @@ int main(int argc, char **argv)
     state_saver_flush(&saver, sim_time_now(sim), true);
     sim_stop(sim);
     net_attach_sim(net, NULL);
+    role_sim_close(cluster); /* after the tick (it publishes), before net (it holds requests) */
     net_destroy(net);
     LOGI("bye");
     return 0;

@@ -4,6 +4,7 @@
 #ifndef OCEAND_NET_H
 #define OCEAND_NET_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -28,5 +29,55 @@ void net_wake(void *net);
 int net_service(struct net *n);
 int net_port(const struct net *n);
 void net_destroy(struct net *n);
+
+/* ---- cluster roles (issue 12; server/role_sim.c, server/role_edge.c) ----
+ * Hooks for daemons whose simulation is elsewhere (edge) or whose clients
+ * are elsewhere (sim). All run on the service thread. --role all sets none. */
+struct frame;
+struct net_cluster_hooks {
+    void *user;
+    bool no_viewers;                                   /* sim: refuse WebSocket upgrades */
+    void (*on_wake)(void *user);                       /* every wake-up (cl_link_dispatch) */
+    void (*demand)(void *user, int layer_key, int delta); /* edge: instead of sim_demand */
+    /* edge: a set / pause / resume that passed the size, rate limit and
+     * token checks, to be answered later with net_send_text(serial) */
+    void (*forward)(void *user, uint64_t serial, const char *client_id, const void *id_json,
+                    const char *text, size_t len);
+    /* sim: an applied set's `params` event (no id), who caused it */
+    void (*on_params_event)(void *user, const char *text, const char *origin, const char *by);
+    /* /healthz: returns "ok" or "degraded" and appends ,"member":... to extra */
+    const char *(*health)(void *user, char *extra, size_t cap);
+    /* /metrics: appends Prometheus lines; returns bytes written */
+    size_t (*metrics)(void *user, char *buf, size_t cap);
+};
+void net_set_cluster(struct net *n, const struct net_cluster_hooks *h);
+/* edge: frame f (a new reference is taken) replaces the newest one (latest wins). */
+void net_publish_frame(struct net *n, struct frame *f);
+/* edge: one JSON text to the client with this serial (if still connected). */
+void net_send_text(struct net *n, uint64_t serial, const char *text);
+/* edge: adopt the sim's hello (params, params_version, tick_rate, tile_size)
+ * for the hello of new clients; existing clients get `params` if the
+ * version moved. Returns 0 or -1 (not a hello). */
+int net_adopt_hello(struct net *n, const char *text, size_t len);
+/* edge: a `params` event from the sim: adopt it and send it to every
+ * client but the one whose client_id is skip_client (NULL = none). */
+int net_broadcast_params(struct net *n, const char *text, size_t len, const char *skip_client);
+/* edge: the cluster state for clients, as a {"type":"status",...} text sent
+ * to all now and to each new client after hello; NULL = healthy (sent once
+ * to all as given in ok_text, then nothing for new clients). */
+void net_set_status(struct net *n, const char *text, const char *ok_text);
+/* sim: a control message (set / pause / resume text) from a client of
+ * another daemon, validated and applied exactly like a local one; reply(ctx,
+ * text) is called exactly once: the error or `params` with the request's id
+ * (text NULL = dropped unanswered, at shutdown). */
+typedef void (*net_reply_fn)(void *ctx, const char *text);
+void net_remote_control(struct net *n, const char *origin, const char *by, const char *text, size_t len,
+                        net_reply_fn reply, void *ctx);
+/* sim: answers every remote request still waiting with NULL (before the link closes). */
+void net_drop_remote_requests(struct net *n);
+/* sim: the hello the sim would send (client_id ""), malloc'd; for edges. */
+char *net_hello_text(struct net *n);
+/* The seq of the newest frame this daemon handed out (0 = none). */
+uint64_t net_latest_seq(const struct net *n);
 
 #endif

@@ -292,8 +292,11 @@ static void demand_snapshot(struct sim *s, struct frame_want *w)
 {
     w->fields = 0;
     w->nkeys = 0;
+    uint8_t remote[SIM_DEMAND_BYTES] = { 0 };
+    if (s->cfg.remote_demand)
+        s->cfg.remote_demand(s->cfg.cluster_user, remote);
     for (int k = 0; k < LAYER_KEYS; k++)
-        if (atomic_load(&s->demand[k]) > 0) {
+        if (atomic_load(&s->demand[k]) > 0 || ((remote[k >> 3] >> (k & 7)) & 1)) {
             w->fields |= OCEAN_FIELD_BIT(layer_key_field(k));
             w->keys[w->nkeys++] = (uint16_t)k;
         }
@@ -348,6 +351,8 @@ static void tick(struct sim *s)
     if (want.nkeys && step(s, want.fields))
         f = encode(s, &want);
     publish(s, f);
+    if (f && s->cfg.on_frame)
+        s->cfg.on_frame(s->cfg.cluster_user, f); /* publish() keeps our reference alive until the next tick */
 }
 
 static void *sim_main(void *arg)
@@ -412,6 +417,7 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     s->params = *p;
     s->version = cfg->start_version;
     s->sim_time = cfg->start_time;
+    s->seq = cfg->start_seq;
     s->pending_tail = &s->pending;
     s->answers_tail = &s->answers;
     const char *hook = getenv("OCEAND_TEST_FAIL_BUILD_SEED");

@@ -58,9 +58,21 @@ struct sim_config {
     double start_time;          /* sim time to resume from */
     int nice;                   /* of the tick thread; 0 = leave as is */
     uint32_t start_version;
+    uint64_t start_seq;         /* seq of the tick before the first (0; --role sim: from the wall clock,
+                                   so that seq never goes back when the sim restarts under its edges) */
     void (*wake)(void *user);   /* called after every tick (lws_cancel_service) */
     void *wake_user;
+    /* --role sim (server/role_sim.c); NULL otherwise. Both run on the tick
+     * thread and must not block: remote_demand ORs the layer keys other
+     * daemons want into bits (SIM_DEMAND_BYTES, bit k = layer key k) before
+     * the demand snapshot; on_frame sees each frame right after it is
+     * published (frame_ref it to keep it). */
+    void (*remote_demand)(void *user, uint8_t bits[]);
+    void (*on_frame)(void *user, struct frame *f);
+    void *cluster_user;
 };
+#define SIM_DEMAND_BYTES 32         /* bitmap of layer keys handed to remote_demand */
+_Static_assert(LAYER_KEYS <= SIM_DEMAND_BYTES * 8, "layer keys fit the remote demand bitmap");
 
 struct sim;
 /* Creates the ocean (may take a while at large N) and starts the tick

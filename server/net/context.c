@@ -109,5 +109,6 @@ void net_destroy(struct net *n)
     lws_context_destroy(n->ctx); /* closes every client: CLOSED frees sessions */
     frame_unref(n->latest);
     dispatch_free_requests(n);
+    free(n->status_text);
     free(n);
 }

@@ -22,16 +22,50 @@
 
 void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
 {
-    if (!n->sim)
+    if (!n->sim && !n->cluster.demand)
         return;
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
-        if (sub->fields & OCEAN_FIELD_BIT(f))
-            sim_demand(n->sim, layer_key(f, sub->lod, sub->bound_index), delta);
+        if (sub->fields & OCEAN_FIELD_BIT(f)) {
+            int key = layer_key(f, sub->lod, sub->bound_index);
+            if (n->cluster.demand) /* edge: the sim is elsewhere */
+                n->cluster.demand(n->cluster.user, key, delta);
+            else
+                sim_demand(n->sim, key, delta);
+        }
 }
 
 /* ---- sets in flight ---- */
 
 static struct request *request_of(lws_dll2_t *d) { return lws_container_of(d, struct request, list); }
+
+/* Who gets the answers to a set: a local client (s), or, in the sim role,
+ * a client of another daemon (rm). */
+struct remote {
+    const char *origin, *by;
+    net_reply_fn reply;
+    void *ctx;
+};
+
+static void respond(struct session *s, const struct remote *rm, cJSON *msg)
+{
+    if (s) {
+        session_queue_json(s, msg);
+        return;
+    }
+    char *text = control_print(msg);
+    rm->reply(rm->ctx, text ? text : "{\"type\":\"error\",\"code\":\"internal\",\"message\":\"out of memory\"}");
+    free(text);
+}
+
+static void respond_error(struct session *s, const struct remote *rm, const struct ctl_error *e, const cJSON *id)
+{
+    if (s) {
+        session_send_error(s, e, id);
+        return;
+    }
+    atomic_fetch_add(&g_metrics.control_errors, 1);
+    respond(NULL, rm, control_error_msg(e, id));
+}
 
 static void request_free(struct request *r)
 {
@@ -42,8 +76,24 @@ static void request_free(struct request *r)
 
 void dispatch_free_requests(struct net *n)
 {
-    while (n->requests.head)
-        request_free(request_of(n->requests.head));
+    while (n->requests.head) {
+        struct request *r = request_of(n->requests.head);
+        if (r->reply)
+            r->reply(r->reply_ctx, NULL); /* dropped unanswered: the edge times it out */
+        request_free(r);
+    }
+}
+
+void net_drop_remote_requests(struct net *n)
+{
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->requests), *next; d; d = next) {
+        next = d->next;
+        struct request *r = request_of(d);
+        if (r->reply) {
+            r->reply(r->reply_ctx, NULL);
+            request_free(r);
+        }
+    }
 }
 
 /* view = applied + every set not answered yet, in order: what the sim will
@@ -63,20 +113,23 @@ static cJSON *with_name(cJSON *m, const char *name)
     return m;
 }
 
-/* name: the set's own checked "name" (applied with the set), or NULL. */
-static void submit_set(struct net *n, struct session *s, const cJSON *params, const char *name, const cJSON *id)
+/* name: the message's own checked "name" (applied with the set), or NULL. */
+static void submit_set(struct net *n, struct session *s, const struct remote *rm, const cJSON *params,
+                       const char *name, const cJSON *id)
 {
     struct ctl_error e;
     struct ocean_params out;
     uint64_t changed;
     if (control_apply_params(params, &n->view, &n->lim, &out, &changed, &e) != 0) {
-        session_send_error(s, &e, id);
+        respond_error(s, rm, &e, id);
         return;
     }
-    if (name)
+    if (name && s)
         snprintf(s->name, sizeof s->name, "%s", name);
+    const char *by_name = name ? name : s ? s->name : "";
     if (!changed) {
-        session_queue_json(s, with_name(control_params_msg(&n->view, n->applied_version, 0, s->client_id, id), s->name));
+        respond(s, rm, with_name(control_params_msg(&n->view, n->applied_version, 0, s ? s->client_id : rm->by, id),
+                                 by_name));
         return;
     }
     struct sim_set *set = calloc(1, sizeof *set);
@@ -87,13 +140,20 @@ static void submit_set(struct net *n, struct session *s, const cJSON *params, co
         free(r);
         cJSON_Delete(idc);
         struct ctl_error oom = { .code = "internal", .message = "out of memory" };
-        session_send_error(s, &oom, id);
+        respond_error(s, rm, &oom, id);
         return;
     }
     r->tag = set->tag = ++n->next_tag;
-    r->serial = s->serial;
-    memcpy(r->by, s->client_id, sizeof r->by);
-    memcpy(r->by_name, s->name, sizeof r->by_name);
+    if (s) {
+        r->serial = s->serial;
+        snprintf(r->by, sizeof r->by, "%s", s->client_id);
+    } else {
+        r->reply = rm->reply;
+        r->reply_ctx = rm->ctx;
+        snprintf(r->by, sizeof r->by, "%s", rm->by);
+        snprintf(r->origin, sizeof r->origin, "%s", rm->origin);
+    }
+    snprintf(r->by_name, sizeof r->by_name, "%s", by_name);
     r->id = idc;
     r->values = set->values = out;
     r->mask = set->mask = changed;
@@ -132,7 +192,8 @@ static void answer(struct net *n, const struct sim_set *a)
         LOGE("answer for an unknown set (tag %llu)", (unsigned long long)a->tag);
         return;
     }
-    struct session *origin = session_find(n, r->serial);
+    struct session *origin = r->reply ? NULL : session_find(n, r->serial);
+    struct remote rm = { .origin = r->origin, .by = r->by, .reply = r->reply, .ctx = r->reply_ctx };
     if (a->status == SIM_SET_APPLIED) {
         if (n->on_params)
             n->on_params(n->on_params_user, &n->applied, n->applied_version);
@@ -140,14 +201,19 @@ static void answer(struct net *n, const struct sim_set *a)
         for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
             if (session_of(d) != origin)
                 session_queue_text(session_of(d), all, false);
+        if (all && n->cluster.on_params_event) /* sim role: to every edge's clients */
+            n->cluster.on_params_event(n->cluster.user, all, r->origin, r->by);
         free(all);
         if (origin)
             session_queue_json(origin, params_msg(n, a, r, r->id));
-    } else if (origin) {
+        else if (r->reply)
+            respond(NULL, &rm, params_msg(n, a, r, r->id));
+    } else if (origin || r->reply) {
         struct ctl_error e = { .code = a->status == SIM_SET_NO_MEMORY ? "internal" : "invalid" };
         snprintf(e.message, sizeof e.message, "%s", a->message);
-        session_send_error(origin, &e, r->id);
+        respond_error(origin, &rm, &e, r->id);
     }
+    r->reply = NULL;
     request_free(r);
 }
 
@@ -209,6 +275,41 @@ bool dispatch_take_token(struct net *n, struct session *s, const char *text, siz
     return true;
 }
 
+/* set / pause / resume (pause and resume are sets of `paused`). */
+static void submit_control(struct net *n, struct session *s, const struct remote *rm, const struct ctl_msg *m)
+{
+    if (m->type == CTL_SET) {
+        submit_set(n, s, rm, m->params, m->name, m->id);
+    } else {
+        cJSON *p = cJSON_CreateObject();
+        cJSON_AddBoolToObject(p, "paused", m->type == CTL_PAUSE);
+        submit_set(n, s, rm, p, m->name, m->id);
+        cJSON_Delete(p);
+    }
+}
+
+void net_remote_control(struct net *n, const char *origin, const char *by, const char *text, size_t len,
+                        net_reply_fn reply, void *ctx)
+{
+    struct remote rm = { .origin = origin, .by = by, .reply = reply, .ctx = ctx };
+    atomic_fetch_add(&g_metrics.control_messages, 1);
+    struct ctl_msg m;
+    struct ctl_error e;
+    cJSON *bad_id = NULL;
+    if (control_parse(text, len, &m, &bad_id, &e) != 0) {
+        respond_error(NULL, &rm, &e, bad_id);
+        cJSON_Delete(bad_id);
+        return;
+    }
+    if (!n->sim || (m.type != CTL_SET && m.type != CTL_PAUSE && m.type != CTL_RESUME)) {
+        struct ctl_error f = { .code = "bad_message", .message = "only set, pause and resume go to the simulation" };
+        respond_error(NULL, &rm, &f, m.id);
+    } else {
+        submit_control(n, NULL, &rm, &m); /* the token was checked where the client is (its edge) */
+    }
+    ctl_msg_free(&m);
+}
+
 void dispatch_message(struct net *n, struct session *s, const char *text, size_t len)
 {
     if (!dispatch_take_token(n, s, text, len))
@@ -231,14 +332,20 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
             session_send_error(s, &f, m.id);
             break;
         }
-        if (m.type == CTL_SET) {
-            submit_set(n, s, m.params, m.name, m.id);
-        } else {
-            cJSON *p = cJSON_CreateObject();
-            cJSON_AddBoolToObject(p, "paused", m.type == CTL_PAUSE);
-            submit_set(n, s, p, NULL, m.id);
-            cJSON_Delete(p);
+        if (n->cluster.forward) { /* edge: the sim validates and applies it */
+            /* The sim knows this client only by its id: carry its display
+             * name in the message (`name` on the set) unless it has one. */
+            char *named = NULL;
+            if (s->name[0] && !m.name && cJSON_AddStringToObject(m.root, "name", s->name))
+                named = cJSON_PrintUnformatted(m.root);
+            if (m.name)
+                snprintf(s->name, sizeof s->name, "%s", m.name);
+            n->cluster.forward(n->cluster.user, s->serial, s->client_id, m.id, named ? named : text,
+                               named ? strlen(named) : len);
+            free(named);
+            break;
         }
+        submit_control(n, s, NULL, &m);
         break;
     }
     case CTL_SUBSCRIBE: {

@@ -41,7 +41,11 @@ static void count_skipped(struct net *n, const struct frame *f)
 
 void fanout_take_latest(struct net *n)
 {
-    struct frame *f = sim_latest(n->sim);
+    fanout_set_latest(n, sim_latest(n->sim));
+}
+
+void fanout_set_latest(struct net *n, struct frame *f)
+{
     if (f == n->latest) {
         frame_unref(f);
         return;

@@ -26,15 +26,20 @@ static char *render(struct net *n, const char *uri, size_t *len, const char **ty
     *len = 0;
     if (strcmp(uri, "/healthz") == 0) {
         *type = "application/json";
-        if ((body = malloc(LWS_PRE + 256)))
-            *len = (size_t)snprintf(body + LWS_PRE, 256, "{\"status\":\"ok\",\"clients\":%d,\"params_version\":%u,\"ticks\":%llu}\n",
-                                    (int)n->sessions.count, n->applied_version,
-                                    (unsigned long long)atomic_load(&g_metrics.ticks));
+        char extra[1024] = "";
+        const char *status = n->cluster.health ? n->cluster.health(n->cluster.user, extra, sizeof extra) : "ok";
+        if ((body = malloc(LWS_PRE + 1280)))
+            *len = (size_t)snprintf(body + LWS_PRE, 1280, "{\"status\":\"%s\",\"clients\":%d,\"params_version\":%u,\"ticks\":%llu%s}\n",
+                                    status, (int)n->sessions.count, n->applied_version,
+                                    (unsigned long long)atomic_load(&g_metrics.ticks), extra);
     } else if (strcmp(uri, "/metrics") == 0) {
         *type = "text/plain; version=0.0.4; charset=utf-8";
         size_t cap = 16384;
-        if ((body = malloc(LWS_PRE + cap)))
+        if ((body = malloc(LWS_PRE + cap + 4096))) {
             *len = metrics_render(body + LWS_PRE, cap);
+            if (n->cluster.metrics) /* cluster counters (--role sim|edge) after the daemon's own */
+                *len += n->cluster.metrics(n->cluster.user, body + LWS_PRE + *len, 4096);
+        }
     } else if (n->placeholder && (strcmp(uri, "/") == 0 || strcmp(uri, "/index.html") == 0)) {
         *type = "text/html; charset=utf-8";
         if ((body = malloc(LWS_PRE + sizeof placeholder_html)))

@@ -15,7 +15,9 @@
  *   dispatch.c  control messages: rate limit, set/subscribe/ping, and the
  *               answers to sets coming back from the sim
  *   fanout.c    frames: latest-frame-wins hand-over, per-client slicing
- *   http.c      /healthz, /metrics, placeholder page */
+ *   http.c      /healthz, /metrics, placeholder page
+ *   cluster.c   the hooks of --role sim|edge (net.h): frames, hello and
+ *               params from another daemon */
 #ifndef OCEAND_NET_INTERNAL_H
 #define OCEAND_NET_INTERNAL_H
 
@@ -84,8 +86,11 @@ struct request {
     lws_dll2_t list;              /* in net.requests, in submission order */
     uint64_t tag;
     uint64_t serial;              /* sender's session serial (it may be gone by the answer) */
-    char by[24];                  /* sender's client id */
+    char by[64];                  /* sender's client id */
     char by_name[CTL_NAME_BYTES]; /* sender's display name at the time, "" = none */
+    net_reply_fn reply;           /* sim role: a remote request, answered through reply(reply_ctx) */
+    void *reply_ctx;
+    char origin[64];              /* ... from this daemon (the edge) */
     cJSON *id;                    /* owned copy of the request id, or NULL */
     struct ocean_params values;   /* what the set asked for (mask of params)... */
     uint64_t mask;                /* ...replayed onto the applied params to rebuild the view */
@@ -123,6 +128,10 @@ struct net {
     lws_retry_bo_t retry;         /* ping / hang-up policy, read by lws */
     struct lws_http_mount m_files, m_health, m_metrics; /* read by lws */
     struct lws_protocols protocols[3]; /* [0] http, [1] oceand.v1, [2] terminator; read by lws */
+    /* Cluster roles (net.h, cluster.c); all zero for --role all. */
+    struct net_cluster_hooks cluster; /* main writes (net_set_cluster) before the loop */
+    char *status_text;            /* edge: {"type":"status",...} for new clients, NULL = healthy */
+    uint64_t published;           /* edge: frames handed to net_publish_frame (frame.index) */
 };
 
 static inline struct net *net_of(struct lws *wsi) { return lws_context_user(lws_get_context(wsi)); }
@@ -149,6 +158,7 @@ void dispatch_free_requests(struct net *n);
 
 /* fanout.c */
 void fanout_take_latest(struct net *n);                      /* after a wake-up */
+void fanout_set_latest(struct net *n, struct frame *f);      /* takes f's reference (NULL = none) */
 bool fanout_want_write(const struct net *n, const struct session *s); /* a frame is ready for s */
 int fanout_write(struct net *n, struct session *s);          /* one lws_write of a frame */
 void fanout_session_free(struct session *s);

@@ -104,7 +104,7 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
     s->tokens_t = mono_now();
     /* Never a frame from before this tick: after an idle period the last
      * frame built may be minutes old (PROTOCOL.md §3.1). */
-    s->first_seq = n->sim ? sim_seq(n->sim) : 0;
+    s->first_seq = n->sim ? sim_seq(n->sim) : net_latest_seq(n);
     subscription_default(&s->sub, n->dc.tick_rate);
     dispatch_demand(n, &s->sub, +1);
     lws_dll2_add_tail(&s->list, &n->sessions);
@@ -115,6 +115,8 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
         .tile_size = net_tile_size(n), .sub = &s->sub,
     };
     session_queue_json(s, control_hello_msg(&h));
+    if (n->status_text)
+        session_queue_text(s, n->status_text, false); /* cluster trouble: the banner at once */
     LOGD("client %s connected (%d now)", s->client_id, (int)n->sessions.count);
 }
 
@@ -234,6 +236,8 @@ static int on_writable(struct net *n, struct session *s)
  * the clients that now have something to send. */
 static void on_sim_wakeup(struct net *n)
 {
+    if (n && n->cluster.on_wake)
+        n->cluster.on_wake(n->cluster.user); /* cluster messages (NATS link) */
     if (!n || !n->sim)
         return;
     fanout_take_latest(n);

@@ -33,6 +33,8 @@ static bool origin_allowed(struct net *n, struct lws *wsi)
 
 bool upgrade_allowed(struct net *n, struct lws *wsi)
 {
+    if (n->cluster.no_viewers)
+        return false; /* --role sim: viewers connect to edges */
     if ((int)n->sessions.count >= n->dc.max_clients) {
         atomic_fetch_add(&g_metrics.rejected_full, 1);
         LOGW("refusing a client: already %d (--max-clients)", (int)n->sessions.count);

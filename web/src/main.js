@@ -34,6 +34,7 @@ const st = {
   connected: false, connectionState: 'idle', clientId: null, role: null,
   framesReceived: 0, lastSeq: null, paramsVersion: null, params: null,
   rendered: 0, n: null, lod: null, frameParamsVersion: null, lastError: null, serverError: null,
+  clusterState: null, // edge's {"type":"status"}: 'ok', 'sim_unavailable', 'nats_unavailable'
 };
 const view = { wireframe: false, freeze: false };
 // ?bench=1: time decode + upload per frame (upload waits for the GPU with finish())
@@ -74,6 +75,10 @@ const conn = new Connection(serverUrl(), {
         break;
       case 'subscribed':
         panel.subscribed(msg.subscription || msg);
+        break;
+      case 'status': // cluster edge: the simulation behind it is unavailable (or back); the socket stays open
+        st.clusterState = msg.state;
+        hud.message(msg.state === 'ok' ? '' : (msg.message || 'simulation unavailable'));
         break;
       case 'error': // a rejected request: the panel says why (decode errors go to the HUD)
         st.serverError = msg;

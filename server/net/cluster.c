@@ -1,0 +1,135 @@
+/* cluster.c — the network side of --role sim|edge (net.h, docs/scaling.md):
+ * frames, hello and params events that come from a simulation in another
+ * process, the cluster status banner, and the sim's hello for edges. The
+ * role logic itself (NATS) is in server/role_sim.c and server/role_edge.c;
+ * everything here runs on the lws service thread. */
+#include "net_internal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "log.h"
+
+void net_set_cluster(struct net *n, const struct net_cluster_hooks *h) { n->cluster = *h; }
+
+uint64_t net_latest_seq(const struct net *n) { return n->latest ? n->latest->hdr.seq : 0; }
+
+static void wake_writers(struct net *n)
+{
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
+        struct session *s = session_of(d);
+        if (s->tq.count || fanout_want_write(n, s))
+            lws_callback_on_writable(s->wsi);
+    }
+}
+
+void net_publish_frame(struct net *n, struct frame *f)
+{
+    frame_ref(f);
+    fanout_set_latest(n, f);
+    wake_writers(n);
+}
+
+void net_send_text(struct net *n, uint64_t serial, const char *text)
+{
+    struct session *s = session_find(n, serial);
+    if (s)
+        session_queue_text(s, text, false);
+}
+
+static void send_all(struct net *n, const char *text, const char *skip_client)
+{
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
+        if (!skip_client || strcmp(session_of(d)->client_id, skip_client) != 0)
+            session_queue_text(session_of(d), text, false);
+}
+
+/* The params (and version) of a hello or params message onto n->applied.
+ * -1 if the message has neither a valid params object nor a version. */
+static int adopt_params(struct net *n, const cJSON *root, uint64_t *changed)
+{
+    const cJSON *obj = cJSON_GetObjectItemCaseSensitive(root, "params");
+    const cJSON *ver = cJSON_GetObjectItemCaseSensitive(root, "params_version");
+    if (!cJSON_IsObject(obj) || !cJSON_IsNumber(ver) || ver->valuedouble < 0 || ver->valuedouble > 4294967295.0)
+        return -1;
+    struct ocean_params out;
+    struct ctl_error e;
+    /* No limits: the sim checked them; the edge only mirrors its values. */
+    if (control_apply_params(obj, &n->applied, NULL, &out, changed, &e) != 0) {
+        LOGW("cluster: the sim's parameters do not parse here: %s", e.message);
+        return -1;
+    }
+    n->applied = n->view = out;
+    n->applied_version = (uint32_t)ver->valuedouble;
+    return 0;
+}
+
+int net_adopt_hello(struct net *n, const char *text, size_t len)
+{
+    cJSON *root = cJSON_ParseWithLength(text, len);
+    uint32_t before = n->applied_version;
+    uint64_t changed = 0;
+    if (!root || adopt_params(n, root, &changed) != 0) {
+        cJSON_Delete(root);
+        return -1;
+    }
+    const cJSON *rate = cJSON_GetObjectItemCaseSensitive(root, "tick_rate");
+    const cJSON *ts = cJSON_GetObjectItemCaseSensitive(root, "cluster_tile_size");
+    if (cJSON_IsNumber(rate) && rate->valuedouble >= 1 && rate->valuedouble <= 240)
+        n->dc.tick_rate = n->lim.tick_rate = rate->valuedouble;
+    if (cJSON_IsNumber(ts) && ts->valueint >= 1 && ts->valueint <= 4096)
+        n->dc.tile_size = ts->valueint;
+    cJSON_Delete(root);
+    if (n->applied_version != before || changed) {
+        /* Clients that got hello from an older cache learn the sim's values now. */
+        cJSON *m = control_params_msg(&n->applied, n->applied_version, changed, NULL, NULL);
+        if (m)
+            cJSON_AddNumberToObject(m, "tile_size", net_tile_size(n));
+        char *t = control_print(m);
+        if (t)
+            send_all(n, t, NULL);
+        free(t);
+    }
+    return 0;
+}
+
+int net_broadcast_params(struct net *n, const char *text, size_t len, const char *skip_client)
+{
+    cJSON *root = cJSON_ParseWithLength(text, len);
+    uint64_t changed = 0;
+    int rc = root ? adopt_params(n, root, &changed) : -1;
+    cJSON_Delete(root);
+    if (rc != 0)
+        return -1;
+    char *copy = malloc(len + 1);
+    if (!copy)
+        return -1;
+    memcpy(copy, text, len);
+    copy[len] = '\0';
+    send_all(n, copy, skip_client);
+    free(copy);
+    return 0;
+}
+
+void net_set_status(struct net *n, const char *text, const char *ok_text)
+{
+    free(n->status_text);
+    n->status_text = text ? strdup(text) : NULL;
+    if (text || ok_text)
+        send_all(n, text ? text : ok_text, NULL);
+}
+
+char *net_hello_text(struct net *n)
+{
+    struct subscription sub;
+    subscription_default(&sub, n->dc.tick_rate);
+    struct hello_info h = {
+        .client_id = "", .controller = false, .params = &n->applied, .params_version = n->applied_version,
+        .tick_rate = n->dc.tick_rate, .tile_size = net_tile_size(n), .sub = &sub,
+    };
+    cJSON *m = control_hello_msg(&h);
+    if (m) /* the configured tile side, so that edges follow N changes like the sim */
+        cJSON_AddNumberToObject(m, "cluster_tile_size", n->dc.tile_size);
+    return control_print(m);
+}

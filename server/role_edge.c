@@ -1,0 +1,333 @@
+/* role_edge.c — `oceand --role edge`: serves viewers (HTTP, web client,
+ * WebSocket, exactly as --role all) from a simulation in another process.
+ * It subscribes (through the NATS link's demand) to the layers its own
+ * clients want, rebuilds frames from them (cl_collector: the layers of one
+ * seq) and hands them to the usual latest-frame-wins fan-out; it forwards
+ * set / pause / resume to the sim after the local size, rate and token
+ * checks and relays the answers; it keeps the sim's hello for new clients.
+ * Stateless: nothing here outlives the process. Everything runs on the lws
+ * thread (hooks and cl_link_dispatch handlers). */
+#include "roles.h"
+
+#include <cjson/cJSON.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "clock.h"
+#include "control.h"
+#include "log.h"
+#include "role_link.h"
+
+enum edge_state { EDGE_UNKNOWN, EDGE_OK, EDGE_SIM_DOWN, EDGE_NATS_DOWN };
+static const char *const state_name[] = { "unknown", "ok", "sim_unavailable", "nats_unavailable" };
+
+/* A request on its way to the sim: a client's control message, or hello. */
+struct forward {
+    struct forward *prev, *next;  /* in role_edge.forwards (freed at close if never answered) */
+    struct role_edge *r;
+    bool hello;
+    uint64_t serial;              /* the client that sent it */
+    cJSON *id;                    /* its request id (for our own `unavailable` error), or NULL */
+};
+
+struct role_edge {
+    struct net *net;
+    struct cl_link *link;
+    struct cl_collector *collector;
+    int count[CL_KEYS];           /* clients' subscriptions per layer key */
+    uint8_t want[CL_KEY_BYTES];   /* keys with count > 0: what we subscribe to */
+    uint64_t frames;              /* frames handed to the fan-out (frame.index) */
+    enum edge_state state;
+    struct forward *forwards;
+    bool hello_needed;            /* ask the sim for hello (again) at the next chance */
+    bool hello_in_flight;
+    double hello_t;               /* when it was last asked */
+};
+
+/* ---- frames ---- */
+
+/* A collected frame (layers of one seq) as a struct frame, adopting the
+ * layers' buffers. */
+static void publish_set(struct role_edge *r, struct cl_frame_set *set)
+{
+    struct frame *f = frame_new(set->nlayers);
+    if (!f)
+        return;
+    const struct cl_layer_info *h = &set->hdr;
+    f->hdr = (struct oc_frame_header){
+        .seq = h->seq, .sim_time = h->sim_time, .params_version = h->params_version, .n = h->n,
+        .tile_size = h->tile_size, .patch_size = h->patch_size, .flags = h->frame_flags,
+        .server_time_us = h->server_time_us,
+    };
+    f->tiles_per_side = h->tiles_per_side;
+    f->index = r->frames++;
+    for (int i = 0; i < set->nlayers; i++) {
+        struct cl_layer *cl = set->layers[i];
+        struct layer *l = &f->layers[f->nlayers++];
+        l->field = cl->info.field;
+        l->lod = cl->info.lod;
+        l->bound_index = cl->info.bound_index;
+        l->buf = (struct oc_buf){ .data = cl->data, .len = cl->len, .cap = cl->len };
+        l->tile_off = cl->tile_off;
+        cl->data = NULL;
+        cl->tile_off = NULL;
+    }
+    net_publish_frame(r->net, f);
+    frame_unref(f);
+}
+
+static void edge_on_layer(void *user, struct cl_layer *layer)
+{
+    struct role_edge *r = user;
+    struct cl_frame_set *out[2];
+    int k = cl_collector_add(r->collector, layer, r->want, out);
+    for (int i = 0; i < k; i++) {
+        publish_set(r, out[i]);
+        cl_frame_set_free(out[i]);
+    }
+}
+
+static void edge_demand(void *user, int key, int delta)
+{
+    struct role_edge *r = user;
+    if (key < 0 || key >= CL_KEYS)
+        return;
+    bool before = r->count[key] > 0;
+    r->count[key] += delta;
+    bool after = r->count[key] > 0;
+    if (before == after)
+        return;
+    cl_bit_set(r->want, key, after);
+    cl_edge_set_demand(r->link, r->want); /* subscribes and heartbeats at once */
+    struct cl_frame_set *done = cl_collector_check(r->collector, r->want);
+    if (done) { /* a viewer left: the pending frame needs no more layers */
+        publish_set(r, done);
+        cl_frame_set_free(done);
+    }
+}
+
+/* ---- requests ---- */
+
+static struct forward *forward_new(struct role_edge *r, bool hello, uint64_t serial, const cJSON *id)
+{
+    struct forward *fw = calloc(1, sizeof *fw);
+    if (!fw)
+        return NULL;
+    fw->r = r;
+    fw->hello = hello;
+    fw->serial = serial;
+    fw->id = id ? cJSON_Duplicate(id, 1) : NULL;
+    fw->next = r->forwards;
+    if (r->forwards)
+        r->forwards->prev = fw;
+    r->forwards = fw;
+    return fw;
+}
+
+static void forward_free(struct forward *fw)
+{
+    if (fw->prev)
+        fw->prev->next = fw->next;
+    else
+        fw->r->forwards = fw->next;
+    if (fw->next)
+        fw->next->prev = fw->prev;
+    cJSON_Delete(fw->id);
+    free(fw);
+}
+
+static void send_unavailable(struct role_edge *r, uint64_t serial, const cJSON *id, int status)
+{
+    struct ctl_error e = { .code = "unavailable" };
+    snprintf(e.message, sizeof e.message, "simulation unavailable (%s); try again", cl_strerror(status));
+    char *text = control_print(control_error_msg(&e, id));
+    if (text)
+        net_send_text(r->net, serial, text);
+    free(text);
+}
+
+static void on_reply(void *ctx, int status, const char *text, size_t len)
+{
+    struct forward *fw = ctx;
+    struct role_edge *r = fw->r;
+    if (fw->hello) {
+        r->hello_in_flight = false;
+        if (status == 0 && net_adopt_hello(r->net, text, len) == 0) {
+            r->hello_needed = false;
+            LOGI("cluster: hello from the sim (params_version in force now)");
+        } else {
+            LOGD("cluster: no hello from the sim: %s (asking again)", status ? cl_strerror(status) : "bad hello");
+        }
+    } else if (status == 0) {
+        char *copy = malloc(len + 1);
+        if (copy) {
+            memcpy(copy, text, len);
+            copy[len] = '\0';
+            net_send_text(r->net, fw->serial, copy);
+            free(copy);
+        }
+    } else {
+        send_unavailable(r, fw->serial, fw->id, status);
+    }
+    forward_free(fw);
+}
+
+/* One hello request at a time; retried (every HELLO_RETRY s, from the
+ * wake-ups) until one succeeds, so the cache catches up after any outage. */
+#define HELLO_RETRY 0.5
+static void request_hello(struct role_edge *r)
+{
+    r->hello_needed = true;
+    if (r->hello_in_flight)
+        return;
+    struct forward *fw = forward_new(r, true, 0, NULL);
+    if (!fw)
+        return;
+    r->hello_t = mono_now();
+    r->hello_in_flight = true;
+    if (cl_edge_request(r->link, CL_KIND_HELLO, "", "", 0, on_reply, fw) != CL_OK) {
+        r->hello_in_flight = false;
+        forward_free(fw);
+    }
+}
+
+static void edge_forward(void *user, uint64_t serial, const char *client_id, const void *id_json,
+                         const char *text, size_t len)
+{
+    struct role_edge *r = user;
+    struct forward *fw = forward_new(r, false, serial, id_json);
+    if (!fw) {
+        send_unavailable(r, serial, id_json, CL_E_NOMEM);
+        return;
+    }
+    int rc = cl_edge_request(r->link, CL_KIND_CTL, client_id, text, len, on_reply, fw);
+    if (rc != CL_OK) {
+        send_unavailable(r, serial, id_json, rc);
+        forward_free(fw);
+    }
+}
+
+/* ---- state ---- */
+
+static void update_state(struct role_edge *r)
+{
+    enum edge_state s = !cl_link_connected(r->link) ? EDGE_NATS_DOWN : !cl_link_sim_up(r->link) ? EDGE_SIM_DOWN : EDGE_OK;
+    if (s == r->state)
+        return;
+    bool first = r->state == EDGE_UNKNOWN;
+    r->state = s;
+    if (s == EDGE_OK)
+        LOGI("cluster: simulation available");
+    else
+        LOGW("cluster: simulation unavailable (%s): clients stay connected, frames resume when it is back",
+             s == EDGE_NATS_DOWN ? "no connection to NATS" : "no heartbeat from the sim");
+    char text[256];
+    snprintf(text, sizeof text, "{\"type\":\"status\",\"state\":\"%s\",\"message\":\"%s\"}", state_name[s],
+             s == EDGE_OK ? "simulation available"
+                          : s == EDGE_NATS_DOWN ? "simulation unavailable (message bus down, reconnecting)"
+                                                : "simulation unavailable");
+    net_set_status(r->net, s == EDGE_OK ? NULL : text, first ? NULL : text);
+}
+
+static void edge_on_state(void *user, enum cl_event ev)
+{
+    struct role_edge *r = user;
+    LOGI("cluster: %s", cl_event_name(ev));
+    if (ev == CL_EV_CONNECTED || ev == CL_EV_RECONNECTED || ev == CL_EV_SIM_UP)
+        request_hello(r); /* the sim may have moved on (or restarted) meanwhile */
+    update_state(r);
+}
+
+static void edge_on_params(void *user, const char *origin, const char *by, const char *text, size_t len)
+{
+    struct role_edge *r = user;
+    /* Our own client got this event as the reply to its request (with its id). */
+    bool ours = strcmp(origin, cl_link_name(r->link)) == 0 && by[0];
+    if (net_broadcast_params(r->net, text, len, ours ? by : NULL) != 0)
+        LOGW("cluster: ignoring a params event that does not parse");
+}
+
+static void edge_on_wake(void *user)
+{
+    struct role_edge *r = user;
+    cl_link_dispatch(r->link);
+    if (r->hello_needed && !r->hello_in_flight && cl_link_connected(r->link) && mono_now() - r->hello_t >= HELLO_RETRY)
+        request_hello(r);
+}
+
+static const char *edge_health(void *user, char *extra, size_t cap)
+{
+    struct role_edge *r = user;
+    update_state(r);
+    size_t off = (size_t)snprintf(extra, cap, ",\"role\":\"edge\",\"cluster\":\"%s\"", state_name[r->state]);
+    if (off < cap)
+        role_keys_json(r->want, extra + off, cap - off);
+    return r->state == EDGE_OK ? "ok" : "degraded";
+}
+
+static size_t edge_metrics(void *user, char *buf, size_t cap)
+{
+    struct role_edge *r = user;
+    size_t off = role_link_metrics(r->link, buf, cap);
+    struct cl_collector_stats cs;
+    cl_collector_stats(r->collector, &cs);
+    if (off < cap)
+        off += (size_t)snprintf(buf + off, cap - off,
+                                "# TYPE oceand_cluster_frames_total counter\noceand_cluster_frames_total %llu\n"
+                                "# TYPE oceand_cluster_frames_partial_total counter\noceand_cluster_frames_partial_total %llu\n"
+                                "# TYPE oceand_cluster_sim_up gauge\noceand_cluster_sim_up %d\n",
+                                (unsigned long long)cs.frames, (unsigned long long)cs.partial,
+                                r->state == EDGE_OK ? 1 : 0);
+    return off < cap ? off : (cap ? cap - 1 : 0);
+}
+
+struct role_edge *role_edge_open(const struct daemon_config *dc, struct net *n, char *err, size_t errlen)
+{
+    struct role_edge *r = calloc(1, sizeof *r);
+    if (!r || !(r->collector = cl_collector_new())) {
+        free(r);
+        snprintf(err, errlen, "out of memory");
+        return NULL;
+    }
+    r->net = n;
+    struct cl_config cfg;
+    role_link_config(dc, CL_ROLE_EDGE, &cfg);
+    cfg.wake = net_wake;
+    cfg.wake_user = n;
+    cfg.user = r;
+    cfg.h.on_state = edge_on_state;
+    cfg.h.on_layer = edge_on_layer;
+    cfg.h.on_params = edge_on_params;
+    char lerr[256];
+    r->link = cl_link_open(&cfg, lerr, sizeof lerr);
+    if (!r->link) {
+        snprintf(err, errlen, "NATS: %s", lerr);
+        cl_collector_free(r->collector);
+        free(r);
+        return NULL;
+    }
+    struct net_cluster_hooks h = {
+        .user = r, .on_wake = edge_on_wake, .demand = edge_demand, .forward = edge_forward,
+        .health = edge_health, .metrics = edge_metrics,
+    };
+    net_set_cluster(n, &h);
+    update_state(r);
+    request_hello(r);
+    LOGI("cluster: role edge as %s (prefix %s)", cl_link_name(r->link),
+         dc->nats_prefix[0] ? dc->nats_prefix : CL_DEFAULT_PREFIX);
+    return r;
+}
+
+void role_edge_close(struct role_edge *r)
+{
+    if (!r)
+        return;
+    struct net_cluster_hooks none = { 0 };
+    net_set_cluster(r->net, &none);
+    cl_link_close(r->link); /* drops unanswered requests without calling back: free them here */
+    while (r->forwards)
+        forward_free(r->forwards);
+    cl_collector_free(r->collector);
+    free(r);
+}

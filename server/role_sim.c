@@ -1,0 +1,218 @@
+/* role_sim.c — `oceand --role sim`: the simulation of a cluster. It ticks
+ * and encodes as --role all does, but for the layers the edges demand
+ * (their heartbeats, through the NATS link), publishes each encoded layer
+ * once on NATS, answers the edges' set / pause / resume (validated by the
+ * same code as a local client's, server/net/dispatch.c) and hello
+ * requests, and publishes every params event. No viewers connect to it.
+ * Threads: the hooks on_frame / remote_demand run on the tick thread and
+ * only queue (cl_sim_publish_layer, cl_sim_demand); the rest runs on the
+ * lws thread inside cl_link_dispatch. */
+#include "roles.h"
+
+#include "clock.h"
+
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "log.h"
+#include "metrics.h"
+#include "role_link.h"
+
+#define STATUS_PERIOD 0.25 /* s between updates of the heartbeat body (the link sends it at its own rate) */
+
+struct role_sim {
+    struct net *net;
+    struct cl_link *link;
+    double status_t;                              /* lws: when the heartbeat body was last set */
+    _Atomic uint64_t demand[CL_KEY_BYTES / 8];    /* tick writes (last union), lws reads (/healthz) */
+    atomic_uint_least64_t layers_encoded;         /* tick writes, lws reads (/metrics) */
+};
+
+/* ---- tick thread ---- */
+
+static void sim_remote_demand(void *user, uint8_t bits[])
+{
+    struct role_sim *r = user;
+    uint8_t u[CL_KEY_BYTES];
+    cl_sim_demand(r->link, u);
+    for (int i = 0; i < CL_KEY_BYTES / 8; i++) {
+        uint64_t w;
+        memcpy(&w, u + 8 * i, 8);
+        atomic_store(&r->demand[i], w);
+    }
+    for (int i = 0; i < SIM_DEMAND_BYTES && i < CL_KEY_BYTES; i++)
+        bits[i] |= u[i];
+}
+
+static void release_frame(void *ctx) { frame_unref(ctx); }
+
+/* Each layer of the frame on its subject; the frame stays alive (one
+ * reference per layer) until the pump has sent it. */
+static void sim_on_frame(void *user, struct frame *f)
+{
+    struct role_sim *r = user;
+    struct cl_layer_info info = {
+        .seq = f->hdr.seq, .sim_time = f->hdr.sim_time, .params_version = f->hdr.params_version,
+        .n = f->hdr.n, .tile_size = f->hdr.tile_size, .patch_size = f->hdr.patch_size,
+        .frame_flags = f->hdr.flags, .server_time_us = f->hdr.server_time_us,
+        .tiles_per_side = (uint16_t)f->tiles_per_side,
+    };
+    for (int i = 0; i < f->nlayers; i++)
+        cl_bit_set(info.encoded, layer_key(f->layers[i].field, f->layers[i].lod, f->layers[i].bound_index), true);
+    for (int i = 0; i < f->nlayers; i++) {
+        const struct layer *l = &f->layers[i];
+        info.field = l->field;
+        info.lod = l->lod;
+        info.bound_index = l->bound_index;
+        frame_ref(f);
+        int rc = cl_sim_publish_layer(r->link, &info, l->buf.data, l->buf.len, l->tile_off, release_frame, f);
+        if (rc == CL_OK)
+            atomic_fetch_add(&r->layers_encoded, 1);
+        else if (rc != CL_E_NOT_CONNECTED)
+            LOGW("cluster: publishing a layer failed: %s", cl_strerror(rc));
+    }
+}
+
+/* ---- lws thread ---- */
+
+/* The request and its link travel together through net_remote_control. */
+struct pending_reply {
+    struct cl_link *link;
+    struct cl_request *req;
+};
+
+static void answer(void *ctx, const char *text)
+{
+    struct pending_reply *p = ctx;
+    cl_request_reply(p->link, p->req, text, text ? strlen(text) : 0);
+    free(p);
+}
+
+static void sim_on_request(void *user, struct cl_request *req)
+{
+    struct role_sim *r = user;
+    if (req->kind == CL_KIND_HELLO) {
+        char *hello = net_hello_text(r->net);
+        cl_request_reply(r->link, req, hello, hello ? strlen(hello) : 0);
+        free(hello);
+        return;
+    }
+    struct pending_reply *p = malloc(sizeof *p);
+    if (!p) {
+        cl_request_reply(r->link, req, NULL, 0);
+        return;
+    }
+    p->link = r->link;
+    p->req = req;
+    net_remote_control(r->net, req->origin, req->by, req->body, req->len, answer, p);
+}
+
+static void sim_on_state(void *user, enum cl_event ev)
+{
+    LOGI("cluster: NATS %s", cl_event_name(ev));
+}
+
+static void sim_on_params_event(void *user, const char *text, const char *origin, const char *by)
+{
+    struct role_sim *r = user;
+    int rc = cl_sim_publish_params(r->link, origin, by, text, strlen(text));
+    if (rc != CL_OK)
+        LOGW("cluster: publishing params failed: %s (edges catch up at their next hello)", cl_strerror(rc));
+}
+
+static void sim_on_wake(void *user)
+{
+    struct role_sim *r = user;
+    cl_link_dispatch(r->link);
+    double now = mono_now();
+    if (now - r->status_t >= STATUS_PERIOD) {
+        r->status_t = now;
+        char st[160];
+        int len = snprintf(st, sizeof st, "{\"params_version\":%u,\"ticks\":%llu}",
+                           (unsigned)atomic_load(&g_metrics.params_version),
+                           (unsigned long long)atomic_load(&g_metrics.ticks));
+        cl_sim_set_status(r->link, st, (size_t)len);
+    }
+}
+
+static const char *sim_health(void *user, char *extra, size_t cap)
+{
+    struct role_sim *r = user;
+    struct cl_stats st;
+    cl_link_stats(r->link, &st);
+    bool up = cl_link_connected(r->link);
+    uint8_t bits[CL_KEY_BYTES];
+    for (int i = 0; i < CL_KEY_BYTES / 8; i++) {
+        uint64_t w = atomic_load(&r->demand[i]);
+        memcpy(bits + 8 * i, &w, 8);
+    }
+    size_t off = (size_t)snprintf(extra, cap, ",\"role\":\"sim\",\"cluster\":\"%s\",\"edges\":%d",
+                                  up ? "ok" : "nats_unavailable", st.demand_edges);
+    if (off < cap)
+        role_keys_json(bits, extra + off, cap - off);
+    return up ? "ok" : "degraded";
+}
+
+static size_t sim_metrics(void *user, char *buf, size_t cap)
+{
+    struct role_sim *r = user;
+    size_t off = role_link_metrics(r->link, buf, cap);
+    if (off < cap)
+        off += (size_t)snprintf(buf + off, cap - off, "# HELP oceand_cluster_layers_encoded_total layers encoded for edges\n"
+                                "# TYPE oceand_cluster_layers_encoded_total counter\noceand_cluster_layers_encoded_total %llu\n",
+                                (unsigned long long)atomic_load(&r->layers_encoded));
+    return off < cap ? off : (cap ? cap - 1 : 0);
+}
+
+struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, struct sim_config *sc,
+                               char *err, size_t errlen)
+{
+    struct role_sim *r = calloc(1, sizeof *r);
+    if (!r) {
+        snprintf(err, errlen, "out of memory");
+        return NULL;
+    }
+    r->net = n;
+    struct cl_config cfg;
+    role_link_config(dc, CL_ROLE_SIM, &cfg);
+    cfg.wake = net_wake;
+    cfg.wake_user = n;
+    cfg.user = r;
+    cfg.h.on_state = sim_on_state;
+    cfg.h.on_request = sim_on_request;
+    char lerr[256];
+    r->link = cl_link_open(&cfg, lerr, sizeof lerr);
+    if (!r->link) {
+        snprintf(err, errlen, "NATS: %s", lerr);
+        free(r);
+        return NULL;
+    }
+    /* Edges keep their clients across a restart of the sim: seq must not go
+     * back, or they would wait for it to catch up. A tick runs at most once a
+     * period, so wall-clock periods since 1970 are always ahead of the last run's seq. */
+    sc->start_seq = (uint64_t)((double)unix_us() * 1e-6 * dc->tick_rate);
+    sc->remote_demand = sim_remote_demand;
+    sc->on_frame = sim_on_frame;
+    sc->cluster_user = r;
+    struct net_cluster_hooks h = {
+        .user = r, .no_viewers = true, .on_wake = sim_on_wake, .on_params_event = sim_on_params_event,
+        .health = sim_health, .metrics = sim_metrics,
+    };
+    net_set_cluster(n, &h);
+    LOGI("cluster: role sim as %s (prefix %s)", cl_link_name(r->link),
+         dc->nats_prefix[0] ? dc->nats_prefix : CL_DEFAULT_PREFIX);
+    return r;
+}
+
+void role_sim_close(struct role_sim *r)
+{
+    if (!r)
+        return;
+    net_drop_remote_requests(r->net); /* they hold cl_requests of this link */
+    struct net_cluster_hooks none = { .no_viewers = true };
+    net_set_cluster(r->net, &none);
+    cl_link_close(r->link);
+    free(r);
+}

@@ -1,0 +1,553 @@
+#!/usr/bin/python3
+"""Integration tests of `oceand --role sim|edge` over NATS (issue 12, docs/scaling.md).
+
+Each test starts its own nats-server on a free 127.0.0.1 port, one `--role sim` and
+one or two `--role edge` daemons, and real WebSocket clients; everything is killed at
+the end, even on failure (and nats-server dies with this process: PR_SET_PDEATHSIG).
+    /usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand build/oceand [--cycles 5]
+Prints "N passed, M failed" last. Helpers (clients, frame parsing) come from
+tests/daemon/test_daemon.py.
+"""
+import argparse
+import asyncio
+import ctypes
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import traceback
+import urllib.error
+import urllib.request
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "daemon"))
+import test_daemon as td  # noqa: E402
+from test_daemon import TestFailure, check, connect, recv_json, recv_frame, parse_header  # noqa: E402
+
+ARGS = None
+N = 256
+NATS_BIN = shutil.which("nats-server") or "/usr/sbin/nats-server"
+
+
+def _die_with_parent():
+    ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+
+
+class Nats:
+    """A nats-server on 127.0.0.1; stop() and start() keep the port."""
+
+    def __init__(self, tmp):
+        self.port = td.free_port()
+        self.url = "nats://127.0.0.1:%d" % self.port
+        self.log = open(os.path.join(tmp, "nats.log"), "ab")
+        self.proc = None
+        self.start()
+
+    def start(self):
+        self.proc = subprocess.Popen([NATS_BIN, "-a", "127.0.0.1", "-p", str(self.port)],
+                                     stdout=self.log, stderr=self.log, preexec_fn=_die_with_parent)
+        deadline = time.time() + 10
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", self.port), timeout=0.5).close()
+                return
+            except OSError:
+                check(self.proc.poll() is None, "nats-server exited at start")
+                check(time.time() < deadline, "nats-server did not listen")
+                time.sleep(0.05)
+
+    def stop(self):
+        if self.proc and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+    def close(self):
+        self.stop()
+        self.log.close()
+
+
+class Node:
+    """One oceand (--role all|sim|edge); restart() keeps its port and state file."""
+
+    def __init__(self, tmp, name, *extra, port=None, state_file=None):
+        self.tmp, self.name, self.extra = tmp, name, list(extra)
+        self.port = port or td.free_port()
+        self.state_file = state_file or os.path.join(tmp, name + "-state.json")
+        self.log_path = os.path.join(tmp, name + ".log")
+        self.url = "ws://127.0.0.1:%d/" % self.port
+        self.http = "http://127.0.0.1:%d" % self.port
+        self.tls_ctx = None
+        self.proc = None
+        self.start()
+
+    def start(self):
+        args = [ARGS.oceand, "--port", str(self.port), "--state-file", self.state_file,
+                "--web-root", os.path.join(self.tmp, "web"), "--resolution", str(N), "--tick-rate", "30",
+                "--plan-rigor", "0", "--wisdom-file", "none", "--log-level", "info"] + self.extra
+        self.log = open(self.log_path, "ab")
+        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log, preexec_fn=_die_with_parent)
+        deadline = time.time() + 20
+        while True:
+            check(self.proc.poll() is None, "%s exited at start: %s\n%s" % (self.name, self.proc.returncode, self.read_log()))
+            try:
+                urllib.request.urlopen(self.http + "/healthz", timeout=1).read()
+                return
+            except (urllib.error.URLError, ConnectionError, OSError):
+                check(time.time() < deadline, "%s did not answer /healthz" % self.name)
+                time.sleep(0.05)
+
+    def read_log(self):
+        with open(self.log_path, "rb") as f:
+            return f.read().decode(errors="replace")[-3000:]
+
+    def health(self):
+        with urllib.request.urlopen(self.http + "/healthz", timeout=5) as r:
+            return json.loads(r.read().decode())
+
+    def metric(self, name):
+        return td.Daemon.metric(self, name)
+
+    def get(self, path):
+        return td.Daemon.get(self, path)
+
+    def rss_kb(self):
+        return td.Daemon.rss_kb(self)
+
+    def kill(self, sig=signal.SIGKILL):
+        if self.proc and self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if not self.log.closed:
+            self.log.close()
+        return self.proc.returncode
+
+    def restart(self):
+        self.kill()
+        self.start()
+
+
+class Cluster:
+    def __init__(self, edges=2, sim_extra=(), edge_extra=(), state=None):
+        self.tmp = tempfile.mkdtemp(prefix="oceand-cluster-")
+        self.nodes = []
+        self.nats = Nats(self.tmp)
+        try:
+            sf = os.path.join(self.tmp, "sim-state.json")
+            if state is not None:
+                with open(sf, "w") as f:
+                    json.dump(state, f)
+            self.sim = self.node("sim", "--role", "sim", "--nats", self.nats.url, *sim_extra, state_file=sf)
+            self.edges = [self.node("edge%d" % i, "--role", "edge", "--nats", self.nats.url, "--state-file", "none",
+                                    *edge_extra) for i in range(edges)]
+            for e in self.edges:
+                wait_for(lambda e=e: e.health()["cluster"] == "ok", "edge sees the sim")
+        except BaseException:
+            self.close()
+            raise
+
+    def node(self, name, *extra, **kw):
+        n = Node(self.tmp, name, *extra, **kw)
+        self.nodes.append(n)
+        return n
+
+    def close(self, failed=False):
+        """SIGTERM every daemon still running: each must exit 0 (under ASan: no leak, no error)."""
+        bad = []
+        for n in self.nodes:
+            running = n.proc.poll() is None
+            rc = n.kill(signal.SIGTERM)
+            if running and rc != 0:
+                bad.append("%s exited with %r" % (n.name, rc))
+        self.nats.close()
+        if failed or bad:
+            for n in self.nodes:
+                print("--- %s log:\n%s" % (n.name, n.read_log()))
+        shutil.rmtree(self.tmp, ignore_errors=True)
+        if bad and not failed:
+            raise TestFailure("; ".join(bad))
+
+
+def wait_for(pred, what, timeout=10.0):
+    deadline = time.time() + timeout
+    while True:
+        try:
+            if pred():
+                return
+        except (urllib.error.URLError, OSError, KeyError, ValueError):
+            pass
+        check(time.time() < deadline, "timed out waiting: %s" % what)
+        time.sleep(0.05)
+
+
+async def await_for(pred, what, timeout=10.0):
+    deadline = time.time() + timeout
+    while not pred():
+        check(time.time() < deadline, "timed out waiting: %s" % what)
+        await asyncio.sleep(0.05)
+
+
+async def frames_by_seq(ws, count, timeout=10.0):
+    out = {}
+    while len(out) < count:
+        h, b = await recv_frame(ws, timeout=timeout)
+        out[h["seq"]] = b
+    return out
+
+
+TESTS = []
+
+
+def test(fn):
+    TESTS.append(fn)
+    return fn
+
+
+def with_cluster(**kw):
+    def deco(fn):
+        def run():
+            c = Cluster(**kw)
+            ok = False
+            try:
+                fn(c)
+                ok = True
+            finally:
+                c.close(failed=not ok)
+        run.__name__ = fn.__name__
+        return run
+    return deco
+
+
+# ---------------------------------------------------------------- tests
+
+@test
+def test_role_flags_are_checked():
+    for args, want in ((["--role", "bogus"], "is not all, sim or edge"),
+                       (["--role", "edge"], "needs --nats"), (["--role", "sim"], "needs --nats")):
+        r = subprocess.run([ARGS.oceand, "--state-file", "none"] + args, capture_output=True, text=True, timeout=20)
+        check(r.returncode == 2 and want in r.stderr, "%r: exit %r, %r" % (args, r.returncode, r.stderr))
+
+
+@test
+@with_cluster(edges=2)
+def test_set_reaches_both_edges_and_frames_are_identical(c):
+    async def run():
+        a, ha = await connect(c.edges[0])
+        b, hb = await connect(c.edges[1])
+        check(ha["params_version"] == hb["params_version"], "hello versions differ")
+        v0 = ha["params_version"]
+        await a.send(json.dumps({"type": "set", "id": 41, "params": {"wind_speed": 20}}))
+        pa = await recv_json(a, lambda m: m["type"] in ("params", "error"))
+        pb = await recv_json(b, lambda m: m["type"] == "params")
+        check(pa["type"] == "params", "set through edge A: %r" % pa)
+        for p in (pa, pb):
+            check(p["params_version"] == v0 + 1, "version %r, want %d" % (p["params_version"], v0 + 1))
+            check(p["changed"] == ["wind_speed"] and p["params"]["wind_speed"] == 20, "params %r" % p)
+            check(p["by"] == ha["client_id"], "by %r" % p.get("by"))
+        check(pa.get("id") == 41, "sender's copy lacks its id")
+        check("id" not in pb, "edge B's client got an id")
+        # Frames of the new version on both edges; equal seq => equal bytes.
+        fa, fb = await asyncio.gather(frames_by_seq(a, 12), frames_by_seq(b, 12))
+        common = sorted(set(fa) & set(fb))
+        check(len(common) >= 4, "only %d common seqs" % len(common))
+        for s in common:
+            check(fa[s] == fb[s], "frames of seq %d differ between edges" % s)
+            check(parse_header(fa[s])["params_version"] >= v0 + 1, "old version after the set")
+        # A client joining edge B late: hello with the new params, a frame soon after.
+        c2, h2 = await connect(c.edges[1])
+        check(h2["params_version"] == v0 + 1 and h2["params"]["wind_speed"] == 20, "late hello %r" % h2["params"])
+        await recv_frame(c2, timeout=5)
+        for ws in (a, b, c2):
+            await ws.close()
+    asyncio.run(run())
+    check(c.sim.health()["role"] == "sim", "sim healthz lacks its role")
+    check(c.sim.metric("oceand_cluster_layers_published_total") > 0, "no layers published")
+
+
+@test
+def test_frames_identical_to_role_all():
+    """Paused at the same sim time, same seed and parameters: an edge's frames carry the
+    same header fields (but seq and server time) and the same tile bytes as --role all's."""
+    state = {"params": {"paused": True, "wind_speed": 13, "seed": 7}, "params_version": 3, "sim_time": 12.5}
+    c = Cluster(edges=1, state=state)
+    ok = False
+    try:
+        sf = os.path.join(c.tmp, "all-state.json")
+        with open(sf, "w") as f:
+            json.dump(state, f)
+        alone = c.node("all", state_file=sf)
+
+        async def run():
+            e, he = await connect(c.edges[0])
+            a, ha = await connect(alone)
+            check(he["params"] == ha["params"] and he["params_version"] == ha["params_version"] == 3,
+                  "hello differs: %r vs %r" % (he["params_version"], ha["params_version"]))
+            _, fe = await recv_frame(e, timeout=10)
+            _, fa = await recv_frame(a, timeout=10)
+            ee, aa = parse_header(fe), parse_header(fa)
+            for k in ("sim_time", "params_version", "n", "tile_size", "patch_size", "tile_count"):
+                check(ee[k] == aa[k], "header %s: edge %r, all %r" % (k, ee[k], aa[k]))
+            check(ee["sim_time"] == 12.5, "sim_time %r" % ee["sim_time"])
+            check(fe[48:] == fa[48:], "tile bytes differ between the edge and --role all")
+            check(fe[40:48] != b"" and len(fe) == len(fa), "lengths")
+            await e.close()
+            await a.close()
+        asyncio.run(run())
+        ok = True
+    finally:
+        c.close(failed=not ok)
+
+
+@test
+def test_control_errors_and_limits_through_an_edge():
+    c = Cluster(edges=1, edge_extra=("--control-token", "s3cret", "--max-message", "1024"))
+    ok = False
+    try:
+        alone = c.node("all", "--control-token", "s3cret", "--max-message", "1024")
+
+        async def codes(node):
+            ws, h = await connect(node)
+            got = []
+            # forbidden without the token, accepted with it, then today's bad sets (with the token)
+            await ws.send('{"type":"set","id":1,"params":{"wind_speed":13}}')
+            got.append((await recv_json(ws, lambda m: m["type"] in ("error", "params"))).get("code", "params"))
+            await ws.send('{"type":"pause","id":2}')
+            got.append((await recv_json(ws, lambda m: m["type"] in ("error", "params"))).get("code", "params"))
+            await ws.send('{"type":"set","id":3,"token":"s3cret","params":{"wind_speed":13}}')
+            p = await recv_json(ws, lambda m: m["type"] in ("error", "params"))
+            got.append(p.get("code", "params"))
+            check(p.get("id") == 3, "id of the accepted set: %r" % p)
+            for text, code, param in td.BAD_SETS:
+                j = None
+                try:
+                    j = json.loads(text)
+                except ValueError:
+                    pass
+                if isinstance(j, dict) and j.get("type") == "set":
+                    j["token"] = "s3cret"
+                    text = json.dumps(j)
+                await ws.send(text)
+                e = await recv_json(ws, lambda m: m["type"] in ("error", "params"))
+                got.append((e.get("code"), e.get("param"), e.get("id")))
+            # rate limit: a burst beyond control_burst (40) gets rate_limited
+            for i in range(60):
+                await ws.send('{"type":"ping","id":%d}' % i)
+            replies = [await recv_json(ws, lambda m: m["type"] in ("pong", "error")) for _ in range(60)]
+            got.append(sum(1 for r in replies if r.get("code") == "rate_limited") > 0)
+            # too large: closed with 1009
+            await asyncio.sleep(2.5)  # refill the bucket
+            await ws.send('{"type":"set","token":"s3cret","params":{"wind_speed":1},"pad":"%s"}' % ("x" * 2000))
+            try:
+                while True:
+                    await asyncio.wait_for(ws.recv(), 5)
+            except websockets_closed() as ex:
+                got.append(ex.code)
+            return got
+
+        edge_codes = asyncio.run(codes(c.edges[0]))
+        all_codes = asyncio.run(codes(alone))
+        check(edge_codes == all_codes, "through an edge:\n%r\n--role all:\n%r" % (edge_codes, all_codes))
+        check(edge_codes[0] == "forbidden" and edge_codes[2] == "params" and edge_codes[-1] == 1009 and
+              edge_codes[-2] is True, "limits: %r" % edge_codes)
+        # The sim has no viewers.
+        try:
+            asyncio.run(connect(c.sim))
+            check(False, "the sim accepted a WebSocket client")
+        except TestFailure:
+            raise
+        except Exception:
+            pass
+        ok = True
+    finally:
+        c.close(failed=not ok)
+
+
+def websockets_closed():
+    import websockets
+    return websockets.exceptions.ConnectionClosed
+
+
+def sim_layers(c):
+    return sorted(c.sim.health()["layers"])
+
+
+@test
+@with_cluster(edges=2)
+def test_demand_no_viewers_then_one(c):
+    wait_for(lambda: sim_layers(c) == [], "no demand without viewers")
+    n0 = c.sim.metric("oceand_cluster_layers_encoded_total")
+    time.sleep(0.5)
+    check(c.sim.metric("oceand_cluster_layers_encoded_total") == n0, "the sim encodes without viewers")
+
+    async def run():
+        ws, h = await connect(c.edges[0])
+        bi = h["bounds"].index(h["subscription"]["bound"])
+        want = sorted("%s.0.%d" % (f, bi) for f in h["subscription"]["fields"])
+        await await_for(lambda: sim_layers(c) == want, "sim encodes exactly %r (has %r)" % (want, sim_layers(c)))
+        await recv_frame(ws)
+        await ws.send('{"type":"subscribe","id":1,"fields":["height"],"lod":1,"bound":%r}' % h["bounds"][2])
+        await recv_json(ws, lambda m: m["type"] == "subscribed")
+        await await_for(lambda: sim_layers(c) == ["height.1.2"], "sim follows the subscription (%r)" % sim_layers(c))
+        _, b = await recv_frame(ws, lambda h_, m: len(td.tiles(m)) and td.tiles(m)[0]["lod"] == 1)
+        check(all(t["field"] == 0 and t["lod"] == 1 for t in td.tiles(b)), "frame has other layers")
+        check(sorted(c.edges[0].health()["layers"]) == ["height.1.2"], "edge demand")
+        check(c.edges[1].health()["layers"] == [], "edge B has demand without clients")
+        await ws.close()
+    asyncio.run(run())
+    wait_for(lambda: sim_layers(c) == [], "demand gone when the viewer left")
+    n1 = c.sim.metric("oceand_cluster_layers_encoded_total")
+    time.sleep(0.5)
+    check(c.sim.metric("oceand_cluster_layers_encoded_total") == n1, "still encoding after the viewer left")
+
+
+async def expect_status(ws, state, timeout=10.0):
+    m = await recv_json(ws, lambda m: m["type"] == "status" and m["state"] == state, timeout=timeout)
+    check(m.get("message"), "status without a message")
+    return m
+
+
+@test
+@with_cluster(edges=1)
+def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
+    async def run():
+        ws, h = await connect(c.edges[0])
+        await ws.send('{"type":"set","id":1,"params":{"wind_speed":17}}')
+        p = await recv_json(ws, lambda m: m["type"] in ("params", "error"))
+        check(p["type"] == "params", "set: %r" % p)
+        version = p["params_version"]
+        hb, _ = await recv_frame(ws, lambda h_, m: h_["params_version"] == version)
+        await await_for(lambda: os.path.exists(c.sim.state_file) and
+                        json.load(open(c.sim.state_file)).get("params_version") == version, "state saved")
+        c.sim.kill()
+        await expect_status(ws, "sim_unavailable")
+        hz = c.edges[0].health()
+        check(hz["status"] == "degraded" and hz["cluster"] == "sim_unavailable", "edge healthz %r" % hz)
+        check("simulation unavailable" in c.edges[0].read_log(), "edge log does not say so")
+        await ws.send('{"type":"set","id":2,"params":{"wind_speed":5}}')
+        e = await recv_json(ws, lambda m: m["type"] in ("params", "error"))
+        check(e["type"] == "error" and e["code"] == "unavailable" and e["id"] == 2, "set while down: %r" % e)
+        await ws.send('{"type":"ping","id":3}')
+        await recv_json(ws, lambda m: m["type"] == "pong")          # still connected to the edge
+        late, hl = await connect(c.edges[0])                          # joining while down: hello + banner
+        await expect_status(late, "sim_unavailable", timeout=3)
+        c.sim.start()
+        await expect_status(ws, "ok")
+        h2, _ = await recv_frame(ws, timeout=5)
+        check(h2["params_version"] == version, "version after restart %r, want %r" % (h2["params_version"], version))
+        check(h2["seq"] > hb["seq"], "seq went back after the sim restarted: %d after %d" % (h2["seq"], hb["seq"]))
+        c3, h3 = await connect(c.edges[0])
+        check(h3["params"]["wind_speed"] == 17 and h3["params_version"] == version, "params after restart")
+        for w in (ws, late, c3):
+            await w.close()
+    asyncio.run(run())
+
+
+@test
+@with_cluster(edges=1)
+def test_nats_down_keeps_clients_and_resumes(c):
+    async def run():
+        ws, h = await connect(c.edges[0])
+        await recv_frame(ws)
+        c.nats.stop()
+        await expect_status(ws, "nats_unavailable")
+        hz = c.edges[0].health()
+        check(hz["status"] == "degraded" and hz["cluster"] == "nats_unavailable", "edge healthz %r" % hz)
+        check(c.sim.health()["cluster"] == "nats_unavailable", "sim healthz while NATS is down")
+        await ws.send('{"type":"set","id":2,"params":{"wind_speed":5}}')
+        e = await recv_json(ws, lambda m: m["type"] in ("params", "error"))
+        check(e["type"] == "error" and e["code"] == "unavailable", "set while NATS is down: %r" % e)
+        c.nats.start()
+        await expect_status(ws, "ok", timeout=15)
+        hf, _ = await recv_frame(ws, timeout=5)
+        await ws.close()
+    asyncio.run(run())
+
+
+@test
+@with_cluster(edges=2)
+def test_kill_restart_cycles_under_load(c):
+    """sim, nats-server and edge B in turn, ARGS.cycles times: edge A's clients stay
+    connected and get frames again after each recovery; edge A's RSS stays flat."""
+    async def run():
+        a = [(await connect(c.edges[0]))[0] for _ in range(4)]
+
+        async def fresh_frames(ws_list):
+            # After the edge said ok: every client gets frames again within --recovery-s
+            # (2 s, the issue's bound; more under sanitizers). Two, so one is newer than any queued.
+            deadline = time.time() + ARGS.recovery_s
+            for ws in ws_list:
+                await recv_frame(ws, timeout=max(0.1, deadline - time.time()))
+                await recv_frame(ws, timeout=max(0.1, deadline - time.time()))
+
+        for ws in a:
+            await recv_frame(ws)
+        rss = []
+        for cycle in range(ARGS.cycles):
+            c.sim.kill()
+            await expect_status(a[0], "sim_unavailable")
+            c.sim.start()
+            await expect_status(a[0], "ok")
+            await fresh_frames(a)
+            c.nats.stop()
+            await expect_status(a[0], "nats_unavailable")
+            c.nats.start()
+            await expect_status(a[0], "ok", timeout=15)
+            await fresh_frames(a)
+            b, _ = await connect(c.edges[1])
+            await recv_frame(b)
+            await b.close()
+            c.edges[1].restart()
+            wait_for(lambda: c.edges[1].health()["cluster"] == "ok", "edge B back")
+            b, _ = await connect(c.edges[1])   # its clients reconnect
+            await recv_frame(b)
+            await b.close()
+            await fresh_frames(a)
+            rss.append(c.edges[0].rss_kb())
+        for ws in a:
+            check(ws.open, "a client of the surviving edge was disconnected")
+            await ws.close()
+        # Flat: after the first cycle (allocator warm-up) growth stays within 4 MB.
+        check(rss[-1] - rss[min(1, len(rss) - 1)] < 4096, "edge A RSS grows: %r kB" % rss)
+        print("  edge A RSS per cycle (kB): %r" % rss)
+    asyncio.run(run())
+
+
+def main():
+    global ARGS
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--oceand", required=True)
+    ap.add_argument("--cycles", type=int, default=5)
+    ap.add_argument("--recovery-s", type=float, default=2.0, help="frames again this soon after recovery")
+    ap.add_argument("-k", default="")
+    ARGS = ap.parse_args()
+    td.ARGS = ARGS
+    if not os.path.exists(NATS_BIN):
+        print("nats-server not found (scripts/deps.sh installs it)")
+        return 1
+    passed = failed = 0
+    for fn in TESTS:
+        if ARGS.k and ARGS.k not in fn.__name__:
+            continue
+        t0 = time.time()
+        try:
+            fn()
+            passed += 1
+            print("PASS %s (%.1f s)" % (fn.__name__, time.time() - t0))
+        except Exception:
+            failed += 1
+            print("FAIL %s" % fn.__name__)
+            traceback.print_exc()
+        sys.stdout.flush()
+    print("%d passed, %d failed" % (passed, failed))
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
