@@ -2,7 +2,7 @@
 
 DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c server/frame.c \
               server/net/context.c server/net/upgrade.c server/net/session.c server/net/dispatch.c \
-              server/net/fanout.c server/net/http.c server/net/cluster.c \
+              server/net/fanout.c server/net/http.c server/net/cluster.c server/net/rx_guard.c \
               server/role_sim.c server/role_edge.c server/role_link.c \
               server/metrics.c server/state.c server/state_saver.c server/log.c
 DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o)

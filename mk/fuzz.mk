@@ -13,6 +13,7 @@ FUZZ_SECONDS ?= 60
 FUZZ_CI_SECONDS ?= $(if $(CI),60,10)
 FUZZ_TARGETS := control frame config
 FUZZ_TARGETS += cluster
+FUZZ_TARGETS += netwire
 
 SIM_SRCS_FOR_FUZZ = $(wildcard server/sim/*.c)
 FUZZ_SRCS_control = fuzz/fuzz_control.c server/control.c $(SIM_SRCS_FOR_FUZZ)
@@ -21,6 +22,8 @@ FUZZ_SRCS_config  = fuzz/fuzz_config.c server/config.c server/control.c server/s
                     $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_cluster = fuzz/fuzz_cluster.c $(wildcard server/cluster/cluster_*.c) proto/c/oc_header.c
 $(BUILD)/fuzz/fuzz_cluster: $(wildcard server/cluster/*.[ch])
+FUZZ_SRCS_netwire = fuzz/fuzz_netwire.c server/net/upgrade.c server/metrics.c server/log.c
+$(BUILD)/fuzz/fuzz_netwire: $(wildcard server/net/*.[ch])
 
 $(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*.c server/*.h server/sim/*.[ch] server/sim/include/*.h proto/c/*.c proto/c/*.h)
 	@mkdir -p $(dir $@)

@@ -1,7 +1,11 @@
 # mk/hostile.mk — hostile-client battery and churn test (issue 7) against a real
 # oceand on 127.0.0.1: malformed / nested / huge / compressed / binary messages,
 # set floods, connection storms, stalled, half-open and vanishing clients, and
-# 1000 connect/subscribe/disconnect cycles. Budget: < 4 min on 2 cores.
+# 1000 connect/subscribe/disconnect cycles; since issue 16 also foreign Host
+# headers (DNS rebinding), bad handshakes, unread replies, descriptor exhaustion
+# (ulimit -n), unmasked frames, web-root symlinks, ping floods, illegal control
+# frames, subscription churn, pipelined HTTP, resolution flapping.
+# Budget: < 4 min on 2 cores (33 cases: 193 s at load 7-17).
 #
 #   make test-hostile     the battery; "N passed, M failed", non-zero on a failure
 #   make bench-hostile    the same run, figures as one JSON line per case on stdout

@@ -21,3 +21,15 @@ test-web: $(BUILD)/web/index.html $(BUILD)/oceand
 
 bench-web: $(BUILD)/web/index.html $(BUILD)/oceand
 	node bench/web_bench.mjs --oceand $(BUILD)/oceand --web-root $(BUILD)/web
+
+# `make screenshots`: the gallery (docs/gallery/*.png) and docs/screenshot.png from a real
+# daemon in headless chromium (tests/web/screenshots.mjs; ~3 min in software GL).
+# `make measure-repetition`: luminance autocorrelation of a top-down view at the patch
+# period, with and without the hex-tiled far field (tests/web/repetition.mjs).
+.PHONY: screenshots measure-repetition
+screenshots: $(BUILD)/web/index.html $(BUILD)/oceand
+	node tests/web/screenshots.mjs --oceand $(BUILD)/oceand --web-root $(BUILD)/web --out docs/gallery --shot docs/screenshot.png
+
+measure-repetition: $(BUILD)/web/index.html $(BUILD)/oceand
+	node tests/web/repetition.mjs --oceand $(BUILD)/oceand --web-root $(BUILD)/web --query '&hex=0' --runs 5
+	node tests/web/repetition.mjs --oceand $(BUILD)/oceand --web-root $(BUILD)/web --runs 5

@@ -67,6 +67,10 @@ static const struct param_def opt_table[] = {
     OPT_STR("nats_tls_ca", nats_tls_ca, "", 0, "PEM CA file to verify the NATS server (implies TLS)"),
     OPT_STR("nats_tls_cert", nats_tls_cert, "", 0, "PEM client certificate for NATS (with --nats-tls-key)"),
     OPT_STR("nats_tls_key", nats_tls_key, "", 0, "PEM private key of --nats-tls-cert"),
+    OPT_STR("server_name", server_name, "", 0, "Host names the daemon answers to besides localhost and the "
+      "--bind address (comma list, e.g. ocean.example.org); other Host headers get 421 (DNS rebinding); \"*\" = any"),
+    OPT("output_limit_kb", PARAM_INT, output_limit_kb, 16, 1 << 20, 1024, NULL, 0, "JSON replies queued for one "
+      "client (KiB); a client over it is closed with 1008 (it is not reading)"),
 };
 #undef OPT
 #undef OPT_STR

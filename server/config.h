@@ -49,6 +49,8 @@ struct daemon_config {
     char   nats_tls_ca[512];   /* trust these CAs (implies TLS) */
     char   nats_tls_cert[512]; /* client certificate ... */
     char   nats_tls_key[512];  /* ... and its key */
+    char   server_name[512];   /* extra Host names accepted (comma list); "*" = any Host */
+    int    output_limit_kb;    /* JSON replies queued per client (KiB) before it is closed */
 };
 
 /* What config_load found besides the values. */

@@ -89,6 +89,24 @@ size_t metrics_render(char *buf, size_t cap)
     counter(&o, "oceand_param_changes_total", "Parameter sets applied.", atomic_load(&m->param_changes));
     counter(&o, "oceand_closed_too_large_total", "Clients closed with 1009 (message too large).",
             atomic_load(&m->closed_too_large));
+    put(&o, "# HELP oceand_clients_refused_total WebSocket upgrades refused before a session (issue 16).\n"
+            "# TYPE oceand_clients_refused_total counter\n"
+            "oceand_clients_refused_total{reason=\"host\"} %llu\n"
+            "oceand_clients_refused_total{reason=\"handshake\"} %llu\n",
+        (unsigned long long)atomic_load(&m->rejected_host), (unsigned long long)atomic_load(&m->rejected_handshake));
+    put(&o, "# HELP oceand_http_refused_total HTTP requests refused: unknown Host (421), symlink in the web root (404).\n"
+            "# TYPE oceand_http_refused_total counter\n"
+            "oceand_http_refused_total{reason=\"host\"} %llu\n"
+            "oceand_http_refused_total{reason=\"symlink\"} %llu\n",
+        (unsigned long long)atomic_load(&m->http_refused_host), (unsigned long long)atomic_load(&m->http_refused_symlink));
+    put(&o, "# HELP oceand_clients_closed_total Clients closed by the daemon: reply queue over --output-limit-kb (1008), "
+            "unmasked frame (1002).\n"
+            "# TYPE oceand_clients_closed_total counter\n"
+            "oceand_clients_closed_total{reason=\"output_limit\"} %llu\n"
+            "oceand_clients_closed_total{reason=\"unmasked\"} %llu\n",
+        (unsigned long long)atomic_load(&m->closed_output_limit), (unsigned long long)atomic_load(&m->closed_unmasked));
+    counter(&o, "oceand_connections_refused_total", "TCP connections closed at accept to keep a reserve of file "
+            "descriptors (RLIMIT_NOFILE).", atomic_load(&m->refused_fd_limit));
     gauge(&o, "oceand_params_version", "Current parameter version.", atomic_load(&m->params_version));
     gauge(&o, "oceand_resolution", "Current simulation resolution N.", atomic_load(&m->resolution));
     gauge(&o, "oceand_sim_time_seconds", "Current simulation time.", atomic_load(&m->sim_time));

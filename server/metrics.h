@@ -21,6 +21,9 @@ struct metrics {
     atomic_uint_least64_t dropped_slow, dropped_rate;
     atomic_uint_least64_t control_messages, control_errors, param_changes;
     atomic_uint_least64_t rejected_full, rejected_origin, closed_too_large;
+    /* issue 16: refusals and closes of hostile peers (server/net/) */
+    atomic_uint_least64_t rejected_host, rejected_handshake, http_refused_host, http_refused_symlink;
+    atomic_uint_least64_t closed_output_limit, closed_unmasked, refused_fd_limit;
     atomic_int clients;
     atomic_uint_least32_t params_version;
     atomic_int resolution;

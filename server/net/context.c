@@ -5,6 +5,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 
 #include "frame.h"
@@ -52,6 +53,15 @@ struct net *net_create(const struct daemon_config *dc, const struct ocean_params
                                               .origin = n->dc.web_root, .def = "index.html",
                                               .origin_protocol = LWSMPRO_FILE };
 
+    /* A reserve of descriptors for the daemon's own files (state, wisdom,
+     * static files being served) and for lws: connections that would take
+     * one of the last ones are closed at accept (http.c, filter_accept). */
+    struct rlimit rl;
+    n->fd_limit = getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur < (1u << 30) ? (int)rl.rlim_cur : 1 << 30;
+    n->fd_ceiling = n->fd_limit - (FD_RESERVE_MIN + n->fd_limit / 64);
+    if (n->fd_ceiling < 8)
+        n->fd_ceiling = 8;
+
     n->retry.secs_since_valid_ping = (uint16_t)dc->ping_interval;
     n->retry.secs_since_valid_hangup = (uint16_t)dc->idle_timeout;
 
@@ -85,6 +95,8 @@ struct net *net_create(const struct daemon_config *dc, const struct ocean_params
         free(n);
         return NULL;
     }
+    if (!dc->tls_cert[0])
+        rx_guard_start(); /* this thread is the service thread (net_service) */
     struct lws_vhost *vh = lws_get_vhost_by_name(n->ctx, "default");
     n->port = vh ? lws_get_vhost_listen_port(vh) : dc->port;
     return n;
@@ -107,6 +119,7 @@ void net_destroy(struct net *n)
     if (!n)
         return;
     lws_context_destroy(n->ctx); /* closes every client: CLOSED frees sessions */
+    rx_guard_stop();
     frame_unref(n->latest);
     dispatch_free_requests(n);
     free(n->status_text);

@@ -195,6 +195,8 @@ static void answer(struct net *n, const struct sim_set *a)
     struct session *origin = r->reply ? NULL : session_find(n, r->serial);
     struct remote rm = { .origin = r->origin, .by = r->by, .reply = r->reply, .ctx = r->reply_ctx };
     if (a->status == SIM_SET_APPLIED) {
+        if (a->changed & resolution_bit())
+            n->trim_due = mono_now() + TRIM_DELAY_S;
         if (n->on_params)
             n->on_params(n->on_params_user, &n->applied, n->applied_version);
         char *all = control_print(params_msg(n, a, r, NULL));

@@ -7,6 +7,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <time.h>
 
 #include "log.h"
 #include "metrics.h"
@@ -52,11 +54,88 @@ static char *render(struct net *n, const char *uri, size_t *len, const char **ty
     return body;
 }
 
+/* Does the static file for uri pass through a symlink below the web root?
+ * lws' file mount follows symlinks (open(2)); an operator's stray link must
+ * not publish files outside the root. The root itself may be a link. */
+static bool static_path_has_symlink(const struct net *n, const char *uri)
+{
+    char path[1200];
+    int len = snprintf(path, sizeof path, "%s%s", n->dc.web_root, uri);
+    if (len <= 0 || (size_t)len >= sizeof path - 16)
+        return true; /* longer than any file we serve: refuse */
+    size_t root = strlen(n->dc.web_root);
+    struct stat st = { 0 };
+    for (size_t i = root + 1; i <= (size_t)len; i++) {
+        if (path[i] != '/' && path[i] != 0)
+            continue;
+        char c = path[i];
+        path[i] = 0;
+        int r = lstat(path, &st);
+        path[i] = c;
+        if (r != 0)
+            return false; /* missing: lws answers 404 */
+        if (S_ISLNK(st.st_mode))
+            return true;
+    }
+    /* A directory is served as its index.html (the mount's default). */
+    if (S_ISDIR(st.st_mode) && (size_t)len + 12 < sizeof path) {
+        snprintf(path + len, sizeof path - (size_t)len, "%sindex.html", path[len - 1] == '/' ? "" : "/");
+        return lstat(path, &st) == 0 && S_ISLNK(st.st_mode);
+    }
+    return false;
+}
+
+/* At accept: keep a reserve of descriptors below RLIMIT_NOFILE. Linux hands
+ * out the lowest free fd, so an accepted fd at or above the ceiling means
+ * every fd below it is taken: close it at once (counted) rather than let
+ * accept(2) reach EMFILE, which lws 4.1 retries in a busy loop. */
+static int filter_accept(struct net *n, int fd)
+{
+    if (fd < n->fd_ceiling) {
+        rx_guard_accept(fd);
+        return 0;
+    }
+    atomic_fetch_add(&g_metrics.refused_fd_limit, 1);
+    time_t now = time(NULL);
+    if (now != n->fd_warned) {
+        n->fd_warned = now;
+        LOGW("refusing connections: %d of %d file descriptors in use (RLIMIT_NOFILE; see ulimit -n)", fd, n->fd_limit);
+    }
+    return 1;
+}
+
+/* Every plain HTTP request, before lws looks at its mounts. */
+static int filter_http(struct net *n, struct lws *wsi, const char *uri)
+{
+    if (!net_host_allowed(n, wsi)) {
+        atomic_fetch_add(&g_metrics.http_refused_host, 1);
+        lws_return_http_status(wsi, 421, "unknown Host (see --server-name)");
+        return 1;
+    }
+    if (!n->placeholder && uri && strcmp(uri, "/healthz") != 0 && strcmp(uri, "/metrics") != 0 &&
+        static_path_has_symlink(n, uri)) {
+        atomic_fetch_add(&g_metrics.http_refused_symlink, 1);
+        LOGW("refusing %s: a symlink in the web root", uri);
+        lws_return_http_status(wsi, HTTP_STATUS_NOT_FOUND, NULL);
+        return 1;
+    }
+    return 0;
+}
+
 int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
 {
     struct net *n = net_of(wsi);
     struct http_session *hs = user;
     switch (reason) {
+    case LWS_CALLBACK_FILTER_NETWORK_CONNECTION:
+        return filter_accept(n, (int)(intptr_t)in);
+    case LWS_CALLBACK_FILTER_HTTP_CONNECTION: {
+        char uri[1024];
+        snprintf(uri, sizeof uri, "%.*s", (int)len, in ? (const char *)in : "");
+        return filter_http(n, wsi, uri);
+    }
+    case LWS_CALLBACK_HTTP_CONFIRM_UPGRADE:
+        return upgrade_confirm(n, wsi, in);
     case LWS_CALLBACK_FILTER_PROTOCOL_CONNECTION:
         LOGD("refusing a WebSocket without subprotocol %s", OC_SUBPROTOCOL);
         return 1;
@@ -93,6 +172,7 @@ int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void 
         return 0;
     }
     case LWS_CALLBACK_CLOSED_HTTP:
+        rx_guard_forget(lws_get_socket_fd(wsi));
         if (hs) {
             free(hs->body);
             hs->body = NULL;

@@ -34,6 +34,9 @@
 
 #define CHUNK_SIZE (32 * 1024)    /* bytes per lws_write of a frame */
 #define MAX_TEXT_QUEUE 256        /* a client this far behind on JSON is not reading: drop it */
+#define TRIM_DELAY_S 0.5          /* after a change of N: time for the builder to free the old grids */
+#define CUT_OFF_GRACE_S 10        /* a client cut off (1008) that does not read its close frame: hung up after */
+#define FD_RESERVE_MIN 16         /* descriptors kept free below RLIMIT_NOFILE (plus 1/64 of it) */
 
 /* One queued JSON message. */
 struct text {
@@ -60,11 +63,13 @@ struct session {
     bool rx_binary;               /* inside a binary message (fragments of it follow) */
     size_t rx_binary_len;         /* its bytes so far: --max-message applies to it too */
     int closing;                  /* close status to send once the queue drains, 0 = none */
+    const char *close_reason;     /* its reason text (static) */
     double tokens, tokens_t;      /* control-message rate limit (token bucket) and its last refill */
 
     /* transmit: JSON queue (sent before any new frame) */
     lws_dll2_owner_t tq;          /* struct text, oldest first; tq.count = messages */
-    size_t tq_bytes;              /* their bytes (for a per-client byte cap) */
+    size_t tq_bytes;              /* their cost in bytes (messages + nodes) */
+    size_t output_limit;          /* --output-limit-kb in bytes: over it the client is closed (1008) */
 
     /* transmit: the frame being sent (fanout.c) */
     struct frame *cur;            /* one reference while sending, else NULL */
@@ -123,8 +128,12 @@ struct net {
     struct ocean_params view;     /* applied + every pending request: what the next set is checked on */
     net_params_fn on_params;      /* main writes (net_on_params) before the loop: applied-change listener */
     void *on_params_user;         /* its argument (main's state saver, used on this thread) */
+    double trim_due;              /* mono time to malloc_trim after a change of N, 0 = none */
     bool placeholder;             /* no index.html in the web root */
     int port;                     /* the port really listened on (--port 0) */
+    int fd_limit;                 /* RLIMIT_NOFILE at start */
+    int fd_ceiling;               /* accepted fds at or above this are closed at once (a reserve below fd_limit) */
+    long fd_warned;               /* time of the last "out of descriptors" warning (one a second) */
     lws_retry_bo_t retry;         /* ping / hang-up policy, read by lws */
     struct lws_http_mount m_files, m_health, m_metrics; /* read by lws */
     struct lws_protocols protocols[3]; /* [0] http, [1] oceand.v1, [2] terminator; read by lws */
@@ -140,7 +149,19 @@ static inline struct session *session_of(lws_dll2_t *d) { return lws_container_o
 static inline int net_tile_size(const struct net *n) { return frame_tile_size(n->dc.tile_size, n->applied.resolution); }
 
 /* upgrade.c */
+bool net_host_name_allowed(const struct daemon_config *dc, const char *host); /* a Host header value */
+bool net_host_allowed(struct net *n, struct lws *wsi);      /* the request's Host */
+int upgrade_confirm(struct net *n, struct lws *wsi, const char *upgrade); /* 0 = go on, 1 = refused (answered) */
 bool upgrade_allowed(struct net *n, struct lws *wsi);
+
+/* rx_guard.c: RFC 6455 §5.1 masking, which lws 4.1 does not check (plain sockets) */
+void rx_guard_start(void);                                   /* net_create, plain ws only */
+void rx_guard_stop(void);
+void rx_guard_accept(int fd);                                /* a new client connection */
+bool rx_guard_in_sync(int fd);                               /* at the upgrade */
+void rx_guard_forget(int fd);                                /* the connection is closing */
+void rx_guard_upgrade_refused(int fd);                       /* refused with an HTTP answer: back to heads */
+bool rx_guard_tripped(int fd);                               /* an unmasked frame was replaced by close 1002 */
 
 /* session.c */
 int cb_ws(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len);

@@ -11,6 +11,7 @@
 
 #include "clock.h"
 
+#include <malloc.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <stdio.h>
@@ -24,16 +25,45 @@
 
 /* ---- JSON send queue ---- */
 
+/* Bytes a queued message costs us: the message, lws' headroom, the node. */
+static size_t text_cost(size_t len) { return sizeof(struct text) + LWS_PRE + len; }
+
+/* Stop serving a client and close it with `status`: its queue is freed now
+ * (the memory is the point), the close frame goes out when the socket takes
+ * it, and a backstop timeout hangs up a client that never reads. */
+static void session_cut_off(struct session *s, int status, const char *reason)
+{
+    while (s->tq.head) {
+        struct text *t = lws_container_of(s->tq.head, struct text, list);
+        lws_dll2_remove(&t->list);
+        free(t);
+    }
+    s->tq_bytes = 0;
+    /* Up to --output-limit-kb just went back to malloc, in pieces the size
+     * of replies: hand it back to the system too (rare: once per client cut off). */
+    malloc_trim(0);
+    if (s->closing)
+        return;
+    s->closing = status;
+    s->close_reason = reason;
+    lws_set_timeout(s->wsi, PENDING_TIMEOUT_CLOSE_SEND, CUT_OFF_GRACE_S);
+    lws_callback_on_writable(s->wsi);
+}
+
 void session_queue_text(struct session *s, const char *msg, bool front)
 {
-    if (!msg)
+    if (!msg || (s->closing && !front))
         return;
-    if (s->tq.count >= MAX_TEXT_QUEUE) {
-        /* Not reading its messages: cut it loose rather than grow without bound. */
-        lws_set_timeout(s->wsi, PENDING_TIMEOUT_USER_OK, LWS_TO_KILL_ASYNC);
+    size_t len = strlen(msg);
+    /* Replies are bounded in bytes as well as in number, like redis'
+     * client-output-buffer-limit: a client this far behind is not reading. */
+    if (s->tq.count >= MAX_TEXT_QUEUE || s->tq_bytes + text_cost(len) > s->output_limit) {
+        atomic_fetch_add(&g_metrics.closed_output_limit, 1);
+        LOGW("client %s: %u replies (%zu bytes) not read: closing it (1008, --output-limit-kb)", s->client_id,
+             (unsigned)s->tq.count, s->tq_bytes);
+        session_cut_off(s, LWS_CLOSE_STATUS_POLICY_VIOLATION, "reply queue over limit");
         return;
     }
-    size_t len = strlen(msg);
     struct text *t = malloc(sizeof *t + LWS_PRE + len);
     if (!t)
         return;
@@ -44,7 +74,7 @@ void session_queue_text(struct session *s, const char *msg, bool front)
         lws_dll2_add_head(&t->list, &s->tq);
     else
         lws_dll2_add_tail(&t->list, &s->tq);
-    s->tq_bytes += len;
+    s->tq_bytes += text_cost(len);
     lws_callback_on_writable(s->wsi);
 }
 
@@ -65,7 +95,7 @@ static int write_text(struct session *s)
 {
     struct text *t = lws_container_of(lws_dll2_get_head(&s->tq), struct text, list);
     lws_dll2_remove(&t->list);
-    s->tq_bytes -= t->len;
+    s->tq_bytes -= text_cost(t->len);
     int w = lws_write(s->wsi, t->data + LWS_PRE, t->len, LWS_WRITE_TEXT);
     bool short_write = w < (int)t->len;
     free(t);
@@ -97,6 +127,7 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
      * frame wins only works if the kernel cannot queue dozens of frames. */
     int sndbuf = n->dc.send_buffer_kb * 1024;
     setsockopt(lws_get_socket_fd(wsi), SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
+    s->output_limit = (size_t)n->dc.output_limit_kb * 1024;
     s->serial = ++n->next_serial;
     snprintf(s->client_id, sizeof s->client_id, "c%llu", (unsigned long long)s->serial);
     s->controller = n->dc.control_token[0] == 0;
@@ -150,6 +181,7 @@ static void close_too_large(struct net *n, struct session *s)
     session_queue_text(s, text, true);
     free(text);
     s->closing = LWS_CLOSE_STATUS_MESSAGE_TOO_LARGE;
+    s->close_reason = "message too large";
     free(s->rx);
     s->rx = NULL;
     s->rx_len = 0;
@@ -163,8 +195,8 @@ static void close_too_large(struct net *n, struct session *s)
 
 static int on_receive(struct net *n, struct session *s, struct lws *wsi, const char *in, size_t len)
 {
-    if (s->closing)
-        return 0;
+    if (s->closing || rx_guard_tripped(lws_get_socket_fd(wsi)))
+        return 0; /* the empty frame rx_guard put in place of an unmasked one */
     bool message_end = lws_is_final_fragment(wsi) && !lws_remaining_packet_payload(wsi);
     if (lws_frame_is_binary(wsi)) {
         /* Binary data is not part of the protocol, but it costs a reply:
@@ -218,7 +250,8 @@ static int on_writable(struct net *n, struct session *s)
     if (!s->cur && s->tq.count) {
         rc = write_text(s);
     } else if (!s->cur && s->closing) {
-        lws_close_reason(s->wsi, (enum lws_close_status)s->closing, (unsigned char *)"message too large", 17);
+        lws_close_reason(s->wsi, (enum lws_close_status)s->closing, (unsigned char *)s->close_reason,
+                         strlen(s->close_reason));
         return -1;
     } else {
         rc = fanout_write(n, s);
@@ -247,6 +280,15 @@ static void on_sim_wakeup(struct net *n)
         if (s->tq.count || fanout_want_write(n, s))
             lws_callback_on_writable(s->wsi);
     }
+    if (n->trim_due > 0 && mono_now() >= n->trim_due) {
+        /* The builder freed the grids of the old N by now. glibc keeps them
+         * on the heap (its mmap threshold grew past their size at the first
+         * free), so RSS would stay at the largest N ever used: return the
+         * free pages to the system. Once per change of N, on this thread,
+         * never on the tick. */
+        n->trim_due = 0;
+        malloc_trim(0);
+    }
 }
 
 int cb_ws(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
@@ -260,6 +302,7 @@ int cb_ws(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *i
         session_open(n, s, wsi);
         return 0;
     case LWS_CALLBACK_CLOSED:
+        rx_guard_forget(lws_get_socket_fd(wsi));
         if (s && s->wsi)
             session_close(n, s);
         return 0;

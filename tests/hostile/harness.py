@@ -41,7 +41,7 @@ def free_port():
 class Daemon:
     """One oceand with its own port, temp dir, state file and log."""
 
-    def __init__(self, oceand, *extra, resolution=64, tick_rate=30, web=False):
+    def __init__(self, oceand, *extra, resolution=64, tick_rate=30, web=False, nofile=None, env=None):
         self.tmp = tempfile.mkdtemp(prefix="oceand-hostile-")
         if web:   # a real web root (static file mount) instead of the placeholder page
             os.makedirs(os.path.join(self.tmp, "web"))
@@ -56,7 +56,14 @@ class Daemon:
                 "--resolution", str(resolution), "--tick-rate", str(tick_rate),
                 "--log-level", "warn"] + [str(a) for a in extra]
         self.log = open(self.log_path, "ab")
-        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log)
+        preexec = None
+        if nofile:   # a low descriptor limit (ulimit -n) for the daemon only
+            import resource
+
+            def preexec():
+                resource.setrlimit(resource.RLIMIT_NOFILE, (nofile, nofile))
+        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log, preexec_fn=preexec,
+                                     env=dict(os.environ, **(env or {})))
         self.url = "ws://127.0.0.1:%d/" % self.port
         self.http = "http://127.0.0.1:%d" % self.port
         deadline = time.time() + 20
@@ -97,6 +104,12 @@ class Daemon:
             except (OSError, IndexError, ValueError):
                 pass
         return cpu / 1e6, wait / 1e6
+
+    def cpu_s(self):
+        """User + system CPU seconds the daemon has used (/proc/PID/stat, all threads)."""
+        with open("/proc/%d/stat" % self.proc.pid) as f:
+            a = f.read().rsplit(")", 1)[1].split()
+        return (int(a[11]) + int(a[12])) / os.sysconf("SC_CLK_TCK")
 
     def fds(self):
         return len(os.listdir("/proc/%d/fd" % self.proc.pid))

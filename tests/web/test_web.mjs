@@ -5,6 +5,11 @@
 import fs from 'node:fs';
 import path from 'node:path';
 import { parseArgs, freePort, startServer, launchBrowser, waitFor, sleep } from './harness.mjs';
+import { ROOT } from './webdeps.mjs';
+import { createRequire } from 'node:module';
+import { SEA_PRESETS } from '../../web/src/presets.js';
+
+const { devices } = createRequire(path.join(ROOT, 'web', 'package.json'))('playwright-core');
 
 const args = parseArgs(process.argv, { oceand: 'build/oceand', webRoot: 'build/web', out: 'build/web-test', fake: false });
 fs.mkdirSync(args.out, { recursive: true });
@@ -49,9 +54,9 @@ async function shot(page, name) {
     (window.__shots ||= {})[name] = px;
     let s = 0, s2 = 0;
     for (const v of px) { s += v; s2 += v * v; }
-    return s2 / px.length - (s / px.length) ** 2;
+    return { variance: s2 / px.length - (s / px.length) ** 2, mean: s / px.length };
   }, { b64: png.toString('base64'), name });
-  return { png, variance };
+  return { png, ...variance };
 }
 // Mean absolute difference (0..255) between two kept screenshots.
 const shotDiff = (page, a, b) => page.evaluate(([a, b]) => {
@@ -60,7 +65,33 @@ const shotDiff = (page, a, b) => page.evaluate(([a, b]) => {
   for (let i = 0; i < p.length; i++) s += Math.abs(p[i] - q[i]);
   return s / p.length;
 }, [a, b]);
-const state = (page) => page.evaluate(() => ({ ...window.oceand, params: window.oceand.params, stats: window.oceand.stats }));
+const state = (page) => page.evaluate(() => ({ ...window.oceand, params: window.oceand.params, stats: window.oceand.stats, view: window.oceand.view, camera: window.oceand.camera }));
+
+// Boxes of the HUD, the panel title (or the whole panel when open) and the banner must
+// not overlap, and the panel starts closed on a phone.
+async function layoutCheck(page, what, banner, open = false) {
+  const boxes = await page.evaluate(({ banner, open }) => {
+    const r = (el) => { const b = el.getBoundingClientRect(); return { x: b.left, y: b.top, w: b.width, h: b.height }; };
+    const panel = document.getElementById('panel');
+    const out = { hud: r(document.getElementById('hud')), panel: r(open ? panel : panel.querySelector(':scope > .title')) };
+    if (banner) out.banner = r(document.getElementById('banner'));
+    out.closed = panel.classList.contains('closed');
+    out.vw = window.innerWidth; out.vh = window.innerHeight;
+    return out;
+  }, { banner, open });
+  if (!open) assert(boxes.closed, `${what}: the panel starts open`);
+  const names = ['hud', 'panel', ...(banner ? ['banner'] : [])];
+  for (const n of names) {
+    const b = boxes[n];
+    assert(b.w > 0 && b.h > 0, `${what}: ${n} has no size`);
+    assert(b.x >= 0 && b.y >= 0 && b.x + b.w <= boxes.vw + 0.5 && b.y + b.h <= boxes.vh + 0.5, `${what}: ${n} ${JSON.stringify(b)} runs off the ${boxes.vw}x${boxes.vh} screen`);
+  }
+  for (let i = 0; i < names.length; i++) for (let j = i + 1; j < names.length; j++) {
+    const p = boxes[names[i]], q = boxes[names[j]];
+    const overlap = p.x < q.x + q.w && q.x < p.x + p.w && p.y < q.y + q.h && q.y < p.y + p.h;
+    assert(!overlap, `${what}: ${names[i]} ${JSON.stringify(p)} overlaps ${names[j]} ${JSON.stringify(q)}`);
+  }
+}
 const renderedMore = async (page, k) => {
   const r = (await state(page)).rendered;
   await waitFor(page, `${k} more rendered frames`, ([r0, n]) => window.oceand.rendered >= r0 + n, [r, k]);
@@ -76,7 +107,7 @@ const pageErrors = [];
 async function openPage() {
   const p = await browser.newPage({ viewport: VIEW });
   p.on('pageerror', (e) => pageErrors.push(e.message));
-  await p.goto(url);
+  await p.goto(url, { timeout: 120000 });
   return p;
 }
 
@@ -90,6 +121,17 @@ try {
     assert(s.params && typeof s.params.wind_speed === 'number', 'params has no wind_speed');
     const names = await a.$$eval('[data-param]', (els) => els.map((e) => e.dataset.param));
     for (const k of Object.keys(s.params)) assert(names.includes(k), `panel has no controller for ${k}`);
+  });
+
+  await check('panel: human labels, developer switches in a closed folder', async () => {
+    const label = await a.locator('[data-param=wind_speed] .name').innerText();
+    assert(label === 'Wind speed (m/s)', `wind_speed label "${label}"`);
+    const dev = a.locator('[data-folder=developer]');
+    assert(await dev.evaluate((el) => el.classList.contains('closed')), 'developer folder is open');
+    for (const sel of ['[data-param=transform]', '[data-sub=lod]', '[data-ui=wireframe]']) {
+      assert(await a.locator(`[data-folder=developer] ${sel}`).count() === 1, `${sel} is not in the developer folder`);
+    }
+    assert(await a.locator('[data-folder=sea] [data-param=wind_speed]').count() === 1, 'wind speed is not in the sea folder');
   });
 
   await check('frames are received, decoded and rendered', async () => {
@@ -125,6 +167,7 @@ try {
   });
 
   await check('wireframe toggle changes the image', async () => {
+    await a.click('[data-folder=developer] > .title'); // wireframe and freeze are developer switches
     await a.click('[data-ui=freeze] input');          // hold the sea still: only the toggle may change pixels
     await renderedMore(a, 2);
     await shot(a, 'still1');
@@ -157,9 +200,55 @@ try {
     assert(Number(shown) === target, `page B panel shows ${shown}, want ${target}`);
     const idA = (await state(a)).clientId;
     const note = await b.locator('[data-ui=last-change]').innerText();
-    assert(note.includes(idA) && note.includes('wind_speed'), `page B does not say who changed what: "${note}"`);
+    assert(note.includes(idA) && note.includes('Wind speed') && note.includes(String(target)), `page B does not say who changed what: "${note}"`);
+    const own = await a.locator('[data-ui=last-change]').innerText();
+    assert(/^you set Wind speed/.test(own) && !own.includes(idA), `page A does not say "you": "${own}"`);
     await waitFor(b, `frames with params_version ${sb.paramsVersion}`, (v) => window.oceand.frameParamsVersion >= v, sb.paramsVersion, 15000);
     await waitFor(a, 'page A frames with the new version', (v) => window.oceand.frameParamsVersion >= v, sb.paramsVersion, 15000);
+  });
+  await check('a sea preset is one shared set: it applies and syncs to the other page', async () => {
+    const storm = SEA_PRESETS.find((p) => p.name === 'storm');
+    const v0 = (await state(b)).paramsVersion;
+    await a.click('[data-preset=storm]');
+    await waitFor(b, 'page B has the storm parameters', (want) => Object.entries(want).every(([k, v]) => window.oceand.params[k] === v), storm.params, 15000);
+    const sb = await state(b);
+    assert(sb.paramsVersion === v0 + 1, `one preset should be one set: version ${v0} -> ${sb.paramsVersion}`);
+    await waitFor(b, 'page B marks the storm preset', () => document.querySelector('[data-preset=storm]').classList.contains('oc-active'), null, 5000);
+    const note = await b.locator('[data-ui=last-change]').innerText();
+    assert(note.includes('storm') && note.includes((await state(a)).clientId), `page B's note: "${note}"`);
+    await waitFor(b, 'the sky of page B follows the wind (overcast)', () => window.oceand.view.sky && window.oceand.view.sky.overcast > 0.95, null, 10000);
+    await a.click('[data-preset=fresh]');
+    await waitFor(b, 'page B back to fresh', () => window.oceand.params.wind_speed === 9.4, null, 15000);
+  });
+
+  await check('view presets are local: night is darker than noon but not black', async () => {
+    await a.click('[data-view=noon]');
+    await waitFor(a, 'noon', () => window.oceand.view.sky.sunAltitudeDeg > 50);
+    await renderedMore(a, 2);
+    const noon = await shot(a, 'noon');
+    await a.click('[data-view=night]');
+    await waitFor(a, 'night', () => window.oceand.view.sky.sunAltitudeDeg < -20);
+    await renderedMore(a, 2);
+    const night = await shot(a, 'night');
+    fs.writeFileSync(path.join(args.out, 'night.png'), night.png);
+    console.log(`     mean pixel value noon ${noon.mean.toFixed(1)}, night ${night.mean.toFixed(1)}, night variance ${night.variance.toFixed(1)}`);
+    assert(night.mean < 0.6 * noon.mean, `night (${night.mean.toFixed(1)}) is not darker than noon (${noon.mean.toFixed(1)})`);
+    assert(night.mean > 12 && night.variance > 4, `night is black (mean ${night.mean.toFixed(1)}, variance ${night.variance.toFixed(1)})`);
+    const hb = (await state(b)).view.hour;
+    assert(hb !== 23, `page B's time of day changed with page A's (${hb})`);
+    await a.click('[data-view=sunset]');
+  });
+
+  await check('the HUD can be hidden (button and H key) and stays hidden after a reload', async () => {
+    await b.click('[data-ui=hud-toggle]');
+    assert(await b.locator('.oc-hud-text').isHidden(), 'HUD text still shown');
+    await b.reload({ timeout: 120000 }); // slow while page A renders in software GL
+    await waitFor(b, 'page B reconnected', () => window.oceand.connected);
+    assert(await b.locator('.oc-hud-text').isHidden(), 'HUD shown again after a reload');
+    await b.keyboard.press('h');
+    await waitFor(b, 'HUD shown by the H key', () => window.oceand.view.hud === true, null, 5000);
+    await waitFor(b, 'HUD text drawn', () => /fps/.test(document.querySelector('.oc-hud-text').textContent), null, 10000);
+    assert(await b.locator('.oc-hud-text').isVisible(), 'HUD text not visible after H');
   });
   await b.close();
 
@@ -168,11 +257,22 @@ try {
     await waitFor(a, 'disconnected', () => !window.oceand.connected, null, 10000);
     const banner = await a.locator('#banner').innerText();
     assert(/unreachable|lost|retrying/.test(banner), `no clear message while down: "${banner}"`);
+    // The panel is locked and greyed while down: no shared control can be used.
+    const locked = await a.evaluate(() => ({
+      offline: document.getElementById('panel').classList.contains('oc-offline'),
+      inputs: [...document.querySelectorAll('[data-param] input, [data-param] select')].map((e) => e.disabled),
+      presets: [...document.querySelectorAll('[data-preset]')].map((e) => e.disabled),
+    }));
+    assert(locked.offline, 'panel not marked offline');
+    assert(locked.inputs.length > 5 && locked.inputs.every(Boolean), `panel inputs editable while down: ${JSON.stringify(locked.inputs)}`);
+    assert(locked.presets.length === 5 && locked.presets.every(Boolean), 'sea presets usable while down');
     await sleep(500);
     server = await startServer(srvOpts);
     const f0 = (await state(a)).framesReceived;
     await waitFor(a, 'reconnected and receiving frames', (f) => window.oceand.connected && window.oceand.framesReceived > f + 3, f0, 30000);
     assert(await a.locator('#banner').isHidden(), 'banner still shown after reconnecting');
+    const enabled = await a.evaluate(() => [...document.querySelectorAll('[data-param] input')].every((e) => !e.disabled));
+    assert(enabled, 'panel still locked after reconnecting');
   });
 
   await a.close(); // a rendering page in the background only slows the rest down
@@ -197,6 +297,82 @@ try {
       await full.stop();
     }
   });
+
+  // Seen from above, choppy waves move patch edges sideways; where a fine patch meets a
+  // coarser one the edges used to part: the sky showed through (without skirts), or the
+  // skirt did (with them), as a dashed seam. ?gapprobe=1 paints sky and skirts magenta,
+  // so whatever shows in the seams can be counted; the unstitched views must show some,
+  // so the check can fail.
+  await check('no sky or skirt in the seams between patches of different detail', async () => {
+    const skyPixels = async (extra) => {
+      const p = await browser.newPage({ viewport: { width: 600, height: 600 } });
+      p.on('pageerror', (e) => pageErrors.push(e.message));
+      try {
+        await p.goto(`http://127.0.0.1:${server.port}/?test=1&aa=0&detail=0.5&ui=0&gapprobe=1&cam=0,150,150&target=0,0,-100${extra}`);
+        await waitFor(p, 'rendering', () => window.oceand.connected && window.oceand.rendered > 3, null, 60000);
+        await renderedMore(p, 2);
+        const png = await p.screenshot({ type: 'png' });
+        return await p.evaluate(async (b64) => {
+          const img = new Image();
+          img.src = `data:image/png;base64,${b64}`;
+          await img.decode();
+          const c = document.createElement('canvas');
+          c.width = img.width; c.height = img.height;
+          const g = c.getContext('2d');
+          g.drawImage(img, 0, 0);
+          const d = g.getImageData(0, 0, c.width, c.height).data;
+          let n = 0; // ?gapprobe=1 paints the sky magenta; this view looks down, below the horizon
+          for (let i = 0; i < d.length; i += 4) if (d[i] > 200 && d[i + 1] < 60 && d[i + 2] > 200) n++;
+          return n;
+        }, png.toString('base64'));
+      } finally { await p.close(); }
+    };
+    const open = await skyPixels('&skirt=0&stitch=0'), old = await skyPixels('&stitch=0');
+    const stitched = await skyPixels('&skirt=0'), normal = await skyPixels('');
+    console.log(`     magenta pixels in the seams: no skirts ${open} unstitched -> ${stitched} stitched; with skirts ${old} unstitched -> ${normal} stitched`);
+    assert(open >= 20 && old >= 20, `the unstitched views show only ${open} / ${old} seam pixels: this view no longer tests the seams`);
+    assert(stitched <= open / 10, `sky shows through the stitched seams: ${stitched} pixels (unstitched ${open})`);
+    assert(normal <= old / 3, `skirts show in the stitched seams: ${normal} pixels (unstitched ${old})`);
+  });
+
+  // Phones: playwright's device descriptors (viewport, touch, mobile user agent), with
+  // deviceScaleFactor 1 so that SwiftShader renders 1/7 of the pixels (layout is in CSS px).
+  const deadPort = await freePort();
+  for (const name of ['Pixel 7', 'Pixel 7 landscape', 'iPhone 13', 'iPhone 13 landscape']) {
+    await check(`phone ${name}: panel closed, HUD/panel/banner disjoint, one-finger drag orbits`, async () => {
+      const ctx = await browser.newContext({ ...devices[name], deviceScaleFactor: 1 });
+      try {
+        const p = await ctx.newPage();
+        p.on('pageerror', (e) => pageErrors.push(e.message));
+        await p.goto(url);
+        await waitFor(p, 'connected and rendering', () => window.oceand.connected && window.oceand.rendered > 1);
+        await layoutCheck(p, name, false);
+        // A one-finger drag across the middle of the screen turns the camera around its target.
+        const vp = devices[name].viewport;
+        const az = (c) => Math.atan2(c.position[0] - c.target[0], c.position[2] - c.target[2]);
+        const before = (await state(p)).camera;
+        const cdp = await ctx.newCDPSession(p);
+        const y = Math.round(vp.height * 0.6), x0 = Math.round(vp.width * 0.3), x1 = Math.round(vp.width * 0.7);
+        await cdp.send('Input.dispatchTouchEvent', { type: 'touchStart', touchPoints: [{ x: x0, y }] });
+        for (let k = 1; k <= 8; k++) await cdp.send('Input.dispatchTouchEvent', { type: 'touchMove', touchPoints: [{ x: x0 + (x1 - x0) * k / 8, y }] });
+        await cdp.send('Input.dispatchTouchEvent', { type: 'touchEnd', touchPoints: [] });
+        await renderedMore(p, 2);
+        const after = (await state(p)).camera;
+        const turned = Math.abs(az(after) - az(before)) * 180 / Math.PI;
+        assert(turned > 10, `one-finger drag turned the camera by ${turned.toFixed(1)}°`);
+        await p.close();
+        // A page whose server is down: the banner joins the HUD and the panel title.
+        const d = await ctx.newPage();
+        await d.goto(`${url}&server=ws://127.0.0.1:${deadPort}/`);
+        await waitFor(d, 'banner shown', () => !document.getElementById('banner').hidden && /unreachable/.test(document.getElementById('banner').textContent), null, 10000);
+        await layoutCheck(d, `${name} (server down)`, true);
+        await d.tap('#panel > .title');
+        await waitFor(d, 'panel opened', () => !document.getElementById('panel').classList.contains('closed'), null, 5000);
+        await sleep(400); // lil-gui's open animation
+        await layoutCheck(d, `${name} (panel open)`, true, true);
+      } finally { await ctx.close(); }
+    });
+  }
 
   await check('no uncaught errors in the pages', async () => {
     assert(pageErrors.length === 0, pageErrors.join('; '));

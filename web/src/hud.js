@@ -20,25 +20,58 @@ export class Stats {
   }
 }
 
+// The HUD: a text block (full on large screens, two short lines on phones) that the
+// user can hide (button or H key; remembered in localStorage), and the banner.
+const HUD_KEY = 'oceand.hud';
 export class Hud {
-  constructor(el, banner) { this.el = el; this.banner = banner; this.lastDraw = 0; }
+  constructor(el, banner, { compact = false } = {}) {
+    this.el = el; this.banner = banner; this.lastDraw = 0; this.compact = compact;
+    this.text = document.createElement('div');
+    this.text.className = 'oc-hud-text';
+    this.button = document.createElement('button');
+    this.button.type = 'button';
+    this.button.className = 'oc-hud-toggle';
+    this.button.dataset.ui = 'hud-toggle';
+    this.button.addEventListener('click', () => this.setVisible(!this.visible));
+    el.append(this.button, this.text);
+    el.classList.toggle('oc-compact', compact);
+    let stored = null;
+    try { stored = localStorage.getItem(HUD_KEY); } catch { /* storage blocked */ }
+    this.onToggle = null;
+    this.setVisible(stored !== 'hidden', false);
+  }
+  setVisible(on, remember = true) {
+    this.visible = on;
+    this.el.classList.toggle('oc-hidden', !on);
+    this.button.textContent = on ? '×' : 'i';
+    this.button.title = on ? 'hide the status (H)' : 'show the status (H)';
+    this.lastDraw = 0;
+    if (remember) { try { localStorage.setItem(HUD_KEY, on ? 'shown' : 'hidden'); } catch { /* storage blocked */ } }
+    this.onToggle?.(on);
+  }
   message(text) {
     this.banner.hidden = !text;
     this.banner.textContent = text || '';
   }
   draw(now, s, st) {
-    if (now - this.lastDraw < 250) return; // 4 Hz is plenty for text
+    if (now - this.lastDraw < 250 || !this.visible) return; // 4 Hz is plenty for text
     this.lastDraw = now;
     const cls = st.connected ? 'ok' : (st.connectionState === 'connecting' ? 'warn' : 'bad');
     const f = (v, d = 1) => (v === null || v === undefined ? '–' : v.toFixed(d));
     const esc = (t) => String(t).replace(/[&<>]/g, (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;' })[c]);
-    this.el.innerHTML =
+    const err = st.lastError ? `\n<span class="bad">${esc(st.lastError.code)}: ${esc(st.lastError.message)}</span>` : '';
+    if (this.compact) {
+      this.text.innerHTML =
+        `<span class="${cls}">●</span> ${esc(st.connected ? st.clientId || '' : st.connectionState)} ${f(s.fps, 0)} fps\n` +
+        `${f(s.framesPerSec, 0)} f/s ${f(s.kBps, 0)} kB/s` + err;
+      return;
+    }
+    this.text.innerHTML =
       `<span class="${cls}">● ${esc(st.connectionState)}</span>  ${esc(st.clientId || '')}\n` +
       `render   ${f(s.fps, 0)} fps\n` +
       `stream   ${f(s.framesPerSec, 1)} frames/s  ${f(s.kBps, 0)} kB/s\n` +
       `latency  ${f(s.latencyMs, 0)} ms   dropped ${s.dropped}\n` +
       `decode   ${f(s.decodeMs, 2)} ms  upload ${f(s.uploadMs, 2)} ms\n` +
-      `N ${st.n ?? '–'}  lod ${st.lod ?? '–'}  params v${st.paramsVersion ?? '–'}  seq ${st.lastSeq ?? '–'}` +
-      (st.lastError ? `\n<span class="bad">${esc(st.lastError.code)}: ${esc(st.lastError.message)}</span>` : '');
+      `N ${st.n ?? '–'}  lod ${st.lod ?? '–'}  params v${st.paramsVersion ?? '–'}  seq ${st.lastSeq ?? '–'}` + err;
   }
 }

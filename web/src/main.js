@@ -6,6 +6,8 @@ import { Connection, serverUrl } from './connection.js';
 import { Ocean } from './ocean.js';
 import { Panel } from './panel.js';
 import { Hud, Stats } from './hud.js';
+import { SkyModel } from './sky.js';
+import { DEFAULT_HOUR } from './presets.js';
 
 const query = new URLSearchParams(location.search);
 const canvas = document.getElementById('ocean');
@@ -19,15 +21,26 @@ const camArg = (query.get('cam') || '').split(',').map(Number); // ?cam=x,y,z: s
 if (camArg.length === 3 && camArg.every(Number.isFinite)) camera.position.set(...camArg);
 const controls = new OrbitControls(camera, canvas);
 controls.target.set(0, 2, 0);
+const tgtArg = (query.get('target') || '').split(',').map(Number); // ?target=x,y,z: look there
+if (tgtArg.length === 3 && tgtArg.every(Number.isFinite)) controls.target.set(...tgtArg);
 controls.enableDamping = true;
 controls.screenSpacePanning = false;           // pan slides over the sea: a simple fly mode
 controls.maxPolarAngle = Math.PI * 0.495;      // stay above the water
 controls.minDistance = 3;
 controls.maxDistance = 3000;
 controls.listenToKeyEvents(window);            // arrow keys pan
-const ocean = new Ocean(renderer, { detail: Number(query.get('detail') || 1) });
+// Phones in either orientation (and small windows): panel closed, HUD compact.
+const compact = window.matchMedia('(max-width: 700px), (max-height: 480px)').matches;
+const sky = new SkyModel(renderer);
+// ?skirt=0 / ?stitch=0: turn off the crack fixes (to see, and test, what they hide);
+// ?hex=0: periodic normals to the horizon (to measure what the hex tiling breaks up).
+const ocean = new Ocean(renderer, sky.uniforms, { detail: Number(query.get('detail') || 1), skirts: query.get('skirt') !== '0', hexTiling: query.get('hex') !== '0' });
+ocean.uniforms.uStitch.value = query.get('stitch') === '0' ? 0 : 1;
+sky.uniforms.uGapProbe.value = query.get('gapprobe') === '1' ? 1 : 0; // ?gapprobe=1: magenta sky and skirts (tests)
 const stats = new Stats();
-const hud = new Hud(document.getElementById('hud'), document.getElementById('banner'));
+const hud = new Hud(document.getElementById('hud'), document.getElementById('banner'), { compact });
+if (query.get('hud') === '0') hud.setVisible(false, false); // ?hud=0: hide for this visit only
+if (query.get('ui') === '0') document.body.classList.add('oc-no-ui'); // ?ui=0: the sea alone (pictures, measurements)
 
 // Everything a test or a curious user may read; window.oceand hands out copies.
 const st = {
@@ -36,7 +49,9 @@ const st = {
   rendered: 0, n: null, lod: null, frameParamsVersion: null, lastError: null, serverError: null,
   clusterState: null, // edge's {"type":"status"}: 'ok', 'sim_unavailable', 'nats_unavailable'
 };
-const view = { wireframe: false, freeze: false };
+// Local view state: never sent. ?hour=h starts at that local time of day.
+const hourArg = Number(query.get('hour'));
+const view = { wireframe: false, freeze: false, hour: query.has('hour') && hourArg >= 0 && hourArg <= 24 ? hourArg : DEFAULT_HOUR, hud: hud.visible };
 // ?bench=1: time decode + upload per frame (upload waits for the GPU with finish())
 // and draw nothing, so rendering does not compete for the CPU being measured.
 const bench = query.has('bench');
@@ -55,7 +70,7 @@ const conn = new Connection(serverUrl(), {
     // "connecting" keeps the last reason on screen. Cleared by hello.
     if (state === 'closed' || state === 'retrying') hud.message(detail);
     else if (state === 'connecting' && st.framesReceived === 0 && st.clientId === null) hud.message(detail);
-    if (state !== 'open' && st.clientId !== null) { st.clientId = null; panel.disconnected(); }
+    if (state !== 'open' && (st.clientId !== null || panel.connected)) { st.clientId = null; panel.disconnected(); }
   },
   onMessage(msg) {
     switch (msg.type) {
@@ -102,7 +117,16 @@ const panel = new Panel({
   set: (params) => conn.send({ type: 'set', params }),
   subscribe: (sub) => { Object.assign(wantedSub, sub); conn.send({ type: 'subscribe', ...sub }); },
   view,
-  onView(key, v) { if (key === 'wireframe') ocean.wireframe = v; },
+  onView(key, v) {
+    if (key === 'wireframe') ocean.wireframe = v;
+    if (key === 'hud' && v !== hud.visible) hud.setVisible(v);
+  },
+}, { compact: compact || query.get('panel') === 'closed' });
+hud.onToggle = (on) => { view.hud = on; panel.refreshView(); };
+if (query.get('wireframe') === '1') { view.wireframe = true; ocean.wireframe = true; panel.refreshView(); }
+// H shows or hides the status (not while typing in a panel field).
+window.addEventListener('keydown', (ev) => {
+  if ((ev.key === 'h' || ev.key === 'H') && !ev.ctrlKey && !ev.metaKey && !ev.altKey && !(ev.target instanceof HTMLInputElement)) hud.setVisible(!hud.visible);
 });
 
 worker.onmessage = (ev) => {
@@ -152,6 +176,8 @@ function frameLoop() {
     stats.latencyMs = (performance.timeOrigin + now) - f.header.serverTimeUs / 1000;
   }
   controls.update();
+  // Sky, sun and light follow the local hour and the shared sea's wind; haze thickens with it.
+  if (sky.update(view.hour, st.params?.wind_speed ?? 10)) ocean.uniforms.uFogDensity.value = 0.00009 * (1 + 4 * sky.state.overcast ** 2);
   if (!bench) ocean.render(camera, now);
   if (ocean.hasData) st.rendered++;
   stats.renders++;
@@ -173,6 +199,8 @@ window.oceand = Object.freeze({
   get rendered() { return st.rendered; },
   get clientId() { return st.clientId; },
   get wireframe() { return ocean.wireframe; },
+  get view() { return snapshot({ hour: view.hour, hud: hud.visible, compact, sky: sky.state }); },
+  get camera() { return snapshot({ position: camera.position.toArray(), target: controls.target.toArray() }); },
   get stats() {
     return Object.freeze({
       fps: stats.fps, framesPerSec: stats.framesPerSec, kBps: stats.kBps, latencyMs: stats.latencyMs,

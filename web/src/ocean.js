@@ -10,6 +10,8 @@ const NEAR_RANGE = 4000;     // metres of real geometry; beyond is the flat far 
 const MAX_RING = 40;         // patches from the camera patch, whatever the patch size
 const HORIZON = 60000;       // metres to the end of the far ring
 const LOD_PIXEL = 0.012;     // wanted segment length per metre of distance (at detail 1)
+const SKIRT_DEPTH = 0.1;     // metres
+const SKIRT_TOP = 0.05;      // the skirt top, as a fraction of its depth below the edge (5 mm)
 
 function floatTexture(data, m, format) {
   const t = new THREE.DataTexture(data, m, m, format, THREE.FloatType);
@@ -21,7 +23,8 @@ function floatTexture(data, m, format) {
 }
 
 // A patch of g×g cells on [0,1]² (scaled to the patch size by the instance matrix),
-// with a skirt hanging below its border to hide cracks between detail levels.
+// with a skirt hanging below its border (edges are stitched to coarser neighbours in the
+// vertex shader; the skirt only hides the pinholes float rounding leaves at T-junctions).
 function patchGeometry(g) {
   const pos = [], skirt = [], index = [];
   for (let j = 0; j <= g; j++) for (let i = 0; i <= g; i++) { pos.push(i / g, 0, j / g); skirt.push(0); }
@@ -34,10 +37,14 @@ function patchGeometry(g) {
   for (let j = 0; j < g; j++) ring.push(v(g, j));
   for (let i = g; i > 0; i--) ring.push(v(i, g));
   for (let j = g; j > 0; j--) ring.push(v(0, j));
-  const base = pos.length / 3;
+  // The skirt's top starts a hair below the edge (SKIRT_TOP of the skirt depth) rather than
+  // on it: sharing the edge, its pixels tied with the surface's in depth and won some,
+  // drawing a faint one-pixel line along every patch border.
+  const top = pos.length / 3, n = ring.length;
+  ring.forEach((r) => { pos.push(pos[3 * r], 0, pos[3 * r + 2]); skirt.push(SKIRT_TOP); });
   ring.forEach((r) => { pos.push(pos[3 * r], 0, pos[3 * r + 2]); skirt.push(1); });
-  for (let k = 0; k < ring.length; k++) {
-    const a = ring[k], b = ring[(k + 1) % ring.length], a2 = base + k, b2 = base + (k + 1) % ring.length;
+  for (let k = 0; k < n; k++) {
+    const a = top + k, b = top + (k + 1) % n, a2 = a + n, b2 = b + n;
     index.push(a, a2, b, b, a2, b2);
   }
   const geo = new THREE.BufferGeometry();
@@ -58,9 +65,12 @@ function farRingGeometry() {
 }
 
 export class Ocean {
-  constructor(renderer, { detail = 1 } = {}) {
+  // skyUniforms: the shared sky cube, key light and exposure (sky.js SkyModel.uniforms).
+  constructor(renderer, skyUniforms, { detail = 1, skirts = true, hexTiling = true } = {}) {
     this.renderer = renderer;
     this.lodPixel = LOD_PIXEL / Math.max(detail, 0.05);
+    this.skirts = skirts;
+    this.hexTiling = hexTiling;
     this.scene = new THREE.Scene();
     this.m = 0;             // texture size (N >> lod)
     this.patch = 0;         // patch size, metres
@@ -69,14 +79,14 @@ export class Ocean {
     this.lastArrival = 0;
     this.interval = 1000 / 30;
     this.hasData = false;
-    const sun = new THREE.Vector3(-0.55, 0.3, -0.78).normalize();
     this.uniforms = {
+      ...skyUniforms,
       uDispA: { value: null }, uDispB: { value: null },
       uSlopeA: { value: null }, uSlopeB: { value: null },
       uMix: { value: 1 }, uPatch: { value: 1 }, uTexel: { value: 1 },
       uHasSlope: { value: 0 }, uHasJac: { value: 0 },
-      uFadeNear: { value: 1000 }, uFadeFar: { value: 3000 }, uSkirtDepth: { value: 2 },
-      uSunDir: { value: sun }, uSunColor: { value: new THREE.Color(1.0, 0.93, 0.8) },
+      uFadeNear: { value: 1000 }, uFadeFar: { value: 3000 }, uSkirtDepth: { value: 2 }, uStitch: { value: 1 },
+      uHexNear: { value: 1e9 }, uHexFar: { value: 2e9 },
       uDeep: { value: new THREE.Color(0.004, 0.035, 0.07) },
       uScatter: { value: new THREE.Color(0.02, 0.16, 0.16) },
       uFogDensity: { value: 0.00009 }, uFoam: { value: 1 },
@@ -86,7 +96,7 @@ export class Ocean {
       side: THREE.DoubleSide,
     });
     const sky = new THREE.Mesh(new THREE.SphereGeometry(1, 32, 16), new THREE.ShaderMaterial({
-      uniforms: { uSunDir: this.uniforms.uSunDir, uSunColor: this.uniforms.uSunColor },
+      uniforms: skyUniforms,
       vertexShader: skyVertex, fragmentShader: skyFragment, side: THREE.BackSide, depthWrite: false,
     }));
     sky.scale.setScalar(HORIZON * 0.9);
@@ -160,7 +170,9 @@ export class Ocean {
     this.ring = Math.min(MAX_RING, Math.ceil(NEAR_RANGE / patch));
     const maxInstances = (2 * this.ring + 1) ** 2;
     for (let g = Math.min(MAX_GRID, m); g >= MIN_GRID; g >>= 1) {
-      const mesh = new THREE.InstancedMesh(patchGeometry(g), this.material, maxInstances);
+      const geo = patchGeometry(g);
+      geo.setAttribute('aEdge', new THREE.InstancedBufferAttribute(new Float32Array(maxInstances * 4), 4));
+      const mesh = new THREE.InstancedMesh(geo, this.material, maxInstances);
       mesh.frustumCulled = false;
       mesh.count = 0;
       this.levels.push({ g, mesh });
@@ -168,7 +180,10 @@ export class Ocean {
     }
     u.uFadeFar.value = this.ring * patch * 0.95;
     u.uFadeNear.value = u.uFadeFar.value * 0.35;
-    u.uSkirtDepth.value = Math.max(0.5, patch / 100);
+    // Short: the stitched edges meet, so the skirt only has to fill rounding pinholes.
+    u.uSkirtDepth.value = this.skirts ? SKIRT_DEPTH : 0;
+    // Hex-tiled normals from one patch away (single waves still resolved nearer).
+    if (this.hexTiling) { u.uHexNear.value = patch; u.uHexFar.value = 2.5 * patch; }
     this.layoutKey = '';
   }
 
@@ -183,6 +198,8 @@ export class Ocean {
     const camY = Math.max(Math.abs(camera.position.y), 1);
     const mat = new THREE.Matrix4();
     for (const l of this.levels) l.mesh.count = 0;
+    // First the level of every patch, then the instances with their edges' levels.
+    const W = 2 * R + 1, lvls = new Int32Array(W * W);
     for (let j = cj - R; j <= cj + R; j++) for (let i = ci - R; i <= ci + R; i++) {
       const x0 = i * L, z0 = j * L;
       const dx = Math.max(x0 - camera.position.x, 0, camera.position.x - x0 - L);
@@ -191,11 +208,16 @@ export class Ocean {
       const want = L / (d * this.lodPixel);    // segments this patch deserves
       let lvl = this.levels.findIndex((l) => l.g <= want);
       if (lvl < 0) lvl = this.levels.length - 1;
-      const mesh = this.levels[lvl].mesh;
-      mat.makeScale(L, 1, L).setPosition(x0, 0, z0);
-      mesh.setMatrixAt(mesh.count++, mat);
+      lvls[(j - cj + R) * W + (i - ci + R)] = lvl;
     }
-    for (const l of this.levels) l.mesh.instanceMatrix.needsUpdate = true;
+    const gAt = (a, b, own) => (a < 0 || b < 0 || a >= W || b >= W ? own : Math.min(own, this.levels[lvls[b * W + a]].g));
+    for (let b = 0; b < W; b++) for (let a = 0; a < W; a++) {
+      const level = this.levels[lvls[b * W + a]], mesh = level.mesh, g = level.g, k = mesh.count++;
+      mat.makeScale(L, 1, L).setPosition((ci - R + a) * L, 0, (cj - R + b) * L);
+      mesh.setMatrixAt(k, mat);
+      mesh.geometry.attributes.aEdge.setXYZW(k, gAt(a - 1, b, g), gAt(a + 1, b, g), gAt(a, b - 1, g), gAt(a, b + 1, g));
+    }
+    for (const l of this.levels) { l.mesh.instanceMatrix.needsUpdate = true; l.mesh.geometry.attributes.aEdge.needsUpdate = true; }
     // Far ring: from the patch field's edge to the horizon.
     const a0 = (ci - R) * L, a1 = (ci + R + 1) * L, bx = camera.position.x, bz = camera.position.z;
     const p = this.far.geometry.attributes.position;

@@ -1,50 +1,146 @@
-// Parameter panel built entirely from hello.schema: one controller per
-// parameter, `set` on release, refreshed by every `params` broadcast.
-// Plus the view (wireframe, freeze) and subscription (fields, LOD, bound) folders.
+// The parameter panel, built from hello.schema. Each parameter gets a human label,
+// a group (sea / advanced / developer) and a one-line help: from the schema when the
+// server sends `label`, `group` and `help`, else from the table below (today's names).
+// A `set` is sent on release; every `params` broadcast refreshes the panel and says
+// who changed what ("you" for our own changes). Folders: Sea (Beaufort presets and
+// the everyday parameters), View (local: time of day, status), Advanced, Developer
+// (closed: transform, wireframe, freeze, the subscription).
 import GUI from 'lil-gui';
+import { SEA_PRESETS, VIEW_PRESETS, matchSeaPreset } from './presets.js';
 
-function label(s) { return s.unit ? `${s.name} (${s.unit})` : s.name; }
+// Fallback labels and groups for the parameters of today's schema.
+export const PARAM_INFO = {
+  wind_speed: { label: 'Wind speed', group: 'sea' },
+  wind_direction: { label: 'Wind direction', group: 'sea' },
+  fetch: { label: 'Fetch', group: 'sea' },
+  choppiness: { label: 'Choppiness', group: 'sea' },
+  swell: { label: 'Swell (long crests)', group: 'sea' },
+  paused: { label: 'Pause the sea', group: 'sea' },
+  spectrum: { label: 'Wave spectrum', group: 'advanced' },
+  amplitude: { label: 'Wave height scale', group: 'advanced' },
+  depth: { label: 'Water depth', group: 'advanced' },
+  gamma: { label: 'Peak sharpness (γ)', group: 'advanced' },
+  directional_spread: { label: 'Directional spreading', group: 'advanced' },
+  small_wave_cutoff: { label: 'Shortest waves', group: 'advanced' },
+  patch_size: { label: 'Patch size', group: 'advanced' },
+  resolution: { label: 'Grid resolution', group: 'advanced' },
+  time_scale: { label: 'Playback speed', group: 'advanced' },
+  loop_period: { label: 'Loop period', group: 'advanced' },
+  seed: { label: 'Random seed', group: 'advanced' },
+  transform: { label: 'Transform (FFT/DFT)', group: 'developer' },
+};
+const GROUPS = ['sea', 'advanced', 'developer'];
+
+// A schema entry with its human face: label, group and help, wherever they come from.
+export function describe(s) {
+  const info = PARAM_INFO[s.name] || {};
+  const pretty = s.name.replace(/_/g, ' ').replace(/^./, (c) => c.toUpperCase());
+  const group = GROUPS.includes(s.group) ? s.group : (info.group || 'advanced');
+  return { label: s.label || info.label || pretty, group, help: s.help || s.description || '' };
+}
+
+function formatValue(v, s) {
+  if (typeof v === 'number' && s?.type === 'float') v = Number(v.toPrecision(4));
+  return `${typeof v === 'string' ? v : JSON.stringify(v)}${s?.unit ? ` ${s.unit}` : ''}`;
+}
+
+// A row of small buttons inside a folder (lil-gui has one button per row).
+function buttonRow(folder, kind, items, onClick) {
+  const row = document.createElement('div');
+  row.className = 'oc-buttons';
+  row.dataset.ui = `${kind}-presets`;
+  const buttons = {};
+  for (const it of items) {
+    const b = document.createElement('button');
+    b.type = 'button';
+    b.textContent = it.label;
+    b.title = it.help;
+    b.dataset[kind] = it.name;
+    b.addEventListener('click', () => onClick(it));
+    row.appendChild(b);
+    buttons[it.name] = b;
+  }
+  folder.$children.prepend(row);
+  return buttons;
+}
 
 export class Panel {
-  // actions: { set(params), subscribe(sub), view: {wireframe, freeze} object, onView(key, value) }
-  constructor(actions) {
+  // actions: { set(params), subscribe(sub), view: {wireframe, freeze, hour, hud}, onView(key, value) }
+  constructor(actions, { compact = false } = {}) {
     this.actions = actions;
     this.gui = new GUI({ title: 'oceand' });
     this.gui.domElement.id = 'panel';
-    if (window.innerWidth < 700) this.gui.close(); // phones: the sea first, panel on tap
+    if (compact) this.gui.close(); // phones, either way round: the sea first, panel on tap
     this.values = {};          // bound to the parameter controllers
     this.ctrls = {};           // name -> controller
+    this.schema = {};          // name -> schema entry
     this.params = null;
-    this.sim = null;
-    const view = this.gui.addFolder('View');
-    this.viewCtrls = {
-      wireframe: view.add(actions.view, 'wireframe').name('wireframe').onChange((v) => actions.onView('wireframe', v)),
-      freeze: view.add(actions.view, 'freeze').name('freeze display').onChange((v) => actions.onView('freeze', v)),
-    };
-    for (const [k, c] of Object.entries(this.viewCtrls)) c.domElement.dataset.ui = k;
+    this.myId = null;
+    this.connected = false;
+    this.folders = {};
     this.note = document.createElement('div');
     this.note.className = 'oc-note';
     this.note.dataset.ui = 'last-change';
     this.note.textContent = 'waiting for the server…';
     this.gui.$children.prepend(this.note);
+
+    // Sea: presets first; the parameters are added on hello.
+    this.folders.sea = this.gui.addFolder('Sea');
+    this.folders.sea.domElement.dataset.folder = 'sea';
+    this.seaButtons = buttonRow(this.folders.sea, 'preset', SEA_PRESETS, (p) => this.actions.set({ ...p.params }));
+
+    // View: local only, never sent.
+    const view = this.gui.addFolder('View (this screen only)');
+    view.domElement.dataset.folder = 'view';
+    this.viewButtons = buttonRow(view, 'view', VIEW_PRESETS, (p) => this.setHour(p.hour));
+    this.viewCtrls = {
+      hour: view.add(actions.view, 'hour', 0, 24, 0.05).name('Time of day (h)').onChange((v) => actions.onView('hour', v)),
+      hud: view.add(actions.view, 'hud').name('Show status (H)').onChange((v) => actions.onView('hud', v)),
+    };
+    this.folders.advanced = this.gui.addFolder('Advanced');
+    this.folders.advanced.domElement.dataset.folder = 'advanced';
+    this.folders.advanced.close();
+    this.folders.developer = this.gui.addFolder('Developer');
+    this.folders.developer.domElement.dataset.folder = 'developer';
+    this.folders.developer.close();
+    const dev = this.folders.developer;
+    this.viewCtrls.wireframe = dev.add(actions.view, 'wireframe').name('wireframe').onChange((v) => actions.onView('wireframe', v));
+    this.viewCtrls.freeze = dev.add(actions.view, 'freeze').name('freeze display').onChange((v) => actions.onView('freeze', v));
+    for (const [k, c] of Object.entries(this.viewCtrls)) c.domElement.dataset.ui = k;
+    this.paramFolders = [];    // per-hello sub-folders to destroy on the next hello
+    this.setConnected(false);
   }
 
-  // hello: (re)build the simulation and subscription folders from the schema.
+  setHour(h) {
+    this.actions.view.hour = h;
+    this.viewCtrls.hour.updateDisplay();
+    this.actions.onView('hour', h);
+  }
+  // Local view changes made elsewhere (keyboard): show them.
+  refreshView() { for (const c of Object.values(this.viewCtrls)) c.updateDisplay(); }
+
+  // hello: (re)build the parameter controllers and the subscription folder.
   build(hello) {
-    if (this.sim) this.sim.destroy();
+    for (const c of Object.values(this.ctrls)) c.destroy();
     if (this.sub) this.sub.destroy();
     this.ctrls = {};
+    this.schema = {};
     this.values = { ...hello.params };
     this.params = { ...hello.params };
+    this.myId = hello.client_id;
     this.readOnly = hello.role !== 'controller';
-    this.sim = this.gui.addFolder(this.readOnly ? 'Simulation (view only)' : 'Simulation');
+    this.folders.sea.title(this.readOnly ? 'Sea (view only)' : 'Sea');
     for (const s of hello.schema || []) this.addParam(s);
     this.buildSubscription(hello);
-    this.note.textContent = `connected as ${hello.client_id} (${hello.role}), params v${hello.params_version}`;
+    this.markPreset();
+    this.note.textContent = `connected as ${hello.client_id}${this.readOnly ? ' (view only)' : ''}`;
+    this.setConnected(true);
   }
 
   addParam(s) {
-    const folder = this.sim, obj = this.values, name = s.name;
+    const info = describe(s);
+    const folder = this.folders[info.group], obj = this.values, name = s.name;
+    this.schema[name] = { ...s, ...info };
     if (!(name in obj)) obj[name] = s.default;
     let c;
     if (s.type === 'enum') c = folder.add(obj, name, s.choices);
@@ -61,10 +157,10 @@ export class Panel {
       c = folder.add(obj, name);
       if (s.type === 'int') c.step(1);
     }
-    c.name(label(s));
+    c.name(s.unit ? `${info.label} (${s.unit})` : info.label);
     c.domElement.dataset.param = name;
-    if (s.description) c.domElement.title = s.description;
-    if (this.readOnly) c.disable();
+    c.domElement.dataset.group = info.group;
+    if (info.help) c.domElement.title = info.help;
     // Send on release (not on every drag step): the server rate-limits sets.
     c.onFinishChange((v) => {
       if (v === this.params[name]) return;
@@ -78,7 +174,7 @@ export class Panel {
   buildSubscription(hello) {
     const sub = hello.subscription || {};
     this.subValues = { lod: sub.lod ?? 0, bound: sub.bound ?? 0.01 };
-    this.sub = this.gui.addFolder('Subscription');
+    this.sub = this.folders.developer.addFolder('Subscription');
     const send = (extra) => this.actions.subscribe(extra);
     this.subCtrls = {
       lod: this.sub.add(this.subValues, 'lod', hello.lods || [0]).name('LOD').onChange((v) => send({ lod: Number(v) })),
@@ -93,11 +189,22 @@ export class Panel {
       });
     }
     for (const [k, c] of Object.entries(this.subCtrls)) c.domElement.dataset.sub = k;
-    this.sub.close();
+  }
+
+  // Shared controls (parameters, sea presets, subscription) work only while connected;
+  // the view folder is local and stays usable.
+  setConnected(on) {
+    this.connected = on;
+    this.gui.domElement.classList.toggle('oc-offline', !on);
+    const lock = !on || this.readOnly;
+    for (const c of Object.values(this.ctrls)) c.disable(lock);
+    for (const b of Object.values(this.seaButtons)) b.disabled = lock;
+    if (this.subCtrls) for (const c of Object.values(this.subCtrls)) c.disable(!on);
   }
 
   // Connection lost: the values shown are the last known ones.
   disconnected() {
+    this.setConnected(false);
     this.note.textContent = 'disconnected — showing the last known values';
   }
 
@@ -110,6 +217,18 @@ export class Panel {
     for (const c of Object.values(this.subCtrls)) c.updateDisplay();
   }
 
+  // Who a change came from: "you", the changer's display name, or its id.
+  who(msg) {
+    if (msg.by && msg.by === this.myId) return 'you';
+    return msg.by_name || msg.by || 'the server';
+  }
+
+  markPreset() {
+    const p = matchSeaPreset(this.params || {});
+    for (const [name, b] of Object.entries(this.seaButtons)) b.classList.toggle('oc-active', p?.name === name);
+    return p;
+  }
+
   // params broadcast: new values, and who changed what.
   update(msg) {
     this.params = { ...msg.params };
@@ -120,15 +239,19 @@ export class Panel {
       const el = this.ctrls[name]?.domElement;
       if (el) { el.classList.remove('oc-changed'); void el.offsetWidth; el.classList.add('oc-changed'); }
     }
-    if (changed.length) {
-      const what = changed.map((n) => `${n}=${JSON.stringify(msg.params[n])}`).join(', ');
-      this.note.textContent = `v${msg.params_version}: ${msg.by || 'server'} set ${what}`;
-    }
+    const preset = this.markPreset();
+    if (!changed.length) return;
+    const what = changed.map((n) => `${this.schema[n]?.label || n} ${formatValue(msg.params[n], this.schema[n])}`).join(', ');
+    this.note.textContent = preset && changed.length > 1
+      ? `${this.who(msg)} chose ${preset.label} (${preset.beaufort}): ${what}`
+      : `${this.who(msg)} set ${what}`;
+    this.note.title = `parameters version ${msg.params_version}`;
   }
 
   // A rejected set: show why and put the server's values back.
   error(msg) {
-    this.note.textContent = `rejected: ${msg.message || msg.code}${msg.param ? ` (${msg.param})` : ''}`;
+    const s = msg.param && this.schema[msg.param];
+    this.note.textContent = `rejected: ${msg.message || msg.code}${s ? ` (${s.label})` : ''}`;
     if (this.params) { Object.assign(this.values, this.params); for (const c of Object.values(this.ctrls)) c.updateDisplay(); }
   }
 }

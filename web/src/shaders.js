@@ -1,26 +1,34 @@
 // GLSL for the water surface and the sky. Written in GLSL ES 1 style
 // (attribute/varying/texture2D); three.js compiles it as GLSL ES 3 on WebGL2.
 
-// Shared lighting: one analytic sky, used for the dome, for reflections and for fog,
-// so the horizon is seamless.
+// Shared lighting: the sky cube rendered by sky.js (uEnv) is the one source for the
+// dome, the reflections, the ambient light and the fog, so the horizon is seamless.
 const SKY = /* glsl */`
-uniform vec3 uSunDir;
+uniform samplerCube uEnv;
+uniform vec3 uSunDir;      // key light: the sun by day, the moon by night
 uniform vec3 uSunColor;
-vec3 skyColor(vec3 d) {
-  float y = max(d.y, 0.0);
-  vec3 zenith  = vec3(0.07, 0.22, 0.52);
-  vec3 horizon = vec3(0.62, 0.74, 0.86);
-  vec3 c = mix(horizon, zenith, pow(y, 0.45));
-  float s = max(dot(d, uSunDir), 0.0);
-  c += uSunColor * (0.35 * pow(s, 10.0) + 0.9 * pow(s, 180.0));
-  return c;
+uniform float uDiscSize;   // cos of the key light's angular radius
+uniform vec3 uMoonDir;
+uniform vec3 uMoonColor;
+uniform float uStars;
+uniform float uExposure;
+uniform float uGapProbe;   // tests: paint sky and skirts magenta, so what shows in the seams is countable
+vec3 skyColor(vec3 d, float lod) {
+  d.y = max(d.y, 0.0);     // below the horizon: the horizon's haze
+  return textureLod(uEnv, normalize(d + vec3(0.0, 1e-4, 0.0)), lod).rgb;
 }
+// Average light from the sky above: the cube's coarsest mip straight up.
+vec3 skyAmbient() { return textureLod(uEnv, vec3(0.0, 1.0, 0.0), 6.0).rgb; }
+float discMask(vec3 d, vec3 c, float cosR) { return smoothstep(cosR - 0.000015, cosR + 0.000005, dot(d, c)); }
 vec3 sunDisc(vec3 d) {
+  // The disc plus a narrow aureole; its colour is the transmitted sunlight.
   float s = max(dot(d, uSunDir), 0.0);
-  return uSunColor * 40.0 * smoothstep(0.99985, 0.99995, s);
+  return uSunColor * (60.0 * discMask(d, uSunDir, uDiscSize) + 0.25 * pow(s, 400.0));
 }
+vec3 moonDisc(vec3 d) { return uMoonColor * 60.0 * discMask(d, uMoonDir, 0.99999); }
 // ACES filmic fit (Narkowicz) and sRGB output: we write display-ready colour.
 vec3 toDisplay(vec3 c) {
+  c *= uExposure;
   c = clamp((c * (2.51 * c + 0.03)) / (c * (2.43 * c + 0.59) + 0.14), 0.0, 1.0);
   return pow(c, vec3(1.0 / 2.2));
 }
@@ -38,11 +46,18 @@ void main() {
 export const skyFragment = /* glsl */`
 ${SKY}
 varying vec3 vDir;
+float starHash(vec3 p) { return fract(sin(dot(p, vec3(12.9898, 78.233, 37.719))) * 43758.5453); }
 void main() {
   vec3 d = normalize(vDir);
-  vec3 c = skyColor(d) + sunDisc(d);
-  if (d.y < 0.0) c = skyColor(vec3(d.x, 0.0, d.z)); // below the horizon: haze
-  gl_FragColor = vec4(toDisplay(c * 1.05), 1.0);
+  vec3 c = skyColor(d, 0.0);
+  if (d.y > 0.0) {
+    c += sunDisc(d) + moonDisc(d);
+    // Stars: a fixed random field on a fine direction grid, dimmed by haze near the horizon.
+    vec3 g = floor(d * 700.0);
+    float st = step(0.9985, starHash(g)) * starHash(g + 1.0);
+    c += vec3(0.05) * st * uStars * smoothstep(0.05, 0.3, d.y);
+  }
+  gl_FragColor = uGapProbe > 0.5 ? vec4(1.0, 0.0, 1.0, 1.0) : vec4(toDisplay(c), 1.0);
 }`;
 
 // Displacement textures: RGBA = (dx, height, dz, jacobian), two frames (A older,
@@ -62,10 +77,23 @@ vec4 dispAt(vec2 xz) {
 export const waterVertex = /* glsl */`
 ${SAMPLE}
 attribute float skirt;
-uniform float uFadeNear, uFadeFar, uSkirtDepth;
+#ifdef USE_INSTANCING
+// Cells per side of the coarser of this patch and its neighbour, on each edge:
+// (x = 0, x = 1, z = 0, z = 1). Where a neighbour is coarser, this patch's edge
+// vertices between the neighbour's are put on the neighbour's straight edge, so the
+// two meet exactly (no T-junction gap: choppy waves move vertices sideways, and a
+// gap seen from above shows the sky as a bright seam or speck; skirts hang straight
+// down and cannot hide it).
+attribute vec4 aEdge;
+#endif
+uniform float uFadeNear, uFadeFar, uSkirtDepth, uStitch;
+varying float vSkirt;
 varying vec3 vWorld;
 varying vec2 vGround;
 varying float vHeight;
+// Far away the grid is coarser than the waves: fade displacement out (the
+// fragment shader keeps the small waves in the normals).
+vec4 dispFaded(vec2 xz) { return dispAt(xz) * (1.0 - smoothstep(uFadeNear, uFadeFar, distance(xz, cameraPosition.xz))); }
 void main() {
 #ifdef USE_INSTANCING
   vec4 base = modelMatrix * instanceMatrix * vec4(position, 1.0);
@@ -73,12 +101,24 @@ void main() {
   vec4 base = modelMatrix * vec4(position, 1.0);
 #endif
   vec2 xz = base.xz;
-  // Far away the grid is coarser than the waves: fade displacement out (the
-  // fragment shader keeps the small waves in the normals).
-  float fade = 1.0 - smoothstep(uFadeNear, uFadeFar, distance(xz, cameraPosition.xz));
-  vec4 d = dispAt(xz) * fade;
+  vec4 d = dispFaded(xz);
+#ifdef USE_INSTANCING
+  float g = 0.0, t = 0.0;
+  vec2 along = vec2(0.0);
+  if (position.x == 0.0) { g = aEdge.x; t = position.z; along = vec2(0.0, 1.0); }
+  else if (position.x == 1.0) { g = aEdge.y; t = position.z; along = vec2(0.0, 1.0); }
+  else if (position.z == 0.0) { g = aEdge.z; t = position.x; along = vec2(1.0, 0.0); }
+  else if (position.z == 1.0) { g = aEdge.w; t = position.x; along = vec2(1.0, 0.0); }
+  float f = fract(t * g); // exact: t = i / 2^a, g = 2^b
+  if (g > 0.0 && f > 0.0 && uStitch > 0.5) {
+    float cell = instanceMatrix[0][0] / g;  // the neighbour's cell, metres
+    vec2 a = xz - along * (f * cell);       // its vertices, bit-identical to its own
+    d = mix(dispFaded(a), dispFaded(a + along * cell), f);
+  }
+#endif
   vec3 p = vec3(xz.x + d.x, d.y - skirt * uSkirtDepth, xz.y + d.z);
   vWorld = p;
+  vSkirt = skirt;
   vGround = xz;
   vHeight = d.y;
   gl_Position = projectionMatrix * viewMatrix * vec4(p, 1.0);
@@ -90,12 +130,46 @@ ${SAMPLE}
 uniform sampler2D uSlopeA;
 uniform sampler2D uSlopeB;
 uniform float uHasSlope, uHasJac, uFogDensity, uFoam;
+uniform float uHexNear, uHexFar; // metres: from periodic normals to hex-tiled ones
 uniform vec3 uDeep, uScatter;
 varying vec3 vWorld;
 varying vec2 vGround;
 varying float vHeight;
+varying float vSkirt;
 
 vec3 surf(vec2 xz) { vec4 d = dispAt(xz); return vec3(xz.x + d.x, d.y, xz.y + d.z); }
+
+// Far-field sample: slope (dh/dx, dh/dz) by forward differences over e, and height,
+// from the newer frame only: 3 texture reads instead of 8 (this runs 3 times a pixel).
+vec3 farSample(vec2 xz, float e) {
+  vec4 c = textureLod(uDispB, xz / uPatch + 0.5 * uTexel, 0.0);
+  vec4 x = textureLod(uDispB, (xz + vec2(e, 0.0)) / uPatch + 0.5 * uTexel, 0.0);
+  vec4 z = textureLod(uDispB, (xz + vec2(0.0, e)) / uPatch + 0.5 * uTexel, 0.0);
+  vec3 tx = vec3(e + x.x - c.x, x.y - c.y, x.z - c.z), tz = vec3(z.x - c.x, z.y - c.y, e + z.z - c.z);
+  vec3 n = cross(tz, tx);
+  return vec3(-n.xz / max(n.y, 1e-4), c.y);
+}
+vec2 hexHash(vec2 p) { return fract(sin(vec2(dot(p, vec2(127.1, 311.7)), dot(p, vec2(269.5, 183.3)))) * 43758.5453); }
+// Far away the periodic patch shows as a lattice. There the slopes are read from the
+// patch shifted by a random offset per cell of a triangular grid and blended with
+// weights normalised to keep the variance (Heitz & Neyret 2018, "High-performance
+// by-example noise using a histogram-preserving blending operator", sec. 3; slopes of a
+// linear sea are Gaussian, so the blend has the same statistics). Wind direction is
+// kept: offsets only, no rotations. The geometry stays periodic, so this is only used
+// where single waves are no longer resolved (uHexNear..uHexFar).
+vec3 hexSample(vec2 xz, float e) {
+  vec2 uv = xz / (0.8 * uPatch) * 3.4641016;              // cells a little smaller than the patch
+  vec2 sk = mat2(1.0, 0.0, -0.57735027, 1.15470054) * uv;  // skewed triangular grid
+  vec2 id = floor(sk);
+  vec3 t = vec3(fract(sk), 0.0);
+  t.z = 1.0 - t.x - t.y;
+  vec3 w; vec2 v1, v2, v3;
+  if (t.z > 0.0) { w = vec3(t.z, t.y, t.x); v1 = id; v2 = id + vec2(0.0, 1.0); v3 = id + vec2(1.0, 0.0); }
+  else { w = vec3(-t.z, 1.0 - t.y, 1.0 - t.x); v1 = id + vec2(1.0); v2 = id + vec2(1.0, 0.0); v3 = id + vec2(0.0, 1.0); }
+  vec2 o1 = xz + hexHash(v1) * uPatch, o2 = xz + hexHash(v2) * uPatch, o3 = xz + hexHash(v3) * uPatch;
+  vec3 s = w.x * farSample(o1, e) + w.y * farSample(o2, e) + w.z * farSample(o3, e);
+  return s / max(length(w), 1e-3);   // (slope x, slope z, height)
+}
 
 void main() {
   vec2 xz = vGround;
@@ -112,6 +186,13 @@ void main() {
     vec2 s = mix(texture(uSlopeA, uv).xy, texture(uSlopeB, uv).xy, uMix);
     n = normalize(vec3(-s.x, 1.0, -s.y));
   }
+  float hex = smoothstep(uHexNear, uHexFar, distance(vWorld, cameraPosition));
+  float height = vHeight;
+  if (hex > 0.0) {
+    vec3 hs = hexSample(xz, e);
+    n = normalize(mix(n, normalize(vec3(-hs.x, 1.0, -hs.y)), hex));
+    height = mix(height, hs.z, hex);
+  }
   // Jacobian of the horizontal map: < 1 where crests fold, which is where foam forms.
   float jac = (tx.x * tz.z - tz.x * tx.z) / (4.0 * e * e);
   if (uHasJac > 0.5) jac = dispAt(xz).w;
@@ -124,24 +205,34 @@ void main() {
   R.y = abs(R.y);
 
   float F = 0.02 + 0.98 * pow(1.0 - max(dot(n, V), 0.0), 5.0);
-  vec3 refl = skyColor(R);
-  // Water body: deep colour lit by the sun and sky, plus light scattered
+  // Reflection of the same sky, blurrier far away (unresolved slopes).
+  vec3 refl = skyColor(R, clamp(log2(dist / 400.0), 0.0, 3.0));
+  // Water body: deep colour lit by the sky and the key light, plus light scattered
   // through thin crests toward the viewer.
+  vec3 amb = skyAmbient();
   float diff = max(dot(n, L), 0.0);
-  vec3 body = uDeep * (0.35 + 0.65 * diff);
-  float crest = clamp(vHeight * 0.25 + 0.3, 0.0, 1.0);
-  body += uScatter * crest * pow(max(dot(V, -L) * 0.5 + 0.5, 0.0), 3.0) * 0.6;
-  body += uScatter * 0.15 * crest;
+  vec3 light = amb * 1.6 + uSunColor * diff * 0.7;
+  vec3 body = uDeep * light;
+  // (Far away the height is hex-tiled too: the crests would print the lattice back.)
+  float crest = clamp(height * 0.25 + 0.3, 0.0, 1.0);
+  body += uScatter * crest * (uSunColor * pow(max(dot(V, -L) * 0.5 + 0.5, 0.0), 3.0) * 0.6 + amb * 0.3);
   vec3 c = mix(body, refl, F);
-  // Sun glints: sharp Blinn-Phong lobe, widened with distance (unresolved waves).
+  // Glitter: a sharp Blinn-Phong lobe of the sun (or moon), widened with distance
+  // where single waves are no longer resolved.
   vec3 H = normalize(L + V);
   float shin = mix(900.0, 140.0, clamp(dist / 2500.0, 0.0, 1.0));
-  c += uSunColor * pow(max(dot(n, H), 0.0), shin) * (shin / 60.0) * F * 1.6;
+  c += uSunColor * pow(max(dot(n, H), 0.0), shin) * (shin / 60.0) * F * 1.6 * step(0.0, L.y);
   // Foam where the surface folds.
   float foam = smoothstep(0.7, 0.25, jac) * 0.9 * uFoam;
-  c = mix(c, vec3(0.82, 0.86, 0.88) * (0.55 + 0.45 * diff) + 0.12, foam);
+  c = mix(c, vec3(0.82, 0.86, 0.88) * light * 0.9, foam);
   // Aerial perspective into the horizon colour.
   float fog = 1.0 - exp(-dist * uFogDensity);
-  c = mix(c, skyColor(vec3(-V.x, 0.0, -V.z)), fog);
-  gl_FragColor = vec4(toDisplay(c), 1.0);
+  // The haze takes the horizon's colour in the direction of view near the horizon,
+  // and the horizon's average looking down: the horizon's detail (clouds) would fan
+  // out as rays around the nadir.
+  vec3 hazeAvg = 0.25 * (skyColor(vec3(1.0, 0.0, 0.0), 3.0) + skyColor(vec3(-1.0, 0.0, 0.0), 3.0)
+                       + skyColor(vec3(0.0, 0.0, 1.0), 3.0) + skyColor(vec3(0.0, 0.0, -1.0), 3.0));
+  vec3 haze = mix(skyColor(vec3(-V.x, 0.0, -V.z) + vec3(1e-4, 0.0, 0.0), 0.0), hazeAvg, smoothstep(0.05, 0.4, V.y));
+  c = mix(c, haze, fog);
+  gl_FragColor = uGapProbe > 0.5 && vSkirt > 0.0 ? vec4(1.0, 0.0, 1.0, 1.0) : vec4(toDisplay(c), 1.0);
 }`;

@@ -1,0 +1,114 @@
+// `make screenshots`: the gallery (docs/gallery/*.png) and docs/screenshot.png, taken
+// from a real daemon in headless Debian chromium (SwiftShader). Sea presets are applied
+// as a real client would, with one `set` over the WebSocket; the view (time of day,
+// camera) comes from the page's URL options.
+//   node tests/web/screenshots.mjs --oceand build/oceand --web-root build/web --out docs/gallery
+//        [--only calm,night] [--shot docs/screenshot.png]
+import fs from 'node:fs';
+import path from 'node:path';
+import { createRequire } from 'node:module';
+import { parseArgs, freePort, startServer, launchBrowser, waitFor, sleep } from './harness.mjs';
+import { ROOT } from './webdeps.mjs';
+import { SEA_PRESETS } from '../../web/src/presets.js';
+import { sunDirection } from '../../web/src/sky.js';
+
+const require = createRequire(path.join(ROOT, 'web', 'package.json'));
+const { devices } = require('playwright-core');
+const WebSocket = require('ws');
+
+const args = parseArgs(process.argv, { oceand: 'build/oceand', webRoot: 'build/web', out: 'docs/gallery', only: '', shot: 'docs/screenshot.png' });
+const DESKTOP = { viewport: { width: 1280, height: 720 } };
+// cam/target in metres; hour = local solar time; preset = Beaufort sea preset.
+// face: look toward the sun's azimuth turned by `yaw` degrees, `dist` m ahead, down to height ty.
+const SHOTS = [
+  { name: 'calm', preset: 'calm', hour: 17.5, cam: '0,5,40', face: { yaw: 12, dist: 120, ty: 0 } },
+  { name: 'fresh', preset: 'fresh', hour: 17.5, cam: '0,14,48', face: { yaw: 20, dist: 100, ty: 2 } },
+  { name: 'gale', preset: 'gale', hour: 17.5, cam: '0,24,80', face: { yaw: 25, dist: 140, ty: 2 } },
+  { name: 'storm', preset: 'storm', hour: 17.5, cam: '0,30,100', face: { yaw: 25, dist: 160, ty: 2 } },
+  { name: 'sunset', preset: 'fresh', hour: 18.4, cam: '0,12,40', face: { yaw: 8, dist: 120, ty: 4 } },
+  { name: 'night', preset: 'fresh', hour: 23, cam: '0,14,48', face: { yaw: 0, dist: 120, ty: 8, moon: true } },
+  { name: 'from-800m', preset: 'fresh', hour: 16, cam: '0,800,600', target: '0,0,-200' },
+  { name: 'phone', preset: 'fresh', hour: 17.5, device: 'Pixel 7', hud: true, face: { yaw: 20, dist: 100, ty: 2 } },
+];
+// Moon direction of sky.js (altitude 38°, azimuth 155°), for the night shot.
+const MOON = { x: -Math.sin(155 * Math.PI / 180), z: Math.cos(155 * Math.PI / 180) };
+function faceTarget(s) {
+  const [cx, cy, cz] = (s.cam || '0,14,48').split(',').map(Number);
+  const d = s.face.moon ? MOON : sunDirection(s.hour);
+  const a = Math.atan2(d.z, d.x) + s.face.yaw * Math.PI / 180, k = s.face.dist;
+  return `${(cx + Math.cos(a) * k).toFixed(1)},${s.face.ty},${(cz + Math.sin(a) * k).toFixed(1)}`;
+}
+const only = new Set(args.only ? args.only.split(',') : []);
+
+// One `set` from a plain protocol client; resolves with the new params_version.
+async function applyPreset(port, name) {
+  const preset = SEA_PRESETS.find((p) => p.name === name);
+  const ws = new WebSocket(`ws://127.0.0.1:${port}/`, 'oceand.v1');
+  const reply = await new Promise((resolve, reject) => {
+    const t = setTimeout(() => reject(new Error(`no reply to set ${name}`)), 10000);
+    ws.on('message', (data, binary) => {
+      if (binary) return;
+      const m = JSON.parse(String(data));
+      if (m.type === 'hello') ws.send(JSON.stringify({ type: 'set', id: 1, params: preset.params }));
+      if (m.id === 1) { clearTimeout(t); resolve(m); }
+    });
+    ws.on('error', reject);
+  });
+  ws.close();
+  if (reply.type !== 'params') throw new Error(`set ${name} rejected: ${JSON.stringify(reply)}`);
+  return reply.params_version;
+}
+
+async function take(browser, port, s, file) {
+  const ctxOpts = s.device ? { ...devices[s.device] } : DESKTOP;
+  const ctx = await browser.newContext(ctxOpts);
+  const page = await ctx.newPage();
+  const errors = [];
+  page.on('pageerror', (e) => errors.push(e.message));
+  const q = new URLSearchParams({ test: '1', hour: String(s.hour) });
+  if (s.cam) q.set('cam', s.cam);
+  if (s.face) q.set('target', faceTarget(s));
+  else if (s.target) q.set('target', s.target);
+  if (!s.hud) q.set('hud', '0');
+  if (!s.panel) q.set('panel', 'closed');
+  if (!s.hud && !s.panel) q.set('ui', '0'); // the sea alone
+  await page.goto(`http://127.0.0.1:${port}/?${q}`);
+  await waitFor(page, 'connected and rendering', () => window.oceand.connected && window.oceand.rendered > 2, null, 60000);
+  const version = s.preset ? await applyPreset(port, s.preset) : null;
+  if (version !== null) await waitFor(page, 'frames of the preset', (v) => window.oceand.frameParamsVersion >= v, version, 60000);
+  // Let the HUD fill in, frames blend, and a few more frames render.
+  const r0 = await page.evaluate(() => window.oceand.rendered);
+  await waitFor(page, 'three more frames', (r) => window.oceand.rendered >= r + 3, r0, 120000);
+  await sleep(600);
+  await page.screenshot({ path: file, type: 'png' });
+  const view = await page.evaluate(() => window.oceand.view);
+  await ctx.close();
+  if (errors.length) throw new Error(`page errors: ${errors.join('; ')}`);
+  return view;
+}
+
+const port = await freePort();
+const server = await startServer({ oceand: args.oceand, webRoot: args.webRoot, port });
+const browser = await launchBrowser();
+fs.mkdirSync(args.out, { recursive: true });
+let failed = 0;
+try {
+  for (const s of SHOTS) {
+    if (only.size && !only.has(s.name)) continue;
+    const file = path.join(args.out, `${s.name}.png`);
+    const t0 = Date.now();
+    try {
+      const v = await take(browser, port, s, file);
+      console.log(`${file}  (${((Date.now() - t0) / 1000).toFixed(1)} s; sun ${v.sky.sunAltitudeDeg.toFixed(1)}°, overcast ${v.sky.overcast.toFixed(2)})`);
+    } catch (e) { failed++; console.log(`FAIL ${s.name}: ${e.message}`); }
+  }
+  if (!only.size || only.has('screenshot')) {
+    // The README's picture: desktop, panel open, status shown, a fresh breeze.
+    const v = await take(browser, port, { name: 'screenshot', preset: 'fresh', hour: 17.5, hud: true, panel: true, face: { yaw: 0, dist: 100, ty: 2 } }, args.shot);
+    console.log(`${args.shot}  (sun ${v.sky.sunAltitudeDeg.toFixed(1)}°)`);
+  }
+} finally {
+  await browser.close().catch(() => {});
+  await server.stop().catch(() => {});
+}
+process.exit(failed ? 1 : 0);

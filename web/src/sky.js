@@ -1,0 +1,197 @@
+// Sky, sun and moon for a local time of day and the shared sea's wind.
+// The sky is three.js's Sky addon (Preetham, Shirley & Smits 1999, "A practical
+// analytic model for daylight"), extended here with a cloud deck whose cover and
+// darkness grow with the wind, and a dim night floor. It is rendered into a small
+// cube map whenever the view changes; the visible dome, the water's reflections,
+// its ambient light and the fog all read that one cube, so they always agree.
+import * as THREE from 'three';
+import { Sky } from 'three/examples/jsm/objects/Sky.js';
+
+const LATITUDE = 40;      // degrees north: a mid-latitude sea
+const DECLINATION = 10;   // degrees: the sun in late April / mid August
+const CUBE_SIZE = 128;    // texels per cube face: the sky is smooth, the sun is drawn apart
+// World axes: north = +z, east = -x, up = +y; the default camera looks south (-z),
+// so the sun rises on the left, culminates ahead and sets on the right.
+const NORTH = new THREE.Vector3(0, 0, 1), EAST = new THREE.Vector3(-1, 0, 0);
+
+// Sun direction for a local solar time (hours), by the standard altitude/azimuth
+// formulas of spherical astronomy (e.g. Meeus, Astronomical Algorithms, ch. 13).
+export function sunDirection(hour, lat = LATITUDE, dec = DECLINATION) {
+  const r = Math.PI / 180, H = (hour - 12) * 15 * r, phi = lat * r, d = dec * r;
+  const sinAlt = Math.sin(phi) * Math.sin(d) + Math.cos(phi) * Math.cos(d) * Math.cos(H);
+  const alt = Math.asin(Math.max(-1, Math.min(1, sinAlt)));
+  const cosAz = (Math.sin(d) - sinAlt * Math.sin(phi)) / Math.max(Math.cos(alt) * Math.cos(phi), 1e-9);
+  let az = Math.acos(Math.max(-1, Math.min(1, cosAz)));   // from north, 0..pi
+  if (Math.sin(H) > 0) az = 2 * Math.PI - az;             // afternoon: west of south
+  return dirFromAltAz(alt, az);
+}
+
+function dirFromAltAz(alt, az) {
+  const h = Math.cos(alt);
+  return NORTH.clone().multiplyScalar(Math.cos(az) * h).addScaledVector(EAST, Math.sin(az) * h).setY(Math.sin(alt)).normalize();
+}
+
+// Cloud cover and darkening from the wind (10 m wind speed, m/s). Not a physical
+// model: fair-weather cumulus in light winds, a closed, dark deck by storm force
+// (Beaufort 10, 24.5 m/s), which is what a sailor sees.
+export function weatherFromWind(u) {
+  const s = (a, b, x) => { const t = Math.min(Math.max((x - a) / (b - a), 0), 1); return t * t * (3 - 2 * t); };
+  return { overcast: 0.12 + 0.88 * s(6, 24, u), darkening: 0.5 * s(10, 28, u) };
+}
+
+const s01 = (a, b, x) => { const t = Math.min(Math.max((x - a) / (b - a), 0), 1); return t * t * (3 - 2 * t); };
+
+// Direct sunlight after the atmosphere: Beer-Lambert with the Kasten & Young (1989)
+// air mass and sea-level optical depths (Rayleigh ~0.05/0.10/0.24 at 680/550/440 nm,
+// plus aerosol), so the sun reddens and dims toward the horizon.
+function sunTransmittance(sinAlt, turbidity) {
+  const altDeg = Math.asin(Math.max(sinAlt, -1)) * 180 / Math.PI;
+  if (altDeg < -1) return new THREE.Color(0, 0, 0);
+  const m = 1 / (Math.max(sinAlt, 0) + 0.50572 * Math.pow(Math.max(altDeg, 0) + 6.07995, -1.6364));
+  const aerosol = 0.03 * turbidity;
+  const t = [0.046, 0.097, 0.236].map((tr) => Math.exp(-(tr + aerosol) * m));
+  const edge = s01(-1, 0.5, altDeg); // the disc sinks below the horizon
+  return new THREE.Color(t[0] * edge, t[1] * edge, t[2] * edge);
+}
+
+// The Sky addon's shader with two edits: its sun disc is left out (the dome draws a
+// sharp one; a disc in a 128² cube would be a blurred blob), and its colour passes
+// through weather() — night floor and cloud deck — before it is written.
+function skyMaterial() {
+  const src = Sky.SkyShader;
+  const disc = 'L0 += ( vSunE * 19000.0 * Fex ) * sundisk;';
+  const out = 'gl_FragColor = vec4( retColor, 1.0 );';
+  if (!src.fragmentShader.includes(disc) || !src.fragmentShader.includes(out)) {
+    throw new Error('three.js Sky shader changed: update web/src/sky.js');
+  }
+  const fragmentShader = src.fragmentShader
+    .replace(disc, '')
+    .replace('void main() {', `${WEATHER}\nvoid main() {`)
+    .replace(out, 'gl_FragColor = vec4( weather( direction, retColor ), 1.0 );');
+  return new THREE.ShaderMaterial({
+    name: 'OceandSky',
+    uniforms: {
+      ...THREE.UniformsUtils.clone(src.uniforms),
+      uSkyGain: { value: new THREE.Color(1, 1, 1) },
+      uNight: { value: new THREE.Color(0, 0, 0) },
+      uOvercast: { value: 0 },
+      uCloudLit: { value: new THREE.Color(1, 1, 1) },
+    },
+    vertexShader: src.vertexShader, fragmentShader, side: THREE.BackSide, depthWrite: false,
+  });
+}
+
+const WEATHER = /* glsl */`
+uniform vec3 uSkyGain;    // dims and tints the clear sky at night
+uniform vec3 uNight;      // night floor: airglow and moonlit sky
+uniform float uOvercast;  // 0 clear .. 1 closed deck
+uniform vec3 uCloudLit;   // cloud base colour in the current light
+float oc_hash(vec2 p) { return fract(sin(dot(p, vec2(127.1, 311.7))) * 43758.5453); }
+float oc_noise(vec2 p) {
+  vec2 i = floor(p), f = fract(p);
+  f = f * f * (3.0 - 2.0 * f);
+  return mix(mix(oc_hash(i), oc_hash(i + vec2(1.0, 0.0)), f.x), mix(oc_hash(i + vec2(0.0, 1.0)), oc_hash(i + vec2(1.0, 1.0)), f.x), f.y);
+}
+float oc_fbm(vec2 p) {
+  float s = 0.0, a = 0.5;
+  for (int i = 0; i < 5; i++) { s += a * oc_noise(p); p = p * 2.03 + vec2(1.7, 9.2); a *= 0.5; }
+  return s;
+}
+vec3 weather(vec3 dir, vec3 clear) {
+  // Under a spreading deck the clear sky left in the gaps is dimmer too.
+  vec3 c = clear * uSkyGain * (1.0 - 0.5 * uOvercast) + uNight * (0.55 + 0.45 * max(dir.y, 0.0));
+  // A cloud layer seen as a plane overhead: cells shrink toward the horizon.
+  float h = max(dir.y, 0.0);
+  float n = oc_fbm(dir.xz / (h + 0.12) * 1.3);
+  float cover = smoothstep(1.05 - uOvercast, 1.3 - uOvercast, n + 0.35);
+  cover = max(cover, smoothstep(0.8, 1.0, uOvercast));
+  float silver = pow(max(dot(dir, vSunDirection), 0.0), 6.0) * (1.0 - uOvercast);
+  // Broken cloud: lumpy, lit toward the sun. A closed deck follows the CIE overcast
+  // sky (Moon & Spencer 1942): L(h) = Lz (1 + 2 sin h) / 3, the horizon a third of the zenith.
+  float deck = smoothstep(0.6, 1.0, uOvercast);
+  vec3 cloud = uCloudLit * mix(0.78 + 0.3 * n + 0.8 * silver, (1.0 + 2.0 * h) / 3.0 * (0.9 + 0.2 * n), deck);
+  return mix(c, cloud, cover * mix(0.55 + 0.45 * smoothstep(0.0, 0.1, dir.y), 1.0, deck));
+}
+`;
+
+export class SkyModel {
+  constructor(renderer) {
+    this.renderer = renderer;
+    this.sky = new THREE.Mesh(new THREE.BoxGeometry(1, 1, 1), skyMaterial());
+    this.sky.frustumCulled = false;
+    this.scene = new THREE.Scene();
+    this.scene.add(this.sky);
+    this.target = new THREE.WebGLCubeRenderTarget(CUBE_SIZE, {
+      type: THREE.HalfFloatType, generateMipmaps: true,
+      minFilter: THREE.LinearMipmapLinearFilter, magFilter: THREE.LinearFilter,
+    });
+    this.cubeCamera = new THREE.CubeCamera(0.1, 10, this.target);
+    this.key = '';
+    // What the water and dome shaders read (shared uniform objects).
+    this.uniforms = {
+      uEnv: { value: this.target.texture },
+      uSunDir: { value: new THREE.Vector3(0, 1, 0) },     // the key light: sun by day, moon by night
+      uSunColor: { value: new THREE.Color(1, 1, 1) },
+      uDiscSize: { value: 0.99999 },                      // cos of the disc's angular radius
+      uMoonDir: { value: new THREE.Vector3(0, 1, 0) },
+      uMoonColor: { value: new THREE.Color(0, 0, 0) },
+      uStars: { value: 0 },
+      uExposure: { value: 1 },
+      uGapProbe: { value: 0 },
+    };
+    this.state = null;
+  }
+
+  // hour: local solar time 0..24; wind: m/s. Re-renders the cube only on change.
+  update(hour, wind) {
+    const key = `${hour.toFixed(3)},${wind.toFixed(2)}`;
+    if (key === this.key) return false;
+    this.key = key;
+    const sun = sunDirection(hour);
+    const { overcast, darkening } = weatherFromWind(wind);
+    const sinAlt = sun.y;
+    const day = s01(-0.2, 0.08, sinAlt);        // 0 at night (sun 12° below), 1 in daylight
+    const turbidity = 2 + 6 * overcast;
+    const u = this.sky.material.uniforms;
+    u.sunPosition.value.copy(sun);
+    u.turbidity.value = turbidity;
+    u.rayleigh.value = 2 + 1.5 * (1 - day);      // deeper blue at twilight
+    u.mieCoefficient.value = 0.003 + 0.01 * overcast;
+    u.mieDirectionalG.value = 0.75;
+    u.uSkyGain.value.setRGB(0.08 + 0.92 * day, 0.1 + 0.9 * day, 0.2 + 0.8 * day).multiplyScalar(1 - darkening * 0.5);
+    u.uNight.value.setRGB(0.006, 0.011, 0.026).multiplyScalar(1 - day);
+    u.uOvercast.value = overcast;
+    // Cloud base: lit by the sun (reddened when low) and the sky; moonlit grey at
+    // night; greyer and darker as the wind rises.
+    const sunT0 = sunTransmittance(sinAlt, turbidity);
+    const lit = u.uCloudLit.value;
+    lit.copy(sunT0).multiplyScalar(0.35 * s01(-0.05, 0.2, sinAlt));
+    lit.r += 0.5 * s01(-0.1, 0.4, sinAlt) + 0.010;
+    lit.g += 0.52 * s01(-0.1, 0.4, sinAlt) + 0.012;
+    lit.b += 0.56 * s01(-0.1, 0.4, sinAlt) + 0.018;
+    lit.multiplyScalar(1 - darkening);
+    // Key light: the sun, then the moon (fixed high in the south-east) once the sun is down.
+    const sunT = sunTransmittance(sinAlt, turbidity);
+    const hidden = 1 - s01(0.4, 0.85, overcast); // a closed deck hides the disc
+    const moonDir = dirFromAltAz(38 * Math.PI / 180, 155 * Math.PI / 180);
+    const night = 1 - s01(-0.12, 0.0, sinAlt);
+    const U = this.uniforms;
+    U.uMoonDir.value.copy(moonDir);
+    U.uMoonColor.value.setRGB(0.035, 0.039, 0.046).multiplyScalar(night * hidden);
+    if (sinAlt > -0.02) {
+      U.uSunDir.value.copy(sun);
+      U.uSunColor.value.copy(sunT).multiplyScalar(1.25 * hidden);
+      U.uDiscSize.value = Math.cos(0.27 * Math.PI / 180);
+    } else {
+      U.uSunDir.value.copy(moonDir);
+      U.uSunColor.value.copy(U.uMoonColor.value);
+      U.uDiscSize.value = Math.cos(0.26 * Math.PI / 180);
+    }
+    U.uStars.value = night * (1 - s01(0.3, 0.8, overcast));
+    // The eye adapts, but not fully: twilight and night stay darker than day.
+    U.uExposure.value = 0.5 + 0.8 * (1 - s01(-0.05, 0.3, sinAlt)) + 2.2 * night;
+    this.state = { hour, wind, sun: sun.toArray(), sunAltitudeDeg: Math.asin(sinAlt) * 180 / Math.PI, overcast, darkening };
+    this.cubeCamera.update(this.renderer, this.scene);
+    return true;
+  }
+}
