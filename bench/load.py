@@ -118,10 +118,15 @@ def main():
     ap.add_argument("--oceand-args", default="", help="extra daemon flags, e.g. '--sim-nice -10'")
     ap.add_argument("--warmup", type=float, default=2)
     ap.add_argument("--window", type=float, default=10)
+    ap.add_argument("--no-query", action="store_true", help="skip the point query / probe runs (query_load.py)")
+    import query_load
+    query_load.add_args(ap)
     args = ap.parse_args()
     for spec in args.runs.split(","):
         n, k = (int(x) for x in spec.split(":"))
         run(args, n, k)
+    if not args.no_query:
+        query_load.bench(args)   # query latency for 1/16/256 points, tick time with 100 probe clients
 
 
 if __name__ == "__main__":

@@ -4,7 +4,8 @@ DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c
               server/net/context.c server/net/upgrade.c server/net/session.c server/net/dispatch.c \
               server/net/fanout.c server/net/http.c server/net/cluster.c server/net/rx_guard.c \
               server/role_sim.c server/role_edge.c server/role_link.c \
-              server/metrics.c server/state.c server/state_saver.c server/log.c
+              server/metrics.c server/state.c server/state_saver.c server/log.c \
+              server/query_msg.c server/query_worker.c server/probe.c
 DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o)
 DAEMON_SAN_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/san/%.o)
 OCEAN_LIB ?= $(BUILD)/libocean.a
@@ -43,12 +44,17 @@ VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-k
 test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	$(BUILD)/test_control
 	/usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
+	$(BUILD)/test_probe
+	/usr/bin/python3 tests/daemon/test_query.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check --query-ref $(BUILD)/query_ref
 
 # Same integration tests against an ASan+UBSan build (slower: frames at a lower N).
 test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(DAEMON_TEST_DEPS)
 	$(BUILD)/san/test_control
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check --sanitized
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  /usr/bin/python3 tests/daemon/test_query.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check \
+	  --query-ref $(BUILD)/query_ref --sanitized
 
 test-daemon-valgrind: $(BUILD)/test_control
 	$(VALGRIND) $(BUILD)/test_control
@@ -64,3 +70,12 @@ run: deps
 
 $(BUILD)/load_client: $(BUILD)/obj/bench/load_client.o
 	$(CC) $(CFLAGS) -o $@ $^
+
+# Point queries and probes (issue 14): the probe accuracy test and the exact
+# reference the daemon tests compare `query_result` with.
+$(BUILD)/test_probe: $(BUILD)/obj/tests/daemon/test_probe.o $(BUILD)/obj/server/probe.o $(BUILD)/obj/server/query_msg.o \
+                     $(BUILD)/obj/server/control.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/query_ref: $(BUILD)/obj/tests/daemon/query_ref.o $(BUILD)/obj/server/query_msg.o $(BUILD)/obj/server/control.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+DAEMON_TEST_DEPS += $(BUILD)/test_probe $(BUILD)/query_ref

@@ -13,6 +13,7 @@ FUZZ_SECONDS ?= 60
 FUZZ_CI_SECONDS ?= $(if $(CI),60,10)
 FUZZ_TARGETS := control frame config
 FUZZ_TARGETS += cluster
+FUZZ_TARGETS += query
 FUZZ_TARGETS += netwire
 
 SIM_SRCS_FOR_FUZZ = $(wildcard server/sim/*.c)
@@ -20,6 +21,7 @@ FUZZ_SRCS_control = fuzz/fuzz_control.c server/control.c $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_frame   = fuzz/fuzz_frame.c $(wildcard proto/c/*.c)
 FUZZ_SRCS_config  = fuzz/fuzz_config.c server/config.c server/control.c server/state.c server/log.c \
                     $(SIM_SRCS_FOR_FUZZ)
+FUZZ_SRCS_query   = fuzz/fuzz_query.c server/query_msg.c server/probe.c server/control.c $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_cluster = fuzz/fuzz_cluster.c $(wildcard server/cluster/cluster_*.c) proto/c/oc_header.c
 $(BUILD)/fuzz/fuzz_cluster: $(wildcard server/cluster/*.[ch])
 FUZZ_SRCS_netwire = fuzz/fuzz_netwire.c server/net/upgrade.c server/metrics.c server/log.c

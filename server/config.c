@@ -57,6 +57,14 @@ static const struct param_def opt_table[] = {
       "small keeps a slow client's queue, and so its latency, short"),
     OPT("sim_nice", PARAM_INT, sim_nice, -20, 19, 0, NULL, 0, "nice value of the tick thread; below 0 (needs "
       "CAP_SYS_NICE) keeps the tick on time on a busy machine"),
+    OPT("query_threads", PARAM_INT, query_threads, 1, 16, 1, NULL, 0, "worker threads for point queries and probes"),
+    OPT("query_window", PARAM_FLOAT, query_window, 0, 60, 5, NULL, 0, "seconds of sim time before now that a "
+        "query's \"time\" may ask for"),
+    OPT("query_budget", PARAM_FLOAT, query_budget, 1, 1e6, 1000, NULL, 0, "exact query points per second, all "
+        "clients together, counted at N = 256 (a point at N costs (N/256)^2); over it: busy"),
+    OPT("query_queue", PARAM_INT, query_queue, 1, 4096, 64, NULL, 0, "queries waiting at most; more: busy"),
+    OPT("probe_max_points", PARAM_INT, probe_max_points, 1, 64, 16, NULL, 0, "probe points per client"),
+    OPT("probe_max_total", PARAM_INT, probe_max_total, 1, 100000, 2048, NULL, 0, "probe points, all clients together"),
     OPT("max_memory_mb", PARAM_INT, max_memory_mb, 16, 1 << 20, 256, NULL, 0, "memory cap for the simulation; limits N"),
     OPT_STR("role", role, "all", 0, "all = one process (no NATS); sim = simulate and publish on NATS "
       "(serves /healthz and /metrics, no viewers); edge = serve viewers from the sim over NATS (docs/scaling.md)"),

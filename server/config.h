@@ -40,6 +40,13 @@ struct daemon_config {
     int    sim_nice;           /* nice value of the tick thread (< 0 needs CAP_SYS_NICE) */
     char   tls_cert[512];      /* PEM certificate (chain): "" = plain http/ws */
     char   tls_key[512];       /* PEM private key of tls_cert */
+    /* point queries and probes (query_worker.h, docs/query.md) */
+    int    query_threads;      /* query worker threads */
+    double query_window;       /* s of sim time a query's "time" may go back */
+    double query_budget;       /* query points per second for all clients (at N = 256) */
+    int    query_queue;        /* queries waiting at most */
+    int    probe_max_points;   /* probe points per client */
+    int    probe_max_total;    /* probe points, all clients */
     /* Cluster (issue 12, docs/scaling.md): --role all needs none of these. */
     char   role[8];            /* "all", "sim" or "edge" */
     char   nats_url[512];      /* --nats: nats://HOST:4222 (comma-separated list allowed) */

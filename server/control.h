@@ -43,7 +43,8 @@ struct ctl_limits {
     int max_memory_mb;      /* simulation memory cap, decides the largest N */
 };
 
-enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING, CTL_NAME };
+enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING,
+                CTL_QUERY, CTL_PROBE /* members checked by query_msg.c */, CTL_NAME };
 
 /* Display names (PROTOCOL.md §7.1 `name`): at most CTL_NAME_MAX_CHARS code
  * points of printable Unicode, UTF-8; CTL_NAME_BYTES holds any valid one. */

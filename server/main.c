@@ -12,6 +12,7 @@
 #include "config.h"
 #include "log.h"
 #include "net.h"
+#include "query_worker.h"
 #include "roles.h"
 #include "sim_thread.h"
 #include "state_saver.h"
@@ -127,7 +128,18 @@ int main(int argc, char **argv)
     }
     install_signals();
     if (strcmp(dc.role, "edge") == 0)
-        return run_edge(&dc, net);
+        return run_edge(&dc, net); /* no simulation here: no point queries either */
+    struct query_config qc = {
+        .threads = dc.query_threads, .window = dc.query_window, .budget = dc.query_budget,
+        .queue = dc.query_queue, .probe_max_points = dc.probe_max_points, .probe_max_total = dc.probe_max_total,
+        .wake = net_wake, .wake_user = net,
+    };
+    struct query_service *queries = query_service_new(&qc, err, sizeof err);
+    if (!queries) {
+        LOGE("point queries: %s", err);
+        net_destroy(net);
+        return 1;
+    }
     struct sim_config sc = {
         .tick_rate = dc.tick_rate,
         .tile_size = dc.tile_size,
@@ -138,22 +150,26 @@ int main(int argc, char **argv)
         .start_version = res.params_version,
         .wake = net_wake,
         .wake_user = net,
+        .queries = queries,
     };
     /* --role sim: the NATS link feeds demand in and takes frames out. */
     struct role_sim *cluster = NULL;
     if (strcmp(dc.role, "sim") == 0 && !(cluster = role_sim_open(&dc, net, &sc, err, sizeof err))) {
         LOGE("%s", err);
+        query_service_free(queries);
         net_destroy(net);
         return 1;
     }
     struct sim *sim = sim_start(&params, &sc, err, sizeof err);
     if (!sim) {
         LOGE("simulation: %s", err);
+        query_service_free(queries);
         role_sim_close(cluster);
         net_destroy(net);
         return 1;
     }
     net_attach_sim(net, sim);
+    net_attach_queries(net, queries);
     /* State saving listens to the parameter changes the sim applies. */
     struct state_saver saver;
     state_saver_init(&saver, dc.state_file, &params, res.params_version);
@@ -177,6 +193,8 @@ int main(int argc, char **argv)
     LOGI("stopping");
     state_saver_flush(&saver, sim_time_now(sim), true);
     sim_stop(sim);
+    net_attach_queries(net, NULL);
+    query_service_free(queries); /* after the tick: it no longer hands over grids */
     net_attach_sim(net, NULL);
     role_sim_close(cluster); /* after the tick (it publishes), before net (it holds requests) */
     net_destroy(net);

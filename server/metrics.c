@@ -89,6 +89,17 @@ size_t metrics_render(char *buf, size_t cap)
     counter(&o, "oceand_param_changes_total", "Parameter sets applied.", atomic_load(&m->param_changes));
     counter(&o, "oceand_closed_too_large_total", "Clients closed with 1009 (message too large).",
             atomic_load(&m->closed_too_large));
+    hist(&o, "oceand_query_duration_seconds", "Worker time of one exact point query.", &m->query_seconds);
+    hist(&o, "oceand_probe_tick_duration_seconds", "Worker time to evaluate every probe of one tick.",
+         &m->probe_seconds);
+    counter(&o, "oceand_queries_total", "Point queries accepted.", atomic_load(&m->queries));
+    counter(&o, "oceand_query_points_total", "Points of the accepted queries.", atomic_load(&m->query_points));
+    counter(&o, "oceand_query_busy_total", "Queries and probes refused with busy (budget, queue).",
+            atomic_load(&m->query_busy));
+    counter(&o, "oceand_probe_ticks_total", "Ticks whose probes were evaluated.", atomic_load(&m->probe_ticks));
+    counter(&o, "oceand_probe_ticks_skipped_total", "Ticks whose probes were skipped (worker behind).",
+            atomic_load(&m->probe_skipped));
+    gauge(&o, "oceand_probe_points", "Points probed by all clients.", atomic_load(&m->probe_points));
     put(&o, "# HELP oceand_clients_refused_total WebSocket upgrades refused before a session (issue 16).\n"
             "# TYPE oceand_clients_refused_total counter\n"
             "oceand_clients_refused_total{reason=\"host\"} %llu\n"

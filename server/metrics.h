@@ -28,6 +28,10 @@ struct metrics {
     atomic_uint_least32_t params_version;
     atomic_int resolution;
     _Atomic double sim_time;
+    /* point queries and probes (query_worker.c) */
+    struct histogram query_seconds, probe_seconds;  /* worker time per query / per probe tick */
+    atomic_uint_least64_t queries, query_points, query_busy, probe_ticks, probe_skipped;
+    atomic_int probe_points;
 };
 extern struct metrics g_metrics;
 

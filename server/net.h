@@ -20,6 +20,9 @@ struct net *net_create(const struct daemon_config *dc, const struct ocean_params
 /* The simulation to take frames and answers from; set once, after sim_start
  * (and to NULL after sim_stop). */
 void net_attach_sim(struct net *n, struct sim *s);
+/* The point-query service (query_worker.h); set once after sim_start, NULL before it is freed. */
+struct query_service;
+void net_attach_queries(struct net *n, struct query_service *q);
 /* Called on the service thread for every parameter change the sim applied. */
 typedef void (*net_params_fn)(void *user, const struct ocean_params *p, uint32_t version);
 void net_on_params(struct net *n, net_params_fn fn, void *user);

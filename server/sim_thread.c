@@ -24,6 +24,7 @@ struct built {
     struct ocean_prepared *prepared; /* new state for s->ocean (ocean_prepare), or NULL when only playback changed */
     struct ocean_params params;   /* in force after the batch */
     struct sim_set *sets;         /* in order; each has ->prev, or a failed ->status */
+    struct ocean_surface *surface; /* query snapshot of the prepared state (made by the builder), or NULL */
 };
 
 /* Each field says which thread writes it and which reads it ("tick",
@@ -170,6 +171,7 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
         cur = next;
     }
     out->prepared = NULL;
+    out->surface = NULL;
     if (physics_differ(&s->build_base, &cur)) {
         enum sim_set_status why;
         out->prepared = build_ocean(s, &cur, &why, err, sizeof err);
@@ -180,6 +182,8 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
                     set_failed(set, why, err);
             cur = s->build_base;
         }
+        if (out->prepared && s->cfg.queries) /* the query snapshot, here rather than on the tick (1-8 ms) */
+            out->surface = query_snapshot_prepared(s->cfg.queries, s->ocean, out->prepared);
     }
     s->build_base = cur;
     out->params = cur;
@@ -249,6 +253,8 @@ static void apply_pending(struct sim *s)
                 if (set->status == SIM_SET_QUEUED)
                     set_failed(set, SIM_SET_INVALID, "internal: stale prepared state");
             b.params = s->params;
+            ocean_surface_free(b.surface); /* a snapshot of what was not committed */
+            b.surface = NULL;
         } else if (old_n != ocean_resolution(s->ocean)) {
             atomic_fetch_add(&g_metrics.replans, 1);
             LOGI("resolution now %d", ocean_resolution(s->ocean));
@@ -265,6 +271,7 @@ static void apply_pending(struct sim *s)
             ocean_prepared_free(b.prepared);
     }
     struct sim_set *last = NULL;
+    uint32_t version_before = s->version;
     for (struct sim_set *set = b.sets; set; set = set->next) {
         if (set->status == SIM_SET_QUEUED) {
             struct ocean_params before = s->params;
@@ -279,6 +286,9 @@ static void apply_pending(struct sim *s)
         last = set;
     }
     s->params = b.params;
+    if (s->version != version_before || b.surface) /* point queries: this version from now on */
+        query_version(s->cfg.queries, s->version, s->sim_time, b.surface != NULL || (b.prepared && commit_rc == 0),
+                      b.surface);
     if (last) {
         pthread_mutex_lock(&s->lock);
         *s->answers_tail = b.sets;
@@ -348,8 +358,12 @@ static void tick(struct sim *s)
     struct frame_want want;
     demand_snapshot(s, &want);
     struct frame *f = NULL;
-    if (want.nkeys && step(s, want.fields))
-        f = encode(s, &want);
+    unsigned probe_fields = query_probe_fields(s->cfg.queries); /* probes need height, dx, dz */
+    if ((want.nkeys || probe_fields) && step(s, want.fields | probe_fields)) {
+        query_tick(s->cfg.queries, s->ocean, s->seq, s->sim_time, s->version);
+        if (want.nkeys)
+            f = encode(s, &want);
+    }
     publish(s, f);
     if (f && s->cfg.on_frame)
         s->cfg.on_frame(s->cfg.cluster_user, f); /* publish() keeps our reference alive until the next tick */
@@ -438,6 +452,8 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
         return NULL;
     }
     atomic_store(&s->now_time, s->sim_time);
+    if (cfg->queries)
+        query_version(cfg->queries, s->version, s->sim_time, true, query_snapshot(cfg->queries, s->ocean));
     atomic_store(&g_metrics.resolution, p->resolution);
     atomic_store(&g_metrics.params_version, s->version);
     /* The tick thread must never take SIGINT/SIGTERM: block them for it
@@ -496,6 +512,7 @@ void sim_stop(struct sim *s)
     free_sets(s->answers);
     if (s->ready_full) {
         free_sets(s->ready.sets);
+        ocean_surface_free(s->ready.surface);
         if (s->ready.prepared)
             ocean_prepared_free(s->ready.prepared);
     }

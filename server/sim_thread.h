@@ -18,6 +18,7 @@
 
 #include "frame.h"
 #include "ocean.h"
+#include "query_worker.h"
 
 /* What became of a set. The network thread maps it to a wire error code. */
 enum sim_set_status {
@@ -62,6 +63,7 @@ struct sim_config {
                                    so that seq never goes back when the sim restarts under its edges) */
     void (*wake)(void *user);   /* called after every tick (lws_cancel_service) */
     void *wake_user;
+    struct query_service *queries; /* point queries and probes (query_worker.h), NULL = none */
     /* --role sim (server/role_sim.c); NULL otherwise. Both run on the tick
      * thread and must not block: remote_demand ORs the layer keys other
      * daemons want into bits (SIM_DEMAND_BYTES, bit k = layer key k) before

@@ -4,6 +4,8 @@
  *             --bound 0.001 --out DIR --format npy|raw|pgm|pgm8|exr
  *   ocean-tap ws://host:8080 --set wind_speed=20 --set spectrum=jonswap
  *   ocean-tap ws://host:8080 --watch
+ *   ocean-tap ws://host:8080 --probe "10,20;-5,3.5" --ticks 300
+ *   ocean-tap ws://host:8080 --query "10,20;1e6,-3" [--time T]
  *
  * One WebSocket connection (libwebsockets client, subprotocol oceand.v1),
  * JSON control messages (cJSON) and binary frames decoded by the project's
@@ -43,6 +45,9 @@ enum exit_code {
 #define ID_SET 1
 #define ID_SUBSCRIBE 2
 #define ID_QUIET 3     /* watch only: the smallest subscription there is */
+#define ID_QUERY 4
+#define ID_PROBE 5
+#define MAX_POINTS 256 /* of --query / --probe (the server caps probes lower) */
 
 static void usage(FILE *to)
 {
@@ -73,6 +78,15 @@ static void usage(FILE *to)
         "  --token T           control token, when the server requires one\n"
         "  --watch             print every params broadcast, one JSON line each (without\n"
         "                      --frames/--out/--stats it subscribes to almost nothing)\n"
+        "Points (PROTOCOL.md §7.4):\n"
+        "  --query \"X,Z;X,Z...\"  exact surface values at these world points (metres):\n"
+        "                      prints the server's query_result as one JSON line\n"
+        "  --time T            ... at sim time T (within the server's window; default now)\n"
+        "  --probe \"X,Z;X,Z...\"  the probe values of these points with every tick: one\n"
+        "                      JSON line (probe_data) per tick, or CSV with --csv\n"
+        "  --csv               --probe as CSV: seq,sim_time,params_version,point,x,z,height,\n"
+        "                      dx,dz,nx,ny,nz,vertical_velocity,vertical_acceleration\n"
+        "  --ticks N           stop after N probe ticks (default: until Ctrl-C)\n"
         "Other:\n"
         "  --timeout S         give up after S seconds without an expected answer (default 10)\n"
         "  -v, --verbose       libwebsockets notices on stderr\n"
@@ -100,7 +114,33 @@ struct opts {
     int nsets;
     const char *token;
     double timeout;
+    int query, probe, csv;  /* --query / --probe given; --csv */
+    double points[MAX_POINTS][2];
+    int npoints;
+    int has_time;
+    double time;          /* --time */
+    long ticks;           /* --ticks, 0 = until Ctrl-C */
 };
+
+/* "x,z;x,z;..." -> o->points. */
+static int parse_points(const char *text, struct opts *o)
+{
+    const char *p = text;
+    o->npoints = 0;
+    while (*p) {
+        char *end;
+        double x = strtod(p, &end);
+        if (end == p || *end != ',') return -1;
+        p = end + 1;
+        double z = strtod(p, &end);
+        if (end == p || (*end && *end != ';') || o->npoints == MAX_POINTS) return -1;
+        o->points[o->npoints][0] = x;
+        o->points[o->npoints][1] = z;
+        o->npoints++;
+        p = *end ? end + 1 : end;
+    }
+    return o->npoints ? 0 : -1;
+}
 
 static int parse_fields(const char *list, unsigned *mask)
 {
@@ -137,6 +177,9 @@ static int parse_args(int argc, char **argv, struct opts *o)
         {"set", required_argument, 0, 'S'},   {"token", required_argument, 0, 'T'},
         {"watch", no_argument, 0, 'w'},       {"timeout", required_argument, 0, 't'},
         {"verbose", no_argument, 0, 'v'},     {"help", no_argument, 0, 'h'},
+        {"query", required_argument, 0, 'Q'}, {"probe", required_argument, 0, 'P'},
+        {"time", required_argument, 0, 'I'},  {"ticks", required_argument, 0, 'K'},
+        {"csv", no_argument, 0, 'C'},
         {0, 0, 0, 0}};
     *o = (struct opts){.frames = -1, .fields = 7u, .bound = -1, .format = TAP_NPY, .timeout = 10};
     int c;
@@ -180,11 +223,30 @@ static int parse_args(int argc, char **argv, struct opts *o)
             if (*end || !(o->timeout > 0)) return usage_error("--timeout needs seconds > 0");
             break;
         case 'v': o->verbose = 1; break;
+        case 'Q': case 'P':
+            if (parse_points(optarg, o)) return usage_error("--%s needs \"X,Z;X,Z...\" (1..%d points)",
+                                                            c == 'Q' ? "query" : "probe", MAX_POINTS);
+            if (c == 'Q') o->query = 1; else o->probe = 1;
+            break;
+        case 'I':
+            o->time = strtod(optarg, &end);
+            if (*end || !*optarg) return usage_error("--time needs seconds of sim time");
+            o->has_time = 1;
+            break;
+        case 'K':
+            o->ticks = strtol(optarg, &end, 10);
+            if (*end || o->ticks < 0) return usage_error("--ticks needs a count >= 0");
+            break;
+        case 'C': o->csv = 1; break;
         case 'h': usage(stdout); return EXIT_OK;
         default: return usage_error("unknown option");
         }
     }
     if (o->format == TAP_EXR) o->fields = (1u << OC_FIELD_COUNT) - 1u; /* the bake needs all six */
+    if (o->query && o->probe) return usage_error("--query and --probe: one at a time");
+    if ((o->query || o->probe) && (o->frames >= 0 || o->out_dir || o->stats || o->watch))
+        return usage_error("--query/--probe do not mix with frames (--frames/--out/--stats) or --watch");
+    if (o->has_time && !o->query) return usage_error("--time is for --query");
     if (optind != argc - 1) return usage_error(optind >= argc ? "missing URL" : "one URL only");
     if (strlen(argv[optind]) >= sizeof o->url - 8) return usage_error("URL too long");
     snprintf(o->url, sizeof o->url, "%s%s", strstr(argv[optind], "://") ? "" : "ws://", argv[optind]);
@@ -193,7 +255,7 @@ static int parse_args(int argc, char **argv, struct opts *o)
 
 /* ---- session state ------------------------------------------------------ */
 
-enum stage { ST_HELLO, ST_SET, ST_SUBSCRIBE, ST_RUN, ST_DONE };
+enum stage { ST_HELLO, ST_SET, ST_SUBSCRIBE, ST_QUERY, ST_PROBE, ST_RUN, ST_DONE };
 
 struct stats {
     double t0, last_report;
@@ -214,6 +276,7 @@ struct session {
     int noutq;
     struct tap_frame *grid; /* the subscribed fields, assembled from tiles */
     long frames_done;
+    long ticks_done;      /* probe_data lines printed */
     double last_activity;
     struct stats st;
     struct lws *wsi;
@@ -353,9 +416,57 @@ static void send_quiet_subscribe(struct session *s)
     send_json(s, j);
 }
 
+static cJSON *points_json(const struct opts *o)
+{
+    cJSON *a = cJSON_CreateArray();
+    for (int i = 0; i < o->npoints; i++) cJSON_AddItemToArray(a, cJSON_CreateDoubleArray(o->points[i], 2));
+    return a;
+}
+
+static void send_points(struct session *s, const char *type, int id)
+{
+    cJSON *j = cJSON_CreateObject();
+    cJSON_AddStringToObject(j, "type", type);
+    cJSON_AddNumberToObject(j, "id", id);
+    cJSON_AddItemToObject(j, "points", points_json(s->o));
+    if (id == ID_QUERY && s->o->has_time) cJSON_AddNumberToObject(j, "time", s->o->time);
+    send_json(s, j);
+}
+
+/* One probe_data message: as it came (JSON), or one CSV row per point. */
+static void print_probe(struct session *s, cJSON *msg, const char *text, size_t len)
+{
+    if (!s->o->csv) {
+        printf("%.*s\n", (int)len, text);
+    } else {
+        cJSON *seq = cJSON_GetObjectItemCaseSensitive(msg, "seq"), *t = cJSON_GetObjectItemCaseSensitive(msg, "sim_time");
+        cJSON *v = cJSON_GetObjectItemCaseSensitive(msg, "params_version"), *pts = cJSON_GetObjectItemCaseSensitive(msg, "points");
+        int i = 0;
+        cJSON *p, *x;
+        cJSON_ArrayForEach(p, pts) {
+            if (i >= s->o->npoints) break;
+            printf("%.0f,%.17g,%.0f,%d,%.10g,%.10g", cJSON_GetNumberValue(seq), cJSON_GetNumberValue(t),
+                   cJSON_GetNumberValue(v), i, s->o->points[i][0], s->o->points[i][1]);
+            cJSON_ArrayForEach(x, p) printf(",%.10g", cJSON_GetNumberValue(x));
+            putchar('\n');
+            i++;
+        }
+    }
+    fflush(stdout);
+    if (s->o->ticks > 0 && ++s->ticks_done >= s->o->ticks) finish(s, EXIT_OK);
+}
+
 /* Move on from the stage just completed to the next one that applies. */
 static void advance(struct session *s)
 {
+    if (s->stage <= ST_SET && s->o->query) { s->stage = ST_QUERY; send_points(s, "query", ID_QUERY); return; }
+    if (s->stage <= ST_SET && s->o->probe) {
+        s->stage = ST_PROBE;
+        send_quiet_subscribe(s); /* the frames of the default subscription are not wanted */
+        send_points(s, "probe", ID_PROBE);
+        return;
+    }
+    if (s->stage == ST_PROBE) { s->stage = ST_RUN; s->st.t0 = s->st.last_report = now_s(); return; }
     if (s->stage == ST_HELLO && s->o->nsets) { s->stage = ST_SET; send_set(s); return; }
     if (s->stage <= ST_SET && s->want_frames) { s->stage = ST_SUBSCRIBE; send_subscribe(s); return; }
     if (s->stage <= ST_SUBSCRIBE && (s->want_frames || s->o->watch)) {
@@ -403,7 +514,7 @@ static void on_text(struct session *s, const char *text, size_t len)
                  cJSON_IsNumber(proto) ? proto->valueint : -1, OC_PROTO_VERSION);
         } else {
             s->schema = cJSON_DetachItemFromObjectCaseSensitive(msg, "schema");
-            if (!s->o->nsets && !s->want_frames && !s->o->watch) {
+            if (!s->o->nsets && !s->want_frames && !s->o->watch && !s->o->query && !s->o->probe) {
                 /* Info mode: the hello without the long schema, one line. */
                 char *out = cJSON_PrintUnformatted(msg);
                 if (out) puts(out);
@@ -441,8 +552,19 @@ static void on_text(struct session *s, const char *text, size_t len)
             else
                 advance(s);
         }
+    } else if (!strcmp(t, "query_result") && s->stage == ST_QUERY && id_is(msg, ID_QUERY)) {
+        printf("%.*s\n", (int)len, text);
+        fflush(stdout);
+        finish(s, EXIT_OK);
+    } else if (!strcmp(t, "probing") && s->stage == ST_PROBE && id_is(msg, ID_PROBE)) {
+        advance(s);
+    } else if (!strcmp(t, "probe_data") && s->stage == ST_RUN && s->o->probe) {
+        print_probe(s, msg, text, len);
     } else if (!strcmp(t, "error")) {
-        if (s->stage == ST_SET && (id_is(msg, ID_SET) || !cJSON_GetObjectItem(msg, "id"))) {
+        if ((s->stage == ST_QUERY && id_is(msg, ID_QUERY)) || (s->stage == ST_PROBE && id_is(msg, ID_PROBE))) {
+            print_error(msg, s->stage == ST_QUERY ? "query rejected" : "probe rejected");
+            finish(s, EXIT_REJECTED);
+        } else if (s->stage == ST_SET && (id_is(msg, ID_SET) || !cJSON_GetObjectItem(msg, "id"))) {
             print_error(msg, "set rejected");
             finish(s, EXIT_REJECTED);
         } else if (s->stage == ST_SUBSCRIBE && (id_is(msg, ID_SUBSCRIBE) || !cJSON_GetObjectItem(msg, "id"))) {
@@ -703,11 +825,14 @@ int main(int argc, char **argv)
         }
         if (o.stats && s.stage == ST_RUN && t - s.st.last_report >= 1.0) report_stats(&s, t, 0);
         /* A pure watch may be silent for ever; everything else expects traffic. */
-        int expecting = s.stage != ST_RUN || s.want_frames;
+        int expecting = s.stage != ST_RUN || s.want_frames || o.probe;
         if (expecting && t - s.last_activity > o.timeout) {
             const char *what = s.stage == ST_HELLO ? "the server's hello"
                              : s.stage == ST_SET ? "the answer to set"
-                             : s.stage == ST_SUBSCRIBE ? "the answer to subscribe" : "the next frame";
+                             : s.stage == ST_SUBSCRIBE ? "the answer to subscribe"
+                             : s.stage == ST_QUERY ? "the answer to query"
+                             : s.stage == ST_PROBE ? "the answer to probe"
+                             : o.probe ? "the next probe tick" : "the next frame";
             fail(&s, EXIT_TIMEOUT, "timed out after %.1f s waiting for %s", o.timeout, what);
         }
     }

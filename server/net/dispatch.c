@@ -16,6 +16,7 @@
 
 #include "log.h"
 #include "metrics.h"
+#include "query_worker.h"
 #include "sim_thread.h"
 
 /* ---- subscriptions and demand ---- */
@@ -277,6 +278,53 @@ bool dispatch_take_token(struct net *n, struct session *s, const char *text, siz
     return true;
 }
 
+/* ---- point queries and probes (query_worker.c does the work) ---- */
+
+#define PROBE_QUEUE_MAX 16 /* JSON messages queued: a client this far behind misses probe ticks */
+
+static void dispatch_query(struct net *n, struct session *s, const cJSON *root, const cJSON *id)
+{
+    struct ctl_error e;
+    struct query_req *r = malloc(sizeof *r); /* 4 kB of points: not on the stack */
+    if (!r || !n->queries) {
+        struct ctl_error oom = { .code = "internal", .message = "point queries are not available" };
+        session_send_error(s, &oom, id);
+    } else if (query_parse(root, r, &e) != 0 ||
+               query_submit(n->queries, s->serial, id, r, n->sim ? sim_time_now(n->sim) : 0, &e) != 0) {
+        session_send_error(s, &e, id);
+    }
+    free(r);
+}
+
+static void dispatch_probe(struct net *n, struct session *s, const cJSON *root, const cJSON *id)
+{
+    struct ctl_error e;
+    struct probe_req *p = malloc(sizeof *p);
+    if (!p || !n->queries) {
+        struct ctl_error oom = { .code = "internal", .message = "probes are not available" };
+        session_send_error(s, &oom, id);
+    } else if (probe_parse(root, n->dc.probe_max_points, p, &e) != 0 ||
+               query_probe_set(n->queries, s->serial, p, &e) != 0) {
+        session_send_error(s, &e, id);
+    } else {
+        session_queue_json(s, probing_msg(id, p->n, (const double(*)[2])p->xz));
+    }
+    free(p);
+}
+
+void dispatch_query_results(struct net *n)
+{
+    struct query_out *o = query_take_results(n->queries);
+    while (o) {
+        struct query_out *next = o->next;
+        struct session *s = session_find(n, o->serial);
+        if (s && s->wsi && !s->closing && !(o->probe && s->tq.count >= PROBE_QUEUE_MAX))
+            session_queue_text(s, o->text, false);
+        query_out_free(o);
+        o = next;
+    }
+}
+
 /* set / pause / resume (pause and resume are sets of `paused`). */
 static void submit_control(struct net *n, struct session *s, const struct remote *rm, const struct ctl_msg *m)
 {
@@ -371,6 +419,12 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
     case CTL_NAME: /* anyone may name themselves: the name only labels their own changes */
         snprintf(s->name, sizeof s->name, "%s", m.name);
         session_queue_json(s, control_named_msg(s->name, m.id));
+        break;
+    case CTL_QUERY:
+        dispatch_query(n, s, m.root, m.id);
+        break;
+    case CTL_PROBE:
+        dispatch_probe(n, s, m.root, m.id);
         break;
     }
     ctl_msg_free(&m);

@@ -115,6 +115,7 @@ struct net {
     struct daemon_config dc;      /* read-only after net_create */
     struct ctl_limits lim;        /* read-only after net_create */
     struct sim *sim;              /* main writes (net_attach_sim) outside the service loop; lws reads */
+    struct query_service *queries; /* main writes (net_attach_queries) outside the loop; lws reads (query, probe) */
     struct frame *latest;         /* newest frame taken from the sim (one reference), or NULL */
     uint64_t seen_index;          /* frame.index of the last frame taken (skip counting) */
     uint64_t seen_seq;            /* its seq */
@@ -176,6 +177,7 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
 void dispatch_answers(struct net *n);                        /* the sim's answers to sets */
 void dispatch_demand(struct net *n, const struct subscription *sub, int delta);
 void dispatch_free_requests(struct net *n);
+void dispatch_query_results(struct net *n);                  /* answers of the query workers */
 
 /* fanout.c */
 void fanout_take_latest(struct net *n);                      /* after a wake-up */

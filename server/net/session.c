@@ -21,6 +21,7 @@
 
 #include "log.h"
 #include "metrics.h"
+#include "query_worker.h"
 #include "sim_thread.h"
 
 /* ---- JSON send queue ---- */
@@ -157,6 +158,7 @@ static void session_close(struct net *n, struct session *s)
     atomic_store(&g_metrics.clients, (int)n->sessions.count);
     LOGD("client %s gone (%d left)", s->client_id, (int)n->sessions.count);
     dispatch_demand(n, &s->sub, -1);
+    query_client_gone(n->queries, s->serial);
     while (s->tq.head) {
         struct text *t = lws_container_of(s->tq.head, struct text, list);
         lws_dll2_remove(&t->list);
@@ -275,6 +277,7 @@ static void on_sim_wakeup(struct net *n)
         return;
     fanout_take_latest(n);
     dispatch_answers(n);
+    dispatch_query_results(n);
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
         struct session *s = session_of(d);
         if (s->tq.count || fanout_want_write(n, s))

@@ -753,6 +753,26 @@ int ocean_commit(struct ocean *o, struct ocean_prepared *pr)
     return 0;
 }
 
+struct ocean_surface *ocean_prepared_surface(const struct ocean *o, const struct ocean_prepared *pr, char *err,
+                                             size_t errlen)
+{
+    if (!o || !pr) {
+        snprintf(err, errlen, "no simulation");
+        return NULL;
+    }
+    if (pr->grid) /* a new N: the whole new grid */
+        return ocean_surface_from(pr->grid, &pr->p, err, errlen);
+    /* Same N: o's grid with the prepared amplitudes (what ocean_commit swaps in).
+     * A shallow copy: the snapshot reads only n, nh, modes and the amplitudes. */
+    struct ocean_grid view = *o->g;
+    view.a = pr->amps.a;
+    view.b = pr->amps.b;
+    view.d = pr->amps.d;
+    view.e = pr->amps.e;
+    view.omega = pr->amps.omega;
+    return ocean_surface_from(&view, &pr->p, err, errlen);
+}
+
 /* ---- public API ------------------------------------------------------- */
 
 struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_options *opt, char *err,

@@ -57,17 +57,24 @@ struct ocean_surface *ocean_surface_new(const struct ocean *o, char *err, size_t
         snprintf(err, errlen, "no simulation");
         return NULL;
     }
-    const struct ocean_grid *g = o->g;
+    return ocean_surface_from(o->g, &o->p, err, errlen);
+}
+
+/* The snapshot of grid g's amplitudes under parameters pp (ocean.c also
+ * calls it on a prepared state). */
+struct ocean_surface *ocean_surface_from(const struct ocean_grid *g, const struct ocean_params *pp, char *err,
+                                         size_t errlen)
+{
     const int n = g->n, nh = g->nh;
-    const double L = o->p.patch_size, lam = o->p.choppiness;
+    const double L = pp->patch_size, lam = pp->choppiness;
     struct ocean_surface *s = calloc(1, sizeof *s);
     char *keep = calloc(g->modes, 1);
     if (!s || !keep)
         goto nomem;
-    s->p = o->p;
+    s->p = *pp;
     s->lambda = lam;
     s->patch = L;
-    s->loop = o->p.loop_period > 0 ? o->p.loop_period : 0;
+    s->loop = pp->loop_period > 0 ? pp->loop_period : 0;
     s->n = n;
     s->nh = nh;
 

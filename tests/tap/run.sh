@@ -249,6 +249,49 @@ EOF
 run 0 "resume" "$TAP" "$URL" --set paused=false
 ok "lossless and lossy (LOD 0/1/2) frames identical in both decoders; bound honoured"
 
+section "--query and --probe (issue 14)"
+run 1 "bad --query points" "$TAP" "$URL" --query "1;2"
+run 1 "--query with frames" "$TAP" "$URL" --query "1,2" --frames 1
+run 0 "query" "$TAP" "$URL" --query "1.5,-2;1e6,-3e6"
+$PY - "$tmp/out" <<'EOF' || fail "--query output is not a query_result"
+import json, math, sys
+j = json.loads(open(sys.argv[1]).read())
+assert j["type"] == "query_result" and len(j["points"]) == 2, j
+for p in j["points"]:
+    assert abs(math.hypot(*p["normal"]) - 1) < 1e-9 and abs(p["height"]) < 20, p
+    for k in ("displacement", "vertical_velocity", "vertical_acceleration"):
+        assert k in p, k
+EOF
+run 4 "query outside the window" "$TAP" "$URL" --query "1,2" --time -100
+grep -q 'time_out_of_window' "$tmp/err" || fail "no time_out_of_window in: $(cat "$tmp/err")"
+run 0 "probe json" "$TAP" "$URL" --probe "1.5,-2;40,7" --ticks 5
+$PY - "$tmp/out" <<'EOF' || fail "--probe output is not one probe_data line per tick"
+import json, sys
+lines = [json.loads(l) for l in open(sys.argv[1])]
+assert len(lines) == 5, len(lines)
+seqs = [l["seq"] for l in lines]
+assert all(b > a for a, b in zip(seqs, seqs[1:])), seqs
+assert all(l["type"] == "probe_data" and len(l["points"]) == 2 and len(l["points"][0]) == 8 for l in lines)
+EOF
+run 0 "probe csv" "$TAP" "$URL" --probe "1.5,-2;40,7" --ticks 3 --csv
+[ "$(wc -l <"$tmp/out")" -eq 6 ] || fail "--csv: expected 3 ticks x 2 points rows: $(cat "$tmp/out")"
+[ "$(awk -F, '{print NF}' "$tmp/out" | sort -u)" = 14 ] || fail "--csv rows do not have 14 columns"
+run 4 "probe over the limit" "$TAP" "$URL" --probe "$(for i in $(seq 1 17); do printf '%d,0;' $i; done | sed 's/;$//')"
+grep -q 'too_many_points' "$tmp/err" || fail "no too_many_points in: $(cat "$tmp/err")"
+ok "--query prints query_result (errors: 4 with the code), --probe one line per tick (JSON or CSV)"
+
+section "Python examples: buoy and ship (probes)"
+run 0 "buoy" timeout 60 $PY proto/examples/buoy.py "$URL" --seconds 3
+$PY - "$tmp/out" <<'EOF' || fail "buoy.py output: $(cat "$tmp/out")"
+import json, sys
+j = json.loads(open(sys.argv[1]).read().strip().splitlines()[-1])
+assert j["points"] == 9 and j["samples"] >= 60 and j["frames"] >= 5, j
+assert 0.5 < j["ratio"] < 2 and j["hs_sea_m"] > 0, j
+EOF
+run 0 "ship" timeout 30 $PY proto/examples/ship.py "$URL" --ticks 6 --speed 5 --heading 45
+[ "$(grep -c '^ *[0-9]' "$tmp/out")" -eq 6 ] || fail "ship.py: expected 6 motion lines: $(cat "$tmp/out")"
+ok "buoy.py compares its Hs with the sea's; ship.py prints heave, pitch and roll per tick"
+
 section "control token, timeouts and a server that goes away"
 silent=$(free_port)
 # A TCP listener that accepts and never answers the WebSocket handshake.

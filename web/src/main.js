@@ -6,6 +6,7 @@ import { Connection, serverUrl } from './connection.js';
 import { Ocean } from './ocean.js';
 import { Panel } from './panel.js';
 import { Hud, Stats } from './hud.js';
+import { ProbeMarker } from './probe.js';
 import { SkyModel } from './sky.js';
 import { DEFAULT_HOUR } from './presets.js';
 
@@ -73,6 +74,7 @@ const conn = new Connection(serverUrl(), {
     if (state !== 'open' && (st.clientId !== null || panel.connected)) { st.clientId = null; panel.disconnected(); }
   },
   onMessage(msg) {
+    if (probe.onMessage(msg)) return; // the buoy marker's probe/query answers (probe.js)
     switch (msg.type) {
       case 'hello':
         st.clientId = msg.client_id; st.role = msg.role;
@@ -112,6 +114,9 @@ const conn = new Connection(serverUrl(), {
     worker.postMessage({ type: 'frame', buf }, [buf]);
   },
 });
+
+// Double-click the sea to drop a buoy (point probe + exact query, probe.js).
+const probe = new ProbeMarker({ scene: ocean.scene, camera, canvas, send: (m) => conn.send(m) });
 
 const panel = new Panel({
   set: (params) => conn.send({ type: 'set', params }),

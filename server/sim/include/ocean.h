@@ -134,6 +134,11 @@ struct ocean_point {
 /* Snapshot the current amplitudes and parameters for queries: O(N^2) time
  * and memory (56 bytes per mode). Returns NULL with err on no memory. */
 struct ocean_surface *ocean_surface_new(const struct ocean *o, char *err, size_t errlen);
+/* The snapshot of what a prepared change (ocean_prepare) of o will put in
+ * force, made before ocean_commit: on the thread that prepared it, while o
+ * keeps stepping (it reads only what ocean_step does not write). */
+struct ocean_surface *ocean_prepared_surface(const struct ocean *o, const struct ocean_prepared *pr, char *err,
+                                             size_t errlen);
 void ocean_surface_free(struct ocean_surface *s);
 /* Values at npoints world points xz[i] = {x, z} at simulation time t (s).
  * Any finite coordinates (the sea is periodic). Returns 0, or -1 (nothing

@@ -1,0 +1,154 @@
+/* test_probe — accuracy of the probes' cheap path (server/probe.c: Lanczos-3
+ * on a tick's grids, Newton on the interpolated displacement, derivatives from
+ * the last three ticks) against the library's exact query, at the daemon's
+ * defaults (N = 256) with choppiness 0, 1 and 2. Prints one JSON line per
+ * case with the errors (docs/query.md quotes them); fails when they exceed
+ * the documented accuracy. Also checks the probe message and its parser. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "control.h"
+#include "ocean.h"
+#include "probe.h"
+#include "query_msg.h"
+
+static int failures;
+#define CHECK(c, ...)                                                                                                  \
+    do {                                                                                                               \
+        if (!(c)) {                                                                                                    \
+            fprintf(stderr, "FAIL %s:%d: ", __FILE__, __LINE__);                                                       \
+            fprintf(stderr, __VA_ARGS__);                                                                              \
+            fputc('\n', stderr);                                                                                       \
+            failures++;                                                                                                \
+        }                                                                                                              \
+    } while (0)
+
+#define NPTS 200
+#define DT (1.0 / 30.0)
+
+/* Documented accuracy at N = 256 defaults (docs/query.md). */
+struct limits {
+    double height_max, height_rms, normal_deg, vel_max, acc_max;
+};
+
+static void accuracy(double choppiness, const struct limits *lim)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.choppiness = choppiness;
+    struct ocean_options opt = { .threads = 1, .wisdom_path = NULL, .plan_rigor = 0 };
+    char err[200];
+    struct ocean *o = ocean_create(&p, &opt, err, sizeof err);
+    CHECK(o, "ocean_create: %s", err);
+    if (!o)
+        return;
+    static double xz[NPTS][2], guess[NPTS][2], hist[NPTS][3];
+    static struct probe_value v[NPTS];
+    static struct ocean_point ex[NPTS];
+    srand(7);
+    for (int i = 0; i < NPTS; i++) {
+        double r1 = rand() / (double)RAND_MAX, r2 = rand() / (double)RAND_MAX;
+        /* any real coordinates: some far away and negative */
+        double far = i % 4 == 0 ? -1e6 : i % 4 == 1 ? 3.3e5 : 0;
+        xz[i][0] = far + r1 * p.patch_size;
+        xz[i][1] = -far + r2 * p.patch_size;
+        guess[i][0] = xz[i][0];
+        guess[i][1] = xz[i][1];
+    }
+    const double t = 100.0, times[3] = { t, t - DT, t - 2 * DT };
+    for (int k = 2; k >= 0; k--) { /* three ticks, oldest first, like the daemon */
+        CHECK(ocean_step(o, times[k], OCEAN_ALL_FIELDS) == 0, "step");
+        struct probe_grids g = { .n = p.resolution, .patch = p.patch_size, .h = ocean_field(o, OCEAN_HEIGHT),
+                                 .dx = ocean_field(o, OCEAN_DX), .dz = ocean_field(o, OCEAN_DZ) };
+        for (int i = 0; i < NPTS; i++) {
+            probe_eval(&g, xz[i][0], xz[i][1], guess[i], &v[i]);
+            hist[i][k] = v[i].height;
+        }
+    }
+    CHECK(ocean_query(o, t, (const double(*)[2])xz, NPTS, ex) == 0, "exact query");
+    double hmax = 0, hss = 0, nmax = 0, vmax = 0, amax = 0, vrms = 0;
+    for (int i = 0; i < NPTS; i++) {
+        double dh = fabs(v[i].height - ex[i].height);
+        hmax = fmax(hmax, dh);
+        hss += dh * dh;
+        double dot = v[i].normal[0] * ex[i].normal[0] + v[i].normal[1] * ex[i].normal[1] + v[i].normal[2] * ex[i].normal[2];
+        nmax = fmax(nmax, acos(fmin(1.0, dot)) * 180 / M_PI);
+        double vel, acc;
+        probe_derivatives(hist[i], times, &vel, &acc);
+        vmax = fmax(vmax, fabs(vel - ex[i].vertical_velocity));
+        amax = fmax(amax, fabs(acc - ex[i].vertical_acceleration));
+        vrms += ex[i].vertical_velocity * ex[i].vertical_velocity;
+    }
+    double hrms = sqrt(hss / NPTS);
+    printf("{\"test\": \"probe_accuracy\", \"N\": %d, \"choppiness\": %g, \"points\": %d, \"height_err_max_mm\": %.2f, "
+           "\"height_err_rms_mm\": %.2f, \"normal_err_max_deg\": %.3f, \"vvel_err_max\": %.4f, \"vvel_rms\": %.3f, "
+           "\"vacc_err_max\": %.4f}\n",
+           p.resolution, choppiness, NPTS, hmax * 1e3, hrms * 1e3, nmax, vmax, sqrt(vrms / NPTS), amax);
+    CHECK(hmax <= lim->height_max, "chop %g: height error %.4f m > %.4f", choppiness, hmax, lim->height_max);
+    CHECK(hrms <= lim->height_rms, "chop %g: height rms error %.4f m > %.4f", choppiness, hrms, lim->height_rms);
+    CHECK(nmax <= lim->normal_deg, "chop %g: normal error %.3f deg > %.3f", choppiness, nmax, lim->normal_deg);
+    CHECK(vmax <= lim->vel_max, "chop %g: velocity error %.4f > %.4f", choppiness, vmax, lim->vel_max);
+    CHECK(amax <= lim->acc_max, "chop %g: acceleration error %.4f > %.4f", choppiness, amax, lim->acc_max);
+    ocean_free(o);
+}
+
+static void messages(void)
+{
+    struct ctl_error e;
+    static struct query_req q;
+    static struct probe_req pr;
+    const char *bad[] = {
+        "{\"points\":[]}", "{\"points\":5}", "{}", "{\"points\":[[1]]}", "{\"points\":[[1,2,3]]}",
+        "{\"points\":[[1,\"2\"]]}", "{\"points\":[[1e999,2]]}", "{\"points\":[[1,2]],\"time\":\"now\"}",
+        "{\"points\":[[1,2]],\"time\":-1e999}", "{\"points\":[{\"x\":1}]}",
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        cJSON *j = cJSON_Parse(bad[i]);
+        CHECK(j && query_parse(j, &q, &e) == -1 && strcmp(e.code, "bad_query") == 0, "accepted %s", bad[i]);
+        cJSON_Delete(j);
+    }
+    cJSON *big = cJSON_CreateObject(), *arr = cJSON_AddArrayToObject(big, "points");
+    for (int i = 0; i < QUERY_MAX_POINTS + 1; i++) {
+        double xy[2] = { i, -i };
+        cJSON_AddItemToArray(arr, cJSON_CreateDoubleArray(xy, 2));
+    }
+    CHECK(query_parse(big, &q, &e) == -1 && strcmp(e.code, "too_many_points") == 0, "257 points accepted");
+    cJSON_DeleteItemFromArray(arr, 0);
+    CHECK(query_parse(big, &q, &e) == 0 && q.n == QUERY_MAX_POINTS && !q.has_time && q.xz[0][0] == 1, "256 points");
+    CHECK(probe_parse(big, 16, &pr, &e) == -1 && strcmp(e.code, "too_many_points") == 0, "probe over its cap");
+    cJSON_Delete(big);
+    cJSON *ok = cJSON_Parse("{\"points\":[[-1e12,3.5]],\"time\":12.25}");
+    CHECK(query_parse(ok, &q, &e) == 0 && q.n == 1 && q.has_time && q.time == 12.25 && q.xz[0][0] == -1e12, "good");
+    cJSON_Delete(ok);
+    cJSON *none = cJSON_Parse("{\"points\":[]}");
+    CHECK(probe_parse(none, 16, &pr, &e) == 0 && pr.n == 0, "empty probe = unsubscribe");
+    cJSON_Delete(none);
+    struct probe_value pv[2] = { { 1.23456, -0.5, 0.25, { 0, 1, 0 }, 0.1, -0.2 }, { 0, 0, 0, { 0, 1, 0 }, 0, 0 } };
+    char *txt = probe_data_text(42, 1.5, 7, 2, pv);
+    cJSON *j = cJSON_Parse(txt);
+    const cJSON *pts = cJSON_GetObjectItem(j, "points");
+    CHECK(j && cJSON_GetArraySize(pts) == 2 && cJSON_GetObjectItem(j, "seq")->valuedouble == 42 &&
+              fabs(cJSON_GetArrayItem(cJSON_GetArrayItem(pts, 0), 0)->valuedouble - 1.2346) < 1e-9,
+          "probe_data round trip: %s", txt);
+    cJSON_Delete(j);
+    free(txt);
+}
+
+int main(void)
+{
+    messages();
+    /* Limits: the measured errors (docs/query.md) with headroom. */
+    struct limits l0 = { 0.022, 0.0075, 4.5, 0.12, 1.0 };
+    struct limits l1 = { 0.022, 0.0075, 5.0, 0.12, 1.4 };
+    struct limits l2 = { 0.040, 0.0090, 5.0, 0.20, 4.5 };
+    accuracy(0, &l0);
+    accuracy(1, &l1);
+    accuracy(2, &l2);
+    if (failures)
+        fprintf(stderr, "test_probe: %d failures\n", failures);
+    else
+        printf("test_probe: ok\n");
+    return failures ? 1 : 0;
+}

@@ -1,0 +1,376 @@
+#!/usr/bin/python3
+"""Integration tests of point queries and probes (issue 14, PROTOCOL.md §7.4)
+against a real oceand, reusing test_daemon.py's harness.
+
+    /usr/bin/python3 tests/daemon/test_query.py --oceand build/oceand \
+        --frame-check build/frame_check --query-ref build/query_ref
+
+- `query` equals the library's exact reference (build/query_ref: ocean_query
+  for the same parameters and sim time) at random points, including negative
+  and very large coordinates, with choppiness 0, 1 and 2;
+- on grid nodes with choppiness 0, `query` heights equal the lossless
+  streamed grid of the same tick (float32 FFT vs double sum: within 0.1 mm);
+- malformed queries and probes get coded errors and change nothing;
+- the global point budget answers `busy`;
+- a probe's heave over 60 s of sim time has Hs within 5 % of 4 sqrt(var) of
+  the streamed height field over the same span, and its spectrum peaks at the
+  field's peak frequency.
+"""
+import argparse
+import asyncio
+import json
+import math
+import os
+import random
+import shutil
+import subprocess
+import sys
+import time
+import traceback
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.join(HERE, "..", "..", "proto", "examples"))
+import test_daemon as td  # noqa: E402
+import oceanproto  # noqa: E402
+from test_daemon import TestFailure, check, connect, recv_json, recv_frame  # noqa: E402
+
+TESTS = []
+QUERY_REF = None
+
+
+def test(fn):
+    TESTS.append(fn)
+    return fn
+
+
+def query_ref(d, params, t, points):
+    path = os.path.join(d.tmp, "query-%d.json" % time.monotonic_ns())
+    with open(path, "w") as f:
+        json.dump({"params": params, "time": t, "points": points}, f)
+    r = subprocess.run([QUERY_REF, path], capture_output=True, text=True, timeout=120)
+    check(r.returncode == 0, "query_ref failed: %s" % r.stderr)
+    return json.loads(r.stdout)["points"]
+
+
+def angle_deg(a, b):
+    dot = sum(x * y for x, y in zip(a, b))
+    return math.degrees(math.acos(max(-1.0, min(1.0, dot))))
+
+
+async def set_params(ws, params, rid):
+    await ws.send(json.dumps({"type": "set", "id": rid, "params": params}))
+    m = await recv_json(ws, lambda m: m.get("id") == rid, timeout=10)
+    check(m["type"] == "params", "set refused: %r" % m)
+    return m
+
+
+@test
+def test_query_matches_exact_reference(d):
+    rnd = random.Random(14)
+    points = [[rnd.uniform(-300, 300), rnd.uniform(-300, 300)] for _ in range(20)]
+    points += [[-1e7 + 0.25, 3.5e6], [1e9, -1e9], [-0.5, -0.5], [123456.789, -98765.4321]]
+
+    async def run():
+        ws, hello = await connect(d)
+        rid = 10
+        # same N (the builder's prepared amplitudes), then a new N and seed (a new grid)
+        for change in ({"choppiness": 0}, {"choppiness": 1}, {"choppiness": 2},
+                       {"resolution": td.BASE_N // 2, "seed": 5, "choppiness": 1.5}):
+            chop = change["choppiness"]
+            rid += 1
+            p = await set_params(ws, change, rid)
+            rid += 1
+            await ws.send(json.dumps({"type": "query", "id": rid, "points": points}))
+            r = await recv_json(ws, lambda m: m.get("id") == rid, timeout=20)
+            check(r["type"] == "query_result", "query refused: %r" % r)
+            check(r["params_version"] == p["params_version"], "version %r, set gave %r" % (r["params_version"], p["params_version"]))
+            check(len(r["points"]) == len(points), "points answered: %d" % len(r["points"]))
+            ref = query_ref(d, p["params"], r["sim_time"], points)
+            worst_h = worst_n = 0
+            for got, want in zip(r["points"], ref):
+                for k in ("height", "displacement", "normal", "vertical_velocity", "vertical_acceleration"):
+                    check(k in got, "member %s missing" % k)
+                worst_h = max(worst_h, abs(got["height"] - want["height"]))
+                worst_n = max(worst_n, angle_deg(got["normal"], want["normal"]))
+                check(abs(math.hypot(*got["normal"]) - 1) < 1e-9, "normal not unit: %r" % got["normal"])
+                check(all(abs(a - b) < 1e-6 for a, b in zip(got["displacement"], want["displacement"])),
+                      "displacement %r vs %r" % (got["displacement"], want["displacement"]))
+                check(abs(got["vertical_velocity"] - want["vertical_velocity"]) < 1e-6, "vertical velocity")
+                check(abs(got["vertical_acceleration"] - want["vertical_acceleration"]) < 1e-6, "vertical acceleration")
+            check(worst_h <= 0.001, "choppiness %g: height error %.6f m > 1 mm" % (chop, worst_h))
+            check(worst_n <= 0.5, "choppiness %g: normal error %.3f deg > 0.5" % (chop, worst_n))
+            print("    choppiness %g: max height error %.2e m, normal %.2e deg" % (chop, worst_h, worst_n))
+        await ws.close()
+    asyncio.run(run())
+
+
+def frame_grid(msg, field="height"):
+    f = oceanproto.decode_frame(msg)
+    a = oceanproto.Assembler([field], f.tiles[0].lod if f.tiles else 0)
+    a.add(f)
+    check(a.complete(), "frame does not hold the whole %s grid" % field)
+    return f, a.fields[field]
+
+
+@test
+def test_query_on_grid_nodes_equals_streamed_grid(d):
+    """Choppiness 0: a grid node is its own source, so query height = the FFT
+    grid's sample at the same tick (lossless frame)."""
+    async def run():
+        ws, hello = await connect(d)
+        await set_params(ws, {"choppiness": 0}, 1)
+        await ws.send(json.dumps({"type": "subscribe", "id": 2, "fields": ["height"], "lod": 0, "bound": 0}))
+        await recv_json(ws, lambda m: m.get("id") == 2)
+        _, msg = await recv_frame(ws, lambda h, b: h["params_version"] >= 1 and
+                                  td.tiles(b) and td.tiles(b)[0]["codec"] == 0, timeout=10)
+        f, grid = frame_grid(msg)
+        n, L = f.n, f.patch_size
+        rnd = random.Random(3)
+        nodes = [(rnd.randrange(n), rnd.randrange(n)) for _ in range(32)]
+        # the same nodes shifted by whole patches: the sea is periodic
+        pts = [[ix * L / n + L * rnd.randint(-1000, 1000), iz * L / n - L * rnd.randint(-1000, 1000)] for ix, iz in nodes]
+        await ws.send(json.dumps({"type": "query", "id": 3, "points": pts, "time": f.sim_time}))
+        r = await recv_json(ws, lambda m: m.get("id") == 3, timeout=10)
+        check(r["type"] == "query_result", "refused: %r" % r)
+        check(r["params_version"] == f.params_version, "version differs from the frame's")
+        worst = max(abs(p["height"] - float(grid[iz, ix])) for p, (ix, iz) in zip(r["points"], nodes))
+        check(worst < 1e-4, "query vs lossless grid: %.2e m" % worst)
+        print("    grid nodes: max |query - streamed| = %.2e m (seq %d)" % (worst, f.seq))
+        await ws.close()
+    asyncio.run(run())
+
+
+BAD_QUERIES = [
+    ('{"type":"query","id":1,"points":[[NaN,1]]}', "bad_json"),
+    ('{"type":"query","id":2,"points":[[1e999,1]]}', "bad_query"),
+    ('{"type":"query","id":3,"points":%s}' % json.dumps([[i, i] for i in range(257)]), "too_many_points"),
+    ('{"type":"query","id":4,"points":[["a",1]]}', "bad_query"),
+    ('{"type":"query","id":5,"points":[[1,2,3]]}', "bad_query"),
+    ('{"type":"query","id":6,"points":{"x":1}}', "bad_query"),
+    ('{"type":"query","id":7}', "bad_query"),
+    ('{"type":"query","id":8,"points":[]}', "bad_query"),
+    ('{"type":"query","id":9,"points":[[1,2]],"time":"now"}', "bad_query"),
+    ('{"type":"query","id":10,"points":[[1,2]],"time":-1000}', "time_out_of_window"),
+    ('{"type":"query","id":11,"points":[[1,2]],"time":1e12}', "time_out_of_window"),
+    ('{"type":"probe","id":12,"points":[[1,"x"]]}', "bad_probe"),
+    ('{"type":"probe","id":13,"points":%s}' % json.dumps([[i, i] for i in range(17)]), "too_many_points"),
+    ('{"type":"probe","id":14,"points":[[1e999,0]]}', "bad_probe"),
+]
+
+
+@test
+def test_malformed_queries_get_coded_errors(d):
+    async def run():
+        ws, hello = await connect(d)
+        v0 = hello["params_version"]
+        for text, code in BAD_QUERIES:
+            await ws.send(text)
+            m = await recv_json(ws, lambda m: m.get("type") in ("error", "query_result", "probing"))
+            check(m["type"] == "error" and m["code"] == code, "%s...: %r, wanted %s" % (text[:50], m, code))
+            if code != "bad_json":
+                check(m.get("id") is not None, "error without the request id: %r" % m)
+            await asyncio.sleep(0.06)   # stay under the control rate limit
+        # nothing changed: same version, frames flow, no probes, a good query works
+        await ws.send(json.dumps({"type": "query", "id": 99, "points": [[0, 0]]}))
+        m = await recv_json(ws, lambda m: m.get("id") == 99)
+        check(m["type"] == "query_result" and m["params_version"] == v0, "good query after bad ones: %r" % m)
+        h, _ = await recv_frame(ws)
+        check(h["params_version"] == v0, "version moved")
+        t_end = time.time() + 0.5
+        while time.time() < t_end:
+            try:
+                msg = await asyncio.wait_for(ws.recv(), 0.5)
+            except asyncio.TimeoutError:
+                break
+            check(not (isinstance(msg, str) and json.loads(msg).get("type") == "probe_data"),
+                  "a refused probe produced probe_data")
+        await ws.close()
+    asyncio.run(run())
+
+
+@test
+def test_past_time_and_snapshot_limit(d):
+    """A query at a past time gets the version in force then; after more than
+    three physics changes the oldest snapshot is gone (memory stays bounded)."""
+    async def run():
+        ws, hello = await connect(d)
+        v0 = hello["params_version"]
+        await ws.send(json.dumps({"type": "query", "id": 1, "points": [[3, 4]]}))
+        r0 = await recv_json(ws, lambda m: m.get("id") == 1)
+        t0, h0 = r0["sim_time"], r0["points"][0]["height"]
+        for i, w in enumerate((11, 12, 13, 14)):
+            await set_params(ws, {"wind_speed": w}, 10 + i)
+        # the current tick: the newest version
+        await ws.send(json.dumps({"type": "query", "id": 2, "points": [[3, 4]]}))
+        r = await recv_json(ws, lambda m: m.get("id") == 2)
+        check(r["type"] == "query_result" and r["params_version"] == v0 + 4, "current: %r" % r)
+        # before the four changes: that snapshot was the fourth oldest, now dropped
+        await ws.send(json.dumps({"type": "query", "id": 3, "points": [[3, 4]], "time": t0}))
+        r = await recv_json(ws, lambda m: m.get("id") == 3)
+        check(r["type"] == "error" and r["code"] == "time_out_of_window", "oldest snapshot kept: %r" % r)
+        await ws.close()
+
+    async def recent():
+        # With one change, the time before it is still answered with the old version and values.
+        ws, hello = await connect(d)
+        await ws.send(json.dumps({"type": "query", "id": 1, "points": [[3, 4]]}))
+        r0 = await recv_json(ws, lambda m: m.get("id") == 1)
+        p = await set_params(ws, {"wind_speed": 9}, 2)
+        await ws.send(json.dumps({"type": "query", "id": 3, "points": [[3, 4]], "time": r0["sim_time"]}))
+        r = await recv_json(ws, lambda m: m.get("id") == 3)
+        check(r["type"] == "query_result" and r["params_version"] == r0["params_version"], "past: %r" % r)
+        # same snapshot, time and point: equal up to the summation order of the vector loops
+        check(abs(r["points"][0]["height"] - r0["points"][0]["height"]) < 1e-9, "past height differs: %r vs %r" % (r, r0))
+        check(p["params_version"] == r0["params_version"] + 1, "version")
+        await ws.close()
+    asyncio.run(run())
+    asyncio.run(recent())
+
+
+@test
+def test_query_budget_answers_busy():
+    d = td.Daemon("--query-budget", "10")
+    try:
+        async def run():
+            ws, _ = await connect(d)
+            pts = [[i * 0.7, -i * 1.3] for i in range(256)]
+            codes = []
+            for rid in range(1, 4):
+                await ws.send(json.dumps({"type": "query", "id": rid, "points": pts}))
+                m = await recv_json(ws, lambda m: m.get("id") == rid, timeout=30)
+                codes.append(m["type"] if m["type"] != "error" else m["code"])
+            check(codes[0] == "query_result", "first 256-point query: %r" % codes)
+            check("busy" in codes[1:], "budget of 10 points/s not enforced: %r" % codes)
+            await ws.close()
+        asyncio.run(run())
+        check(d.stop()[0] == 0, "exit code")
+    finally:
+        d.kill()
+        shutil.rmtree(d.tmp, ignore_errors=True)
+
+
+
+
+def peak_frequency(series, dt):
+    """Frequency of the largest bin of the mean periodogram (Hann window) of the columns."""
+    x = series - series.mean(axis=0)
+    w = np.hanning(x.shape[0])[:, None]
+    p = (np.abs(np.fft.rfft(x * w, axis=0)) ** 2).mean(axis=1)
+    f = np.fft.rfftfreq(x.shape[0], dt)
+    p[0] = 0
+    return f[int(np.argmax(p))], f[1] - f[0]
+
+
+@test
+def test_probe_heave_hs_and_peak():
+    """64 probes for 60 s of sim time (time_scale 4): Hs of their heave series
+    within 5 % of 4 sqrt(var) of the streamed height field over the same span,
+    spectral peak at the field's peak frequency."""
+    scale = 4.0
+    d = td.Daemon("--time-scale", str(scale), "--probe-max-points", "64")
+    try:
+        async def run():
+            ws, hello = await connect(d)
+            L = hello["params"]["patch_size"]
+            pts = [[(i + 0.5) * L / 8 + 0.37, (j + 0.5) * L / 8 - 0.21] for i in range(8) for j in range(8)]
+            await ws.send(json.dumps({"type": "subscribe", "id": 1, "fields": ["height"], "lod": 2, "bound": 0,
+                                      "max_rate": 10}))
+            await recv_json(ws, lambda m: m.get("id") == 1)
+            await ws.send(json.dumps({"type": "probe", "id": 2, "points": pts}))
+            await recv_json(ws, lambda m: m.get("id") == 2)
+            heave, ht, grids, gt = [], [], [], []
+            t0 = None
+            while True:
+                msg = await asyncio.wait_for(ws.recv(), 5)
+                if isinstance(msg, str):
+                    m = json.loads(msg)
+                    if m.get("type") != "probe_data":
+                        continue
+                    if t0 is None:
+                        t0 = m["sim_time"]
+                    heave.append([p[0] for p in m["points"]])
+                    ht.append(m["sim_time"])
+                    if m["sim_time"] - t0 >= 60.0:
+                        break
+                elif t0 is not None:
+                    f, g = frame_grid(msg)
+                    grids.append(g.astype(np.float64))
+                    gt.append(f.sim_time)
+            return np.array(heave), np.array(ht), np.array(grids), np.array(gt)
+        heave, ht, grids, gt = asyncio.run(run())
+        check(len(ht) > 100 and len(gt) > 50, "too few samples: %d probe ticks, %d frames" % (len(ht), len(gt)))
+        gaps = np.diff(ht)
+        check(gaps.min() > 0, "probe ticks out of order")
+        hs_probe = 4 * heave.std()
+        hs_field = 4 * grids.std()
+        rel = abs(hs_probe - hs_field) / hs_field
+        # peak frequency: the probes' heave vs the streamed field's own time series,
+        # both resampled onto a uniform time grid
+        tu = np.arange(ht[0], ht[-1], 0.25)
+        hu = np.stack([np.interp(tu, ht, heave[:, k]) for k in range(heave.shape[1])], axis=1)
+        fp_probe, df = peak_frequency(hu, 0.25)
+        tg = np.arange(gt[0], gt[-1], 0.25)
+        flat = grids.reshape(len(gt), -1)[:, ::7]
+        gu = np.stack([np.interp(tg, gt, flat[:, k]) for k in range(flat.shape[1])], axis=1)
+        fp_field, dfg = peak_frequency(gu, 0.25)
+        print("    Hs probe %.3f m, field %.3f m (%.1f %%); peak %.4f Hz probe, %.4f Hz field (bins %.4f Hz); "
+              "%d probe ticks, %d frames" % (hs_probe, hs_field, 100 * rel, fp_probe, fp_field, df, len(ht), len(gt)))
+        check(rel <= 0.05, "Hs of the probes %.3f m vs the field %.3f m: %.1f %% apart" % (hs_probe, hs_field, 100 * rel))
+        check(abs(fp_probe - fp_field) <= 1.5 * max(df, dfg),
+              "heave peak %.4f Hz vs the field's %.4f Hz" % (fp_probe, fp_field))
+        check(d.stop()[0] == 0, "exit code")
+    finally:
+        d.kill()
+        shutil.rmtree(d.tmp, ignore_errors=True)
+
+
+def main():
+    global QUERY_REF
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--oceand", default="build/oceand")
+    ap.add_argument("--frame-check", default="build/frame_check")
+    ap.add_argument("--query-ref", default="build/query_ref")
+    ap.add_argument("--sanitized", action="store_true")
+    ap.add_argument("-k", default="")
+    args = ap.parse_args()
+    td.ARGS = args
+    QUERY_REF = args.query_ref
+    if args.sanitized:
+        td.BASE_N = 128
+    passed = failed = 0
+    for fn in TESTS:
+        if args.k not in fn.__name__:
+            continue
+        t0 = time.time()
+        print("--- %s" % fn.__name__, flush=True)
+        try:
+            if fn.__code__.co_argcount == 1:
+                d = td.Daemon()
+                try:
+                    fn(d)
+                    rc, _ = d.stop()
+                    check(rc == 0, "daemon exit code %r; log:\n%s" % (rc, d.read_log()))
+                    log = d.read_log()
+                    check("ERROR: AddressSanitizer" not in log and "runtime error:" not in log,
+                          "sanitizer report:\n%s" % log)
+                finally:
+                    d.kill()
+                    shutil.rmtree(d.tmp, ignore_errors=True)
+            else:
+                fn()
+            passed += 1
+            print("ok   %s (%.1f s)" % (fn.__name__, time.time() - t0), flush=True)
+        except Exception as e:
+            failed += 1
+            print("FAIL %s: %s" % (fn.__name__, e), flush=True)
+            if not isinstance(e, TestFailure):
+                traceback.print_exc()
+    print("%d passed, %d failed" % (passed, failed))
+    sys.exit(1 if failed else 0)
+
+
+if __name__ == "__main__":
+    main()
