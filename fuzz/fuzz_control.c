@@ -66,6 +66,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     } else if (m.type == CTL_PING) {
         free(control_print(control_pong_msg(m.id, m.has_t, m.t, 1)));
     }
+    if (m.name) { /* a `name`, or a set's: checked, so it fits a session's buffer */
+        check(strlen(m.name) < CTL_NAME_BYTES && control_check_name(m.name, &e) == 0);
+        free(control_print(control_named_msg(m.name, m.id)));
+    }
     ctl_msg_free(&m);
     return 0;
 }

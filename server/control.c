@@ -20,7 +20,8 @@
 #define SAME_NUMBER(a, b) ((int)(a) == (int)(b))
 _Static_assert(SAME_NUMBER(OCEAN_HEIGHT, OC_FIELD_HEIGHT) && SAME_NUMBER(OCEAN_DX, OC_FIELD_DX) &&
                    SAME_NUMBER(OCEAN_DZ, OC_FIELD_DZ) && SAME_NUMBER(OCEAN_SLOPE_X, OC_FIELD_SLOPE_X) &&
-                   SAME_NUMBER(OCEAN_SLOPE_Z, OC_FIELD_SLOPE_Z) && SAME_NUMBER(OCEAN_JACOBIAN, OC_FIELD_JACOBIAN),
+                   SAME_NUMBER(OCEAN_SLOPE_Z, OC_FIELD_SLOPE_Z) && SAME_NUMBER(OCEAN_JACOBIAN, OC_FIELD_JACOBIAN) &&
+                   SAME_NUMBER(OCEAN_FOAM, OC_FIELD_FOAM),
                "ocean_field and oc_field must number the fields alike");
 _Static_assert(SAME_NUMBER(OCEAN_FIELD_COUNT, OC_FIELD_COUNT), "ocean_field and oc_field must have the same fields");
 _Static_assert(CTL_MAX_LOD == OC_MAX_LOD, "CTL_MAX_LOD must be the wire's OC_MAX_LOD");
@@ -146,6 +147,14 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
         if (tok && !cJSON_IsString(tok))
             rc = fail(e, "bad_message", NULL, "\"token\" must be a string");
         m->token = cJSON_GetStringValue(tok);
+    } else if (strcmp(ts, "name") == 0) {
+        m->type = CTL_NAME;
+        const cJSON *nm = cJSON_GetObjectItemCaseSensitive(root, "name");
+        if (!cJSON_IsString(nm))
+            rc = fail(e, "bad_name", NULL, "\"name\" needs a \"name\" string (\"\" for none)");
+        else if (control_check_name(nm->valuestring, e) != 0)
+            rc = -1;
+        m->name = cJSON_GetStringValue(nm);
     } else if (strcmp(ts, "subscribe") == 0) {
         m->type = CTL_SUBSCRIBE;
     } else if (strcmp(ts, "pause") == 0) {
@@ -165,6 +174,15 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
         m->t = t ? t->valuedouble : 0;
     } else {
         rc = fail(e, "unknown_type", NULL, "unknown message type \"%.40s\"", ts);
+    }
+    if (!rc && (m->type == CTL_SET || m->type == CTL_PAUSE || m->type == CTL_RESUME)) {
+        /* Optional on the requests that change the sea: the sender's display name. */
+        const cJSON *nm = cJSON_GetObjectItemCaseSensitive(root, "name");
+        if (nm && !cJSON_IsString(nm))
+            rc = fail(e, "bad_name", NULL, "\"name\" must be a string");
+        else if (nm && control_check_name(nm->valuestring, e) != 0)
+            rc = -1;
+        m->name = cJSON_GetStringValue(nm);
     }
     if (rc) {
         if (id_out && id)
@@ -421,6 +439,11 @@ cJSON *control_schema(void)
         if (d->flags & PARAM_PLAYBACK)
             cJSON_AddTrueToObject(o, "playback");
         cJSON_AddStringToObject(o, "description", d->description ? d->description : "");
+        /* For people (the panel): a row without UI text falls back to its name. */
+        const struct param_ui *ui = param_ui(d);
+        cJSON_AddStringToObject(o, "label", ui ? ui->label : d->name);
+        cJSON_AddStringToObject(o, "group", param_group_name(ui ? ui->group : PARAM_GROUP_ADVANCED));
+        cJSON_AddStringToObject(o, "help", ui ? ui->help : "");
         cJSON_AddItemToArray(a, o);
     }
     return a;
@@ -573,6 +596,72 @@ cJSON *control_capacity_object(const struct capacity_info *c)
         cJSON_AddNumberToObject(e, "full_rate_fields", z->full_rate_fields);
         cJSON_AddItemToArray(a, e);
     }
+    return o;
+}
+
+/* One code point of strict UTF-8 (no overlong forms, no surrogates, at
+ * most U+10FFFF) at s: its length, or 0 if invalid. Hand-written: cJSON
+ * passes bytes through unchecked, and the check is a dozen lines. */
+static int utf8_next(const unsigned char *s, uint32_t *cp)
+{
+    unsigned char c = s[0];
+    int len = c < 0x80 ? 1 : (c & 0xe0) == 0xc0 ? 2 : (c & 0xf0) == 0xe0 ? 3 : (c & 0xf8) == 0xf0 ? 4 : 0;
+    if (!len)
+        return 0;
+    uint32_t v = len == 1 ? c : c & (0x7fu >> len);
+    for (int i = 1; i < len; i++) {
+        if ((s[i] & 0xc0) != 0x80)
+            return 0; /* also stops at the NUL */
+        v = v << 6 | (s[i] & 0x3fu);
+    }
+    static const uint32_t least[5] = {0, 0, 0x80, 0x800, 0x10000};
+    if (v < least[len] || v > 0x10ffff || (v >= 0xd800 && v <= 0xdfff))
+        return 0;
+    *cp = v;
+    return len;
+}
+
+/* Characters a name may not hold although they are valid UTF-8: controls,
+ * and the invisible ones that could make a name look like another or
+ * reorder the text around it. */
+static bool name_char_refused(uint32_t c)
+{
+    return c < 0x20 || (c >= 0x7f && c < 0xa0) || c == 0xad || (c >= 0x200b && c <= 0x200f) ||
+           (c >= 0x2028 && c <= 0x202e) || (c >= 0x2060 && c <= 0x206f) || c == 0xfeff ||
+           (c >= 0xe000 && c <= 0xf8ff) || (c >= 0xfff0 && c <= 0xffff) || (c & 0xfffe) == 0xfffe ||
+           (c >= 0xfdd0 && c <= 0xfdef) || c >= 0xf0000;
+}
+
+int control_check_name(const char *s, struct ctl_error *e)
+{
+    const unsigned char *p = (const unsigned char *)s;
+    size_t chars = 0;
+    uint32_t c = 0;
+    while (*p) {
+        int len = utf8_next(p, &c);
+        if (!len)
+            return fail(e, "bad_name", NULL, "name is not valid UTF-8 (byte %zu)", (size_t)(p - (const unsigned char *)s));
+        if (++chars > CTL_NAME_MAX_CHARS)
+            return fail(e, "bad_name", NULL, "name longer than %d characters", CTL_NAME_MAX_CHARS);
+        if (c < 0x80 && strchr("<>&\"'", (int)c))
+            return fail(e, "bad_name", NULL, "name may not contain %c (no markup: < > & \" ')", (int)c);
+        if (name_char_refused(c))
+            return fail(e, "bad_name", NULL, "name may not contain U+%04X (control or invisible character)", (unsigned)c);
+        if (chars == 1 && c == ' ')
+            return fail(e, "bad_name", NULL, "name may not start with a space");
+        p += len;
+    }
+    if (chars && c == ' ')
+        return fail(e, "bad_name", NULL, "name may not end with a space");
+    return 0;
+}
+
+cJSON *control_named_msg(const char *name, const cJSON *id)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "type", "named");
+    add_id(o, id);
+    cJSON_AddStringToObject(o, "name", name);
     return o;
 }
 

@@ -44,7 +44,12 @@ struct ctl_limits {
 };
 
 enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING,
-                CTL_QUERY, CTL_PROBE /* members checked by query_msg.c */ };
+                CTL_QUERY, CTL_PROBE /* members checked by query_msg.c */, CTL_NAME };
+
+/* Display names (PROTOCOL.md §7.1 `name`): at most CTL_NAME_MAX_CHARS code
+ * points of printable Unicode, UTF-8; CTL_NAME_BYTES holds any valid one. */
+#define CTL_NAME_MAX_CHARS 32
+#define CTL_NAME_BYTES (4 * CTL_NAME_MAX_CHARS + 1)
 
 struct ctl_msg {
     enum ctl_type type;
@@ -53,6 +58,8 @@ struct ctl_msg {
     const cJSON *params;    /* CTL_SET: the "params" object */
     const char *token;      /* CTL_SET: optional "token", or NULL */
     double t;               /* CTL_PING: echoed "t" */
+    const char *name;       /* CTL_NAME, or a `set`'s optional "name": a checked display name
+                             * ("" = none), inside root; NULL when not given */
     bool has_t;
 };
 
@@ -137,6 +144,15 @@ cJSON *control_hello_msg(const struct hello_info *h);
 /* Token check for `set`/`pause`/`resume`, in constant time (no early exit
  * at the first wrong byte). */
 bool control_token_equal(const char *given, const char *secret);
+
+/* Whether s may be a display name: valid UTF-8, at most CTL_NAME_MAX_CHARS
+ * code points, none of them a control or invisible formatting character
+ * (C0, C1, bidi overrides, zero-width, private use, noncharacters) or
+ * markup (< > & " '), no space at either end; "" (no name) is allowed.
+ * Returns 0, or -1 with e filled (code "bad_name"). */
+int control_check_name(const char *s, struct ctl_error *e);
+/* {"type":"named","id":...,"name":"..."}: the display name now in force. */
+cJSON *control_named_msg(const char *name, const cJSON *id);
 
 /* Print and delete: returns malloc'd text (free()), NULL on no memory. */
 char *control_print(cJSON *msg);

@@ -33,7 +33,7 @@ if (existsSync(fzstdPath)) {
 test('constants', () => {
   assert.equal(PROTO_VERSION, manifest.protocol);
   assert.equal(SUBPROTOCOL, manifest.subprotocol);
-  assert.deepEqual([...FIELD_NAMES], ['height', 'dx', 'dz', 'slope_x', 'slope_z', 'jacobian']);
+  assert.deepEqual([...FIELD_NAMES], ['height', 'dx', 'dz', 'slope_x', 'slope_z', 'jacobian', 'foam']);
 });
 
 for (const [v, useNodeZlib] of manifest.vectors.flatMap((x) => [[x, true], [x, false]])) {
@@ -163,6 +163,8 @@ const required = {
   pong: ['server_time_us'],
   pause: [],
   resume: [],
+  name: ['name'],
+  named: ['name'],
 };
 const cdir = join(vdir, 'control');
 for (const f of readdirSync(cdir).filter((n) => n.endsWith('.json')).sort()) {
@@ -173,7 +175,7 @@ for (const f of readdirSync(cdir).filter((n) => n.endsWith('.json')).sort()) {
     if (msg.type === 'hello') {
       assert.equal(msg.protocol, PROTO_VERSION);
       assert.deepEqual(msg.fields, [...FIELD_NAMES]);
-      for (const s of msg.schema) for (const k of ['name', 'type', 'default', 'description']) assert.ok(k in s, `schema ${s.name} lacks ${k}`);
+      for (const s of msg.schema) for (const k of ['name', 'type', 'default', 'description', 'label', 'group', 'help']) assert.ok(k in s, `schema ${s.name} lacks ${k}`);
     }
     if (msg.type === 'error') assert.match(msg.code, /^[a-z_]+$/);
   });

@@ -1078,13 +1078,15 @@ static void *prep_thread(void *arg)
     return NULL;
 }
 
+/* The fields that are a function of (params, t): all but foam, which
+ * carries its history across a reconfigure by design (test_foam). */
 static int same_fields(const struct ocean *a, const struct ocean *b)
 {
     int n = ocean_resolution(a);
     if (n != ocean_resolution(b))
         return 0;
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
-        if (memcmp(ocean_field(a, f), ocean_field(b, f), (size_t)n * n * sizeof(float)) != 0)
+        if (f != OCEAN_FOAM && memcmp(ocean_field(a, f), ocean_field(b, f), (size_t)n * n * sizeof(float)) != 0)
             return 0;
     return 1;
 }
@@ -1301,6 +1303,121 @@ static void test_wisdom(void)
     rmdir(dir);
 }
 
+/* ---- foam (ocean_foam.c) ------------------------------------------------ */
+
+/* Fraction of samples with foam >= 0.5 ("covered"). */
+static double foam_covered(const struct ocean *o)
+{
+    size_t nn = (size_t)ocean_resolution(o) * ocean_resolution(o), c = 0;
+    const float *f = ocean_field(o, OCEAN_FOAM);
+    for (size_t i = 0; i < nn; i++)
+        c += f[i] >= 0.5f;
+    return (double)c / (double)nn;
+}
+
+/* Whitecap coverage against Monahan & O'Muircheartaigh (1980), W = 3.84e-6
+ * U10^3.41, at the default parameters (N = 256, choppiness 1), stepped as
+ * the daemon does at its default 30 ticks per second: the covered fraction
+ * (foam >= 0.5), averaged over 10 s, within a factor of 2 of W. Also: foam
+ * stays in [0, 1], is reproducible, and fades once the wind drops. */
+static void test_foam(void)
+{
+    const double winds[] = {8, 12, 16, 20, 25}, dt = 1.0 / 30;
+    const int nwinds = quick ? 1 : 5, seconds = quick ? 2 : 10;
+    for (int w = 0; w < nwinds; w++) {
+        struct ocean_params p;
+        params_defaults(&p);
+        p.wind_speed = winds[quick ? 2 : w];
+        if (quick)
+            p.resolution = 64; /* coverage not checked: too few samples */
+        struct ocean *o = make(&p, 1);
+        if (!o)
+            return;
+        double sum = 0, lo = 1, hi = 0;
+        int samples = 0;
+        bool range = true;
+        size_t nn = (size_t)p.resolution * p.resolution;
+        for (int k = 0; k <= seconds * 30; k++) {
+            ocean_step(o, 100.0 + k * dt, OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_FOAM));
+            const float *f = ocean_field(o, OCEAN_FOAM);
+            for (size_t i = 0; i < nn && range; i++)
+                range = f[i] >= 0.0f && f[i] <= 1.0f;
+            if (k % 15 == 0) {
+                double c = foam_covered(o);
+                sum += c;
+                lo = fmin(lo, c);
+                hi = fmax(hi, c);
+                samples++;
+            }
+        }
+        double cov = sum / samples, W = 3.84e-6 * pow(p.wind_speed, 3.41);
+        char name[64];
+        snprintf(name, sizeof name, "foam.coverage.U%g", p.wind_speed);
+        check(range && (quick || (cov >= W / 2 && cov <= 2 * W)), name,
+              "covered fraction %.4f (%.4f..%.4f over %d s) vs Monahan & O'Muircheartaigh W = %.4f: ratio %.2f%s",
+              cov, lo, hi, seconds, W, cov / W, quick ? " (quick mode, N = 64: only the range 0..1 checked)" : "");
+        ocean_free(o);
+    }
+
+    /* Reproducible: the same (params, step times) give the same foam, and a
+     * cold start depends on (params, t) only, not on the resolution's past. */
+    struct ocean_params p;
+    params_defaults(&p);
+    p.wind_speed = 20;
+    p.resolution = quick ? 32 : 128;
+    p.patch_size = quick ? 32 : 128;
+    struct ocean *a = make(&p, 1), *b = make(&p, 2);
+    if (!a || !b) {
+        ocean_free(a);
+        ocean_free(b);
+        return;
+    }
+    size_t nn = (size_t)p.resolution * p.resolution;
+    ocean_step(a, 3.0, OCEAN_ALL_FIELDS); /* b: a different history before a gap */
+    for (int k = 0; k < 30; k++)
+        ocean_step(a, 50.0 + k / 30.0, OCEAN_FIELD_BIT(OCEAN_FOAM));
+    for (int k = 0; k < 30; k++)
+        ocean_step(b, 50.0 + k / 30.0, OCEAN_FIELD_BIT(OCEAN_FOAM));
+    double same = rel_err(ocean_field(a, OCEAN_FOAM), ocean_field(b, OCEAN_FOAM), nn);
+    double c0 = foam_covered(a);
+    /* The wind drops to nothing: no new foam, and the old fades (e-folding
+     * 3 s: after 4 s nothing is left at 0.5). */
+    p.wind_speed = 0;
+    char err[256];
+    ocean_reconfigure(a, &p, err, sizeof err);
+    double fmaxv = 0;
+    for (int k = 30; k <= 30 + 4 * 30; k++)
+        ocean_step(a, 50.0 + k / 30.0, OCEAN_FIELD_BIT(OCEAN_FOAM));
+    fmaxv = max_abs(ocean_field(a, OCEAN_FOAM), nn);
+    check(same == 0 && c0 > 0 && foam_covered(a) == 0 && fmaxv <= exp(-4.0 / 3.0) + 1e-6, "foam.deterministic_and_fades",
+          "two oceans (1 and 2 threads, different pasts) after the same steps: max diff %.1e; covered %.4f, "
+          "4 s after the wind stops: covered %.4f, max foam %.3f (<= exp(-4/3))",
+          same, c0, foam_covered(a), fmaxv);
+    ocean_free(a);
+    ocean_free(b);
+}
+
+/* Every sea parameter has a label, a group and a one-line help for the
+ * panel (params.h, struct param_ui), and no UI row names a missing one. */
+static void test_param_ui(void)
+{
+    int missing = 0, groups[3] = {0};
+    const char *first = "";
+    for (size_t i = 0; i < param_count; i++) {
+        const struct param_ui *u = param_ui(&param_table[i]);
+        bool ok = u && u->label && *u->label && u->help && *u->help && strlen(u->help) <= 100 &&
+                  !strchr(u->help, '\n') && (unsigned)u->group <= PARAM_GROUP_DEVELOPER;
+        if (!ok && !missing++)
+            first = param_table[i].name;
+        if (ok)
+            groups[u->group]++;
+    }
+    check(missing == 0 && groups[PARAM_GROUP_SEA] > 0 && groups[PARAM_GROUP_DEVELOPER] > 0 &&
+              strcmp(param_group_name(PARAM_GROUP_DEVELOPER), "developer") == 0,
+          "params.ui", "%d of %zu parameters without label/group/help (first: %s); sea %d, advanced %d, developer %d",
+          missing, param_count, first, groups[0], groups[1], groups[2]);
+}
+
 int main(void)
 {
     const char *qenv = getenv("OCEAN_TEST_QUICK");
@@ -1325,6 +1442,8 @@ int main(void)
     RUN(test_prepare_commit);
     RUN(test_memory_bytes);
     RUN(test_wisdom);
+    RUN(test_foam);
+    RUN(test_param_ui);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }

@@ -7,7 +7,7 @@
 #include <string.h>
 
 static const char *const field_names[OC_FIELD_COUNT] = {
-    "height", "dx", "dz", "slope_x", "slope_z", "jacobian",
+    "height", "dx", "dz", "slope_x", "slope_z", "jacobian", "foam",
 };
 
 const char *oc_strerror(int err)

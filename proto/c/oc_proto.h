@@ -39,6 +39,7 @@
 enum oc_field {
     OC_FIELD_HEIGHT = 0, OC_FIELD_DX = 1, OC_FIELD_DZ = 2,
     OC_FIELD_SLOPE_X = 3, OC_FIELD_SLOPE_Z = 4, OC_FIELD_JACOBIAN = 5,
+    OC_FIELD_FOAM = 6,
     OC_FIELD_COUNT
 };
 

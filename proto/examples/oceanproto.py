@@ -23,7 +23,7 @@ import numpy as np
 MAGIC = b"OCNF"
 VERSION = 1
 SUBPROTOCOL = "oceand.v1"
-FIELDS = ("height", "dx", "dz", "slope_x", "slope_z", "jacobian")   # ids 0..5 (§3.2)
+FIELDS = ("height", "dx", "dz", "slope_x", "slope_z", "jacobian", "foam")   # ids 0..6 (§3.2)
 MAX_N, MAX_LOD = 2048, 4
 
 # §3.1, §3.2: all little-endian, no padding.

@@ -16,7 +16,7 @@
 
 export const PROTO_VERSION = 1;
 export const SUBPROTOCOL = 'oceand.v1';
-export const FIELD_NAMES = Object.freeze(['height', 'dx', 'dz', 'slope_x', 'slope_z', 'jacobian']);
+export const FIELD_NAMES = Object.freeze(['height', 'dx', 'dz', 'slope_x', 'slope_z', 'jacobian', 'foam']);
 export const CODEC_RAW_F32 = 0;
 export const CODEC_QUANT_LORENZO = 1;       // deflate-raw entropy coder (default)
 export const CODEC_QUANT_LORENZO_ZSTD = 2;  // zstd entropy coder

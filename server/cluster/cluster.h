@@ -60,7 +60,7 @@
  * A layer is one field at one LOD and one error bound. Its key is the same
  * number as the daemon's sim_demand_key (the daemon checks the constants
  * agree at compile time). */
-#define CL_FIELDS    6   /* OC_FIELD_COUNT */
+#define CL_FIELDS    7   /* OC_FIELD_COUNT */
 #define CL_LODS      5   /* OC_MAX_LOD + 1 */
 #define CL_BOUNDS    5   /* CTL_BOUND_COUNT */
 #define CL_KEYS      (CL_FIELDS * CL_LODS * CL_BOUNDS)

@@ -106,7 +106,17 @@ static void rebuild_view(struct net *n)
         n->view = params_with(&n->view, &request_of(d)->values, request_of(d)->mask);
 }
 
-static void submit_set(struct net *n, struct session *s, const struct remote *rm, const cJSON *params, const cJSON *id)
+/* `params` names who caused it: the client id, and the display name if any. */
+static cJSON *with_name(cJSON *m, const char *name)
+{
+    if (m && name && name[0])
+        cJSON_AddStringToObject(m, "by_name", name);
+    return m;
+}
+
+/* name: the message's own checked "name" (applied with the set), or NULL. */
+static void submit_set(struct net *n, struct session *s, const struct remote *rm, const cJSON *params,
+                       const char *name, const cJSON *id)
 {
     struct ctl_error e;
     struct ocean_params out;
@@ -115,8 +125,12 @@ static void submit_set(struct net *n, struct session *s, const struct remote *rm
         respond_error(s, rm, &e, id);
         return;
     }
+    if (name && s)
+        snprintf(s->name, sizeof s->name, "%s", name);
+    const char *by_name = name ? name : s ? s->name : "";
     if (!changed) {
-        respond(s, rm, control_params_msg(&n->view, n->applied_version, 0, s ? s->client_id : rm->by, id));
+        respond(s, rm, with_name(control_params_msg(&n->view, n->applied_version, 0, s ? s->client_id : rm->by, id),
+                                 by_name));
         return;
     }
     struct sim_set *set = calloc(1, sizeof *set);
@@ -140,6 +154,7 @@ static void submit_set(struct net *n, struct session *s, const struct remote *rm
         snprintf(r->by, sizeof r->by, "%s", rm->by);
         snprintf(r->origin, sizeof r->origin, "%s", rm->origin);
     }
+    snprintf(r->by_name, sizeof r->by_name, "%s", by_name);
     r->id = idc;
     r->values = set->values = out;
     r->mask = set->mask = changed;
@@ -158,9 +173,9 @@ static uint64_t resolution_bit(void)
 
 /* `params` for one applied set; with tile_size when N changed, since the
  * tile side follows N below the configured size (hello has it too). */
-static cJSON *params_msg(struct net *n, const struct sim_set *a, const char *by, const cJSON *id)
+static cJSON *params_msg(struct net *n, const struct sim_set *a, const struct request *r, const cJSON *id)
 {
-    cJSON *m = control_params_msg(&a->params, a->version, a->changed, by, id);
+    cJSON *m = with_name(control_params_msg(&a->params, a->version, a->changed, r->by, id), r->by_name);
     if (m && (a->changed & resolution_bit())) {
         cJSON_AddNumberToObject(m, "tile_size", net_tile_size(n));
         net_capacity_add(n, m); /* the encode budget follows N; ~1.5 kB, so only then */
@@ -187,7 +202,7 @@ static void answer(struct net *n, const struct sim_set *a)
             n->trim_due = mono_now() + TRIM_DELAY_S;
         if (n->on_params)
             n->on_params(n->on_params_user, &n->applied, n->applied_version);
-        char *all = control_print(params_msg(n, a, r->by, NULL));
+        char *all = control_print(params_msg(n, a, r, NULL));
         for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
             if (session_of(d) != origin)
                 session_queue_text(session_of(d), all, false);
@@ -195,9 +210,9 @@ static void answer(struct net *n, const struct sim_set *a)
             n->cluster.on_params_event(n->cluster.user, all, r->origin, r->by);
         free(all);
         if (origin)
-            session_queue_json(origin, params_msg(n, a, r->by, r->id));
+            session_queue_json(origin, params_msg(n, a, r, r->id));
         else if (r->reply)
-            respond(NULL, &rm, params_msg(n, a, r->by, r->id));
+            respond(NULL, &rm, params_msg(n, a, r, r->id));
     } else if (origin || r->reply) {
         struct ctl_error e = { .code = a->status == SIM_SET_NO_MEMORY ? "internal" : "invalid" };
         snprintf(e.message, sizeof e.message, "%s", a->message);
@@ -316,11 +331,11 @@ void dispatch_query_results(struct net *n)
 static void submit_control(struct net *n, struct session *s, const struct remote *rm, const struct ctl_msg *m)
 {
     if (m->type == CTL_SET) {
-        submit_set(n, s, rm, m->params, m->id);
+        submit_set(n, s, rm, m->params, m->name, m->id);
     } else {
         cJSON *p = cJSON_CreateObject();
         cJSON_AddBoolToObject(p, "paused", m->type == CTL_PAUSE);
-        submit_set(n, s, rm, p, m->id);
+        submit_set(n, s, rm, p, m->name, m->id);
         cJSON_Delete(p);
     }
 }
@@ -370,7 +385,16 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
             break;
         }
         if (n->cluster.forward) { /* edge: the sim validates and applies it */
-            n->cluster.forward(n->cluster.user, s->serial, s->client_id, m.id, text, len);
+            /* The sim knows this client only by its id: carry its display
+             * name in the message (`name` on the set) unless it has one. */
+            char *named = NULL;
+            if (s->name[0] && !m.name && cJSON_AddStringToObject(m.root, "name", s->name))
+                named = cJSON_PrintUnformatted(m.root);
+            if (m.name)
+                snprintf(s->name, sizeof s->name, "%s", m.name);
+            n->cluster.forward(n->cluster.user, s->serial, s->client_id, m.id, named ? named : text,
+                               named ? strlen(named) : len);
+            free(named);
             break;
         }
         submit_control(n, s, NULL, &m);
@@ -394,6 +418,10 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
     }
     case CTL_PING:
         session_queue_json(s, control_pong_msg(m.id, m.has_t, m.t, unix_us()));
+        break;
+    case CTL_NAME: /* anyone may name themselves: the name only labels their own changes */
+        snprintf(s->name, sizeof s->name, "%s", m.name);
+        session_queue_json(s, control_named_msg(s->name, m.id));
         break;
     case CTL_QUERY:
         dispatch_query(n, s, m.root, m.id);

@@ -54,6 +54,7 @@ struct session {
     struct lws *wsi;              /* NULL once closed */
     uint64_t serial;              /* unique for the daemon's life; requests find their sender by it */
     char client_id[24];           /* "c<serial>": hello.client_id, params.by */
+    char name[CTL_NAME_BYTES];    /* display name (`name`, or a set's "name"), "" = none: params.by_name */
     bool controller;              /* may set without a token */
     struct subscription sub;      /* in force; counted in the sim's demand */
 
@@ -92,6 +93,7 @@ struct request {
     uint64_t tag;
     uint64_t serial;              /* sender's session serial (it may be gone by the answer) */
     char by[64];                  /* sender's client id */
+    char by_name[CTL_NAME_BYTES]; /* sender's display name at the time, "" = none */
     net_reply_fn reply;           /* sim role: a remote request, answered through reply(reply_ctx) */
     void *reply_ctx;
     char origin[64];              /* ... from this daemon (the edge) */

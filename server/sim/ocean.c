@@ -20,7 +20,7 @@
 #include "ocean_internal.h"
 
 static const char *const field_names[OCEAN_FIELD_COUNT] = {
-    "height", "dx", "dz", "slope_x", "slope_z", "jacobian"};
+    "height", "dx", "dz", "slope_x", "slope_z", "jacobian", "foam"};
 
 const char *ocean_field_name(enum ocean_field f)
 {
@@ -736,6 +736,7 @@ int ocean_commit(struct ocean *o, struct ocean_prepared *pr)
         struct ocean_grid *old = o->g;
         o->g = pr->grid;
         pr->grid = old;
+        o->foam_warm = false; /* a new grid's foam is empty: rebuild its history */
     } else {
         amps_swap(o->g, &pr->amps);
         if (pr->gauss) {
@@ -834,9 +835,7 @@ int ocean_step(struct ocean *o, double t, unsigned fields)
     if (!o || !isfinite(t))
         return -1;
     fields &= OCEAN_ALL_FIELDS;
-    if (o->p.transform == TRANSFORM_DFT)
-        return ocean_step_dft(o, t, fields);
-    return ocean_step_fft(o, t, fields);
+    return ocean_step_with_foam(o, t, fields);
 }
 
 const float *ocean_field(const struct ocean *o, enum ocean_field f)

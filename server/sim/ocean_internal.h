@@ -4,6 +4,7 @@
 #define OCEAND_OCEAN_INTERNAL_H
 
 #include <complex.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <fftw3.h>
 
@@ -105,7 +106,21 @@ struct ocean {
     struct ocean_pool *pool;   /* opt.threads - 1 workers; NULL for one thread */
     struct ocean_pool *prep_pool; /* ocean_prepare's own (another thread's), made on first use */
     unsigned long generation;  /* commits so far: a prepare made before the last one is stale */
+    /* Foam (ocean_foam.c): the state is g->out[OCEAN_FOAM] itself. */
+    double foam_time;          /* t of the last foam step */
+    bool foam_warm;            /* g->out[OCEAN_FOAM] holds history up to foam_time */
 };
+
+/* Foam model constants (ocean_foam.c, docs/simulation.md "Foam"). */
+#define FOAM_TAU 3.0            /* s, e-folding time of foam after breaking */
+#define FOAM_RAMP 0.1           /* J this far below the threshold injects full foam */
+#define FOAM_SPINUP_STEP 0.25   /* s, lattice of a cold start's history */
+#define FOAM_SPINUP_STEPS 20    /* ...that many steps: 5 s, covered foam (>= 0.5) lives ~2 s */
+#define FOAM_SPINUP_TIME (FOAM_SPINUP_STEP * FOAM_SPINUP_STEPS)
+/* The Jacobian threshold of breaking at wind speed U10 (m/s). */
+double ocean_foam_threshold(double wind_speed);
+/* ocean_step's body: the step on p.transform's path, plus the foam. */
+int ocean_step_with_foam(struct ocean *o, double t, unsigned fields);
 
 /* Test hook: bytes ever allocated for the library's arrays (grids,
  * amplitudes, normals), summed; never decreases. */

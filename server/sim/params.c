@@ -78,6 +78,64 @@ const struct param_def param_table[] = {
 const size_t param_count = sizeof param_table / sizeof param_table[0];
 _Static_assert(sizeof param_table / sizeof param_table[0] == PARAM_COUNT, "PARAM_COUNT must match the table");
 
+/* Labels, groups and one-line help for people (params.h, struct param_ui). */
+static const struct param_ui ui_table[] = {
+    {"resolution", "Resolution", PARAM_GROUP_DEVELOPER,
+     "Grid samples per side: more detail, more CPU and bandwidth"},
+    {"patch_size", "Patch size", PARAM_GROUP_ADVANCED,
+     "Side of the simulated square of sea, which repeats like a tile"},
+    {"wind_speed", "Wind speed", PARAM_GROUP_SEA,
+     "Wind 10 m above the sea: stronger wind, bigger and longer waves, more whitecaps"},
+    {"wind_direction", "Wind direction", PARAM_GROUP_SEA,
+     "Where the wind blows toward, in degrees"},
+    {"amplitude", "Wave height scale", PARAM_GROUP_ADVANCED,
+     "Multiplies the wave spectrum; 1 is the physical sea for this wind"},
+    {"spectrum", "Spectrum", PARAM_GROUP_ADVANCED,
+     "Which model of wave energy per wavelength the sea follows"},
+    {"fetch", "Fetch", PARAM_GROUP_SEA,
+     "Open water upwind: short fetch gives a young, choppy sea"},
+    {"depth", "Water depth", PARAM_GROUP_SEA,
+     "Shallow water slows waves and steepens them"},
+    {"gamma", "Peak sharpness", PARAM_GROUP_ADVANCED,
+     "JONSWAP peak enhancement: higher concentrates energy near the peak"},
+    {"directional_spread", "Directional spread", PARAM_GROUP_ADVANCED,
+     "How waves spread around the wind direction"},
+    {"swell", "Swell", PARAM_GROUP_SEA,
+     "Longer, more parallel crests, as in swell from a distant storm"},
+    {"choppiness", "Choppiness", PARAM_GROUP_SEA,
+     "Sharpens crests by moving water toward them; also makes more foam"},
+    {"small_wave_cutoff", "Small wave cutoff", PARAM_GROUP_ADVANCED,
+     "Damps ripples shorter than this wavelength"},
+    {"loop_period", "Loop period", PARAM_GROUP_ADVANCED,
+     "The sea repeats exactly after this many seconds; 0 = never"},
+    {"seed", "Random seed", PARAM_GROUP_ADVANCED,
+     "Another seed gives another sea with the same statistics"},
+    {"transform", "Transform", PARAM_GROUP_DEVELOPER,
+     "FFT, or the brute-force sum used to check it (small grids only)"},
+    {"time_scale", "Playback speed", PARAM_GROUP_SEA,
+     "Simulated seconds per real second"},
+    {"paused", "Paused", PARAM_GROUP_SEA,
+     "Stops the sea's clock for everyone"},
+};
+
+const struct param_ui *param_ui(const struct param_def *d)
+{
+    for (size_t i = 0; d && i < sizeof ui_table / sizeof ui_table[0]; i++)
+        if (strcmp(ui_table[i].name, d->name) == 0)
+            return &ui_table[i];
+    return NULL;
+}
+
+const char *param_group_name(enum param_group g)
+{
+    switch (g) {
+    case PARAM_GROUP_SEA: return "sea";
+    case PARAM_GROUP_ADVANCED: return "advanced";
+    case PARAM_GROUP_DEVELOPER: return "developer";
+    }
+    return "advanced";
+}
+
 double param_get(const struct ocean_params *p, const struct param_def *d)
 {
     const char *f = (const char *)p + d->offset;

@@ -121,7 +121,7 @@ static void test_subscribe(void)
           "subscribed text %s", s);
     free(s);
     cJSON_Delete(m);
-    const char *bad[] = { "{\"fields\":[]}", "{\"fields\":[\"foam\"]}", "{\"lod\":5}", "{\"lod\":1.5}",
+    const char *bad[] = { "{\"fields\":[]}", "{\"fields\":[\"spray\"]}", "{\"lod\":5}", "{\"lod\":1.5}",
                           "{\"bound\":0.002}", "{\"max_rate\":0}", "{\"tiles\":\"some\"}", "{\"tiles\":[[0,40]]}",
                           "{\"tiles\":[[0]]}" };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
@@ -752,6 +752,71 @@ static void test_capacity_plan(void)
         CHECK(ci.sizes[i].fits_memory == control_fits_memory(ci.sizes[i].n, 256), "fits_memory of %d", ci.sizes[i].n);
 }
 
+/* Display names (PROTOCOL.md §7.1 `name`): what is accepted and refused,
+ * by control_check_name and through control_parse (`name`, and `set`'s
+ * optional "name"); a refused name is bad_name with the id kept. */
+static void test_display_names(void)
+{
+    struct ctl_error e;
+    static const char *const good[] = {"", "Ana", "Zo\xc3\xab", "\xe6\xb5\xb7", "a b", "x-y_z.1",
+                                       "\xf0\x9f\x8c\x8a wave", /* U+1F30A: 4 bytes */
+                                       "12345678901234567890123456789012"};
+    for (size_t i = 0; i < sizeof good / sizeof good[0]; i++)
+        CHECK(control_check_name(good[i], &e) == 0, "good name %zu refused: %s", i, e.message);
+    char cjk32[CTL_NAME_BYTES], cjk33[CTL_NAME_BYTES + 3];
+    cjk32[0] = cjk33[0] = 0;
+    for (int i = 0; i < 32; i++)
+        strcat(cjk32, "\xe6\xb5\xb7");
+    snprintf(cjk33, sizeof cjk33, "%s\xe6\xb5\xb7", cjk32);
+    CHECK(control_check_name(cjk32, &e) == 0 && strlen(cjk32) == 96, "32 CJK characters (96 bytes) refused");
+    CHECK(control_check_name(cjk33, &e) != 0 && strcmp(e.code, "bad_name") == 0, "33 CJK characters accepted");
+    static const char *const bad[] = {
+        "123456789012345678901234567890123", "<b>", "a&b", "a\"b", "a'b", "a>b", "tab\there", "\x7f",
+        "\xc2\x85",                 /* U+0085 NEL (C1) */
+        "\xe2\x80\xae" "abc",       /* U+202E right-to-left override */
+        "zero\xe2\x80\x8bwidth",    /* U+200B */
+        "\xef\xbb\xbf" "bom",       /* U+FEFF */
+        "\xee\x80\x80",             /* U+E000 private use */
+        "\xc0\xaf",                 /* overlong '/' */
+        "\xed\xa0\x80",             /* a surrogate, U+D800 */
+        "\xf4\x90\x80\x80",         /* above U+10FFFF */
+        "\xe6\xb5",                 /* truncated sequence */
+        "\xff", " lead", "trail ", " ",
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)
+        CHECK(control_check_name(bad[i], &e) != 0 && strcmp(e.code, "bad_name") == 0, "bad name %zu accepted", i);
+
+    struct ctl_msg m;
+    cJSON *id = NULL;
+    const char *ok = "{\"type\":\"name\",\"id\":9,\"name\":\"Ana\"}";
+    CHECK(control_parse(ok, strlen(ok), &m, &id, &e) == 0 && m.type == CTL_NAME && m.name && strcmp(m.name, "Ana") == 0,
+          "name message not parsed");
+    char *t = control_print(control_named_msg(m.name, m.id));
+    CHECK(t && strcmp(t, "{\"type\":\"named\",\"id\":9,\"name\":\"Ana\"}") == 0, "named: %s", t ? t : "(null)");
+    free(t);
+    ctl_msg_free(&m);
+    const char *set_named = "{\"type\":\"set\",\"params\":{\"wind_speed\":3},\"name\":\"Bo\"}";
+    CHECK(control_parse(set_named, strlen(set_named), &m, &id, &e) == 0 && m.type == CTL_SET && m.name &&
+              strcmp(m.name, "Bo") == 0, "set with a name not parsed");
+    ctl_msg_free(&m);
+    const char *set_plain = "{\"type\":\"set\",\"params\":{\"wind_speed\":3}}";
+    CHECK(control_parse(set_plain, strlen(set_plain), &m, &id, &e) == 0 && m.name == NULL, "set without a name has one");
+    ctl_msg_free(&m);
+    static const char *const refused[] = {
+        "{\"type\":\"name\",\"id\":7,\"name\":\"<i>\"}", "{\"type\":\"name\",\"id\":7,\"name\":3}",
+        "{\"type\":\"name\",\"id\":7}", "{\"type\":\"set\",\"id\":7,\"params\":{},\"name\":\"a&b\"}",
+        "{\"type\":\"set\",\"id\":7,\"params\":{},\"name\":[\"x\"]}",
+        "{\"type\":\"name\",\"id\":7,\"name\":\"\\u202e\"}",
+    };
+    for (size_t i = 0; i < sizeof refused / sizeof refused[0]; i++) {
+        id = NULL;
+        int rc = control_parse(refused[i], strlen(refused[i]), &m, &id, &e);
+        CHECK(rc != 0 && strcmp(e.code, "bad_name") == 0 && cJSON_IsNumber(id) && id->valuedouble == 7,
+              "%s: rc %d code %s", refused[i], rc, rc ? e.code : "-");
+        cJSON_Delete(id);
+    }
+}
+
 int main(void)
 {
     test_capacity_plan();
@@ -770,6 +835,7 @@ int main(void)
     test_short_frames();
     test_config_file_limits();
     test_state_values();
+    test_display_names();
     fuzz();
     printf("test_control: %d passed, %d failed\n", passed, failed);
     return failed != 0;

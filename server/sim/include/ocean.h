@@ -12,14 +12,20 @@
  *                   choppiness lambda: the surface point is (x+Dx, h, z+Dz)
  *   OCEAN_SLOPE_X/Z dh/dx, dh/dz of the undisplaced height, dimensionless
  *   OCEAN_JACOBIAN  det of d(x+Dx, z+Dz)/d(x,z), dimensionless; 1 = flat,
- *                   < 0 where the surface folds (foam) */
+ *                   < 0 where the surface folds (foam)
+ *   OCEAN_FOAM      whitecap foam, 0..1, accumulated from the Jacobian over
+ *                   the steps that asked for it and fading over seconds
+ *                   (ocean_foam.c): a sample is "covered" where foam >= 0.5.
+ *                   Unlike the others it has a history: it depends on the
+ *                   times of the previous foam steps (a cold start rebuilds
+ *                   it from (params, t) alone; see ocean_step). */
 #ifndef OCEAND_OCEAN_H
 #define OCEAND_OCEAN_H
 
 #include "params.h"
 
 enum ocean_field {
-    OCEAN_HEIGHT, OCEAN_DX, OCEAN_DZ, OCEAN_SLOPE_X, OCEAN_SLOPE_Z, OCEAN_JACOBIAN,
+    OCEAN_HEIGHT, OCEAN_DX, OCEAN_DZ, OCEAN_SLOPE_X, OCEAN_SLOPE_Z, OCEAN_JACOBIAN, OCEAN_FOAM,
     OCEAN_FIELD_COUNT
 };
 #define OCEAN_FIELD_BIT(f) (1u << (f))
@@ -68,7 +74,14 @@ struct ocean_prepared;
 struct ocean_prepared *ocean_prepare(struct ocean *o, const struct ocean_params *p, char *err, size_t errlen);
 int ocean_commit(struct ocean *o, struct ocean_prepared *pr);
 void ocean_prepared_free(struct ocean_prepared *pr);
-/* Compute the fields in the mask (OCEAN_FIELD_BIT...) at time t seconds. */
+/* Compute the fields in the mask (OCEAN_FIELD_BIT...) at time t seconds.
+ * With OCEAN_FOAM the Jacobian is computed too, and the foam is decayed
+ * for the time since the previous foam step and fed from this step's
+ * Jacobian. A foam step with no usable history (the first, after a change
+ * of resolution, t earlier than the previous foam step or more than 5 s
+ * after it) first rebuilds the history from 20 Jacobian-only steps at
+ * t - 5 s ... t - 0.25 s, so the foam is a function of (params, t) there;
+ * after that, of the step times too. */
 int ocean_step(struct ocean *o, double t, unsigned fields);
 /* Output of the last step; valid until the next step/reconfigure/free. */
 const float *ocean_field(const struct ocean *o, enum ocean_field f);
@@ -84,7 +97,7 @@ int ocean_threads(int requested);
 size_t ocean_memory_bytes(int n, int threads);
 void ocean_free(struct ocean *o);
 
-/* Stable lowercase names: "height", "dx", "dz", "slope_x", "slope_z", "jacobian". */
+/* Stable lowercase names: "height", "dx", "dz", "slope_x", "slope_z", "jacobian", "foam". */
 const char *ocean_field_name(enum ocean_field f);
 
 /* ---- point queries (ocean_query.c) ---------------------------------------

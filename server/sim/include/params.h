@@ -88,6 +88,26 @@ enum param_error {
 extern const struct param_def param_table[PARAM_COUNT];
 extern const size_t param_count;
 
+/* What a person reads about a sea parameter (the `hello` schema's label,
+ * group and help, so the web panel hard-codes no names). A second table
+ * beside param_table, one row per parameter (tests/test_ocean.c checks
+ * that every row of param_table has one). */
+enum param_group {
+    PARAM_GROUP_SEA,        /* everyday: wind, waves, playback */
+    PARAM_GROUP_ADVANCED,   /* the spectrum's shape and the patch */
+    PARAM_GROUP_DEVELOPER,  /* resolution, transform: cost and checking, not the look */
+};
+struct param_ui {
+    const char *name;       /* param_table's name */
+    const char *label;      /* short human name: "Wind speed" */
+    enum param_group group;
+    const char *help;       /* one line for a tooltip */
+};
+/* The row for d, or NULL if it has none. */
+const struct param_ui *param_ui(const struct param_def *d);
+/* "sea", "advanced", "developer". */
+const char *param_group_name(enum param_group g);
+
 /* Fill with the defaults from the table. */
 void params_defaults(struct ocean_params *p);
 /* Look a parameter up by name; NULL if unknown. */
