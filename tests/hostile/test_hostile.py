@@ -965,9 +965,11 @@ def output_limit_close(d, fig):
         % (fig["closed_counted"], sorted(set(map(str, codes)))))
     check(ok, "clients over the output limit not closed/counted: %g" % fig["closed_counted"])
     check(all(c is not None for c in codes), "a client over the limit is still open")
-    # The close frame can be lost to a TCP reset when lws closes with the client's
-    # unread pings still in its receive queue: EOF is a close too, but some must see 1008.
-    check(1008 in codes and set(codes) <= {1008, "eof"}, "close codes %r, want 1008 (or EOF)" % codes)
+    # The close frame (1008) is sent, but the kernel answers the client's still-unread
+    # pings with a TCP reset that can overtake it: how many clients see 1008 rather than
+    # EOF depends on timing (all, or none, on a loaded machine). What must hold: every
+    # one is closed (above), counted by reason (above), and nothing else comes back.
+    check(set(codes) <= {1008, "eof"}, "close codes %r, want 1008 or EOF" % codes)
 
 
 @case(nofile=96, args=("--max-clients", "500"))
