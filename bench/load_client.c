@@ -10,9 +10,7 @@
  * This one is a plain epoll loop with a minimal RFC 6455 reader (server
  * frames are unmasked) that skips payload with one pass over each recv.
  *
- *   load_client PORT CLIENTS WARMUP_S WINDOW_S [SUBSCRIBE_JSON]
- * SUBSCRIBE_JSON (at most 125 bytes) is sent by every client after the
- * handshake, e.g. {"type":"subscribe","fields":["height"]}. */
+ *   load_client PORT CLIENTS WARMUP_S WINDOW_S */
 #include <arpa/inet.h>
 #include <errno.h>
 #include <netinet/in.h>
@@ -226,7 +224,7 @@ static double pct(double *v, size_t n, double p)
 int main(int argc, char **argv)
 {
     if (argc < 5) {
-        fprintf(stderr, "usage: load_client PORT CLIENTS WARMUP_S WINDOW_S [SUBSCRIBE_JSON]\n");
+        fprintf(stderr, "usage: load_client PORT CLIENTS WARMUP_S WINDOW_S\n");
         return 2;
     }
     int port = atoi(argv[1]);
@@ -247,8 +245,6 @@ int main(int argc, char **argv)
             continue;
         }
         connected++;
-        if (argc > 5)
-            send_frame(&clients[i], 1, argv[5], strlen(argv[5]));
         struct epoll_event ev = { .events = EPOLLIN, .data.ptr = &clients[i] };
         epoll_ctl(ep, EPOLL_CTL_ADD, clients[i].fd, &ev);
     }

@@ -204,10 +204,8 @@ void ctl_msg_free(struct ctl_msg *m)
 bool control_fits_memory(int n, int max_memory_mb)
 {
     /* While a new N is being built the old simulation still runs, so two
-     * exist at once; plus up to three frames in flight of one raw field, and
-     * the encoder's copy of the six fields (frame.c: the next step overwrites
-     * the library's while the last one is encoded). */
-    double bytes = 2.0 * (double)ocean_memory_bytes(n, 1) + (3.0 + 6.0) * 4.0 * (double)n * (double)n;
+     * exist at once; plus up to three frames in flight of one raw field. */
+    double bytes = 2.0 * (double)ocean_memory_bytes(n, 1) + 3.0 * 4.0 * (double)n * (double)n;
     return bytes <= (double)max_memory_mb * 1048576.0;
 }
 
@@ -555,47 +553,6 @@ cJSON *control_hello_msg(const struct hello_info *h)
     cJSON_AddNumberToObject(o, "tick_rate", h->tick_rate);
     cJSON_AddNumberToObject(o, "tile_size", h->tile_size);
     cJSON_AddItemToObject(o, "subscription", control_subscription_object(h->sub));
-    if (h->capacity)
-        cJSON_AddItemToObject(o, "capacity", control_capacity_object(h->capacity));
-    return o;
-}
-
-cJSON *control_degraded_msg(bool active, int subscribed_lod, int lod, double rate, const char *reason)
-{
-    cJSON *o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "type", "degraded");
-    cJSON_AddBoolToObject(o, "active", active);
-    cJSON_AddNumberToObject(o, "subscribed_lod", subscribed_lod);
-    cJSON_AddNumberToObject(o, "lod", lod);
-    cJSON_AddNumberToObject(o, "rate", floor(rate * 100 + 0.5) / 100);
-    cJSON_AddStringToObject(o, "reason", reason ? reason : "");
-    return o;
-}
-
-static double round2(double v) { return floor(v * 100 + 0.5) / 100; }
-
-cJSON *control_capacity_object(const struct capacity_info *c)
-{
-    cJSON *o = cJSON_CreateObject();
-    cJSON_AddNumberToObject(o, "max_resolution", c->max_resolution);
-    cJSON_AddNumberToObject(o, "memory_cap_mb", c->memory_cap_mb);
-    cJSON_AddNumberToObject(o, "cores", c->cores);
-    cJSON_AddNumberToObject(o, "tick_ms", round2(c->tick_ms));
-    cJSON_AddNumberToObject(o, "budget_ms", round2(c->budget_ms));
-    cJSON_AddNumberToObject(o, "encode_budget", (double)c->encode_budget);
-    cJSON *a = cJSON_AddArrayToObject(o, "resolutions");
-    for (int i = 0; i < c->nsizes && i < CAPACITY_MAX_SIZES; i++) {
-        const struct capacity_size *z = &c->sizes[i];
-        cJSON *e = cJSON_CreateObject();
-        cJSON_AddNumberToObject(e, "n", z->n);
-        cJSON_AddBoolToObject(e, "fits_memory", z->fits_memory);
-        double ms[6];
-        for (int k = 0; k < 6; k++)
-            ms[k] = round2(z->est_ms[k]);
-        cJSON_AddItemToObject(e, "est_ms", cJSON_CreateDoubleArray(ms, 6));
-        cJSON_AddNumberToObject(e, "full_rate_fields", z->full_rate_fields);
-        cJSON_AddItemToArray(a, e);
-    }
     return o;
 }
 
