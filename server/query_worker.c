@@ -171,6 +171,19 @@ void query_version(struct query_service *q, uint32_t version, double since, bool
     }
     struct snap *drop[MAX_EPOCHS + 1];
     int ndrop = 0;
+    /* A change of N: the earlier snapshots (up to 8 MB each at N = 512) are
+     * given back at once rather than kept for the window (RSS after N is
+     * flapped, test-hostile resolution_flapping); times before the change
+     * are then out of the window (PROTOCOL.md §7.4). */
+    if (fresh && fresh->surf && q->nepochs > 0) {
+        const struct snap *prev = q->epochs[q->nepochs - 1].snap;
+        if (prev && prev->surf &&
+            ocean_surface_params(prev->surf)->resolution != ocean_surface_params(fresh->surf)->resolution) {
+            for (int i = 0; i < q->nepochs; i++)
+                drop[ndrop++] = q->epochs[i].snap;
+            q->nepochs = 0;
+        }
+    }
     /* Keep what the window can still ask for: an epoch is needed while the
      * next one starts after since - window. */
     while (q->nepochs > 0 && (q->nepochs == MAX_EPOCHS ||
