@@ -1,6 +1,6 @@
 # mk/daemon.mk — the oceand daemon (issue 4): binary, integration tests, load bench, `make run`.
 
-DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c server/frame.c \
+DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c server/frame.c server/layer_stream.c \
               server/net/context.c server/net/upgrade.c server/net/session.c server/net/dispatch.c \
               server/net/fanout.c server/net/http.c server/net/cluster.c server/net/rx_guard.c \
               server/role_sim.c server/role_edge.c server/role_link.c \

@@ -32,6 +32,7 @@ struct subscription {
     int lod;                /* 0..CTL_MAX_LOD */
     int bound_index;        /* index into ctl_bounds */
     double max_rate;        /* frames per second, 0 < r <= tick rate */
+    bool temporal;          /* accepts codec 3 (predicted tiles, PROTOCOL.md §5.9); default false */
     bool all_tiles;
     int ntiles;             /* when !all_tiles */
     uint16_t tiles[CTL_MAX_TILES][2];

@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "layer_stream.h"
 #include "log.h"
 
 struct frame *frame_new(int nlayers)
@@ -31,6 +32,8 @@ void frame_unref(struct frame *f)
     for (int i = 0; i < f->nlayers; i++) {
         oc_buf_free(&f->layers[i].buf);
         free(f->layers[i].tile_off);
+        oc_buf_free(&f->layers[i].shared);
+        free(f->layers[i].shared_off);
     }
     free(f->layers);
     free(f);
@@ -66,7 +69,8 @@ static int encode_layer(struct layer *l, struct oc_encoder *enc, const float *da
 }
 
 struct frame *frame_encode(const struct ocean *o, struct oc_encoder *enc, int tile_size,
-                           const struct frame_want *want, const struct oc_frame_header *hdr)
+                           const struct frame_want *want, const struct oc_frame_header *hdr,
+                           struct layer_streams *streams)
 {
     int n = ocean_resolution(o);
     int ts = frame_tile_size(tile_size, n);
@@ -89,11 +93,15 @@ struct frame *frame_encode(const struct ocean *o, struct oc_encoder *enc, int ti
         const float *data = ocean_field(o, (enum ocean_field)l->field);
         if ((ts >> l->lod) < 1 || !data)
             continue; /* a LOD finer than one sample per tile, or a field not stepped */
-        int rc = encode_layer(l, enc, data, n, ts);
+        struct oc_stream *st = want->temporal[key] && streams ? streams->st[key] : NULL;
+        int rc = st ? layer_encode_temporal(st, enc, data, hdr->seq, want->intra[key], f->tiles_per_side, l)
+                    : encode_layer(l, enc, data, n, ts);
         if (rc != 0) {
             LOGE("encoding %s lod %d: %s", ocean_field_name((enum ocean_field)l->field), l->lod, oc_strerror(rc));
             oc_buf_free(&l->buf);
             free(l->tile_off);
+            oc_buf_free(&l->shared);
+            free(l->shared_off);
             memset(l, 0, sizeof *l);
             continue;
         }

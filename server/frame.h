@@ -31,11 +31,19 @@ static inline int layer_key_bound(int key) { return key % CTL_BOUND_COUNT; }
  * the grid is smaller. hello and params announce this value too. */
 static inline int frame_tile_size(int configured, int n) { return configured < n ? configured : n; }
 
-/* All tiles of one field at one LOD and bound, encoded back to back. */
+/* All tiles of one field at one LOD and bound, encoded back to back.
+ * buf holds intra tiles (codec 1, or 0), which any client can decode: for a
+ * temporal layer these are this tick's keyframe tiles, present only when
+ * some client needed them (else tile_off is NULL). A temporal layer also has
+ * the shared tiles of its stream (PROTOCOL.md §5.9), for the clients that
+ * received the layer in each of the `need` previous ticks. */
 struct layer {
     uint8_t field, lod, bound_index;
+    uint8_t need;           /* temporal: ticks of history the shared tiles need (0 = none) */
     struct oc_buf buf;
-    uint32_t *tile_off;     /* tiles_per_side^2 + 1 offsets into buf; tile i = tz*tps + tx */
+    uint32_t *tile_off;     /* tiles_per_side^2 + 1 offsets into buf; tile i = tz*tps + tx; NULL = none */
+    struct oc_buf shared;   /* temporal: the shared tiles (codec 3, or a chain's keyframe) */
+    uint32_t *shared_off;   /* offsets into shared, as tile_off; NULL = not a temporal layer this tick */
 };
 
 struct frame {
@@ -54,14 +62,21 @@ struct frame_want {
     unsigned fields;            /* OCEAN_FIELD_BIT mask of the keys below */
     int nkeys;
     uint16_t keys[LAYER_KEYS];
+    uint8_t temporal[LAYER_KEYS]; /* by key: a temporal client wants it (encode its stream) */
+    uint8_t intra[LAYER_KEYS];  /* by key: a client needs intra / keyframe tiles this tick */
 };
+
+struct layer_streams;
 
 /* Encode the wanted layers of the ocean's last step into a new frame (one
  * reference, held by the caller). hdr gives seq, sim_time, params_version,
- * patch_size; n, tile_size and server_time_us are filled in here. A layer
- * that fails to encode is left out (logged). NULL when out of memory. */
+ * patch_size; n, tile_size and server_time_us are filled in here. Temporal
+ * keys are encoded by their stream in `streams` (layer_streams_prepare made
+ * them), the others as intra tiles. A layer that fails to encode is left
+ * out (logged). NULL when out of memory. */
 struct frame *frame_encode(const struct ocean *o, struct oc_encoder *enc, int tile_size,
-                           const struct frame_want *want, const struct oc_frame_header *hdr);
+                           const struct frame_want *want, const struct oc_frame_header *hdr,
+                           struct layer_streams *streams);
 
 /* An empty frame with room for nlayers layers (nlayers = 0 so far), one
  * reference: for frames not encoded here (an edge rebuilds them from the

@@ -63,6 +63,8 @@ static void sim_on_frame(void *user, struct frame *f)
         cl_bit_set(info.encoded, layer_key(f->layers[i].field, f->layers[i].lod, f->layers[i].bound_index), true);
     for (int i = 0; i < f->nlayers; i++) {
         const struct layer *l = &f->layers[i];
+        if (!l->tile_off)
+            continue; /* no intra tiles this tick (edges always ask for them: their demand counts as intra) */
         info.field = l->field;
         info.lod = l->lod;
         info.bound_index = l->bound_index;

@@ -16,6 +16,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "layer_stream.h"
 #include "log.h"
 #include "metrics.h"
 
@@ -45,6 +46,7 @@ struct sim {
     uint64_t seq;                 /* tick only: ticks run (PROTOCOL.md §3.3: +1 per tick, frame or not) */
     uint64_t published;           /* tick only: frames published, for struct frame.index */
     struct oc_encoder *enc;       /* tick only */
+    struct layer_streams streams; /* tick only: the temporal layers' encoder state */
 
     /* builder only: the params of the newest state built (applied, or
      * waiting in `ready`): the base the next batch is checked against. */
@@ -61,6 +63,8 @@ struct sim {
     struct sim_set *answers, **answers_tail;  /* tick appends; lws takes (sim_take_answers) */
 
     atomic_int demand[LAYER_KEYS];    /* atomic: lws writes (subscriptions); tick reads */
+    atomic_int tdemand[LAYER_KEYS];   /* atomic: lws writes (temporal subscriptions, also in demand); tick reads */
+    atomic_int key_want[LAYER_KEYS];  /* atomic: lws writes (temporal clients lacking references); tick reads */
     _Atomic double now_time;          /* atomic: tick writes; lws reads (state file) */
     atomic_uint_least64_t now_seq;    /* atomic: tick writes; lws reads (a new client's first frame) */
 };
@@ -112,6 +116,8 @@ struct frame *sim_latest(struct sim *s)
 
 uint64_t sim_seq(struct sim *s) { return atomic_load(&s->now_seq); }
 void sim_demand(struct sim *s, int key, int delta) { atomic_fetch_add(&s->demand[key], delta); }
+void sim_demand_temporal(struct sim *s, int key, int delta) { atomic_fetch_add(&s->tdemand[key], delta); }
+void sim_want_keyframes(struct sim *s, int key, int delta) { atomic_fetch_add(&s->key_want[key], delta); }
 double sim_time_now(struct sim *s) { return atomic_load(&s->now_time); }
 
 /* ---- builder thread ---- */
@@ -255,9 +261,14 @@ static void apply_pending(struct sim *s)
             b.params = s->params;
             ocean_surface_free(b.surface); /* a snapshot of what was not committed */
             b.surface = NULL;
-        } else if (old_n != ocean_resolution(s->ocean)) {
-            atomic_fetch_add(&g_metrics.replans, 1);
-            LOGI("resolution now %d", ocean_resolution(s->ocean));
+        } else {
+            /* A new sea (or a new N): the previous frames predict it badly, so
+             * every temporal layer starts new chains (keyframes) at this tick. */
+            layer_streams_reset(&s->streams);
+            if (old_n != ocean_resolution(s->ocean)) {
+                atomic_fetch_add(&g_metrics.replans, 1);
+                LOGI("resolution now %d", ocean_resolution(s->ocean));
+            }
         }
         /* b.prepared now holds the old state (or the unused new one). */
         pthread_mutex_lock(&s->lock);
@@ -305,11 +316,20 @@ static void demand_snapshot(struct sim *s, struct frame_want *w)
     uint8_t remote[SIM_DEMAND_BYTES] = { 0 };
     if (s->cfg.remote_demand)
         s->cfg.remote_demand(s->cfg.cluster_user, remote);
-    for (int k = 0; k < LAYER_KEYS; k++)
-        if (atomic_load(&s->demand[k]) > 0 || ((remote[k >> 3] >> (k & 7)) & 1)) {
+    for (int k = 0; k < LAYER_KEYS; k++) {
+        int all = atomic_load(&s->demand[k]), temporal = atomic_load(&s->tdemand[k]);
+        bool rem = (remote[k >> 3] >> (k & 7)) & 1;
+        w->temporal[k] = temporal > 0;
+        /* Intra tiles for clients that are not temporal (edges included), and
+         * keyframes for temporal ones that lack the references. */
+        w->intra[k] = all > temporal || rem || atomic_load(&s->key_want[k]) > 0;
+        if (all > 0 || rem) {
             w->fields |= OCEAN_FIELD_BIT(layer_key_field(k));
             w->keys[w->nkeys++] = (uint16_t)k;
         }
+    }
+    int n = ocean_resolution(s->ocean);
+    layer_streams_prepare(&s->streams, n, frame_tile_size(s->cfg.tile_size, n), w);
 }
 
 static bool step(struct sim *s, unsigned fields)
@@ -327,7 +347,7 @@ static struct frame *encode(struct sim *s, const struct frame_want *want)
         .seq = s->seq, .sim_time = s->sim_time, .params_version = s->version,
         .patch_size = (float)s->params.patch_size,
     };
-    struct frame *f = frame_encode(s->ocean, s->enc, s->cfg.tile_size, want, &h);
+    struct frame *f = frame_encode(s->ocean, s->enc, s->cfg.tile_size, want, &h, &s->streams);
     if (f)
         f->index = s->published++;
     histogram_observe(&g_metrics.encode_seconds, mono_now() - t0);
@@ -434,6 +454,7 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     s->seq = cfg->start_seq;
     s->pending_tail = &s->pending;
     s->answers_tail = &s->answers;
+    layer_streams_init(&s->streams, cfg->keyframe_interval, cfg->stream_budget);
     const char *hook = getenv("OCEAND_TEST_FAIL_BUILD_SEED");
     s->test_fail_seed = hook && *hook ? atoi(hook) : -1;
     if (s->test_fail_seed >= 0)
@@ -519,6 +540,7 @@ void sim_stop(struct sim *s)
     if (s->to_free)
         ocean_prepared_free(s->to_free);
     frame_unref(s->latest);
+    layer_streams_free(&s->streams);
     ocean_free(s->ocean);
     oc_encoder_free(s->enc);
     pthread_cond_destroy(&s->cond);

@@ -28,10 +28,13 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
         if (sub->fields & OCEAN_FIELD_BIT(f)) {
             int key = layer_key(f, sub->lod, sub->bound_index);
-            if (n->cluster.demand) /* edge: the sim is elsewhere */
+            if (n->cluster.demand) { /* edge: the sim is elsewhere (and sends intra tiles) */
                 n->cluster.demand(n->cluster.user, key, delta);
-            else
+            } else {
                 sim_demand(n->sim, key, delta);
+                if (sub->temporal)
+                    sim_demand_temporal(n->sim, key, delta);
+            }
         }
 }
 
@@ -405,9 +408,11 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         if (control_apply_subscribe(m.root, &s->sub, &n->lim, ns, &e) != 0) {
             session_send_error(s, &e, m.id);
         } else {
+            fanout_want_keyframes(n, s, false); /* counted with the old subscription */
             dispatch_demand(n, ns, +1);
             dispatch_demand(n, &s->sub, -1);
             s->sub = *ns;
+            fanout_subscribed(n, s); /* temporal: keyframes from the next frame on (PROTOCOL.md §5.9) */
             session_queue_json(s, control_subscribed_msg(&s->sub, m.id));
         }
         free(ns);
