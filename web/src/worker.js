@@ -5,7 +5,7 @@
 // Output buffers are transferred to the main thread, which hands them back for
 // reuse (no 4 MB allocation per frame at N=512).
 import { inflateSync } from 'fflate';
-import { decodeFrame, setInflateRaw } from '../../proto/js/oc_decode.js';
+import { decodeFrame, setInflateRaw, DecoderState } from '../../proto/js/oc_decode.js';
 
 // Codec 1 (raw DEFLATE): fflate's synchronous inflate for small tiles, where one async
 // DecompressionStream per tile costs more than the inflating (the decoder picks per tile).
@@ -23,21 +23,46 @@ function take(channels, count) {
   return new Float32Array(count * channels);
 }
 
-self.onmessage = async (ev) => {
+// Codec 3 (temporal) tiles are predicted from the previous frames: one DecoderState keeps
+// their codes, and frames are decoded strictly one after the other, in arrival order (a
+// frame's tiles may inflate asynchronously, so a queue serialises them). A frame that a
+// newer one has already overtaken in the queue is decoded (its codes are the next frame's
+// references) but not assembled: the render loop would never show it.
+const state = new DecoderState();
+const queue = [];
+let running = false;
+
+self.onmessage = (ev) => {
   const msg = ev.data;
   if (msg.type === 'recycle') {
     for (const b of msg.buffers) if (b && pool[b.channels]) pool[b.channels].push(b.buffer);
     return;
   }
+  if (msg.type === 'reset') { state.reset(); return; }
   if (msg.type !== 'frame') return;
+  queue.push(msg);
+  if (!running) drain();
+};
+
+async function drain() {
+  running = true;
+  while (queue.length) {
+    const msg = queue.shift();
+    await handle(msg, queue.length > 0);
+  }
+  running = false;
+}
+
+async function handle(msg, superseded) {
   const t0 = performance.now();
   let frame;
   try {
-    frame = await decodeFrame(msg.buf);
+    frame = await decodeFrame(msg.buf, { state });
   } catch (e) {
-    self.postMessage({ type: 'error', message: String(e && e.message || e) });
+    self.postMessage({ type: 'error', code: e && e.code, message: String(e && e.message || e) });
     return;
   }
+  if (superseded) { self.postMessage({ type: 'skip', seq: frame.header.seq }); return; }
   const t1 = performance.now();
   const h = frame.header;
   const lod = frame.tiles.length ? frame.tiles[0].lod : 0;
@@ -70,4 +95,4 @@ self.onmessage = async (ev) => {
   self.postMessage({
     type: 'frame', header: h, lod, m, present, disp, slope, decodeMs, assembleMs, bytes: msg.buf.byteLength,
   }, transfer);
-};
+}
