@@ -159,8 +159,10 @@ function inflateRawInstalled(src, n) {
 // fflate 2.5 ms, streams 4.7 ms; 12 tiles of 128x128, fflate 2.4 ms, streams 1.6 ms.
 const STREAM_MIN_SAMPLES = 128 * 128;
 const haveStreams = typeof DecompressionStream === 'function';
-const preferStream = (t) => (t.codec === CODEC_QUANT_LORENZO || t.codec === CODEC_TEMPORAL)
-  && t.width * t.height >= STREAM_MIN_SAMPLES;
+// Codec 3 tiles inflate to half as many bytes (pair packing) from a quarter of the input, so
+// the stream's set-up dominates: they take the synchronous inflater whenever one is installed
+// (node, CPU per N=256 frame of height+dx+dz: 4.2-5.3 ms with fflate, 5.5-6.5 with streams).
+const preferStream = (t) => t.codec === CODEC_QUANT_LORENZO && t.width * t.height >= STREAM_MIN_SAMPLES;
 
 // One DecompressionStream per tile (async; decodeFrame runs them concurrently).
 async function inflateRawStream(src, n) {
@@ -384,22 +386,31 @@ function readTemporalPrefix(h, t, bytes, start, state) {
 }
 
 // Pair packing: one byte per two samples (15*z1 + z2 when both are below 15, 255 = escaped pair).
+// Scratch arrays are reused (reconstructTemporal never awaits, so tiles cannot interleave here).
 let pairScratch = new Int32Array(4097);
+let yScratch = new Int32Array(64);
+const PAIR_HI = new Int32Array(256), PAIR_LO = new Int32Array(256); // b -> (z1, z2); 255 marks an escape
+for (let b = 0; b < 256; b++) {
+  PAIR_HI[b] = b < PAIR_LIMIT * PAIR_LIMIT ? (b / PAIR_LIMIT) | 0 : -1;
+  PAIR_LO[b] = b < PAIR_LIMIT * PAIR_LIMIT ? b % PAIR_LIMIT : -1;
+}
 function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
   const npairs = (count + 1) >> 1, ny = 2 * pairEsc;
-  const y = new Int32Array(ny);
+  if (yScratch.length < ny) yScratch = new Int32Array(ny);
+  const y = yScratch;
   unpackEscapes(y, packed.subarray(npairs), ny, escCount, escWidth);
-  if (pairScratch.length < count + 1) pairScratch = new Int32Array(count + 1);
-  const zz = pairScratch; // consumed by reconstructTemporal before the next tile (no await in between)
+  if (pairScratch.length < 2 * npairs) pairScratch = new Int32Array(2 * npairs);
+  const zz = pairScratch;
   let e = 0;
-  for (let p = 0; p < npairs; p++) {
+  for (let p = 0, k = 0; p < npairs; p++, k += 2) {
     const b = packed[p];
-    if (b < PAIR_LIMIT * PAIR_LIMIT) {
-      zz[2 * p] = (b / PAIR_LIMIT) | 0;
-      zz[2 * p + 1] = b % PAIR_LIMIT;
+    const hi = PAIR_HI[b];
+    if (hi >= 0) {
+      zz[k] = hi;
+      zz[k + 1] = PAIR_LO[b];
     } else if (b === 255 && e < pairEsc) {
-      zz[2 * p] = y[2 * e];
-      zz[2 * p + 1] = y[2 * e + 1];
+      zz[k] = y[2 * e];
+      zz[k + 1] = y[2 * e + 1];
       e++;
     } else {
       throw fail('corrupt', `pair byte ${b}`);
@@ -410,24 +421,13 @@ function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
   return zz;
 }
 
-// The 5-point Laplacian of a reference's codes, neighbours clamped to the tile, as exact float64
-// (|L| < 2^34); computed once per reference frame and kept with it.
-function laplacian(slot, w, h) {
-  if (slot.lap) return slot.lap;
-  const q = slot.codes, L = new Float64Array(w * h);
-  for (let j = 0; j < h; j++) {
-    const r = j * w, up = (j > 0 ? j - 1 : 0) * w, dn = (j + 1 < h ? j + 1 : h - 1) * w;
-    if (w === 1) { L[r] = q[up] + q[dn] - 2 * q[r]; continue; }
-    L[r] = q[r + 1] + q[up] + q[dn] - 3 * q[r]; // the W neighbour clamps to the sample itself
-    for (let i = 1; i < w - 1; i++) L[r + i] = q[r + i - 1] + q[r + i + 1] + q[up + i] + q[dn + i] - 4 * q[r + i];
-    L[r + w - 1] = q[r + w - 2] + q[up + w - 1] + q[dn + w - 1] - 3 * q[r + w - 1];
-  }
-  slot.lap = L;
-  return L;
-}
-
 // Predictions from the references (no sample of this frame is needed), plus the residuals.
-// Every sum is an exact integer below 2^53 in float64; `| 0` wraps the code to int32 as C does.
+// S of §5.8 regrouped: S = Σ a_k·q_k + Σ b_k·L(q_k) = A + L(B), with A = Σ a_k·q_k and
+// B = Σ b_k·q_k, because the clamped 5-point Laplacian is linear. The same integer: with
+// |q| < 2^31 and |a|, |b| < 2^17, |A|, |B| < 2^50 and |L(B)| < 2^53, so every partial sum is
+// exact in float64; one pass builds A and B, a second applies L to B, with no Laplacian per
+// reference (nothing to compute or keep per frame). `| 0` wraps the code to int32 as C does.
+let aScratch = new Float64Array(4096), bScratch = new Float64Array(4096);
 function reconstructTemporal(t, packed, l) {
   const w = t.width, h = t.height, count = w * h;
   let zz;
@@ -436,22 +436,42 @@ function reconstructTemporal(t, packed, l) {
   else { zz = new Int32Array(count); unpackEscapes(zz, packed, count, l.escCount, l.escWidth); }
   const q = new Int32Array(count), out = new Float32Array(count);
   const [c0, c1, c2, c3, c4, c5, c6] = l.coef, depth = l.depth;
-  // S of §5.8 regrouped per reference: S = Σ a_k·q_k + Σ b_k·L(q_k). The same integer (every
-  // partial sum stays below 2^53, so float64 is exact), with fewer operations per sample.
   const a1 = c0, a2 = c1 - c0, a3 = c2 - c1, a4 = -c2, b1 = c3 + c6, b2 = c4 - c3, b3 = c5 - c4, b4 = -c5;
   // Missing references (depth < 4) stand in as q1: their coefficients are 0.
-  const ref = (k) => l.refs[k < depth ? k : 0];
-  const q1 = ref(0).codes, q2 = ref(1).codes, q3 = ref(2).codes, q4 = ref(3).codes;
-  const L1 = laplacian(ref(0), w, h), L2 = laplacian(ref(1), w, h), L3 = laplacian(ref(2), w, h);
-  const L4 = laplacian(ref(3), w, h);
-  const off = t.offset, sc = t.scale;
+  const ref = (k) => l.refs[k < depth ? k : 0].codes;
+  const q1 = ref(0), q2 = ref(1), q3 = ref(2), q4 = ref(3);
+  if (aScratch.length < count) { aScratch = new Float64Array(count); bScratch = new Float64Array(count); }
+  const A = aScratch, B = bScratch;
   for (let k = 0; k < count; k++) {
-    const a = q1[k];
-    const s = a1 * a + a2 * q2[k] + a3 * q3[k] + a4 * q4[k] + b1 * L1[k] + b2 * L2[k] + b3 * L3[k] + b4 * L4[k];
-    const z = zz[k];
-    const v = (a + Math.floor((s + 2048) * (1 / 4096)) + ((z >>> 1) ^ -(z & 1))) | 0; // 1/4096: exact
-    q[k] = v;
-    out[k] = off + v * sc;
+    const x1 = q1[k], x2 = q2[k], x3 = q3[k], x4 = q4[k];
+    A[k] = a1 * x1 + a2 * x2 + a3 * x3 + a4 * x4;
+    B[k] = b1 * x1 + b2 * x2 + b3 * x3 + b4 * x4;
+  }
+  const off = t.offset, sc = t.scale, inv = 1 / 4096; // exact: a power of two
+  for (let j = 0; j < h; j++) {
+    const r = j * w, up = (j > 0 ? j - 1 : 0) * w, dn = (j + 1 < h ? j + 1 : h - 1) * w;
+    if (w === 1) {
+      const S = A[r] + B[up] + B[dn] - 2 * B[r], z = zz[r];
+      const v = (q1[r] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
+      q[r] = v; out[r] = off + v * sc;
+      continue;
+    }
+    // i = 0: the W neighbour clamps to the sample itself.
+    let z = zz[r];
+    let S = A[r] + B[r + 1] + B[up] + B[dn] - 3 * B[r];
+    let v = (q1[r] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
+    q[r] = v; out[r] = off + v * sc;
+    const end = r + w - 1, du = up - r, dd = dn - r;
+    for (let k = r + 1; k < end; k++) {
+      z = zz[k];
+      S = A[k] + B[k - 1] + B[k + 1] + B[k + du] + B[k + dd] - 4 * B[k];
+      v = (q1[k] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
+      q[k] = v; out[k] = off + v * sc;
+    }
+    z = zz[end]; // i = w - 1: the E neighbour clamps
+    S = A[end] + B[end - 1] + B[end + du] + B[end + dd] - 3 * B[end];
+    v = (q1[end] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
+    q[end] = v; out[end] = off + v * sc;
   }
   return { samples: out, codes: q };
 }
