@@ -10,7 +10,9 @@
  * This one is a plain epoll loop with a minimal RFC 6455 reader (server
  * frames are unmasked) that skips payload with one pass over each recv.
  *
- *   load_client PORT CLIENTS WARMUP_S WINDOW_S */
+ *   load_client PORT CLIENTS WARMUP_S WINDOW_S [TEMPORAL]
+ * TEMPORAL 1 (default): each client subscribes with "temporal": true, as the
+ * web client does (codec 3, PROTOCOL.md §5.9); 0: the intra-only default. */
 #include <arpa/inet.h>
 #include <errno.h>
 #include <netinet/in.h>
@@ -224,12 +226,13 @@ static double pct(double *v, size_t n, double p)
 int main(int argc, char **argv)
 {
     if (argc < 5) {
-        fprintf(stderr, "usage: load_client PORT CLIENTS WARMUP_S WINDOW_S\n");
+        fprintf(stderr, "usage: load_client PORT CLIENTS WARMUP_S WINDOW_S [TEMPORAL]\n");
         return 2;
     }
     int port = atoi(argv[1]);
     nclients = atoi(argv[2]);
     double warmup = atof(argv[3]), window = atof(argv[4]);
+    bool temporal = argc < 6 || atoi(argv[5]) != 0;
     signal(SIGPIPE, SIG_IGN);
     clients = calloc((size_t)nclients, sizeof *clients);
     lat_cap = (size_t)nclients * 32 * (size_t)(window + 2) + 1024;
@@ -245,6 +248,10 @@ int main(int argc, char **argv)
             continue;
         }
         connected++;
+        if (temporal) {
+            static const char sub[] = "{\"type\":\"subscribe\",\"temporal\":true}";
+            send_frame(&clients[i], 1, sub, sizeof sub - 1);
+        }
         struct epoll_event ev = { .events = EPOLLIN, .data.ptr = &clients[i] };
         epoll_ctl(ep, EPOLL_CTL_ADD, clients[i].fd, &ev);
     }
@@ -296,7 +303,7 @@ int main(int argc, char **argv)
     }
     printf("{\"connected\":%d,\"errors\":%d,\"open_at_end\":%d,\"window_s\":%g,\"frames_made\":%llu,\"fps_median\":%.2f,"
            "\"fps_min\":%.2f,\"delivered\":%.4f,\"delivered_median\":%.4f,\"lat_p50_ms\":%.2f,\"lat_p99_ms\":%.2f,"
-           "\"set_latency_ticks_p50\":%.1f,\"set_latency_ticks_p99\":%.1f,\"set_samples\":%d,\"mbytes_per_s\":%.1f,"
+           "\"set_latency_ticks_p50\":%.1f,\"set_latency_ticks_p99\":%.1f,\"set_samples\":%d,\"mbytes_per_s\":%.3f,"
            "\"frame_kb\":%.1f}\n",
            connected, errors, still_open, window, (unsigned long long)made, pct(fps, (size_t)nclients, 0.5),
            pct(fps, (size_t)nclients, 0), pct(share, (size_t)nclients, 0), pct(share, (size_t)nclients, 0.5),
