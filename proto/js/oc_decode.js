@@ -340,9 +340,19 @@ function readLossyPrefix(t, bytes, start) {
 
 /** The references of predicted tiles: the codes of the last frames of every tile. One per stream. */
 export class DecoderState {
-  constructor() { this.tiles = new Map(); }
+  constructor() { this.tiles = new Map(); this.spare = []; }
   /** Forget every reference (e.g. after resubscribing); predicted tiles then fail until the next keyframe. */
-  reset() { this.tiles.clear(); }
+  reset() { this.tiles.clear(); this.spare.length = 0; }
+}
+// Code arrays of references that left the history, reused for the next tiles' codes: no
+// allocation per tile and frame in a steady stream (decodes of one state never overlap).
+function takeCodes(state, count) {
+  const spare = state && state.spare;
+  while (spare && spare.length) {
+    const c = spare.pop();
+    if (c.length === count) return c;
+  }
+  return new Int32Array(count);
 }
 const tileKey = (h, t) => `${t.field}/${t.lod}/${t.tileX}/${t.tileZ}/${h.n}/${h.tileSize}`;
 // Coefficients a tile of each depth may use (bit k = coefficient k: d1, d2, d3, L(d1), L(d2), L(d3), L(q1)).
@@ -428,13 +438,13 @@ function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
 // exact in float64; one pass builds A and B, a second applies L to B, with no Laplacian per
 // reference (nothing to compute or keep per frame). `| 0` wraps the code to int32 as C does.
 let aScratch = new Float64Array(4096), bScratch = new Float64Array(4096);
-function reconstructTemporal(t, packed, l) {
+function reconstructTemporal(t, packed, l, state) {
   const w = t.width, h = t.height, count = w * h;
   let zz;
   if (l.packing === 1) zz = unpackPairs(packed, count, l.pairEsc, l.escCount, l.escWidth);
   else if (l.escCount === 0) zz = packed;
   else { zz = new Int32Array(count); unpackEscapes(zz, packed, count, l.escCount, l.escWidth); }
-  const q = new Int32Array(count), out = new Float32Array(count);
+  const q = takeCodes(state, count), out = new Float32Array(count);
   const [c0, c1, c2, c3, c4, c5, c6] = l.coef, depth = l.depth;
   const a1 = c0, a2 = c1 - c0, a3 = c2 - c1, a4 = -c2, b1 = c3 + c6, b2 = c4 - c3, b3 = c5 - c4, b4 = -c5;
   // Missing references (depth < 4) stand in as q1: their coefficients are 0.
@@ -482,24 +492,31 @@ function decodeTileSync(h, t, bytes, start, inflate, state) {
   if (t.codec === CODEC_RAW_F32) return { samples: decodeRaw(t, bytes, start), codes: null };
   if (t.codec === CODEC_TEMPORAL) {
     const l = readTemporalPrefix(h, t, bytes, start, state);
-    return reconstructTemporal(t, inflate(l.src, l.n), l);
+    return reconstructTemporal(t, inflate(l.src, l.n), l, state);
   }
   const l = readLossyPrefix(t, bytes, start);
   const packed = t.codec === CODEC_QUANT_LORENZO ? inflate(l.src, l.n) : unzstd(l.src, l.n);
   const samples = reconstruct(t, packed, l.escCount, l.escWidth, l.coef);
-  return { samples, codes: state ? scratch.slice(0, samples.length) : null };
+  return { samples, codes: state ? copyCodes(state, samples.length) : null };
 }
 
 // One tile with DecompressionStream for codec 1 and 3 (the other codecs are synchronous).
 async function decodeTileStream(h, t, bytes, start, state) {
   if (t.codec === CODEC_TEMPORAL) {
     const l = readTemporalPrefix(h, t, bytes, start, state);
-    return reconstructTemporal(t, await inflateRawStream(l.src, l.n), l);
+    return reconstructTemporal(t, await inflateRawStream(l.src, l.n), l, state);
   }
   if (t.codec !== CODEC_QUANT_LORENZO) return decodeTileSync(h, t, bytes, start, null, state);
   const l = readLossyPrefix(t, bytes, start);
   const samples = reconstruct(t, await inflateRawStream(l.src, l.n), l.escCount, l.escWidth, l.coef);
-  return { samples, codes: state ? scratch.slice(0, samples.length) : null };
+  return { samples, codes: state ? copyCodes(state, samples.length) : null };
+}
+
+// The codes reconstruct() left in scratch, copied into an array the state keeps.
+function copyCodes(state, count) {
+  const c = takeCodes(state, count);
+  c.set(scratch.subarray(0, count));
+  return c;
 }
 
 // After a whole frame decoded: its lossy tiles become references (at most HISTORY_SLOTS per tile;
@@ -514,7 +531,7 @@ function commitReferences(state, header, metas, decoded) {
     if (slots.length >= HISTORY_SLOTS) {
       let oldest = 0;
       slots.forEach((s, k) => { if (s.seq < slots[oldest].seq) oldest = k; });
-      slots.splice(oldest, 1);
+      state.spare.push(slots.splice(oldest, 1)[0].codes);
     }
     slots.push({ seq, offset: t.offset, scale: t.scale, bound: t.bound, codes });
     state.tiles.set(key, slots);
