@@ -157,6 +157,23 @@ try {
     assert(ro, 'window.oceand is writable');
   });
 
+  await check('temporal codec by default: predicted frames decode in order, no reference error', async () => {
+    const f0 = (await state(a)).framesReceived;
+    await waitFor(a, '30 more frames', (n) => window.oceand.framesReceived >= n + 30, f0, 60000);
+    const s = await state(a);
+    // (A page whose worker fell behind three times in 10 s gives the temporal codec up.)
+    assert(s.stats.temporal === true || s.stats.localDrops >= 3, 'the page did not ask for the temporal codec');
+    // A reference error is only allowed after the page itself dropped a frame (its worker
+    // fell 8 frames behind on a loaded machine): the server never breaks the chain.
+    assert(s.stats.lastError === null && (s.stats.referenceErrors === 0 || s.stats.localDrops > 0),
+      `decode errors: ${s.stats.referenceErrors} reference (${s.stats.localDrops} dropped by the page), last ${JSON.stringify(s.stats.lastError)}`);
+    if (!args.fake) { // the daemon sent it predicted (shared) tiles, not only keyframes
+      const m = await (await fetch(`http://127.0.0.1:${port}/metrics`)).text();
+      const shared = Number((m.match(/^oceand_temporal_tiles_sent_total\{kind="shared"\} (\S+)$/m) || [])[1]);
+      assert(shared > 0, `no shared (predicted) tiles sent: ${shared}`);
+    }
+  });
+
   await check('canvas shows a varied image (not a flat colour)', async () => {
     await renderedMore(a, 1);
     const base = await shot(a, 'base');

@@ -50,6 +50,7 @@ const st = {
   rendered: 0, n: null, lod: null, frameParamsVersion: null, lastError: null, serverError: null,
   clusterState: null, // edge's {"type":"status"}: 'ok', 'sim_unavailable', 'nats_unavailable'
   referenceErrors: 0, resyncs: 0, // temporal: predicted frames without their references, and resubscriptions
+  localDrops: 0,   // temporal: frames dropped here because the worker was MAX_QUEUED behind (breaks the chain)
 };
 // Local view state: never sent. ?hour=h starts at that local time of day.
 const hourArg = Number(query.get('hour'));
@@ -65,7 +66,7 @@ let pendingFrame = null;       // newest decoded frame waiting for the render lo
 // Temporal codec (codec 3, PROTOCOL.md §5.9) unless ?temporal=0 asks for intra-only frames:
 // every frame must then reach the decoder (its codes are the next frame's references), so
 // frames are never dropped before the worker except when it falls far behind (then resync).
-const temporal = query.get('temporal') !== '0';
+let temporal = query.get('temporal') !== '0';
 const MAX_QUEUED = 8;          // temporal: frames waiting for the worker before we drop and resync
 const wantedSub = temporal ? { temporal: true } : {}; // kept across reconnects, with the panel's changes
 let lastResync = -Infinity;
@@ -120,7 +121,7 @@ const conn = new Connection(serverUrl(), {
     // Temporal: the worker decodes every frame in order and skips only the assembly of
     // overtaken ones; a frame dropped here breaks the chain, so ask for keyframes.
     if (temporal ? workerBusy >= MAX_QUEUED : workerBusy >= (bench ? 1 : 2)) { // bench: one at a time
-      if (temporal) resync();
+      if (temporal) dropped();
       return;
     }
     workerBusy++;
@@ -146,6 +147,20 @@ if (query.get('wireframe') === '1') { view.wireframe = true; ocean.wireframe = t
 window.addEventListener('keydown', (ev) => {
   if ((ev.key === 'h' || ev.key === 'H') && !ev.ctrlKey && !ev.metaKey && !ev.altKey && !(ev.target instanceof HTMLInputElement)) hud.setVisible(!hud.visible);
 });
+
+// The worker cannot keep up with every frame: resync; a third time within 10 s, give up the
+// temporal codec for this page (intra frames can be skipped before decoding).
+const dropTimes = [];
+function dropped() {
+  st.localDrops++;
+  const now = performance.now();
+  dropTimes.push(now);
+  while (dropTimes.length && now - dropTimes[0] > 10000) dropTimes.shift();
+  if (dropTimes.length < 3) { resync(); return; }
+  temporal = false;
+  wantedSub.temporal = false;
+  conn.send({ type: 'subscribe', temporal: false });
+}
 
 // Subscribing again makes the server send keyframe tiles from its next frame on (§5.9): the
 // way out of a broken chain. At most once a second (frames already on their way still fail).
@@ -235,7 +250,7 @@ window.oceand = Object.freeze({
     return Object.freeze({
       fps: stats.fps, framesPerSec: stats.framesPerSec, kBps: stats.kBps, latencyMs: stats.latencyMs,
       dropped: stats.dropped, decodeMs: stats.decodeMs, uploadMs: stats.uploadMs, n: st.n, lod: st.lod,
-      temporal, referenceErrors: st.referenceErrors, resyncs: st.resyncs,
+      temporal, referenceErrors: st.referenceErrors, resyncs: st.resyncs, localDrops: st.localDrops,
       lastError: snapshot(st.lastError), serverError: snapshot(st.serverError),
       ...(bench ? { timings: snapshot(timings) } : {}),
     });

@@ -27,10 +27,12 @@ function take(channels, count) {
 // their codes, and frames are decoded strictly one after the other, in arrival order (a
 // frame's tiles may inflate asynchronously, so a queue serialises them). A frame that a
 // newer one has already overtaken in the queue is decoded (its codes are the next frame's
-// references) but not assembled: the render loop would never show it.
+// references) but not assembled: the render loop would never show it (unless nothing was
+// assembled for 100 ms: a worker that is always behind still shows ten frames a second).
 const state = new DecoderState();
 const queue = [];
 let running = false;
+let lastAssembled = 0;
 
 self.onmessage = (ev) => {
   const msg = ev.data;
@@ -62,7 +64,8 @@ async function handle(msg, superseded) {
     self.postMessage({ type: 'error', code: e && e.code, message: String(e && e.message || e) });
     return;
   }
-  if (superseded) { self.postMessage({ type: 'skip', seq: frame.header.seq }); return; }
+  if (superseded && t0 - lastAssembled < 100) { self.postMessage({ type: 'skip', seq: frame.header.seq }); return; }
+  lastAssembled = t0;
   const t1 = performance.now();
   const h = frame.header;
   const lod = frame.tiles.length ? frame.tiles[0].lod : 0;
