@@ -1,5 +1,5 @@
-/* frame.c — encode a tick's subscribed layers once, in parallel (rows of
- * tiles on the encode pool); reference-counted frames. */
+/* frame.c — encode a tick's subscribed layers once, in parallel (one layer
+ * per item on the encode pool); reference-counted frames. */
 #include "frame.h"
 
 #include "clock.h"
@@ -53,40 +53,38 @@ struct layer_id {
     int field, encoded_lod, bound_index;
 };
 
-/* Tiles [tx0, tx1) of row tz of one layer, appended to out; off[i] = where
- * tile tx0 + i starts in out. This is the whole per-layer encode: one call
- * per row here, one call per layer when run with the full range. */
-static int encode_tiles(struct oc_encoder *enc, const struct layer_id *id, const float *data, int n, int ts,
-                        int tz, int tx0, int tx1, struct oc_buf *out, uint32_t *off)
+/* The whole encode of one layer: every tile, in tile order, into l (buf and
+ * tile_off, fresh: the frame owns them once published). One call per layer,
+ * handed to one encode thread, so that per-layer codec state needs no lock. */
+static int encode_layer(struct oc_encoder *enc, const struct layer_id *id, const float *data, int n, int ts,
+                        size_t reserve, struct layer *l)
 {
-    for (int tx = tx0; tx < tx1; tx++) {
-        off[tx - tx0] = (uint32_t)out->len;
-        int rc = oc_encode_tile(enc, data, n, ts, tx, tz, id->encoded_lod, (enum oc_field)id->field,
-                                ctl_bounds[id->bound_index], out);
-        if (rc != 0)
-            return rc;
-    }
-    off[tx1 - tx0] = (uint32_t)out->len;
+    int tps = n / ts;
+    l->tile_off = malloc(sizeof(uint32_t) * ((size_t)tps * tps + 1));
+    if (!l->tile_off || (reserve && oc_buf_reserve(&l->buf, reserve) != 0))
+        return OC_E_NOMEM;
+    for (int tz = 0; tz < tps; tz++)
+        for (int tx = 0; tx < tps; tx++) {
+            l->tile_off[tz * tps + tx] = (uint32_t)l->buf.len;
+            int rc = oc_encode_tile(enc, data, n, ts, tx, tz, id->encoded_lod, (enum oc_field)id->field,
+                                    ctl_bounds[id->bound_index], &l->buf);
+            if (rc != 0)
+                return rc;
+        }
+    l->tile_off[tps * tps] = (uint32_t)l->buf.len;
     return 0;
 }
-
-/* One row of tiles of one layer. */
-struct item {
-    int key_index;              /* into want.keys */
-    int row;                    /* tz */
-    struct oc_buf buf;          /* kept across frames: no allocation once warm */
-    uint32_t *off;              /* tps + 1 */
-    int off_cap;
-    int rc;
-};
 
 struct frame_job {
     int nenc;
     struct oc_encoder **enc;    /* one per encode thread + the caller */
     float *snap[OCEAN_FIELD_COUNT]; /* the step's fields, copied: the next step overwrites them */
     size_t snap_cap[OCEAN_FIELD_COUNT];
-    struct item *items;
-    int nitems, items_cap;
+    struct frame *f;            /* being built: one layer per item (frame_job_finish hands it over) */
+    int nitems;
+    int item_key[LAYER_KEYS];   /* item -> index into want.keys */
+    int item_rc[LAYER_KEYS];
+    size_t last_len[LAYER_KEYS]; /* bytes of each key's layer last time: reserved up front */
     struct frame_want want;
     struct oc_frame_header hdr;
     int n, ts, tps;
@@ -121,28 +119,11 @@ void frame_job_free(struct frame_job *j)
     free(j->enc);
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
         free(j->snap[f]);
-    for (int i = 0; i < j->items_cap; i++) {
-        oc_buf_free(&j->items[i].buf);
-        free(j->items[i].off);
-    }
-    free(j->items);
+    frame_unref(j->f);
     free(j);
 }
 
 long frame_job_samples(const struct frame_job *j) { return j->samples; }
-
-static int grow_items(struct frame_job *j, int need)
-{
-    if (need <= j->items_cap)
-        return 0;
-    struct item *it = realloc(j->items, sizeof *it * (size_t)need);
-    if (!it)
-        return -1;
-    memset(it + j->items_cap, 0, sizeof *it * (size_t)(need - j->items_cap));
-    j->items = it;
-    j->items_cap = need;
-    return 0;
-}
 
 int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, const struct frame_want *want,
                     const struct oc_frame_header *hdr)
@@ -157,6 +138,8 @@ int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, c
     j->hdr.tile_size = (uint16_t)j->ts;
     j->nitems = 0;
     j->samples = 0;
+    frame_unref(j->f); /* a job begun and never finished (out of memory half way) */
+    j->f = NULL;
     size_t nn = (size_t)n * n;
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
         const float *src = (want->fields & OCEAN_FIELD_BIT(f)) ? ocean_field(o, (enum ocean_field)f) : NULL;
@@ -171,92 +154,74 @@ int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, c
         }
         memcpy(j->snap[f], src, nn * sizeof(float));
     }
-    if (grow_items(j, want->nkeys * j->tps) != 0)
+    if (!(j->f = frame_new(want->nkeys)))
         return -1;
+    j->f->tiles_per_side = j->tps;
     for (int k = 0; k < want->nkeys; k++) {
         int field = layer_key_field(want->keys[k]), lod = want->lod[k];
         if ((j->ts >> lod) < 1 || !(want->fields & OCEAN_FIELD_BIT(field)) || !ocean_field(o, (enum ocean_field)field))
             continue; /* a LOD finer than one sample per tile, or a field not stepped */
         j->samples += (long)(n >> lod) * (n >> lod);
-        for (int tz = 0; tz < j->tps; tz++) {
-            struct item *it = &j->items[j->nitems++];
-            it->key_index = k;
-            it->row = tz;
-            it->buf.len = 0;
-            it->rc = 0;
-            if (it->off_cap < j->tps + 1) {
-                free(it->off);
-                it->off_cap = 0;
-                if (!(it->off = malloc(sizeof(uint32_t) * (size_t)(j->tps + 1))))
-                    return -1;
-                it->off_cap = j->tps + 1;
-            }
-        }
+        j->item_key[j->nitems] = k;
+        j->item_rc[j->nitems] = 0;
+        j->nitems++;
     }
     return j->nitems;
 }
 
 void frame_job_item(struct frame_job *j, int index, int worker)
 {
-    struct item *it = &j->items[index];
-    int key = j->want.keys[it->key_index];
-    struct layer_id id = { layer_key_field(key), j->want.lod[it->key_index], layer_key_bound(key) };
-    it->rc = encode_tiles(j->enc[worker], &id, j->snap[id.field], j->n, j->ts, it->row, 0, j->tps, &it->buf, it->off);
+    int k = j->item_key[index], key = j->want.keys[k];
+    struct layer_id id = { layer_key_field(key), j->want.lod[k], layer_key_bound(key) };
+    struct layer *l = &j->f->layers[index];
+    l->field = (uint8_t)id.field;
+    l->lod = (uint8_t)layer_key_lod(key);
+    l->bound_index = (uint8_t)id.bound_index;
+    l->encoded_lod = (uint8_t)id.encoded_lod;
+    j->item_rc[index] = encode_layer(j->enc[worker], &id, j->snap[id.field], j->n, j->ts, j->last_len[key], l);
 }
 
-/* Join rows [first, first + tps) into layer l. */
-static int join_rows(struct frame_job *j, int first, struct layer *l)
+void frame_job_warm(struct frame_job *j, const struct ocean *o, int tile_size)
 {
-    size_t total = 0;
-    for (int r = 0; r < j->tps; r++) {
-        if (j->items[first + r].rc != 0)
-            return j->items[first + r].rc;
-        total += j->items[first + r].buf.len;
-    }
-    l->tile_off = malloc(sizeof(uint32_t) * ((size_t)j->tps * j->tps + 1));
-    if (!l->tile_off || oc_buf_reserve(&l->buf, total ? total : 1) != 0)
-        return OC_E_NOMEM;
-    for (int r = 0; r < j->tps; r++) {
-        const struct item *it = &j->items[first + r];
-        for (int tx = 0; tx < j->tps; tx++)
-            l->tile_off[r * j->tps + tx] = (uint32_t)(l->buf.len + it->off[tx]);
-        memcpy(l->buf.data + l->buf.len, it->buf.data, it->buf.len);
-        l->buf.len += it->buf.len;
-    }
-    l->tile_off[j->tps * j->tps] = (uint32_t)l->buf.len;
-    return 0;
+    int n = ocean_resolution(o), ts = frame_tile_size(tile_size, n);
+    for (int e = 0; e < j->nenc; e++)
+        for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
+            const float *data = ocean_field(o, (enum ocean_field)f);
+            if (!data)
+                continue;
+            struct layer_id id = { f, 0, 3 /* 1 cm */ };
+            struct layer l = { 0 };
+            encode_layer(j->enc[e], &id, data, n, ts, 0, &l);
+            oc_buf_free(&l.buf);
+            free(l.tile_off);
+        }
 }
 
 struct frame *frame_job_finish(struct frame_job *j)
 {
-    struct frame *f = calloc(1, sizeof *f);
+    struct frame *f = j->f;
+    j->f = NULL;
     if (!f)
         return NULL;
-    atomic_init(&f->refs, 1);
-    f->tiles_per_side = j->tps;
-    int nlayers = j->tps ? j->nitems / j->tps : 0;
-    f->layers = calloc(nlayers ? (size_t)nlayers : 1, sizeof *f->layers);
-    if (!f->layers) {
-        free(f);
-        return NULL;
-    }
-    for (int first = 0; first < j->nitems; first += j->tps) {
-        int k = j->items[first].key_index, key = j->want.keys[k];
-        struct layer *l = &f->layers[f->nlayers];
-        l->field = (uint8_t)layer_key_field(key);
-        l->lod = (uint8_t)layer_key_lod(key);
-        l->bound_index = (uint8_t)layer_key_bound(key);
-        l->encoded_lod = j->want.lod[k];
-        int rc = join_rows(j, first, l);
-        if (rc != 0) {
-            LOGE("encoding %s lod %d: %s", ocean_field_name((enum ocean_field)l->field), l->encoded_lod, oc_strerror(rc));
+    /* Keep the layers that encoded, in item order. */
+    int kept = 0;
+    for (int i = 0; i < j->nitems; i++) {
+        struct layer *l = &f->layers[i];
+        if (j->item_rc[i] != 0) {
+            LOGE("encoding %s lod %d: %s", ocean_field_name((enum ocean_field)l->field), l->encoded_lod,
+                 oc_strerror(j->item_rc[i]));
             oc_buf_free(&l->buf);
             free(l->tile_off);
-            memset(l, 0, sizeof *l);
             continue;
         }
-        f->nlayers++;
+        j->last_len[j->want.keys[j->item_key[i]]] = l->buf.len + l->buf.len / 8;
+        if (kept != i)
+            f->layers[kept] = *l;
+        kept++;
     }
+    for (int i = kept; i < j->nitems; i++)
+        memset(&f->layers[i], 0, sizeof f->layers[i]);
+    f->nlayers = kept;
     f->hdr = j->hdr;
     f->hdr.server_time_us = unix_us();
     return f;

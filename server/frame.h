@@ -64,10 +64,11 @@ struct frame_want {
  * of threads while the producer steps the next tick:
  *   frame_job_begin   (producer, after the step) copies the wanted fields out
  *                     of the simulation (the next step overwrites them) and
- *                     cuts the work into items: one row of tiles of one layer;
+ *                     cuts the work into items: one layer each (its whole
+ *                     encode is one call, so per-layer codec state needs no lock);
  *   frame_job_item    (any encode thread, items in any order, concurrently);
- *   frame_job_finish  (the thread that finished the last item) joins each
- *                     layer's rows into one buffer and returns the frame.
+ *   frame_job_finish  (the thread that finished the last item) drops the
+ *                     layers that failed and returns the frame.
  * A job is reused frame after frame (buffers keep their capacity). */
 struct frame_job;
 struct frame_job *frame_job_new(int workers);    /* workers + 1 encoders (the caller helps) */
@@ -81,6 +82,9 @@ void frame_job_item(struct frame_job *j, int item, int worker);
 /* The frame (one reference, held by the caller), or NULL when out of memory.
  * A layer that failed to encode is left out (logged). */
 struct frame *frame_job_finish(struct frame_job *j);
+/* Encode every field the ocean has once with every encoder (start-up: their
+ * compressors and scratch grow now, not minutes later under load). */
+void frame_job_warm(struct frame_job *j, const struct ocean *o, int tile_size);
 /* Samples the last begun job encodes (all its layers, at their encoded LOD). */
 long frame_job_samples(const struct frame_job *j);
 
