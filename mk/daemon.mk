@@ -16,7 +16,7 @@ PROTO_SAN_LIB ?= $(BUILD)/san/liboc_proto.a
 
 BINS += $(BUILD)/oceand
 TESTS += test-daemon test-daemon-asan test-daemon-valgrind
-BENCHES += bench-load bench-capacity
+BENCHES += bench-load bench-capacity bench-layer-flood
 
 # The cluster roles (--role sim|edge) link the NATS transport (mk/cluster.mk).
 $(BUILD)/oceand: $(DAEMON_OBJ) $(OCEAN_LIB) $(PROTO_LIB) $(CLUSTER_LIB)
@@ -42,7 +42,7 @@ DAEMON_TEST_DEPS := $(BUILD)/test_control $(BUILD)/frame_check $(BUILD)/test_pro
 # Valgrind for the unit test: zero errors and zero definite leaks (~5 s).
 VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite
 
-.PHONY: test-daemon test-daemon-asan test-daemon-valgrind bench-load bench-capacity run
+.PHONY: test-daemon test-daemon-asan test-daemon-valgrind bench-load bench-capacity bench-layer-flood run
 test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	$(BUILD)/test_control
 	/usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
@@ -68,6 +68,11 @@ bench-load: $(BUILD)/oceand $(BUILD)/load_client
 # 256 with 200 clients; three runs each, then a median line per row (~4 min).
 bench-capacity: $(BUILD)/oceand $(BUILD)/load_client
 	/usr/bin/python3 bench/load.py --capacity --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_CAPACITY_ARGS)
+
+# Issue 16 defect 2's repro (N = 512, 25 viewers asking for every field x LOD x bound):
+# admitted/refused, observer frames/s, overruns, encode/tick time, RSS; one JSON line (~15 s).
+bench-layer-flood: $(BUILD)/oceand
+	/usr/bin/python3 bench/layer_flood.py --oceand $(BUILD)/oceand
 
 run: deps
 	@$(MAKE) --no-print-directory build-all
