@@ -127,7 +127,7 @@ def run(args, n, k, fields=None):
                "tick_ms_mean": round(1000 * (tsum1 - tsum0) / max(1, tcnt1 - tcnt0), 2),
                "tick_ms_p50_bucket": bucket_median(tb0, tb1),
                "encode_ms_mean": round(1000 * (esum1 - esum0) / max(1, ecnt1 - ecnt0), 2),  # wall, on the encode pool   # deadline -> frame published, histogram bucket
-               "degraded_groups_at_end": int(degraded),
+               "degraded_groups_at_end": int(degraded) if degraded == degraded else None,  # NaN: a daemon without the metric
                "connected": r["connected"], "frame_kb": r["frame_kb"], "mbytes_per_s": r["mbytes_per_s"],
                "set_samples": r["set_samples"], "window_s": args.window,
                "loadavg_1m": round(os.getloadavg()[0], 2)}   # this machine is shared: context for the numbers
