@@ -9,20 +9,26 @@
 
 static double nlogn(int n) { return (double)n * n * log2((double)(n < 2 ? 2 : n)); }
 
+static double penalty(const struct cost_model *m) { return m->penalty > 1 ? m->penalty : 1; }
+static double enc_per_sample(const struct cost_model *m) { return m->enc_s_per_sample * penalty(m); }
+
 double cost_step_s(const struct cost_model *m, int n, int nfields)
 {
     if (nfields <= 0)
         return 0;
     double at_n0 = m->step1_s + (m->step6_s - m->step1_s) * (nfields - 1) / 5.0;
-    return at_n0 * nlogn(n) / nlogn(m->n0) * m->step_scale;
+    return at_n0 * nlogn(n) / nlogn(m->n0) * m->step_scale * penalty(m);
 }
 
-double cost_encode_s(const struct cost_model *m, long samples) { return (double)samples * m->enc_s_per_sample; }
+double cost_encode_s(const struct cost_model *m, long samples) { return (double)samples * enc_per_sample(m); }
 
 long cost_encode_budget(const struct cost_model *m, int n)
 {
     if (m->encode_budget > 0)
         return m->encode_budget;
+    struct cost_model measured = *m; /* admission follows the measured costs, not a transient penalty */
+    measured.penalty = 1;
+    m = &measured;
     double left = m->budget_s - cost_step_s(m, n, OCEAN_FIELD_COUNT);
     double derived = left > 0 && m->enc_s_per_sample > 0 ? left / m->enc_s_per_sample : 0;
     /* At least one client's worth of every field at full resolution: any
@@ -78,7 +84,7 @@ void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[L
      * quarter of it even when the step takes it all (then frames come less
      * often than ticks, step 3, rather than at the coarsest LOD). */
     double left = fmax(budget - step, budget * 0.25);
-    long cap = left > 0 && m->enc_s_per_sample > 0 ? (long)fmin(left / m->enc_s_per_sample, 2e9) : 0;
+    long cap = left > 0 && m->enc_s_per_sample > 0 ? (long)fmin(left / enc_per_sample(m), 2e9) : 0;
     if (m->encode_budget > 0 && m->encode_budget < cap)
         cap = m->encode_budget;
 

@@ -32,6 +32,12 @@ struct cost_model {
     double step1_s, step6_s;    /* step at n0: height only, all six fields */
     double step_scale;          /* live correction: measured / predicted (EWMA) */
     double enc_s_per_sample;    /* encode wall per sample on the pool (EWMA) */
+    double penalty;             /* transient factor on both costs (<= 1 = none): x1.25 for each tick
+                                   the producer had not even started the frame before, back
+                                   toward 1 on each tick it had (sim_thread.c, tick). Kept apart
+                                   from the EWMAs, which frames update: a plan degraded by it
+                                   makes frames rare, so frames alone would undo it only slowly.
+                                   Not used for admission (cost_encode_budget) */
     long encode_budget;         /* --encode-budget: samples per tick at most, 0 = derived only */
     int max_memory_mb;
     int cores;

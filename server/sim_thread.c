@@ -455,7 +455,10 @@ static void produce(struct sim *s, const struct prod_job *pj)
     if (!pj->want.nkeys)
         return; /* stepped for the probes only: no frame */
     pthread_mutex_lock(&s->lock);
-    double predicted = cost_step_s(&s->model, ocean_resolution(s->ocean), popcount_u(pj->want.fields)) / s->model.step_scale;
+    struct cost_model base = s->model; /* the prediction without the live corrections */
+    base.step_scale = 1;
+    base.penalty = 1;
+    double predicted = cost_step_s(&base, ocean_resolution(s->ocean), popcount_u(pj->want.fields));
     if (predicted > 0)
         s->model.step_scale = ewma(s->model.step_scale, t_step / predicted);
     pthread_mutex_unlock(&s->lock);
@@ -551,8 +554,14 @@ static void tick(struct sim *s, double t_tick)
     pthread_mutex_lock(&s->lock);
     bool idle = !s->prod_busy && !s->prod_has_job, queued = s->prod_has_job, set_ready = s->ready_full;
     pthread_mutex_unlock(&s->lock);
-    if (idle)
+    if (idle) {
         apply_pending(s); /* the producer is not using the ocean: it may be swapped */
+        if (s->model.penalty > 1) { /* it kept up: the transient penalty fades (see below) */
+            pthread_mutex_lock(&s->lock);
+            s->model.penalty = s->model.penalty * 0.95 > 1 ? s->model.penalty * 0.95 : 1;
+            pthread_mutex_unlock(&s->lock);
+        }
+    }
     s->seq++;
     int n = ocean_resolution(s->ocean);
     atomic_store(&s->now_seq, s->seq);
@@ -615,12 +624,12 @@ static void tick(struct sim *s, double t_tick)
         /* The producer has not even started the frame before: this one cannot
          * start on time. Counted as an overrun, and taken as proof that the
          * model is optimistic (a shared machine, a slower N): costs up by a
-         * quarter at once, so the next plan degrades; the per-frame EWMAs
-         * bring them back down when frames come in on time again. */
+         * quarter at once (the penalty, at most x64), so the next plan
+         * degrades; each tick that finds the producer idle takes 5 % of it
+         * back (x64 -> x1 in ~2.7 s), whether or not frames are rare. */
         atomic_fetch_add(&g_metrics.overruns, 1);
         pthread_mutex_lock(&s->lock);
-        s->model.step_scale *= 1.25;
-        s->model.enc_s_per_sample *= 1.25;
+        s->model.penalty = fmin(fmax(s->model.penalty, 1) * 1.25, 64);
         pthread_mutex_unlock(&s->lock);
         return;
     }
@@ -699,6 +708,7 @@ static void measure_model(struct sim *s)
     m->budget_s = 0.8 * m->period_s;
     m->n0 = n;
     m->step_scale = 1;
+    m->penalty = 1;
     m->encode_budget = s->cfg.encode_budget;
     m->max_memory_mb = s->cfg.max_memory_mb;
     m->cores = s->cfg.cores;

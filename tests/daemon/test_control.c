@@ -735,6 +735,17 @@ static void test_capacity_plan(void)
     CHECK(p.rate[g0] < 1 && p.rate[g0] == p.rate[g2] && p.rate[g0] >= (float)m.period_s, "step-bound: rates %g %g",
           p.rate[g0], p.rate[g2]);
     m.step_scale = 1;
+    /* the transient penalty (ticks the producer could not start on time) degrades the plan the
+     * same way, but the admission budget follows the measured costs only */
+    long admit_before = cost_encode_budget(&m, n);
+    m.penalty = 20;
+    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    CHECK(p.rate[g0] < 1 && p.rate[g0] == p.rate[g2], "penalty: rates %g %g", p.rate[g0], p.rate[g2]);
+    CHECK(cost_encode_budget(&m, n) == admit_before, "penalty changed the admission budget: %ld vs %ld",
+          cost_encode_budget(&m, n), admit_before);
+    m.penalty = 0; /* 0 or 1: none */
+    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    CHECK(!plan_degraded(&p, g0), "no penalty, still degraded");
     /* admission budget: --encode-budget wins; else at least six fields at full N */
     CHECK(cost_encode_budget(&m, n) >= 6L * n * n, "derived admission budget %ld", cost_encode_budget(&m, n));
     m.encode_budget = 1234;
