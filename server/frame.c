@@ -110,16 +110,31 @@ struct frame_job *frame_job_new(int workers)
     return j;
 }
 
+/* A frame begun and never finished (start-up measurement, out of memory
+ * half way): its encoded layers are not counted in nlayers yet. */
+static void drop_unfinished(struct frame_job *j)
+{
+    if (!j->f)
+        return;
+    for (int i = 0; i < j->nitems; i++) {
+        oc_buf_free(&j->f->layers[i].buf);
+        free(j->f->layers[i].tile_off);
+    }
+    j->f->nlayers = 0;
+    frame_unref(j->f);
+    j->f = NULL;
+}
+
 void frame_job_free(struct frame_job *j)
 {
     if (!j)
         return;
+    drop_unfinished(j);
     for (int i = 0; i < j->nenc; i++)
         oc_encoder_free(j->enc[i]);
     free(j->enc);
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
         free(j->snap[f]);
-    frame_unref(j->f);
     free(j);
 }
 
@@ -136,10 +151,9 @@ int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, c
     j->hdr = *hdr;
     j->hdr.n = (uint16_t)n;
     j->hdr.tile_size = (uint16_t)j->ts;
+    drop_unfinished(j); /* before nitems is reset: it counts that frame's layers */
     j->nitems = 0;
     j->samples = 0;
-    frame_unref(j->f); /* a job begun and never finished (out of memory half way) */
-    j->f = NULL;
     size_t nn = (size_t)n * n;
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
         const float *src = (want->fields & OCEAN_FIELD_BIT(f)) ? ocean_field(o, (enum ocean_field)f) : NULL;

@@ -459,8 +459,14 @@ static void produce(struct sim *s, const struct prod_job *pj)
     base.step_scale = 1;
     base.penalty = 1;
     double predicted = cost_step_s(&base, ocean_resolution(s->ocean), popcount_u(pj->want.fields));
+    /* One step far slower than the model counts as at most twice the
+     * current scale: a one-off (foam's cold spin-up, ~20 steps, after a new
+     * N or a first foam subscription; a page-fault storm) must not make the
+     * plan step-bound for everyone and then, with frames made rare, stay so
+     * (under ASan the spin-up read as an 85 ms step at N = 256: 2 frames in
+     * 4 s). Sustained slowness still raises it by 10 % a frame. */
     if (predicted > 0)
-        s->model.step_scale = ewma(s->model.step_scale, t_step / predicted);
+        s->model.step_scale = ewma(s->model.step_scale, fmin(t_step / predicted, 2 * s->model.step_scale));
     pthread_mutex_unlock(&s->lock);
     /* The previous frame's encode overlapped this step; its buffers are about
      * to be reused, so it must be done (we help rather than sleep). */

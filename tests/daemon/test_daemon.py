@@ -1580,7 +1580,10 @@ def test_foam_field_streamed(d):
         while time.time() < t_end:
             _, b = await recv_frame(a)
             f = oceanproto.decode_frame(b)
-            asm = oceanproto.Assembler(["foam"], 0)
+            # Under sanitizers the daemon may serve the layer degraded on purpose
+            # (a coarser LOD, told with `degraded`): presence is all that is checked there.
+            lod = f.tiles[0].lod if ARGS.sanitized and f.tiles else 0
+            asm = oceanproto.Assembler(["foam"], lod)
             asm.add(f)
             if not asm.complete():
                 continue
