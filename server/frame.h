@@ -67,6 +67,9 @@ struct frame_want {
  *                     cuts the work into items: one layer each (its whole
  *                     encode is one call, so per-layer codec state needs no lock);
  *   frame_job_item    (any encode thread, items in any order, concurrently);
+ *                     jobs run one at a time in seq order, so per-layer state
+ *                     kept across frames (a temporal codec's stream) is used by
+ *                     one thread at a time, frame after frame, without a lock;
  *   frame_job_finish  (the thread that finished the last item) drops the
  *                     layers that failed and returns the frame.
  * A job is reused frame after frame (buffers keep their capacity). */
