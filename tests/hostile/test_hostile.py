@@ -151,10 +151,11 @@ CASES = []
 
 
 def case(resolution=64, args=(), changes_params=False, rss_slack_kb=RSS_SLACK_KB, settle_clients=True, web=False,
-         nofile=None):
+         nofile=None, log_pipe=False, fsize=None):
     def wrap(fn):
         fn.opts = dict(resolution=resolution, args=args, changes_params=changes_params,
-                       rss_slack_kb=rss_slack_kb, settle_clients=settle_clients, web=web, nofile=nofile)
+                       rss_slack_kb=rss_slack_kb, settle_clients=settle_clients, web=web, nofile=nofile,
+                       log_pipe=log_pipe, fsize=fsize)
         CASES.append(fn)
         return fn
     return wrap
@@ -1246,13 +1247,74 @@ def resolution_flapping(d, fig):
     check(rss[-1] - rss[0] < 8192, "RSS settles %d kB above the start after flapping" % (rss[-1] - rss[0]))
 
 
+# ---------------------------------------------------------------- issue 16: third battery (attacker's second round)
+
+def refusals(d, count, deadline_s=15):
+    """`count` upgrades that the daemon refuses and logs: a foreign Origin
+    (closed without an answer) and a foreign Host (421) in turn. Returns how
+    many were dealt with, answered or closed; stops at the first left hanging
+    (a daemon stuck on its log answers none after it)."""
+    done = 0
+    t_end = time.time() + deadline_s
+    for i in range(count):
+        if time.time() > t_end:
+            break
+        host = "127.0.0.1:%d" % d.port if i % 2 else "evil.example:%d" % d.port
+        req = ("GET / HTTP/1.1\r\nHost: %s\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+               "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+               "Sec-WebSocket-Protocol: oceand.v1\r\nOrigin: http://evil.example\r\n\r\n" % host).encode()
+        s = socket.create_connection(("127.0.0.1", d.port), timeout=3)
+        try:
+            s.sendall(req)
+            c = s.recv(4096)             # the 421, or b"" when closed (Origin refused)
+        except socket.timeout:
+            break
+        except OSError:
+            c = b""
+        finally:
+            s.close()
+        if c and not c.startswith(b"HTTP/1.1 421") and not c.startswith(b"HTTP/1.0 421"):
+            raise CaseFailure("refusal %d answered %r" % (i, c[:40]))
+        done += 1
+    return done
+
+
+@case(log_pipe=True)
+def log_flood(d, fig):
+    """Every refused upgrade logs a line (and lws adds one of its own). With
+    stderr a pipe that is not drained fast enough (systemd, `| tee` on a slow
+    disk) a full pipe blocked write(2) on the lws thread: 600 refusals stopped
+    every client's frames. Lines are now rate-limited (10/s, burst 100) and
+    dropped when stderr is full, both counted in /metrics. The test's pipe
+    holds 4 KiB and is not read during the attack."""
+    t0 = time.time()
+    n = refusals(d, 3000)
+    secs = time.time() - t0
+    check(n == 3000, "only %d of 3000 refusals dealt with: the daemon stopped (blocked on its log?)" % n)
+    m = d.metrics()
+    rate = m.get('oceand_log_lines_dropped_total{reason="rate"}', 0)
+    blocked = m.get('oceand_log_lines_dropped_total{reason="blocked"}', 0)
+    d.drain_log()
+    with open(d.log_path, "rb") as f:
+        lines = f.read().count(b"\n")
+    fig.update(refusals=3000, answered=n, attack_s=round(secs, 1), log_lines=lines, dropped_rate=rate,
+               dropped_blocked=blocked)
+    log("    %d of 3000 refused upgrades answered in %.1f s; log: %d lines written, %d over the rate, %d while "
+        "stderr was full" % (n, secs, lines, rate, blocked))
+    check(lines <= 100 + 10 * (time.time() - t0) + 20, "%d log lines for 3000 refusals in %.1f s" % (lines, secs))
+    # each refusal logs at least one line; all but the burst and 10 a second are over the rate
+    check(rate >= 3000 - (100 + 10 * (time.time() - t0) + 20),
+          "log lines over the rate not dropped (or not counted): rate %d, blocked %d" % (rate, blocked))
+
+
 # ---------------------------------------------------------------- runner
 
 def run_case(fn, fig):
     """Run one case on its own daemon; figures go into fig (kept when the case fails)."""
     o = fn.opts
     fig["N"] = o["resolution"]
-    d = Daemon(ARGS.oceand, *o["args"], resolution=o["resolution"], web=o["web"], nofile=o["nofile"])
+    d = Daemon(ARGS.oceand, *o["args"], resolution=o["resolution"], web=o["web"], nofile=o["nofile"],
+               log_pipe=o["log_pipe"], fsize=o["fsize"])
     obs = None
     try:
         obs = Observer(d.url)
