@@ -1307,6 +1307,57 @@ def log_flood(d, fig):
           "log lines over the rate not dropped (or not counted): rate %d, blocked %d" % (rate, blocked))
 
 
+@case(changes_params=True, rss_slack_kb=4096)   # daemon defaults: 20 messages/s, burst 40 per client
+def params_fanout(d, fig):
+    """40 controllers each send 20 sets a second (their rate limit) for 4 s,
+    reading everything. Each applied set used to be broadcast as its own
+    `params` to every client: K x 20 a second to each, so 100 such
+    controllers cut a well-behaved client off (1008, reply queue full).
+    Now the sets applied at one tick boundary go out as one `params`: a
+    bystander gets at most one per tick, and stays connected."""
+    K = 40
+    ctl = []
+    for _ in range(K):
+        s, _ = raw_ws(d.port)
+        s.setblocking(False)
+        ctl.append(s)
+    bs, br = attacker(d)            # the bystander: reads and counts
+    ticks0 = d.metric("oceand_ticks_total")
+    changes0 = d.metric("oceand_param_changes_total")
+    t0 = time.time()
+    i = 0
+    nxt = t0
+    while time.time() - t0 < 4.0:
+        for s in ctl:
+            i += 1
+            send_quiet(s, ws_frame(OP_TEXT, '{"type":"set","params":{"wind_speed":%g}}' % (5 + (i % 61) * 0.5)))
+        nxt += 0.05
+        while time.time() < nxt:
+            rl, _, _ = select.select(ctl + [bs], [], [], max(0.0, nxt - time.time()))
+            for s in rl:
+                if s is bs:
+                    br.pump(0)
+                    continue
+                try:
+                    s.recv(1 << 20)
+                except OSError:
+                    pass
+    br.until(lambda r: False, 0.5)
+    ticks = d.metric("oceand_ticks_total") - ticks0
+    changes = d.metric("oceand_param_changes_total") - changes0
+    got = sum(1 for t in br.texts if t.get("type") == "params")
+    for s in ctl:
+        s.close()
+    bs.close()
+    fig.update(controllers=K, sets_sent=i, sets_applied=changes, ticks=ticks, bystander_params=got,
+               bystander_close=br.close_code, bystander_eof=br.eof)
+    log("    %d controllers sent %d sets in 4 s (%d applied over %d ticks); the bystander got %d params, close %r"
+        % (K, i, changes, ticks, got, br.close_code))
+    check(br.close_code is None and not br.eof, "the bystander was disconnected (close %r)" % br.close_code)
+    check(changes > 2 * ticks, "too few sets applied (%d over %d ticks) to test the fan-out" % (changes, ticks))
+    check(1 <= got <= ticks + 2, "bystander got %d params for %d ticks (one per applied set: %d)" % (got, ticks, changes))
+
+
 # ---------------------------------------------------------------- runner
 
 def run_case(fn, fig):
