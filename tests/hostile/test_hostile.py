@@ -20,6 +20,7 @@ import json
 import os
 import select
 import shutil
+import signal
 import socket
 import struct
 import sys
@@ -1356,6 +1357,71 @@ def params_fanout(d, fig):
     check(br.close_code is None and not br.eof, "the bystander was disconnected (close %r)" % br.close_code)
     check(changes > 2 * ticks, "too few sets applied (%d over %d ticks) to test the fan-out" % (changes, ticks))
     check(1 <= got <= ticks + 2, "bystander got %d params for %d ticks (one per applied set: %d)" % (got, ticks, changes))
+
+
+def read_state(d):
+    try:
+        with open(os.path.join(d.tmp, "state.json")) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+@case(changes_params=True)
+def state_file_attacks(d, fig):
+    """Whoever may write in the state file's folder plants a symlink at the
+    temporary name the daemon saves through (state.json.tmp -> a file of the
+    daemon's user): the save used to overwrite the link's target with the
+    state. Then SIGUSR1 and SIGUSR2, whose default action ended the daemon
+    without saving: they save now, like SIGHUP."""
+    victim = os.path.join(d.tmp, "victim.txt")
+    with open(victim, "w") as f:
+        f.write("precious\n")
+    os.symlink(victim, os.path.join(d.tmp, "state.json.tmp"))
+    s, r = attacker(d)
+    m = ask(s, r, '{"type":"set","id":1,"params":{"wind_speed":17.5}}')
+    check(m and m.get("type") == "params", "set: %r" % (m,))
+    saved = wait_until(lambda: (read_state(d) or {}).get("params", {}).get("wind_speed") == 17.5, 5)
+    with open(victim) as f:
+        victim_now = f.read()
+    st_path = os.path.join(d.tmp, "state.json")
+    fig.update(saved=saved, victim_intact=victim_now == "precious\n", state_is_link=os.path.islink(st_path))
+    log("    symlink at state.json.tmp: state saved %s, victim %s, state.json a link: %s"
+        % (saved, "intact" if victim_now == "precious\n" else "OVERWRITTEN (%r)" % victim_now[:30],
+           os.path.islink(st_path)))
+    check(victim_now == "precious\n", "the file behind a symlink at state.json.tmp was overwritten")
+    check(saved and not os.path.islink(st_path), "state not saved as a file of its own")
+    for i, sig in enumerate((signal.SIGUSR1, signal.SIGUSR2)):
+        m = ask(s, r, '{"type":"set","id":%d,"params":{"wind_speed":%g}}' % (2 + i, 11.5 + i))
+        check(m and m.get("type") == "params", "set: %r" % (m,))
+        d.proc.send_signal(sig)
+        ok = wait_until(lambda: (read_state(d) or {}).get("params", {}).get("wind_speed") == 11.5 + i, 3)
+        fig[sig.name] = "saved" if ok and d.alive() else "exit %r" % d.proc.poll()
+        check(d.alive(), "%s ended the daemon (exit %r)" % (sig.name, d.proc.poll()))
+        check(ok, "%s did not save the state" % sig.name)
+    s.close()
+
+
+@case(changes_params=True, fsize=256)
+def state_save_fsize(d, fig):
+    """The disk is full, as far as the daemon can tell: `ulimit -f 1` (1 KiB;
+    the state file is larger). A write past the limit raised SIGXFSZ, whose
+    default action ended the daemon at its first save. It must fail like a
+    full disk: a warning, nothing left behind, the daemon running."""
+    s, r = attacker(d)
+    m = ask(s, r, '{"type":"set","id":1,"params":{"wind_speed":18.5}}')
+    check(m and m.get("type") == "params", "set: %r" % (m,))
+    d.proc.send_signal(signal.SIGHUP)     # save now
+    warned = wait_until(lambda: not d.alive() or b"File too large" in open(d.log_path, "rb").read(), 5)
+    s.close()
+    left = sorted(f for f in os.listdir(d.tmp) if f.startswith("state"))
+    fig.update(alive=d.alive(), exit=d.proc.poll(), warned=warned and d.alive(), files=left)
+    log("    save under ulimit -f 256 bytes: daemon %s, warned %s, state files %s"
+        % ("running" if d.alive() else "ended (%r)" % d.proc.poll(), warned, left))
+    check(d.alive(), "the daemon ended at its save (exit %r: %s)" % (
+        d.proc.poll(), "SIGXFSZ" if d.proc.poll() == -signal.SIGXFSZ else "?"))
+    check(warned, "no warning about the failed save")
+    check(not left, "files left behind by the failed save: %s" % left)
 
 
 # ---------------------------------------------------------------- runner
