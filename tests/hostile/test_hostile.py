@@ -23,6 +23,7 @@ import shutil
 import signal
 import socket
 import struct
+import subprocess
 import sys
 import threading
 import time
@@ -1422,6 +1423,58 @@ def state_save_fsize(d, fig):
         d.proc.poll(), "SIGXFSZ" if d.proc.poll() == -signal.SIGXFSZ else "?"))
     check(warned, "no warning about the failed save")
     check(not left, "files left behind by the failed save: %s" % left)
+
+
+def run_oceand(args, env=None, timeout=8, stop_after=None):
+    """Run oceand to its end (or SIGTERM it after stop_after s); (exit code, output)."""
+    p = subprocess.Popen([ARGS.oceand, "--bind", "127.0.0.1", "--port", "0", "--wisdom-file", "none",
+                          "--resolution", "64"] + args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                         env=dict(os.environ, **(env or {})))
+    try:
+        out, _ = p.communicate(timeout=stop_after or timeout)
+    except subprocess.TimeoutExpired:
+        p.send_signal(signal.SIGTERM)
+        try:
+            out, _ = p.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            out, _ = p.communicate()
+        if not stop_after:
+            return None, out.decode(errors="replace")
+    return p.returncode, out.decode(errors="replace")
+
+
+@case()
+def absurd_command_lines(d, fig):
+    """Paths longer than the daemon's buffers were cut to fit, silently: a
+    --state-file (or a config file's state_file) of 600 bytes became another
+    path, which the daemon read and then wrote; so did a long $XDG_STATE_HOME
+    (the default state folder). Now: a given path that does not fit is an
+    error (exit 2); a derived one is not used (warning)."""
+    base = os.path.join(d.tmp, "cl")
+    os.makedirs(base)
+    long_file = os.path.join(base, "d" * 560, "state.json")
+    cfg = os.path.join(base, "c.json")
+    with open(cfg, "w") as f:
+        json.dump({"state_file": long_file}, f)
+    got = {}
+    for name, args in (("--state-file", ["--state-file", long_file]), ("config state_file", ["--config", cfg])):
+        rc, out = run_oceand(args)
+        got[name] = rc
+        check(rc == 2 and "too long" in out, "%s of %d bytes: exit %r, %r" % (name, len(long_file), rc, out[-200:]))
+    # $XDG_STATE_HOME whose oceand-state.json path would be cut inside the file name
+    xdg = base
+    while len(xdg) < 505:
+        xdg = os.path.join(xdg, "x" * min(200, 504 - len(xdg)))
+    os.makedirs(xdg)
+    rc, out = run_oceand(["--log-level", "warn"], env={"XDG_STATE_HOME": xdg}, stop_after=1.5)
+    written = os.listdir(xdg)
+    got["XDG_STATE_HOME"] = written or rc
+    fig["results"] = got
+    log("    too-long paths: %r" % got)
+    check(rc == 0, "with a long $XDG_STATE_HOME: exit %r, %r" % (rc, out[-200:]))
+    check(not written, "state written to a cut path: %s" % written)
+    check("XDG_STATE_HOME" in out, "no warning about the long $XDG_STATE_HOME: %r" % out[-200:])
 
 
 # ---------------------------------------------------------------- runner
