@@ -17,6 +17,7 @@ human log then goes to stderr). Prints "N passed, M failed" last.
 """
 import argparse
 import json
+import math
 import os
 import select
 import shutil
@@ -1475,6 +1476,103 @@ def absurd_command_lines(d, fig):
     check(rc == 0, "with a long $XDG_STATE_HOME: exit %r, %r" % (rc, out[-200:]))
     check(not written, "state written to a cut path: %s" % written)
     check("XDG_STATE_HOME" in out, "no warning about the long $XDG_STATE_HOME: %r" % out[-200:])
+
+
+@case(args=LIBERAL)
+def fragment_floods(d, fig):
+    """One 64 KiB message in 65 000 one-byte fragments, and 300 000 empty
+    continuation frames inside one message: each is one answer, memory flat
+    (the empty ones never grow the message, so --max-message never trips)."""
+    s, r = attacker(d)
+    msg = b'{"type":"ping","id":5,"pad":"' + b"a" * 65000 + b'"}'
+    out = bytearray()
+    for i in range(len(msg)):
+        out += ws_frame(OP_TEXT if i == 0 else OP_CONT, msg[i:i + 1], fin=i == len(msg) - 1)
+    rss0 = d.rss_kb()
+    send_quiet(s, bytes(out))
+    r.until(lambda r: any(t.get("type") == "pong" for t in r.texts), 15)
+    one = [t.get("id") for t in r.texts if t.get("type") == "pong"]
+    s.close()
+    s, r = attacker(d)
+    send_quiet(s, ws_frame(OP_TEXT, b"{", fin=False))
+    empty = ws_frame(OP_CONT, b"", fin=False) * 10000
+    for _ in range(30):
+        if not send_quiet(s, empty):
+            break
+    send_quiet(s, ws_frame(OP_CONT, b'"type":"ping","id":6}'))
+    r.until(lambda r: any(t.get("type") == "pong" for t in r.texts), 15)
+    two = [t.get("id") for t in r.texts if t.get("type") == "pong"]
+    s.close()
+    fig.update(one_byte_fragments=len(msg), empty_fragments=300000, answers=[one, two], rss_jump_kb=d.rss_kb() - rss0)
+    log("    %d one-byte fragments -> %r; 300 000 empty fragments -> %r; RSS %+d kB"
+        % (len(msg), one, two, fig["rss_jump_kb"]))
+    check(one == [5], "the message in one-byte fragments: answers %r" % one)
+    check(two == [6], "the message with 300 000 empty fragments: answers %r" % two)
+
+
+EXTREME = [1.7976931348623157e308, -1.7976931348623157e308, 1e308, 5e-324, -0.0, 1e20, 2.0 ** 53 + 1, -2.0 ** 63]
+
+
+@case(args=("--probe-max-total", "256"), rss_slack_kb=4096)
+def query_probe_abuse(d, fig):
+    """Point queries and probes at absurd coordinates (+-DBL_MAX, 1e308,
+    subnormals, 2^63) from 24 clients: probe sets changed with every message
+    (over the total: busy), queries past the budget and the queue (busy),
+    then every client vanishes with its queries still queued. Replies stay
+    valid JSON with finite values, the refusals are coded, and once they are
+    gone nothing is left probing."""
+    pts = [[a, b] for a in EXTREME for b in EXTREME]
+    socks = []
+    codes = {}
+    bad = []
+    for k in range(24):
+        s, r = attacker(d)
+        socks.append((s, r))
+        batch = b""
+        for i in range(12):   # probe sets churned: a different set each message
+            sub = pts[(k + i) % 48:(k + i) % 48 + 16]
+            batch += ws_frame(OP_TEXT, json.dumps({"type": "probe", "id": i, "points": sub}))
+        for i in range(12):
+            batch += ws_frame(OP_TEXT, json.dumps({"type": "query", "id": 100 + i, "points": (pts * 4)[:256]}))
+        send_quiet(s, batch)
+    deadline = time.time() + 10
+    for s, r in socks:
+        r.until(lambda r: sum(1 for t in r.texts if t.get("type") in ("probing", "query_result", "error")) >= 24,
+                max(0.1, deadline - time.time()))
+        for t in r.texts:
+            if t.get("type") == "error":
+                codes[t.get("code")] = codes.get(t.get("code"), 0) + 1
+            elif t.get("type") in ("probing", "query_result", "probe_data"):
+                codes[t["type"]] = codes.get(t["type"], 0) + 1
+            if "unparseable" in t:
+                bad.append(t["unparseable"][:60])
+            if t.get("type") == "query_result":
+                for p in t["points"]:
+                    vals = [p["height"], p["jacobian"], p["vertical_velocity"]] + p["displacement"] + p["normal"]
+                    if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in vals):
+                        bad.append("query_result values %r" % vals[:4])
+                        break
+            if t.get("type") == "probe_data":
+                if not all(math.isfinite(v) for p in t["points"] for v in p):
+                    bad.append("probe_data %r" % t["points"][:1])
+    # all vanish at once, with what they queued still queued
+    for s, r in socks:
+        rst_close(s)
+    gone = wait_until(lambda: d.metric("oceand_clients") == 1 and d.metric("oceand_probe_points") == 0, 10)
+    fig.update(replies=codes, bad=bad[:5], probe_points_after=d.metric("oceand_probe_points"))
+    log("    24 clients x (12 probe sets + 12 queries of 256 points at absurd coordinates): %r" % codes)
+    check(not bad, "replies not valid JSON or not finite: %r" % bad[:3])
+    check(set(codes) <= {"probing", "query_result", "probe_data", "busy", "time_out_of_window"},
+          "unexpected replies %r" % codes)
+    check(codes.get("busy", 0) > 0 and codes.get("query_result", 0) > 0 and codes.get("probing", 0) > 0,
+          "expected answers, and busy past the budget: %r" % codes)
+    check(gone, "still probing after every client left: %g points" % d.metric("oceand_probe_points"))
+    s, r = attacker(d)      # the service still answers
+    send_quiet(s, ws_frame(OP_TEXT, json.dumps({"type": "query", "id": 1, "points": [[1.5, 2.5]]})))
+    r.until(lambda r: any(t.get("type") in ("query_result", "error") for t in r.texts), 10)
+    m = ([t for t in r.texts if t.get("type") in ("query_result", "error")] or [None])[0]
+    s.close()
+    check(m and m.get("type") in ("query_result", "error"), "a query afterwards: %r" % (m,))
 
 
 # ---------------------------------------------------------------- runner
