@@ -1575,6 +1575,47 @@ def query_probe_abuse(d, fig):
     check(m and m.get("type") in ("query_result", "error"), "a query afterwards: %r" % (m,))
 
 
+@case(args=LIBERAL)
+def name_abuse(d, fig):
+    """`name` with markup, controls, bidi overrides, 33 characters: bad_name
+    each (escaped lone surrogates: bad_json). Raw invalid UTF-8 inside a name (overlong,
+    a surrogate, a 5-byte form) never reaches it: close 1007. And 10 clients
+    renaming themselves 100 times each: a name goes to its owner only (no
+    fan-out), so a bystander receives none of it."""
+    fig["messages"] = expect_errors(d, [
+        (json.dumps({"type": "name", "id": i, "name": n}), "bad_name", None) for i, n in enumerate([
+            "<script>", "a&b", "\u202eevil", "tab\there", "x" * 33, " lead", "trail ", "\u200bzw", "\ufeffbom",
+            "\x7f", "\u0085nel"])] + [
+        ('{"type":"name","id":50,"name":"\\ud800"}', "bad_json", None),     # cJSON: a lone surrogate
+        ('{"type":"name","id":51,"name":"\\udc00\\ud800"}', "bad_json", None),
+        ('{"type":"name","id":52,"name":5}', "bad_name", None)])
+    raw = {}
+    for label, b in (("overlong", b"\xc0\xaf"), ("surrogate", b"\xed\xa0\x80"), ("5-byte", b"\xf8\x88\x80\x80\x80")):
+        s, r = attacker(d)
+        send_quiet(s, ws_frame(OP_TEXT, b'{"type":"name","id":1,"name":"a' + b + b'"}'))
+        r.until(lambda r: r.close_code is not None or any(t.get("type") in ("named", "error") for t in r.texts), 3)
+        raw[label] = r.close_code if r.close_code is not None else [t.get("type") for t in r.texts[1:]]
+        s.close()
+    bs, br = attacker(d)
+    n0 = len(br.texts)
+    flappers = [attacker(d) for _ in range(10)]
+    for i in range(100):
+        for k, (s, r) in enumerate(flappers):
+            send_quiet(s, ws_frame(OP_TEXT, json.dumps({"type": "name", "name": "n%d-%d" % (k, i)})))
+    ok = all(r.until(lambda r: sum(1 for t in r.texts if t.get("type") == "named") >= 100, 10) for s, r in flappers)
+    br.until(lambda r: False, 0.5)
+    leaked = [t.get("type") for t in br.texts[n0:]]
+    for s, r in flappers:
+        s.close()
+    bs.close()
+    fig.update(raw_utf8=raw, bystander_got=len(leaked))
+    log("    raw invalid UTF-8 in a name: %r; 1000 renames: every one answered %s, bystander got %d messages"
+        % (raw, ok, len(leaked)))
+    check(all(v == 1007 for v in raw.values()), "raw invalid UTF-8 in a name: %r, want close 1007" % raw)
+    check(ok, "not every rename was answered")
+    check(not leaked, "renames reached a bystander: %r" % leaked[:5])
+
+
 # ---------------------------------------------------------------- runner
 
 def run_case(fn, fig):
