@@ -10,9 +10,9 @@
  * This one is a plain epoll loop with a minimal RFC 6455 reader (server
  * frames are unmasked) that skips payload with one pass over each recv.
  *
- *   load_client PORT CLIENTS WARMUP_S WINDOW_S [TEMPORAL]
- * TEMPORAL 1 (default): each client subscribes with "temporal": true, as the
- * web client does (codec 3, PROTOCOL.md §5.9); 0: the intra-only default. */
+ *   load_client PORT CLIENTS WARMUP_S WINDOW_S [SUBSCRIBE_JSON]
+ * SUBSCRIBE_JSON (at most 125 bytes) is sent by every client after the
+ * handshake, e.g. {"type":"subscribe","fields":["height"]}. */
 #include <arpa/inet.h>
 #include <errno.h>
 #include <netinet/in.h>
@@ -226,13 +226,12 @@ static double pct(double *v, size_t n, double p)
 int main(int argc, char **argv)
 {
     if (argc < 5) {
-        fprintf(stderr, "usage: load_client PORT CLIENTS WARMUP_S WINDOW_S [TEMPORAL]\n");
+        fprintf(stderr, "usage: load_client PORT CLIENTS WARMUP_S WINDOW_S [SUBSCRIBE_JSON]\n");
         return 2;
     }
     int port = atoi(argv[1]);
     nclients = atoi(argv[2]);
     double warmup = atof(argv[3]), window = atof(argv[4]);
-    bool temporal = argc < 6 || atoi(argv[5]) != 0;
     signal(SIGPIPE, SIG_IGN);
     clients = calloc((size_t)nclients, sizeof *clients);
     lat_cap = (size_t)nclients * 32 * (size_t)(window + 2) + 1024;
@@ -248,10 +247,8 @@ int main(int argc, char **argv)
             continue;
         }
         connected++;
-        if (temporal) {
-            static const char sub[] = "{\"type\":\"subscribe\",\"temporal\":true}";
-            send_frame(&clients[i], 1, sub, sizeof sub - 1);
-        }
+        if (argc > 5)
+            send_frame(&clients[i], 1, argv[5], strlen(argv[5]));
         struct epoll_event ev = { .events = EPOLLIN, .data.ptr = &clients[i] };
         epoll_ctl(ep, EPOLL_CTL_ADD, clients[i].fd, &ev);
     }

@@ -4,6 +4,8 @@
 #include <stdarg.h>
 #include <stdio.h>
 
+#include "log.h"
+
 struct metrics g_metrics;
 const double metrics_hist_le[METRICS_HIST_BUCKETS] = {
     0.001, 0.002, 0.005, 0.01, 0.02, 0.033, 0.05, 0.1, 0.25, 1.0
@@ -63,11 +65,23 @@ size_t metrics_render(char *buf, size_t cap)
     struct out o = { buf, cap, 0 };
     struct metrics *m = &g_metrics;
     buf[0] = 0;
-    hist(&o, "oceand_tick_duration_seconds", "Time to step the simulation and encode one tick.", &m->tick_seconds);
-    hist(&o, "oceand_encode_duration_seconds", "Time to encode the subscribed layers of one tick.", &m->encode_seconds);
+    hist(&o, "oceand_tick_duration_seconds", "From a tick's deadline to its frame's publication (step, copy, encode).",
+         &m->tick_seconds);
+    hist(&o, "oceand_step_duration_seconds", "Time to step the simulation for one frame.", &m->step_seconds);
+    hist(&o, "oceand_encode_duration_seconds", "Time to encode the layers of one frame (on the encode pool, "
+         "while the next frame is stepped).", &m->encode_seconds);
     counter(&o, "oceand_ticks_total", "Simulation ticks run.", atomic_load(&m->ticks));
-    counter(&o, "oceand_tick_overruns_total", "Ticks that started a whole period late (skipped, not queued).",
+    counter(&o, "oceand_tick_overruns_total", "Ticks that started a whole period late (skipped, not queued), "
+            "or whose frame could not start because the one before was still being stepped.",
             atomic_load(&m->overruns));
+    counter(&o, "oceand_tick_late_total", "Of the overruns, the ticks whose clock thread itself woke a whole "
+            "period late (the machine did not run it); the rest are frames the producer could not start.",
+            atomic_load(&m->ticks_late));
+    gauge(&o, "oceand_degraded_groups", "Subscription groups (LOD, bound) encoded at a coarser LOD or a lower "
+          "rate than asked, because demand exceeds the encode budget.", atomic_load(&m->degraded_groups));
+    counter(&o, "oceand_subscriptions_refused_busy_total", "Subscriptions refused with `busy` (encode budget).",
+            atomic_load(&m->refused_busy));
+    counter(&o, "oceand_degraded_messages_total", "`degraded` messages sent to clients.", atomic_load(&m->degraded_sent));
     counter(&o, "oceand_replans_total", "FFT re-plans after a resolution change.", atomic_load(&m->replans));
     gauge(&o, "oceand_clients", "Connected WebSocket clients.", atomic_load(&m->clients));
     put(&o, "# HELP oceand_clients_rejected_total WebSocket upgrades refused.\n"
@@ -136,6 +150,12 @@ size_t metrics_render(char *buf, size_t cap)
     counter(&o, "oceand_frames_waited_keyframe_total", "Frames a temporal client was not sent because it lacked "
             "their references and they carried no keyframe tiles (it gets the next one).",
             atomic_load(&m->frames_waited_keyframe));
+    put(&o, "# HELP oceand_log_lines_dropped_total Log lines not written: over 10 a second (rate), or stderr full "
+            "(blocked).\n"
+            "# TYPE oceand_log_lines_dropped_total counter\n"
+            "oceand_log_lines_dropped_total{reason=\"rate\"} %llu\n"
+            "oceand_log_lines_dropped_total{reason=\"blocked\"} %llu\n",
+        log_dropped(false), log_dropped(true));
     gauge(&o, "oceand_params_version", "Current parameter version.", atomic_load(&m->params_version));
     gauge(&o, "oceand_resolution", "Current simulation resolution N.", atomic_load(&m->resolution));
     gauge(&o, "oceand_sim_time_seconds", "Current simulation time.", atomic_load(&m->sim_time));
