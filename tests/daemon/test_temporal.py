@@ -113,7 +113,13 @@ def test_temporal_stream_within_bound_of_lossless():
             if ref is None:
                 continue
             for t in f.tiles:
-                e = float(np.max(np.abs(t.samples.astype(np.float64) - ref[(t.field, t.x, t.z)])))
+                # The server may send either layer at a coarser LOD when it is short of encode
+                # time (capacity plan): a coarser LOD is plain subsampling (PROTOCOL.md §4).
+                r, a = ref[(t.field, t.x, t.z)], t.samples
+                if r.shape != a.shape:
+                    sa, sr = a.shape[0] // min(a.shape[0], r.shape[0]), r.shape[0] // min(a.shape[0], r.shape[0])
+                    a, r = a[::sa, ::sa], r[::sr, ::sr]
+                e = float(np.max(np.abs(a.astype(np.float64) - r)))
                 err = max(err, e)
             compared += 1
         print("    max error %.5f against the simulation, %.5f against the lossless stream (%d frames at equal seq)"
