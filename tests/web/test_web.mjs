@@ -167,10 +167,16 @@ try {
     // fell 8 frames behind on a loaded machine): the server never breaks the chain.
     assert(s.stats.lastError === null && (s.stats.referenceErrors === 0 || s.stats.localDrops > 0),
       `decode errors: ${s.stats.referenceErrors} reference (${s.stats.localDrops} dropped by the page), last ${JSON.stringify(s.stats.lastError)}`);
-    if (!args.fake) { // the daemon sent it predicted (shared) tiles, not only keyframes
+    if (!args.fake) { // the daemon sent it predicted (shared) tiles, not only keyframes...
       const m = await (await fetch(`http://127.0.0.1:${port}/metrics`)).text();
-      const shared = Number((m.match(/^oceand_temporal_tiles_sent_total\{kind="shared"\} (\S+)$/m) || [])[1]);
-      assert(shared > 0, `no shared (predicted) tiles sent: ${shared}`);
+      const num = (re) => Number((m.match(re) || [])[1]);
+      const shared = num(/^oceand_temporal_tiles_sent_total\{kind="shared"\} (\S+)$/m);
+      const degraded = num(/^oceand_degraded_groups (\S+)$/m);
+      // ...unless the capacity plan thinned the stream (every frame then follows a gap: keyframes,
+      // PROTOCOL.md §5.9) or the page gave the temporal codec up (its worker fell behind).
+      if (degraded === 0 && s.stats.temporal && s.stats.localDrops === 0)
+        assert(shared > 0, `no shared (predicted) tiles sent: ${shared}`);
+      else console.log(`     (not checked: ${degraded} degraded groups, ${s.stats.localDrops} frames dropped by the page)`);
     }
   });
 
