@@ -272,7 +272,8 @@ void dispatch_answers(struct net *n)
 
 #define RATE_LIMITED_ID_MAX 256 /* bytes of a string id echoed in rate_limited (no amplification) */
 #define REFUSED_PARSE_MAX 1024  /* bytes of a refused message parsed for its id: no more work than a unit */
-#define BUDGET_BURST_S 0.1      /* --control-budget: a burst of at most 0.1 s of it (3 ticks at 30 Hz) */
+#define BUDGET_BURST_S 0.1      /* --control-budget: a burst of at most 0.1 s of it (3 ticks at 30 Hz), */
+#define BUDGET_DEBT_S 1.0       /* and a debt of at most 1 s of it (fair shares spent past it) */
 #define SHARE_BURST_S 1.0       /* a client's fair share: 1 s of it saved up, */
 #define SHARE_MIN 4.0           /* and at least 4 units (a few sets in a row) */
 
@@ -327,8 +328,9 @@ static void refuse(struct session *s, const char *code, const char *message, con
  *    clients together) is spent, and so is its fair share of it (budget ÷
  *    clients connected, a bucket of its own): whoever sends little, such as
  *    a controller's occasional `set`, still gets through while others flood.
- * What is accepted is bounded by the budget's refill plus the fair shares'
- * (also the budget in sum): at most twice --control-budget units a second. */
+ * In the long run all clients together get --control-budget units a second:
+ * the fair shares (the budget in sum) are charged to it too, and what they
+ * spend past it is a debt it repays first. */
 bool dispatch_take_token(struct net *n, struct session *s, const char *text, size_t len)
 {
     atomic_fetch_add(&g_metrics.control_messages, 1);
@@ -356,10 +358,13 @@ bool dispatch_take_token(struct net *n, struct session *s, const char *text, siz
         refuse(s, "busy", "the control budget of all clients is spent (--control-budget): try again", text, len);
         return false;
     }
+    /* Both are charged, whichever let it pass: what the fair shares let
+     * through past an empty budget is owed by the budget (up to 1 s of it),
+     * so in the long run all clients together get the budget, no more. */
     n->budget -= cost;
     s->share -= cost;
-    if (n->budget < -cost)
-        n->budget = -cost; /* one message's debt at most (the fair shares went past it) */
+    if (n->budget < -budget * BUDGET_DEBT_S)
+        n->budget = -budget * BUDGET_DEBT_S;
     if (s->share < -share_cap - cost)
         s->share = -share_cap - cost;
     atomic_fetch_add(&g_metrics.control_units, (uint64_t)cost);

@@ -1696,12 +1696,12 @@ def control_budget(d, fig):
     units = m1.get("oceand_control_units_total", float("nan")) - m0.get("oceand_control_units_total", 0)
     refused = {r: m1.get('oceand_control_refused_total{reason="%s"}' % r, 0)
                - m0.get('oceand_control_refused_total{reason="%s"}' % r, 0) for r in ("rate_limited", "busy")}
-    # Accepted at most: the budget's refill and the fair shares' (the budget again), the budget's
-    # 0.1 s burst, the shares saved up (1 s of each, at least 4 units), one message of debt per
-    # client (K attackers, the controller, the observer); a subscribe costs 11 units (1 + 10 KiB).
+    # Accepted at most: the budget's refill, its 0.1 s burst, its debt (1 s of it), the fair shares
+    # saved up (1 s of each, at least 4 units), one message of debt per client (K attackers, the
+    # controller, the observer); a subscribe costs 11 units (1 + 10 KiB).
     cost = 1 + len(frame) // 1024
     n = K + 2
-    allowed = (2 * BUDGET * elapsed + 0.1 * BUDGET + max(BUDGET, 4 * n) + n * cost) / cost
+    allowed = (BUDGET * elapsed + 0.1 * BUDGET + BUDGET + max(BUDGET, 4 * n) + n * cost) / cost
     fig.update(clients=K, subscribes_sent=sent, subscribes_accepted=accepted, accepted_max=round(allowed),
                codes=codes, units=units, refused_rate_limited=refused["rate_limited"], refused_busy=refused["busy"],
                sets=len(sets), sets_applied=len(sets) - len(late), controller_frames=f["controller_frames"],
