@@ -7,6 +7,7 @@ the service thread's CPU (the main thread: lws_service), the whole daemon's,
 their run-queue wait, the observer's frames, the load average.
 
     /usr/bin/python3 bench/control_budget.py --oceand build/oceand [--before OLD_BUILD] [--rounds 3]
+    make bench-control-budget [BEFORE=OLD_BUILD]
 
 A build without --control-budget (before the change) is run with its
 defaults; the others with theirs (budget 2000) and with --control-budget 300.
