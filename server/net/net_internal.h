@@ -131,7 +131,7 @@ struct net {
     net_params_fn on_params;      /* main writes (net_on_params) before the loop: applied-change listener */
     void *on_params_user;         /* its argument (main's state saver, used on this thread) */
     double trim_due;              /* mono time to malloc_trim after a change of N, 0 = none */
-    double budget, budget_t;      /* --control-budget: units left for all clients together, last refill */
+    double budget, budget_t;      /* --control-budget: units left for all clients together, last refill (lws thread) */
     bool placeholder;             /* no index.html in the web root */
     int port;                     /* the port really listened on (--port 0) */
     int fd_limit;                 /* RLIMIT_NOFILE at start */
