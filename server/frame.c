@@ -14,6 +14,7 @@ struct frame *frame_new(int nlayers)
     if (!f)
         return NULL;
     atomic_init(&f->refs, 1);
+    f->ncascades = 1;
     f->layers = calloc(nlayers > 0 ? (size_t)nlayers : 1, sizeof *f->layers);
     if (!f->layers) {
         free(f);
@@ -36,14 +37,19 @@ void frame_unref(struct frame *f)
     free(f);
 }
 
-const struct layer *frame_layer(const struct frame *f, int field, int lod, int bound_index)
+const struct layer *frame_layer_cascade(const struct frame *f, int cascade, int field, int lod, int bound_index)
 {
     for (int i = 0; i < f->nlayers; i++) {
         const struct layer *l = &f->layers[i];
-        if (l->field == field && l->lod == lod && l->bound_index == bound_index)
+        if (l->field == field && l->lod == lod && l->bound_index == bound_index && l->cascade == cascade)
             return l;
     }
     return NULL;
+}
+
+const struct layer *frame_layer(const struct frame *f, int field, int lod, int bound_index)
+{
+    return frame_layer_cascade(f, 0, field, lod, bound_index);
 }
 
 /* Every tile of one layer, in tile order, with the offsets clients slice by. */
@@ -56,8 +62,8 @@ static int encode_layer(struct layer *l, struct oc_encoder *enc, const float *da
     for (int tz = 0; tz < tps; tz++)
         for (int tx = 0; tx < tps; tx++) {
             l->tile_off[tz * tps + tx] = (uint32_t)l->buf.len;
-            int rc = oc_encode_tile(enc, data, n, ts, tx, tz, l->lod, (enum oc_field)l->field,
-                                    ctl_bounds[l->bound_index], &l->buf);
+            int rc = oc_encode_tile_cascade(enc, data, n, ts, tx, tz, l->lod, (enum oc_field)l->field,
+                                            ctl_bounds[l->bound_index], l->cascade, &l->buf);
             if (rc != 0)
                 return rc;
         }
@@ -75,6 +81,7 @@ struct frame *frame_encode(const struct ocean *o, struct oc_encoder *enc, int ti
         return NULL;
     atomic_init(&f->refs, 1);
     f->tiles_per_side = n / ts;
+    f->ncascades = ocean_cascades(o);
     f->layers = calloc(want->nkeys ? (size_t)want->nkeys : 1, sizeof *f->layers);
     if (!f->layers) {
         free(f);
@@ -86,12 +93,14 @@ struct frame *frame_encode(const struct ocean *o, struct oc_encoder *enc, int ti
         l->field = (uint8_t)layer_key_field(key);
         l->lod = (uint8_t)layer_key_lod(key);
         l->bound_index = (uint8_t)layer_key_bound(key);
-        const float *data = ocean_field(o, (enum ocean_field)l->field);
+        l->cascade = (uint8_t)layer_key_which_cascade(key);
+        const float *data = ocean_cascade_field(o, l->cascade, (enum ocean_field)l->field);
         if ((ts >> l->lod) < 1 || !data)
-            continue; /* a LOD finer than one sample per tile, or a field not stepped */
+            continue; /* a LOD finer than one sample per tile, a field not stepped, a cascade not in force */
         int rc = encode_layer(l, enc, data, n, ts);
         if (rc != 0) {
-            LOGE("encoding %s lod %d: %s", ocean_field_name((enum ocean_field)l->field), l->lod, oc_strerror(rc));
+            LOGE("encoding %s lod %d cascade %d: %s", ocean_field_name((enum ocean_field)l->field), l->lod, l->cascade,
+                 oc_strerror(rc));
             oc_buf_free(&l->buf);
             free(l->tile_off);
             memset(l, 0, sizeof *l);

@@ -60,7 +60,7 @@ struct sim {
     struct ocean_prepared *to_free;   /* tick writes (the state a commit swapped out); builder frees it */
     struct sim_set *answers, **answers_tail;  /* tick appends; lws takes (sim_take_answers) */
 
-    atomic_int demand[LAYER_KEYS];    /* atomic: lws writes (subscriptions); tick reads */
+    atomic_int demand[LAYER_KEYS_ALL]; /* atomic: lws writes (subscriptions); tick reads */
     _Atomic double now_time;          /* atomic: tick writes; lws reads (state file) */
     atomic_uint_least64_t now_seq;    /* atomic: tick writes; lws reads (a new client's first frame) */
 };
@@ -300,21 +300,27 @@ static void apply_pending(struct sim *s)
 /* Which layers clients want now, from the demand counters. */
 static void demand_snapshot(struct sim *s, struct frame_want *w)
 {
+    memset(w->cfields, 0, sizeof w->cfields);
     w->fields = 0;
     w->nkeys = 0;
     uint8_t remote[SIM_DEMAND_BYTES] = { 0 };
     if (s->cfg.remote_demand)
         s->cfg.remote_demand(s->cfg.cluster_user, remote);
-    for (int k = 0; k < LAYER_KEYS; k++)
-        if (atomic_load(&s->demand[k]) > 0 || ((remote[k >> 3] >> (k & 7)) & 1)) {
+    for (int k = 0; k < LAYER_KEYS_ALL; k++) /* a cluster's remote demand: cascade 0 keys only */
+        if (atomic_load(&s->demand[k]) > 0 || (k < LAYER_KEYS && ((remote[k >> 3] >> (k & 7)) & 1))) {
             w->fields |= OCEAN_FIELD_BIT(layer_key_field(k));
+            w->cfields[layer_key_which_cascade(k)] |= OCEAN_FIELD_BIT(layer_key_field(k));
             w->keys[w->nkeys++] = (uint16_t)k;
         }
 }
 
-static bool step(struct sim *s, unsigned fields)
+/* Each cascade is stepped for the fields asked of it (probes read cascade 0). */
+static bool step(struct sim *s, const struct frame_want *want, unsigned probe_fields)
 {
-    if (ocean_step(s->ocean, s->sim_time, fields) == 0)
+    unsigned fields[OCEAN_MAX_CASCADES];
+    memcpy(fields, want->cfields, sizeof fields);
+    fields[0] |= probe_fields;
+    if (ocean_step_cascades(s->ocean, s->sim_time, fields, OCEAN_MAX_CASCADES) == 0)
         return true;
     LOGE("ocean_step failed at t=%g", s->sim_time);
     return false;
@@ -359,7 +365,7 @@ static void tick(struct sim *s)
     demand_snapshot(s, &want);
     struct frame *f = NULL;
     unsigned probe_fields = query_probe_fields(s->cfg.queries); /* probes need height, dx, dz */
-    if ((want.nkeys || probe_fields) && step(s, want.fields | probe_fields)) {
+    if ((want.nkeys || probe_fields) && step(s, &want, probe_fields)) {
         query_tick(s->cfg.queries, s->ocean, s->seq, s->sim_time, s->version);
         if (want.nkeys)
             f = encode(s, &want);
