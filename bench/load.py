@@ -73,7 +73,7 @@ def run(args, n, k):
                 break
             except OSError:
                 time.sleep(0.05)
-        lc = subprocess.Popen([args.load_client, str(port), str(k), str(args.warmup), str(args.window)],
+        lc = subprocess.Popen([args.load_client, str(port), str(k), str(args.warmup), str(args.window), args.subscribe],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = lc.stderr.readline()          # "measuring": the window starts
         cpu0, t0, wait0 = cpu_seconds(d.pid), time.monotonic(), runq_wait_seconds(d.pid)
@@ -90,7 +90,7 @@ def run(args, n, k):
         if lc.returncode != 0 or not out.strip():
             raise RuntimeError("load_client failed: %s %s" % (line, err))
         r = json.loads(out)
-        res = {"bench": "load", "N": n, "clients": k, "oceand_args": args.oceand_args, "fps_median": r["fps_median"], "fps_min": r["fps_min"],
+        res = {"bench": "load", "N": n, "clients": k, "oceand_args": args.oceand_args, "subscribe": args.subscribe, "fps_median": r["fps_median"], "fps_min": r["fps_min"],
                "delivered": r["delivered"], "lat_p50_ms": r["lat_p50_ms"], "lat_p99_ms": r["lat_p99_ms"],
                "set_latency_ticks_p99": r["set_latency_ticks_p99"],
                "daemon_cpu": round((cpu1 - cpu0) / (t1 - t0), 2),
@@ -116,6 +116,7 @@ def main():
     ap.add_argument("--load-client", default="build/load_client")
     ap.add_argument("--runs", default="256:1,256:50,256:200,512:100", help="N:clients,...")
     ap.add_argument("--oceand-args", default="", help="extra daemon flags, e.g. '--sim-nice -10'")
+    ap.add_argument("--subscribe", default="", help="a subscribe message every client sends (JSON), e.g. the web client's")
     ap.add_argument("--warmup", type=float, default=2)
     ap.add_argument("--window", type=float, default=10)
     ap.add_argument("--no-query", action="store_true", help="skip the point query / probe runs (query_load.py)")

@@ -77,14 +77,22 @@ static uint32_t rd32(const uint8_t *p) { uint32_t v; memcpy(&v, p, 4); return v;
 /* Send one masked client frame (mask key 0: payload goes as is). */
 static void send_frame(struct client *c, int opcode, const void *data, size_t len)
 {
-    uint8_t buf[256];
-    if (len > 125)
+    uint8_t buf[4096 + 8];
+    if (len > 4096)
         return;
+    size_t h = 2;
     buf[0] = (uint8_t)(0x80 | opcode);
-    buf[1] = (uint8_t)(0x80 | len);
-    memset(buf + 2, 0, 4);
-    memcpy(buf + 6, data, len);
-    ssize_t w = send(c->fd, buf, 6 + len, MSG_NOSIGNAL);
+    if (len <= 125) {
+        buf[1] = (uint8_t)(0x80 | len);
+    } else { /* 16-bit length */
+        buf[1] = 0x80 | 126;
+        buf[2] = (uint8_t)(len >> 8);
+        buf[3] = (uint8_t)len;
+        h = 4;
+    }
+    memset(buf + h, 0, 4); /* mask key 0 */
+    memcpy(buf + h + 4, data, len);
+    ssize_t w = send(c->fd, buf, h + 4 + len, MSG_NOSIGNAL);
     (void)w;
 }
 
@@ -224,9 +232,10 @@ static double pct(double *v, size_t n, double p)
 int main(int argc, char **argv)
 {
     if (argc < 5) {
-        fprintf(stderr, "usage: load_client PORT CLIENTS WARMUP_S WINDOW_S\n");
+        fprintf(stderr, "usage: load_client PORT CLIENTS WARMUP_S WINDOW_S [SUBSCRIBE_JSON]\n");
         return 2;
     }
+    const char *subscribe = argc > 5 && *argv[5] ? argv[5] : NULL; /* sent by every client after connecting */
     int port = atoi(argv[1]);
     nclients = atoi(argv[2]);
     double warmup = atof(argv[3]), window = atof(argv[4]);
@@ -245,6 +254,8 @@ int main(int argc, char **argv)
             continue;
         }
         connected++;
+        if (subscribe)
+            send_frame(&clients[i], 1, subscribe, strlen(subscribe));
         struct epoll_event ev = { .events = EPOLLIN, .data.ptr = &clients[i] };
         epoll_ctl(ep, EPOLL_CTL_ADD, clients[i].fd, &ev);
     }
