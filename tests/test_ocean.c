@@ -1213,7 +1213,7 @@ static void test_memory_bytes(void)
         struct ocean_params p;
         params_defaults(&p);
         p.resolution = n;
-        size_t want = ocean_memory_bytes(n, 2);
+        size_t want = ocean_memory_bytes(n, 2) * (size_t)p.cascades; /* one grid per cascade */
         size_t hook0 = ocean_alloc_bytes, heap0 = heap_in_use();
         struct ocean *o = make(&p, 2);
         size_t hook = ocean_alloc_bytes - hook0, heap = heap_in_use() - heap0;
@@ -1424,7 +1424,7 @@ static void test_param_ui(void)
 /* Hs of the sum of 3 cascades against the spectrum's integral over the
  * combined band (band_m0, the 1-D integral of S(w) over the wavenumbers
  * the three grids hold: from half the largest patch's dk to the finest
- * cascade's Nyquist). The cascades' random numbers are independent and
+ * cascade's top, half its Nyquist). The cascades' random numbers are independent and
  * their bands disjoint, so the variance of the sum is the sum of their
  * variances (each from its own grid). A light wind puts the peak at the
  * border of cascades 0 and 1, so counting a band twice, or leaving a gap,
@@ -1458,7 +1458,8 @@ static void test_cascades_hs(void)
                 m0[c] += variance(ocean_cascade_field(o, c, OCEAN_HEIGHT), nn) / seeds;
         }
         double dk = 2 * M_PI / p.patch_size, L2 = ocean_cascade_patch(p.patch_size, 2);
-        double ref = band_m0(&o->model, 0.5 * dk, M_PI * p.resolution / L2);
+        /* Up to the finest cascade's top: (N/4 - 1/2) of its wavenumber steps. */
+        double ref = band_m0(&o->model, 0.5 * dk, (ocean_cascade_band_top(p.resolution, 2) + 0.5) * 2 * M_PI / L2);
         double sum = m0[0] + m0[1] + m0[2], hs = 4 * sqrt(sum), hs_ref = 4 * sqrt(ref);
         double fine = (m0[1] + m0[2]) / sum;
         char name[64];
@@ -1482,6 +1483,7 @@ static void test_cascades_structure(void)
     params_defaults(&p);
     p.resolution = 64;
     p.patch_size = 64;
+    p.cascades = 1;
     struct ocean *one = make(&p, 1);
     p.cascades = 3;
     struct ocean *three = make(&p, 1);
@@ -1498,25 +1500,34 @@ static void test_cascades_structure(void)
           "cascades.zero_is_single_patch", "cascade 0 of a 3-cascade sea equals the 1-cascade sea in all %d fields: %s",
           OCEAN_FIELD_COUNT, same ? "yes" : "no");
 
-    /* Forward DFT of cascade 1's height: zero inside the band edge, energy beyond it. */
+    /* Forward DFT of cascades 1, 2's heights: zero outside their bands, which
+     * meet: cascade 2 starts where cascade 1 ends, in physical wavenumber. */
     double complex *F = malloc(nn * sizeof *F);
-    forward_dft(ocean_cascade_field(three, 1, OCEAN_HEIGHT), 64, F);
-    int band = ocean_cascade_band(64, 1);
-    double inside = 0, outside = 0;
-    for (int iz = 0; iz < 64; iz++)
-        for (int ix = 0; ix < 64; ix++) {
-            int mx = ix > 32 ? ix - 64 : ix, mz = iz > 32 ? iz - 64 : iz;
-            int m = abs(mx) > abs(mz) ? abs(mx) : abs(mz);
-            double e = creal(F[iz * 64 + ix] * conj(F[iz * 64 + ix]));
-            if (m < band)
-                inside += e;
-            else
-                outside += e;
-        }
+    int bands_ok = 1;
+    char msg[200] = "";
+    for (int c = 1; c < 3; c++) {
+        forward_dft(ocean_cascade_field(three, c, OCEAN_HEIGHT), 64, F);
+        int lo = ocean_cascade_band(64, c), hi = ocean_cascade_band_top(64, c);
+        double out = 0, in = 0;
+        for (int iz = 0; iz < 64; iz++)
+            for (int ix = 0; ix < 64; ix++) {
+                int mx = ix > 32 ? ix - 64 : ix, mz = iz > 32 ? iz - 64 : iz;
+                int m = abs(mx) > abs(mz) ? abs(mx) : abs(mz);
+                double e = creal(F[iz * 64 + ix] * conj(F[iz * 64 + ix]));
+                if (m < lo || m > hi)
+                    out += e;
+                else
+                    in += e;
+            }
+        bands_ok &= out <= 1e-9 * in && in > 0;
+        snprintf(msg + strlen(msg), sizeof msg - strlen(msg), "%scascade %d: [%d, %d] holds %.3g, outside %.3g",
+                 c > 1 ? "; " : "", c, lo, hi, in, out);
+    }
     free(F);
-    check(band == (int)ceil(31.5 / OCEAN_CASCADE_RATIO) && inside <= 1e-9 * outside && outside > 0,
-          "cascades.band", "cascade 1 at N = 64: modes with max(|mx|,|mz|) < %d hold %.3g of the energy (%.3g beyond)",
-          band, inside, outside);
+    bands_ok &= ocean_cascade_band(64, 1) == (int)ceil(31.5 / OCEAN_CASCADE_RATIO) &&
+                ocean_cascade_band(64, 2) == (int)ceil(15.5 / OCEAN_CASCADE_RATIO) &&
+                ocean_cascade_band_top(64, 1) == 15 && ocean_cascade_band_top(64, 0) == 31;
+    check(bands_ok, "cascades.band", "N = 64, max(|mx|,|mz|) per cascade: %s", msg);
 
     /* FFT = DFT on the finer cascades (same band, patch and seed on both paths). */
     float *fft[3];

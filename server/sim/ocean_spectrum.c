@@ -8,6 +8,7 @@
 #include "ocean_spectrum.h"
 #include "ocean.h"
 
+#include <limits.h>
 #include <math.h>
 
 #define PM_ALPHA 0.0081            /* Phillips constant */
@@ -36,6 +37,7 @@ void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p)
     m->patch = p->patch_size;
     m->seed = (uint32_t)p->seed;
     m->band = 0;
+    m->band_top = INT_MAX;
     m->alpha = PM_ALPHA;
     m->omega_p = m->calm ? 1.0 : PM_PEAK * g / U;
     if (!m->calm && (m->kind == SPECTRUM_JONSWAP || m->kind == SPECTRUM_TMA)) {
@@ -67,9 +69,17 @@ double ocean_cascade_patch(double patch_size, int cascade)
     return patch_size / pow(OCEAN_CASCADE_RATIO, cascade);
 }
 
+int ocean_cascade_band_top(int n, int cascade)
+{
+    return cascade > 0 ? n / 4 - 1 : n / 2 - 1;
+}
+
 int ocean_cascade_band(int n, int cascade)
 {
-    return cascade > 0 ? (int)ceil((n / 2 - 0.5) / OCEAN_CASCADE_RATIO) : 0;
+    if (cascade <= 0)
+        return 0;
+    /* The coarser cascade's modes cover max(|m|) < its top + 1/2, in its units. */
+    return (int)ceil((ocean_cascade_band_top(n, cascade - 1) + 0.5) / OCEAN_CASCADE_RATIO);
 }
 
 void spectrum_model_cascade(struct spectrum_model *m, const struct ocean_params *p, int cascade)
@@ -78,6 +88,7 @@ void spectrum_model_cascade(struct spectrum_model *m, const struct ocean_params 
     m->patch = ocean_cascade_patch(p->patch_size, cascade);
     m->seed = spectrum_cascade_seed((uint32_t)p->seed, cascade);
     m->band = ocean_cascade_band(p->resolution, cascade);
+    m->band_top = cascade > 0 ? ocean_cascade_band_top(p->resolution, cascade) : INT_MAX;
 }
 
 double dispersion_omega(double k, double depth)

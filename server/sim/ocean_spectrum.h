@@ -31,7 +31,8 @@ struct spectrum_model {
     double loop_omega;     /* 2 pi / loop_period, 0 = no loop */
     double patch;          /* L, m (of this cascade) */
     uint32_t seed;         /* of this cascade */
-    int band;              /* cascade >= 1: modes with max(|mx|, |mz|) < band are zero (ocean_cascade_band) */
+    int band, band_top;    /* cascade >= 1: only modes with band <= max(|mx|, |mz|) <= band_top are
+                            * non-zero (ocean_cascade_band); cascade 0: 0, INT_MAX (all) */
 };
 
 void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p);
@@ -43,7 +44,8 @@ uint32_t spectrum_cascade_seed(uint32_t seed, int cascade);
 static inline bool spectrum_in_band(const struct spectrum_model *m, int mx, int mz)
 {
     int ax = mx < 0 ? -mx : mx, az = mz < 0 ? -mz : mz;
-    return (ax > az ? ax : az) >= m->band;
+    int a = ax > az ? ax : az;
+    return a >= m->band && a <= m->band_top;
 }
 
 /* Finite-depth dispersion w = sqrt(g k tanh(k d)) and its derivative. */

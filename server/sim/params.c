@@ -28,7 +28,7 @@ static const char *const transform_names[] = {"fft", "dft", NULL};
 #define DFT_MAX_N 64
 
 /* Cascades by default: docs/simulation.md, "Cascades" (the measurement that chose it). */
-#define CASCADES_DEFAULT 1
+#define CASCADES_DEFAULT 3
 
 const struct param_def param_table[] = {
     P("resolution", PARAM_INT, "", 16, 2048, 256, NULL,
