@@ -92,10 +92,13 @@ float cascadeH(sampler2D a, sampler2D b, vec2 xz, float L, float texel) {
   vec2 uv = xz / L + 0.5 * texel;
   return mix(textureLod(a, uv, 0.0).y, textureLod(b, uv, 0.0).y, uMix);
 }
-// Weight of cascade c for a sampling step 'step' (m): 1 while its samples are resolved.
+// Weight of cascade c for a sampling step 'step' (m, half a pixel's or a cell's width):
+// 1 while its shortest waves (two samples of its texture) span several steps, 0 once a
+// step reaches one sample. Unresolved, a cascade would alias into a lattice of its own
+// period (seen from 1 km up with a gentler fade: squares of 72 m).
 vec3 cascadeWeights(float step) {
   vec3 spacing = max(uCPatch * uCTexel, vec3(1e-6));
-  return uCOn * (1.0 - smoothstep(vec3(1.0), vec3(3.0), vec3(step) / spacing));
+  return uCOn * (1.0 - smoothstep(vec3(0.35), vec3(1.0), vec3(step) / spacing));
 }
 // Summed height of the finer cascades at xz, each weighted by w.
 float cascadesHeight(vec2 xz, vec3 w) {
