@@ -79,7 +79,7 @@ vec4 dispAt(vec2 xz) {
 // The finer cascades 1..3: each a periodic patch of side uCPatch[c-1] (the server's
 // cascade_patch_sizes), streamed as height at its own LOD, tiled with its own period.
 // They add to cascade 0 per vertex (height, where the mesh resolves them) and per
-// pixel (slopes from central differences of each cascade's height, each with its own
+// pixel (slopes from forward differences of each cascade's height, each with its own
 // step, faded out where a pixel covers more than a few of its samples: unresolved,
 // they would only alias into sparkle).
 const CASCADES = /* glsl */`
@@ -108,18 +108,21 @@ float cascadesHeight(vec2 xz, vec3 w) {
   if (w.z > 0.0) h += w.z * cascadeH(uC3A, uC3B, xz, uCPatch.z, uCTexel.z);
   return h;
 }
-vec2 cascadeSlope(sampler2D a, sampler2D b, vec2 xz, float L, float texel, float footprint) {
+// Forward differences on the newer frame only: 3 texture reads per cascade instead of 8
+// (software GL renders the page on the CPU; the small waves need no blending between frames).
+vec2 cascadeSlope(sampler2D b, vec2 xz, float L, float texel, float footprint) {
   float e = max(L * texel, footprint);
-  return vec2(cascadeH(a, b, xz + vec2(e, 0.0), L, texel) - cascadeH(a, b, xz - vec2(e, 0.0), L, texel),
-              cascadeH(a, b, xz + vec2(0.0, e), L, texel) - cascadeH(a, b, xz - vec2(0.0, e), L, texel)) / (2.0 * e);
+  float c = textureLod(b, xz / L + 0.5 * texel, 0.0).y;
+  return vec2(textureLod(b, (xz + vec2(e, 0.0)) / L + 0.5 * texel, 0.0).y - c,
+              textureLod(b, (xz + vec2(0.0, e)) / L + 0.5 * texel, 0.0).y - c) / e;
 }
 // Summed slopes (dh/dx, dh/dz) of the finer cascades for a pixel of this footprint (m).
 vec2 cascadesSlope(vec2 xz, float footprint) {
   vec3 w = cascadeWeights(footprint);
   vec2 s = vec2(0.0);
-  if (w.x > 0.0) s += w.x * cascadeSlope(uC1A, uC1B, xz, uCPatch.x, uCTexel.x, footprint);
-  if (w.y > 0.0) s += w.y * cascadeSlope(uC2A, uC2B, xz, uCPatch.y, uCTexel.y, footprint);
-  if (w.z > 0.0) s += w.z * cascadeSlope(uC3A, uC3B, xz, uCPatch.z, uCTexel.z, footprint);
+  if (w.x > 0.0) s += w.x * cascadeSlope(uC1B, xz, uCPatch.x, uCTexel.x, footprint);
+  if (w.y > 0.0) s += w.y * cascadeSlope(uC2B, xz, uCPatch.y, uCTexel.y, footprint);
+  if (w.z > 0.0) s += w.z * cascadeSlope(uC3B, xz, uCPatch.z, uCTexel.z, footprint);
   return s;
 }
 `;
