@@ -91,7 +91,8 @@ def run(args, n, k, fields=None):
                 break
             except OSError:
                 time.sleep(0.05)
-        sub = [json.dumps({"type": "subscribe", "fields": fields}, separators=(",", ":"))] if fields else []
+        sub = [args.subscribe] if args.subscribe else \
+            [json.dumps({"type": "subscribe", "fields": fields}, separators=(",", ":"))] if fields else []
         lc = subprocess.Popen([args.load_client, str(port), str(k), str(args.warmup), str(args.window)] + sub,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = lc.stderr.readline()          # "measuring": the window starts
@@ -117,7 +118,7 @@ def run(args, n, k, fields=None):
             raise RuntimeError("load_client failed: %s %s" % (line, err))
         r = json.loads(out)
         res = {"bench": "load", "N": n, "clients": k, "fields": fields or ["height", "dx", "dz"],
-               "oceand_args": args.oceand_args, "fps_median": r["fps_median"], "fps_min": r["fps_min"],
+               "subscribe": args.subscribe, "oceand_args": args.oceand_args, "fps_median": r["fps_median"], "fps_min": r["fps_min"],
                "delivered": r["delivered"], "lat_p50_ms": r["lat_p50_ms"], "lat_p99_ms": r["lat_p99_ms"],
                "set_latency_ticks_p99": r["set_latency_ticks_p99"],
                "daemon_cpu": round((cpu1 - cpu0) / (t1 - t0), 2),
@@ -147,6 +148,7 @@ def main():
     ap.add_argument("--load-client", default="build/load_client")
     ap.add_argument("--runs", default="256:1,256:50,256:200,512:100", help="N:clients,...")
     ap.add_argument("--oceand-args", default="", help="extra daemon flags, e.g. '--sim-nice -10'")
+    ap.add_argument("--subscribe", default="", help="a subscribe message every client sends (JSON), e.g. the web client's")
     ap.add_argument("--warmup", type=float, default=2)
     ap.add_argument("--window", type=float, default=10)
     ap.add_argument("--no-query", action="store_true", help="skip the point query / probe runs (query_load.py)")

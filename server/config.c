@@ -522,7 +522,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         snprintf(err, errlen, "parameters: %s", verr);
         return -1;
     }
-    if (!control_fits_memory(p->resolution, dc->max_memory_mb) && resolution_from_state) {
+    if (!control_fits_memory(p->resolution, p->cascades, dc->max_memory_mb) && resolution_from_state) {
         /* Like every other bad saved value: warn and fall back. */
         LOGW("ignoring the saved resolution %d: it exceeds --max-memory-mb %d; using %d", p->resolution,
              dc->max_memory_mb, resolution_before_state);
@@ -532,7 +532,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
             return -1;
         }
     }
-    if (!control_fits_memory(p->resolution, dc->max_memory_mb)) {
+    if (!control_fits_memory(p->resolution, p->cascades, dc->max_memory_mb)) {
         snprintf(err, errlen, "resolution %d exceeds --max-memory-mb %d", p->resolution, dc->max_memory_mb);
         return -1;
     }

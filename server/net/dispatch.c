@@ -25,14 +25,20 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
 {
     if (!n->sim && !n->cluster.demand)
         return;
-    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
-        if (sub->fields & OCEAN_FIELD_BIT(f)) {
-            int key = layer_key(f, sub->lod, sub->bound_index);
-            if (n->cluster.demand) /* edge: the sim is elsewhere */
-                n->cluster.demand(n->cluster.user, key, delta);
-            else
-                sim_demand(n->sim, key, delta);
-        }
+    for (int c = 0; c < CTL_MAX_CASCADES; c++) {
+        int lod, bound_index;
+        unsigned fields = subscription_cascade(sub, c, &lod, &bound_index);
+        if (c > 0 && n->cluster.demand)
+            break; /* edge: the cluster relays cascade 0 only */
+        for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+            if (fields & OCEAN_FIELD_BIT(f)) {
+                int key = layer_key_cascade(c, f, lod, bound_index);
+                if (n->cluster.demand) /* edge: the sim is elsewhere */
+                    n->cluster.demand(n->cluster.user, key, delta);
+                else
+                    sim_demand(n->sim, key, delta);
+            }
+    }
 }
 
 /* ---- sets in flight ---- */

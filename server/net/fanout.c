@@ -72,14 +72,19 @@ static bool begin_frame(struct session *s, struct frame *f)
 {
     int tps = f->tiles_per_side;
     int nf = 0;
-    for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++) {
-        s->layers[fi] = NULL;
-        if (!(s->sub.fields & OCEAN_FIELD_BIT(fi)))
-            continue;
-        s->layers[fi] = frame_layer(f, fi, s->sub.lod, s->sub.bound_index);
-        if (!s->layers[fi])
-            return false;
-        nf++;
+    for (int c = 0; c < OCEAN_MAX_CASCADES; c++) {
+        int lod, bound_index;
+        unsigned fields = c < f->ncascades ? subscription_cascade(&s->sub, c, &lod, &bound_index) : 0;
+        for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++) {
+            const struct layer **slot = &s->layers[c * OCEAN_FIELD_COUNT + fi];
+            *slot = NULL;
+            if (!(fields & OCEAN_FIELD_BIT(fi)))
+                continue;
+            *slot = frame_layer_cascade(f, c, fi, lod, bound_index);
+            if (!*slot)
+                return false;
+            nf++;
+        }
     }
     s->ntiles = 0;
     if (s->sub.all_tiles) {
@@ -94,7 +99,7 @@ static bool begin_frame(struct session *s, struct frame *f)
     h.tile_count = (uint16_t)(nf * s->ntiles);
     oc_frame_header_write(s->hdr, &h);
     s->total = OC_FRAME_HEADER_SIZE;
-    for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++)
+    for (int fi = 0; fi < OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT; fi++)
         for (int i = 0; s->layers[fi] && i < s->ntiles; i++)
             s->total += s->layers[fi]->tile_off[s->tiles[i] + 1] - s->layers[fi]->tile_off[s->tiles[i]];
     frame_ref(f);
@@ -119,7 +124,7 @@ static size_t fill(struct session *s, unsigned char *dst, size_t cap)
         s->hdr_off += (int)take;
         n += take;
     }
-    while (n < cap && s->fi < OCEAN_FIELD_COUNT) {
+    while (n < cap && s->fi < OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT) {
         const struct layer *l = s->layers[s->fi];
         if (!l || s->ti >= s->ntiles) {
             s->fi++;

@@ -76,7 +76,7 @@ struct session {
     /* transmit: the frame being sent (fanout.c) */
     struct frame *cur;            /* one reference while sending, else NULL */
     uint8_t hdr[OC_FRAME_HEADER_SIZE]; /* its header, with this client's tile count */
-    const struct layer *layers[OCEAN_FIELD_COUNT]; /* per field, NULL = not subscribed */
+    const struct layer *layers[OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT]; /* [cascade * FIELDS + field], NULL = not sent */
     uint16_t tiles[CTL_MAX_TILES]; /* the frame's tiles this client gets, in order */
     int ntiles;
     size_t total, sent;           /* bytes of this client's frame, and sent so far */
