@@ -376,6 +376,49 @@ static void bench_dft(int n, const char *wisdom)
     ocean_free(o);
 }
 
+/* Cascades: step CPU time for 1..4 cascades (every cascade stepped with the
+ * fields a client draws: height, dx, dz, slopes), interleaved per
+ * repetition so that the shared machine's load hits all counts alike. */
+static void bench_cascades(int n, const char *wisdom)
+{
+    struct ocean *o[OCEAN_MAX_CASCADES];
+    int reps = reps_for(n);
+    const unsigned fields = OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_DX) | OCEAN_FIELD_BIT(OCEAN_DZ) |
+                            OCEAN_FIELD_BIT(OCEAN_SLOPE_X) | OCEAN_FIELD_BIT(OCEAN_SLOPE_Z);
+    for (int c = 0; c < OCEAN_MAX_CASCADES; c++) {
+        struct ocean_params p;
+        params_defaults(&p);
+        p.resolution = n;
+        p.cascades = c + 1;
+        struct ocean_options opt = {1, wisdom, 1};
+        char err[256];
+        o[c] = ocean_create(&p, &opt, err, sizeof err);
+        if (!o[c]) {
+            fprintf(stderr, "bench_step: cascades %d: %s\n", c + 1, err);
+            for (int k = 0; k < c; k++)
+                ocean_free(o[k]);
+            return;
+        }
+        ocean_step(o[c], 0.5, fields);
+    }
+    double *cpu = malloc((size_t)reps * OCEAN_MAX_CASCADES * sizeof *cpu);
+    for (int r = 0; r < reps; r++)
+        for (int c = 0; c < OCEAN_MAX_CASCADES; c++) {
+            double c0 = cpu_ms();
+            ocean_step(o[c], 1.0 + r * 0.033, fields);
+            cpu[c * reps + r] = cpu_ms() - c0;
+        }
+    double one = median(cpu, reps);
+    for (int c = 0; c < OCEAN_MAX_CASCADES; c++) {
+        double m = median(cpu + c * reps, reps);
+        printf("{\"bench\":\"cascades\",\"N\":%d,\"threads\":1,\"cascades\":%d,\"fields\":\"height,dx,dz,slopes\","
+               "\"step_cpu_ms\":%.3f,\"vs_one\":%.2f,\"reps\":%d}\n", n, c + 1, m, m / one, reps);
+        ocean_free(o[c]);
+    }
+    fflush(stdout);
+    free(cpu);
+}
+
 /* Where a step's time beyond FFTW's goes, one thread, process CPU time,
  * all variants interleaved per repetition on the same ocean:
  *   step (all fields and foam), fftw (only the FFTW executes); fill,
@@ -449,7 +492,7 @@ static void bench_parts(int n, const char *wisdom)
 int main(int argc, char **argv)
 {
     const char *wisdom = argc > 1 && *argv[1] ? argv[1] : NULL;
-    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, parts, pack, layout, reconfigure, dft */
+    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, parts, pack, layout, reconfigure, dft, cascades */
 #define WANT(name) (!only || strcmp(only, name) == 0)
     /* The machine is shared: say how busy it was. */
     double load[3] = {0, 0, 0};
@@ -479,5 +522,7 @@ int main(int argc, char **argv)
             bench_reconfigure(n, threads, wisdom);
     for (int n = 16; n <= 128 && WANT("dft"); n *= 2)
         bench_dft(n, wisdom);
+    for (int n = 256; n <= 512 && WANT("cascades"); n *= 2)
+        bench_cascades(n, wisdom);
     return 0;
 }

@@ -96,8 +96,8 @@ def run(args, n, k, fields=None):
         sub = {"type": "subscribe", "temporal": not args.intra}   # temporal: as the web client does
         if fields:
             sub["fields"] = fields
-        lc = subprocess.Popen([args.load_client, str(port), str(k), str(args.warmup), str(args.window),
-                               json.dumps(sub, separators=(",", ":"))],
+        sub = [args.subscribe] if args.subscribe else [json.dumps(sub, separators=(",", ":"))]
+        lc = subprocess.Popen([args.load_client, str(port), str(k), str(args.warmup), str(args.window)] + sub,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = lc.stderr.readline()          # "measuring": the window starts
         cpu0, t0, wait0 = cpu_seconds(d.pid), time.monotonic(), runq_wait_seconds(d.pid)
@@ -122,7 +122,7 @@ def run(args, n, k, fields=None):
             raise RuntimeError("load_client failed: %s %s" % (line, err))
         r = json.loads(out)
         res = {"bench": "load", "N": n, "clients": k, "temporal": not args.intra, "fields": fields or ["height", "dx", "dz"],
-               "oceand_args": args.oceand_args, "fps_median": r["fps_median"], "fps_min": r["fps_min"],
+               "subscribe": args.subscribe, "oceand_args": args.oceand_args, "fps_median": r["fps_median"], "fps_min": r["fps_min"],
                "delivered": r["delivered"], "lat_p50_ms": r["lat_p50_ms"], "lat_p99_ms": r["lat_p99_ms"],
                "set_latency_ticks_p99": r["set_latency_ticks_p99"],
                "daemon_cpu": round((cpu1 - cpu0) / (t1 - t0), 2),
@@ -153,6 +153,7 @@ def main():
     ap.add_argument("--load-client", default="build/load_client")
     ap.add_argument("--runs", default="256:1,256:50,256:200,512:100", help="N:clients,...")
     ap.add_argument("--oceand-args", default="", help="extra daemon flags, e.g. '--sim-nice -10'")
+    ap.add_argument("--subscribe", default="", help="a subscribe message every client sends (JSON), e.g. the web client's")
     ap.add_argument("--warmup", type=float, default=2)
     ap.add_argument("--intra", action="store_true", help="clients do not ask for the temporal codec (codec 1 only)")
     ap.add_argument("--window", type=float, default=10)

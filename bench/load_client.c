@@ -79,14 +79,22 @@ static uint32_t rd32(const uint8_t *p) { uint32_t v; memcpy(&v, p, 4); return v;
 /* Send one masked client frame (mask key 0: payload goes as is). */
 static void send_frame(struct client *c, int opcode, const void *data, size_t len)
 {
-    uint8_t buf[256];
-    if (len > 125)
+    uint8_t buf[4096 + 8];
+    if (len > 4096)
         return;
+    size_t h = 2;
     buf[0] = (uint8_t)(0x80 | opcode);
-    buf[1] = (uint8_t)(0x80 | len);
-    memset(buf + 2, 0, 4);
-    memcpy(buf + 6, data, len);
-    ssize_t w = send(c->fd, buf, 6 + len, MSG_NOSIGNAL);
+    if (len <= 125) {
+        buf[1] = (uint8_t)(0x80 | len);
+    } else { /* 16-bit length */
+        buf[1] = 0x80 | 126;
+        buf[2] = (uint8_t)(len >> 8);
+        buf[3] = (uint8_t)len;
+        h = 4;
+    }
+    memset(buf + h, 0, 4); /* mask key 0 */
+    memcpy(buf + h + 4, data, len);
+    ssize_t w = send(c->fd, buf, h + 4 + len, MSG_NOSIGNAL);
     (void)w;
 }
 

@@ -135,7 +135,7 @@ def snapshot(port):
 
 def bench(args):
     for n in (int(x) for x in args.ns.split(",")):
-        d, port, log = start(args, n, ["--query-budget", "1000000", "--control-rate", "1000",
+        d, port, log = start(args, n, ["--query-budget", "1000000", "--control-rate", "1000", "--control-budget", "1e7",
                                        "--control-burst", "1000"] + args.oceand_args.split())
         try:
             for pts in (1, 16, 256):

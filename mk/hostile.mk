@@ -8,21 +8,26 @@
 # battery: log floods on a slow stderr pipe, params fan-out from many
 # controllers, state-file symlink, ulimit -f, SIGUSR1/2, over-long paths,
 # fragment floods, query/probe abuse; layer floods (every field x LOD x bound at
-# N = 512 against the encode budget, issue 16 defect 2).
-# Budget: < 5 min on 2 cores (42 cases).
+# N = 512 against the encode budget, issue 16 defect 2); the control budget (50
+# clients of max-size subscribes, a controller's sets).
+# Budget: < 5 min on 2 cores (43 cases).
 #
 #   make test-hostile     the battery; "N passed, M failed", non-zero on a failure
 #   make bench-hostile    the same run, figures as one JSON line per case on stdout
 # HOSTILE_ARGS passes options, e.g. HOSTILE_ARGS="-k churn,set_flood" or "--strict".
+#   make bench-control-budget [BEFORE=old/oceand]   the control_budget attack, before/after alternating
 
 HOSTILE_ARGS ?=
 
 TESTS += test-hostile
-BENCHES += bench-hostile
+BENCHES += bench-hostile bench-control-budget
 
-.PHONY: test-hostile bench-hostile
+.PHONY: test-hostile bench-hostile bench-control-budget
 test-hostile: $(BUILD)/oceand
 	/usr/bin/python3 tests/hostile/test_hostile.py --oceand $(BUILD)/oceand $(HOSTILE_ARGS)
 
 bench-hostile: $(BUILD)/oceand
 	@/usr/bin/python3 tests/hostile/test_hostile.py --oceand $(BUILD)/oceand --bench $(HOSTILE_ARGS)
+
+bench-control-budget: $(BUILD)/oceand
+	@/usr/bin/python3 bench/control_budget.py --oceand $(BUILD)/oceand $(if $(BEFORE),--before $(BEFORE))

@@ -63,12 +63,15 @@ static float quantize_rate(double r, double period_s)
     return (float)(q > 1 ? 1 : q);
 }
 
-void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS], double budget_scale,
+void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS_ALL], double budget_scale,
                    struct plan *p)
 {
     memset(p, 0, sizeof *p);
     unsigned all = 0;
-    for (int k = 0; k < LAYER_KEYS; k++)
+    /* Cascades: a finer cascade's keys fall in the group of their LOD and
+     * bound (the group's fields are a union: a field asked of two cascades
+     * in one group is counted once; known approximation). */
+    for (int k = 0; k < LAYER_KEYS_ALL; k++)
         if (demand[k] > 0) {
             int g = plan_group(layer_key_lod(k), layer_key_bound(k));
             p->fields[g] |= OCEAN_FIELD_BIT(layer_key_field(k));
@@ -174,7 +177,10 @@ void capacity_info_fill(const struct cost_model *m, int n, struct capacity_info 
     for (int size = first; size <= hi && c->nsizes < CAPACITY_MAX_SIZES; size *= 2) {
         struct capacity_size *z = &c->sizes[c->nsizes++];
         z->n = size;
-        z->fits_memory = control_fits_memory(size, m->max_memory_mb);
+        /* Memory at the default cascade count (one grid each): the announcement
+         * does not follow later changes of `cascades` (set checks them itself). */
+        const struct param_def *cd = param_find("cascades");
+        z->fits_memory = control_fits_memory(size, cd ? (int)cd->def : 1, m->max_memory_mb);
         if (z->fits_memory)
             c->max_resolution = size;
         for (int f = 1; f <= 6; f++) {

@@ -65,7 +65,7 @@ struct plan {
 
 /* Demand -> plan at resolution n with tile side ts (per-tick samples and
  * time from the model; budget_scale < 1 plans with headroom). */
-void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS], double budget_scale,
+void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS_ALL], double budget_scale,
                    struct plan *out);
 bool plan_degraded(const struct plan *p, int group);
 /* What the plan delivers, comparable between plans of the same demand:

@@ -37,8 +37,11 @@ static const struct param_def opt_table[] = {
       "(default $XDG_STATE_HOME/oceand-state.json, else build/oceand-state.json; \"none\" = off)"),
     OPT("max_clients", PARAM_INT, max_clients, 1, 100000, 512, NULL, 0, "WebSocket clients at once; more are refused"),
     OPT("max_message", PARAM_INT, max_message, 256, 16777216, 65536, NULL, 0, "largest JSON message in bytes; larger closes with 1009"),
-    OPT("control_rate", PARAM_FLOAT, control_rate, 0.1, 10000, 20, NULL, 0, "control messages per second per client (sustained)"),
-    OPT("control_burst", PARAM_INT, control_burst, 1, 10000, 40, NULL, 0, "control messages per client in a burst"),
+    OPT("control_rate", PARAM_FLOAT, control_rate, 0.1, 10000, 20, NULL, 0, "control units per second per client "
+        "(sustained); a message costs 1 unit + 1 per full KiB; over it: rate_limited"),
+    OPT("control_burst", PARAM_INT, control_burst, 1, 10000, 40, NULL, 0, "control units per client in a burst"),
+    OPT("control_budget", PARAM_FLOAT, control_budget, 10, 1e7, 2000, NULL, 0, "control units per second, all "
+        "clients together (each still gets budget / clients); over it: busy"),
     OPT("ping_interval", PARAM_INT, ping_interval, 1, 3600, 20, NULL, 0, "seconds of silence before the server pings"),
     OPT("idle_timeout", PARAM_INT, idle_timeout, 2, 7200, 60, NULL, 0, "seconds of silence before the server hangs up"),
     OPT_STR("allowed_origins", allowed_origins, "", 0, "WebSocket Origins allowed: \"\" = same host "
@@ -522,7 +525,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         snprintf(err, errlen, "parameters: %s", verr);
         return -1;
     }
-    if (!control_fits_memory(p->resolution, dc->max_memory_mb) && resolution_from_state) {
+    if (!control_fits_memory(p->resolution, p->cascades, dc->max_memory_mb) && resolution_from_state) {
         /* Like every other bad saved value: warn and fall back. */
         LOGW("ignoring the saved resolution %d: it exceeds --max-memory-mb %d; using %d", p->resolution,
              dc->max_memory_mb, resolution_before_state);
@@ -532,7 +535,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
             return -1;
         }
     }
-    if (!control_fits_memory(p->resolution, dc->max_memory_mb)) {
+    if (!control_fits_memory(p->resolution, p->cascades, dc->max_memory_mb)) {
         snprintf(err, errlen, "resolution %d exceeds --max-memory-mb %d", p->resolution, dc->max_memory_mb);
         return -1;
     }

@@ -25,8 +25,9 @@ struct daemon_config {
     char   config_file[512];
     int    max_clients;
     int    max_message;        /* bytes of one JSON text message */
-    double control_rate;       /* control messages per second per client */
+    double control_rate;       /* control units per second per client (a unit: a message, + 1 per KiB) */
     int    control_burst;
+    double control_budget;     /* control units per second, all clients together */
     int    ping_interval;      /* s of silence before we ping */
     int    idle_timeout;       /* s of silence before we hang up */
     char   allowed_origins[512]; /* "" = same host or no Origin; "*" = any; else comma list */

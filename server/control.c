@@ -51,6 +51,23 @@ void subscription_default(struct subscription *s, double tick_rate)
     s->bound_index = 3; /* 0.01 m */
     s->max_rate = tick_rate;
     s->all_tiles = true;
+    s->ncascades = 1;
+}
+
+_Static_assert(CTL_MAX_CASCADES == OCEAN_MAX_CASCADES, "subscriptions address every cascade");
+
+unsigned subscription_cascade(const struct subscription *s, int c, int *lod, int *bound_index)
+{
+    if (c == 0) {
+        *lod = s->lod;
+        *bound_index = s->bound_index;
+        return s->fields;
+    }
+    if (c < 0 || c >= s->ncascades || c >= CTL_MAX_CASCADES)
+        return 0;
+    *lod = s->cascade[c].lod;
+    *bound_index = s->cascade[c].bound_index;
+    return s->cascade[c].fields;
 }
 
 static bool is_scalar(const cJSON *j)
@@ -225,13 +242,13 @@ static size_t memory_bytes(int n)
     return b;
 }
 
-bool control_fits_memory(int n, int max_memory_mb)
+bool control_fits_memory(int n, int cascades, int max_memory_mb)
 {
     /* While a new N is being built the old simulation still runs, so two
-     * exist at once; plus up to three frames in flight of one raw field, and
+     * exist at once (one grid per cascade); plus up to three frames in flight of one raw field, and
      * the encoder's copy of the six fields (frame.c: the next step overwrites
      * the library's while the last one is encoded). */
-    double bytes = 2.0 * (double)memory_bytes(n) + (3.0 + 6.0) * 4.0 * (double)n * (double)n;
+    double bytes = 2.0 * (cascades > 1 ? cascades : 1) * (double)memory_bytes(n) + (3.0 + 6.0) * 4.0 * (double)n * (double)n;
     return bytes <= (double)max_memory_mb * 1048576.0;
 }
 
@@ -303,9 +320,9 @@ int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const
     char err[160];
     if (params_validate(&p, err, sizeof err) != 0)
         return fail(e, "invalid", NULL, "%s", err);
-    if (lim && !control_fits_memory(p.resolution, lim->max_memory_mb))
-        return fail(e, "invalid", "resolution", "resolution %d exceeds the memory cap of %d MB",
-                    p.resolution, lim->max_memory_mb);
+    if (lim && !control_fits_memory(p.resolution, p.cascades, lim->max_memory_mb))
+        return fail(e, "invalid", "resolution", "resolution %d exceeds the memory cap of %d MB (with %d cascade%s)",
+                    p.resolution, lim->max_memory_mb, p.cascades, p.cascades > 1 ? "s" : "");
     uint64_t mask = 0;
     for (size_t i = 0; i < param_count; i++)
         if (param_get(&p, &param_table[i]) != param_get(cur, &param_table[i]))
@@ -316,11 +333,10 @@ int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const
     return 0;
 }
 
-int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, const struct ctl_limits *lim,
-                            struct subscription *out, struct ctl_error *e)
+/* fields, lod and bound of a subscription (or of one cascade of it): the
+ * members given replace *fields, *lod, *bound_index. */
+static int parse_layer(const cJSON *msg, unsigned *fields, int *lod, int *bound_index, struct ctl_error *e)
 {
-    struct subscription tmp; /* ~4 KB: fine on the stack */
-    memcpy(&tmp, cur, sizeof tmp);
     const cJSON *j;
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "fields"))) {
         if (!cJSON_IsArray(j) || cJSON_GetArraySize(j) == 0)
@@ -337,13 +353,13 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
                 return fail(e, "bad_subscription", NULL, "unknown field \"%.40s\"", name ? name : "?");
             mask |= OCEAN_FIELD_BIT(k);
         }
-        tmp.fields = mask;
+        *fields = mask;
     }
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "lod"))) {
         if (!cJSON_IsNumber(j) || j->valuedouble != floor(j->valuedouble) || j->valuedouble < 0 ||
             j->valuedouble > CTL_MAX_LOD)
             return fail(e, "bad_subscription", NULL, "\"lod\" must be an integer 0..%d", CTL_MAX_LOD);
-        tmp.lod = (int)j->valuedouble;
+        *lod = (int)j->valuedouble;
     }
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "bound"))) {
         int k = -1;
@@ -352,7 +368,38 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
                 k = i;
         if (k < 0)
             return fail(e, "bad_subscription", NULL, "\"bound\" must be one of 0, 0.001, 0.005, 0.01, 0.05");
-        tmp.bound_index = k;
+        *bound_index = k;
+    }
+    return 0;
+}
+
+int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, const struct ctl_limits *lim,
+                            struct subscription *out, struct ctl_error *e)
+{
+    struct subscription tmp; /* ~4 KB: fine on the stack */
+    memcpy(&tmp, cur, sizeof tmp);
+    const cJSON *j;
+    if (parse_layer(msg, &tmp.fields, &tmp.lod, &tmp.bound_index, e) != 0)
+        return -1;
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "cascades"))) {
+        /* The finer cascades 1, 2, ...: each {fields, lod, bound}, any member
+         * omitted taken from cascade 0's (the top level's, as now in force). */
+        if (!cJSON_IsArray(j) || cJSON_GetArraySize(j) > CTL_MAX_CASCADES - 1)
+            return fail(e, "bad_subscription", NULL, "\"cascades\" must be an array of at most %d objects "
+                        "{fields, lod, bound} for cascades 1..%d", CTL_MAX_CASCADES - 1, CTL_MAX_CASCADES - 1);
+        int c = 1;
+        const cJSON *item;
+        cJSON_ArrayForEach(item, j) {
+            if (!cJSON_IsObject(item))
+                return fail(e, "bad_subscription", NULL, "\"cascades\"[%d] must be an object {fields, lod, bound}", c - 1);
+            struct cascade_sub cs = {tmp.fields, tmp.lod, tmp.bound_index};
+            if (parse_layer(item, &cs.fields, &cs.lod, &cs.bound_index, e) != 0)
+                return -1;
+            tmp.cascade[c++] = cs;
+        }
+        for (int k = c; k < CTL_MAX_CASCADES; k++)
+            memset(&tmp.cascade[k], 0, sizeof tmp.cascade[k]);
+        tmp.ncascades = c;
     }
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "max_rate"))) {
         if (!cJSON_IsNumber(j) || !isfinite(j->valuedouble) || j->valuedouble <= 0)
@@ -511,7 +558,28 @@ cJSON *control_subscription_object(const struct subscription *s)
     cJSON_AddNumberToObject(o, "bound", bound_text[s->bound_index]);
     cJSON_AddNumberToObject(o, "max_rate", s->max_rate);
     cJSON_AddBoolToObject(o, "temporal", s->temporal);
+    if (s->ncascades > 1) { /* only when asked for: a client that knows no cascades sees what it always saw */
+        cJSON *cs = cJSON_AddArrayToObject(o, "cascades");
+        for (int c = 1; c < s->ncascades && c < CTL_MAX_CASCADES; c++) {
+            cJSON *co = cJSON_CreateObject();
+            cJSON *cf = cJSON_AddArrayToObject(co, "fields");
+            for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
+                if (s->cascade[c].fields & OCEAN_FIELD_BIT(i))
+                    cJSON_AddItemToArray(cf, cJSON_CreateString(ocean_field_name((enum ocean_field)i)));
+            cJSON_AddNumberToObject(co, "lod", s->cascade[c].lod);
+            cJSON_AddNumberToObject(co, "bound", bound_text[s->cascade[c].bound_index]);
+            cJSON_AddItemToArray(cs, co);
+        }
+    }
     return o;
+}
+
+/* "cascade_patch_sizes": the side of each cascade's patch in force, m. */
+static void add_cascade_patches(cJSON *o, const struct ocean_params *p)
+{
+    cJSON *a = cJSON_AddArrayToObject(o, "cascade_patch_sizes");
+    for (int c = 0; c < p->cascades && c < CTL_MAX_CASCADES; c++)
+        cJSON_AddItemToArray(a, cJSON_CreateNumber(ocean_cascade_patch(p->patch_size, c)));
 }
 
 static void add_id(cJSON *o, const cJSON *id)
@@ -539,6 +607,7 @@ cJSON *control_params_msg(const struct ocean_params *p, uint32_t version, uint64
     cJSON_AddStringToObject(o, "type", "params");
     cJSON_AddItemToObject(o, "params", control_params_object(p));
     cJSON_AddNumberToObject(o, "params_version", version);
+    add_cascade_patches(o, p);
     cJSON *c = cJSON_AddArrayToObject(o, "changed");
     for (size_t i = 0; i < param_count; i++)
         if (changed & (1ull << i))
@@ -583,6 +652,7 @@ cJSON *control_hello_msg(const struct hello_info *h)
     cJSON_AddStringToObject(o, "role", h->controller ? "controller" : "viewer");
     cJSON_AddItemToObject(o, "params", control_params_object(h->params));
     cJSON_AddNumberToObject(o, "params_version", h->params_version);
+    add_cascade_patches(o, h->params);
     cJSON_AddItemToObject(o, "schema", control_schema());
     cJSON *f = cJSON_AddArrayToObject(o, "fields");
     for (int i = 0; i < OCEAN_FIELD_COUNT; i++)

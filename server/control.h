@@ -27,10 +27,18 @@ struct ctl_error {
 };
 
 /* What a client wants to receive. */
-struct subscription {
+#define CTL_MAX_CASCADES 4            /* = OCEAN_MAX_CASCADES (checked in control.c) */
+struct cascade_sub {
     unsigned fields;        /* OCEAN_FIELD_BIT mask, never 0 */
     int lod;                /* 0..CTL_MAX_LOD */
     int bound_index;        /* index into ctl_bounds */
+};
+struct subscription {
+    unsigned fields;        /* cascade 0: OCEAN_FIELD_BIT mask, never 0 */
+    int lod;                /* 0..CTL_MAX_LOD */
+    int bound_index;        /* index into ctl_bounds */
+    int ncascades;          /* cascades asked for: 1 (cascade 0 only, the default) .. CTL_MAX_CASCADES */
+    struct cascade_sub cascade[CTL_MAX_CASCADES]; /* [1 .. ncascades-1]: the finer cascades ([0] unused) */
     double max_rate;        /* frames per second, 0 < r <= tick rate */
     bool temporal;          /* accepts codec 3 (predicted tiles, PROTOCOL.md §5.9); default false */
     bool all_tiles;
@@ -65,6 +73,9 @@ struct ctl_msg {
 };
 
 void subscription_default(struct subscription *s, double tick_rate);
+/* The fields, LOD and bound a subscription asks for cascade c: 0 fields
+ * when it does not ask for that cascade. */
+unsigned subscription_cascade(const struct subscription *s, int c, int *lod, int *bound_index);
 
 /* Parse one text message. On success returns 0 and fills m (free with
  * ctl_msg_free). On failure returns -1, fills e, and *id_out (if not NULL)
@@ -94,10 +105,10 @@ const char *control_error_code(enum param_error r);
 int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, const struct ctl_limits *lim,
                             struct subscription *out, struct ctl_error *e);
 
-/* Whether the daemon's simulation at resolution n fits max_memory_mb: two
+/* Whether the daemon's simulation at resolution n with `cascades` grids fits max_memory_mb: two
  * simulations (ocean_memory_bytes, the running one and one being built)
  * plus the frames in flight. */
-bool control_fits_memory(int n, int max_memory_mb);
+bool control_fits_memory(int n, int cascades, int max_memory_mb);
 
 /* JSON builders; all return a cJSON tree the caller prints and deletes. */
 cJSON *control_params_object(const struct ocean_params *p);

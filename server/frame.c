@@ -16,6 +16,7 @@ struct frame *frame_new(int nlayers)
     if (!f)
         return NULL;
     atomic_init(&f->refs, 1);
+    f->ncascades = 1;
     f->layers = calloc(nlayers > 0 ? (size_t)nlayers : 1, sizeof *f->layers);
     if (!f->layers) {
         free(f);
@@ -40,20 +41,25 @@ void frame_unref(struct frame *f)
     free(f);
 }
 
-const struct layer *frame_layer(const struct frame *f, int field, int lod, int bound_index)
+const struct layer *frame_layer_cascade(const struct frame *f, int cascade, int field, int lod, int bound_index)
 {
     for (int i = 0; i < f->nlayers; i++) {
         const struct layer *l = &f->layers[i];
-        if (l->field == field && l->lod == lod && l->bound_index == bound_index)
+        if (l->field == field && l->lod == lod && l->bound_index == bound_index && l->cascade == cascade)
             return l;
     }
     return NULL;
 }
 
+const struct layer *frame_layer(const struct frame *f, int field, int lod, int bound_index)
+{
+    return frame_layer_cascade(f, 0, field, lod, bound_index);
+}
+
 /* Which layer a piece of work belongs to. A stream-state (temporal) codec
- * keeps its state per (field, encoded_lod, bound_index, tile). */
+ * keeps its state per (cascade, field, encoded_lod, bound_index, tile). */
 struct layer_id {
-    int field, encoded_lod, bound_index;
+    int field, encoded_lod, bound_index, cascade;
 };
 
 /* The whole encode of one layer: every tile, in tile order, into l (buf and
@@ -69,8 +75,8 @@ static int encode_layer(struct oc_encoder *enc, const struct layer_id *id, const
     for (int tz = 0; tz < tps; tz++)
         for (int tx = 0; tx < tps; tx++) {
             l->tile_off[tz * tps + tx] = (uint32_t)l->buf.len;
-            int rc = oc_encode_tile(enc, data, n, ts, tx, tz, id->encoded_lod, (enum oc_field)id->field,
-                                    ctl_bounds[id->bound_index], &l->buf);
+            int rc = oc_encode_tile_cascade(enc, data, n, ts, tx, tz, id->encoded_lod, (enum oc_field)id->field,
+                                            ctl_bounds[id->bound_index], id->cascade, &l->buf);
             if (rc != 0)
                 return rc;
         }
@@ -81,13 +87,14 @@ static int encode_layer(struct oc_encoder *enc, const struct layer_id *id, const
 struct frame_job {
     int nenc;
     struct oc_encoder **enc;    /* one per encode thread + the caller */
-    float *snap[OCEAN_FIELD_COUNT]; /* the step's fields, copied: the next step overwrites them */
-    size_t snap_cap[OCEAN_FIELD_COUNT];
+    float *snap[OCEAN_MAX_CASCADES][OCEAN_FIELD_COUNT]; /* the step's fields per cascade, copied:
+                                                           the next step overwrites them */
+    size_t snap_cap[OCEAN_MAX_CASCADES][OCEAN_FIELD_COUNT];
     struct frame *f;            /* being built: one layer per item (frame_job_finish hands it over) */
     int nitems;
-    int item_key[LAYER_KEYS];   /* item -> index into want.keys */
-    int item_rc[LAYER_KEYS];
-    size_t last_len[LAYER_KEYS]; /* bytes of each key's layer last time: reserved up front */
+    int item_key[LAYER_KEYS_ALL];   /* item -> index into want.keys */
+    int item_rc[LAYER_KEYS_ALL];
+    size_t last_len[LAYER_KEYS_ALL]; /* bytes of each key's layer last time: reserved up front */
     struct frame_want want;
     struct oc_frame_header hdr;
     int n, ts, tps;
@@ -139,8 +146,9 @@ void frame_job_free(struct frame_job *j)
     for (int i = 0; i < j->nenc; i++)
         oc_encoder_free(j->enc[i]);
     free(j->enc);
-    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
-        free(j->snap[f]);
+    for (int c = 0; c < OCEAN_MAX_CASCADES; c++)
+        for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+            free(j->snap[c][f]);
     free(j);
 }
 
@@ -174,26 +182,30 @@ int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, c
     j->nitems = 0;
     j->samples = 0;
     size_t nn = (size_t)n * n;
-    for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
-        const float *src = (want->fields & OCEAN_FIELD_BIT(f)) ? ocean_field(o, (enum ocean_field)f) : NULL;
-        if (!src)
-            continue;
-        if (j->snap_cap[f] < nn) {
-            free(j->snap[f]);
-            j->snap_cap[f] = 0;
-            if (!(j->snap[f] = malloc(nn * sizeof(float))))
-                return -1;
-            j->snap_cap[f] = nn;
+    int ncascades = ocean_cascades(o);
+    for (int c = 0; c < ncascades && c < OCEAN_MAX_CASCADES; c++)
+        for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
+            const float *src = (want->cfields[c] & OCEAN_FIELD_BIT(f)) ? ocean_cascade_field(o, c, (enum ocean_field)f) : NULL;
+            if (!src)
+                continue;
+            if (j->snap_cap[c][f] < nn) {
+                free(j->snap[c][f]);
+                j->snap_cap[c][f] = 0;
+                if (!(j->snap[c][f] = malloc(nn * sizeof(float))))
+                    return -1;
+                j->snap_cap[c][f] = nn;
+            }
+            memcpy(j->snap[c][f], src, nn * sizeof(float));
         }
-        memcpy(j->snap[f], src, nn * sizeof(float));
-    }
     if (!(j->f = frame_new(want->nkeys)))
         return -1;
     j->f->tiles_per_side = j->tps;
+    j->f->ncascades = ncascades;
     for (int k = 0; k < want->nkeys; k++) {
-        int field = layer_key_field(want->keys[k]), lod = want->lod[k];
-        if ((j->ts >> lod) < 1 || !(want->fields & OCEAN_FIELD_BIT(field)) || !ocean_field(o, (enum ocean_field)field))
-            continue; /* a LOD finer than one sample per tile, or a field not stepped */
+        int field = layer_key_field(want->keys[k]), lod = want->lod[k], c = layer_key_which_cascade(want->keys[k]);
+        if ((j->ts >> lod) < 1 || c >= ncascades || !(want->cfields[c] & OCEAN_FIELD_BIT(field)) ||
+            !ocean_cascade_field(o, c, (enum ocean_field)field))
+            continue; /* a LOD finer than one sample per tile, a field not stepped, a cascade not in force */
         j->samples += (long)(n >> lod) * (n >> lod);
         j->item_key[j->nitems] = k;
         j->item_rc[j->nitems] = 0;
@@ -205,18 +217,20 @@ int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, c
 void frame_job_item(struct frame_job *j, int index, int worker)
 {
     int k = j->item_key[index], key = j->want.keys[k];
-    struct layer_id id = { layer_key_field(key), j->want.lod[k], layer_key_bound(key) };
+    struct layer_id id = { layer_key_field(key), j->want.lod[k], layer_key_bound(key), layer_key_which_cascade(key) };
     struct layer *l = &j->f->layers[index];
+    l->cascade = (uint8_t)id.cascade;
     l->field = (uint8_t)id.field;
     l->lod = (uint8_t)layer_key_lod(key);
     l->bound_index = (uint8_t)id.bound_index;
     l->encoded_lod = (uint8_t)id.encoded_lod;
-    struct oc_stream *st = j->streams && j->want.temporal[key] ? j->streams->st[key] : NULL;
+    struct oc_stream *st = j->streams && key < LAYER_KEYS && j->want.temporal[key] ? j->streams->st[key] : NULL;
     if (st) /* temporal: this layer's stream, used by this thread alone (jobs run one at a time) */
-        j->item_rc[index] = layer_encode_temporal(st, j->enc[worker], j->snap[id.field], j->hdr.seq,
+        j->item_rc[index] = layer_encode_temporal(st, j->enc[worker], j->snap[id.cascade][id.field], j->hdr.seq,
                                                   j->want.intra[key], j->tps, l);
     else
-        j->item_rc[index] = encode_layer(j->enc[worker], &id, j->snap[id.field], j->n, j->ts, j->last_len[key], l);
+        j->item_rc[index] = encode_layer(j->enc[worker], &id, j->snap[id.cascade][id.field], j->n, j->ts,
+                                         j->last_len[key], l);
 }
 
 void frame_job_warm(struct frame_job *j, const struct ocean *o, int tile_size)
@@ -227,7 +241,7 @@ void frame_job_warm(struct frame_job *j, const struct ocean *o, int tile_size)
             const float *data = ocean_field(o, (enum ocean_field)f);
             if (!data)
                 continue;
-            struct layer_id id = { f, 0, 3 /* 1 cm */ };
+            struct layer_id id = { f, 0, 3 /* 1 cm */, 0 };
             struct layer l = { 0 };
             encode_layer(j->enc[e], &id, data, n, ts, 0, &l);
             oc_buf_free(&l.buf);
@@ -246,8 +260,8 @@ struct frame *frame_job_finish(struct frame_job *j)
     for (int i = 0; i < j->nitems; i++) {
         struct layer *l = &f->layers[i];
         if (j->item_rc[i] != 0) {
-            LOGE("encoding %s lod %d: %s", ocean_field_name((enum ocean_field)l->field), l->encoded_lod,
-                 oc_strerror(j->item_rc[i]));
+            LOGE("encoding %s lod %d cascade %d: %s", ocean_field_name((enum ocean_field)l->field), l->encoded_lod,
+                 l->cascade, oc_strerror(j->item_rc[i]));
             oc_buf_free(&l->buf);
             free(l->tile_off);
             oc_buf_free(&l->shared);

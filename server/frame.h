@@ -16,17 +16,25 @@
 #include "oc_proto.h"
 #include "ocean.h"
 
-/* A layer key: one (field, LOD, bound index) combination, 0..LAYER_KEYS-1.
+/* A layer key: one (cascade, field, LOD, bound index) combination.
  * Subscriptions are counted per key (demand); a frame holds one layer per
- * key that had demand when it was built. */
+ * key that had demand when it was built. Cascade 0's keys are
+ * 0..LAYER_KEYS-1 (what a cluster relays: server/cluster knows only those);
+ * cascade c's are c * LAYER_KEYS + the same, up to LAYER_KEYS_ALL - 1. */
 #define LAYER_KEYS (OCEAN_FIELD_COUNT * (CTL_MAX_LOD + 1) * CTL_BOUND_COUNT)
+#define LAYER_KEYS_ALL (LAYER_KEYS * OCEAN_MAX_CASCADES)
 static inline int layer_key(int field, int lod, int bound_index)
 {
     return (field * (CTL_MAX_LOD + 1) + lod) * CTL_BOUND_COUNT + bound_index;
 }
-static inline int layer_key_field(int key) { return key / ((CTL_MAX_LOD + 1) * CTL_BOUND_COUNT); }
+static inline int layer_key_cascade(int cascade, int field, int lod, int bound_index)
+{
+    return cascade * LAYER_KEYS + layer_key(field, lod, bound_index);
+}
+static inline int layer_key_field(int key) { return key % LAYER_KEYS / ((CTL_MAX_LOD + 1) * CTL_BOUND_COUNT); }
 static inline int layer_key_lod(int key) { return (key / CTL_BOUND_COUNT) % (CTL_MAX_LOD + 1); }
 static inline int layer_key_bound(int key) { return key % CTL_BOUND_COUNT; }
+static inline int layer_key_which_cascade(int key) { return key / LAYER_KEYS; }
 
 /* The tile side frames use at resolution n: the configured size, or n when
  * the grid is smaller. hello and params announce this value too. */
@@ -39,7 +47,7 @@ static inline int frame_tile_size(int configured, int n) { return configured < n
  * the shared tiles of its stream (PROTOCOL.md §5.9), for the clients that
  * received the layer in each of the `need` previous ticks. */
 struct layer {
-    uint8_t field, lod, bound_index; /* lod: of the key clients subscribed to */
+    uint8_t field, lod, bound_index, cascade; /* lod: of the key clients subscribed to */
     uint8_t encoded_lod;        /* lod of its tiles: lod, or coarser when the tick degraded it
                                    (capacity.h; the clients concerned were told with `degraded`) */
     uint8_t need;               /* temporal: ticks of history the shared tiles need (0 = none) */
@@ -56,6 +64,7 @@ struct frame {
                                    frames the lws thread never saw, unlike seq, which also
                                    advances on ticks that built no frame */
     int tiles_per_side;
+    int ncascades;              /* cascades in force when it was built (layers of higher ones never come) */
     int nlayers;
     struct layer *layers;
 };
@@ -63,12 +72,13 @@ struct frame {
 /* Which layers to build: the keys due this tick, the encoded LOD of each,
  * and the fields they need. */
 struct frame_want {
-    unsigned fields;            /* OCEAN_FIELD_BIT mask of the keys below */
+    unsigned fields;            /* OCEAN_FIELD_BIT mask of the keys below (all cascades) */
+    unsigned cfields[OCEAN_MAX_CASCADES]; /* the same per cascade: what each must be stepped for */
     int nkeys;
-    uint16_t keys[LAYER_KEYS];
-    uint8_t lod[LAYER_KEYS];    /* encoded LOD of keys[i]: layer_key_lod(keys[i]) or coarser */
-    uint8_t temporal[LAYER_KEYS]; /* by key: a temporal client wants it (encode its stream) */
-    uint8_t intra[LAYER_KEYS];  /* by key: a client needs intra / keyframe tiles this tick */
+    uint16_t keys[LAYER_KEYS_ALL];
+    uint8_t lod[LAYER_KEYS_ALL]; /* encoded LOD of keys[i]: layer_key_lod(keys[i]) or coarser */
+    uint8_t temporal[LAYER_KEYS_ALL]; /* by key: a temporal client wants it (encode its stream; cascade 0 only) */
+    uint8_t intra[LAYER_KEYS_ALL];  /* by key: a client needs intra / keyframe tiles this tick */
     bool reset_streams;         /* the sea changed (N or physics): every temporal layer starts new chains */
 };
 
@@ -117,7 +127,9 @@ struct frame *frame_new(int nlayers);
 
 void frame_ref(struct frame *f);
 void frame_unref(struct frame *f);     /* NULL is fine */
-/* The layer for (field, lod, bound), or NULL if nobody asked for it this tick. */
+/* The layer for (field, lod, bound) of cascade 0, or NULL if nobody asked for it this tick. */
 const struct layer *frame_layer(const struct frame *f, int field, int lod, int bound_index);
+/* The same for any cascade. */
+const struct layer *frame_layer_cascade(const struct frame *f, int cascade, int field, int lod, int bound_index);
 
 #endif

@@ -53,8 +53,8 @@ void layer_streams_prepare(struct layer_streams *ls, int n, int tile_size, struc
     for (int i = 0; i < want->nkeys; i++) {
         int k = want->keys[i];
         int side = tile_size >> layer_key_lod(k);
-        if (!want->temporal[k] || ls->st[k])
-            continue;
+        if (k >= LAYER_KEYS || !want->temporal[k] || ls->st[k])
+            continue; /* streams are for cascade 0's keys */
         size_t bytes = layer_stream_bytes(side) * (size_t)(n / tile_size) * (size_t)(n / tile_size);
         if (side >= 1 && ls->used + bytes <= ls->budget)
             ls->st[k] = oc_stream_new(n, tile_size, layer_key_lod(k), (enum oc_field)layer_key_field(k),

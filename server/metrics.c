@@ -100,6 +100,14 @@ size_t metrics_render(char *buf, size_t cap)
     counter(&o, "oceand_control_messages_total", "JSON control messages received.", atomic_load(&m->control_messages));
     counter(&o, "oceand_control_errors_total", "JSON control messages answered with an error.",
             atomic_load(&m->control_errors));
+    counter(&o, "oceand_control_units_total", "Control units charged to accepted messages (1 + 1 per full KiB).",
+            atomic_load(&m->control_units));
+    put(&o, "# HELP oceand_control_refused_total Control messages dropped unread: the client's own limit "
+            "(rate_limited) or the budget of all clients (busy).\n"
+            "# TYPE oceand_control_refused_total counter\n"
+            "oceand_control_refused_total{reason=\"rate_limited\"} %llu\n"
+            "oceand_control_refused_total{reason=\"busy\"} %llu\n",
+        (unsigned long long)atomic_load(&m->control_rate_limited), (unsigned long long)atomic_load(&m->control_busy));
     counter(&o, "oceand_param_changes_total", "Parameter sets applied.", atomic_load(&m->param_changes));
     counter(&o, "oceand_closed_too_large_total", "Clients closed with 1009 (message too large).",
             atomic_load(&m->closed_too_large));

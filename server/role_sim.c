@@ -59,10 +59,14 @@ static void sim_on_frame(void *user, struct frame *f)
         .frame_flags = f->hdr.flags, .server_time_us = f->hdr.server_time_us,
         .tiles_per_side = (uint16_t)f->tiles_per_side,
     };
+    /* A cluster relays cascade 0 only (its layer keys are cascade 0's). */
     for (int i = 0; i < f->nlayers; i++)
-        cl_bit_set(info.encoded, layer_key(f->layers[i].field, f->layers[i].lod, f->layers[i].bound_index), true);
+        if (f->layers[i].cascade == 0)
+            cl_bit_set(info.encoded, layer_key(f->layers[i].field, f->layers[i].lod, f->layers[i].bound_index), true);
     for (int i = 0; i < f->nlayers; i++) {
         const struct layer *l = &f->layers[i];
+        if (l->cascade != 0)
+            continue;
         if (!l->tile_off)
             continue; /* no intra tiles this tick (edges always ask for them: their demand counts as intra) */
         info.field = l->field;

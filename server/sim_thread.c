@@ -100,9 +100,9 @@ struct sim {
     struct plan plan_pub;             /* tick writes; lws reads (sim_plan) */
     uint32_t plan_gen;                /* +1 per change of plan_pub */
 
-    atomic_int demand[LAYER_KEYS];    /* atomic: lws writes (subscriptions); tick reads */
-    atomic_int tdemand[LAYER_KEYS];   /* atomic: lws writes (temporal subscriptions, also in demand); tick reads */
-    atomic_int key_want[LAYER_KEYS];  /* atomic: lws writes (temporal clients lacking references); tick reads */
+    atomic_int demand[LAYER_KEYS_ALL]; /* atomic: lws writes (subscriptions); tick reads */
+    atomic_int tdemand[LAYER_KEYS_ALL]; /* atomic: lws writes (temporal subscriptions, also in demand); tick reads */
+    atomic_int key_want[LAYER_KEYS_ALL]; /* atomic: lws writes (temporal clients lacking references); tick reads */
     _Atomic double now_time;          /* atomic: tick writes; lws reads (state file) */
     atomic_uint_least64_t now_seq;    /* atomic: tick writes; lws reads (a new client's first frame) */
     atomic_int now_n;                 /* atomic: tick writes; lws reads (capacity at the N in force) */
@@ -176,17 +176,21 @@ uint32_t sim_plan(struct sim *s, struct plan *out)
     return gen;
 }
 
-static void sub_keys(const struct subscription *sub, int demand[LAYER_KEYS], int delta)
+static void sub_keys(const struct subscription *sub, int demand[LAYER_KEYS_ALL], int delta)
 {
-    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
-        if (sub->fields & OCEAN_FIELD_BIT(f))
-            demand[layer_key(f, sub->lod, sub->bound_index)] += delta;
+    for (int c = 0; c < CTL_MAX_CASCADES; c++) {
+        int lod, bound_index;
+        unsigned fields = subscription_cascade(sub, c, &lod, &bound_index);
+        for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+            if (fields & OCEAN_FIELD_BIT(f))
+                demand[layer_key_cascade(c, f, lod, bound_index)] += delta;
+    }
 }
 
 bool sim_admit(struct sim *s, const struct subscription *old, const struct subscription *want, long *need, long *budget)
 {
-    int demand[LAYER_KEYS], before[LAYER_KEYS];
-    for (int k = 0; k < LAYER_KEYS; k++)
+    int demand[LAYER_KEYS_ALL], before[LAYER_KEYS_ALL];
+    for (int k = 0; k < LAYER_KEYS_ALL; k++)
         before[k] = demand[k] = atomic_load(&s->demand[k]);
     if (old)
         sub_keys(old, demand, -1);
@@ -194,7 +198,7 @@ bool sim_admit(struct sim *s, const struct subscription *old, const struct subsc
     int n = atomic_load(&s->now_n);
     long samples = 0;
     bool adds = false;
-    for (int k = 0; k < LAYER_KEYS; k++)
+    for (int k = 0; k < LAYER_KEYS_ALL; k++)
         if (demand[k] > 0) {
             long side = n >> layer_key_lod(k);
             samples += side * side;
@@ -458,7 +462,8 @@ static int popcount_u(unsigned v)
 static void produce(struct sim *s, const struct prod_job *pj)
 {
     double t0 = mono_now();
-    if (ocean_step(s->ocean, pj->sim_time, pj->want.fields) != 0) {
+    /* Each cascade is stepped for the fields asked of it (probes read cascade 0). */
+    if (ocean_step_cascades(s->ocean, pj->sim_time, pj->want.cfields, OCEAN_MAX_CASCADES) != 0) {
         LOGE("ocean_step failed at t=%g", pj->sim_time);
         return;
     }
@@ -524,7 +529,7 @@ static void *producer_main(void *arg)
 /* Re-plan from the demand: a more degraded plan at once, a less degraded
  * one only after it has held for three seconds with 40 % headroom
  * (hysteresis: clients are told every change). */
-static void update_plan(struct sim *s, const int demand[LAYER_KEYS], int n, int ts)
+static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], int n, int ts)
 {
     pthread_mutex_lock(&s->lock);
     struct cost_model m = s->model;
@@ -590,14 +595,14 @@ static void tick(struct sim *s, double t_tick)
     atomic_store(&g_metrics.params_version, s->version);
     atomic_store(&g_metrics.resolution, n);
 
-    int demand[LAYER_KEYS];
+    int demand[LAYER_KEYS_ALL];
     bool any = false;
     uint8_t remote[SIM_DEMAND_BYTES] = { 0 };
-    if (s->cfg.remote_demand) /* --role sim: the layer keys other daemons want */
+    if (s->cfg.remote_demand) /* --role sim: the layer keys other daemons want (cascade 0's only) */
         s->cfg.remote_demand(s->cfg.cluster_user, remote);
-    for (int k = 0; k < LAYER_KEYS; k++) {
+    for (int k = 0; k < LAYER_KEYS_ALL; k++) {
         demand[k] = atomic_load(&s->demand[k]);
-        if (demand[k] <= 0 && ((remote[k >> 3] >> (k & 7)) & 1))
+        if (demand[k] <= 0 && k < LAYER_KEYS && ((remote[k >> 3] >> (k & 7)) & 1))
             demand[k] = 1;
         any |= demand[k] > 0;
     }
@@ -626,10 +631,11 @@ static void tick(struct sim *s, double t_tick)
             s->credit[g] = 2; /* a group held back by a busy producer does not pile up */
         due[g] = s->credit[g] >= 1;
     }
-    for (int k = 0; k < LAYER_KEYS; k++) {
+    for (int k = 0; k < LAYER_KEYS_ALL; k++) {
         int g = plan_group(layer_key_lod(k), layer_key_bound(k));
         if (demand[k] > 0 && due[g]) {
             pj.want.fields |= OCEAN_FIELD_BIT(layer_key_field(k));
+            pj.want.cfields[layer_key_which_cascade(k)] |= OCEAN_FIELD_BIT(layer_key_field(k));
             pj.want.lod[pj.want.nkeys] = s->plan.lod[g];
             pj.want.keys[pj.want.nkeys++] = (uint16_t)k;
             /* Temporal layers (PROTOCOL.md §5.9): a stream when a temporal client wants
@@ -637,13 +643,14 @@ static void tick(struct sim *s, double t_tick)
              * and this tick's keyframes for temporal ones that lack the references. */
             int temporal = atomic_load(&s->tdemand[k]);
             pj.want.temporal[k] = temporal > 0;
-            pj.want.intra[k] = demand[k] > temporal || ((remote[k >> 3] >> (k & 7)) & 1) ||
+            pj.want.intra[k] = demand[k] > temporal || (k < LAYER_KEYS && ((remote[k >> 3] >> (k & 7)) & 1)) ||
                                atomic_load(&s->key_want[k]) > 0;
         }
     }
     if (!pj.want.nkeys && !probe_fields)
         return; /* a degraded group's off tick */
     pj.want.fields |= probe_fields; /* stepped for the probes, not encoded unless a layer wants them */
+    pj.want.cfields[0] |= probe_fields;
     if (!idle && set_ready)
         return; /* let the producer drain so that the parameter change applies next tick */
     if (queued) {
@@ -743,17 +750,20 @@ static void measure_model(struct sim *s)
     double best1 = 1e9, best6 = 1e9, best_enc = 1e9;
     for (int i = 0; i < 3; i++) {
         double t0 = mono_now();
-        ocean_step(s->ocean, s->sim_time, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+        /* Cascade 0 only: the model's step is one cascade's (a finer cascade
+         * costs as much again, and only when a client asks for it). */
+        const unsigned h_only = OCEAN_FIELD_BIT(OCEAN_HEIGHT), six = OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM);
+        ocean_step_cascades(s->ocean, s->sim_time, &h_only, 1);
         double t1 = mono_now();
         /* The six surface fields, not foam: a foam step would start its
          * history at the start-up wind, and foam later asked for under
          * another wind would build up from there instead of being spun up
          * (test_foam_field_streamed's coverage halved). */
-        ocean_step(s->ocean, s->sim_time, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
+        ocean_step_cascades(s->ocean, s->sim_time, &six, 1);
         double t2 = mono_now();
         best1 = fmin(best1, t1 - t0);
         best6 = fmin(best6, t2 - t1);
-        struct frame_want w = { .fields = OCEAN_FIELD_BIT(OCEAN_HEIGHT), .nkeys = 1 };
+        struct frame_want w = { .fields = OCEAN_FIELD_BIT(OCEAN_HEIGHT), .cfields = { OCEAN_FIELD_BIT(OCEAN_HEIGHT) }, .nkeys = 1 };
         w.keys[0] = (uint16_t)layer_key(OCEAN_HEIGHT, 0, 3 /* 1 cm */);
         struct oc_frame_header h = { 0 };
         int items = frame_job_begin(s->job, s->ocean, s->cfg.tile_size, &w, &h);

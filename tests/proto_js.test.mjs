@@ -56,6 +56,7 @@ for (const [v, useNodeZlib] of manifest.vectors.flatMap((x) => [[x, true], [x, f
       assert.equal(t.fieldName, m.field);
       assert.equal(FIELD_NAMES[t.field], m.field);
       for (const k of ['lod', 'codec', 'tileX', 'tileZ', 'width', 'height', 'offset', 'scale']) assert.equal(t[k], m[k], k);
+      assert.equal(t.cascade, m.cascade ?? 0, 'cascade');
       assert.equal(t.bound, Math.fround(m.bound));
       const want = expected.subarray(m.sampleOffset, m.sampleOffset + t.samples.length);
       const got = new Uint32Array(t.samples.buffer, t.samples.byteOffset, t.samples.length);

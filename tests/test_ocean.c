@@ -95,7 +95,7 @@ static void test_params(void)
     params_defaults(&p);
     check(params_validate(&p, err, sizeof err) == 0, "params.defaults_valid", "%s",
           params_validate(&p, err, sizeof err) == 0 ? "defaults pass validation" : err);
-    static const char *const names[] = {"resolution", "patch_size", "wind_speed", "wind_direction",
+    static const char *const names[] = {"resolution", "patch_size", "cascades", "wind_speed", "wind_direction",
         "amplitude", "spectrum", "fetch", "depth", "gamma", "directional_spread", "swell",
         "choppiness", "small_wave_cutoff", "loop_period", "seed", "transform", "time_scale", "paused"};
     int found = 0, sane = 1;
@@ -1215,7 +1215,7 @@ static void test_memory_bytes(void)
         struct ocean_params p;
         params_defaults(&p);
         p.resolution = n;
-        size_t want = ocean_memory_bytes(n, 2);
+        size_t want = ocean_memory_bytes(n, 2) * (size_t)p.cascades; /* one grid per cascade */
         size_t hook0 = ocean_alloc_bytes, heap0 = heap_in_use();
         struct ocean *o = make(&p, 2);
         size_t hook = ocean_alloc_bytes - hook0, heap = heap_in_use() - heap0;
@@ -1420,6 +1420,156 @@ static void test_param_ui(void)
           missing, param_count, first, groups[0], groups[1], groups[2]);
 }
 
+
+/* ---- cascades ----------------------------------------------------------------- */
+
+/* Hs of the sum of 3 cascades against the spectrum's integral over the
+ * combined band (band_m0, the 1-D integral of S(w) over the wavenumbers
+ * the three grids hold: from half the largest patch's dk to the finest
+ * cascade's top, half its Nyquist). The cascades' random numbers are independent and
+ * their bands disjoint, so the variance of the sum is the sum of their
+ * variances (each from its own grid). A light wind puts the peak at the
+ * border of cascades 0 and 1, so counting a band twice, or leaving a gap,
+ * would move Hs well beyond the tolerance: the finer cascades must hold a
+ * good share of the energy for the check to mean anything. */
+static void test_cascades_hs(void)
+{
+    const int spectra[] = {SPECTRUM_PIERSON_MOSKOWITZ, SPECTRUM_JONSWAP};
+    for (size_t si = 0; si < sizeof spectra / sizeof spectra[0]; si++) {
+        struct ocean_params p;
+        params_defaults(&p);
+        p.spectrum = spectra[si];
+        p.cascades = 3;
+        p.resolution = quick ? 64 : 256;
+        p.patch_size = quick ? 250 : 1000;
+        p.wind_speed = 3;
+        p.fetch = 5;
+        p.small_wave_cutoff = 0;
+        int seeds = quick ? 4 : 16;
+        double m0[3] = {0, 0, 0};
+        struct ocean *o = make(&p, 1);
+        if (!o)
+            return;
+        size_t nn = (size_t)p.resolution * p.resolution;
+        for (int seed = 0; seed < seeds; seed++) {
+            p.seed = 2000 + seed;
+            char err[256];
+            ocean_reconfigure(o, &p, err, sizeof err);
+            ocean_step(o, 0.0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+            for (int c = 0; c < 3; c++)
+                m0[c] += variance(ocean_cascade_field(o, c, OCEAN_HEIGHT), nn) / seeds;
+        }
+        double dk = 2 * M_PI / p.patch_size, L2 = ocean_cascade_patch(p.patch_size, 2);
+        /* Up to the finest cascade's top: (N/4 - 1/2) of its wavenumber steps. */
+        double ref = band_m0(&o->model, 0.5 * dk, (ocean_cascade_band_top(p.resolution, 2) + 0.5) * 2 * M_PI / L2);
+        double sum = m0[0] + m0[1] + m0[2], hs = 4 * sqrt(sum), hs_ref = 4 * sqrt(ref);
+        double fine = (m0[1] + m0[2]) / sum;
+        char name[64];
+        snprintf(name, sizeof name, "cascades.hs.%s", spec_name(spectra[si]));
+        double tol = quick ? 0.10 : 0.05;
+        check(fabs(hs / hs_ref - 1) <= tol && fine > 0.2, name,
+              "3 cascades (L %.0f / %.1f / %.1f m): Hs of the sum %.4f m (mean of %d seeds; variance shares "
+              "%.0f / %.0f / %.0f %%) vs spectrum over the combined band %.4f m, %+.1f%% (limit %.0f%%)",
+              p.patch_size, ocean_cascade_patch(p.patch_size, 1), L2, hs, seeds, 100 * m0[0] / sum,
+              100 * m0[1] / sum, 100 * m0[2] / sum, hs_ref, 100 * (hs / hs_ref - 1), 100 * tol);
+        ocean_free(o);
+    }
+}
+
+/* Cascade 0 of any cascade count is the one-cascade sea bit for bit; the
+ * finer cascades are zero below their band; FFT = DFT on cascade 1; a
+ * change of the cascade count equals a fresh ocean. */
+static void test_cascades_structure(void)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = 64;
+    p.patch_size = 64;
+    p.cascades = 1;
+    struct ocean *one = make(&p, 1);
+    p.cascades = 3;
+    struct ocean *three = make(&p, 1);
+    if (!one || !three)
+        return;
+    size_t nn = 64 * 64;
+    ocean_step(one, 7.5, OCEAN_ALL_FIELDS);
+    ocean_step(three, 7.5, OCEAN_ALL_FIELDS);
+    int same = 1;
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+        same &= memcmp(ocean_field(one, f), ocean_cascade_field(three, 0, f), nn * sizeof(float)) == 0;
+    check(same && ocean_cascades(one) == 1 && ocean_cascades(three) == 3 && !ocean_cascade_field(one, 1, 0) &&
+          !ocean_cascade_field(three, 1, OCEAN_FOAM) && ocean_cascade_field(three, 2, OCEAN_HEIGHT),
+          "cascades.zero_is_single_patch", "cascade 0 of a 3-cascade sea equals the 1-cascade sea in all %d fields: %s",
+          OCEAN_FIELD_COUNT, same ? "yes" : "no");
+
+    /* Forward DFT of cascades 1, 2's heights: zero outside their bands, which
+     * meet: cascade 2 starts where cascade 1 ends, in physical wavenumber. */
+    double complex *F = malloc(nn * sizeof *F);
+    int bands_ok = 1;
+    char msg[200] = "";
+    for (int c = 1; c < 3; c++) {
+        forward_dft(ocean_cascade_field(three, c, OCEAN_HEIGHT), 64, F);
+        int lo = ocean_cascade_band(64, c), hi = ocean_cascade_band_top(64, c);
+        double out = 0, in = 0;
+        for (int iz = 0; iz < 64; iz++)
+            for (int ix = 0; ix < 64; ix++) {
+                int mx = ix > 32 ? ix - 64 : ix, mz = iz > 32 ? iz - 64 : iz;
+                int m = abs(mx) > abs(mz) ? abs(mx) : abs(mz);
+                double e = creal(F[iz * 64 + ix] * conj(F[iz * 64 + ix]));
+                if (m < lo || m > hi)
+                    out += e;
+                else
+                    in += e;
+            }
+        bands_ok &= out <= 1e-9 * in && in > 0;
+        snprintf(msg + strlen(msg), sizeof msg - strlen(msg), "%scascade %d: [%d, %d] holds %.3g, outside %.3g",
+                 c > 1 ? "; " : "", c, lo, hi, in, out);
+    }
+    free(F);
+    bands_ok &= ocean_cascade_band(64, 1) == (int)ceil(31.5 / OCEAN_CASCADE_RATIO) &&
+                ocean_cascade_band(64, 2) == (int)ceil(15.5 / OCEAN_CASCADE_RATIO) &&
+                ocean_cascade_band_top(64, 1) == 15 && ocean_cascade_band_top(64, 0) == 31;
+    check(bands_ok, "cascades.band", "N = 64, max(|mx|,|mz|) per cascade: %s", msg);
+
+    /* FFT = DFT on the finer cascades (same band, patch and seed on both paths). */
+    float *fft[3];
+    for (int c = 1; c < 3; c++)
+        fft[c] = memcpy(malloc(nn * sizeof(float)), ocean_cascade_field(three, c, OCEAN_DX), nn * sizeof(float));
+    struct ocean_params q = p;
+    q.transform = TRANSFORM_DFT;
+    char err[256];
+    ocean_reconfigure(three, &q, err, sizeof err);
+    ocean_step(three, 7.5, OCEAN_FIELD_BIT(OCEAN_DX));
+    double e1 = rel_err(fft[1], ocean_cascade_field(three, 1, OCEAN_DX), nn);
+    double e2 = rel_err(fft[2], ocean_cascade_field(three, 2, OCEAN_DX), nn);
+    check(e1 <= 1e-5 && e2 <= 1e-5, "cascades.fft_eq_dft", "dx of cascades 1, 2 at N = 64: rel err %.2g, %.2g (limit 1e-5)",
+          e1, e2);
+
+    /* 3 -> 1 -> 4 (another N too) against a fresh 4-cascade ocean. */
+    q = p;
+    q.cascades = 1;
+    int rc = ocean_reconfigure(three, &q, err, sizeof err);
+    q.cascades = 4;
+    q.resolution = 32;
+    rc |= ocean_reconfigure(three, &q, err, sizeof err);
+    struct ocean *fresh = make(&q, 1);
+    int eq = fresh && rc == 0 && ocean_cascades(three) == 4;
+    if (eq) {
+        ocean_step(three, 3.25, OCEAN_ALL_FIELDS);
+        ocean_step(fresh, 3.25, OCEAN_ALL_FIELDS);
+        for (int c = 0; c < 4; c++)
+            eq &= memcmp(ocean_cascade_field(three, c, OCEAN_HEIGHT), ocean_cascade_field(fresh, c, OCEAN_HEIGHT),
+                         32 * 32 * sizeof(float)) == 0;
+    }
+    check(eq, "cascades.reconfigure_equals_fresh", "cascades 3 -> 1 -> 4 (N 64 -> 32): every cascade bit-identical "
+          "to a fresh ocean: %s", eq ? "yes" : "no");
+    ocean_free(fresh);
+    free(fft[1]);
+    free(fft[2]);
+    ocean_free(one);
+    ocean_free(three);
+}
+
 int main(void)
 {
     const char *qenv = getenv("OCEAN_TEST_QUICK");
@@ -1446,6 +1596,8 @@ int main(void)
     RUN(test_wisdom);
     RUN(test_foam);
     RUN(test_param_ui);
+    RUN(test_cascades_hs);
+    RUN(test_cascades_structure);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }

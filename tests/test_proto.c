@@ -61,6 +61,8 @@ static int vec_tile(void *user, const struct oc_frame_header *fh, const struct o
     CHECK(strcmp(oc_field_name((enum oc_field)th->field), field) == 0, "%s: field %d vs %s", c->name, th->field, field);
     CHECK(th->lod == cJSON_GetObjectItem(t, "lod")->valueint, "%s: lod", c->name);
     CHECK(th->codec == cJSON_GetObjectItem(t, "codec")->valueint, "%s: codec", c->name);
+    const cJSON *mc = cJSON_GetObjectItem(t, "cascade");
+    CHECK(oc_tile_cascade(th) == (mc ? mc->valueint : 0), "%s: cascade", c->name);
     CHECK(th->tile_x == cJSON_GetObjectItem(t, "tileX")->valueint, "%s: tile_x", c->name);
     CHECK(th->tile_z == cJSON_GetObjectItem(t, "tileZ")->valueint, "%s: tile_z", c->name);
     CHECK(th->width == cJSON_GetObjectItem(t, "width")->valueint, "%s: width", c->name);

@@ -108,7 +108,9 @@ static int log2u(unsigned v) { int l = 0; while (v > 1) { v >>= 1; l++; } return
 
 static uint64_t tile_key(const struct oc_frame_header *fh, const struct oc_tile_header *th)
 {
-    return 1 + ((uint64_t)th->field | (uint64_t)th->lod << 4 | (uint64_t)log2u(fh->n) << 8
+    /* field 3 bits, lod 3 bits, cascade 2 bits (flags & OC_TILE_CASCADE_MASK) */
+    return 1 + ((uint64_t)th->field | (uint64_t)(th->lod & 7) << 3 | (uint64_t)(th->flags & OC_TILE_CASCADE_MASK) << 6
+                | (uint64_t)log2u(fh->n) << 8
                 | (uint64_t)log2u(fh->tile_size) << 12 | (uint64_t)th->tile_x << 16 | (uint64_t)th->tile_z << 32);
 }
 

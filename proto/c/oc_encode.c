@@ -277,3 +277,15 @@ int oc_encode_tile(struct oc_encoder *e, const float *field_data, int n, int til
         return oc_enc_append_raw(out, &th, e->vals, count);
     return oc_enc_append_intra(e, &th, e->q, 1, out);
 }
+
+int oc_encode_tile_cascade(struct oc_encoder *e, const float *field_data, int n, int tile_size,
+                           int tile_x, int tile_z, int lod, enum oc_field field, float bound, int cascade,
+                           struct oc_buf *out)
+{
+    if (cascade < 0 || cascade >= OC_MAX_CASCADES || !out) return OC_E_ARG;
+    size_t at = out->len;
+    int rc = oc_encode_tile(e, field_data, n, tile_size, tile_x, tile_z, lod, field, bound, out);
+    if (rc == 0)
+        out->data[at + 3] = (uint8_t)cascade; /* tile header flags, bits 0-1 */
+    return rc;
+}

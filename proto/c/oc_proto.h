@@ -84,7 +84,7 @@ struct oc_frame_header {
 };
 
 struct oc_tile_header {
-    uint8_t  field, lod, codec, flags;
+    uint8_t  field, lod, codec, flags;   /* flags bits 0-1: the cascade (PROTOCOL.md §3.2); others 0 */
     uint16_t tile_x, tile_z, width, height;
     float    bound;
     double   offset, scale;
@@ -118,6 +118,15 @@ int oc_encode_tile(struct oc_encoder *e, const float *field_data, int n, int til
  * when the codes would not fit in int32 (huge dynamic range for the bound),
  * when the bound is below float32 resolution of the values, or when the
  * lossy payload would not be smaller than raw. Non-finite input: OC_E_ARG. */
+
+/* The same, for cascade `cascade` (0..3) of a multi-cascade sea: the tile
+ * header's flags carry the cascade index (PROTOCOL.md §3.2, §4.1). */
+#define OC_TILE_CASCADE_MASK 3u
+#define OC_MAX_CASCADES 4
+static inline int oc_tile_cascade(const struct oc_tile_header *th) { return th->flags & OC_TILE_CASCADE_MASK; }
+int oc_encode_tile_cascade(struct oc_encoder *e, const float *field_data, int n, int tile_size,
+                           int tile_x, int tile_z, int lod, enum oc_field field, float bound, int cascade,
+                           struct oc_buf *out);
 
 /* Decoder: walks a whole frame, checking every length before reading. */
 struct oc_decoder;

@@ -58,6 +58,7 @@ class Tile:
     z: int
     bound: float
     samples: np.ndarray  # (height, width) float32, row j along z, column i along x
+    cascade: int = 0     # tile header flags bits 0-1 (§3.2): which cascade's patch (§4.1)
 
 
 @dataclass
@@ -311,7 +312,7 @@ def decode_frame(data, state=None):
     for index in range(tile_count):
         if len(data) - pos < TILE_HEADER.size:
             raise ProtocolError("truncated", f"tile {index}: truncated tile header")
-        (fid, lod, codec, _tflags, tx, tz, width, height, bound, offset, scale,
+        (fid, lod, codec, tflags, tx, tz, width, height, bound, offset, scale,
          payload_len, _reserved) = TILE_HEADER.unpack_from(data, pos)
         pos += TILE_HEADER.size
         if payload_len > len(data) - pos:
@@ -331,7 +332,7 @@ def decode_frame(data, state=None):
         elif codec == CODEC_TEMPORAL:
             if not (math.isfinite(offset) and math.isfinite(scale) and scale > 0):
                 raise ProtocolError("corrupt", f"tile {index}: bad offset/scale")
-            key = (fid, lod, tx, tz, n, tile_size)
+            key = (fid, lod, tflags & 3, tx, tz, n, tile_size)
             q = _temporal(payload, key, offset, scale, bound, height, width, state)
             codes[index] = (key, offset, scale, bound, q)
             samples = (offset + q.astype(np.float64) * scale).astype(np.float32)
@@ -341,7 +342,7 @@ def decode_frame(data, state=None):
             r, coef = _residuals(payload, codec, count)
             lossy.setdefault((height, width), []).append((index, r.reshape(height, width), coef, offset, scale))
             samples = None
-        decoded.append(Tile(FIELDS[fid], lod, codec, tx, tz, bound, samples))
+        decoded.append(Tile(FIELDS[fid], lod, codec, tx, tz, bound, samples, tflags & 3))
     if pos != len(data):
         raise ProtocolError("corrupt", f"{len(data) - pos} bytes after the last tile")
 
@@ -352,7 +353,7 @@ def decode_frame(data, state=None):
         for (index, _r, _c, offset, scale), qt in zip(group, q):
             decoded[index].samples = (offset + qt.astype(np.float64) * scale).astype(np.float32)
             t = decoded[index]
-            key = (FIELDS.index(t.field), t.lod, t.x, t.z, n, tile_size)
+            key = (FIELDS.index(t.field), t.lod, t.cascade, t.x, t.z, n, tile_size)
             codes[index] = (key, offset, scale, t.bound, qt)
     frame.tiles = decoded
     if state is not None:   # the whole frame decoded: its codes become references (5 per tile, oldest out)

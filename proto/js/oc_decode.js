@@ -354,7 +354,8 @@ function takeCodes(state, count) {
   }
   return new Int32Array(count);
 }
-const tileKey = (h, t) => `${t.field}/${t.lod}/${t.tileX}/${t.tileZ}/${h.n}/${h.tileSize}`;
+// A tile's identity for references: cascade (tile flags bits 0-1, PROTOCOL.md §3.2) included.
+const tileKey = (h, t) => `${t.field}/${t.lod}/${t.flags & 3}/${t.tileX}/${t.tileZ}/${h.n}/${h.tileSize}`;
 // Coefficients a tile of each depth may use (bit k = coefficient k: d1, d2, d3, L(d1), L(d2), L(d3), L(q1)).
 const COEF_MASK = [0, 0x40, 0x49, 0x5b, 0x7f];
 const TEMPORAL_COEFS = 7;
@@ -539,7 +540,7 @@ function commitReferences(state, header, metas, decoded) {
 }
 
 /**
- * Decode a whole binary frame: {header, tiles:[{field, fieldName, lod, codec, tileX, tileZ, width, height,
+ * Decode a whole binary frame: {header, tiles:[{field, fieldName, lod, codec, cascade, tileX, tileZ, width, height,
  * bound, offset, scale, samples: Float32Array}]}. options.useNodeZlib = false skips node's zlib under node
  * (then DecompressionStream and any setInflateRaw() inflater are used, as in a browser: the tests cover
  * the browser paths so). options.state = a DecoderState: keeps the references predicted tiles (codec 3)
@@ -583,7 +584,7 @@ export async function decodeFrame(arrayBuffer, options = {}) {
   }
   if (state) commitReferences(state, header, metas, samples);
   const tiles = metas.map(({ t }, i) => ({
-    field: t.field, fieldName: FIELD_NAMES[t.field], lod: t.lod, codec: t.codec,
+    field: t.field, fieldName: FIELD_NAMES[t.field], lod: t.lod, codec: t.codec, cascade: t.flags & 3,
     tileX: t.tileX, tileZ: t.tileZ, width: t.width, height: t.height,
     bound: t.bound, offset: t.offset, scale: t.scale, samples: samples[i].samples,
   }));

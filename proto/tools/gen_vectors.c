@@ -30,7 +30,7 @@ static float *make_field(int n, double amp, double noise, double bias)
     return f;
 }
 
-struct tile_req { const float *data; int tx, tz, lod, field; float bound; int codec; };
+struct tile_req { const float *data; int tx, tz, lod, field; float bound; int codec; int cascade; };
 
 static FILE *manifest;
 static const char *dir;
@@ -72,7 +72,8 @@ static void emit(const char *name, const char *desc, int n, int ts, const struct
         const struct tile_req *r = &reqs[i];
         oc_encoder_set_codec(e, r->codec ? (enum oc_codec)r->codec : OC_CODEC_QUANT_LORENZO, 0);
         size_t before = buf.len;
-        int rc = oc_encode_tile(e, r->data, n, ts, r->tx, r->tz, r->lod, (enum oc_field)r->field, r->bound, &buf);
+        int rc = oc_encode_tile_cascade(e, r->data, n, ts, r->tx, r->tz, r->lod, (enum oc_field)r->field, r->bound,
+                                        r->cascade, &buf);
         if (rc) { fprintf(stderr, "%s: encode: %s\n", name, oc_strerror(rc)); exit(1); }
         int side = ts >> r->lod, step = 1 << r->lod;
         for (int j = 0; j < side; j++)
@@ -85,8 +86,8 @@ static void emit(const char *name, const char *desc, int n, int ts, const struct
         memcpy(&bnd, th + 12, 4); memcpy(&off, th + 16, 8); memcpy(&sc, th + 24, 8);
         fprintf(manifest, "%s\n       {\"field\":\"%s\",\"lod\":%d,\"codec\":%d,\"tileX\":%d,\"tileZ\":%d,"
                 "\"width\":%d,\"height\":%d,\"bound\":%.9g,\"offset\":%.17g,\"scale\":%.17g,"
-                "\"sampleOffset\":%zu}", i ? "," : "", oc_field_name((enum oc_field)r->field), r->lod, th[2],
-                r->tx, r->tz, side, side, bnd, off, sc, at);
+                "\"cascade\":%d,\"sampleOffset\":%zu}", i ? "," : "", oc_field_name((enum oc_field)r->field), r->lod,
+                th[2], r->tx, r->tz, side, side, bnd, off, sc, r->cascade, at);
         at += (size_t)side * side;
     }
     fprintf(manifest, "]}");
@@ -417,32 +418,36 @@ int main(int argc, char **argv)
     huge[5] = 3e9f; huge[17] = -2e9f;
 
     struct oc_buf tiny = { 0 }, big = { 0 };
-    { struct tile_req r[] = { { h8, 0, 0, 0, 0, 0.01f, 1 } };
+    { struct tile_req r[] = { { h8, 0, 0, 0, 0, 0.01f, 1, 0 } };
       emit("v01_tiny_lossy", "n=8, one 4x4 height tile, bound 1 cm (the PROTOCOL.md worked example)", 8, 4, r, 1, &tiny); }
-    { struct tile_req r[] = { { h16, 0, 0, 0, 0, 0, 0 }, { h16, 1, 1, 0, 0, 0, 0 } };
+    { struct tile_req r[] = { { h16, 0, 0, 0, 0, 0, 0, 0 }, { h16, 1, 1, 0, 0, 0, 0, 0 } };
       emit("v02_raw", "raw float32 (bound 0), two of four tiles", 16, 8, r, 2, NULL); }
-    { struct tile_req r[] = { { h64, 0, 0, 0, 0, 0.001f, 1 }, { h64, 1, 0, 0, 0, 0.001f, 1 },
-                              { h64, 0, 1, 0, 0, 0.001f, 1 }, { h64, 1, 1, 0, 0, 0.001f, 1 } };
+    { struct tile_req r[] = { { h64, 0, 0, 0, 0, 0.001f, 1, 0 }, { h64, 1, 0, 0, 0, 0.001f, 1, 0 },
+                              { h64, 0, 1, 0, 0, 0.001f, 1, 0 }, { h64, 1, 1, 0, 0, 0.001f, 1, 0 } };
       emit("v03_height_1mm", "all tiles of a 64x64 height field, bound 1 mm, deflate", 64, 32, r, 4, &big); }
-    { struct tile_req r[] = { { d32, 1, 0, 0, 1, 0.01f, 1 }, { d32, 1, 0, 0, 2, 0.005f, 1 },
-                              { j32, 1, 0, 0, 3, 0.001f, 1 }, { j32, 1, 0, 0, 4, 0.001f, 1 },
-                              { j32, 1, 0, 0, 5, 0.01f, 1 } };
+    { struct tile_req r[] = { { d32, 1, 0, 0, 1, 0.01f, 1, 0 }, { d32, 1, 0, 0, 2, 0.005f, 1, 0 },
+                              { j32, 1, 0, 0, 3, 0.001f, 1, 0 }, { j32, 1, 0, 0, 4, 0.001f, 1, 0 },
+                              { j32, 1, 0, 0, 5, 0.01f, 1, 0 } };
       emit("v04_fields", "dx, dz, slope_x, slope_z, jacobian of one tile at several bounds", 32, 16, r, 5, NULL); }
-    { struct tile_req r[] = { { h64, 1, 1, 0, 0, 0.005f, 1 }, { h64, 1, 1, 1, 0, 0.005f, 1 },
-                              { h64, 1, 1, 2, 0, 0.005f, 1 }, { h64, 1, 1, 3, 0, 0.005f, 1 },
-                              { h64, 1, 1, 4, 0, 0.005f, 1 } };
+    { struct tile_req r[] = { { h64, 1, 1, 0, 0, 0.005f, 1, 0 }, { h64, 1, 1, 1, 0, 0.005f, 1, 0 },
+                              { h64, 1, 1, 2, 0, 0.005f, 1, 0 }, { h64, 1, 1, 3, 0, 0.005f, 1, 0 },
+                              { h64, 1, 1, 4, 0, 0.005f, 1, 0 } };
       emit("v05_lods", "one tile at LOD 0..4 (32, 16, 8, 4, 2 samples per side)", 64, 32, r, 5, NULL); }
-    { struct tile_req r[] = { { h128, 0, 3, 0, 0, 0.01f, 1 }, { h128, 2, 1, 0, 0, 0.01f, 1 },
-                              { h128, 3, 3, 1, 1, 0.01f, 1 } };
+    { struct tile_req r[] = { { h128, 0, 3, 0, 0, 0.01f, 1, 0 }, { h128, 2, 1, 0, 0, 0.01f, 1, 0 },
+                              { h128, 3, 3, 1, 1, 0.01f, 1, 0 } };
       emit("v06_partial", "3 of 16 tiles (a region), mixed LOD", 128, 32, r, 3, NULL); }
-    { struct tile_req r[] = { { konst, 0, 0, 0, 0, 0.001f, 1 } };
+    { struct tile_req r[] = { { konst, 0, 0, 0, 0, 0.001f, 1, 0 } };
       emit("v07_constant", "constant tile: every residual after the first is 0", 16, 16, r, 1, NULL); }
-    { struct tile_req r[] = { { h64, 0, 0, 0, 0, 0.001f, 2 }, { h64, 1, 1, 1, 0, 0.01f, 2 } };
+    { struct tile_req r[] = { { h64, 0, 0, 0, 0, 0.001f, 2, 0 }, { h64, 1, 1, 1, 0, 0.01f, 2, 0 } };
       emit("v08_zstd", "codec 2 (zstd entropy coder)", 64, 32, r, 2, NULL); }
-    { struct tile_req r[] = { { huge, 0, 0, 0, 0, 0.001f, 1 } };
+    { struct tile_req r[] = { { huge, 0, 0, 0, 0, 0.001f, 1, 0 } };
       emit("v09_huge_range", "range 5e9 at bound 1 mm: codes would not fit, falls back to raw", 16, 16, r, 1, NULL); }
-    { struct tile_req r[] = { { noise64, 0, 0, 0, 0, 0.001f, 1 }, { noise64, 1, 0, 0, 0, 0.05f, 1 } };
+    { struct tile_req r[] = { { noise64, 0, 0, 0, 0, 0.001f, 1, 0 }, { noise64, 1, 0, 0, 0, 0.05f, 1, 0 } };
       emit("v10_noise", "white noise: many escaped residuals (stream B)", 64, 32, r, 2, NULL); }
+    { struct tile_req r[] = { { h64, 1, 0, 0, 0, 0.01f, 1, 0 }, { noise64, 1, 0, 1, 0, 0.001f, 1, 1 },
+                              { h16, 0, 0, 1, 0, 0.001f, 1, 2 }, { noise64, 1, 0, 1, 3, 0.001f, 1, 1 } };
+      emit("v12_cascades", "cascades: the same tile (1, 0) of cascade 0 (LOD 0), 1 (LOD 1, height and slope_x) "
+           "and 2 (LOD 1), cascade in the tile flags", 64, 32, r, 4, NULL); }
     emit_crafted();
     fprintf(manifest, "\n ],\n \"bad\":[");
 

@@ -200,7 +200,7 @@ def decode_frame(buf, refs=None):
     for _ in range(tc):
         if len(buf) - pos < 40:
             raise FrameError("truncated", "tile header")
-        field, lod, codec, _fl, tx, tz, w, h, bound, off, sc, plen, _res = struct.unpack_from("<BBBBHHHHfddII", buf, pos)
+        field, lod, codec, fl, tx, tz, w, h, bound, off, sc, plen, _res = struct.unpack_from("<BBBBHHHHfddII", buf, pos)
         side = ts >> lod if lod <= 4 else 0
         if field >= 6 or lod > 4 or side == 0 or w != side or h != side or tx >= n // ts or tz >= n // ts:
             raise FrameError("corrupt", "tile header")
@@ -214,8 +214,8 @@ def decode_frame(buf, refs=None):
         p = buf[pos:pos + plen]
         pos += plen
         th = dict(field=FIELDS[field], lod=lod, codec=codec, tileX=tx, tileZ=tz, width=w, height=h,
-                  bound=bound, offset=off, scale=sc)
-        key = (field, lod, tx, tz, n, ts)
+                  bound=bound, offset=off, scale=sc, cascade=fl & 3)   # flags bits 0-1: the cascade (§3.2)
+        key = (field, lod, fl & 3, tx, tz, n, ts)
         if codec == 0:
             if plen != 4 * w * h:
                 raise FrameError("corrupt", "raw size")
@@ -261,6 +261,7 @@ def check_vectors(vdir):
         for t, mt in zip(tiles, v["tiles"]):
             at = mt["sampleOffset"]
             good &= all(t[k] == mt[k] for k in ("field", "lod", "codec", "tileX", "tileZ", "offset", "scale"))
+            good &= t["cascade"] == mt.get("cascade", 0)
             # identical float32 values (compared through their bits)
             good &= struct.pack(f"<{len(t['samples'])}f", *t["samples"]) == raw[4 * at:4 * (at + len(t["samples"]))]
         print(("ok   " if good else "FAIL ") + v["name"])

@@ -25,17 +25,23 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
 {
     if (!n->sim && !n->cluster.demand)
         return;
-    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
-        if (sub->fields & OCEAN_FIELD_BIT(f)) {
-            int key = layer_key(f, sub->lod, sub->bound_index);
-            if (n->cluster.demand) { /* edge: the sim is elsewhere (and sends intra tiles) */
-                n->cluster.demand(n->cluster.user, key, delta);
-            } else {
-                sim_demand(n->sim, key, delta);
-                if (sub->temporal)
-                    sim_demand_temporal(n->sim, key, delta);
+    for (int c = 0; c < CTL_MAX_CASCADES; c++) {
+        int lod, bound_index;
+        unsigned fields = subscription_cascade(sub, c, &lod, &bound_index);
+        if (c > 0 && n->cluster.demand)
+            break; /* edge: the cluster relays cascade 0 only */
+        for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+            if (fields & OCEAN_FIELD_BIT(f)) {
+                int key = layer_key_cascade(c, f, lod, bound_index);
+                if (n->cluster.demand) /* edge: the sim is elsewhere */
+                    n->cluster.demand(n->cluster.user, key, delta);
+                else {
+                    sim_demand(n->sim, key, delta);
+                    if (sub->temporal && c == 0) /* the temporal codec: cascade 0's layers */
+                        sim_demand_temporal(n->sim, key, delta);
+                }
             }
-        }
+    }
 }
 
 /* ---- sets in flight ---- */
@@ -276,13 +282,19 @@ void dispatch_answers(struct net *n)
 /* ---- messages ---- */
 
 #define RATE_LIMITED_ID_MAX 256 /* bytes of a string id echoed in rate_limited (no amplification) */
+#define REFUSED_PARSE_MAX 1024  /* bytes of a refused message parsed for its id: no more work than a unit */
+#define BUDGET_BURST_S 0.1      /* --control-budget: a burst of at most 0.1 s of it (3 ticks at 30 Hz), */
+#define BUDGET_DEBT_S 1.0       /* and a debt of at most 1 s of it (fair shares spent past it) */
+#define SHARE_BURST_S 1.0       /* a client's fair share: 1 s of it saved up, */
+#define SHARE_MIN 4.0           /* and at least 4 units (a few sets in a row) */
 
-/* The request id of a message we will not otherwise parse (rate_limited):
- * §7 promises it in every error a request causes. A detached copy, or NULL
- * for no id, a non-scalar one, or a string over RATE_LIMITED_ID_MAX. */
+/* The request id of a message we will not otherwise parse (rate_limited,
+ * busy): §7 promises it in every error a request causes. A detached copy, or
+ * NULL for no id, a non-scalar one, a string over RATE_LIMITED_ID_MAX, or a
+ * message over REFUSED_PARSE_MAX (a refusal must cost less than a parse). */
 static cJSON *request_id(const char *text, size_t len)
 {
-    if (!text)
+    if (!text || len > REFUSED_PARSE_MAX)
         return NULL;
     cJSON *root = cJSON_ParseWithLength(text, len);
     cJSON *id = cJSON_IsObject(root) ? cJSON_GetObjectItemCaseSensitive(root, "id") : NULL;
@@ -293,27 +305,80 @@ static cJSON *request_id(const char *text, size_t len)
     return copy;
 }
 
-/* Charge one message to the client's token bucket (every message from a
- * client, text or binary, costs the daemon a reply). false = over the limit:
- * the client got rate_limited (with the message's id, if text) and the
- * message is to be dropped. */
+/* What a message costs, in control units: 1, plus 1 per full KiB. Parsing
+ * (and echoing) is linear in the bytes, and the bytes are known before any
+ * parse: a 1024-tile subscribe (10 KB, 0.5 ms) costs 11, a ping 1. */
+static double message_cost(size_t len) { return 1.0 + (double)(len / 1024); }
+
+/* A token bucket: refill at rate up to cap since *t, at time now. */
+static void refill(double *tokens, double *t, double rate, double cap, double now)
+{
+    *tokens += (now - *t) * rate;
+    if (*tokens > cap)
+        *tokens = cap;
+    *t = now;
+}
+
+static void refuse(struct session *s, const char *code, const char *message, const char *text, size_t len)
+{
+    struct ctl_error e = { .code = code };
+    snprintf(e.message, sizeof e.message, "%s", message);
+    cJSON *id = request_id(text, len);
+    session_send_error(s, &e, id);
+    cJSON_Delete(id);
+}
+
+/* Charge a message to the client's own bucket, then to the budget of all
+ * clients (PROTOCOL.md §1.1). Every message from a client, text or binary,
+ * is charged (each costs the daemon a reply). The buckets may go into debt
+ * by one message (so a message of any allowed size can pass), and are
+ * checked for one unit. false = refused, dropped unread:
+ *  - rate_limited: the client's own bucket (--control-rate/--control-burst)
+ *    is empty: a flooding client meets this first;
+ *  - busy: the client is within its own limit but --control-budget (all
+ *    clients together) is spent, and so is its fair share of it (budget ÷
+ *    clients connected, a bucket of its own): whoever sends little, such as
+ *    a controller's occasional `set`, still gets through while others flood.
+ * In the long run all clients together get --control-budget units a second:
+ * the fair shares (the budget in sum) are charged to it too, and what they
+ * spend past it is a debt it repays first. */
 bool dispatch_take_token(struct net *n, struct session *s, const char *text, size_t len)
 {
     atomic_fetch_add(&g_metrics.control_messages, 1);
-    double now = mono_now();
-    s->tokens += (now - s->tokens_t) * n->dc.control_rate;
-    if (s->tokens > n->dc.control_burst)
-        s->tokens = n->dc.control_burst;
-    s->tokens_t = now;
+    double now = mono_now(), cost = message_cost(len);
+    refill(&s->tokens, &s->tokens_t, n->dc.control_rate, n->dc.control_burst, now);
     if (s->tokens < 1) {
-        struct ctl_error e = { .code = "rate_limited" };
-        snprintf(e.message, sizeof e.message, "more than %g control messages per second", n->dc.control_rate);
-        cJSON *id = request_id(text, len);
-        session_send_error(s, &e, id);
-        cJSON_Delete(id);
+        char m[96];
+        snprintf(m, sizeof m, "more than %g control units per second (a message: 1 + 1 per KiB)", n->dc.control_rate);
+        atomic_fetch_add(&g_metrics.control_rate_limited, 1);
+        refuse(s, "rate_limited", m, text, len);
         return false;
     }
-    s->tokens -= 1;
+    s->tokens -= cost;
+
+    double budget = n->dc.control_budget, fair = budget / (n->sessions.count ? n->sessions.count : 1);
+    if (n->budget_t == 0) { /* first message since start */
+        n->budget = budget * BUDGET_BURST_S;
+        n->budget_t = now;
+    }
+    refill(&n->budget, &n->budget_t, budget, budget * BUDGET_BURST_S, now);
+    double share_cap = fair * SHARE_BURST_S > SHARE_MIN ? fair * SHARE_BURST_S : SHARE_MIN;
+    refill(&s->share, &s->share_t, fair, share_cap, now);
+    if (n->budget < 1 && s->share < 1) {
+        atomic_fetch_add(&g_metrics.control_busy, 1);
+        refuse(s, "busy", "the control budget of all clients is spent (--control-budget): try again", text, len);
+        return false;
+    }
+    /* Both are charged, whichever let it pass: what the fair shares let
+     * through past an empty budget is owed by the budget (up to 1 s of it),
+     * so in the long run all clients together get the budget, no more. */
+    n->budget -= cost;
+    s->share -= cost;
+    if (n->budget < -budget * BUDGET_DEBT_S)
+        n->budget = -budget * BUDGET_DEBT_S;
+    if (s->share < -share_cap - cost)
+        s->share = -share_cap - cost;
+    atomic_fetch_add(&g_metrics.control_units, (uint64_t)cost);
     return true;
 }
 

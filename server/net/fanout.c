@@ -111,30 +111,35 @@ static bool begin_frame(struct net *n, struct session *s, struct frame *f)
     int nf = 0;
     /* Ticks this client received in a row up to the one before f (§5.9). */
     int usable = s->hist_seq && s->hist_seq + 1 == f->hdr.seq ? s->hist : 0;
-    int shared = 0;
-    for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++) {
-        s->layers[fi] = NULL;
-        if (!(s->sub.fields & OCEAN_FIELD_BIT(fi)))
-            continue;
-        const struct layer *l = frame_layer(f, fi, s->sub.lod, s->sub.bound_index);
-        if (!l)
-            return false;
-        if (s->sub.temporal && l->shared_off && usable >= l->need) {
-            s->lbuf[fi] = l->shared.data;
-            s->loff[fi] = l->shared_off;
-            shared |= 1 << fi;
-        } else if (l->tile_off) {
-            s->lbuf[fi] = l->buf.data;
-            s->loff[fi] = l->tile_off;
-        } else {
-            fanout_want_keyframes(n, s, true);
-            if (s->waited_seq != f->hdr.seq)
-                atomic_fetch_add(&g_metrics.frames_waited_keyframe, 1);
-            s->waited_seq = f->hdr.seq;
-            return false;
+    int nshared = 0;
+    for (int c = 0; c < OCEAN_MAX_CASCADES; c++) {
+        int lod, bound_index;
+        unsigned fields = c < f->ncascades ? subscription_cascade(&s->sub, c, &lod, &bound_index) : 0;
+        for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++) {
+            int slot = c * OCEAN_FIELD_COUNT + fi;
+            s->layers[slot] = NULL;
+            if (!(fields & OCEAN_FIELD_BIT(fi)))
+                continue;
+            const struct layer *l = frame_layer_cascade(f, c, fi, lod, bound_index);
+            if (!l)
+                return false;
+            if (s->sub.temporal && l->shared_off && usable >= l->need) {
+                s->lbuf[slot] = l->shared.data;
+                s->loff[slot] = l->shared_off;
+                nshared++;
+            } else if (l->tile_off) {
+                s->lbuf[slot] = l->buf.data;
+                s->loff[slot] = l->tile_off;
+            } else {
+                fanout_want_keyframes(n, s, true);
+                if (s->waited_seq != f->hdr.seq)
+                    atomic_fetch_add(&g_metrics.frames_waited_keyframe, 1);
+                s->waited_seq = f->hdr.seq;
+                return false;
+            }
+            s->layers[slot] = l;
+            nf++;
         }
-        s->layers[fi] = l;
-        nf++;
     }
     s->ntiles = 0;
     if (s->sub.all_tiles) {
@@ -149,11 +154,10 @@ static bool begin_frame(struct net *n, struct session *s, struct frame *f)
     h.tile_count = (uint16_t)(nf * s->ntiles);
     oc_frame_header_write(s->hdr, &h);
     s->total = OC_FRAME_HEADER_SIZE;
-    for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++)
+    for (int fi = 0; fi < OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT; fi++)
         for (int i = 0; s->layers[fi] && i < s->ntiles; i++)
             s->total += s->loff[fi][s->tiles[i] + 1] - s->loff[fi][s->tiles[i]];
     if (s->sub.temporal) {
-        int nshared = __builtin_popcount((unsigned)shared);
         atomic_fetch_add(&g_metrics.sent_shared_tiles, (uint64_t)(nshared * s->ntiles));
         atomic_fetch_add(&g_metrics.sent_key_tiles, (uint64_t)((nf - nshared) * s->ntiles));
         s->hist = usable + 1;
@@ -182,7 +186,7 @@ static size_t fill(struct session *s, unsigned char *dst, size_t cap)
         s->hdr_off += (int)take;
         n += take;
     }
-    while (n < cap && s->fi < OCEAN_FIELD_COUNT) {
+    while (n < cap && s->fi < OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT) {
         if (!s->layers[s->fi] || s->ti >= s->ntiles) {
             s->fi++;
             s->ti = 0;

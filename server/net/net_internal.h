@@ -65,7 +65,8 @@ struct session {
     size_t rx_binary_len;         /* its bytes so far: --max-message applies to it too */
     int closing;                  /* close status to send once the queue drains, 0 = none */
     const char *close_reason;     /* its reason text (static) */
-    double tokens, tokens_t;      /* control-message rate limit (token bucket) and its last refill */
+    double tokens, tokens_t;      /* control-message rate limit (token bucket, in units) and its last refill */
+    double share, share_t;        /* its fair share of --control-budget (bucket of budget / clients) */
 
     /* transmit: JSON queue (sent before any new frame) */
     lws_dll2_owner_t tq;          /* struct text, oldest first; tq.count = messages */
@@ -75,9 +76,9 @@ struct session {
     /* transmit: the frame being sent (fanout.c) */
     struct frame *cur;            /* one reference while sending, else NULL */
     uint8_t hdr[OC_FRAME_HEADER_SIZE]; /* its header, with this client's tile count */
-    const struct layer *layers[OCEAN_FIELD_COUNT]; /* per field, NULL = not subscribed */
-    const uint8_t *lbuf[OCEAN_FIELD_COUNT];   /* per field: the tiles this client gets (layer buf or shared) */
-    const uint32_t *loff[OCEAN_FIELD_COUNT];  /* ... and their offsets */
+    const struct layer *layers[OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT]; /* [cascade * FIELDS + field], NULL = not sent */
+    const uint8_t *lbuf[OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT];  /* per slot: the tiles this client gets (buf or shared) */
+    const uint32_t *loff[OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT]; /* ... and their offsets */
     uint16_t tiles[CTL_MAX_TILES]; /* the frame's tiles this client gets, in order */
     int ntiles;
     size_t total, sent;           /* bytes of this client's frame, and sent so far */
@@ -138,6 +139,7 @@ struct net {
     net_params_fn on_params;      /* main writes (net_on_params) before the loop: applied-change listener */
     void *on_params_user;         /* its argument (main's state saver, used on this thread) */
     double trim_due;              /* mono time to malloc_trim after a change of N, 0 = none */
+    double budget, budget_t;      /* --control-budget: units left for all clients together, last refill (lws thread) */
     bool placeholder;             /* no index.html in the web root */
     int port;                     /* the port really listened on (--port 0) */
     int fd_limit;                 /* RLIMIT_NOFILE at start */

@@ -134,6 +134,8 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
     s->controller = n->dc.control_token[0] == 0;
     s->tokens = n->dc.control_burst;
     s->tokens_t = mono_now();
+    s->share = 1; /* its first message passes the budget (fair share: dispatch_take_token) */
+    s->share_t = s->tokens_t;
     /* Never a frame from before this tick: after an idle period the last
      * frame built may be minutes old (PROTOCOL.md §3.1). */
     s->first_seq = n->sim ? sim_seq(n->sim) : net_latest_seq(n);

@@ -563,7 +563,7 @@ static void amp_rows(void *arg, int r0, int r1, int worker)
             int mx = ix;
             /* Nyquist row and column stay zero: their -k aliases onto
              * themselves, so they could not be both hermitian and random. */
-            if (ix == n / 2 || iz == n / 2) {
+            if (ix == n / 2 || iz == n / 2 || !spectrum_in_band(m, mx, mz)) { /* or a coarser cascade's */
                 s->a[i] = s->b[i] = s->d[i] = s->e[i] = 0;
                 s->omega[i] = 0;
                 continue;
@@ -630,13 +630,20 @@ static bool amps_compute(const struct ocean_grid *g, const struct spectrum_model
 
 /* ---- parameter changes: prepare, commit ------------------------------------- */
 
-struct ocean_prepared {
-    struct ocean_params p;
+/* What a parameter change makes for one cascade. */
+struct cascade_prep {
     struct spectrum_model model;
-    struct ocean_grid *grid;   /* a new N: the whole new grid (after commit: the old one) */
+    struct ocean_grid *grid;   /* a new N or a new cascade: the whole new grid (after commit: the old
+                                * one, or a cascade the change dropped) */
     struct ocean_amps amps;    /* same N: the new amplitudes (after commit: the old ones) */
     float *gauss;              /* same N, new seed: its normals (after commit: the old ones) */
     uint32_t seed;             /* of `gauss` */
+};
+
+struct ocean_prepared {
+    struct ocean_params p;
+    int ncascades;             /* p.cascades */
+    struct cascade_prep c[OCEAN_MAX_CASCADES];
     unsigned long generation;  /* o->generation prepared against */
 };
 
@@ -644,9 +651,11 @@ void ocean_prepared_free(struct ocean_prepared *pr)
 {
     if (!pr)
         return;
-    grid_free(pr->grid);
-    amps_free(&pr->amps);
-    fftwf_free(pr->gauss);
+    for (int c = 0; c < OCEAN_MAX_CASCADES; c++) {
+        grid_free(pr->c[c].grid);
+        amps_free(&pr->c[c].amps);
+        fftwf_free(pr->c[c].gauss);
+    }
     free(pr);
 }
 
@@ -658,7 +667,53 @@ static void set_k_tables(struct ocean_grid *g, double patch)
         g->kz[i] = (float)ocean_wavenumber(i, g->n, patch);
 }
 
-/* Everything new parameters need, beside the live grid (read only). */
+/* The live grid of cascade c, or NULL. */
+static struct ocean_grid *cascade_grid(const struct ocean *o, int c)
+{
+    return c == 0 ? o->g : c < o->ncascades ? o->fine[c] : NULL;
+}
+
+/* One cascade's share of prepare(): beside its live grid g (read only; NULL
+ * for a cascade the change adds). */
+static bool prepare_cascade(const struct ocean *o, const struct ocean_params *p, int c, struct cascade_prep *cp,
+                            struct ocean_pool *pool, int threads, char *err, size_t errlen)
+{
+    spectrum_model_cascade(&cp->model, p, c);
+    cp->seed = cp->model.seed;
+    const struct ocean_grid *g = cascade_grid(o, c);
+    if (!g || g->n != p->resolution) {
+        cp->grid = grid_new(p->resolution, &o->opt, err, errlen);
+        if (!cp->grid)
+            return false;
+        cp->grid->seed = cp->seed;
+        gauss_compute(cp->grid->n, cp->seed, cp->grid->gauss, pool, threads);
+        set_k_tables(cp->grid, cp->model.patch);
+        struct ocean_amps amps = {cp->grid->a, cp->grid->b, cp->grid->d, cp->grid->e, cp->grid->omega,
+                                  cp->grid->ampc};
+        if (!amps_compute(cp->grid, &cp->model, p->choppiness, cp->grid->gauss, &amps, pool, threads))
+            goto oom;
+        return true;
+    }
+    if (!amps_alloc(&cp->amps, g->n))
+        goto oom;
+    const float *gauss = g->gauss;
+    if (cp->seed != g->seed) {
+        bool ok = true;
+        cp->gauss = zalloc(g->modes * 4 * sizeof(float), &ok);
+        if (!ok)
+            goto oom;
+        gauss_compute(g->n, cp->seed, cp->gauss, pool, threads);
+        gauss = cp->gauss;
+    }
+    if (!amps_compute(g, &cp->model, p->choppiness, gauss, &cp->amps, pool, threads))
+        goto oom;
+    return true;
+oom:
+    snprintf(err, errlen, "out of memory for resolution %d", p->resolution);
+    return false;
+}
+
+/* Everything new parameters need, beside the live grids (read only). */
 static struct ocean_prepared *prepare(const struct ocean *o, const struct ocean_params *p, struct ocean_pool *pool,
                                       int threads, char *err, size_t errlen)
 {
@@ -670,43 +725,14 @@ static struct ocean_prepared *prepare(const struct ocean *o, const struct ocean_
         return NULL;
     }
     pr->p = *p;
-    spectrum_model_init(&pr->model, p);
+    pr->ncascades = p->cascades;
     pr->generation = o->generation;
-    pr->seed = (uint32_t)p->seed;
-    const struct ocean_grid *g = o->g;
-    if (!g || g->n != p->resolution) {
-        pr->grid = grid_new(p->resolution, &o->opt, err, errlen);
-        if (!pr->grid) {
-            free(pr);
+    for (int c = 0; c < pr->ncascades; c++)
+        if (!prepare_cascade(o, p, c, &pr->c[c], pool, threads, err, errlen)) {
+            ocean_prepared_free(pr);
             return NULL;
         }
-        pr->grid->seed = pr->seed;
-        gauss_compute(pr->grid->n, pr->seed, pr->grid->gauss, pool, threads);
-        set_k_tables(pr->grid, p->patch_size);
-        struct ocean_amps amps = {pr->grid->a, pr->grid->b, pr->grid->d, pr->grid->e, pr->grid->omega,
-                                  pr->grid->ampc};
-        if (!amps_compute(pr->grid, &pr->model, p->choppiness, pr->grid->gauss, &amps, pool, threads))
-            goto oom;
-        return pr;
-    }
-    if (!amps_alloc(&pr->amps, g->n))
-        goto oom;
-    const float *gauss = g->gauss;
-    if (pr->seed != g->seed) {
-        bool ok = true;
-        pr->gauss = zalloc(g->modes * 4 * sizeof(float), &ok);
-        if (!ok)
-            goto oom;
-        gauss_compute(g->n, pr->seed, pr->gauss, pool, threads);
-        gauss = pr->gauss;
-    }
-    if (!amps_compute(g, &pr->model, p->choppiness, gauss, &pr->amps, pool, threads))
-        goto oom;
     return pr;
-oom:
-    snprintf(err, errlen, "out of memory for resolution %d", p->resolution);
-    ocean_prepared_free(pr);
-    return NULL;
 }
 
 struct ocean_prepared *ocean_prepare(struct ocean *o, const struct ocean_params *p, char *err, size_t errlen)
@@ -727,24 +753,38 @@ int ocean_commit(struct ocean *o, struct ocean_prepared *pr)
     if (!o || !pr || pr->generation != o->generation)
         return -1; /* prepared against another state: nothing changes */
     o->p = pr->p;
-    o->model = pr->model;
-    if (pr->grid) {
-        struct ocean_grid *old = o->g;
-        o->g = pr->grid;
-        pr->grid = old;
-        o->foam_warm = false; /* a new grid's foam is empty: rebuild its history */
-    } else {
-        amps_swap(o->g, &pr->amps);
-        if (pr->gauss) {
-            float *t = o->g->gauss;
-            o->g->gauss = pr->gauss;
-            pr->gauss = t;
-            uint32_t s = o->g->seed;
-            o->g->seed = pr->seed;
-            pr->seed = s;
+    for (int c = 0; c < pr->ncascades; c++) {
+        struct cascade_prep *cp = &pr->c[c];
+        struct ocean_grid **slot = c == 0 ? &o->g : &o->fine[c];
+        if (c == 0)
+            o->model = cp->model;
+        else
+            o->fine_model[c] = cp->model;
+        if (cp->grid) {
+            struct ocean_grid *old = *slot;
+            *slot = cp->grid;
+            cp->grid = old;
+            if (c == 0)
+                o->foam_warm = false; /* a new grid's foam is empty: rebuild its history */
+            continue;
         }
-        set_k_tables(o->g, pr->p.patch_size); /* N + 1 floats */
+        struct ocean_grid *g = *slot;
+        amps_swap(g, &cp->amps);
+        if (cp->gauss) {
+            float *t = g->gauss;
+            g->gauss = cp->gauss;
+            cp->gauss = t;
+            uint32_t s = g->seed;
+            g->seed = cp->seed;
+            cp->seed = s;
+        }
+        set_k_tables(g, cp->model.patch); /* N + 1 floats */
     }
+    for (int c = pr->ncascades; c < o->ncascades; c++) { /* dropped cascades: freed with pr */
+        pr->c[c].grid = o->fine[c];
+        o->fine[c] = NULL;
+    }
+    o->ncascades = pr->ncascades;
     o->generation++; /* also refuses a second commit of the same object */
     return 0;
 }
@@ -756,16 +796,17 @@ struct ocean_surface *ocean_prepared_surface(const struct ocean *o, const struct
         snprintf(err, errlen, "no simulation");
         return NULL;
     }
-    if (pr->grid) /* a new N: the whole new grid */
-        return ocean_surface_from(pr->grid, &pr->p, err, errlen);
+    const struct cascade_prep *cp = &pr->c[0]; /* queries sum cascade 0 only (docs/simulation.md) */
+    if (cp->grid) /* a new N: the whole new grid */
+        return ocean_surface_from(cp->grid, &pr->p, err, errlen);
     /* Same N: o's grid with the prepared amplitudes (what ocean_commit swaps in).
      * A shallow copy: the snapshot reads only n, nh, modes and the amplitudes. */
     struct ocean_grid view = *o->g;
-    view.a = pr->amps.a;
-    view.b = pr->amps.b;
-    view.d = pr->amps.d;
-    view.e = pr->amps.e;
-    view.omega = pr->amps.omega;
+    view.a = cp->amps.a;
+    view.b = cp->amps.b;
+    view.d = cp->amps.d;
+    view.e = cp->amps.e;
+    view.omega = cp->amps.omega;
     return ocean_surface_from(&view, &pr->p, err, errlen);
 }
 
@@ -826,6 +867,37 @@ int ocean_reconfigure(struct ocean *o, const struct ocean_params *p, char *err, 
     return 0;
 }
 
+/* Step cascade c >= 1: its grid and model stand in for cascade 0's during
+ * the call, so ocean_step.c and ocean_dft.c step it like any sea. */
+static int step_cascade(struct ocean *o, int c, double t, unsigned fields)
+{
+    struct ocean_grid *g0 = o->g;
+    struct spectrum_model m0 = o->model;
+    o->g = o->fine[c];
+    o->model = o->fine_model[c];
+    int rc = o->p.transform == TRANSFORM_DFT ? ocean_step_dft(o, t, fields) : ocean_step_fft(o, t, fields);
+    o->g = g0;
+    o->model = m0;
+    return rc;
+}
+
+int ocean_step_cascades(struct ocean *o, double t, const unsigned *fields, int count)
+{
+    if (!o || !isfinite(t) || !fields || count < 0)
+        return -1;
+    if (count > o->ncascades)
+        count = o->ncascades;
+    int rc = 0;
+    for (int c = 0; c < count && rc == 0; c++) {
+        unsigned f = fields[c] & OCEAN_ALL_FIELDS;
+        if (c == 0)
+            rc = ocean_step_with_foam(o, t, f);
+        else if (f & ~OCEAN_FIELD_BIT(OCEAN_FOAM))
+            rc = step_cascade(o, c, t, f & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
+    }
+    return rc;
+}
+
 int ocean_keep_jacobian_terms(struct ocean *o)
 {
     struct ocean_grid *g = o->g;
@@ -838,10 +910,22 @@ int ocean_keep_jacobian_terms(struct ocean *o)
 
 int ocean_step(struct ocean *o, double t, unsigned fields)
 {
-    if (!o || !isfinite(t))
-        return -1;
-    fields &= OCEAN_ALL_FIELDS;
-    return ocean_step_with_foam(o, t, fields);
+    unsigned all[OCEAN_MAX_CASCADES] = {fields, fields, fields, fields};
+    return ocean_step_cascades(o, t, all, OCEAN_MAX_CASCADES);
+}
+
+const float *ocean_cascade_field(const struct ocean *o, int cascade, enum ocean_field f)
+{
+    if (!o || (unsigned)f >= OCEAN_FIELD_COUNT || cascade < 0 || cascade >= o->ncascades)
+        return NULL;
+    if (cascade == 0)
+        return o->g->out[f];
+    return f == OCEAN_FOAM ? NULL : o->fine[cascade]->out[f];
+}
+
+int ocean_cascades(const struct ocean *o)
+{
+    return o ? o->ncascades : 0;
 }
 
 const float *ocean_field(const struct ocean *o, enum ocean_field f)
@@ -868,6 +952,8 @@ void ocean_free(struct ocean *o)
     ocean_pool_free(o->pool);
     ocean_pool_free(o->prep_pool);
     grid_free(o->g);
+    for (int c = 1; c < OCEAN_MAX_CASCADES; c++)
+        grid_free(o->fine[c]);
     free(o->wisdom_path);
     free(o);
 }

@@ -17,7 +17,7 @@ void ocean_reference_spectrum(const struct ocean *o, double t, enum ocean_transf
     const int n = o->g->n;
     /* Not wrapped into the loop period, unlike the FFT path: the reference
      * is the plain definition, so the tests see whether wrapping is exact. */
-    const double L = o->p.patch_size, lam = o->p.choppiness, tt = t;
+    const double L = m->patch, lam = o->p.choppiness, tt = t;
     for (int iz = 0; iz < n; iz++) {
         for (int ix = 0; ix < n; ix++) {
             double complex *dst = &out[(size_t)iz * n + ix];

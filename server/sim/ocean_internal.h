@@ -111,7 +111,13 @@ struct ocean {
     struct ocean_options opt;  /* opt.wisdom_path points at our own copy */
     char *wisdom_path;
     struct spectrum_model model;
-    struct ocean_grid *g;
+    struct ocean_grid *g;      /* cascade 0; ocean_step_fft/_dft step g under `model` */
+    /* Cascades 1 .. ncascades-1 ([0] unused): their grids and models. To step
+     * cascade c, ocean.c puts them in g and model for the duration of the
+     * call (step_cascade), so the step code knows nothing of cascades. */
+    int ncascades;
+    struct ocean_grid *fine[OCEAN_MAX_CASCADES];
+    struct spectrum_model fine_model[OCEAN_MAX_CASCADES];
     struct ocean_pool *pool;   /* opt.threads - 1 workers; NULL for one thread */
     struct ocean_pool *prep_pool; /* ocean_prepare's own (another thread's), made on first use */
     unsigned long generation;  /* commits so far: a prepare made before the last one is stale */

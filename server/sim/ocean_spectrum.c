@@ -6,7 +6,9 @@
  * sum Psi dk^2, the Riemann sum of the spectrum's integral: independent of
  * N and L once the spectrum is resolved. */
 #include "ocean_spectrum.h"
+#include "ocean.h"
 
+#include <limits.h>
 #include <math.h>
 
 #define PM_ALPHA 0.0081            /* Phillips constant */
@@ -34,6 +36,8 @@ void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p)
     m->loop_omega = p->loop_period > 0 ? 2.0 * M_PI / p->loop_period : 0.0;
     m->patch = p->patch_size;
     m->seed = (uint32_t)p->seed;
+    m->band = 0;
+    m->band_top = INT_MAX;
     m->alpha = PM_ALPHA;
     m->omega_p = m->calm ? 1.0 : PM_PEAK * g / U;
     if (!m->calm && (m->kind == SPECTRUM_JONSWAP || m->kind == SPECTRUM_TMA)) {
@@ -47,6 +51,44 @@ void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p)
         m->alpha = JONSWAP_ALPHA_COEF * pow(chi, JONSWAP_ALPHA_EXP);
         m->omega_p = 2.0 * M_PI * JONSWAP_FP_COEF * (g / U) * pow(chi, JONSWAP_FP_EXP);
     }
+}
+
+uint32_t spectrum_cascade_seed(uint32_t seed, int cascade)
+{
+    if (cascade == 0)
+        return seed;
+    /* splitmix64's finaliser of (seed, cascade): independent streams. */
+    uint64_t z = ((uint64_t)seed << 8 | (uint64_t)cascade) + 0x9E3779B97F4A7C15ull * (uint64_t)(cascade + 1);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return (uint32_t)(z ^ (z >> 31));
+}
+
+double ocean_cascade_patch(double patch_size, int cascade)
+{
+    return patch_size / pow(OCEAN_CASCADE_RATIO, cascade);
+}
+
+int ocean_cascade_band_top(int n, int cascade)
+{
+    return cascade > 0 ? n / 4 - 1 : n / 2 - 1;
+}
+
+int ocean_cascade_band(int n, int cascade)
+{
+    if (cascade <= 0)
+        return 0;
+    /* The coarser cascade's modes cover max(|m|) < its top + 1/2, in its units. */
+    return (int)ceil((ocean_cascade_band_top(n, cascade - 1) + 0.5) / OCEAN_CASCADE_RATIO);
+}
+
+void spectrum_model_cascade(struct spectrum_model *m, const struct ocean_params *p, int cascade)
+{
+    spectrum_model_init(m, p);
+    m->patch = ocean_cascade_patch(p->patch_size, cascade);
+    m->seed = spectrum_cascade_seed((uint32_t)p->seed, cascade);
+    m->band = ocean_cascade_band(p->resolution, cascade);
+    m->band_top = cascade > 0 ? ocean_cascade_band_top(p->resolution, cascade) : INT_MAX;
 }
 
 double dispersion_omega(double k, double depth)
@@ -231,6 +273,8 @@ void spectrum_gauss_pair(uint32_t seed, int mx, int mz, double *a, double *b)
 
 double complex spectrum_h0(const struct spectrum_model *m, int mx, int mz)
 {
+    if (!spectrum_in_band(m, mx, mz))
+        return 0.0;
     double dk = 2.0 * M_PI / m->patch;
     double psi = spectrum_directional(m, mx * dk, mz * dk);
     if (!(psi > 0))

@@ -29,11 +29,24 @@ struct spectrum_model {
     double swell;          /* 0..1 */
     double cutoff;         /* small_wave_cutoff, m (wavelength) */
     double loop_omega;     /* 2 pi / loop_period, 0 = no loop */
-    double patch;          /* L, m */
-    uint32_t seed;
+    double patch;          /* L, m (of this cascade) */
+    uint32_t seed;         /* of this cascade */
+    int band, band_top;    /* cascade >= 1: only modes with band <= max(|mx|, |mz|) <= band_top are
+                            * non-zero (ocean_cascade_band); cascade 0: 0, INT_MAX (all) */
 };
 
 void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p);
+/* The model of cascade c: p's, with the cascade's patch, seed and band. */
+void spectrum_model_cascade(struct spectrum_model *m, const struct ocean_params *p, int cascade);
+/* The random seed of cascade c (the seed itself for c = 0). */
+uint32_t spectrum_cascade_seed(uint32_t seed, int cascade);
+/* Whether integer wavenumber (mx, mz) lies in the model's band. */
+static inline bool spectrum_in_band(const struct spectrum_model *m, int mx, int mz)
+{
+    int ax = mx < 0 ? -mx : mx, az = mz < 0 ? -mz : mz;
+    int a = ax > az ? ax : az;
+    return a >= m->band && a <= m->band_top;
+}
 
 /* Finite-depth dispersion w = sqrt(g k tanh(k d)) and its derivative. */
 double dispersion_omega(double k, double depth);

@@ -27,12 +27,18 @@ static const char *const transform_names[] = {"fft", "dft", NULL};
  * multiply-adds per step (~0.1 s at 64, ~2 s at 128). */
 #define DFT_MAX_N 64
 
+/* Cascades by default: docs/simulation.md, "Cascades" (the measurement that chose it). */
+#define CASCADES_DEFAULT 3
+
 const struct param_def param_table[] = {
     P("resolution", PARAM_INT, "", 16, 2048, 256, NULL,
      "grid samples per side N (power of two); changing it re-plans the FFT", resolution,
      PARAM_POW2 | PARAM_REPLAN),
     P("patch_size", PARAM_FLOAT, "m", 1, 10000, 256, NULL,
      "side L of the periodic square patch", patch_size, 0),
+    P("cascades", PARAM_INT, "", 1, 4, CASCADES_DEFAULT, NULL,
+     "periodic patches summed: cascade c has side L / 3.543^c and adds the wavenumbers the coarser ones "
+     "cannot hold (docs/simulation.md, Cascades)", cascades, 0),
     P("wind_speed", PARAM_FLOAT, "m/s", 0, 40, 10, NULL,
      "wind speed U10, 10 m above the sea", wind_speed, 0),
     P("wind_direction", PARAM_FLOAT, "deg", -360, 360, 0, NULL,
@@ -84,6 +90,8 @@ static const struct param_ui ui_table[] = {
      "Grid samples per side: more detail, more CPU and bandwidth"},
     {"patch_size", "Patch size", PARAM_GROUP_ADVANCED,
      "Side of the simulated square of sea, which repeats like a tile"},
+    {"cascades", "Detail cascades", PARAM_GROUP_ADVANCED,
+     "More cascades add finer ripples on smaller patches that never line up with the large one"},
     {"wind_speed", "Wind speed", PARAM_GROUP_SEA,
      "Wind 10 m above the sea: stronger wind, bigger and longer waves, more whitecaps"},
     {"wind_direction", "Wind direction", PARAM_GROUP_SEA,

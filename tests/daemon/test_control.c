@@ -711,7 +711,7 @@ static void test_capacity_plan(void)
         .period_s = 1.0 / 30, .budget_s = 0.8 / 30, .n0 = 256, .step1_s = 0.001, .step6_s = 0.003,
         .step_scale = 1, .enc_s_per_sample = 1e-9, .max_memory_mb = 256, .cores = 2,
     };
-    int demand[LAYER_KEYS] = { 0 };
+    int demand[LAYER_KEYS_ALL] = { 0 };
     struct plan p;
     const int n = 256, ts = 128, g0 = plan_group(0, 3), g2 = plan_group(2, 3);
     for (int f = 0; f < 3; f++)
@@ -755,12 +755,12 @@ static void test_capacity_plan(void)
     capacity_info_fill(&m, n, &ci);
     int top = 0;
     for (int z = 16; z <= 2048; z *= 2)
-        if (control_fits_memory(z, 256))
+        if (control_fits_memory(z, (int)param_find("cascades")->def, 256)) /* at the default cascades */
             top = z;
     CHECK(ci.max_resolution == top && ci.nsizes > 0 && ci.sizes[ci.nsizes - 1].n == 2048, "max_resolution %d want %d",
           ci.max_resolution, top);
     for (int i = 0; i < ci.nsizes; i++)
-        CHECK(ci.sizes[i].fits_memory == control_fits_memory(ci.sizes[i].n, 256), "fits_memory of %d", ci.sizes[i].n);
+        CHECK(ci.sizes[i].fits_memory == control_fits_memory(ci.sizes[i].n, (int)param_find("cascades")->def, 256), "fits_memory of %d", ci.sizes[i].n);
 }
 
 /* Display names (PROTOCOL.md §7.1 `name`): what is accepted and refused,

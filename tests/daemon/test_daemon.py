@@ -25,6 +25,7 @@ import http.client
 import urllib.error
 import urllib.request
 
+import numpy as np
 import websockets
 
 ARGS = None
@@ -1600,6 +1601,78 @@ def test_foam_field_streamed(d):
               "streamed foam at 20 m/s: covered %.4f over %d frames, W %.4f" % (cov, len(covered), W))
         print("    streamed foam at 20 m/s: covered %.4f over %d frames (W %.4f)" % (cov, len(covered), W))
         await a.close()
+    asyncio.run(run())
+
+
+@test
+def test_cascades(d):
+    """Cascades: hello and params announce each cascade's patch size; a
+    client that asks for none gets cascade 0 only, as before; one that
+    asks for the finer cascades gets their tiles (cascade in the tile
+    flags) at the LOD and bound it asked for, with their own content; a
+    cascade not in force is simply left out; bad `cascades` is refused."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+    import oceanproto
+
+    async def run():
+        a, ha = await connect(d)
+        b, _ = await connect(d)
+        await a.send(json.dumps({"type": "set", "id": 1, "params": {"cascades": 3}}))
+        pm = await recv_json(a, lambda m: m["type"] == "params")
+        L = pm["params"]["patch_size"]
+        sizes = pm["cascade_patch_sizes"]
+        check(len(ha["cascade_patch_sizes"]) == ha["params"]["cascades"], "hello %r" % ha.get("cascade_patch_sizes"))
+        check(len(sizes) == 3 and abs(sizes[0] - L) < 1e-9 and all(abs(sizes[c] - L / 3.543 ** c) < 1e-6 * L
+                                                                     for c in range(3)), "cascade_patch_sizes %r" % sizes)
+        # a: cascade 0 at LOD 0, cascades 1 (slopes, LOD 1, 1 mm) and 2 (height, default lod/bound of cascade 0).
+        await a.send(json.dumps({"type": "subscribe", "id": 2, "fields": ["height"], "lod": 0, "bound": 0.01,
+                                 "cascades": [{"fields": ["slope_x", "slope_z"], "lod": 1, "bound": 0.001},
+                                              {"fields": ["height"]}]}))
+        s = await recv_json(a, lambda m: m["type"] == "subscribed")
+        cs = s["subscription"]["cascades"]
+        check(cs == [{"fields": ["slope_x", "slope_z"], "lod": 1, "bound": 0.001},
+                     {"fields": ["height"], "lod": 0, "bound": 0.01}], "subscribed cascades %r" % cs)
+        seen = set()
+        for _ in range(40):
+            _, raw = await recv_frame(a)
+            f = oceanproto.decode_frame(raw)
+            kinds = {(t.cascade, t.field, t.lod) for t in f.tiles}
+            if kinds == {(0, "height", 0), (1, "slope_x", 1), (1, "slope_z", 1), (2, "height", 0)}:
+                h0 = np.concatenate([t.samples.ravel() for t in f.tiles if t.cascade == 0])
+                h2 = np.concatenate([t.samples.ravel() for t in f.tiles if t.cascade == 2])
+                sx = [t for t in f.tiles if t.cascade == 1 and t.field == "slope_x"]
+                check(all(t.bound == np.float32(0.001) and t.samples.shape == (f.tile_size // 2,) * 2 for t in sx),
+                      "cascade 1 tiles at LOD 1, 1 mm")
+                # The finer cascade holds the short waves only: much smaller heights.
+                check(0 < h2.std() < 0.2 * h0.std(), "height std cascade 0 %.4f, cascade 2 %.4f" % (h0.std(), h2.std()))
+                seen.add("all")
+                break
+        check("all" in seen, "no frame with every cascade asked for")
+        # b never subscribed: cascade 0 only, default fields.
+        _, raw = await recv_frame(b)
+        fb = oceanproto.decode_frame(raw)
+        check(fb.tiles and all(t.cascade == 0 for t in fb.tiles), "a client that knows no cascades got cascades %r"
+              % sorted({t.cascade for t in fb.tiles}))
+        # Fewer cascades in force: cascade 2 is left out, the rest keeps coming.
+        await a.send(json.dumps({"type": "set", "id": 3, "params": {"cascades": 2}}))
+        await recv_json(a, lambda m: m["type"] == "params")
+        ok = False
+        for _ in range(40):
+            h, raw = await recv_frame(a)
+            f = oceanproto.decode_frame(raw)
+            if h["params_version"] >= pm["params_version"] + 1:
+                cas = {t.cascade for t in f.tiles}
+                check(cas == {0, 1}, "cascades after set cascades=2: %r" % cas)
+                ok = True
+                break
+        check(ok, "no frame after cascades=2")
+        for bad in ({"cascades": {"fields": ["height"]}}, {"cascades": [{}, {}, {}, {}]}, {"cascades": [{"lod": 9}]},
+                    {"cascades": [3]}, {"cascades": [{"fields": ["nope"]}]}):
+            await a.send(json.dumps(dict({"type": "subscribe", "id": 9}, **bad)))
+            e = await recv_json(a, lambda m: m["type"] in ("error", "subscribed"))
+            check(e["type"] == "error" and e["code"] == "bad_subscription", "%r -> %r" % (bad, e))
+        await a.close()
+        await b.close()
     asyncio.run(run())
 
 

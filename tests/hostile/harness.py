@@ -267,6 +267,7 @@ class Reader:
         self.s = s
         self.buf = b""
         self.texts = []          # JSON objects received
+        self.bin_at = []         # self.binary when each of them arrived
         self.binary = 0          # binary frames (or final fragments) received
         self.close_code = None   # code from the server's close frame
         self.eof = False         # TCP closed (FIN or RST)
@@ -295,6 +296,7 @@ class Reader:
             payload = b[off:off + n]
             self.buf = b[off + n:]
             if op == OP_TEXT:
+                self.bin_at.append(self.binary)
                 try:
                     self.texts.append(json.loads(payload))
                 except ValueError:

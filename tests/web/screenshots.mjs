@@ -63,6 +63,7 @@ async function take(browser, port, s, file) {
   const ctxOpts = s.device ? { ...devices[s.device] } : DESKTOP;
   const ctx = await browser.newContext(ctxOpts);
   const page = await ctx.newPage();
+  page.setDefaultTimeout(150000); // software GL on a shared 2-core machine can take a while
   const errors = [];
   page.on('pageerror', (e) => errors.push(e.message));
   const q = new URLSearchParams({ test: '1', hour: String(s.hour) });

@@ -70,6 +70,11 @@ let temporal = query.get('temporal') !== '0';
 const MAX_QUEUED = 8;          // temporal: frames waiting for the worker before we drop and resync
 const wantedSub = temporal ? { temporal: true } : {}; // kept across reconnects, with the panel's changes
 let lastResync = -Infinity;
+// Cascades 1..3 (PROTOCOL.md §4.1): their height, at LOD 1 (each holds waves up to half its
+// Nyquist wavenumber, so LOD 1 loses nothing) and 1 mm (their heights are centimetres).
+// Asked for always: the server leaves out cascades that are not in force. ?cascades=0: none.
+const CASCADE_SUB = [1, 2, 3].map(() => ({ fields: ['height'], lod: 1, bound: 0.001 }));
+const useCascades = query.get('cascades') !== '0';
 
 const conn = new Connection(serverUrl(), {
   onState(state, detail) {
@@ -91,8 +96,11 @@ const conn = new Connection(serverUrl(), {
         st.params = msg.params; st.paramsVersion = msg.params_version;
         panel.build(msg);
         if (msg.subscription) panel.subscribed(msg.subscription);
-        // After a reconnect, ask again for what the user had chosen.
-        if (Object.keys(wantedSub).length) conn.send({ type: 'subscribe', ...wantedSub });
+        // After a reconnect, ask again for what the user had chosen; and the finer
+        // cascades, where the server has them (hello.cascade_patch_sizes).
+        if (Object.keys(wantedSub).length || (msg.cascade_patch_sizes && useCascades)) {
+          conn.send({ type: 'subscribe', ...(msg.cascade_patch_sizes && useCascades ? { cascades: CASCADE_SUB } : {}), ...wantedSub });
+        }
         hud.message('');
         break;
       case 'params':
@@ -193,6 +201,7 @@ function recycle(f) {
   const buffers = [];
   if (f.disp) buffers.push({ buffer: f.disp.buffer, channels: 4 });
   if (f.slope) buffers.push({ buffer: f.slope.buffer, channels: 2 });
+  for (const c of f.fine || []) buffers.push({ buffer: c.disp.buffer, channels: 4 });
   worker.postMessage({ type: 'recycle', buffers }, buffers.map((b) => b.buffer));
 }
 
@@ -215,6 +224,7 @@ function frameLoop() {
     stats.uploadMs = uploadMs;
     if (bench && timings.decode.length < 10000) { timings.decode.push(f.decodeMs); timings.assemble.push(f.assembleMs); timings.upload.push(uploadMs); }
     const buffers = released.map((a) => ({ buffer: a.buffer, channels: a.length === f.m * f.m * 2 ? 2 : 4 }));
+    for (const a of ocean.setCascades(f.fine)) buffers.push({ buffer: a.buffer, channels: 4 });
     worker.postMessage({ type: 'recycle', buffers }, buffers.map((b) => b.buffer));
     st.n = f.header.n; st.lod = f.lod; st.frameParamsVersion = f.header.paramsVersion;
     // Latency: server encode time to the frame reaching the screen (clocks of one machine, or NTP).

@@ -90,6 +90,12 @@ export class Ocean {
       uDeep: { value: new THREE.Color(0.004, 0.035, 0.07) },
       uScatter: { value: new THREE.Color(0.02, 0.16, 0.16) },
       uFogDensity: { value: 0.00009 }, uFoam: { value: 1 },
+      // Cascades 1..3 (shaders.js CASCADES): textures, patch sides, texel sizes, on/off.
+      uC1A: { value: null }, uC1B: { value: null }, uC2A: { value: null }, uC2B: { value: null },
+      uC3A: { value: null }, uC3B: { value: null },
+      uCPatch: { value: new THREE.Vector3(1, 1, 1) }, uCTexel: { value: new THREE.Vector3(1, 1, 1) },
+      uCOn: { value: new THREE.Vector3(0, 0, 0) },
+      uMinCell: { value: 1 }, uLodPixel: { value: this.lodPixel },
     };
     this.material = new THREE.ShaderMaterial({
       uniforms: this.uniforms, vertexShader: waterVertex, fragmentShader: waterFragment,
@@ -111,6 +117,41 @@ export class Ocean {
     // Two texture slots (older A, newer B); data arrays are swapped in.
     this.disp = [null, null];
     this.slope = [null, null];
+    this.cascades = [null, null, null, null]; // [c] = { m, tex: [A, B] } for cascades 1..3
+  }
+
+  // The finer cascades of a frame (worker.js assembleCascades): each its own pair of
+  // textures, swapped like cascade 0's; a cascade missing from the frame is switched off.
+  // Returns the arrays to hand back to the worker.
+  setCascades(fine) {
+    const released = [], u = this.uniforms, on = [0, 0, 0];
+    for (const f of fine || []) {
+      let slot = this.cascades[f.c];
+      if (!slot || slot.m !== f.m) {
+        if (slot) for (const t of slot.tex) t.dispose();
+        slot = this.cascades[f.c] = { m: f.m, tex: [0, 1].map(() => floatTexture(f.disp.slice(), f.m, THREE.RGBAFormat)) };
+      }
+      slot.tex.reverse();
+      released.push(slot.tex[1].image.data);
+      slot.tex[1].image.data = f.disp;
+      slot.tex[1].needsUpdate = true;
+      this.renderer.initTexture(slot.tex[1]);
+      u[`uC${f.c}A`].value = slot.tex[0];
+      u[`uC${f.c}B`].value = slot.tex[1];
+      u.uCPatch.value.setComponent(f.c - 1, f.patch);
+      u.uCTexel.value.setComponent(f.c - 1, 1 / f.m);
+      on[f.c - 1] = 1;
+    }
+    // A cascade that stopped coming: off, and no texture left bound to it.
+    for (let c = 1; c < 4; c++) if (!on[c - 1]) { u[`uC${c}A`].value = u[`uC${c}B`].value = this.blank(); }
+    u.uCOn.value.set(on[0], on[1], on[2]);
+    return released.filter((a) => a && a.buffer.byteLength);
+  }
+
+  // A 1x1 zero texture for unused cascade samplers.
+  blank() {
+    if (!this.blankTex) this.blankTex = floatTexture(new Float32Array(4), 1, THREE.RGBAFormat);
+    return this.blankTex;
   }
 
   set wireframe(on) { this.material.wireframe = on; }
@@ -165,6 +206,7 @@ export class Ocean {
     this.hasData = false;
     const u = this.uniforms;
     u.uPatch.value = patch; u.uTexel.value = 1 / m;
+    u.uMinCell.value = patch / Math.min(MAX_GRID, m);
     for (const l of this.levels) { this.scene.remove(l.mesh); l.mesh.geometry.dispose(); l.mesh.dispose(); }
     this.levels = [];
     this.ring = Math.min(MAX_RING, Math.ceil(NEAR_RANGE / patch));

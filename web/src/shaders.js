@@ -74,8 +74,62 @@ vec4 dispAt(vec2 xz) {
 }
 `;
 
+
+// ---- Cascades (docs/web.md "Cascades"; kept apart from the rest on purpose) ----
+// The finer cascades 1..3: each a periodic patch of side uCPatch[c-1] (the server's
+// cascade_patch_sizes), streamed as height at its own LOD, tiled with its own period.
+// They add to cascade 0 per vertex (height, where the mesh resolves them) and per
+// pixel (slopes from forward differences of each cascade's height, each with its own
+// step, faded out where a pixel covers more than a few of its samples: unresolved,
+// they would only alias into sparkle).
+const CASCADES = /* glsl */`
+uniform sampler2D uC1A, uC1B, uC2A, uC2B, uC3A, uC3B; // (dx, height, dz, 0) of cascades 1..3, older / newer
+uniform vec3 uCPatch;   // patch side of cascades 1..3, m
+uniform vec3 uCTexel;   // 1 / texture size of cascades 1..3
+uniform vec3 uCOn;      // 1 where a cascade has data, else 0
+uniform float uMinCell, uLodPixel; // the mesh's finest cell (m) and cells per metre of distance
+float cascadeH(sampler2D a, sampler2D b, vec2 xz, float L, float texel) {
+  vec2 uv = xz / L + 0.5 * texel;
+  return mix(textureLod(a, uv, 0.0).y, textureLod(b, uv, 0.0).y, uMix);
+}
+// Weight of cascade c for a sampling step 'step' (m, half a pixel's or a cell's width):
+// 1 while its shortest waves (two samples of its texture) span several steps, 0 once a
+// step reaches one sample. Unresolved, a cascade would alias into a lattice of its own
+// period (seen from 1 km up with a gentler fade: squares of 72 m).
+vec3 cascadeWeights(float step) {
+  vec3 spacing = max(uCPatch * uCTexel, vec3(1e-6));
+  return uCOn * (1.0 - smoothstep(vec3(0.35), vec3(1.0), vec3(step) / spacing));
+}
+// Summed height of the finer cascades at xz, each weighted by w.
+float cascadesHeight(vec2 xz, vec3 w) {
+  float h = 0.0;
+  if (w.x > 0.0) h += w.x * cascadeH(uC1A, uC1B, xz, uCPatch.x, uCTexel.x);
+  if (w.y > 0.0) h += w.y * cascadeH(uC2A, uC2B, xz, uCPatch.y, uCTexel.y);
+  if (w.z > 0.0) h += w.z * cascadeH(uC3A, uC3B, xz, uCPatch.z, uCTexel.z);
+  return h;
+}
+// Forward differences on the newer frame only: 3 texture reads per cascade instead of 8
+// (software GL renders the page on the CPU; the small waves need no blending between frames).
+vec2 cascadeSlope(sampler2D b, vec2 xz, float L, float texel, float footprint) {
+  float e = max(L * texel, footprint);
+  float c = textureLod(b, xz / L + 0.5 * texel, 0.0).y;
+  return vec2(textureLod(b, (xz + vec2(e, 0.0)) / L + 0.5 * texel, 0.0).y - c,
+              textureLod(b, (xz + vec2(0.0, e)) / L + 0.5 * texel, 0.0).y - c) / e;
+}
+// Summed slopes (dh/dx, dh/dz) of the finer cascades for a pixel of this footprint (m).
+vec2 cascadesSlope(vec2 xz, float footprint) {
+  vec3 w = cascadeWeights(footprint);
+  vec2 s = vec2(0.0);
+  if (w.x > 0.0) s += w.x * cascadeSlope(uC1B, xz, uCPatch.x, uCTexel.x, footprint);
+  if (w.y > 0.0) s += w.y * cascadeSlope(uC2B, xz, uCPatch.y, uCTexel.y, footprint);
+  if (w.z > 0.0) s += w.z * cascadeSlope(uC3B, xz, uCPatch.z, uCTexel.z, footprint);
+  return s;
+}
+`;
+
 export const waterVertex = /* glsl */`
 ${SAMPLE}
+${CASCADES}
 attribute float skirt;
 #ifdef USE_INSTANCING
 // Cells per side of the coarser of this patch and its neighbour, on each edge:
@@ -117,6 +171,11 @@ void main() {
   }
 #endif
   vec3 p = vec3(xz.x + d.x, d.y - skirt * uSkirtDepth, xz.y + d.z);
+  // Finer cascades' heights where the mesh's cells resolve them (cascades block): a
+  // cell is about uLodPixel x the distance (ocean.js layout), never below uMinCell.
+  float camDist = distance(vec3(xz.x, 0.0, xz.y), cameraPosition);
+  float cell = max(uMinCell, uLodPixel * camDist);
+  p.y += (1.0 - smoothstep(uFadeNear, uFadeFar, camDist)) * cascadesHeight(xz, cascadeWeights(0.5 * cell));
   vWorld = p;
   vSkirt = skirt;
   vGround = xz;
@@ -127,6 +186,7 @@ void main() {
 export const waterFragment = /* glsl */`
 ${SKY}
 ${SAMPLE}
+${CASCADES}
 uniform sampler2D uSlopeA;
 uniform sampler2D uSlopeB;
 uniform float uHasSlope, uHasJac, uFogDensity, uFoam;
@@ -193,6 +253,10 @@ void main() {
     n = normalize(mix(n, normalize(vec3(-hs.x, 1.0, -hs.y)), hex));
     height = mix(height, hs.z, hex);
   }
+  // Finer cascades: their slopes add to cascade 0's (cascades block).
+  vec2 cs = cascadesSlope(xz, 0.5 * max(fw.x, fw.y));
+  vec2 s0 = -n.xz / max(n.y, 1e-3);          // n is along (-dh/dx, 1, -dh/dz)
+  n = normalize(vec3(-(s0.x + cs.x), 1.0, -(s0.y + cs.y)));
   // Jacobian of the horizontal map: < 1 where crests fold, which is where foam forms.
   float jac = (tx.x * tz.z - tz.x * tx.z) / (4.0 * e * e);
   if (uHasJac > 0.5) jac = dispAt(xz).w;

@@ -68,16 +68,17 @@ async function handle(msg, superseded) {
   lastAssembled = t0;
   const t1 = performance.now();
   const h = frame.header;
-  const lod = frame.tiles.length ? frame.tiles[0].lod : 0;
+  const base = frame.tiles.filter((t) => !t.cascade);   // cascade 0 (tile flags 0)
+  const lod = base.length ? base[0].lod : 0;
   const m = h.n >> lod;
   const count = m * m;
   const present = {};
-  for (const t of frame.tiles) present[t.fieldName] = true;
+  for (const t of base) present[t.fieldName] = true;
   const disp = take(4, count);
   if (!present.jacobian) for (let i = 3; i < disp.length; i += 4) disp[i] = 1;
   const slope = (present.slope_x || present.slope_z) ? take(2, count) : null;
 
-  for (const t of frame.tiles) {
+  for (const t of base) {
     const ch = CHANNEL[t.fieldName];
     if (!ch || t.lod !== lod) continue;
     const [c, stride] = ch;
@@ -91,11 +92,39 @@ async function handle(msg, superseded) {
       for (let i = 0; i < t.width; i++, o += stride) dst[o] = s[i0 + i];
     }
   }
+  const fine = assembleCascades(frame);
   const t2 = performance.now();
   const decodeMs = t2 - t0, assembleMs = t2 - t1;
   const transfer = [disp.buffer];
   if (slope) transfer.push(slope.buffer);
+  for (const c of fine) transfer.push(c.disp.buffer);
   self.postMessage({
-    type: 'frame', header: h, lod, m, present, disp, slope, decodeMs, assembleMs, bytes: msg.buf.byteLength,
+    type: 'frame', header: h, lod, m, present, disp, slope, fine, decodeMs, assembleMs, bytes: msg.buf.byteLength,
   }, transfer);
+}
+
+// Cascades 1..3 (PROTOCOL.md §4.1): each its own M_c x M_c texture (M_c = N >> its LOD),
+// RGBA (dx, height, dz, 0); patch side L_c = patch_size / 3.543^c. Only cascades with tiles.
+const CASCADE_RATIO = 3.543;
+function assembleCascades(frame) {
+  const h = frame.header, out = [];
+  for (let c = 1; c < 4; c++) {
+    const tiles = frame.tiles.filter((t) => t.cascade === c && CHANNEL[t.fieldName] && CHANNEL[t.fieldName][1] === 4);
+    if (!tiles.length) continue;
+    const lod = tiles[0].lod, m = h.n >> lod, step = h.tileSize >> lod;
+    const disp = take(4, m * m);
+    disp.fill(0);
+    for (const t of tiles) {
+      if (t.lod !== lod) continue;
+      const ch = CHANNEL[t.fieldName][0], s = t.samples;
+      const x0 = t.tileX * step, z0 = t.tileZ * step;
+      for (let j = 0; j < t.height; j++) {
+        let o = ((z0 + j) * m + x0) * 4 + ch;
+        const i0 = j * t.width;
+        for (let i = 0; i < t.width; i++, o += 4) disp[o] = s[i0 + i];
+      }
+    }
+    out.push({ c, m, patch: h.patchSize / CASCADE_RATIO ** c, disp });
+  }
+  return out;
 }

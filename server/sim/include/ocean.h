@@ -37,6 +37,28 @@ enum ocean_field {
  * Callers (the daemon's state file) must refuse times outside [0, max]. */
 #define OCEAN_TIME_MAX 1.0e9
 
+/* Cascades (docs/simulation.md, "Cascades"). A simulation sums
+ * p.cascades periodic patches on grids of the same N: cascade c has side
+ * L_c = patch_size / OCEAN_CASCADE_RATIO^c and holds only the wavenumbers
+ * the coarser cascades cannot: cascade 0 all of its grid (it is exactly
+ * the single patch of a one-cascade sea); cascade c >= 1 its modes with
+ * ocean_cascade_band(N, c) <= max(|mx|, |mz|) <= ocean_cascade_band_top(N, c)
+ * = N/4 - 1, i.e. up to half its Nyquist wavenumber, so that LOD 1 (every
+ * other sample) carries it exactly; the next cascade starts where it ends.
+ * So the spectrum's energy is counted once. Each cascade has its own
+ * random numbers (seed mixed with c). The ratio is not an integer, and r, r^2, r^3 all lie
+ * within 0.06 of a half-integer: at the largest period L each finer patch
+ * is shifted by about half its own period, so no two tilings line up. */
+#define OCEAN_MAX_CASCADES 4
+#define OCEAN_CASCADE_RATIO 3.543
+/* L_c for a patch_size L: L / ratio^c. */
+double ocean_cascade_patch(double patch_size, int cascade);
+/* The first and the last integer wavenumber max(|mx|, |mz|) that cascade c
+ * holds on an N grid: 0 and N/2 - 1 for cascade 0 (all of them);
+ * ceil((top(c-1) + 1/2) / ratio) and N/4 - 1 for c >= 1. */
+int ocean_cascade_band(int n, int cascade);
+int ocean_cascade_band_top(int n, int cascade);
+
 struct ocean_options {
     int threads;               /* worker threads for the step (fill + transforms), >= 1;
                                 * 0 = one per online core (ocean_threads) */
@@ -83,15 +105,25 @@ void ocean_prepared_free(struct ocean_prepared *pr);
  * t - 5 s ... t - 0.25 s, so the foam is a function of (params, t) there;
  * after that, of the step times too. */
 int ocean_step(struct ocean *o, double t, unsigned fields);
-/* Output of the last step; valid until the next step/reconfigure/free. */
+/* The same with a field mask per cascade (fields[c] for c < count; cascades
+ * beyond count, or with mask 0, are not stepped and keep their last
+ * output). OCEAN_FOAM is computed for cascade 0 only. */
+int ocean_step_cascades(struct ocean *o, double t, const unsigned *fields, int count);
+/* Output of the last step (cascade 0); valid until the next step/reconfigure/free. */
 const float *ocean_field(const struct ocean *o, enum ocean_field f);
+/* Output of cascade c (0 .. ocean_cascades - 1), or NULL (also for
+ * OCEAN_FOAM of c >= 1: foam lives on cascade 0). */
+const float *ocean_cascade_field(const struct ocean *o, int cascade, enum ocean_field f);
+/* Cascades in force (p.cascades). */
+int ocean_cascades(const struct ocean *o);
 const struct ocean_params *ocean_get_params(const struct ocean *o);
 int ocean_resolution(const struct ocean *o);
 /* The thread count ocean_create uses for options.threads = requested:
  * 0 = one per online core (sysconf), with no cap but OCEAN_MAX_THREADS (64);
  * below 0 = 1; above 64 = 64. */
 int ocean_threads(int requested);
-/* Bytes one simulation of resolution n with `threads` workers (as above) allocates for
+/* Bytes one cascade of a simulation of resolution n with `threads` workers (as above)
+ * allocates for its grid (a sea of C cascades allocates C times this): for
  * its grids (spectra, FFT work arrays, output fields): what a memory cap
  * should count. FFTW's plans are not included (small beside the arrays). */
 size_t ocean_memory_bytes(int n, int threads);

@@ -18,7 +18,8 @@ enum transform_kind { TRANSFORM_FFT, TRANSFORM_DFT };
 /* All lengths in metres, times in seconds, angles in degrees unless named. */
 struct ocean_params {
     int    resolution;          /* N, samples per side, power of two 16..2048 */
-    double patch_size;          /* L, side of the periodic patch, m */
+    double patch_size;          /* L, side of the periodic patch, m (cascade 0, the largest) */
+    int    cascades;            /* 1..OCEAN_MAX_CASCADES patches, each OCEAN_CASCADE_RATIO smaller (ocean.h) */
     double wind_speed;          /* U10, wind speed 10 m above the sea, m/s */
     double wind_direction;      /* degrees, 0 = +x, 90 = +z */
     double amplitude;           /* dimensionless multiplier of the spectrum */
@@ -84,7 +85,7 @@ enum param_error {
 
 /* The number of sea parameters, as a constant: the daemon's `changed` masks
  * are uint64_t, and it checks PARAM_COUNT <= 64 at compile time. */
-#define PARAM_COUNT 18
+#define PARAM_COUNT 19
 extern const struct param_def param_table[PARAM_COUNT];
 extern const size_t param_count;
 
