@@ -47,6 +47,7 @@ void subscription_default(struct subscription *s, double tick_rate)
     memset(s, 0, sizeof *s);
     s->fields = OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_DX) | OCEAN_FIELD_BIT(OCEAN_DZ);
     s->lod = 0;
+    memset(s->field_lod, -1, sizeof s->field_lod);
     s->bound_index = 3; /* 0.01 m */
     s->max_rate = tick_rate;
     s->all_tiles = true;
@@ -319,6 +320,28 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
             return fail(e, "bad_subscription", NULL, "\"lod\" must be an integer 0..%d", CTL_MAX_LOD);
         tmp.lod = (int)j->valuedouble;
     }
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "field_lod"))) {
+        /* Per-field LOD (e.g. foam coarser than the heights); replaces the
+         * previous map, {} clears it. Fields not named follow "lod". */
+        if (!cJSON_IsObject(j))
+            return fail(e, "bad_subscription", NULL, "\"field_lod\" must be an object {\"field\": lod}");
+        memset(tmp.field_lod, -1, sizeof tmp.field_lod);
+        const cJSON *f;
+        cJSON_ArrayForEach(f, j) {
+            int k = -1;
+            for (int i = 0; f->string && i < OCEAN_FIELD_COUNT; i++)
+                if (strcmp(f->string, ocean_field_name((enum ocean_field)i)) == 0)
+                    k = i;
+            if (k < 0)
+                return fail(e, "bad_subscription", NULL, "\"field_lod\": unknown field \"%.40s\"",
+                            f->string ? f->string : "?");
+            if (!cJSON_IsNumber(f) || f->valuedouble != floor(f->valuedouble) || f->valuedouble < 0 ||
+                f->valuedouble > CTL_MAX_LOD)
+                return fail(e, "bad_subscription", NULL, "\"field_lod\": the LOD of %s must be an integer 0..%d",
+                            ocean_field_name((enum ocean_field)k), CTL_MAX_LOD);
+            tmp.field_lod[k] = (signed char)f->valuedouble;
+        }
+    }
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "bound"))) {
         int k = -1;
         for (int i = 0; cJSON_IsNumber(j) && i < CTL_BOUND_COUNT; i++)
@@ -455,6 +478,13 @@ cJSON *control_subscription_object(const struct subscription *s)
         if (s->fields & OCEAN_FIELD_BIT(i))
             cJSON_AddItemToArray(f, cJSON_CreateString(ocean_field_name((enum ocean_field)i)));
     cJSON_AddNumberToObject(o, "lod", s->lod);
+    cJSON *fl = NULL; /* only when some field has its own LOD */
+    for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
+        if (s->field_lod[i] >= 0) {
+            if (!fl)
+                fl = cJSON_AddObjectToObject(o, "field_lod");
+            cJSON_AddNumberToObject(fl, ocean_field_name((enum ocean_field)i), s->field_lod[i]);
+        }
     if (s->all_tiles) {
         cJSON_AddStringToObject(o, "tiles", "all");
     } else {

@@ -11,6 +11,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "ocean.h"
 #include "params.h"
 
 #define CTL_MAX_TILES 1024            /* 32 x 32: tile coordinates are 0..31 (no duplicates kept) */
@@ -30,6 +31,7 @@ struct ctl_error {
 struct subscription {
     unsigned fields;        /* OCEAN_FIELD_BIT mask, never 0 */
     int lod;                /* 0..CTL_MAX_LOD */
+    signed char field_lod[OCEAN_FIELD_COUNT]; /* per-field LOD, or -1: `lod` (subscribe "field_lod") */
     int bound_index;        /* index into ctl_bounds */
     double max_rate;        /* frames per second, 0 < r <= tick rate */
     bool all_tiles;
@@ -64,6 +66,11 @@ struct ctl_msg {
 };
 
 void subscription_default(struct subscription *s, double tick_rate);
+/* The LOD field f is sent at: its own ("field_lod") or the subscription's. */
+static inline int subscription_lod(const struct subscription *s, int f)
+{
+    return s->field_lod[f] >= 0 ? s->field_lod[f] : s->lod;
+}
 
 /* Parse one text message. On success returns 0 and fills m (free with
  * ctl_msg_free). On failure returns -1, fills e, and *id_out (if not NULL)

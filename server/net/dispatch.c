@@ -27,7 +27,7 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
         return;
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
         if (sub->fields & OCEAN_FIELD_BIT(f)) {
-            int key = layer_key(f, sub->lod, sub->bound_index);
+            int key = layer_key(f, subscription_lod(sub, f), sub->bound_index);
             if (n->cluster.demand) /* edge: the sim is elsewhere */
                 n->cluster.demand(n->cluster.user, key, delta);
             else

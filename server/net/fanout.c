@@ -76,7 +76,7 @@ static bool begin_frame(struct session *s, struct frame *f)
         s->layers[fi] = NULL;
         if (!(s->sub.fields & OCEAN_FIELD_BIT(fi)))
             continue;
-        s->layers[fi] = frame_layer(f, fi, s->sub.lod, s->sub.bound_index);
+        s->layers[fi] = frame_layer(f, fi, subscription_lod(&s->sub, fi), s->sub.bound_index);
         if (!s->layers[fi])
             return false;
         nf++;
