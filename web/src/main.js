@@ -48,6 +48,7 @@ const st = {
   connected: false, connectionState: 'idle', clientId: null, role: null,
   framesReceived: 0, lastSeq: null, paramsVersion: null, params: null,
   rendered: 0, n: null, lod: null, frameParamsVersion: null, lastError: null, serverError: null,
+  subscription: null, foamLod: null, foamM: 0,
   clusterState: null, // edge's {"type":"status"}: 'ok', 'sim_unavailable', 'nats_unavailable'
 };
 // Local view state: never sent. ?hour=h starts at that local time of day.
@@ -62,6 +63,19 @@ const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'modu
 let workerBusy = 0;            // frames handed to the worker and not yet back
 let pendingFrame = null;       // newest decoded frame waiting for the render loop
 const wantedSub = {};          // subscription changes made in the panel, kept across reconnects
+// Foam: the server's shared `foam` field, at a coarse LOD of its own (a 64×64 grid for
+// any N: 1-5 % more bytes, bench/foam_bytes.py). ?foam=0: don't ask (the shader then
+// makes foam from the Jacobian, as it does with a server that has no foam field).
+const wantFoam = query.get('foam') !== '0';
+const foamLodFor = (n) => Math.max(0, Math.min(4, Math.round(Math.log2((n || 256) / 64))));
+function foamSubscription(hello, n) {
+  if (!wantFoam || !(hello.fields || []).includes('foam')) return null;
+  const field_lod = { foam: foamLodFor(n) };
+  if (wantedSub.fields) return { field_lod }; // the developer panel chose the fields: keep them
+  const fields = hello.subscription?.fields || ['height', 'dx', 'dz'];
+  return { fields: fields.includes('foam') ? fields : [...fields, 'foam'], field_lod };
+}
+let lastHello = null;
 
 const conn = new Connection(serverUrl(), {
   onState(state, detail) {
@@ -82,15 +96,27 @@ const conn = new Connection(serverUrl(), {
         st.params = msg.params; st.paramsVersion = msg.params_version;
         panel.build(msg);
         if (msg.subscription) panel.subscribed(msg.subscription);
-        // After a reconnect, ask again for what the user had chosen.
-        if (Object.keys(wantedSub).length) conn.send({ type: 'subscribe', ...wantedSub });
+        ocean.setWind(msg.params?.wind_speed, msg.params?.wind_direction);
+        lastHello = msg;
+        // After a reconnect, ask again for what the user had chosen (and the foam field).
+        {
+          const foam = foamSubscription(msg, msg.params?.resolution);
+          if (Object.keys(wantedSub).length || foam) conn.send({ type: 'subscribe', ...wantedSub, ...(foam || {}) });
+        }
         hud.message('');
         break;
       case 'params':
         st.params = msg.params; st.paramsVersion = msg.params_version;
         panel.update(msg);
+        ocean.setWind(msg.params?.wind_speed, msg.params?.wind_direction);
+        // A new N: keep the foam grid at about 64×64.
+        if ((msg.changed || []).includes('resolution') && lastHello) {
+          const foam = foamSubscription(lastHello, msg.params.resolution);
+          if (foam) conn.send({ type: 'subscribe', field_lod: foam.field_lod });
+        }
         break;
       case 'subscribed':
+        st.subscription = msg.subscription || msg;
         panel.subscribed(msg.subscription || msg);
         break;
       case 'status': // cluster edge: the simulation behind it is unavailable (or back); the socket stays open
@@ -153,6 +179,7 @@ function recycle(f) {
   const buffers = [];
   if (f.disp) buffers.push({ buffer: f.disp.buffer, channels: 4 });
   if (f.slope) buffers.push({ buffer: f.slope.buffer, channels: 2 });
+  if (f.foam) buffers.push({ buffer: f.foam.buffer, channels: 1 });
   worker.postMessage({ type: 'recycle', buffers }, buffers.map((b) => b.buffer));
 }
 
@@ -174,9 +201,10 @@ function frameLoop() {
     const { uploadMs, released } = ocean.setFrame(f, now, bench);
     stats.uploadMs = uploadMs;
     if (bench && timings.decode.length < 10000) { timings.decode.push(f.decodeMs); timings.assemble.push(f.assembleMs); timings.upload.push(uploadMs); }
-    const buffers = released.map((a) => ({ buffer: a.buffer, channels: a.length === f.m * f.m * 2 ? 2 : 4 }));
+    const buffers = released.map((a) => ({ buffer: a.buffer, channels: a.length === f.m * f.m * 4 ? 4 : a.length === f.m * f.m * 2 ? 2 : 1 }));
     worker.postMessage({ type: 'recycle', buffers }, buffers.map((b) => b.buffer));
     st.n = f.header.n; st.lod = f.lod; st.frameParamsVersion = f.header.paramsVersion;
+    st.foamLod = f.foam ? f.foamLod : null; st.foamM = f.foam ? f.fm : 0;
     // Latency: server encode time to the frame reaching the screen (clocks of one machine, or NTP).
     stats.latencyMs = (performance.timeOrigin + now) - f.header.serverTimeUs / 1000;
   }
@@ -203,6 +231,9 @@ window.oceand = Object.freeze({
   get params() { return snapshot(st.params); },
   get rendered() { return st.rendered; },
   get clientId() { return st.clientId; },
+  get subscription() { return snapshot(st.subscription); },
+  // Where the foam drawn comes from: the server's field (at lod, F×F) or the Jacobian.
+  get foam() { return snapshot({ source: ocean.uniforms.uFoamField.value ? 'field' : 'jacobian', lod: st.foamLod, size: st.foamM }); },
   get wireframe() { return ocean.wireframe; },
   get view() { return snapshot({ hour: view.hour, hud: hud.visible, compact, sky: sky.state }); },
   get camera() { return snapshot({ position: camera.position.toArray(), target: controls.target.toArray() }); },

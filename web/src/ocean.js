@@ -90,6 +90,9 @@ export class Ocean {
       uDeep: { value: new THREE.Color(0.004, 0.035, 0.07) },
       uScatter: { value: new THREE.Color(0.02, 0.16, 0.16) },
       uFogDensity: { value: 0.00009 }, uFoam: { value: 1 },
+      // Foam (shaders.js FOAM): the server's field, two frames like the displacement.
+      uFoamA: { value: null }, uFoamB: { value: null }, uFoamField: { value: 0 }, uFoamTexel: { value: 1 },
+      uFoamWind: { value: new THREE.Vector2(1, 0) }, uFoamWindSpeed: { value: 10 },
     };
     this.material = new THREE.ShaderMaterial({
       uniforms: this.uniforms, vertexShader: waterVertex, fragmentShader: waterFragment,
@@ -111,6 +114,36 @@ export class Ocean {
     // Two texture slots (older A, newer B); data arrays are swapped in.
     this.disp = [null, null];
     this.slope = [null, null];
+    this.foam = [null, null]; // F×F single-channel float, F = N >> foam LOD
+    this.foamM = 0;
+  }
+
+  // Wind of the shared sea (params): the foam streaks follow it.
+  setWind(speed, directionDeg) {
+    const a = (directionDeg || 0) * Math.PI / 180;
+    this.uniforms.uFoamWind.value.set(Math.cos(a), Math.sin(a));
+    this.uniforms.uFoamWindSpeed.value = speed ?? 10;
+  }
+
+  // The foam field of a frame (or none: the shader falls back to the Jacobian).
+  setFoam(f, released) {
+    const u = this.uniforms;
+    if (!f.foam) { u.uFoamField.value = 0; return; }
+    const fresh = f.fm !== this.foamM || !this.foam[0];
+    if (fresh) {
+      for (const t of this.foam) if (t) t.dispose();
+      this.foam = [0, 1].map(() => floatTexture(new Float32Array(f.fm * f.fm), f.fm, THREE.RedFormat));
+      this.foamM = f.fm;
+    }
+    this.foam.reverse();
+    released.push(this.foam[1].image.data);
+    this.foam[1].image.data = f.foam;
+    this.foam[1].needsUpdate = true;
+    this.renderer.initTexture(this.foam[1]);
+    if (fresh) { this.foam[0].image.data = f.foam.slice(); this.foam[0].needsUpdate = true; }
+    u.uFoamA.value = this.foam[0]; u.uFoamB.value = this.foam[1];
+    u.uFoamTexel.value = 1 / f.fm;
+    u.uFoamField.value = 1;
   }
 
   set wireframe(on) { this.material.wireframe = on; }
@@ -137,6 +170,7 @@ export class Ocean {
       this.slope[1].needsUpdate = true;
       this.renderer.initTexture(this.slope[1]);
     }
+    this.setFoam(f, released);
     if (sync) this.renderer.getContext().finish();
     const uploadMs = performance.now() - t0;
     if (!this.hasData) { // first frame: both slots hold it, no blend from zeros
