@@ -48,7 +48,7 @@ const st = {
   connected: false, connectionState: 'idle', clientId: null, role: null,
   framesReceived: 0, lastSeq: null, paramsVersion: null, params: null,
   rendered: 0, n: null, lod: null, frameParamsVersion: null, lastError: null, serverError: null,
-  subscription: null, foamLod: null, foamM: 0,
+  name: null, subscription: null, foamLod: null, foamM: 0,
   clusterState: null, // edge's {"type":"status"}: 'ok', 'sim_unavailable', 'nats_unavailable'
 };
 // Local view state: never sent. ?hour=h starts at that local time of day.
@@ -91,11 +91,12 @@ const conn = new Connection(serverUrl(), {
     if (probe.onMessage(msg)) return; // the buoy marker's probe/query answers (probe.js)
     switch (msg.type) {
       case 'hello':
-        st.clientId = msg.client_id; st.role = msg.role;
+        st.clientId = msg.client_id; st.role = msg.role; st.name = null;
         st.lastSeq = null; // a new session: seq gaps across a reconnect are not drops
         st.params = msg.params; st.paramsVersion = msg.params_version;
         panel.build(msg);
         if (msg.subscription) panel.subscribed(msg.subscription);
+        if (panel.me.name) conn.send({ type: 'name', name: panel.me.name }); // our display name, every session
         ocean.setWind(msg.params?.wind_speed, msg.params?.wind_direction);
         lastHello = msg;
         // After a reconnect, ask again for what the user had chosen (and the foam field).
@@ -114,6 +115,10 @@ const conn = new Connection(serverUrl(), {
           const foam = foamSubscription(lastHello, msg.params.resolution);
           if (foam) conn.send({ type: 'subscribe', field_lod: foam.field_lod });
         }
+        break;
+      case 'named': // our display name as the server now has it
+        st.name = msg.name;
+        panel.named(msg.name);
         break;
       case 'subscribed':
         st.subscription = msg.subscription || msg;
@@ -146,6 +151,7 @@ const probe = new ProbeMarker({ scene: ocean.scene, camera, canvas, send: (m) =>
 
 const panel = new Panel({
   set: (params) => conn.send({ type: 'set', params }),
+  name: (name) => conn.send({ type: 'name', name }),
   subscribe: (sub) => { Object.assign(wantedSub, sub); conn.send({ type: 'subscribe', ...sub }); },
   view,
   onView(key, v) {
@@ -231,6 +237,7 @@ window.oceand = Object.freeze({
   get params() { return snapshot(st.params); },
   get rendered() { return st.rendered; },
   get clientId() { return st.clientId; },
+  get name() { return st.name; },  // our display name in force on the server (null: none yet)
   get subscription() { return snapshot(st.subscription); },
   // Where the foam drawn comes from: the server's field (at lod, F×F) or the Jacobian.
   get foam() { return snapshot({ source: ocean.uniforms.uFoamField.value ? 'field' : 'jacobian', lod: st.foamLod, size: st.foamM }); },
