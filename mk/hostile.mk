@@ -4,8 +4,11 @@
 # 1000 connect/subscribe/disconnect cycles; since issue 16 also foreign Host
 # headers (DNS rebinding), bad handshakes, unread replies, descriptor exhaustion
 # (ulimit -n), unmasked frames, web-root symlinks, ping floods, illegal control
-# frames, subscription churn, pipelined HTTP, resolution flapping.
-# Budget: < 4 min on 2 cores (33 cases: 193 s at load 7-17).
+# frames, subscription churn, pipelined HTTP, resolution flapping; third
+# battery: log floods on a slow stderr pipe, params fan-out from many
+# controllers, state-file symlink, ulimit -f, SIGUSR1/2, over-long paths,
+# fragment floods, query/probe abuse.
+# Budget: < 5 min on 2 cores (41 cases).
 #
 #   make test-hostile     the battery; "N passed, M failed", non-zero on a failure
 #   make bench-hostile    the same run, figures as one JSON line per case on stdout

@@ -324,12 +324,16 @@ static void resolve_wisdom_path(struct daemon_config *dc)
     if (strcmp(dc->wisdom_file, "auto") != 0)
         return;
     const char *xdg = getenv("XDG_CACHE_HOME"), *home = getenv("HOME");
+    int n = -1;
     if (xdg && *xdg)
-        snprintf(dc->wisdom_file, sizeof dc->wisdom_file, "%s/oceand/fftw-wisdom", xdg);
+        n = snprintf(dc->wisdom_file, sizeof dc->wisdom_file, "%s/oceand/fftw-wisdom", xdg);
     else if (home && *home)
-        snprintf(dc->wisdom_file, sizeof dc->wisdom_file, "%s/.cache/oceand/fftw-wisdom", home);
-    else
+        n = snprintf(dc->wisdom_file, sizeof dc->wisdom_file, "%s/.cache/oceand/fftw-wisdom", home);
+    if (n < 0 || (size_t)n >= sizeof dc->wisdom_file) { /* none, or cut: another file */
+        if (n > 0)
+            LOGW("$XDG_CACHE_HOME or $HOME is too long for the FFTW wisdom file's path: no wisdom cache");
         dc->wisdom_file[0] = '\0';
+    }
 }
 
 /* A config file larger than this is refused, not truncated. */
@@ -384,9 +388,22 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
     /* Where the state lives: flag > config file > $XDG_STATE_HOME > build/. */
     const char *sf = state_cli ? state_cli : cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(cfg, "state_file"));
     const char *xdg = getenv("XDG_STATE_HOME");
+    /* A path that does not fit is refused, never cut: the cut one names
+     * another file, which the daemon would then write (test-hostile
+     * absurd_command_lines). */
+    if (sf && strlen(sf) >= sizeof dc->state_file) {
+        snprintf(err, errlen, "state_file: value too long (%zu bytes, at most %zu)", strlen(sf),
+                 sizeof dc->state_file - 1);
+        cJSON_Delete(cfg);
+        return -1;
+    }
     if (sf)
         snprintf(dc->state_file, sizeof dc->state_file, "%s", strcmp(sf, "none") == 0 ? "" : sf);
-    else if (xdg && *xdg)
+    else if (xdg && *xdg && strlen(xdg) + sizeof "/oceand-state.json" > sizeof dc->state_file) {
+        LOGW("$XDG_STATE_HOME is too long (%zu bytes) for the state file's path: state not saved "
+             "(give --state-file)", strlen(xdg));
+        dc->state_file[0] = '\0';
+    } else if (xdg && *xdg)
         snprintf(dc->state_file, sizeof dc->state_file, "%s/oceand-state.json", xdg);
     else
         snprintf(dc->state_file, sizeof dc->state_file, "build/oceand-state.json");

@@ -488,10 +488,21 @@ cJSON *control_subscription_object(const struct subscription *s)
     if (s->all_tiles) {
         cJSON_AddStringToObject(o, "tiles", "all");
     } else {
-        cJSON *t = cJSON_AddArrayToObject(o, "tiles");
-        for (int i = 0; i < s->ntiles; i++) {
-            int xz[2] = { s->tiles[i][0], s->tiles[i][1] };
-            cJSON_AddItemToArray(t, cJSON_CreateIntArray(xz, 2));
+        /* Printed here, not as cJSON numbers: cJSON 1.7.15 prints every
+         * number with %.15g and reads it back with sscanf, so 1024 tiles cost
+         * ~0.5 ms per `subscribed` (a stranger's 20 subscribes a second were
+         * 10 ms of the service thread). Integers below 32: 8 bytes a tile. */
+        char *raw = malloc(8 * (size_t)s->ntiles + 3);
+        if (raw) {
+            size_t n = 0;
+            raw[n++] = '[';
+            for (int i = 0; i < s->ntiles; i++)
+                n += (size_t)sprintf(raw + n, "%s[%u,%u]", i ? "," : "", (unsigned)s->tiles[i][0] % 100u,
+                                     (unsigned)s->tiles[i][1] % 100u);
+            raw[n++] = ']';
+            raw[n] = 0;
+            cJSON_AddRawToObject(o, "tiles", raw);
+            free(raw);
         }
     }
     /* Print the bound as the client wrote it (0.01, not 0.00999999977). */

@@ -31,8 +31,9 @@ static void on_signal(int sig)
     alarm(3);
 }
 
-/* SIGHUP: save the state now (a daemon's usual "hang-up" duty). The
- * configuration is read at start-up only, so it is not reloaded. */
+/* SIGHUP (and SIGUSR1, SIGUSR2): save the state now (a daemon's usual
+ * "hang-up" duty). The configuration is read at start-up only, so it is
+ * not reloaded. */
 static volatile sig_atomic_t hangup;
 
 static void on_hangup(int sig)
@@ -70,8 +71,15 @@ static void install_signals(void)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
+    /* A write past RLIMIT_FSIZE (ulimit -f: the state file, the FFTW wisdom,
+     * a log file) fails with EFBIG and is handled like a full disk, instead
+     * of SIGXFSZ ending the process (test-hostile state_save_fsize). */
+    signal(SIGXFSZ, SIG_IGN);
+    /* HUP, USR1 and USR2 would end the process without saving: save instead. */
     sa.sa_handler = on_hangup;
     sigaction(SIGHUP, &sa, NULL);
+    sigaction(SIGUSR1, &sa, NULL);
+    sigaction(SIGUSR2, &sa, NULL);
 }
 
 /* --role edge: no simulation here; frames, hello and answers come from the
@@ -184,7 +192,7 @@ int main(int argc, char **argv)
             break;
         if (hangup) {
             hangup = 0;
-            LOGI("SIGHUP: saving the state; the configuration is not reloaded (restart to apply it)");
+            LOGI("SIGHUP/SIGUSR1/SIGUSR2: saving the state; the configuration is not reloaded (restart to apply it)");
             state_saver_flush(&saver, sim_time_now(sim), true);
         }
         state_saver_flush(&saver, sim_time_now(sim), false);

@@ -4,6 +4,8 @@
 #include <stdarg.h>
 #include <stdio.h>
 
+#include "log.h"
+
 struct metrics g_metrics;
 const double metrics_hist_le[METRICS_HIST_BUCKETS] = {
     0.001, 0.002, 0.005, 0.01, 0.02, 0.033, 0.05, 0.1, 0.25, 1.0
@@ -118,6 +120,12 @@ size_t metrics_render(char *buf, size_t cap)
         (unsigned long long)atomic_load(&m->closed_output_limit), (unsigned long long)atomic_load(&m->closed_unmasked));
     counter(&o, "oceand_connections_refused_total", "TCP connections closed at accept to keep a reserve of file "
             "descriptors (RLIMIT_NOFILE).", atomic_load(&m->refused_fd_limit));
+    put(&o, "# HELP oceand_log_lines_dropped_total Log lines not written: over 10 a second (rate), or stderr full "
+            "(blocked).\n"
+            "# TYPE oceand_log_lines_dropped_total counter\n"
+            "oceand_log_lines_dropped_total{reason=\"rate\"} %llu\n"
+            "oceand_log_lines_dropped_total{reason=\"blocked\"} %llu\n",
+        log_dropped(false), log_dropped(true));
     gauge(&o, "oceand_params_version", "Current parameter version.", atomic_load(&m->params_version));
     gauge(&o, "oceand_resolution", "Current simulation resolution N.", atomic_load(&m->resolution));
     gauge(&o, "oceand_sim_time_seconds", "Current simulation time.", atomic_load(&m->sim_time));

@@ -31,7 +31,13 @@ int state_save(const char *path, const struct ocean_params *p, uint32_t version,
     }
     char tmp[600];
     snprintf(tmp, sizeof tmp, "%s.tmp", path);
-    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    /* Never written through: a symlink planted at the temporary name (by
+     * whoever may write in that folder) made us overwrite its target with
+     * the state (test-hostile state_file_attacks). Remove what is there (a
+     * stale one, or a link: unlink does not follow it), then create it
+     * afresh; O_EXCL refuses one planted again meanwhile (the save fails). */
+    unlink(tmp);
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
     if (fd < 0) {
         snprintf(err, errlen, "%s: %s", tmp, strerror(errno));
         free(text);

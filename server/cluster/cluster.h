@@ -187,7 +187,15 @@ void cl_layer_free(struct cl_layer *l);
  * that does not continue the slot's layer, or a new layer before the old one
  * is complete, drops the incomplete one (counted). Not thread-safe. */
 struct cl_assembler;
+/* Bytes held by all incomplete layers together (data + tile offsets): a
+ * publisher that starts a layer in every slot and never finishes one would
+ * otherwise hold CL_KEYS x CL_MAX_LAYER_BYTES (11 GiB). Over it, slots of
+ * older seqs are dropped first, then the part (CL_E_TOO_LARGE, counted).
+ * A sim publishes a layer's parts one after another, so it needs one. */
+#define CL_MAX_ASSEMBLY_BYTES ((size_t)2 * CL_MAX_LAYER_BYTES)
 struct cl_assembler *cl_assembler_new(void);
+void cl_assembler_set_budget(struct cl_assembler *a, size_t bytes); /* default CL_MAX_ASSEMBLY_BYTES */
+size_t cl_assembler_held(const struct cl_assembler *a);
 void cl_assembler_free(struct cl_assembler *a);
 /* Returns 1 and a complete layer in *out (caller frees), 0 when more parts
  * are needed, or a negative CL_E_* (the part is ignored). */

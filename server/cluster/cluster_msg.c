@@ -318,12 +318,28 @@ struct slot {
 struct cl_assembler {
     struct slot slots[CL_KEYS];
     uint64_t dropped;
+    size_t held, budget;      /* bytes of every slot's data and offsets; its cap */
 };
 
-struct cl_assembler *cl_assembler_new(void) { return calloc(1, sizeof(struct cl_assembler)); }
-
-static void slot_reset(struct slot *s)
+struct cl_assembler *cl_assembler_new(void)
 {
+    struct cl_assembler *a = calloc(1, sizeof(struct cl_assembler));
+    if (a)
+        a->budget = CL_MAX_ASSEMBLY_BYTES;
+    return a;
+}
+
+void cl_assembler_set_budget(struct cl_assembler *a, size_t bytes) { a->budget = bytes; }
+size_t cl_assembler_held(const struct cl_assembler *a) { return a->held; }
+
+static size_t slot_bytes(const struct slot *s)
+{
+    return s->cap + (s->off ? sizeof(uint32_t) * ((size_t)s->total + 1) : 0);
+}
+
+static void slot_reset(struct cl_assembler *a, struct slot *s)
+{
+    a->held -= slot_bytes(s);
     free(s->data);
     free(s->off);
     memset(s, 0, sizeof *s);
@@ -334,11 +350,25 @@ void cl_assembler_free(struct cl_assembler *a)
     if (!a)
         return;
     for (int k = 0; k < CL_KEYS; k++)
-        slot_reset(&a->slots[k]);
+        slot_reset(a, &a->slots[k]);
     free(a);
 }
 
 uint64_t cl_assembler_dropped(const struct cl_assembler *a) { return a->dropped; }
+
+/* Room for `more` bytes in slot s: drop other incomplete layers of older
+ * seqs first (left behind by lost parts), then give up. */
+static bool make_room(struct cl_assembler *a, const struct slot *s, size_t more)
+{
+    for (int k = 0; k < CL_KEYS && a->held + more > a->budget; k++) {
+        struct slot *o = &a->slots[k];
+        if (o != s && o->active && o->info.seq < s->info.seq) {
+            a->dropped++;
+            slot_reset(a, o);
+        }
+    }
+    return a->held + more <= a->budget;
+}
 
 static bool info_same(const struct cl_layer_info *a, const struct cl_layer_info *b)
 {
@@ -359,31 +389,46 @@ int cl_assembler_add(struct cl_assembler *a, const struct cl_layer_part *p, stru
     if (p->tile_first == 0) {
         if (s->active)
             a->dropped++; /* a new layer began before the old one was complete */
-        slot_reset(s);
+        slot_reset(a, s);
         s->info = p->info;
         s->total = p->info.tiles_per_side * p->info.tiles_per_side;
-        s->off = malloc(sizeof(uint32_t) * ((size_t)s->total + 1));
+        size_t off_bytes = sizeof(uint32_t) * ((size_t)s->total + 1);
+        if (!make_room(a, s, off_bytes)) {
+            a->dropped++;
+            memset(s, 0, sizeof *s);
+            return CL_E_TOO_LARGE;
+        }
+        s->off = malloc(off_bytes);
         if (!s->off)
             return CL_E_NOMEM;
+        a->held += off_bytes;
         s->active = true;
     } else if (!s->active || p->tile_first != s->next_tile || !info_same(&s->info, &p->info)) {
         if (s->active)
             a->dropped++; /* a part went missing: the layer cannot be completed */
-        slot_reset(s);
+        slot_reset(a, s);
         return CL_E_CORRUPT;
     }
     if (p->data_len > CL_MAX_LAYER_BYTES - s->len) {
         a->dropped++;
-        slot_reset(s);
+        slot_reset(a, s);
         return CL_E_TOO_LARGE;
     }
     if (s->len + p->data_len > s->cap) {
         size_t cap = s->next_tile + p->tile_count == s->total ? s->len + p->data_len : 2 * (s->len + p->data_len);
+        if (cap > CL_MAX_LAYER_BYTES)
+            cap = CL_MAX_LAYER_BYTES;
+        if (!make_room(a, s, cap - s->cap)) {
+            a->dropped++;
+            slot_reset(a, s);
+            return CL_E_TOO_LARGE;
+        }
         uint8_t *d = realloc(s->data, cap ? cap : 1);
         if (!d) {
-            slot_reset(s);
+            slot_reset(a, s);
             return CL_E_NOMEM;
         }
+        a->held += cap - s->cap;
         s->data = d;
         s->cap = cap;
     }
@@ -398,16 +443,18 @@ int cl_assembler_add(struct cl_assembler *a, const struct cl_layer_part *p, stru
     s->off[s->total] = (uint32_t)s->len;
     struct cl_layer *l = malloc(sizeof *l);
     if (!l) {
-        slot_reset(s);
+        slot_reset(a, s);
         return CL_E_NOMEM;
     }
     l->info = s->info;
     l->data = s->data;
     l->len = s->len;
     l->tile_off = s->off;
+    a->held -= slot_bytes(s); /* handed over: no longer the assembler's */
     s->data = NULL;
     s->off = NULL;
-    slot_reset(s);
+    s->cap = 0;
+    slot_reset(a, s);
     *out = l;
     return 1;
 }

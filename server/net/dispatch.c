@@ -173,15 +173,33 @@ static uint64_t resolution_bit(void)
 
 /* `params` for one applied set; with tile_size when N changed, since the
  * tile side follows N below the configured size (hello has it too). */
-static cJSON *params_msg(struct net *n, const struct sim_set *a, const struct request *r, const cJSON *id)
+static cJSON *params_msg(struct net *n, const struct ocean_params *p, uint32_t version, uint64_t changed,
+                         const char *by, const char *by_name, const cJSON *id)
 {
-    cJSON *m = with_name(control_params_msg(&a->params, a->version, a->changed, r->by, id), r->by_name);
-    if (m && (a->changed & resolution_bit()))
+    cJSON *m = with_name(control_params_msg(p, version, changed, by, id), by_name);
+    if (m && (changed & resolution_bit()))
         cJSON_AddNumberToObject(m, "tile_size", net_tile_size(n));
     return m;
 }
 
-static void answer(struct net *n, const struct sim_set *a)
+/* What the other clients are told about the sets applied at one tick
+ * boundary: ONE `params` for all of them (the last one's values, version
+ * and sender; `changed` = every parameter any of them changed). One per set
+ * made K controllers, each within its rate limit, send K x 20 `params` a
+ * second to every client: 100 of them filled a well-behaved client's reply
+ * queue until it was cut off (1008; test-hostile params_fanout). */
+struct fanout_params {
+    bool any;
+    struct ocean_params params;
+    uint32_t version;
+    uint64_t changed;
+    uint64_t serial;               /* the last set's sender, if local (it has its own reply) */
+    bool local;
+    char by[64], origin[64];
+    char by_name[CTL_NAME_BYTES];
+};
+
+static void answer(struct net *n, const struct sim_set *a, struct fanout_params *fp)
 {
     n->applied = a->params; /* in force after this set, applied or refused */
     n->applied_version = a->version;
@@ -200,17 +218,22 @@ static void answer(struct net *n, const struct sim_set *a)
             n->trim_due = mono_now() + TRIM_DELAY_S;
         if (n->on_params)
             n->on_params(n->on_params_user, &n->applied, n->applied_version);
-        char *all = control_print(params_msg(n, a, r, NULL));
-        for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
-            if (session_of(d) != origin)
-                session_queue_text(session_of(d), all, false);
-        if (all && n->cluster.on_params_event) /* sim role: to every edge's clients */
-            n->cluster.on_params_event(n->cluster.user, all, r->origin, r->by);
-        free(all);
+        fp->any = true;
+        fp->params = a->params;
+        fp->version = a->version;
+        fp->changed |= a->changed;
+        fp->serial = r->serial;
+        fp->local = !r->reply;
+        snprintf(fp->by, sizeof fp->by, "%s", r->by);
+        snprintf(fp->origin, sizeof fp->origin, "%s", r->origin);
+        snprintf(fp->by_name, sizeof fp->by_name, "%s", r->by_name);
+        cJSON *mine = params_msg(n, &a->params, a->version, a->changed, r->by, r->by_name, r->id);
         if (origin)
-            session_queue_json(origin, params_msg(n, a, r, r->id));
+            session_queue_json(origin, mine);
         else if (r->reply)
-            respond(NULL, &rm, params_msg(n, a, r, r->id));
+            respond(NULL, &rm, mine);
+        else
+            cJSON_Delete(mine);
     } else if (origin || r->reply) {
         struct ctl_error e = { .code = a->status == SIM_SET_NO_MEMORY ? "internal" : "invalid" };
         snprintf(e.message, sizeof e.message, "%s", a->message);
@@ -225,13 +248,24 @@ void dispatch_answers(struct net *n)
     struct sim_set *a = sim_take_answers(n->sim);
     if (!a)
         return;
+    struct fanout_params fp = { 0 };
     while (a) {
         struct sim_set *next = a->next;
-        answer(n, a);
+        answer(n, a, &fp);
         sim_set_free(a);
         a = next;
     }
     rebuild_view(n);
+    if (!fp.any)
+        return;
+    /* To everyone but the last set's sender, whose own reply said it all. */
+    char *all = control_print(params_msg(n, &fp.params, fp.version, fp.changed, fp.by, fp.by_name, NULL));
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
+        if (!(fp.local && session_of(d)->serial == fp.serial))
+            session_queue_text(session_of(d), all, false);
+    if (all && n->cluster.on_params_event) /* sim role: to every edge's clients */
+        n->cluster.on_params_event(n->cluster.user, all, fp.origin, fp.by);
+    free(all);
 }
 
 /* ---- messages ---- */

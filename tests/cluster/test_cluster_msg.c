@@ -450,12 +450,67 @@ static void test_collector(void)
     cl_collector_free(c);
 }
 
+/* A publisher that starts a layer in every slot and never finishes one
+ * (a malicious or broken sim on NATS): what the assembler holds stays under
+ * its budget; older incomplete layers make room for a newer one, which
+ * still completes (test-hostile's third battery; the default budget is
+ * CL_MAX_ASSEMBLY_BYTES, here 4 MiB so that the test stays small). */
+static void test_assembler_budget(void)
+{
+    current = "assembler budget";
+    const size_t budget = 4u << 20, maxp = 65536;
+    struct cl_assembler *a = cl_assembler_new();
+    cl_assembler_set_budget(a, budget);
+    uint8_t *buf = malloc(maxp);
+    int refused = 0, over = 0;
+    for (int f = 0; f < CL_FIELDS; f++)
+        for (int lod = 0; lod < CL_LODS; lod++)
+            for (int b = 0; b < CL_BOUNDS; b++) {
+                struct gen_layer g;
+                gen_layer_make(&g, 256, 16, f, lod, b, 7, 2000, (uint64_t)(f * 100 + lod * 10 + b));
+                int k = cl_layer_part_tiles(g.tile_off, 0, 256, maxp);
+                long w = cl_layer_part_write(buf, maxp, &g.info, 0, k, g.data, g.tile_off);
+                struct cl_layer_part p;
+                struct cl_layer *out = NULL;
+                CHECK(w > 0 && cl_layer_part_parse(buf, (size_t)w, &p) == 0, "part");
+                int rc = cl_assembler_add(a, &p, &out);
+                CHECK(rc == 0 || rc == CL_E_TOO_LARGE, "first part of a key: %d", rc);
+                refused += rc == CL_E_TOO_LARGE;
+                over += cl_assembler_held(a) > budget;
+                gen_layer_free(&g);
+            }
+    CHECK(!over, "held more than the budget after %d parts", over);
+    CHECK(refused > 0, "175 incomplete layers of ~128 KiB fit in 4 MiB?");
+    /* a newer layer (the sim moved on) still gets through, whole */
+    struct gen_layer g;
+    gen_layer_make(&g, 256, 16, 0, 0, 0, 8, 2000, 99);
+    struct cl_layer *out = NULL;
+    int done = 0;
+    for (int first = 0; first < 256;) {
+        int k = cl_layer_part_tiles(g.tile_off, first, 256, maxp);
+        long w = cl_layer_part_write(buf, maxp, &g.info, first, k, g.data, g.tile_off);
+        struct cl_layer_part p;
+        cl_layer_part_parse(buf, (size_t)w, &p);
+        int rc = cl_assembler_add(a, &p, &out);
+        CHECK(rc >= 0, "newer layer refused at tile %d: %d", first, rc);
+        done += rc == 1;
+        CHECK(cl_assembler_held(a) <= budget, "held %zu over the budget", cl_assembler_held(a));
+        first += k;
+    }
+    CHECK(done == 1 && out && gen_layer_equal(&g, out), "the newer layer did not complete intact");
+    cl_layer_free(out);
+    gen_layer_free(&g);
+    free(buf);
+    cl_assembler_free(a);
+}
+
 int main(void)
 {
     test_subjects();
     test_part_roundtrip();
     test_part_rejects();
     test_split_assemble();
+    test_assembler_budget();
     test_envelope();
     test_demand();
     test_collector();

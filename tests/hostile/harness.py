@@ -5,6 +5,7 @@ make it look slow).
 
 Only 127.0.0.1 is ever used. Every loop is bounded by a count or a deadline.
 """
+import fcntl
 import json
 import os
 import select
@@ -41,7 +42,8 @@ def free_port():
 class Daemon:
     """One oceand with its own port, temp dir, state file and log."""
 
-    def __init__(self, oceand, *extra, resolution=64, tick_rate=30, web=False, nofile=None, env=None):
+    def __init__(self, oceand, *extra, resolution=64, tick_rate=30, web=False, nofile=None, env=None,
+                 log_pipe=False, fsize=None):
         self.tmp = tempfile.mkdtemp(prefix="oceand-hostile-")
         if web:   # a real web root (static file mount) instead of the placeholder page
             os.makedirs(os.path.join(self.tmp, "web"))
@@ -56,14 +58,23 @@ class Daemon:
                 "--resolution", str(resolution), "--tick-rate", str(tick_rate),
                 "--log-level", "warn"] + [str(a) for a in extra]
         self.log = open(self.log_path, "ab")
-        preexec = None
-        if nofile:   # a low descriptor limit (ulimit -n) for the daemon only
-            import resource
+        self.pipe_r = None
+        out = self.log
+        if log_pipe:   # stderr is a 4 KiB pipe that the test drains only when it chooses (drain_log)
+            self.pipe_r, out = os.pipe()
+            fcntl.fcntl(out, 1031, 4096)            # F_SETPIPE_SZ: one page
+            os.set_blocking(self.pipe_r, False)
+        import resource
 
-            def preexec():
+        def preexec():
+            if nofile:   # a low descriptor limit (ulimit -n) for the daemon only
                 resource.setrlimit(resource.RLIMIT_NOFILE, (nofile, nofile))
-        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log, preexec_fn=preexec,
+            if fsize:    # a file size limit (ulimit -f, bytes): writes past it fail (or SIGXFSZ)
+                resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
+        self.proc = subprocess.Popen(args, stdout=out, stderr=out, preexec_fn=preexec if nofile or fsize else None,
                                      env=dict(os.environ, **(env or {})))
+        if log_pipe:
+            os.close(out)
         self.url = "ws://127.0.0.1:%d/" % self.port
         self.http = "http://127.0.0.1:%d" % self.port
         deadline = time.time() + 20
@@ -80,7 +91,20 @@ class Daemon:
     def alive(self):
         return self.proc.poll() is None
 
+    def drain_log(self):
+        """Pipe mode: move what the daemon wrote to its stderr pipe into the log file."""
+        while self.pipe_r is not None:
+            try:
+                data = os.read(self.pipe_r, 65536)
+            except BlockingIOError:
+                break
+            if not data:
+                break
+            self.log.write(data)
+        self.log.flush()
+
     def read_log(self, tail=3000):
+        self.drain_log()
         with open(self.log_path, "rb") as f:
             return f.read().decode(errors="replace")[-tail:]
 
@@ -140,12 +164,20 @@ class Daemon:
             rc = self.proc.returncode
         else:
             self.proc.send_signal(signal.SIGTERM)
-            try:
-                rc = self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
+            deadline = time.time() + timeout
+            while self.proc.poll() is None and time.time() < deadline:
+                self.drain_log()      # pipe mode: never let our own pipe hold the daemon up
+                time.sleep(0.05)
+            if self.proc.poll() is None:
                 self.proc.kill()
                 self.proc.wait()
                 rc = None
+            else:
+                rc = self.proc.returncode
+        self.drain_log()
+        if self.pipe_r is not None:
+            os.close(self.pipe_r)
+            self.pipe_r = None
         self.log.close()
         return rc
 

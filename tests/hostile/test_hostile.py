@@ -17,11 +17,14 @@ human log then goes to stderr). Prints "N passed, M failed" last.
 """
 import argparse
 import json
+import math
 import os
 import select
 import shutil
+import signal
 import socket
 import struct
+import subprocess
 import sys
 import threading
 import time
@@ -151,10 +154,11 @@ CASES = []
 
 
 def case(resolution=64, args=(), changes_params=False, rss_slack_kb=RSS_SLACK_KB, settle_clients=True, web=False,
-         nofile=None):
+         nofile=None, log_pipe=False, fsize=None):
     def wrap(fn):
         fn.opts = dict(resolution=resolution, args=args, changes_params=changes_params,
-                       rss_slack_kb=rss_slack_kb, settle_clients=settle_clients, web=web, nofile=nofile)
+                       rss_slack_kb=rss_slack_kb, settle_clients=settle_clients, web=web, nofile=nofile,
+                       log_pipe=log_pipe, fsize=fsize)
         CASES.append(fn)
         return fn
     return wrap
@@ -1246,13 +1250,380 @@ def resolution_flapping(d, fig):
     check(rss[-1] - rss[0] < 8192, "RSS settles %d kB above the start after flapping" % (rss[-1] - rss[0]))
 
 
+# ---------------------------------------------------------------- issue 16: third battery (attacker's second round)
+
+def refusals(d, count, deadline_s=15):
+    """`count` upgrades that the daemon refuses and logs: a foreign Origin
+    (closed without an answer) and a foreign Host (421) in turn. Returns how
+    many were dealt with, answered or closed; stops at the first left hanging
+    (a daemon stuck on its log answers none after it)."""
+    done = 0
+    t_end = time.time() + deadline_s
+    for i in range(count):
+        if time.time() > t_end:
+            break
+        host = "127.0.0.1:%d" % d.port if i % 2 else "evil.example:%d" % d.port
+        req = ("GET / HTTP/1.1\r\nHost: %s\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+               "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+               "Sec-WebSocket-Protocol: oceand.v1\r\nOrigin: http://evil.example\r\n\r\n" % host).encode()
+        s = socket.create_connection(("127.0.0.1", d.port), timeout=3)
+        try:
+            s.sendall(req)
+            c = s.recv(4096)             # the 421, or b"" when closed (Origin refused)
+        except socket.timeout:
+            break
+        except OSError:
+            c = b""
+        finally:
+            s.close()
+        if c and not c.startswith(b"HTTP/1.1 421") and not c.startswith(b"HTTP/1.0 421"):
+            raise CaseFailure("refusal %d answered %r" % (i, c[:40]))
+        done += 1
+    return done
+
+
+@case(log_pipe=True)
+def log_flood(d, fig):
+    """Every refused upgrade logs a line (and lws adds one of its own). With
+    stderr a pipe that is not drained fast enough (systemd, `| tee` on a slow
+    disk) a full pipe blocked write(2) on the lws thread: 600 refusals stopped
+    every client's frames. Lines are now rate-limited (10/s, burst 100) and
+    dropped when stderr is full, both counted in /metrics. The test's pipe
+    holds 4 KiB and is not read during the attack."""
+    t0 = time.time()
+    n = refusals(d, 3000)
+    secs = time.time() - t0
+    check(n == 3000, "only %d of 3000 refusals dealt with: the daemon stopped (blocked on its log?)" % n)
+    m = d.metrics()
+    rate = m.get('oceand_log_lines_dropped_total{reason="rate"}', 0)
+    blocked = m.get('oceand_log_lines_dropped_total{reason="blocked"}', 0)
+    d.drain_log()
+    with open(d.log_path, "rb") as f:
+        lines = f.read().count(b"\n")
+    fig.update(refusals=3000, answered=n, attack_s=round(secs, 1), log_lines=lines, dropped_rate=rate,
+               dropped_blocked=blocked)
+    log("    %d of 3000 refused upgrades answered in %.1f s; log: %d lines written, %d over the rate, %d while "
+        "stderr was full" % (n, secs, lines, rate, blocked))
+    check(lines <= 100 + 10 * (time.time() - t0) + 20, "%d log lines for 3000 refusals in %.1f s" % (lines, secs))
+    # each refusal logs at least one line; all but the burst and 10 a second are over the rate
+    check(rate >= 3000 - (100 + 10 * (time.time() - t0) + 20),
+          "log lines over the rate not dropped (or not counted): rate %d, blocked %d" % (rate, blocked))
+
+
+@case(changes_params=True, rss_slack_kb=4096)   # daemon defaults: 20 messages/s, burst 40 per client
+def params_fanout(d, fig):
+    """40 controllers each send 20 sets a second (their rate limit) for 4 s,
+    reading everything. Each applied set used to be broadcast as its own
+    `params` to every client: K x 20 a second to each, so 100 such
+    controllers cut a well-behaved client off (1008, reply queue full).
+    Now the sets applied at one tick boundary go out as one `params`: a
+    bystander gets at most one per tick, and stays connected."""
+    K = 40
+    ctl = []
+    for _ in range(K):
+        s, _ = raw_ws(d.port)
+        s.setblocking(False)
+        ctl.append(s)
+    bs, br = attacker(d)            # the bystander: reads and counts
+    ticks0 = d.metric("oceand_ticks_total")
+    changes0 = d.metric("oceand_param_changes_total")
+    t0 = time.time()
+    i = 0
+    nxt = t0
+    while time.time() - t0 < 4.0:
+        for s in ctl:
+            i += 1
+            send_quiet(s, ws_frame(OP_TEXT, '{"type":"set","params":{"wind_speed":%g}}' % (5 + (i % 61) * 0.5)))
+        nxt += 0.05
+        while time.time() < nxt:
+            rl, _, _ = select.select(ctl + [bs], [], [], max(0.0, nxt - time.time()))
+            for s in rl:
+                if s is bs:
+                    br.pump(0)
+                    continue
+                try:
+                    s.recv(1 << 20)
+                except OSError:
+                    pass
+    br.until(lambda r: False, 0.5)
+    ticks = d.metric("oceand_ticks_total") - ticks0
+    changes = d.metric("oceand_param_changes_total") - changes0
+    got = sum(1 for t in br.texts if t.get("type") == "params")
+    for s in ctl:
+        s.close()
+    bs.close()
+    fig.update(controllers=K, sets_sent=i, sets_applied=changes, ticks=ticks, bystander_params=got,
+               bystander_close=br.close_code, bystander_eof=br.eof)
+    log("    %d controllers sent %d sets in 4 s (%d applied over %d ticks); the bystander got %d params, close %r"
+        % (K, i, changes, ticks, got, br.close_code))
+    check(br.close_code is None and not br.eof, "the bystander was disconnected (close %r)" % br.close_code)
+    check(changes > 2 * ticks, "too few sets applied (%d over %d ticks) to test the fan-out" % (changes, ticks))
+    check(1 <= got <= ticks + 2, "bystander got %d params for %d ticks (one per applied set: %d)" % (got, ticks, changes))
+
+
+def read_state(d):
+    try:
+        with open(os.path.join(d.tmp, "state.json")) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+@case(changes_params=True)
+def state_file_attacks(d, fig):
+    """Whoever may write in the state file's folder plants a symlink at the
+    temporary name the daemon saves through (state.json.tmp -> a file of the
+    daemon's user): the save used to overwrite the link's target with the
+    state. Then SIGUSR1 and SIGUSR2, whose default action ended the daemon
+    without saving: they save now, like SIGHUP."""
+    victim = os.path.join(d.tmp, "victim.txt")
+    with open(victim, "w") as f:
+        f.write("precious\n")
+    os.symlink(victim, os.path.join(d.tmp, "state.json.tmp"))
+    s, r = attacker(d)
+    m = ask(s, r, '{"type":"set","id":1,"params":{"wind_speed":17.5}}')
+    check(m and m.get("type") == "params", "set: %r" % (m,))
+    saved = wait_until(lambda: (read_state(d) or {}).get("params", {}).get("wind_speed") == 17.5, 5)
+    with open(victim) as f:
+        victim_now = f.read()
+    st_path = os.path.join(d.tmp, "state.json")
+    fig.update(saved=saved, victim_intact=victim_now == "precious\n", state_is_link=os.path.islink(st_path))
+    log("    symlink at state.json.tmp: state saved %s, victim %s, state.json a link: %s"
+        % (saved, "intact" if victim_now == "precious\n" else "OVERWRITTEN (%r)" % victim_now[:30],
+           os.path.islink(st_path)))
+    check(victim_now == "precious\n", "the file behind a symlink at state.json.tmp was overwritten")
+    check(saved and not os.path.islink(st_path), "state not saved as a file of its own")
+    for i, sig in enumerate((signal.SIGUSR1, signal.SIGUSR2)):
+        m = ask(s, r, '{"type":"set","id":%d,"params":{"wind_speed":%g}}' % (2 + i, 11.5 + i))
+        check(m and m.get("type") == "params", "set: %r" % (m,))
+        d.proc.send_signal(sig)
+        ok = wait_until(lambda: (read_state(d) or {}).get("params", {}).get("wind_speed") == 11.5 + i, 3)
+        fig[sig.name] = "saved" if ok and d.alive() else "exit %r" % d.proc.poll()
+        check(d.alive(), "%s ended the daemon (exit %r)" % (sig.name, d.proc.poll()))
+        check(ok, "%s did not save the state" % sig.name)
+    s.close()
+
+
+@case(changes_params=True, fsize=256)
+def state_save_fsize(d, fig):
+    """The disk is full, as far as the daemon can tell: `ulimit -f 1` (1 KiB;
+    the state file is larger). A write past the limit raised SIGXFSZ, whose
+    default action ended the daemon at its first save. It must fail like a
+    full disk: a warning, nothing left behind, the daemon running."""
+    s, r = attacker(d)
+    m = ask(s, r, '{"type":"set","id":1,"params":{"wind_speed":18.5}}')
+    check(m and m.get("type") == "params", "set: %r" % (m,))
+    d.proc.send_signal(signal.SIGHUP)     # save now
+    warned = wait_until(lambda: not d.alive() or b"File too large" in open(d.log_path, "rb").read(), 5)
+    s.close()
+    left = sorted(f for f in os.listdir(d.tmp) if f.startswith("state"))
+    fig.update(alive=d.alive(), exit=d.proc.poll(), warned=warned and d.alive(), files=left)
+    log("    save under ulimit -f 256 bytes: daemon %s, warned %s, state files %s"
+        % ("running" if d.alive() else "ended (%r)" % d.proc.poll(), warned, left))
+    check(d.alive(), "the daemon ended at its save (exit %r: %s)" % (
+        d.proc.poll(), "SIGXFSZ" if d.proc.poll() == -signal.SIGXFSZ else "?"))
+    check(warned, "no warning about the failed save")
+    check(not left, "files left behind by the failed save: %s" % left)
+
+
+def run_oceand(args, env=None, timeout=8, stop_after=None):
+    """Run oceand to its end (or SIGTERM it after stop_after s); (exit code, output)."""
+    p = subprocess.Popen([ARGS.oceand, "--bind", "127.0.0.1", "--port", "0", "--wisdom-file", "none",
+                          "--resolution", "64"] + args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                         env=dict(os.environ, **(env or {})))
+    try:
+        out, _ = p.communicate(timeout=stop_after or timeout)
+    except subprocess.TimeoutExpired:
+        p.send_signal(signal.SIGTERM)
+        try:
+            out, _ = p.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            out, _ = p.communicate()
+        if not stop_after:
+            return None, out.decode(errors="replace")
+    return p.returncode, out.decode(errors="replace")
+
+
+@case()
+def absurd_command_lines(d, fig):
+    """Paths longer than the daemon's buffers were cut to fit, silently: a
+    --state-file (or a config file's state_file) of 600 bytes became another
+    path, which the daemon read and then wrote; so did a long $XDG_STATE_HOME
+    (the default state folder). Now: a given path that does not fit is an
+    error (exit 2); a derived one is not used (warning)."""
+    base = os.path.join(d.tmp, "cl")
+    os.makedirs(base)
+    long_file = os.path.join(base, "d" * 560, "state.json")
+    cfg = os.path.join(base, "c.json")
+    with open(cfg, "w") as f:
+        json.dump({"state_file": long_file}, f)
+    got = {}
+    for name, args in (("--state-file", ["--state-file", long_file]), ("config state_file", ["--config", cfg])):
+        rc, out = run_oceand(args)
+        got[name] = rc
+        check(rc == 2 and "too long" in out, "%s of %d bytes: exit %r, %r" % (name, len(long_file), rc, out[-200:]))
+    # $XDG_STATE_HOME whose oceand-state.json path would be cut inside the file name
+    xdg = base
+    while len(xdg) < 505:
+        xdg = os.path.join(xdg, "x" * min(200, 504 - len(xdg)))
+    os.makedirs(xdg)
+    rc, out = run_oceand(["--log-level", "warn"], env={"XDG_STATE_HOME": xdg}, stop_after=1.5)
+    written = os.listdir(xdg)
+    got["XDG_STATE_HOME"] = written or rc
+    fig["results"] = got
+    log("    too-long paths: %r" % got)
+    check(rc == 0, "with a long $XDG_STATE_HOME: exit %r, %r" % (rc, out[-200:]))
+    check(not written, "state written to a cut path: %s" % written)
+    check("XDG_STATE_HOME" in out, "no warning about the long $XDG_STATE_HOME: %r" % out[-200:])
+
+
+@case(args=LIBERAL)
+def fragment_floods(d, fig):
+    """One 64 KiB message in 65 000 one-byte fragments, and 300 000 empty
+    continuation frames inside one message: each is one answer, memory flat
+    (the empty ones never grow the message, so --max-message never trips)."""
+    s, r = attacker(d)
+    msg = b'{"type":"ping","id":5,"pad":"' + b"a" * 65000 + b'"}'
+    out = bytearray()
+    for i in range(len(msg)):
+        out += ws_frame(OP_TEXT if i == 0 else OP_CONT, msg[i:i + 1], fin=i == len(msg) - 1)
+    rss0 = d.rss_kb()
+    send_quiet(s, bytes(out))
+    r.until(lambda r: any(t.get("type") == "pong" for t in r.texts), 15)
+    one = [t.get("id") for t in r.texts if t.get("type") == "pong"]
+    s.close()
+    s, r = attacker(d)
+    send_quiet(s, ws_frame(OP_TEXT, b"{", fin=False))
+    empty = ws_frame(OP_CONT, b"", fin=False) * 10000
+    for _ in range(30):
+        if not send_quiet(s, empty):
+            break
+    send_quiet(s, ws_frame(OP_CONT, b'"type":"ping","id":6}'))
+    r.until(lambda r: any(t.get("type") == "pong" for t in r.texts), 15)
+    two = [t.get("id") for t in r.texts if t.get("type") == "pong"]
+    s.close()
+    fig.update(one_byte_fragments=len(msg), empty_fragments=300000, answers=[one, two], rss_jump_kb=d.rss_kb() - rss0)
+    log("    %d one-byte fragments -> %r; 300 000 empty fragments -> %r; RSS %+d kB"
+        % (len(msg), one, two, fig["rss_jump_kb"]))
+    check(one == [5], "the message in one-byte fragments: answers %r" % one)
+    check(two == [6], "the message with 300 000 empty fragments: answers %r" % two)
+
+
+EXTREME = [1.7976931348623157e308, -1.7976931348623157e308, 1e308, 5e-324, -0.0, 1e20, 2.0 ** 53 + 1, -2.0 ** 63]
+
+
+@case(args=("--probe-max-total", "256"), rss_slack_kb=4096)
+def query_probe_abuse(d, fig):
+    """Point queries and probes at absurd coordinates (+-DBL_MAX, 1e308,
+    subnormals, 2^63) from 24 clients: probe sets changed with every message
+    (over the total: busy), queries past the budget and the queue (busy),
+    then every client vanishes with its queries still queued. Replies stay
+    valid JSON with finite values, the refusals are coded, and once they are
+    gone nothing is left probing."""
+    pts = [[a, b] for a in EXTREME for b in EXTREME]
+    socks = []
+    codes = {}
+    bad = []
+    for k in range(24):
+        s, r = attacker(d)
+        socks.append((s, r))
+        batch = b""
+        for i in range(12):   # probe sets churned: a different set each message
+            sub = pts[(k + i) % 48:(k + i) % 48 + 16]
+            batch += ws_frame(OP_TEXT, json.dumps({"type": "probe", "id": i, "points": sub}))
+        for i in range(12):
+            batch += ws_frame(OP_TEXT, json.dumps({"type": "query", "id": 100 + i, "points": (pts * 4)[:256]}))
+        send_quiet(s, batch)
+    deadline = time.time() + 10
+    for s, r in socks:
+        r.until(lambda r: sum(1 for t in r.texts if t.get("type") in ("probing", "query_result", "error")) >= 24,
+                max(0.1, deadline - time.time()))
+        for t in r.texts:
+            if t.get("type") == "error":
+                codes[t.get("code")] = codes.get(t.get("code"), 0) + 1
+            elif t.get("type") in ("probing", "query_result", "probe_data"):
+                codes[t["type"]] = codes.get(t["type"], 0) + 1
+            if "unparseable" in t:
+                bad.append(t["unparseable"][:60])
+            if t.get("type") == "query_result":
+                for p in t["points"]:
+                    vals = [p["height"], p["jacobian"], p["vertical_velocity"]] + p["displacement"] + p["normal"]
+                    if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in vals):
+                        bad.append("query_result values %r" % vals[:4])
+                        break
+            if t.get("type") == "probe_data":
+                if not all(math.isfinite(v) for p in t["points"] for v in p):
+                    bad.append("probe_data %r" % t["points"][:1])
+    # all vanish at once, with what they queued still queued
+    for s, r in socks:
+        rst_close(s)
+    gone = wait_until(lambda: d.metric("oceand_clients") == 1 and d.metric("oceand_probe_points") == 0, 10)
+    fig.update(replies=codes, bad=bad[:5], probe_points_after=d.metric("oceand_probe_points"))
+    log("    24 clients x (12 probe sets + 12 queries of 256 points at absurd coordinates): %r" % codes)
+    check(not bad, "replies not valid JSON or not finite: %r" % bad[:3])
+    check(set(codes) <= {"probing", "query_result", "probe_data", "busy", "time_out_of_window"},
+          "unexpected replies %r" % codes)
+    check(codes.get("busy", 0) > 0 and codes.get("query_result", 0) > 0 and codes.get("probing", 0) > 0,
+          "expected answers, and busy past the budget: %r" % codes)
+    check(gone, "still probing after every client left: %g points" % d.metric("oceand_probe_points"))
+    s, r = attacker(d)      # the service still answers
+    send_quiet(s, ws_frame(OP_TEXT, json.dumps({"type": "query", "id": 1, "points": [[1.5, 2.5]]})))
+    r.until(lambda r: any(t.get("type") in ("query_result", "error") for t in r.texts), 10)
+    m = ([t for t in r.texts if t.get("type") in ("query_result", "error")] or [None])[0]
+    s.close()
+    check(m and m.get("type") in ("query_result", "error"), "a query afterwards: %r" % (m,))
+
+
+@case(args=LIBERAL)
+def name_abuse(d, fig):
+    """`name` with markup, controls, bidi overrides, 33 characters: bad_name
+    each (escaped lone surrogates: bad_json). Raw invalid UTF-8 inside a name (overlong,
+    a surrogate, a 5-byte form) never reaches it: close 1007. And 10 clients
+    renaming themselves 100 times each: a name goes to its owner only (no
+    fan-out), so a bystander receives none of it."""
+    fig["messages"] = expect_errors(d, [
+        (json.dumps({"type": "name", "id": i, "name": n}), "bad_name", None) for i, n in enumerate([
+            "<script>", "a&b", "\u202eevil", "tab\there", "x" * 33, " lead", "trail ", "\u200bzw", "\ufeffbom",
+            "\x7f", "\u0085nel"])] + [
+        ('{"type":"name","id":50,"name":"\\ud800"}', "bad_json", None),     # cJSON: a lone surrogate
+        ('{"type":"name","id":51,"name":"\\udc00\\ud800"}', "bad_json", None),
+        ('{"type":"name","id":52,"name":5}', "bad_name", None)])
+    raw = {}
+    for label, b in (("overlong", b"\xc0\xaf"), ("surrogate", b"\xed\xa0\x80"), ("5-byte", b"\xf8\x88\x80\x80\x80")):
+        s, r = attacker(d)
+        send_quiet(s, ws_frame(OP_TEXT, b'{"type":"name","id":1,"name":"a' + b + b'"}'))
+        r.until(lambda r: r.close_code is not None or any(t.get("type") in ("named", "error") for t in r.texts), 3)
+        raw[label] = r.close_code if r.close_code is not None else [t.get("type") for t in r.texts[1:]]
+        s.close()
+    bs, br = attacker(d)
+    n0 = len(br.texts)
+    flappers = [attacker(d) for _ in range(10)]
+    for i in range(100):
+        for k, (s, r) in enumerate(flappers):
+            send_quiet(s, ws_frame(OP_TEXT, json.dumps({"type": "name", "name": "n%d-%d" % (k, i)})))
+    ok = all(r.until(lambda r: sum(1 for t in r.texts if t.get("type") == "named") >= 100, 10) for s, r in flappers)
+    br.until(lambda r: False, 0.5)
+    leaked = [t.get("type") for t in br.texts[n0:]]
+    for s, r in flappers:
+        s.close()
+    bs.close()
+    fig.update(raw_utf8=raw, bystander_got=len(leaked))
+    log("    raw invalid UTF-8 in a name: %r; 1000 renames: every one answered %s, bystander got %d messages"
+        % (raw, ok, len(leaked)))
+    check(all(v == 1007 for v in raw.values()), "raw invalid UTF-8 in a name: %r, want close 1007" % raw)
+    check(ok, "not every rename was answered")
+    check(not leaked, "renames reached a bystander: %r" % leaked[:5])
+
+
 # ---------------------------------------------------------------- runner
 
 def run_case(fn, fig):
     """Run one case on its own daemon; figures go into fig (kept when the case fails)."""
     o = fn.opts
     fig["N"] = o["resolution"]
-    d = Daemon(ARGS.oceand, *o["args"], resolution=o["resolution"], web=o["web"], nofile=o["nofile"])
+    d = Daemon(ARGS.oceand, *o["args"], resolution=o["resolution"], web=o["web"], nofile=o["nofile"],
+               log_pipe=o["log_pipe"], fsize=o["fsize"])
     obs = None
     try:
         obs = Observer(d.url)
