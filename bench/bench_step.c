@@ -1,7 +1,7 @@
 /* bench_step.c — how long a simulation step takes, and how much of it is FFTW.
  *
  * Usage: bench_step [WISDOM_FILE [GROUP]]   (make bench-step passes build/fftw-wisdom;
- * GROUP = step, pack, layout, reconfigure or dft runs only that one)
+ * GROUP = step, parts, pack, layout, reconfigure or dft runs only that one)
  * One JSON object per line on stdout, medians over repetitions:
  *   {"bench":"step","N":..,"threads":..,"step_ms":..,"fftw_ms":..,"ratio":..}
  *     for threads = 1, 2, 4, ... up to the online cores (the scaling curve);
@@ -11,6 +11,9 @@
  *     (all threads) and its fastest repetition, since the machine is shared;
  *     fftw_cpu_ms and cpu_ratio: the same with process CPU time (on a busy
  *     shared machine the least noisy ratio);
+ *   {"bench":"step_parts",...}   one thread: what each part of our own work
+ *     costs (step without it), the foam, and the Jacobian terms written as
+ *     whole fields instead of in cache (bench_parts);
  *   {"bench":"pack_vs_c2r",...}  the transforms of a full step done our way
  *     (split c2r), as 8 plain 2-D c2r, and as 4 c2c carrying two real
  *     fields each (plus the de-interleave packing needs);
@@ -373,10 +376,80 @@ static void bench_dft(int n, const char *wisdom)
     ocean_free(o);
 }
 
+/* Where a step's time beyond FFTW's goes, one thread, process CPU time,
+ * all variants interleaved per repetition on the same ocean:
+ *   step (all fields and foam), fftw (only the FFTW executes); fill,
+ *   spectra, factors, jacobian: what the six-field step (no foam) loses
+ *   without that part of our own work (ocean_step_parts); foam: the step
+ *   minus the six-field step; terms_whole: the step with the Jacobian's
+ *   three terms written as whole N x N fields and combined afterwards (the
+ *   layout before this round) instead of in the worker's cache-sized
+ *   scratch. The parts are differences of two timings: on a shared machine
+ *   the fastest repetition of each variant (min) is the least noisy, so
+ *   the parts use that; step/fftw also give medians. own_sum: the parts'
+ *   sum; the rest of step - fftw is cache our passes take from FFTW's. */
+static void bench_parts(int n, const char *wisdom)
+{
+    struct ocean *o = make(n, 1, wisdom, 1);
+    if (!o)
+        return;
+    if (ocean_keep_jacobian_terms(o) != 0) {
+        ocean_free(o);
+        return;
+    }
+    float *whole[3]; /* toggled: the whole-field terms only in V_WHOLE */
+    for (int k = 0; k < 3; k++) {
+        whole[k] = o->g->jac[k];
+        o->g->jac[k] = NULL;
+    }
+    enum { V_STEP, V_NOFOAM, V_FFTW, V_FILL, V_SPECTRA, V_FACTORS, V_JAC, V_WHOLE, V_COUNT };
+    static const unsigned skip[V_COUNT] = {0, 0, OCEAN_SKIP_ALL, OCEAN_SKIP_FILL, OCEAN_SKIP_SPECTRA,
+                                           OCEAN_SKIP_FACTORS, OCEAN_SKIP_JACOBIAN, 0};
+    const unsigned six = OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM);
+    int reps = 2 * reps_for(n) + 1;
+    double *v[V_COUNT], lo[V_COUNT];
+    for (int k = 0; k < V_COUNT; k++) {
+        v[k] = malloc(reps * sizeof *v[k]);
+        lo[k] = 1e300;
+    }
+    ocean_step(o, 0.5, OCEAN_ALL_FIELDS);
+    for (int r = 0; r < reps; r++) {
+        double t = 1.0 + r * 0.033;
+        for (int k = 0; k < V_COUNT; k++) {
+            for (int j = 0; j < 3; j++)
+                o->g->jac[j] = k == V_WHOLE ? whole[j] : NULL;
+            double c0 = cpu_ms();
+            if (k == V_STEP || k == V_WHOLE)
+                ocean_step(o, t, OCEAN_ALL_FIELDS);
+            else
+                ocean_step_parts(o, t, six, skip[k]);
+            v[k][r] = cpu_ms() - c0;
+            lo[k] = v[k][r] < lo[k] ? v[k][r] : lo[k];
+        }
+    }
+    for (int j = 0; j < 3; j++)
+        o->g->jac[j] = whole[j];
+    double ms = median(v[V_STEP], reps), mf = median(v[V_FFTW], reps), mw = median(v[V_WHOLE], reps);
+    double nf = lo[V_NOFOAM], part[5] = {nf - lo[V_FILL], nf - lo[V_SPECTRA], nf - lo[V_FACTORS], nf - lo[V_JAC],
+                                         lo[V_STEP] - nf};
+    printf("{\"bench\":\"step_parts\",\"N\":%d,\"threads\":1,\"step_cpu_ms\":%.3f,\"fftw_cpu_ms\":%.3f,"
+           "\"cpu_ratio\":%.3f,\"terms_whole_cpu_ms\":%.3f,\"terms_whole_ratio\":%.3f,\"min_step_ms\":%.3f,"
+           "\"min_fftw_ms\":%.3f,\"min_ratio\":%.3f,\"min_terms_whole_ratio\":%.3f,\"fill_ms\":%.3f,"
+           "\"spectra_ms\":%.3f,\"factors_ms\":%.3f,\"jacobian_ms\":%.3f,\"foam_ms\":%.3f,\"own_sum_ms\":%.3f,"
+           "\"own_ms\":%.3f,\"reps\":%d}\n",
+           n, ms, mf, ms / mf, mw, mw / mf, lo[V_STEP], lo[V_FFTW], lo[V_STEP] / lo[V_FFTW], lo[V_WHOLE] / lo[V_FFTW],
+           part[0], part[1], part[2], part[3], part[4], part[0] + part[1] + part[2] + part[3] + part[4],
+           lo[V_STEP] - lo[V_FFTW], reps);
+    fflush(stdout);
+    for (int k = 0; k < V_COUNT; k++)
+        free(v[k]);
+    ocean_free(o);
+}
+
 int main(int argc, char **argv)
 {
     const char *wisdom = argc > 1 && *argv[1] ? argv[1] : NULL;
-    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, pack, layout, reconfigure, dft */
+    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, parts, pack, layout, reconfigure, dft */
 #define WANT(name) (!only || strcmp(only, name) == 0)
     /* The machine is shared: say how busy it was. */
     double load[3] = {0, 0, 0};
@@ -394,6 +467,8 @@ int main(int argc, char **argv)
     for (int n = 64; n <= 2048 && WANT("step"); n *= 2)
         for (int threads = 1; threads <= max_threads; threads *= 2)
             bench_step(n, threads, wisdom);
+    for (int n = 256; n <= 2048 && WANT("parts"); n *= 2)
+        bench_parts(n, wisdom);
     for (int n = 256; n <= 1024 && WANT("pack"); n *= 4)
         for (int threads = 1; threads <= 2; threads++)
             bench_pack(n, threads, wisdom);

@@ -6,6 +6,7 @@ on loopback. Prints one JSON line per run:
 delivered = share of the frames the daemon made in the window that reached the worst client.
 
     /usr/bin/python3 bench/load.py [--runs 256:200,512:100] [--window 10]
+    /usr/bin/python3 bench/load.py --capacity      # the issue-15 capacity table (make bench-capacity)
 """
 import argparse
 import json
@@ -58,7 +59,24 @@ def rss_mb(pid):
     return 0.0
 
 
-def run(args, n, k):
+def hist_p50_ms(port, name):
+    """Median of a /metrics histogram, from its buckets (upper bound of the bucket holding it)."""
+    text = urllib.request.urlopen("http://127.0.0.1:%d/metrics" % port, timeout=5).read().decode()
+    rows = re.findall(r'^%s_bucket\{le="([^"]+)"\} (\d+)$' % re.escape(name), text, re.M)
+    return [(float("inf") if le == "+Inf" else float(le) * 1000, int(c)) for le, c in rows]
+
+
+def bucket_median(b0, b1):
+    total = b1[-1][1] - b0[-1][1]
+    if total <= 0:
+        return float("nan")
+    for (le, c1), (_, c0) in zip(b1, b0):
+        if c1 - c0 >= total / 2:
+            return le
+    return float("inf")
+
+
+def run(args, n, k, fields=None):
     tmp = tempfile.mkdtemp(prefix="oceand-bench-")
     port = free_port()
     log = open(os.path.join(tmp, "oceand.log"), "wb")
@@ -67,36 +85,49 @@ def run(args, n, k):
                          + args.oceand_args.split(),
                          stdout=log, stderr=log)
     try:
-        for _ in range(200):
+        for _ in range(2400):             # up to 2 min: the first start at a new N plans FFTW (then cached)
             try:
                 urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=1).read()
                 break
             except OSError:
                 time.sleep(0.05)
-        lc = subprocess.Popen([args.load_client, str(port), str(k), str(args.warmup), str(args.window)],
+        sub = [json.dumps({"type": "subscribe", "fields": fields}, separators=(",", ":"))] if fields else []
+        lc = subprocess.Popen([args.load_client, str(port), str(k), str(args.warmup), str(args.window)] + sub,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = lc.stderr.readline()          # "measuring": the window starts
         cpu0, t0, wait0 = cpu_seconds(d.pid), time.monotonic(), runq_wait_seconds(d.pid)
         over0 = metric(port, "oceand_tick_overruns_total")
+        late0 = metric(port, "oceand_tick_late_total")
         tsum0, tcnt0 = metric(port, "oceand_tick_duration_seconds_sum"), metric(port, "oceand_tick_duration_seconds_count")
+        esum0, ecnt0 = metric(port, "oceand_encode_duration_seconds_sum"), metric(port, "oceand_encode_duration_seconds_count")
+        tb0 = hist_p50_ms(port, "oceand_tick_duration_seconds")
         rss = [rss_mb(d.pid)]
         while lc.poll() is None:
             time.sleep(0.5)
             rss.append(rss_mb(d.pid))
         cpu1, t1, wait1 = cpu_seconds(d.pid), time.monotonic(), runq_wait_seconds(d.pid)
         over1 = metric(port, "oceand_tick_overruns_total")
+        late1 = metric(port, "oceand_tick_late_total")
         tsum1, tcnt1 = metric(port, "oceand_tick_duration_seconds_sum"), metric(port, "oceand_tick_duration_seconds_count")
+        esum1, ecnt1 = metric(port, "oceand_encode_duration_seconds_sum"), metric(port, "oceand_encode_duration_seconds_count")
+        tb1 = hist_p50_ms(port, "oceand_tick_duration_seconds")
+        degraded = metric(port, "oceand_degraded_groups")
         out, err = lc.communicate()
         if lc.returncode != 0 or not out.strip():
             raise RuntimeError("load_client failed: %s %s" % (line, err))
         r = json.loads(out)
-        res = {"bench": "load", "N": n, "clients": k, "oceand_args": args.oceand_args, "fps_median": r["fps_median"], "fps_min": r["fps_min"],
+        res = {"bench": "load", "N": n, "clients": k, "fields": fields or ["height", "dx", "dz"],
+               "oceand_args": args.oceand_args, "fps_median": r["fps_median"], "fps_min": r["fps_min"],
                "delivered": r["delivered"], "lat_p50_ms": r["lat_p50_ms"], "lat_p99_ms": r["lat_p99_ms"],
                "set_latency_ticks_p99": r["set_latency_ticks_p99"],
                "daemon_cpu": round((cpu1 - cpu0) / (t1 - t0), 2),
                "daemon_runq_wait": round((wait1 - wait0) / (t1 - t0), 2), "rss_mb": round(max(rss), 1),
                "rss_mb_start": round(rss[0], 1), "overruns": int(over1 - over0),
+               "overruns_clock_late": int(late1 - late0) if late1 == late1 else None,  # of them: the tick thread not run in time
                "tick_ms_mean": round(1000 * (tsum1 - tsum0) / max(1, tcnt1 - tcnt0), 2),
+               "tick_ms_p50_bucket": bucket_median(tb0, tb1),
+               "encode_ms_mean": round(1000 * (esum1 - esum0) / max(1, ecnt1 - ecnt0), 2),  # wall, on the encode pool   # deadline -> frame published, histogram bucket
+               "degraded_groups_at_end": int(degraded) if degraded == degraded else None,  # NaN: a daemon without the metric
                "connected": r["connected"], "frame_kb": r["frame_kb"], "mbytes_per_s": r["mbytes_per_s"],
                "set_samples": r["set_samples"], "window_s": args.window,
                "loadavg_1m": round(os.getloadavg()[0], 2)}   # this machine is shared: context for the numbers
@@ -121,12 +152,51 @@ def main():
     ap.add_argument("--no-query", action="store_true", help="skip the point query / probe runs (query_load.py)")
     import query_load
     query_load.add_args(ap)
+    ap.add_argument("--capacity", action="store_true", help="issue 15's capacity rows, --repeat times each, "
+                    "then one median line per row")
+    ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
+    if args.capacity:
+        capacity(args)
+        return
     for spec in args.runs.split(","):
         n, k = (int(x) for x in spec.split(":"))
         run(args, n, k)
     if not args.no_query:
         query_load.bench(args)   # query latency for 1/16/256 points, tick time with 100 probe clients
+
+
+# Issue 15's targets: (N, clients, fields subscribed at 1 cm, LOD 0).
+SIX = ["height", "dx", "dz", "slope_x", "slope_z", "jacobian"]
+CAPACITY_ROWS = [
+    (512, 1, SIX),
+    (1024, 1, ["height", "dx", "dz"]),
+    (1024, 1, SIX),
+    (2048, 1, ["height"]),
+    (2048, 1, ["height", "dx", "dz"]),
+    (256, 200, None),
+]
+
+
+def capacity(args):
+    import contextlib
+    import io
+    import statistics
+    for n, k, fields in CAPACITY_ROWS:
+        runs = []
+        for _ in range(args.repeat):
+            buf = io.StringIO()
+            with contextlib.redirect_stdout(buf):
+                run(args, n, k, fields)
+            line = buf.getvalue().strip()
+            print(line, flush=True)
+            runs.append(json.loads(line))
+        med = {"bench": "capacity", "N": n, "clients": k, "fields": runs[0]["fields"], "runs": len(runs)}
+        for key in ("fps_median", "fps_min", "delivered", "overruns", "overruns_clock_late", "tick_ms_mean", "tick_ms_p50_bucket",
+                    "encode_ms_mean",
+                    "lat_p50_ms", "daemon_cpu", "daemon_runq_wait", "rss_mb", "degraded_groups_at_end", "loadavg_1m"):
+            med[key] = statistics.median(r[key] for r in runs)
+        print(json.dumps(med), flush=True)
 
 
 if __name__ == "__main__":

@@ -10,7 +10,9 @@
  * This one is a plain epoll loop with a minimal RFC 6455 reader (server
  * frames are unmasked) that skips payload with one pass over each recv.
  *
- *   load_client PORT CLIENTS WARMUP_S WINDOW_S */
+ *   load_client PORT CLIENTS WARMUP_S WINDOW_S [SUBSCRIBE_JSON]
+ * SUBSCRIBE_JSON (at most 125 bytes) is sent by every client after the
+ * handshake, e.g. {"type":"subscribe","fields":["height"]}. */
 #include <arpa/inet.h>
 #include <errno.h>
 #include <netinet/in.h>
@@ -224,7 +226,7 @@ static double pct(double *v, size_t n, double p)
 int main(int argc, char **argv)
 {
     if (argc < 5) {
-        fprintf(stderr, "usage: load_client PORT CLIENTS WARMUP_S WINDOW_S\n");
+        fprintf(stderr, "usage: load_client PORT CLIENTS WARMUP_S WINDOW_S [SUBSCRIBE_JSON]\n");
         return 2;
     }
     int port = atoi(argv[1]);
@@ -245,6 +247,8 @@ int main(int argc, char **argv)
             continue;
         }
         connected++;
+        if (argc > 5)
+            send_frame(&clients[i], 1, argv[5], strlen(argv[5]));
         struct epoll_event ev = { .events = EPOLLIN, .data.ptr = &clients[i] };
         epoll_ctl(ep, EPOLL_CTL_ADD, clients[i].fd, &ev);
     }

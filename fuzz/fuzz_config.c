@@ -23,26 +23,29 @@ static void load_defaults(void)
         abort();
 }
 
-/* Word-wise comparison, left out of coverage tracing and ASan checks: the
- * structs are ours and aligned, and libFuzzer's memcmp hook or a checked
- * byte loop over these ~5 KiB structs cost more than the code under test. */
-__attribute__((no_sanitize("coverage", "address"))) static int same_bytes(const void *a, const void *b, size_t n)
+/* 64-byte-vector comparison, left out of coverage tracing and ASan checks:
+ * the structs are ours and aligned, and libFuzzer's memcmp hook or a checked
+ * byte loop over these ~7 KiB structs (the daemon_config's path buffers)
+ * cost more than the code under test; a word loop at -O1 still took 7 % of
+ * an execution (perf), the vector one a fraction of that. */
+typedef uint64_t v8u64 __attribute__((vector_size(64), aligned(8)));
+__attribute__((no_sanitize("coverage", "address", "undefined"))) static int same_bytes(const void *a, const void *b, size_t n)
 {
-    const uint64_t *x = a, *y = b;
-    uint64_t d0 = 0, d1 = 0, d2 = 0, d3 = 0;
-    size_t w = n / 8, i = 0;
-    for (; i + 4 <= w; i += 4) {
-        d0 |= x[i] ^ y[i];
-        d1 |= x[i + 1] ^ y[i + 1];
-        d2 |= x[i + 2] ^ y[i + 2];
-        d3 |= x[i + 3] ^ y[i + 3];
+    const unsigned char *x = a, *y = b;
+    v8u64 d = {0};
+    size_t i = 0;
+    for (; i + 64 <= n; i += 64) {
+        v8u64 u, v;
+        memcpy(&u, x + i, 64);
+        memcpy(&v, y + i, 64);
+        d |= u ^ v;
     }
-    for (; i < w; i++)
-        d0 |= x[i] ^ y[i];
-    const unsigned char *xc = (const unsigned char *)(x + w), *yc = (const unsigned char *)(y + w);
-    for (size_t k = 0; k < n % 8; k++)
-        d0 |= (uint64_t)(xc[k] ^ yc[k]);
-    return (d0 | d1 | d2 | d3) == 0;
+    uint64_t acc = 0;
+    for (int k = 0; k < 8; k++)
+        acc |= d[k];
+    for (; i < n; i++)
+        acc |= (uint64_t)(x[i] ^ y[i]);
+    return acc == 0;
 }
 
 /* cJSON's nodes come from an arena reset after each input instead of the

@@ -1,6 +1,7 @@
 # mk/daemon.mk — the oceand daemon (issue 4): binary, integration tests, load bench, `make run`.
 
 DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c server/frame.c \
+              server/encode_pool.c server/capacity.c server/net/capacity.c \
               server/net/context.c server/net/upgrade.c server/net/session.c server/net/dispatch.c \
               server/net/fanout.c server/net/http.c server/net/cluster.c server/net/rx_guard.c \
               server/role_sim.c server/role_edge.c server/role_link.c \
@@ -15,7 +16,7 @@ PROTO_SAN_LIB ?= $(BUILD)/san/liboc_proto.a
 
 BINS += $(BUILD)/oceand
 TESTS += test-daemon test-daemon-asan test-daemon-valgrind
-BENCHES += bench-load
+BENCHES += bench-load bench-capacity bench-layer-flood
 
 # The cluster roles (--role sim|edge) link the NATS transport (mk/cluster.mk).
 $(BUILD)/oceand: $(DAEMON_OBJ) $(OCEAN_LIB) $(PROTO_LIB) $(CLUSTER_LIB)
@@ -27,10 +28,10 @@ $(BUILD)/san/oceand: $(DAEMON_SAN_OBJ) $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB) $(CLUST
 # Unit test of the pure control module (parse/validate), and the frame checker
 # the integration tests use to decode frames and compare with the library.
 $(BUILD)/test_control: $(BUILD)/obj/tests/daemon/test_control.o $(BUILD)/obj/server/control.o \
-                       $(BUILD)/obj/server/config.o $(BUILD)/obj/server/state.o $(BUILD)/obj/server/log.o $(OCEAN_LIB) $(PROTO_LIB)
+                       $(BUILD)/obj/server/capacity.o $(BUILD)/obj/server/config.o $(BUILD)/obj/server/state.o $(BUILD)/obj/server/log.o $(OCEAN_LIB) $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 $(BUILD)/san/test_control: $(BUILD)/san/tests/daemon/test_control.o $(BUILD)/san/server/control.o \
-                       $(BUILD)/san/server/config.o $(BUILD)/san/server/state.o $(BUILD)/san/server/log.o $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB)
+                       $(BUILD)/san/server/capacity.o $(BUILD)/san/server/config.o $(BUILD)/san/server/state.o $(BUILD)/san/server/log.o $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB)
 	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
 $(BUILD)/frame_check: $(BUILD)/obj/tests/daemon/frame_check.o $(BUILD)/obj/server/control.o $(OCEAN_LIB) $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
@@ -41,7 +42,7 @@ DAEMON_TEST_DEPS := $(BUILD)/test_control $(BUILD)/frame_check $(BUILD)/test_pro
 # Valgrind for the unit test: zero errors and zero definite leaks (~5 s).
 VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite
 
-.PHONY: test-daemon test-daemon-asan test-daemon-valgrind bench-load run
+.PHONY: test-daemon test-daemon-asan test-daemon-valgrind bench-load bench-capacity bench-layer-flood run
 test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	$(BUILD)/test_control
 	/usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
@@ -62,6 +63,16 @@ test-daemon-valgrind: $(BUILD)/test_control
 
 bench-load: $(BUILD)/oceand $(BUILD)/load_client
 	/usr/bin/python3 bench/load.py --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_LOAD_ARGS)
+
+# Issue 15's capacity table (README): N = 1024 six fields, 2048 h/dx/dz, 2048 height,
+# 256 with 200 clients; three runs each, then a median line per row (~4 min).
+bench-capacity: $(BUILD)/oceand $(BUILD)/load_client
+	/usr/bin/python3 bench/load.py --capacity --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_CAPACITY_ARGS)
+
+# Issue 16 defect 2's repro (N = 512, 25 viewers asking for every field x LOD x bound):
+# admitted/refused, observer frames/s, overruns, encode/tick time, RSS; one JSON line (~15 s).
+bench-layer-flood: $(BUILD)/oceand
+	/usr/bin/python3 bench/layer_flood.py --oceand $(BUILD)/oceand
 
 run: deps
 	@$(MAKE) --no-print-directory build-all

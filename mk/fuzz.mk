@@ -17,6 +17,13 @@ FUZZ_TARGETS += cluster
 FUZZ_TARGETS += query
 FUZZ_TARGETS += netwire
 
+# The config loader's input is JSON text: the operands of integer compares
+# (trace-cmp) are parsed binary values that libFuzzer cannot splice back into
+# text, while the key names still come from its strcmp hooks. Without
+# trace-cmp an execution costs ~20 % less CPU and same-seed runs reach the
+# same edges (README, fuzzing row).
+FUZZ_FLAGS_config := -fno-sanitize-coverage=trace-cmp
+
 SIM_SRCS_FOR_FUZZ = $(wildcard server/sim/*.c)
 FUZZ_SRCS_control = fuzz/fuzz_control.c server/control.c $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_frame   = fuzz/fuzz_frame.c $(wildcard proto/c/*.c)
@@ -30,7 +37,7 @@ $(BUILD)/fuzz/fuzz_netwire: $(wildcard server/net/*.[ch])
 
 $(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*.c server/*.h server/sim/*.[ch] server/sim/include/*.h proto/c/*.c proto/c/*.h)
 	@mkdir -p $(dir $@)
-	$(FUZZ_CC) $(FUZZ_FLAGS) $(PKG_CFLAGS) $(FUZZ_SRCS_$*) -o $@ $(PKG_LIBS) $(FUZZ_EXTRA_LIBS)
+	$(FUZZ_CC) $(FUZZ_FLAGS) $(FUZZ_FLAGS_$*) $(PKG_CFLAGS) $(FUZZ_SRCS_$*) -o $@ $(PKG_LIBS) $(FUZZ_EXTRA_LIBS)
 
 FUZZ_BINS := $(addprefix $(BUILD)/fuzz/fuzz_,$(FUZZ_TARGETS))
 

@@ -7,8 +7,9 @@
 # frames, subscription churn, pipelined HTTP, resolution flapping; third
 # battery: log floods on a slow stderr pipe, params fan-out from many
 # controllers, state-file symlink, ulimit -f, SIGUSR1/2, over-long paths,
-# fragment floods, query/probe abuse.
-# Budget: < 5 min on 2 cores (41 cases).
+# fragment floods, query/probe abuse; layer floods (every field x LOD x bound at
+# N = 512 against the encode budget, issue 16 defect 2).
+# Budget: < 5 min on 2 cores (42 cases).
 #
 #   make test-hostile     the battery; "N passed, M failed", non-zero on a failure
 #   make bench-hostile    the same run, figures as one JSON line per case on stdout

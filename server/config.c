@@ -48,7 +48,11 @@ static const struct param_def opt_table[] = {
       "on the same port (needs --tls-key)"),
     OPT_STR("tls_key", tls_key, "", 0, "PEM private key file of --tls-cert"),
     OPT("fft_threads", PARAM_INT, fft_threads, 0, 64, 0, NULL, 0, "worker threads for the simulation step and for "
-      "rebuilding the spectrum after a change (0 = one per core, at most 8)"),
+      "rebuilding the spectrum after a change (0 = one per core, every core)"),
+    OPT("encode_threads", PARAM_INT, encode_threads, 0, 64, 0, NULL, 0, "threads that encode frames, pipelined "
+      "with the next step (0 = one per core)"),
+    OPT("encode_budget", PARAM_INT, encode_budget, 0, 1 << 30, 0, NULL, 0, "samples encoded per tick at most, over "
+      "all distinct layers (0 = derived from the tick time measured at start-up); a subscription beyond it gets `busy`"),
     OPT("plan_rigor", PARAM_INT, plan_rigor, 0, 1, 1, NULL, 0, "1 = FFTW_MEASURE (faster steps; the first plan of "
       "each N takes a moment, then it is cached in --wisdom-file), 0 = FFTW_ESTIMATE"),
     OPT_STR("wisdom_file", wisdom_file, "auto", 0, "FFTW wisdom cache: \"auto\" = "
@@ -65,7 +69,8 @@ static const struct param_def opt_table[] = {
     OPT("query_queue", PARAM_INT, query_queue, 1, 4096, 64, NULL, 0, "queries waiting at most; more: busy"),
     OPT("probe_max_points", PARAM_INT, probe_max_points, 1, 64, 16, NULL, 0, "probe points per client"),
     OPT("probe_max_total", PARAM_INT, probe_max_total, 1, 100000, 2048, NULL, 0, "probe points, all clients together"),
-    OPT("max_memory_mb", PARAM_INT, max_memory_mb, 16, 1 << 20, 256, NULL, 0, "memory cap for the simulation; limits N"),
+    OPT("max_memory_mb", PARAM_INT, max_memory_mb, 0, 1 << 20, 0, NULL, 0, "memory cap for the simulation; limits N "
+      "(0 = a quarter of the machine's memory: MemTotal or the cgroup limit, whichever is lower)"),
     OPT_STR("role", role, "all", 0, "all = one process (no NATS); sim = simulate and publish on NATS "
       "(serves /healthz and /metrics, no viewers); edge = serve viewers from the sim over NATS (docs/scaling.md)"),
     OPT_STR("nats", nats_url, "", PARAM_SECRET, "NATS server URL(s) (may hold user:password) for --role sim|edge, e.g. nats://127.0.0.1:4222"),
@@ -80,6 +85,7 @@ static const struct param_def opt_table[] = {
     OPT("output_limit_kb", PARAM_INT, output_limit_kb, 16, 1 << 20, 1024, NULL, 0, "JSON replies queued for one "
       "client (KiB); a client over it is closed with 1008 (it is not reading)"),
 };
+
 #undef OPT
 #undef OPT_STR
 static const size_t opt_count = sizeof opt_table / sizeof opt_table[0];
@@ -336,6 +342,33 @@ static void resolve_wisdom_path(struct daemon_config *dc)
     }
 }
 
+/* A quarter of what the machine (or its cgroup) gives us, at least 256 MB:
+ * the simulation's share of a box that runs other things too. */
+int config_default_memory_mb(void)
+{
+    double total = 0;
+    FILE *f = fopen("/proc/meminfo", "r");
+    if (f) {
+        char line[128];
+        while (fgets(line, sizeof line, f))
+            if (sscanf(line, "MemTotal: %lf kB", &total) == 1)
+                break;
+        fclose(f);
+        total *= 1024.0;
+    }
+    static const char *const cgroup_limits[] = { "/sys/fs/cgroup/memory.max",
+                                                 "/sys/fs/cgroup/memory/memory.limit_in_bytes" };
+    for (size_t i = 0; i < sizeof cgroup_limits / sizeof cgroup_limits[0]; i++) {
+        FILE *c = fopen(cgroup_limits[i], "r");
+        double lim = 0;
+        if (c && fscanf(c, "%lf", &lim) == 1 && lim > 0 && (total <= 0 || lim < total))
+            total = lim; /* "max" (no limit) does not parse as a number */
+        if (c)
+            fclose(c);
+    }
+    double mb = total / 4.0 / 1048576.0;
+    return mb < 256 ? 256 : mb > (1 << 20) ? (1 << 20) : (int)mb;
+}
 /* A config file larger than this is refused, not truncated. */
 #define CONFIG_MAX_BYTES (16u << 20)
 
@@ -474,10 +507,13 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         return -1;
     }
     resolve_wisdom_path(dc);
-    if (dc->fft_threads == 0) {
-        long cores = sysconf(_SC_NPROCESSORS_ONLN);
-        dc->fft_threads = cores < 1 ? 1 : cores > 8 ? 8 : (int)cores;
-    }
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    if (dc->fft_threads == 0) /* every core: the step scales to 16 threads (issue 15) */
+        dc->fft_threads = cores < 1 ? 1 : cores > 64 ? 64 : (int)cores;
+    if (dc->encode_threads == 0)
+        dc->encode_threads = cores < 1 ? 1 : cores > 64 ? 64 : (int)cores;
+    if (dc->max_memory_mb == 0)
+        dc->max_memory_mb = config_default_memory_mb();
     char verr[200];
     if (params_validate(p, verr, sizeof verr) != 0) {
         snprintf(err, errlen, "parameters: %s", verr);

@@ -32,6 +32,8 @@ struct daemon_config {
     char   allowed_origins[512]; /* "" = same host or no Origin; "*" = any; else comma list */
     char   control_token[128];   /* "" = everyone may set */
     int    fft_threads;
+    int    encode_threads;     /* frame encoders (pool), 0 = one per core (resolved by config_load) */
+    int    encode_budget;      /* samples encoded per tick at most; 0 = derived from the measured tick */
     int    plan_rigor;
     char   wisdom_file[512];
     int    max_memory_mb;
@@ -77,6 +79,9 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
 int config_apply_text(struct daemon_config *dc, struct ocean_params *p, const char *text, size_t len,
                       char *err, size_t errlen);
 void config_usage(FILE *out, const char *argv0);
+/* The default --max-memory-mb: a quarter of MemTotal or of the cgroup's
+ * memory limit, whichever is lower, at least 256. */
+int config_default_memory_mb(void);
 /* Read a whole regular file of at most max bytes into a malloc'd,
  * NUL-terminated *text (free()). Returns 0; -1 with a message in err (errno
  * kept: ENOENT for a missing file; a larger file is refused, never cut);

@@ -5,6 +5,7 @@
 #include <ctype.h>
 #include <inttypes.h>
 #include <math.h>
+#include <stdatomic.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -202,11 +203,36 @@ void ctl_msg_free(struct ctl_msg *m)
     memset(m, 0, sizeof *m);
 }
 
+/* ocean_memory_bytes(n, 1) for power-of-two n, remembered: it counts the
+ * spectrum's rings with an O(N^2) pass and a fresh table (milliseconds at
+ * N = 2048), too slow to repeat for every hello's capacity announcement on
+ * the lws thread (test-hostile connections_500 lost 12-20 frames of its
+ * observer per burst of 99 hellos). Pure function of n: any thread may fill
+ * a slot, a race only computes the same value twice. */
+static _Atomic size_t memory_bytes_cache[32];
+
+static size_t memory_bytes(int n)
+{
+    int lg = 0;
+    while (lg < 31 && (1 << lg) < n)
+        lg++;
+    if (n < 2 || (1 << lg) != n)
+        return ocean_memory_bytes(n, 1);
+    size_t b = atomic_load_explicit(&memory_bytes_cache[lg], memory_order_relaxed);
+    if (!b) {
+        b = ocean_memory_bytes(n, 1);
+        atomic_store_explicit(&memory_bytes_cache[lg], b, memory_order_relaxed);
+    }
+    return b;
+}
+
 bool control_fits_memory(int n, int max_memory_mb)
 {
     /* While a new N is being built the old simulation still runs, so two
-     * exist at once; plus up to three frames in flight of one raw field. */
-    double bytes = 2.0 * (double)ocean_memory_bytes(n, 1) + 3.0 * 4.0 * (double)n * (double)n;
+     * exist at once; plus up to three frames in flight of one raw field, and
+     * the encoder's copy of the six fields (frame.c: the next step overwrites
+     * the library's while the last one is encoded). */
+    double bytes = 2.0 * (double)memory_bytes(n) + (3.0 + 6.0) * 4.0 * (double)n * (double)n;
     return bytes <= (double)max_memory_mb * 1048576.0;
 }
 
@@ -594,6 +620,47 @@ cJSON *control_hello_msg(const struct hello_info *h)
     cJSON_AddNumberToObject(o, "tick_rate", h->tick_rate);
     cJSON_AddNumberToObject(o, "tile_size", h->tile_size);
     cJSON_AddItemToObject(o, "subscription", control_subscription_object(h->sub));
+    if (h->capacity)
+        cJSON_AddItemToObject(o, "capacity", control_capacity_object(h->capacity));
+    return o;
+}
+
+cJSON *control_degraded_msg(bool active, int subscribed_lod, int lod, double rate, const char *reason)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "type", "degraded");
+    cJSON_AddBoolToObject(o, "active", active);
+    cJSON_AddNumberToObject(o, "subscribed_lod", subscribed_lod);
+    cJSON_AddNumberToObject(o, "lod", lod);
+    cJSON_AddNumberToObject(o, "rate", floor(rate * 100 + 0.5) / 100);
+    cJSON_AddStringToObject(o, "reason", reason ? reason : "");
+    return o;
+}
+
+static double round2(double v) { return floor(v * 100 + 0.5) / 100; }
+
+cJSON *control_capacity_object(const struct capacity_info *c)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "max_resolution", c->max_resolution);
+    cJSON_AddNumberToObject(o, "memory_cap_mb", c->memory_cap_mb);
+    cJSON_AddNumberToObject(o, "cores", c->cores);
+    cJSON_AddNumberToObject(o, "tick_ms", round2(c->tick_ms));
+    cJSON_AddNumberToObject(o, "budget_ms", round2(c->budget_ms));
+    cJSON_AddNumberToObject(o, "encode_budget", (double)c->encode_budget);
+    cJSON *a = cJSON_AddArrayToObject(o, "resolutions");
+    for (int i = 0; i < c->nsizes && i < CAPACITY_MAX_SIZES; i++) {
+        const struct capacity_size *z = &c->sizes[i];
+        cJSON *e = cJSON_CreateObject();
+        cJSON_AddNumberToObject(e, "n", z->n);
+        cJSON_AddBoolToObject(e, "fits_memory", z->fits_memory);
+        double ms[6];
+        for (int k = 0; k < 6; k++)
+            ms[k] = round2(z->est_ms[k]);
+        cJSON_AddItemToObject(e, "est_ms", cJSON_CreateDoubleArray(ms, 6));
+        cJSON_AddNumberToObject(e, "full_rate_fields", z->full_rate_fields);
+        cJSON_AddItemToArray(a, e);
+    }
     return o;
 }
 

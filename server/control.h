@@ -114,6 +114,28 @@ cJSON *control_params_msg(const struct ocean_params *p, uint32_t version, uint64
                           const char *by, const cJSON *id);
 cJSON *control_subscribed_msg(const struct subscription *s, const cJSON *id);
 cJSON *control_pong_msg(const cJSON *id, bool has_t, double t, uint64_t server_time_us);
+/* What this daemon can do (server/capacity.h): announced in hello and
+ * params as "capacity" (PROTOCOL.md). */
+#define CAPACITY_MAX_SIZES 8
+struct capacity_info {
+    int max_resolution;         /* largest N the memory cap allows */
+    int memory_cap_mb;
+    int cores;
+    double tick_ms, budget_ms;  /* tick period, and the share of it a frame may take */
+    long encode_budget;         /* samples per tick that may be encoded at the current N */
+    int nsizes;
+    struct capacity_size {
+        int n;
+        bool fits_memory;
+        double est_ms[6];       /* estimated frame time with 1..6 fields at LOD 0 */
+        int full_rate_fields;   /* most fields (LOD 0) that fit the budget at the tick rate */
+    } sizes[CAPACITY_MAX_SIZES];
+};
+cJSON *control_capacity_object(const struct capacity_info *c);
+/* `degraded`: how a client's subscription is served now (active = coarser
+ * LOD or fewer frames than asked; false = as asked again). */
+cJSON *control_degraded_msg(bool active, int subscribed_lod, int lod, double rate, const char *reason);
+
 struct hello_info {
     const char *client_id;
     bool controller;
@@ -122,6 +144,7 @@ struct hello_info {
     double tick_rate;
     int tile_size;
     const struct subscription *sub;
+    const struct capacity_info *capacity; /* NULL = not announced */
 };
 cJSON *control_hello_msg(const struct hello_info *h);
 

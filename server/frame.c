@@ -1,4 +1,5 @@
-/* frame.c — encode a tick's subscribed layers once; reference-counted frames. */
+/* frame.c — encode a tick's subscribed layers once, in parallel (one layer
+ * per item on the encode pool); reference-counted frames. */
 #include "frame.h"
 
 #include "clock.h"
@@ -46,18 +47,27 @@ const struct layer *frame_layer(const struct frame *f, int field, int lod, int b
     return NULL;
 }
 
-/* Every tile of one layer, in tile order, with the offsets clients slice by. */
-static int encode_layer(struct layer *l, struct oc_encoder *enc, const float *data, int n, int ts)
+/* Which layer a piece of work belongs to. A stream-state (temporal) codec
+ * keeps its state per (field, encoded_lod, bound_index, tile). */
+struct layer_id {
+    int field, encoded_lod, bound_index;
+};
+
+/* The whole encode of one layer: every tile, in tile order, into l (buf and
+ * tile_off, fresh: the frame owns them once published). One call per layer,
+ * handed to one encode thread, so that per-layer codec state needs no lock. */
+static int encode_layer(struct oc_encoder *enc, const struct layer_id *id, const float *data, int n, int ts,
+                        size_t reserve, struct layer *l)
 {
     int tps = n / ts;
     l->tile_off = malloc(sizeof(uint32_t) * ((size_t)tps * tps + 1));
-    if (!l->tile_off)
+    if (!l->tile_off || (reserve && oc_buf_reserve(&l->buf, reserve) != 0))
         return OC_E_NOMEM;
     for (int tz = 0; tz < tps; tz++)
         for (int tx = 0; tx < tps; tx++) {
             l->tile_off[tz * tps + tx] = (uint32_t)l->buf.len;
-            int rc = oc_encode_tile(enc, data, n, ts, tx, tz, l->lod, (enum oc_field)l->field,
-                                    ctl_bounds[l->bound_index], &l->buf);
+            int rc = oc_encode_tile(enc, data, n, ts, tx, tz, id->encoded_lod, (enum oc_field)id->field,
+                                    ctl_bounds[id->bound_index], &l->buf);
             if (rc != 0)
                 return rc;
         }
@@ -65,43 +75,168 @@ static int encode_layer(struct layer *l, struct oc_encoder *enc, const float *da
     return 0;
 }
 
-struct frame *frame_encode(const struct ocean *o, struct oc_encoder *enc, int tile_size,
-                           const struct frame_want *want, const struct oc_frame_header *hdr)
+struct frame_job {
+    int nenc;
+    struct oc_encoder **enc;    /* one per encode thread + the caller */
+    float *snap[OCEAN_FIELD_COUNT]; /* the step's fields, copied: the next step overwrites them */
+    size_t snap_cap[OCEAN_FIELD_COUNT];
+    struct frame *f;            /* being built: one layer per item (frame_job_finish hands it over) */
+    int nitems;
+    int item_key[LAYER_KEYS];   /* item -> index into want.keys */
+    int item_rc[LAYER_KEYS];
+    size_t last_len[LAYER_KEYS]; /* bytes of each key's layer last time: reserved up front */
+    struct frame_want want;
+    struct oc_frame_header hdr;
+    int n, ts, tps;
+    long samples;
+};
+
+struct frame_job *frame_job_new(int workers)
+{
+    struct frame_job *j = calloc(1, sizeof *j);
+    if (!j)
+        return NULL;
+    j->nenc = workers + 1;
+    j->enc = calloc((size_t)j->nenc, sizeof *j->enc);
+    if (!j->enc) {
+        free(j);
+        return NULL;
+    }
+    for (int i = 0; i < j->nenc; i++)
+        if (!(j->enc[i] = oc_encoder_new())) {
+            frame_job_free(j);
+            return NULL;
+        }
+    return j;
+}
+
+/* A frame begun and never finished (start-up measurement, out of memory
+ * half way): its encoded layers are not counted in nlayers yet. */
+static void drop_unfinished(struct frame_job *j)
+{
+    if (!j->f)
+        return;
+    for (int i = 0; i < j->nitems; i++) {
+        oc_buf_free(&j->f->layers[i].buf);
+        free(j->f->layers[i].tile_off);
+    }
+    j->f->nlayers = 0;
+    frame_unref(j->f);
+    j->f = NULL;
+}
+
+void frame_job_free(struct frame_job *j)
+{
+    if (!j)
+        return;
+    drop_unfinished(j);
+    for (int i = 0; i < j->nenc; i++)
+        oc_encoder_free(j->enc[i]);
+    free(j->enc);
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+        free(j->snap[f]);
+    free(j);
+}
+
+long frame_job_samples(const struct frame_job *j) { return j->samples; }
+
+int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, const struct frame_want *want,
+                    const struct oc_frame_header *hdr)
 {
     int n = ocean_resolution(o);
-    int ts = frame_tile_size(tile_size, n);
-    struct frame *f = calloc(1, sizeof *f);
+    j->n = n;
+    j->ts = frame_tile_size(tile_size, n);
+    j->tps = n / j->ts;
+    j->want = *want;
+    j->hdr = *hdr;
+    j->hdr.n = (uint16_t)n;
+    j->hdr.tile_size = (uint16_t)j->ts;
+    drop_unfinished(j); /* before nitems is reset: it counts that frame's layers */
+    j->nitems = 0;
+    j->samples = 0;
+    size_t nn = (size_t)n * n;
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
+        const float *src = (want->fields & OCEAN_FIELD_BIT(f)) ? ocean_field(o, (enum ocean_field)f) : NULL;
+        if (!src)
+            continue;
+        if (j->snap_cap[f] < nn) {
+            free(j->snap[f]);
+            j->snap_cap[f] = 0;
+            if (!(j->snap[f] = malloc(nn * sizeof(float))))
+                return -1;
+            j->snap_cap[f] = nn;
+        }
+        memcpy(j->snap[f], src, nn * sizeof(float));
+    }
+    if (!(j->f = frame_new(want->nkeys)))
+        return -1;
+    j->f->tiles_per_side = j->tps;
+    for (int k = 0; k < want->nkeys; k++) {
+        int field = layer_key_field(want->keys[k]), lod = want->lod[k];
+        if ((j->ts >> lod) < 1 || !(want->fields & OCEAN_FIELD_BIT(field)) || !ocean_field(o, (enum ocean_field)field))
+            continue; /* a LOD finer than one sample per tile, or a field not stepped */
+        j->samples += (long)(n >> lod) * (n >> lod);
+        j->item_key[j->nitems] = k;
+        j->item_rc[j->nitems] = 0;
+        j->nitems++;
+    }
+    return j->nitems;
+}
+
+void frame_job_item(struct frame_job *j, int index, int worker)
+{
+    int k = j->item_key[index], key = j->want.keys[k];
+    struct layer_id id = { layer_key_field(key), j->want.lod[k], layer_key_bound(key) };
+    struct layer *l = &j->f->layers[index];
+    l->field = (uint8_t)id.field;
+    l->lod = (uint8_t)layer_key_lod(key);
+    l->bound_index = (uint8_t)id.bound_index;
+    l->encoded_lod = (uint8_t)id.encoded_lod;
+    j->item_rc[index] = encode_layer(j->enc[worker], &id, j->snap[id.field], j->n, j->ts, j->last_len[key], l);
+}
+
+void frame_job_warm(struct frame_job *j, const struct ocean *o, int tile_size)
+{
+    int n = ocean_resolution(o), ts = frame_tile_size(tile_size, n);
+    for (int e = 0; e < j->nenc; e++)
+        for (int f = 0; f < OCEAN_FIELD_COUNT; f++) {
+            const float *data = ocean_field(o, (enum ocean_field)f);
+            if (!data)
+                continue;
+            struct layer_id id = { f, 0, 3 /* 1 cm */ };
+            struct layer l = { 0 };
+            encode_layer(j->enc[e], &id, data, n, ts, 0, &l);
+            oc_buf_free(&l.buf);
+            free(l.tile_off);
+        }
+}
+
+struct frame *frame_job_finish(struct frame_job *j)
+{
+    struct frame *f = j->f;
+    j->f = NULL;
     if (!f)
         return NULL;
-    atomic_init(&f->refs, 1);
-    f->tiles_per_side = n / ts;
-    f->layers = calloc(want->nkeys ? (size_t)want->nkeys : 1, sizeof *f->layers);
-    if (!f->layers) {
-        free(f);
-        return NULL;
-    }
-    for (int i = 0; i < want->nkeys; i++) {
-        int key = want->keys[i];
-        struct layer *l = &f->layers[f->nlayers];
-        l->field = (uint8_t)layer_key_field(key);
-        l->lod = (uint8_t)layer_key_lod(key);
-        l->bound_index = (uint8_t)layer_key_bound(key);
-        const float *data = ocean_field(o, (enum ocean_field)l->field);
-        if ((ts >> l->lod) < 1 || !data)
-            continue; /* a LOD finer than one sample per tile, or a field not stepped */
-        int rc = encode_layer(l, enc, data, n, ts);
-        if (rc != 0) {
-            LOGE("encoding %s lod %d: %s", ocean_field_name((enum ocean_field)l->field), l->lod, oc_strerror(rc));
+    /* Keep the layers that encoded, in item order. */
+    int kept = 0;
+    for (int i = 0; i < j->nitems; i++) {
+        struct layer *l = &f->layers[i];
+        if (j->item_rc[i] != 0) {
+            LOGE("encoding %s lod %d: %s", ocean_field_name((enum ocean_field)l->field), l->encoded_lod,
+                 oc_strerror(j->item_rc[i]));
             oc_buf_free(&l->buf);
             free(l->tile_off);
-            memset(l, 0, sizeof *l);
             continue;
         }
-        f->nlayers++;
+        j->last_len[j->want.keys[j->item_key[i]]] = l->buf.len + l->buf.len / 8;
+        if (kept != i)
+            f->layers[kept] = *l;
+        kept++;
     }
-    f->hdr = *hdr;
-    f->hdr.n = (uint16_t)n;
-    f->hdr.tile_size = (uint16_t)ts;
+    for (int i = kept; i < j->nitems; i++)
+        memset(&f->layers[i], 0, sizeof f->layers[i]);
+    f->nlayers = kept;
+    f->hdr = j->hdr;
     f->hdr.server_time_us = unix_us();
     return f;
 }

@@ -33,7 +33,9 @@ static inline int frame_tile_size(int configured, int n) { return configured < n
 
 /* All tiles of one field at one LOD and bound, encoded back to back. */
 struct layer {
-    uint8_t field, lod, bound_index;
+    uint8_t field, lod, bound_index; /* lod: of the key clients subscribed to */
+    uint8_t encoded_lod;        /* lod of its tiles: lod, or coarser when the tick degraded it
+                                   (capacity.h; the clients concerned were told with `degraded`) */
     struct oc_buf buf;
     uint32_t *tile_off;     /* tiles_per_side^2 + 1 offsets into buf; tile i = tz*tps + tx */
 };
@@ -49,19 +51,45 @@ struct frame {
     struct layer *layers;
 };
 
-/* Which layers to build: the keys with demand, and the fields they need. */
+/* Which layers to build: the keys due this tick, the encoded LOD of each,
+ * and the fields they need. */
 struct frame_want {
     unsigned fields;            /* OCEAN_FIELD_BIT mask of the keys below */
     int nkeys;
     uint16_t keys[LAYER_KEYS];
+    uint8_t lod[LAYER_KEYS];    /* encoded LOD of keys[i]: layer_key_lod(keys[i]) or coarser */
 };
 
-/* Encode the wanted layers of the ocean's last step into a new frame (one
- * reference, held by the caller). hdr gives seq, sim_time, params_version,
- * patch_size; n, tile_size and server_time_us are filled in here. A layer
- * that fails to encode is left out (logged). NULL when out of memory. */
-struct frame *frame_encode(const struct ocean *o, struct oc_encoder *enc, int tile_size,
-                           const struct frame_want *want, const struct oc_frame_header *hdr);
+/* One frame being encoded, in three steps, so that the encode runs on a pool
+ * of threads while the producer steps the next tick:
+ *   frame_job_begin   (producer, after the step) copies the wanted fields out
+ *                     of the simulation (the next step overwrites them) and
+ *                     cuts the work into items: one layer each (its whole
+ *                     encode is one call, so per-layer codec state needs no lock);
+ *   frame_job_item    (any encode thread, items in any order, concurrently);
+ *                     jobs run one at a time in seq order, so per-layer state
+ *                     kept across frames (a temporal codec's stream) is used by
+ *                     one thread at a time, frame after frame, without a lock;
+ *   frame_job_finish  (the thread that finished the last item) drops the
+ *                     layers that failed and returns the frame.
+ * A job is reused frame after frame (buffers keep their capacity). */
+struct frame_job;
+struct frame_job *frame_job_new(int workers);    /* workers + 1 encoders (the caller helps) */
+void frame_job_free(struct frame_job *j);
+/* hdr gives seq, sim_time, params_version, patch_size; n and tile_size are
+ * filled in here (server_time_us at finish). Returns the number of items
+ * (0 = nothing to encode), or -1 when out of memory. */
+int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, const struct frame_want *want,
+                    const struct oc_frame_header *hdr);
+void frame_job_item(struct frame_job *j, int item, int worker);
+/* The frame (one reference, held by the caller), or NULL when out of memory.
+ * A layer that failed to encode is left out (logged). */
+struct frame *frame_job_finish(struct frame_job *j);
+/* Encode every field the ocean has once with every encoder (start-up: their
+ * compressors and scratch grow now, not minutes later under load). */
+void frame_job_warm(struct frame_job *j, const struct ocean *o, int tile_size);
+/* Samples the last begun job encodes (all its layers, at their encoded LOD). */
+long frame_job_samples(const struct frame_job *j);
 
 /* An empty frame with room for nlayers layers (nlayers = 0 so far), one
  * reference: for frames not encoded here (an edge rebuilds them from the

@@ -65,11 +65,23 @@ size_t metrics_render(char *buf, size_t cap)
     struct out o = { buf, cap, 0 };
     struct metrics *m = &g_metrics;
     buf[0] = 0;
-    hist(&o, "oceand_tick_duration_seconds", "Time to step the simulation and encode one tick.", &m->tick_seconds);
-    hist(&o, "oceand_encode_duration_seconds", "Time to encode the subscribed layers of one tick.", &m->encode_seconds);
+    hist(&o, "oceand_tick_duration_seconds", "From a tick's deadline to its frame's publication (step, copy, encode).",
+         &m->tick_seconds);
+    hist(&o, "oceand_step_duration_seconds", "Time to step the simulation for one frame.", &m->step_seconds);
+    hist(&o, "oceand_encode_duration_seconds", "Time to encode the layers of one frame (on the encode pool, "
+         "while the next frame is stepped).", &m->encode_seconds);
     counter(&o, "oceand_ticks_total", "Simulation ticks run.", atomic_load(&m->ticks));
-    counter(&o, "oceand_tick_overruns_total", "Ticks that started a whole period late (skipped, not queued).",
+    counter(&o, "oceand_tick_overruns_total", "Ticks that started a whole period late (skipped, not queued), "
+            "or whose frame could not start because the one before was still being stepped.",
             atomic_load(&m->overruns));
+    counter(&o, "oceand_tick_late_total", "Of the overruns, the ticks whose clock thread itself woke a whole "
+            "period late (the machine did not run it); the rest are frames the producer could not start.",
+            atomic_load(&m->ticks_late));
+    gauge(&o, "oceand_degraded_groups", "Subscription groups (LOD, bound) encoded at a coarser LOD or a lower "
+          "rate than asked, because demand exceeds the encode budget.", atomic_load(&m->degraded_groups));
+    counter(&o, "oceand_subscriptions_refused_busy_total", "Subscriptions refused with `busy` (encode budget).",
+            atomic_load(&m->refused_busy));
+    counter(&o, "oceand_degraded_messages_total", "`degraded` messages sent to clients.", atomic_load(&m->degraded_sent));
     counter(&o, "oceand_replans_total", "FFT re-plans after a resolution change.", atomic_load(&m->replans));
     gauge(&o, "oceand_clients", "Connected WebSocket clients.", atomic_load(&m->clients));
     put(&o, "# HELP oceand_clients_rejected_total WebSocket upgrades refused.\n"

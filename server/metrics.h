@@ -15,8 +15,9 @@ struct histogram {
 extern const double metrics_hist_le[METRICS_HIST_BUCKETS]; /* upper bounds, seconds */
 
 struct metrics {
-    struct histogram tick_seconds, encode_seconds;
+    struct histogram tick_seconds, encode_seconds, step_seconds;
     atomic_uint_least64_t ticks, overruns, replans;
+    atomic_uint_least64_t ticks_late;  /* the overruns where the clock itself woke late (descheduled) */
     atomic_uint_least64_t frames_sent, bytes_sent, text_sent;
     atomic_uint_least64_t dropped_slow, dropped_rate;
     atomic_uint_least64_t control_messages, control_errors, param_changes;
@@ -25,6 +26,8 @@ struct metrics {
     atomic_uint_least64_t rejected_host, rejected_handshake, http_refused_host, http_refused_symlink;
     atomic_uint_least64_t closed_output_limit, closed_unmasked, refused_fd_limit;
     atomic_int clients;
+    atomic_int degraded_groups;       /* subscription groups encoded coarser or less often (capacity.h) */
+    atomic_uint_least64_t refused_busy, degraded_sent; /* subscriptions refused `busy`; `degraded` messages sent */
     atomic_uint_least32_t params_version;
     atomic_int resolution;
     _Atomic double sim_time;

@@ -5,6 +5,7 @@
 #include "clock.h"
 
 #include <errno.h>
+#include <malloc.h>
 #include <math.h>
 #include <pthread.h>
 #include <signal.h>
@@ -16,12 +17,16 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "capacity.h"
+#include "encode_pool.h"
 #include "log.h"
 #include "metrics.h"
 
 /* A batch of sets the builder has prepared for one tick boundary. */
 struct built {
-    struct ocean_prepared *prepared; /* new state for s->ocean (ocean_prepare), or NULL when only playback changed */
+    struct ocean_prepared *prepared; /* the new state for the ocean in force (ocean_prepare:
+                                        new amplitudes, or a new grid and plans for a new N),
+                                        or NULL when only playback changed */
     struct ocean_params params;   /* in force after the batch */
     struct sim_set *sets;         /* in order; each has ->prev, or a failed ->status */
     struct ocean_surface *surface; /* query snapshot of the prepared state (made by the builder), or NULL */
@@ -36,15 +41,31 @@ struct sim {
     atomic_bool stop;             /* sim_stop writes; tick and builder read */
     int test_fail_seed;           /* sim_start writes (OCEAND_TEST_FAIL_BUILD_SEED, -1 = none); builder reads */
 
-    struct ocean *ocean;          /* sim_start writes the pointer, never changed after; tick steps and
-                                   * commits it; builder runs ocean_prepare against it (allowed while
-                                   * the tick steps, ocean.h), never while a commit runs (lock) */
+    struct ocean *ocean;          /* sim_start writes the pointer, never changed after; the producer steps
+                                   * it while prod_busy/prod_has_job, the tick commits into it only while
+                                   * the producer is idle (handed over under the lock); the builder runs
+                                   * ocean_prepare against it (allowed while it is stepped, ocean.h),
+                                   * never while a commit runs (ready_full is cleared after the commit) */
     struct ocean_params params;   /* tick only: the parameters in force */
     uint32_t version;             /* tick only: params_version in force */
     double sim_time;              /* tick only: the clock (copied to now_time) */
     uint64_t seq;                 /* tick only: ticks run (PROTOCOL.md §3.3: +1 per tick, frame or not) */
-    uint64_t published;           /* tick only: frames published, for struct frame.index */
-    struct oc_encoder *enc;       /* tick only */
+    struct plan plan;             /* tick only: the plan in force (capacity.h) */
+    struct plan plan_lower;       /* tick only: a less degraded plan seen... */
+    int lower_ticks;              /* ...for this many ticks in a row (hysteresis) */
+    double credit[PLAN_GROUPS];   /* tick only: a group is encoded when its credit reaches 1 */
+    bool had_demand;              /* tick only: last tick had subscribers */
+
+    pthread_t producer;           /* sim_start writes; sim_stop joins */
+    bool producer_started;        /* sim_start writes; sim_stop reads */
+    struct encode_pool *pool;     /* sim_start creates; producer starts/waits jobs; sim_stop frees */
+    struct frame_job *job;        /* producer fills it, the pool encodes it, the pool's last thread
+                                     finishes it (encode_done); one job at a time (encode_pool) */
+    uint64_t published;           /* encode_done only (jobs are serial): frames published, for struct frame.index */
+    double job_t_tick, job_t_enc; /* producer writes before the job starts; encode_done reads */
+    long job_samples;             /* same */
+    /* Measuring at start-up (sim_start, before the threads). */
+    bool measure_done;
 
     /* builder only: the params of the newest state built (applied, or
      * waiting in `ready`): the base the next batch is checked against. */
@@ -59,10 +80,26 @@ struct sim {
     bool ready_full;                  /* builder sets, tick clears */
     struct ocean_prepared *to_free;   /* tick writes (the state a commit swapped out); builder frees it */
     struct sim_set *answers, **answers_tail;  /* tick appends; lws takes (sim_take_answers) */
+    pthread_cond_t prod_cond;         /* tick signals, producer waits */
+    bool prod_busy;                   /* producer: stepping a frame or waiting for the encode before
+                                         it (set when it takes a job, cleared once the frame's
+                                         encode has started: the next step may overlap it) */
+    bool prod_has_job;                /* tick sets (a job queued, one deep), producer clears */
+    struct prod_job {                 /* tick writes, producer reads */
+        double sim_time, t_tick;
+        uint64_t seq;
+        uint32_t version;
+        float patch_size;
+        struct frame_want want;
+    } pj;
+    struct cost_model model;          /* producer and encode_done update (EWMA); tick and lws read */
+    struct plan plan_pub;             /* tick writes; lws reads (sim_plan) */
+    uint32_t plan_gen;                /* +1 per change of plan_pub */
 
     atomic_int demand[LAYER_KEYS];    /* atomic: lws writes (subscriptions); tick reads */
     _Atomic double now_time;          /* atomic: tick writes; lws reads (state file) */
     atomic_uint_least64_t now_seq;    /* atomic: tick writes; lws reads (a new client's first frame) */
+    atomic_int now_n;                 /* atomic: tick writes; lws reads (capacity at the N in force) */
 };
 
 void sim_set_free(struct sim_set *set) { free(set); }
@@ -114,6 +151,56 @@ uint64_t sim_seq(struct sim *s) { return atomic_load(&s->now_seq); }
 void sim_demand(struct sim *s, int key, int delta) { atomic_fetch_add(&s->demand[key], delta); }
 double sim_time_now(struct sim *s) { return atomic_load(&s->now_time); }
 
+void sim_capacity(struct sim *s, struct capacity_info *out)
+{
+    pthread_mutex_lock(&s->lock);
+    struct cost_model m = s->model;
+    pthread_mutex_unlock(&s->lock);
+    capacity_info_fill(&m, atomic_load(&s->now_n), out);
+}
+
+uint32_t sim_plan(struct sim *s, struct plan *out)
+{
+    pthread_mutex_lock(&s->lock);
+    *out = s->plan_pub;
+    uint32_t gen = s->plan_gen;
+    pthread_mutex_unlock(&s->lock);
+    return gen;
+}
+
+static void sub_keys(const struct subscription *sub, int demand[LAYER_KEYS], int delta)
+{
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+        if (sub->fields & OCEAN_FIELD_BIT(f))
+            demand[layer_key(f, sub->lod, sub->bound_index)] += delta;
+}
+
+bool sim_admit(struct sim *s, const struct subscription *old, const struct subscription *want, long *need, long *budget)
+{
+    int demand[LAYER_KEYS], before[LAYER_KEYS];
+    for (int k = 0; k < LAYER_KEYS; k++)
+        before[k] = demand[k] = atomic_load(&s->demand[k]);
+    if (old)
+        sub_keys(old, demand, -1);
+    sub_keys(want, demand, +1);
+    int n = atomic_load(&s->now_n);
+    long samples = 0;
+    bool adds = false;
+    for (int k = 0; k < LAYER_KEYS; k++)
+        if (demand[k] > 0) {
+            long side = n >> layer_key_lod(k);
+            samples += side * side;
+            adds |= before[k] <= 0;
+        }
+    pthread_mutex_lock(&s->lock);
+    struct cost_model m = s->model;
+    pthread_mutex_unlock(&s->lock);
+    *need = samples;
+    *budget = cost_encode_budget(&m, n);
+    /* Layers someone already gets cost nothing more: never refused. */
+    return !adds || samples <= *budget;
+}
+
 /* ---- builder thread ---- */
 
 static uint64_t params_diff(const struct ocean_params *a, const struct ocean_params *b)
@@ -139,9 +226,13 @@ static void set_failed(struct sim_set *set, enum sim_set_status status, const ch
     snprintf(set->message, sizeof set->message, "%s", msg);
 }
 
-/* ocean_prepare, or the test hook's simulated out-of-memory (see sim_thread.h). */
-static struct ocean_prepared *build_ocean(struct sim *s, const struct ocean_params *p, enum sim_set_status *why,
-                                 char *err, size_t errlen)
+/* ocean_prepare against the ocean in force, or the test hook's simulated
+ * out-of-memory (see sim_thread.h). ocean_prepare only reads what the
+ * producer's ocean_step does not change, so it runs while frames are made;
+ * it never overlaps a commit (the tick commits before it clears ready_full,
+ * and the builder prepares only while ready_full is clear). */
+static struct ocean_prepared *build_state(struct sim *s, const struct ocean_params *p, enum sim_set_status *why,
+                                          char *err, size_t errlen)
 {
     if (s->test_fail_seed >= 0 && p->seed == s->test_fail_seed) {
         usleep(500 * 1000); /* long enough for a test to queue another set behind this one */
@@ -154,9 +245,9 @@ static struct ocean_prepared *build_ocean(struct sim *s, const struct ocean_para
 }
 
 /* Check each set of a batch on top of the previous one (all or nothing per
- * set) and build ONE new ocean for the whole batch if any physics changed.
- * Allocates nothing but the ocean: whatever fails, every set is answered
- * and build_base moves only to what was really built. */
+ * set) and prepare ONE new state for the whole batch if any physics changed.
+ * Allocates nothing but that state: whatever fails, every set is answered
+ * and build_base moves only to what was really prepared. */
 static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
 {
     struct ocean_params cur = s->build_base;
@@ -174,7 +265,7 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
     out->surface = NULL;
     if (physics_differ(&s->build_base, &cur)) {
         enum sim_set_status why;
-        out->prepared = build_ocean(s, &cur, &why, err, sizeof err);
+        out->prepared = build_state(s, &cur, &why, err, sizeof err);
         if (!out->prepared) {
             LOGW("applying parameters failed: %s", err);
             for (struct sim_set *set = sets; set; set = set->next)
@@ -234,42 +325,37 @@ static void apply_pending(struct sim *s)
     pthread_mutex_lock(&s->lock);
     bool have = s->ready_full;
     struct built b = s->ready;
-    int commit_rc = 0, old_n = ocean_resolution(s->ocean);
-    /* Commit under the lock, before the builder is told `ready` is free:
-     * it may then start the next ocean_prepare, which must not overlap a
-     * commit. The commit only swaps pointers (ocean.h). */
-    if (have && b.prepared)
-        commit_rc = ocean_commit(s->ocean, b.prepared);
-    s->ready_full = false;
-    if (have)
-        pthread_cond_signal(&s->cond);
     pthread_mutex_unlock(&s->lock);
     if (!have)
         return;
+    int commit_rc = 0;
     if (b.prepared) {
+        /* O(1), and the producer is idle (our caller checked): no step or
+         * field reader overlaps it, nor a prepare (ready_full is still set). */
+        int n_before = ocean_resolution(s->ocean);
+        commit_rc = ocean_commit(s->ocean, b.prepared);
         if (commit_rc != 0) {
-            LOGE("applying parameters failed: the prepared state was stale");
+            LOGE("a prepared parameter change no longer fits the simulation; refused");
             for (struct sim_set *set = b.sets; set; set = set->next)
                 if (set->status == SIM_SET_QUEUED)
-                    set_failed(set, SIM_SET_INVALID, "internal: stale prepared state");
+                    set_failed(set, SIM_SET_INVALID, "internal: prepared against another state");
             b.params = s->params;
             ocean_surface_free(b.surface); /* a snapshot of what was not committed */
             b.surface = NULL;
-        } else if (old_n != ocean_resolution(s->ocean)) {
+        } else if (n_before != ocean_resolution(s->ocean)) {
             atomic_fetch_add(&g_metrics.replans, 1);
             LOGI("resolution now %d", ocean_resolution(s->ocean));
         }
-        /* b.prepared now holds the old state (or the unused new one). */
-        pthread_mutex_lock(&s->lock);
-        bool slot_free = s->to_free == NULL;
-        if (slot_free) {
-            s->to_free = b.prepared; /* freeing 10-100 MB is the builder's job, not the tick's */
-            pthread_cond_signal(&s->cond);
-        }
-        pthread_mutex_unlock(&s->lock);
-        if (!slot_free)
-            ocean_prepared_free(b.prepared);
     }
+    pthread_mutex_lock(&s->lock);
+    s->ready_full = false;
+    pthread_cond_signal(&s->cond);
+    bool slot_free = b.prepared && s->to_free == NULL;
+    if (slot_free)
+        s->to_free = b.prepared; /* the old state: freeing 10-100 MB is the builder's job, not the tick's */
+    pthread_mutex_unlock(&s->lock);
+    if (b.prepared && !slot_free)
+        ocean_prepared_free(b.prepared);
     struct sim_set *last = NULL;
     uint32_t version_before = s->version;
     for (struct sim_set *set = b.sets; set; set = set->next) {
@@ -297,45 +383,7 @@ static void apply_pending(struct sim *s)
     }
 }
 
-/* Which layers clients want now, from the demand counters. */
-static void demand_snapshot(struct sim *s, struct frame_want *w)
-{
-    w->fields = 0;
-    w->nkeys = 0;
-    uint8_t remote[SIM_DEMAND_BYTES] = { 0 };
-    if (s->cfg.remote_demand)
-        s->cfg.remote_demand(s->cfg.cluster_user, remote);
-    for (int k = 0; k < LAYER_KEYS; k++)
-        if (atomic_load(&s->demand[k]) > 0 || ((remote[k >> 3] >> (k & 7)) & 1)) {
-            w->fields |= OCEAN_FIELD_BIT(layer_key_field(k));
-            w->keys[w->nkeys++] = (uint16_t)k;
-        }
-}
-
-static bool step(struct sim *s, unsigned fields)
-{
-    if (ocean_step(s->ocean, s->sim_time, fields) == 0)
-        return true;
-    LOGE("ocean_step failed at t=%g", s->sim_time);
-    return false;
-}
-
-static struct frame *encode(struct sim *s, const struct frame_want *want)
-{
-    double t0 = mono_now();
-    struct oc_frame_header h = {
-        .seq = s->seq, .sim_time = s->sim_time, .params_version = s->version,
-        .patch_size = (float)s->params.patch_size,
-    };
-    struct frame *f = frame_encode(s->ocean, s->enc, s->cfg.tile_size, want, &h);
-    if (f)
-        f->index = s->published++;
-    histogram_observe(&g_metrics.encode_seconds, mono_now() - t0);
-    return f;
-}
-
-/* The newest frame replaces the previous one; NULL (no frame this tick)
- * too, so that nobody is ever handed a frame from an earlier tick. */
+/* The newest frame replaces the previous one. */
 static void publish(struct sim *s, struct frame *f)
 {
     pthread_mutex_lock(&s->lock);
@@ -345,28 +393,260 @@ static void publish(struct sim *s, struct frame *f)
     frame_unref(old);
 }
 
-static void tick(struct sim *s)
+/* The cost model follows each frame: up slowly (one slow frame on a shared
+ * machine is noise; overruns raise it at once, see tick), down quickly (an
+ * overrun's raise must not keep a plan degraded for long). */
+static double ewma(double model, double measured)
 {
-    apply_pending(s);
+    double a = measured < model ? 0.25 : 0.1;
+    return (1 - a) * model + a * measured;
+}
+
+/* ---- encode (pool threads) ---- */
+
+static void encode_item(void *ctx, int item, int worker) { frame_job_item(((struct sim *)ctx)->job, item, worker); }
+
+/* The last encode thread of a job: finish the frame, publish it, wake lws. */
+static void encode_done(void *ctx)
+{
+    struct sim *s = ctx;
+    struct frame *f = frame_job_finish(s->job);
+    double now = mono_now();
+    if (f) {
+        f->index = s->published++;
+        frame_ref(f); /* for on_frame: publish() may hand the last reference on at once */
+        publish(s, f);
+        if (s->cfg.on_frame)
+            s->cfg.on_frame(s->cfg.cluster_user, f); /* on this encode thread (frames are published in order) */
+        frame_unref(f);
+    }
+    double enc = now - s->job_t_enc;
+    histogram_observe(&g_metrics.encode_seconds, enc);
+    histogram_observe(&g_metrics.tick_seconds, now - s->job_t_tick);
+    if (s->job_samples >= 4096) { /* tiny jobs are all overhead: they would skew the per-sample cost */
+        pthread_mutex_lock(&s->lock);
+        s->model.enc_s_per_sample = ewma(s->model.enc_s_per_sample, enc / (double)s->job_samples);
+        pthread_mutex_unlock(&s->lock);
+    }
+    if (s->cfg.wake)
+        s->cfg.wake(s->cfg.wake_user);
+}
+
+/* ---- producer thread: step, copy the fields, start their encode ---- */
+
+static int popcount_u(unsigned v)
+{
+    int c = 0;
+    for (; v; v &= v - 1)
+        c++;
+    return c;
+}
+
+static void produce(struct sim *s, const struct prod_job *pj)
+{
+    double t0 = mono_now();
+    if (ocean_step(s->ocean, pj->sim_time, pj->want.fields) != 0) {
+        LOGE("ocean_step failed at t=%g", pj->sim_time);
+        return;
+    }
+    double t_step = mono_now() - t0;
+    histogram_observe(&g_metrics.step_seconds, t_step);
+    query_tick(s->cfg.queries, s->ocean, pj->seq, pj->sim_time, pj->version); /* probes: copies 3 grids */
+    if (!pj->want.nkeys)
+        return; /* stepped for the probes only: no frame */
+    pthread_mutex_lock(&s->lock);
+    struct cost_model base = s->model; /* the prediction without the live corrections */
+    base.step_scale = 1;
+    base.penalty = 1;
+    double predicted = cost_step_s(&base, ocean_resolution(s->ocean), popcount_u(pj->want.fields));
+    /* One step far slower than the model counts as at most twice the
+     * current scale: a one-off (foam's cold spin-up, ~20 steps, after a new
+     * N or a first foam subscription; a page-fault storm) must not make the
+     * plan step-bound for everyone and then, with frames made rare, stay so
+     * (under ASan the spin-up read as an 85 ms step at N = 256: 2 frames in
+     * 4 s). Sustained slowness still raises it by 10 % a frame. */
+    if (predicted > 0)
+        s->model.step_scale = ewma(s->model.step_scale, fmin(t_step / predicted, 2 * s->model.step_scale));
+    pthread_mutex_unlock(&s->lock);
+    /* The previous frame's encode overlapped this step; its buffers are about
+     * to be reused, so it must be done (we help rather than sleep). */
+    encode_pool_wait(s->pool);
+    struct oc_frame_header h = {
+        .seq = pj->seq, .sim_time = pj->sim_time, .params_version = pj->version, .patch_size = pj->patch_size,
+    };
+    int items = frame_job_begin(s->job, s->ocean, s->cfg.tile_size, &pj->want, &h);
+    if (items < 0) {
+        LOGE("out of memory preparing frame %llu", (unsigned long long)pj->seq);
+        return;
+    }
+    s->job_t_tick = pj->t_tick;
+    s->job_t_enc = mono_now();
+    s->job_samples = frame_job_samples(s->job);
+    encode_pool_start(s->pool, items, encode_item, encode_done, s);
+}
+
+static void *producer_main(void *arg)
+{
+    struct sim *s = arg;
+    pthread_mutex_lock(&s->lock);
+    for (;;) {
+        while (!atomic_load(&s->stop) && !s->prod_has_job)
+            pthread_cond_wait(&s->prod_cond, &s->lock);
+        if (atomic_load(&s->stop))
+            break;
+        struct prod_job pj = s->pj;
+        s->prod_has_job = false;
+        s->prod_busy = true;
+        pthread_mutex_unlock(&s->lock);
+        produce(s, &pj);
+        pthread_mutex_lock(&s->lock);
+        s->prod_busy = false;
+    }
+    pthread_mutex_unlock(&s->lock);
+    return NULL;
+}
+
+/* ---- tick thread: the clock, the plan, and handing frames to the producer ---- */
+
+/* Re-plan from the demand: a more degraded plan at once, a less degraded
+ * one only after it has held for three seconds with 40 % headroom
+ * (hysteresis: clients are told every change). */
+static void update_plan(struct sim *s, const int demand[LAYER_KEYS], int n, int ts)
+{
+    pthread_mutex_lock(&s->lock);
+    struct cost_model m = s->model;
+    pthread_mutex_unlock(&s->lock);
+    struct plan now, easy;
+    capacity_plan(&m, n, ts, demand, 1.0, &now);
+    bool same_demand = true;
+    for (int g = 0; g < PLAN_GROUPS; g++)
+        same_demand &= now.fields[g] == s->plan.fields[g];
+    struct plan next = s->plan;
+    if (!same_demand || plan_value(&now, n) < 0.9 * plan_value(&s->plan, n)) {
+        next = now;
+        s->lower_ticks = 0;
+    } else {
+        capacity_plan(&m, n, ts, demand, 0.6, &easy);
+        if (plan_value(&easy, n) > plan_value(&s->plan, n)) {
+            if (++s->lower_ticks >= 3 * (int)s->cfg.tick_rate) {
+                next = easy;
+                s->lower_ticks = 0;
+            }
+        } else {
+            s->lower_ticks = 0;
+        }
+    }
+    if (plan_same(&next, &s->plan))
+        return;
+    int degraded = 0;
+    for (int g = 0; g < PLAN_GROUPS; g++) {
+        degraded += plan_degraded(&next, g);
+        if (plan_degraded(&next, g) && !plan_degraded(&s->plan, g))
+            LOGI("degrading lod %d bound %g: encoded at lod %d, %g frames/s (%s)", g / CTL_BOUND_COUNT,
+                 ctl_bounds[g % CTL_BOUND_COUNT], next.lod[g], next.rate[g] * s->cfg.tick_rate, next.reason);
+        if (s->credit[g] == 0) /* spread the groups' ticks: equal rates must not all fall on one tick */
+            s->credit[g] = fmod(0.618034 * (g + 1), 1.0);
+    }
+    atomic_store(&g_metrics.degraded_groups, degraded);
+    s->plan = next;
+    pthread_mutex_lock(&s->lock);
+    s->plan_pub = next;
+    s->plan_gen++;
+    pthread_mutex_unlock(&s->lock);
+}
+
+static void tick(struct sim *s, double t_tick)
+{
+    pthread_mutex_lock(&s->lock);
+    bool idle = !s->prod_busy && !s->prod_has_job, queued = s->prod_has_job, set_ready = s->ready_full;
+    pthread_mutex_unlock(&s->lock);
+    if (idle) {
+        apply_pending(s); /* the producer is not using the ocean: it may be swapped */
+        if (s->model.penalty > 1) { /* it kept up: the transient penalty fades (see below) */
+            pthread_mutex_lock(&s->lock);
+            s->model.penalty = s->model.penalty * 0.95 > 1 ? s->model.penalty * 0.95 : 1;
+            pthread_mutex_unlock(&s->lock);
+        }
+    }
     s->seq++;
+    int n = ocean_resolution(s->ocean);
     atomic_store(&s->now_seq, s->seq);
     atomic_store(&s->now_time, s->sim_time);
+    atomic_store(&s->now_n, n);
     atomic_store(&g_metrics.sim_time, s->sim_time);
     atomic_store(&g_metrics.params_version, s->version);
-    atomic_store(&g_metrics.resolution, ocean_resolution(s->ocean));
+    atomic_store(&g_metrics.resolution, n);
 
-    struct frame_want want;
-    demand_snapshot(s, &want);
-    struct frame *f = NULL;
-    unsigned probe_fields = query_probe_fields(s->cfg.queries); /* probes need height, dx, dz */
-    if ((want.nkeys || probe_fields) && step(s, want.fields | probe_fields)) {
-        query_tick(s->cfg.queries, s->ocean, s->seq, s->sim_time, s->version);
-        if (want.nkeys)
-            f = encode(s, &want);
+    int demand[LAYER_KEYS];
+    bool any = false;
+    uint8_t remote[SIM_DEMAND_BYTES] = { 0 };
+    if (s->cfg.remote_demand) /* --role sim: the layer keys other daemons want */
+        s->cfg.remote_demand(s->cfg.cluster_user, remote);
+    for (int k = 0; k < LAYER_KEYS; k++) {
+        demand[k] = atomic_load(&s->demand[k]);
+        if (demand[k] <= 0 && ((remote[k >> 3] >> (k & 7)) & 1))
+            demand[k] = 1;
+        any |= demand[k] > 0;
     }
-    publish(s, f);
-    if (f && s->cfg.on_frame)
-        s->cfg.on_frame(s->cfg.cluster_user, f); /* publish() keeps our reference alive until the next tick */
+    unsigned probe_fields = query_probe_fields(s->cfg.queries); /* probes need height, dx, dz */
+    if (!any) {
+        if (s->had_demand)
+            publish(s, NULL); /* nobody is ever handed a frame from before an idle period */
+        s->had_demand = false;
+        if (!probe_fields)
+            return;
+    } else {
+        s->had_demand = true;
+        update_plan(s, demand, n, frame_tile_size(s->cfg.tile_size, n));
+    }
+
+    /* The groups due this tick, at their planned LOD. */
+    struct prod_job pj = { .sim_time = s->sim_time, .t_tick = t_tick, .seq = s->seq, .version = s->version,
+                           .patch_size = (float)s->params.patch_size };
+    bool due[PLAN_GROUPS];
+    for (int g = 0; g < PLAN_GROUPS; g++) {
+        due[g] = false;
+        if (!s->plan.fields[g])
+            continue;
+        s->credit[g] += s->plan.rate[g];
+        if (s->credit[g] > 2)
+            s->credit[g] = 2; /* a group held back by a busy producer does not pile up */
+        due[g] = s->credit[g] >= 1;
+    }
+    for (int k = 0; k < LAYER_KEYS; k++) {
+        int g = plan_group(layer_key_lod(k), layer_key_bound(k));
+        if (demand[k] > 0 && due[g]) {
+            pj.want.fields |= OCEAN_FIELD_BIT(layer_key_field(k));
+            pj.want.lod[pj.want.nkeys] = s->plan.lod[g];
+            pj.want.keys[pj.want.nkeys++] = (uint16_t)k;
+        }
+    }
+    if (!pj.want.nkeys && !probe_fields)
+        return; /* a degraded group's off tick */
+    pj.want.fields |= probe_fields; /* stepped for the probes, not encoded unless a layer wants them */
+    if (!idle && set_ready)
+        return; /* let the producer drain so that the parameter change applies next tick */
+    if (queued) {
+        /* The producer has not even started the frame before: this one cannot
+         * start on time. Counted as an overrun, and taken as proof that the
+         * model is optimistic (a shared machine, a slower N): costs up by a
+         * quarter at once (the penalty, at most x64), so the next plan
+         * degrades; each tick that finds the producer idle takes 5 % of it
+         * back (x64 -> x1 in ~2.7 s), whether or not frames are rare. */
+        atomic_fetch_add(&g_metrics.overruns, 1);
+        pthread_mutex_lock(&s->lock);
+        s->model.penalty = fmin(fmax(s->model.penalty, 1) * 1.25, 64);
+        pthread_mutex_unlock(&s->lock);
+        return;
+    }
+    for (int g = 0; g < PLAN_GROUPS; g++)
+        if (due[g])
+            s->credit[g] -= 1;
+    pthread_mutex_lock(&s->lock);
+    s->pj = pj;
+    s->prod_has_job = true; /* one deep: taken when the producer is done with the frame before */
+    pthread_cond_signal(&s->prod_cond);
+    pthread_mutex_unlock(&s->lock);
 }
 
 static void *sim_main(void *arg)
@@ -386,12 +666,11 @@ static void *sim_main(void *arg)
          * interval, with or without clients (PROTOCOL.md §3.1). */
         if (!s->params.paused)
             s->sim_time += s->params.time_scale * elapsed;
-        tick(s);
+        tick(s, t0);
         /* Always wake lws: answers (params) may be waiting even without a frame. */
         if (s->cfg.wake)
             s->cfg.wake(s->cfg.wake_user);
         atomic_fetch_add(&g_metrics.ticks, 1);
-        histogram_observe(&g_metrics.tick_seconds, mono_now() - t0);
 
         /* Absolute schedule: next deadline = previous + period, never drifting.
          * If we are already past it, count an overrun and skip the missed
@@ -408,6 +687,7 @@ static void *sim_main(void *arg)
         if (late > 0) {
             long skip = (long)(late / period) + 1;
             atomic_fetch_add(&g_metrics.overruns, 1);
+            atomic_fetch_add(&g_metrics.ticks_late, 1);
             steps += skip;
             long long ns = (long long)next.tv_nsec + (long long)skip * period_ns;
             next.tv_sec += (time_t)(ns / 1000000000LL);
@@ -420,6 +700,78 @@ static void *sim_main(void *arg)
     return NULL;
 }
 
+/* Start-up measurement for the cost model (capacity.h): the step with one
+ * field and with all six, and the encode of one field at 1 cm, on this
+ * machine, best of three (the machine may be shared: the best run is what it
+ * can do; the live model corrects it from every frame). */
+static void measure_done(void *ctx) { ((struct sim *)ctx)->measure_done = true; }
+
+static void measure_model(struct sim *s)
+{
+    struct cost_model *m = &s->model;
+    int n = ocean_resolution(s->ocean);
+    m->period_s = 1.0 / s->cfg.tick_rate;
+    m->budget_s = 0.8 * m->period_s;
+    m->n0 = n;
+    m->step_scale = 1;
+    m->penalty = 1;
+    m->encode_budget = s->cfg.encode_budget;
+    m->max_memory_mb = s->cfg.max_memory_mb;
+    m->cores = s->cfg.cores;
+    double best1 = 1e9, best6 = 1e9, best_enc = 1e9;
+    for (int i = 0; i < 3; i++) {
+        double t0 = mono_now();
+        ocean_step(s->ocean, s->sim_time, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+        double t1 = mono_now();
+        /* The six surface fields, not foam: a foam step would start its
+         * history at the start-up wind, and foam later asked for under
+         * another wind would build up from there instead of being spun up
+         * (test_foam_field_streamed's coverage halved). */
+        ocean_step(s->ocean, s->sim_time, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
+        double t2 = mono_now();
+        best1 = fmin(best1, t1 - t0);
+        best6 = fmin(best6, t2 - t1);
+        struct frame_want w = { .fields = OCEAN_FIELD_BIT(OCEAN_HEIGHT), .nkeys = 1 };
+        w.keys[0] = (uint16_t)layer_key(OCEAN_HEIGHT, 0, 3 /* 1 cm */);
+        struct oc_frame_header h = { 0 };
+        int items = frame_job_begin(s->job, s->ocean, s->cfg.tile_size, &w, &h);
+        if (items < 0)
+            break;
+        s->measure_done = false;
+        double t3 = mono_now();
+        encode_pool_start(s->pool, items, encode_item, measure_done, s);
+        encode_pool_wait(s->pool);
+        double t4 = mono_now();
+        if (frame_job_samples(s->job) > 0)
+            best_enc = fmin(best_enc, (t4 - t3) / (double)frame_job_samples(s->job));
+    }
+    /* Warm every encoder (its compressor and scratch) now: one first used
+     * minutes later (the producer helps only now and then) would show as
+     * memory growth under load. */
+    frame_job_warm(s->job, s->ocean, s->cfg.tile_size);
+    m->step1_s = best1;
+    m->step6_s = fmax(best6, best1);
+    m->enc_s_per_sample = best_enc < 1e9 ? best_enc : 1e-8;
+    LOGI("capacity at N=%d: step %.2f ms (height) / %.2f ms (6 fields), encode %.2f ns/sample on %d threads; "
+         "encode budget %ld samples per tick", n, best1 * 1e3, best6 * 1e3, m->enc_s_per_sample * 1e9,
+         encode_pool_threads(s->pool) + 1, cost_encode_budget(m, n));
+    /* The announcement's memory figures once now: every hello and params
+     * carries them, on the lws thread (control_fits_memory remembers them). */
+    struct capacity_info warm;
+    capacity_info_fill(m, n, &warm);
+}
+
+static void sim_free_parts(struct sim *s)
+{
+    encode_pool_free(s->pool);
+    frame_job_free(s->job);
+    ocean_free(s->ocean);
+    pthread_cond_destroy(&s->prod_cond);
+    pthread_cond_destroy(&s->cond);
+    pthread_mutex_destroy(&s->lock);
+    free(s);
+}
+
 struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg, char *err, size_t errlen)
 {
     struct sim *s = calloc(1, sizeof *s);
@@ -428,6 +780,8 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
         return NULL;
     }
     s->cfg = *cfg;
+    if (s->cfg.encode_threads < 1)
+        s->cfg.encode_threads = 1;
     s->params = *p;
     s->version = cfg->start_version;
     s->sim_time = cfg->start_time;
@@ -438,32 +792,62 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     s->test_fail_seed = hook && *hook ? atoi(hook) : -1;
     if (s->test_fail_seed >= 0)
         LOGW("test hook: builds with seed %d will fail (OCEAND_TEST_FAIL_BUILD_SEED)", s->test_fail_seed);
+    /* Frames are allocated on whichever encode thread finishes them and freed
+     * on the lws thread: with one malloc arena per thread, each would keep its
+     * own cache of freed frames (RSS creeping up by megabytes); one arena
+     * reuses them. Allocations are a few per frame: no contention to speak of. */
+    mallopt(M_ARENA_MAX, 1);
+    /* Fixed thresholds (setting them turns glibc's dynamic ones off, which
+     * after one large free keep megabytes of freed frames in the heap). */
+    mallopt(M_MMAP_THRESHOLD, 128 * 1024);
+    mallopt(M_TRIM_THRESHOLD, 256 * 1024);
     pthread_mutex_init(&s->lock, NULL);
     pthread_cond_init(&s->cond, NULL);
+    pthread_cond_init(&s->prod_cond, NULL);
     s->build_base = *p;
     s->ocean = ocean_create(p, &cfg->opts, err, errlen);
-    s->enc = oc_encoder_new();
-    if (!s->ocean || !s->enc) {
-        if (s->ocean && !s->enc)
-            snprintf(err, errlen, "out of memory (encoder)");
-        ocean_free(s->ocean);
-        oc_encoder_free(s->enc);
-        free(s);
+    if (!s->ocean) {
+        sim_free_parts(s);
         return NULL;
     }
+    /* The encode pool: encode_threads threads (while the producer sleeps
+     * until the next tick every core may encode), plus the producer, which
+     * helps while it waits for the previous frame (encode_pool_wait). */
+    s->pool = encode_pool_new(s->cfg.encode_threads);
+    s->job = s->pool ? frame_job_new(encode_pool_threads(s->pool)) : NULL;
+    if (!s->pool || !s->job) {
+        snprintf(err, errlen, "out of memory (encoder threads)");
+        sim_free_parts(s);
+        return NULL;
+    }
+    measure_model(s);
     atomic_store(&s->now_time, s->sim_time);
     if (cfg->queries)
         query_version(cfg->queries, s->version, s->sim_time, true, query_snapshot(cfg->queries, s->ocean));
+    atomic_store(&s->now_n, p->resolution);
     atomic_store(&g_metrics.resolution, p->resolution);
     atomic_store(&g_metrics.params_version, s->version);
     /* The tick thread must never take SIGINT/SIGTERM: block them for it
-     * (and for the builder thread), whatever the caller did. */
+     * (and for the builder and producer threads), whatever the caller did.
+     * (The encode pool's threads were started above with the caller's mask:
+     * main blocks nothing before its handlers exist, and they only encode.) */
     sigset_t block, old;
     sigemptyset(&block);
     sigaddset(&block, SIGINT);
     sigaddset(&block, SIGTERM);
     pthread_sigmask(SIG_BLOCK, &block, &old);
-    int rc = pthread_create(&s->thread, NULL, sim_main, s);
+    int rc = pthread_create(&s->producer, NULL, producer_main, s);
+    s->producer_started = rc == 0;
+    if (rc == 0) {
+        rc = pthread_create(&s->thread, NULL, sim_main, s);
+        if (rc != 0) {
+            atomic_store(&s->stop, true);
+            pthread_mutex_lock(&s->lock);
+            pthread_cond_broadcast(&s->prod_cond);
+            pthread_mutex_unlock(&s->lock);
+            pthread_join(s->producer, NULL);
+        }
+    }
     if (rc == 0) {
         s->builder_started = pthread_create(&s->builder, NULL, builder_main, s) == 0;
         if (!s->builder_started)
@@ -471,10 +855,8 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     }
     pthread_sigmask(SIG_SETMASK, &old, NULL);
     if (rc != 0) {
-        snprintf(err, errlen, "cannot start the simulation thread: %s", strerror(rc));
-        ocean_free(s->ocean);
-        oc_encoder_free(s->enc);
-        free(s);
+        snprintf(err, errlen, "cannot start the simulation threads: %s", strerror(rc));
+        sim_free_parts(s);
         return NULL;
     }
     return s;
@@ -496,6 +878,11 @@ void sim_stop(struct sim *s)
     atomic_store(&s->stop, true);
     pthread_join(s->thread, NULL);
     pthread_mutex_lock(&s->lock);
+    pthread_cond_broadcast(&s->prod_cond);
+    pthread_mutex_unlock(&s->lock);
+    pthread_join(s->producer, NULL);
+    encode_pool_wait(s->pool); /* its last frame, published before we free */
+    pthread_mutex_lock(&s->lock);
     pthread_cond_broadcast(&s->cond);
     bool busy = s->builder_busy;
     pthread_mutex_unlock(&s->lock);
@@ -516,12 +903,7 @@ void sim_stop(struct sim *s)
         if (s->ready.prepared)
             ocean_prepared_free(s->ready.prepared);
     }
-    if (s->to_free)
-        ocean_prepared_free(s->to_free);
+    ocean_prepared_free(s->to_free);
     frame_unref(s->latest);
-    ocean_free(s->ocean);
-    oc_encoder_free(s->enc);
-    pthread_cond_destroy(&s->cond);
-    pthread_mutex_destroy(&s->lock);
-    free(s);
+    sim_free_parts(s);
 }

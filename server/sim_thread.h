@@ -2,9 +2,13 @@
  * crosses between them and the network (lws) thread. docs/threads.md has
  * the whole threading contract.
  *
- * A tick: apply the parameters the builder prepared -> step the ocean for
- * the fields somebody subscribes to -> encode each subscribed layer once
- * (frame.c) -> publish the frame -> wake the network thread.
+ * A tick (the tick thread, a clock on absolute deadlines): apply the
+ * parameters the builder prepared -> plan which subscription groups are due
+ * and at which LOD (capacity.h) -> hand the frame to the producer thread,
+ * which steps the ocean for those fields, copies them out and starts their
+ * encode on the encode pool (frame.c, encode_pool.h) -> the pool's last
+ * thread publishes the frame and wakes the network thread. The encode of
+ * tick t runs while the producer steps tick t+1.
  * Parameter sets are built off the tick path by the builder (a new ocean
  * for the batch: spectrum, and FFT plans for a new N) and swapped in at the
  * next tick boundary. The mutex is held only to swap pointers and move list
@@ -16,6 +20,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "capacity.h"
 #include "frame.h"
 #include "ocean.h"
 #include "query_worker.h"
@@ -59,13 +64,18 @@ struct sim_config {
     double start_time;          /* sim time to resume from */
     int nice;                   /* of the tick thread; 0 = leave as is */
     uint32_t start_version;
+    int encode_threads;         /* threads that encode (pool + the producer helping), >= 1 */
+    long encode_budget;         /* --encode-budget: samples per tick at most, 0 = derived */
+    int max_memory_mb;          /* for the capacity announcement */
+    int cores;                  /* same */
     uint64_t start_seq;         /* seq of the tick before the first (0; --role sim: from the wall clock,
                                    so that seq never goes back when the sim restarts under its edges) */
-    void (*wake)(void *user);   /* called after every tick (lws_cancel_service) */
+    void (*wake)(void *user);   /* called after every tick and every frame (lws_cancel_service) */
     void *wake_user;
     struct query_service *queries; /* point queries and probes (query_worker.h), NULL = none */
-    /* --role sim (server/role_sim.c); NULL otherwise. Both run on the tick
-     * thread and must not block: remote_demand ORs the layer keys other
+    /* --role sim (server/role_sim.c); NULL otherwise. remote_demand runs on
+     * the tick thread, on_frame on the encode thread that publishes the
+     * frame (one at a time, in seq order); neither may block: remote_demand ORs the layer keys other
      * daemons want into bits (SIM_DEMAND_BYTES, bit k = layer key k) before
      * the demand snapshot; on_frame sees each frame right after it is
      * published (frame_ref it to keep it). */
@@ -95,5 +105,15 @@ struct frame *sim_latest(struct sim *s);                     /* this tick's fram
 uint64_t sim_seq(struct sim *s);                             /* seq of the last tick run */
 void sim_demand(struct sim *s, int layer_key, int delta);   /* subscriptions in force */
 double sim_time_now(struct sim *s);
+/* What this daemon can do at the N in force (capacity.h), for hello/params. */
+void sim_capacity(struct sim *s, struct capacity_info *out);
+/* The plan in force (which subscription groups are degraded, and how) and
+ * its generation (+1 per change). */
+uint32_t sim_plan(struct sim *s, struct plan *out);
+/* Whether replacing subscription old (NULL = none) by want keeps the
+ * distinct layers within the encode budget; need and budget in samples per
+ * tick. Layers somebody already gets are free. Call on the thread that
+ * changes demand (sim_demand), before changing it. */
+bool sim_admit(struct sim *s, const struct subscription *old, const struct subscription *want, long *need, long *budget);
 
 #endif

@@ -177,8 +177,10 @@ static cJSON *params_msg(struct net *n, const struct ocean_params *p, uint32_t v
                          const char *by, const char *by_name, const cJSON *id)
 {
     cJSON *m = with_name(control_params_msg(p, version, changed, by, id), by_name);
-    if (m && (changed & resolution_bit()))
+    if (m && (changed & resolution_bit())) {
         cJSON_AddNumberToObject(m, "tile_size", net_tile_size(n));
+        net_capacity_add(n, m); /* the encode budget follows N; ~1.5 kB, so only then */
+    }
     return m;
 }
 
@@ -436,13 +438,14 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         struct subscription *ns = malloc(sizeof *ns); /* ~4 kB (tile list): not on the stack */
         if (!ns)
             break;
-        if (control_apply_subscribe(m.root, &s->sub, &n->lim, ns, &e) != 0) {
+        if (control_apply_subscribe(m.root, &s->sub, &n->lim, ns, &e) != 0 || !net_capacity_admit(n, s, ns, &e)) {
             session_send_error(s, &e, m.id);
         } else {
             dispatch_demand(n, ns, +1);
             dispatch_demand(n, &s->sub, -1);
             s->sub = *ns;
             session_queue_json(s, control_subscribed_msg(&s->sub, m.id));
+            net_capacity_tell(n, s);
         }
         free(ns);
         break;

@@ -26,6 +26,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "capacity.h"
 #include "config.h"
 #include "control.h"
 #include "frame.h"
@@ -138,6 +139,8 @@ struct net {
     lws_retry_bo_t retry;         /* ping / hang-up policy, read by lws */
     struct lws_http_mount m_files, m_health, m_metrics; /* read by lws */
     struct lws_protocols protocols[3]; /* [0] http, [1] oceand.v1, [2] terminator; read by lws */
+    struct plan told;             /* the sim's plan the clients were last told about (capacity.c) */
+    uint32_t told_gen;            /* its generation, 0 = none yet */
     /* Cluster roles (net.h, cluster.c); all zero for --role all. */
     struct net_cluster_hooks cluster; /* main writes (net_set_cluster) before the loop */
     char *status_text;            /* edge: {"type":"status",...} for new clients, NULL = healthy */
@@ -185,6 +188,12 @@ void fanout_set_latest(struct net *n, struct frame *f);      /* takes f's refere
 bool fanout_want_write(const struct net *n, const struct session *s); /* a frame is ready for s */
 int fanout_write(struct net *n, struct session *s);          /* one lws_write of a frame */
 void fanout_session_free(struct session *s);
+
+/* capacity.c: capacity in hello/params, `busy`, `degraded` (server/capacity.h) */
+void net_capacity_add(struct net *n, cJSON *msg);            /* "capacity" member into msg */
+bool net_capacity_admit(struct net *n, struct session *s, const struct subscription *want, struct ctl_error *e);
+void net_capacity_tell(struct net *n, struct session *s);    /* `degraded` if s's group is degraded now */
+void net_capacity_wake(struct net *n);                       /* after a wake-up: tell plan changes */
 
 /* http.c */
 int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len);

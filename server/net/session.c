@@ -146,9 +146,15 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
         .params_version = n->applied_version, .tick_rate = n->dc.tick_rate,
         .tile_size = net_tile_size(n), .sub = &s->sub,
     };
+    struct capacity_info ci;
+    if (n->sim) {
+        sim_capacity(n->sim, &ci);
+        h.capacity = &ci;
+    }
     session_queue_json(s, control_hello_msg(&h));
     if (n->status_text)
         session_queue_text(s, n->status_text, false); /* cluster trouble: the banner at once */
+    net_capacity_tell(n, s);
     LOGD("client %s connected (%d now)", s->client_id, (int)n->sessions.count);
 }
 
@@ -278,6 +284,7 @@ static void on_sim_wakeup(struct net *n)
     fanout_take_latest(n);
     dispatch_answers(n);
     dispatch_query_results(n);
+    net_capacity_wake(n);
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
         struct session *s = session_of(d);
         if (s->tq.count || fanout_want_write(n, s))

@@ -59,12 +59,10 @@ float *ocean_transform_dest(struct ocean_grid *g, enum ocean_transform tr)
     }
 }
 
-void ocean_combine_jacobian_rows(struct ocean_grid *g, int r0, int r1)
+void ocean_combine_jacobian(float *restrict j, const float *restrict xx, const float *restrict zz,
+                            const float *restrict xz, size_t count)
 {
-    size_t i0 = (size_t)r0 * g->n, i1 = (size_t)r1 * g->n;
-    const float *restrict xx = g->jac[0], *restrict zz = g->jac[1], *restrict xz = g->jac[2];
-    float *restrict j = g->out[OCEAN_JACOBIAN];
-    for (size_t i = i0; i < i1; i++)
+    for (size_t i = 0; i < count; i++)
         j[i] = (1.0f + xx[i]) * (1.0f + zz[i]) - xz[i] * xz[i];
 }
 
@@ -392,7 +390,7 @@ size_t ocean_memory_bytes(int n, int threads)
     size_t nh = (size_t)n / 2 + 1, modes = (size_t)n * nh, nn = (size_t)n * n;
     int tile = n / 2 < OCEAN_COL_TILE ? n / 2 : OCEAN_COL_TILE;
     int workers = threads;
-    size_t fill_floats = ocean_tile_floats(n, tile), row_floats = (size_t)2 * OCEAN_ROW_BLOCK * nh * 2;
+    size_t fill_floats = ocean_tile_floats(n, tile), row_floats = ocean_row_scratch_floats(n);
     size_t scratch = ((fill_floats > row_floats ? fill_floats : row_floats) + 15) & ~(size_t)15;
     /* The same arrays as grid_new, in the same order. */
     return modes * (4 * sizeof(float) + sizeof(double))                   /* a, b, d, e, omega */
@@ -402,7 +400,7 @@ size_t ocean_memory_bytes(int n, int threads)
          + ring_count(n) * sizeof(uint32_t)                               /* ring_m2 */
          + COL_COUNT * modes * 2 * sizeof(float)                          /* col */
          + (size_t)workers * scratch * sizeof(float)                      /* scratch */
-         + (OCEAN_FIELD_COUNT + 3) * nn * sizeof(float);                  /* out, jac */
+         + OCEAN_FIELD_COUNT * nn * sizeof(float);                        /* out */
 }
 
 static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char *err, size_t errlen)
@@ -428,16 +426,14 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
     for (int i = 0; i < COL_COUNT; i++)
         g->col[i] = zalloc(g->modes * 2 * sizeof(float), &ok);
     g->workers = opt->threads < OCEAN_MAX_THREADS ? opt->threads : OCEAN_MAX_THREADS;
-    /* Per worker: the fill's h~, lambda/k and spectrum for one tile; or
-     * two blocks of row-pass input (ROW_BLOCK x nh complex each). */
-    size_t fill_floats = ocean_tile_floats(n, g->tile), row_floats = (size_t)2 * OCEAN_ROW_BLOCK * g->nh * 2;
+    /* Per worker: the fill's h~ and spectrum for one tile; or a block of
+     * row-pass input and the block's Jacobian terms. */
+    size_t fill_floats = ocean_tile_floats(n, g->tile), row_floats = ocean_row_scratch_floats(n);
     g->scratch_floats = fill_floats > row_floats ? fill_floats : row_floats;
     g->scratch_floats = (g->scratch_floats + 15) & ~(size_t)15; /* keep every slot 64-byte aligned */
     g->scratch = zalloc((size_t)g->workers * g->scratch_floats * sizeof(float), &ok);
     for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
         g->out[i] = zalloc(nn * sizeof(float), &ok);
-    for (int i = 0; i < 3; i++)
-        g->jac[i] = zalloc(nn * sizeof(float), &ok);
     if (ok)
         ok = grid_build_rings(g);
     if (!ok) {
@@ -828,6 +824,16 @@ int ocean_reconfigure(struct ocean *o, const struct ocean_params *p, char *err, 
     ocean_commit(o, pr); /* cannot fail: prepared against o->g just now */
     ocean_prepared_free(pr);
     return 0;
+}
+
+int ocean_keep_jacobian_terms(struct ocean *o)
+{
+    struct ocean_grid *g = o->g;
+    bool ok = true;
+    for (int i = 0; i < 3; i++)
+        if (!g->jac[i])
+            g->jac[i] = zalloc((size_t)g->n * g->n * sizeof(float), &ok);
+    return ok ? 0 : -1;
 }
 
 int ocean_step(struct ocean *o, double t, unsigned fields)

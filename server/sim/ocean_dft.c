@@ -55,9 +55,16 @@ int ocean_step_dft(struct ocean *o, double t, unsigned fields)
     unsigned tm = ocean_transforms_for(fields);
     double complex *spec = malloc(nn * sizeof *spec);
     double complex *w = malloc((size_t)n * sizeof *w);
-    if (!spec || !w) {
+    /* The Jacobian's three terms: the whole fields if a test keeps them
+     * (ocean_keep_jacobian_terms), else a temporary (N <= 64 here). */
+    float *tmp = g->jac[0] ? NULL : malloc(3 * nn * sizeof *tmp);
+    float *jac[3];
+    for (int i = 0; i < 3; i++)
+        jac[i] = g->jac[0] ? g->jac[i] : tmp ? tmp + i * nn : NULL;
+    if (!spec || !w || !jac[0]) {
         free(spec);
         free(w);
+        free(tmp);
         return -1;
     }
     /* e^{i kx x} = e^{2 pi i mx ix / N}: a table indexed by mx*ix mod N. */
@@ -67,7 +74,8 @@ int ocean_step_dft(struct ocean *o, double t, unsigned fields)
         if (!(tm & (1u << tr)))
             continue;
         ocean_reference_spectrum(o, t, tr, spec);
-        float *dst = ocean_transform_dest(g, tr);
+        float *dst = tr == TR_JXX ? jac[0] : tr == TR_JZZ ? jac[1] : tr == TR_JXZ ? jac[2]
+                   : ocean_transform_dest(g, tr);
         for (int z = 0; z < n; z++) {
             for (int x = 0; x < n; x++) {
                 double complex sum = 0;
@@ -82,8 +90,9 @@ int ocean_step_dft(struct ocean *o, double t, unsigned fields)
         }
     }
     if (fields & OCEAN_FIELD_BIT(OCEAN_JACOBIAN))
-        ocean_combine_jacobian_rows(g, 0, n);
+        ocean_combine_jacobian(g->out[OCEAN_JACOBIAN], jac[0], jac[1], jac[2], nn);
     free(spec);
     free(w);
+    free(tmp);
     return 0;
 }

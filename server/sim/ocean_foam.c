@@ -40,22 +40,11 @@ double ocean_foam_threshold(double wind_speed)
     return 0.70 + 0.0035 * over;
 }
 
-struct foam_ctx {
-    struct ocean_grid *g;
-    float decay, threshold, inv_ramp;
-};
-
-/* Rows [r0, r1) of blocks of OCEAN_ROW_BLOCK rows: decay, then inject. */
-static void foam_rows(void *arg, int b0, int b1, int worker)
+void ocean_foam_samples(const struct ocean_foam_update *u, const float *restrict J, float *restrict foam,
+                        size_t count)
 {
-    (void)worker;
-    const struct foam_ctx *c = arg;
-    const size_t n = (size_t)c->g->n;
-    const size_t i0 = (size_t)b0 * OCEAN_ROW_BLOCK * n, i1 = (size_t)b1 * OCEAN_ROW_BLOCK * n;
-    const float *restrict J = c->g->out[OCEAN_JACOBIAN];
-    float *restrict foam = c->g->out[OCEAN_FOAM];
-    const float decay = c->decay, jc = c->threshold, inv = c->inv_ramp;
-    for (size_t i = i0; i < i1; i++) {
+    const float decay = u->decay, jc = u->threshold, inv = u->inv_ramp;
+    for (size_t i = 0; i < count; i++) {
         float in = (jc - J[i]) * inv;
         in = in < 0.0f ? 0.0f : in > 1.0f ? 1.0f : in;
         float old = foam[i] * decay;
@@ -63,22 +52,49 @@ static void foam_rows(void *arg, int b0, int b1, int worker)
     }
 }
 
-/* One accumulation from the Jacobian now in the grid, dt s after the last. */
-static void foam_accumulate(struct ocean *o, double dt)
+struct foam_ctx {
+    struct ocean_grid *g;
+    struct ocean_foam_update u;
+};
+
+/* Blocks [b0, b1) of OCEAN_ROW_BLOCK rows (the DFT path's separate pass). */
+static void foam_rows(void *arg, int b0, int b1, int worker)
 {
+    (void)worker;
+    const struct foam_ctx *c = arg;
+    const size_t rows = (size_t)OCEAN_ROW_BLOCK * c->g->n, i0 = (size_t)b0 * rows;
+    ocean_foam_samples(&c->u, c->g->out[OCEAN_JACOBIAN] + i0, c->g->out[OCEAN_FOAM] + i0, (size_t)(b1 - b0) * rows);
+}
+
+static struct ocean_foam_update foam_update(const struct ocean *o, double dt)
+{
+    struct ocean_foam_update u = {(float)exp(-dt / FOAM_TAU), (float)ocean_foam_threshold(o->p.wind_speed),
+                                  (float)(1.0 / FOAM_RAMP)};
+    return u;
+}
+
+/* A step on p.transform's path that also accumulates foam, dt s after the
+ * last: fused into the FFT path's row stage (the Jacobian's block is in
+ * cache), a separate pass after the DFT. */
+static int step_and_foam(struct ocean *o, double t, unsigned fields, double dt, bool fft)
+{
+    struct ocean_foam_update u = foam_update(o, dt);
+    if (fft)
+        return ocean_step_fft_foam(o, t, fields, &u);
+    if (ocean_step_dft(o, t, fields) != 0)
+        return -1;
+    struct foam_ctx c = {o->g, u};
     struct ocean_grid *g = o->g;
-    struct foam_ctx c = {g, (float)exp(-dt / FOAM_TAU), (float)ocean_foam_threshold(o->p.wind_speed),
-                         (float)(1.0 / FOAM_RAMP)};
     int threads = g->n >= OCEAN_THREADS_FROM_N ? g->workers : 1;
     ocean_parallel(o->pool, threads, g->n / OCEAN_ROW_BLOCK, foam_rows, &c);
+    return 0;
 }
 
 int ocean_step_with_foam(struct ocean *o, double t, unsigned fields)
 {
-    int (*step)(struct ocean *, double, unsigned) =
-        o->p.transform == TRANSFORM_DFT ? ocean_step_dft : ocean_step_fft;
+    bool fft = o->p.transform != TRANSFORM_DFT;
     if (!(fields & OCEAN_FIELD_BIT(OCEAN_FOAM)))
-        return step(o, t, fields);
+        return fft ? ocean_step_fft(o, t, fields) : ocean_step_dft(o, t, fields);
     fields |= OCEAN_FIELD_BIT(OCEAN_JACOBIAN);
     double dt = t - o->foam_time;
     if (!o->foam_warm || !(dt >= 0) || dt > FOAM_SPINUP_TIME) {
@@ -87,16 +103,13 @@ int ocean_step_with_foam(struct ocean *o, double t, unsigned fields)
          * cold start to FOAM_SPINUP_STEPS small steps). */
         struct ocean_grid *g = o->g;
         memset(g->out[OCEAN_FOAM], 0, (size_t)g->n * g->n * sizeof(float));
-        for (int k = FOAM_SPINUP_STEPS; k >= 1; k--) {
-            if (ocean_step_fft(o, t - k * FOAM_SPINUP_STEP, OCEAN_FIELD_BIT(OCEAN_JACOBIAN)) != 0)
+        for (int k = FOAM_SPINUP_STEPS; k >= 1; k--)
+            if (step_and_foam(o, t - k * FOAM_SPINUP_STEP, OCEAN_FIELD_BIT(OCEAN_JACOBIAN), FOAM_SPINUP_STEP, true) != 0)
                 return -1;
-            foam_accumulate(o, FOAM_SPINUP_STEP);
-        }
         dt = FOAM_SPINUP_STEP;
     }
-    if (step(o, t, fields) != 0)
+    if (step_and_foam(o, t, fields, dt, fft) != 0)
         return -1;
-    foam_accumulate(o, dt);
     o->foam_time = t;
     o->foam_warm = true;
     return 0;

@@ -73,8 +73,17 @@ struct ocean_grid {
      * is (B interleaved c2r inputs). The Nyquist column ix = N/2 is zero. */
     float *col[COL_COUNT];
     float *out[OCEAN_FIELD_COUNT];
-    float *jac[3];             /* dDx/dx, dDz/dz, dDx/dz before combining */
-    float *scratch;            /* per worker, scratch_floats each: fill tile / 2 row blocks */
+    /* dDx/dx, dDz/dz, dDx/dz before combining, whole fields: NULL unless
+     * ocean_keep_jacobian_terms (tests) asked for them. Otherwise the FFT
+     * path transforms a row block's three terms into the worker's scratch
+     * and combines them there while they are in cache (no 3 N x N arrays
+     * written and read back), and the DFT path uses a temporary. */
+    float *jac[3];
+    /* Per worker, scratch_floats each (64-byte aligned): stage 1, a fill
+     * tile (ocean_tile_floats); stage 2, one row block of kx-factored
+     * input (ROW_BLOCK x nh complex), then the block's three Jacobian
+     * terms (ROW_BLOCK x N floats each): ocean_row_scratch_floats. */
+    float *scratch;
     size_t scratch_floats;
     int workers;               /* scratch slots */
     fftwf_plan col_plan;       /* in place, `tile` contiguous N-point c2c (one thread each) */
@@ -111,6 +120,14 @@ struct ocean {
     bool foam_warm;            /* g->out[OCEAN_FOAM] holds history up to foam_time */
 };
 
+/* One foam update, from the Jacobian just computed: foam = max(foam *
+ * decay, clamp((threshold - J) * inv_ramp, 0, 1)) per sample. The FFT path
+ * applies it per row block right after the block's Jacobian (in cache). */
+struct ocean_foam_update {
+    float decay, threshold, inv_ramp;
+};
+void ocean_foam_samples(const struct ocean_foam_update *u, const float *J, float *foam, size_t count);
+
 /* Foam model constants (ocean_foam.c, docs/simulation.md "Foam"). */
 #define FOAM_TAU 3.0            /* s, e-folding time of foam after breaking */
 #define FOAM_RAMP 0.1           /* J this far below the threshold injects full foam */
@@ -129,12 +146,22 @@ extern _Atomic size_t ocean_alloc_bytes;
 /* Transforms needed for an OCEAN_FIELD_BIT mask. */
 unsigned ocean_transforms_for(unsigned fields);
 
-/* The FFT path and the brute-force path, whatever p.transform says. */
+/* The FFT path and the brute-force path, whatever p.transform says.
+ * ocean_step_fft_foam also updates the foam (fields must include the
+ * Jacobian); foam may be NULL. */
 int ocean_step_fft(struct ocean *o, double t, unsigned fields);
+int ocean_step_fft_foam(struct ocean *o, double t, unsigned fields, const struct ocean_foam_update *foam);
 int ocean_step_dft(struct ocean *o, double t, unsigned fields);
 /* Only the FFTW executes the step for these fields would run, on whatever
  * the buffers hold (benchmark). */
 void ocean_fft_only(struct ocean *o, unsigned fields);
+/* Benchmark: a step (no foam) without some of our own parts, to see what
+ * each costs: the fill (h~(k,t): phases, amplitudes), the z-pass spectra
+ * (kz and 1/k factors), the kx factors of the row pass (and the Nyquist
+ * clear), the Jacobian. All of them: ocean_fft_only. */
+enum { OCEAN_SKIP_FILL = 1, OCEAN_SKIP_SPECTRA = 2, OCEAN_SKIP_FACTORS = 4, OCEAN_SKIP_JACOBIAN = 8,
+       OCEAN_SKIP_ALL = 15 };
+void ocean_step_parts(struct ocean *o, double t, unsigned fields, unsigned skip);
 
 /* Reference spectrum of transform tr at time t over the full N x N grid,
  * out[iz*N + ix] for k = (kx(ix), kz(iz)), computed in double from the
@@ -144,8 +171,14 @@ void ocean_reference_spectrum(const struct ocean *o, double t, enum ocean_transf
 /* Time at which the phases are evaluated: t, or t wrapped into
  * [0, loop_period) so that a looping sea is exactly periodic. */
 double ocean_phase_time(const struct ocean *o, double t);
-/* out[JACOBIAN] = (1 + dDx/dx)(1 + dDz/dz) - (dDx/dz)^2 from g->jac, rows [r0, r1). */
-void ocean_combine_jacobian_rows(struct ocean_grid *g, int r0, int r1);
+/* j = (1 + dDx/dx)(1 + dDz/dz) - (dDx/dz)^2 for `count` samples. */
+void ocean_combine_jacobian(float *j, const float *xx, const float *zz, const float *xz, size_t count);
+/* Test hook: keep the three Jacobian terms as whole fields in g->jac (for
+ * ocean_transform_dest) from the next step on. 0, or -1 out of memory. */
+int ocean_keep_jacobian_terms(struct ocean *o);
+/* A stage-2 worker's scratch: floats, and where its Jacobian terms start. */
+size_t ocean_row_scratch_floats(int n);
+float *ocean_row_jacobian_terms(float *scratch, int n);
 /* Output array that transform tr lands in. */
 float *ocean_transform_dest(struct ocean_grid *g, enum ocean_transform tr);
 

@@ -67,7 +67,8 @@ struct fill_ctx {
     double t;
     unsigned cols;  /* ocean_column bits */
     unsigned tm;    /* transforms (fields) */
-    int fft_only;   /* benchmark: run the same FFTW executes, skip our own work */
+    unsigned skip;  /* benchmark: OCEAN_SKIP_* parts of our own work left out (all: FFTW only) */
+    const struct ocean_foam_update *foam; /* or NULL: no foam this step */
 };
 
 /* Which z-pass spectra a set of transforms needs. */
@@ -83,73 +84,85 @@ static unsigned columns_for(unsigned tm)
 }
 
 /* One column (fixed kx) of a z-pass spectrum, N values along kz, from h~
- * and lambda coth(kD)/k of that column; kz and constants folded in (enum ocean_column). */
-__attribute__((target_clones("avx2", "default")))
-static void column_spectrum(float *restrict out, const float *restrict hr, const float *restrict hi,
-                            const float *restrict invk, const float *restrict kz, int col, int n)
+ * (interleaved complex) and lambda coth(kD)/k of that column; kz and
+ * constants folded in (enum ocean_column). COL_H is h~ itself: the z pass
+ * transforms the h~ column in place, no copy. */
+__attribute__((target_clones("avx512f", "avx2", "default")))
+static void column_spectrum(float *restrict out, const float *restrict h, const float *restrict invk,
+                            const float *restrict kz, int col, int n)
 {
     switch (col) {
-    case COL_H: /* h~ */
-        for (int i = 0; i < n; i++) {
-            out[2 * i] = hr[i];
-            out[2 * i + 1] = hi[i];
-        }
-        break;
     case COL_KZ: /* i kz h~ = slope_z */
         for (int i = 0; i < n; i++) {
-            out[2 * i] = -kz[i] * hi[i];
-            out[2 * i + 1] = kz[i] * hr[i];
+            out[2 * i] = -kz[i] * h[2 * i + 1];
+            out[2 * i + 1] = kz[i] * h[2 * i];
         }
         break;
     case COL_INVK: /* lambda h~/k */
         for (int i = 0; i < n; i++) {
-            out[2 * i] = invk[i] * hr[i];
-            out[2 * i + 1] = invk[i] * hi[i];
+            out[2 * i] = invk[i] * h[2 * i];
+            out[2 * i + 1] = invk[i] * h[2 * i + 1];
         }
         break;
     case COL_KZINVK: /* i lambda kz h~/k = Dz */
         for (int i = 0; i < n; i++) {
             float f = kz[i] * invk[i];
-            out[2 * i] = -f * hi[i];
-            out[2 * i + 1] = f * hr[i];
+            out[2 * i] = -f * h[2 * i + 1];
+            out[2 * i + 1] = f * h[2 * i];
         }
         break;
     default: /* COL_KZ2INVK: -lambda kz^2 h~/k = dDz/dz */
         for (int i = 0; i < n; i++) {
             float f = -kz[i] * kz[i] * invk[i];
-            out[2 * i] = f * hr[i];
-            out[2 * i + 1] = f * hi[i];
+            out[2 * i] = f * h[2 * i];
+            out[2 * i + 1] = f * h[2 * i + 1];
         }
         break;
     }
 }
 
-/* A worker's fill scratch for one tile of T columns: h~ (real, imaginary),
- * column-major with column stride tile_ld floats; then the spectrum being
- * transformed, T columns of N complex, stride tile_sd. The strides are N
- * plus a cache line, so that T columns, a multiple of 4 KiB apart
- * otherwise, do not all fall into the same L1 set. */
-static size_t tile_ld(int n) { return (size_t)n + 16; }
+/* A worker's fill scratch for one tile of T columns: h~ (interleaved
+ * complex, column-major), then the spectrum being transformed, both T
+ * columns of N complex with column stride tile_sd complex: N plus a cache
+ * line, so that T columns, a multiple of 4 KiB apart otherwise, do not all
+ * fall into the same L1 set. Same layout and alignment, so col_plan runs
+ * on either (the h~ tile is COL_H's spectrum). Then the sines and cosines
+ * of one column's phases (rows 0 .. N/2, padded to 16). */
 static size_t tile_sd(int n) { return (size_t)n + 8; }
-size_t ocean_tile_floats(int n, int tile) { return (size_t)tile * (2 * tile_ld(n) + 2 * tile_sd(n)); }
-float *ocean_tile_spectrum(float *scratch, int n, int tile) { return scratch + (size_t)2 * tile * tile_ld(n); }
+static size_t phase_floats(int n) { return (size_t)n / 2 + 16; }
+size_t ocean_tile_floats(int n, int tile) { return (size_t)4 * tile * tile_sd(n) + 2 * phase_floats(n); }
+float *ocean_tile_spectrum(float *scratch, int n, int tile) { return scratch + (size_t)2 * tile * tile_sd(n); }
 int ocean_tile_dist(int n) { return (int)tile_sd(n); }
+/* Stage 2's scratch: one block of kx-factored input (B x nh complex), then
+ * the block's three Jacobian terms (B x N floats each); 64-byte aligned. */
+static size_t row_buf_floats(int n) { return ((size_t)2 * OCEAN_ROW_BLOCK * (n / 2 + 1) + 15) & ~(size_t)15; }
+size_t ocean_row_scratch_floats(int n) { return row_buf_floats(n) + (size_t)3 * OCEAN_ROW_BLOCK * n; }
+float *ocean_row_jacobian_terms(float *scratch, int n) { return scratch + row_buf_floats(n); }
 
-/* h~(k, t) down one kx column (N modes, N a multiple of 16), from its
- * column-major amplitudes (ocean_amp_col): h~ = (a c + b s) + i (d c - e s),
- * 16 modes at a time (a fixed trip count vectorises fully). */
-__attribute__((target_clones("avx2", "default")))
-static void fill_column(const float *restrict col, double t, int n, float *restrict hr, float *restrict hi)
+/* h~(k, t) down one kx column (N modes, N a multiple of 16), interleaved
+ * complex, from its column-major amplitudes (ocean_amp_col):
+ * h~ = (a c + b s) + i (d c - e s). w depends on |k| only (one value per
+ * ring, ocean.c), so rows iz and N - iz of a column have the same w, bit
+ * for bit: sin and cos are computed for rows 0 .. N/2 only (16 at a time:
+ * a fixed trip count vectorises fully) into s, c (phase_floats each), and
+ * rows N/2+1 .. N-1 use those of row N - iz. Half the phase work. */
+__attribute__((target_clones("avx512f", "avx2", "default")))
+static void fill_column(const float *restrict col, double t, int n, float *restrict h, float *restrict s,
+                        float *restrict c)
 {
     const float *a = col, *b = col + n, *d = col + 2 * (size_t)n, *e = col + 3 * (size_t)n;
     const double *omega = (const double *)(col + 5 * (size_t)n);
-    for (int i0 = 0; i0 < n; i0 += 16) {
-        float s[16], c[16];
-        sincos_row(omega + i0, t, 16, s, c);
-        for (int i = 0; i < 16; i++) {
-            hr[i0 + i] = a[i0 + i] * c[i] + b[i0 + i] * s[i];
-            hi[i0 + i] = d[i0 + i] * c[i] - e[i0 + i] * s[i];
-        }
+    const int half = n / 2;
+    for (int i0 = 0; i0 <= half; i0 += 16)
+        sincos_row(omega + i0, t, 16, s + i0, c + i0);
+    for (int i = 0; i <= half; i++) {
+        h[2 * i] = a[i] * c[i] + b[i] * s[i];
+        h[2 * i + 1] = d[i] * c[i] - e[i] * s[i];
+    }
+    for (int i = half + 1; i < n; i++) {
+        const int m = n - i; /* same |kz|, same w */
+        h[2 * i] = a[i] * c[m] + b[i] * s[m];
+        h[2 * i + 1] = d[i] * c[m] - e[i] * s[m];
     }
 }
 
@@ -162,29 +175,33 @@ static void fill_column(const float *restrict col, double t, int n, float *restr
  * col_plan (contiguous columns: ~3x faster than FFTW's strided column
  * transform over a row-major array, which copies every column in and out),
  * and stored by store_plan (FFTW's copy) in the block-major layout that the
- * row pass reads without any reshuffling. */
+ * row pass reads without any reshuffling. COL_H goes last: it is the h~
+ * tile itself, transformed in place once the others are made from it. */
 static void fill_tiles(void *arg, int t0, int t1, int worker)
 {
     const struct fill_ctx *c = arg;
     struct ocean_grid *g = c->o->g;
     const int n = g->n, T = g->tile;
-    const size_t ld = tile_ld(n), sd = tile_sd(n);
+    const size_t sd = tile_sd(n);
     const float *kz = g->kz;
-    float *scratch = g->scratch + (size_t)worker * g->scratch_floats;
-    float *hr = scratch, *hi = hr + (size_t)T * ld; /* column-major */
-    float *spec = ocean_tile_spectrum(scratch, n, T);
+    float *h = g->scratch + (size_t)worker * g->scratch_floats;
+    float *spec = ocean_tile_spectrum(h, n, T);
+    float *ps = spec + (size_t)2 * T * sd, *pc = ps + phase_floats(n);
+    static const enum ocean_column order[COL_COUNT] = {COL_KZ, COL_INVK, COL_KZINVK, COL_KZ2INVK, COL_H};
     for (int tl = t0; tl < t1; tl++) {
         const int c0 = tl * T;
-        for (int j = 0; j < T && !c->fft_only; j++)
-            fill_column(ocean_amp_col(g->ampc, n, c0 + j), c->t, n, hr + j * ld, hi + j * ld);
-        for (int k = 0; k < COL_COUNT; k++) {
+        for (int j = 0; j < T && !(c->skip & OCEAN_SKIP_FILL); j++)
+            fill_column(ocean_amp_col(g->ampc, n, c0 + j), c->t, n, h + 2 * j * sd, ps, pc);
+        for (int q = 0; q < COL_COUNT; q++) {
+            const enum ocean_column k = order[q];
             if (!(c->cols & (1u << k)))
                 continue;
-            for (int j = 0; j < T && !c->fft_only; j++)
-                column_spectrum(spec + 2 * j * sd, hr + j * ld, hi + j * ld,
+            float *z = k == COL_H ? h : spec;
+            for (int j = 0; j < T && k != COL_H && !(c->skip & OCEAN_SKIP_SPECTRA); j++)
+                column_spectrum(spec + 2 * j * sd, h + 2 * j * sd,
                                 ocean_amp_col(g->ampc, n, c0 + j) + 4 * (size_t)n, kz, k, n);
-            fftwf_execute_dft(g->col_plan, (fftwf_complex *)spec, (fftwf_complex *)spec);
-            fftwf_execute_dft(g->store_plan, (fftwf_complex *)spec,
+            fftwf_execute_dft(g->col_plan, (fftwf_complex *)z, (fftwf_complex *)z);
+            fftwf_execute_dft(g->store_plan, (fftwf_complex *)z,
                               (fftwf_complex *)(g->col[k] + 2 * (size_t)c0 * OCEAN_ROW_BLOCK));
         }
     }
@@ -195,7 +212,7 @@ enum kx_factor { KX_NONE, KX_I, KX_NEG2 };
 
 /* out = factor(kx) * in for one block of B rows (block-major, see
  * ocean_grid.col): contiguous in and out, vectorised. */
-__attribute__((target_clones("avx2", "default")))
+__attribute__((target_clones("avx2", "default"))) /* GCC's AVX-512 version of this loop is slower */
 static void block_factor(float *restrict out, const float *restrict in, enum kx_factor how,
                          const float *restrict kx, int nh)
 {
@@ -213,13 +230,39 @@ static void block_factor(float *restrict out, const float *restrict in, enum kx_
     }
 }
 
+/* A row block's Jacobian from its three terms, and with u the foam
+ * update (ocean_foam_samples) in the same pass, while J is in a register:
+ * the same float operations as ocean_combine_jacobian and
+ * ocean_foam_samples one after the other, so the same bits. */
+__attribute__((target_clones("avx512f", "avx2", "default")))
+static void jacobian_foam(float *restrict J, float *restrict foam, const float *restrict xx,
+                          const float *restrict zz, const float *restrict xz, size_t count,
+                          const struct ocean_foam_update *u)
+{
+    if (!u) {
+        for (size_t i = 0; i < count; i++)
+            J[i] = (1.0f + xx[i]) * (1.0f + zz[i]) - xz[i] * xz[i];
+        return;
+    }
+    const float decay = u->decay, jc = u->threshold, inv = u->inv_ramp;
+    for (size_t i = 0; i < count; i++) {
+        float j = (1.0f + xx[i]) * (1.0f + zz[i]) - xz[i] * xz[i];
+        J[i] = j;
+        float in = (jc - j) * inv;
+        in = in < 0.0f ? 0.0f : in > 1.0f ? 1.0f : in;
+        float old = foam[i] * decay;
+        foam[i] = old > in ? old : in;
+    }
+}
+
 /* Row stage over blocks [b0, b1) of OCEAN_ROW_BLOCK rows. A block of a
  * z-pass spectrum is contiguous and already in row_plan's input layout:
  * fields without a kx factor are transformed straight from it, last,
  * since c2r destroys its input; the others (slope_x, Dx, dDx/dz: i kx;
  * dDx/dx: -kx^2) get their factor into the worker's buffer first. The c2r
- * writes the rows straight into the output, and the Jacobian of the block
- * is combined while it is in cache. */
+ * writes the rows straight into the output, except the Jacobian's three
+ * terms: they go into the worker's scratch, and the block's Jacobian (and
+ * foam, if asked for) is made from them while they are in cache. */
 static void row_blocks(void *arg, int b0, int b1, int worker)
 {
     const struct fill_ctx *c = arg;
@@ -227,6 +270,7 @@ static void row_blocks(void *arg, int b0, int b1, int worker)
     const int n = g->n, nh = g->nh, B = OCEAN_ROW_BLOCK;
     const unsigned tm = c->tm;
     float *buf = g->scratch + (size_t)worker * g->scratch_floats;
+    float *terms = ocean_row_jacobian_terms(buf, n);
     static const struct {
         enum ocean_transform tr;
         enum ocean_column col;
@@ -237,33 +281,40 @@ static void row_blocks(void *arg, int b0, int b1, int worker)
         {TR_DZ, COL_KZINVK, KX_NONE}, {TR_JZZ, COL_KZ2INVK, KX_NONE}};
     for (int blk = b0; blk < b1; blk++) {
         const int r0 = blk * B;
+        const size_t at = (size_t)r0 * n, count = (size_t)B * n;
+        float *jac[3]; /* this block's Jacobian terms */
+        for (int k = 0; k < 3; k++)
+            jac[k] = g->jac[k] ? g->jac[k] + at : terms + k * count;
         /* The Nyquist column is zero and the fill never writes it, but the
          * previous step's direct c2r may have scribbled on it (c2r destroys
          * its input): clear it before any field of this block reads it. */
-        for (int k = 0; k < COL_COUNT && !c->fft_only; k++)
+        for (int k = 0; k < COL_COUNT && !(c->skip & OCEAN_SKIP_FACTORS); k++)
             if (c->cols & (1u << k))
                 memset(g->col[k] + 2 * ((size_t)blk * nh + nh - 1) * B, 0, 2 * B * sizeof(float));
         for (size_t q = 0; q < sizeof order / sizeof order[0]; q++) {
-            if (!(tm & (1u << order[q].tr)))
+            const enum ocean_transform tr = order[q].tr;
+            if (!(tm & (1u << tr)))
                 continue;
             float *in = g->col[order[q].col] + 2 * (size_t)blk * nh * B;
-            float *out = ocean_transform_dest(g, order[q].tr) + (size_t)r0 * n;
+            float *out = tr >= TR_JXX ? jac[tr - TR_JXX] : ocean_transform_dest(g, tr) + at;
             if (order[q].f != KX_NONE) {
-                if (!c->fft_only)
+                if (!(c->skip & OCEAN_SKIP_FACTORS))
                     block_factor(buf, in, order[q].f, g->kx, nh);
                 fftwf_execute_dft_c2r(g->row_plan, (fftwf_complex *)buf, out);
             } else {
                 fftwf_execute_dft_c2r(g->row_plan, (fftwf_complex *)in, out);
             }
         }
-        if ((tm & (1u << TR_JXX)) && !c->fft_only) /* all three Jacobian terms are there */
-            ocean_combine_jacobian_rows(g, r0, r0 + B);
+        if ((tm & (1u << TR_JXX)) && !(c->skip & OCEAN_SKIP_JACOBIAN)) { /* all three Jacobian terms are there */
+            jacobian_foam(g->out[OCEAN_JACOBIAN] + at, g->out[OCEAN_FOAM] + at, jac[0], jac[1], jac[2], count,
+                          c->foam);
+        }
     }
 }
 
 /* Both stages of a step. Stage 1 (fill + z pass) needs every row of its
  * columns, stage 2 (row pass) every column of its rows, so they are two
- * rounds on the pool. With fft_only set, exactly the FFTW executes of a
+ * rounds on the pool. With every OCEAN_SKIP_* set, exactly the FFTW executes of a
  * step run (same arrays, same threads): the benchmark's reference. */
 static void run_step(struct fill_ctx *c, int threads)
 {
@@ -279,19 +330,31 @@ static int step_threads(const struct ocean *o)
     return o->g->n >= OCEAN_THREADS_FROM_N ? o->g->workers : 1;
 }
 
-void ocean_fft_only(struct ocean *o, unsigned fields)
+void ocean_step_parts(struct ocean *o, double t, unsigned fields, unsigned skip)
 {
     unsigned tm = ocean_transforms_for(fields);
-    struct fill_ctx c = {o, 0, columns_for(tm), tm, 1};
+    struct fill_ctx c = {o, ocean_phase_time(o, t), columns_for(tm), tm, skip, NULL};
     run_step(&c, step_threads(o));
 }
 
-int ocean_step_fft(struct ocean *o, double t, unsigned fields)
+void ocean_fft_only(struct ocean *o, unsigned fields)
+{
+    ocean_step_parts(o, 0, fields, OCEAN_SKIP_ALL);
+}
+
+int ocean_step_fft_foam(struct ocean *o, double t, unsigned fields, const struct ocean_foam_update *foam)
 {
     unsigned tm = ocean_transforms_for(fields);
     if (!tm)
         return 0;
-    struct fill_ctx c = {o, ocean_phase_time(o, t), columns_for(tm), tm, 0};
+    if (foam && !(tm & (1u << TR_JXX)))
+        return -1;
+    struct fill_ctx c = {o, ocean_phase_time(o, t), columns_for(tm), tm, 0, foam};
     run_step(&c, step_threads(o));
     return 0;
+}
+
+int ocean_step_fft(struct ocean *o, double t, unsigned fields)
+{
+    return ocean_step_fft_foam(o, t, fields, NULL);
 }

@@ -87,7 +87,10 @@ class Node:
     def start(self):
         args = [ARGS.oceand, "--port", str(self.port), "--state-file", self.state_file,
                 "--web-root", os.path.join(self.tmp, "web"), "--resolution", str(N), "--tick-rate", "30",
-                "--plan-rigor", "0", "--wisdom-file", "none", "--log-level", "info"] + self.extra
+                "--plan-rigor", "0", "--wisdom-file", "none", "--log-level", "info",
+                # the old fixed cap (the default follows the machine's memory): BAD_SETS
+                # expects N = 2048 refused, not a multi-second build
+                "--max-memory-mb", "256"] + self.extra
         self.log = open(self.log_path, "ab")
         self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log, preexec_fn=_die_with_parent)
         deadline = time.time() + 20

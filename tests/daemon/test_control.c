@@ -12,6 +12,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "capacity.h"
 #include "config.h"
 #include "control.h"
 #include "log.h"
@@ -260,7 +261,7 @@ static void test_builders(void)
     params_defaults(&p);
     struct subscription sub;
     subscription_default(&sub, 30);
-    struct hello_info h = { "c1", true, &p, 3, 30, 64, &sub };
+    struct hello_info h = { "c1", true, &p, 3, 30, 64, &sub, NULL };
     char *s = control_print(control_hello_msg(&h));
     cJSON *j = cJSON_Parse(s);
     CHECK(j && cJSON_GetArraySize(cJSON_GetObjectItem(j, "schema")) == (int)param_count, "hello schema");
@@ -540,7 +541,7 @@ static void test_hello_matches_vector(void)
     params_defaults(&p);
     struct subscription sub;
     subscription_default(&sub, 30);
-    struct hello_info h = { "c7", true, &p, 12, 30, 64, &sub };
+    struct hello_info h = { "c7", true, &p, 12, 30, 64, &sub, NULL };
     cJSON *have = control_hello_msg(&h);
     strip_descriptions(want);
     strip_descriptions(have);
@@ -742,6 +743,66 @@ static void fuzz(void)
     passed++;
 }
 
+/* capacity.c: the plan of a tick (issue 15 / 16 defect 2), from a model
+ * with fixed numbers: behaviour only, no clock. */
+static void test_capacity_plan(void)
+{
+    struct cost_model m = {
+        .period_s = 1.0 / 30, .budget_s = 0.8 / 30, .n0 = 256, .step1_s = 0.001, .step6_s = 0.003,
+        .step_scale = 1, .enc_s_per_sample = 1e-9, .max_memory_mb = 256, .cores = 2,
+    };
+    int demand[LAYER_KEYS] = { 0 };
+    struct plan p;
+    const int n = 256, ts = 128, g0 = plan_group(0, 3), g2 = plan_group(2, 3);
+    for (int f = 0; f < 3; f++)
+        demand[layer_key(f, 0, 3)] = 1;           /* h, dx, dz at lod 0, 1 cm */
+    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    CHECK(!plan_degraded(&p, g0) && p.rate[g0] == 1 && p.lod[g0] == 0, "fits but degraded: lod %d rate %g", p.lod[g0], p.rate[g0]);
+    /* a sample cap below the demand: the largest group goes one LOD coarser, the small one stays */
+    demand[layer_key(0, 2, 3)] = 1;               /* height at lod 2 */
+    m.encode_budget = 3L * n * n - 1;
+    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    CHECK(p.lod[g0] == 1 && p.rate[g0] == 1 && !plan_degraded(&p, g2) && p.reason[0], "cap: lod %d rate %g, small %d",
+          p.lod[g0], p.rate[g0], plan_degraded(&p, g2));
+    /* a cap nothing fits at any LOD: rates go down, never to zero */
+    m.encode_budget = 10;
+    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    CHECK(p.rate[g0] > 0 && p.rate[g0] < 1 && p.lod[g0] > 1, "tiny cap: lod %d rate %g", p.lod[g0], p.rate[g0]);
+    /* the step alone longer than the budget: every group at a lower rate, same for all */
+    m.encode_budget = 0;
+    m.step_scale = 20;                             /* step of 3 fields: 20 * 2 ms = 40 ms > 26.7 */
+    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    CHECK(p.rate[g0] < 1 && p.rate[g0] == p.rate[g2] && p.rate[g0] >= (float)m.period_s, "step-bound: rates %g %g",
+          p.rate[g0], p.rate[g2]);
+    m.step_scale = 1;
+    /* the transient penalty (ticks the producer could not start on time) degrades the plan the
+     * same way, but the admission budget follows the measured costs only */
+    long admit_before = cost_encode_budget(&m, n);
+    m.penalty = 20;
+    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    CHECK(p.rate[g0] < 1 && p.rate[g0] == p.rate[g2], "penalty: rates %g %g", p.rate[g0], p.rate[g2]);
+    CHECK(cost_encode_budget(&m, n) == admit_before, "penalty changed the admission budget: %ld vs %ld",
+          cost_encode_budget(&m, n), admit_before);
+    m.penalty = 0; /* 0 or 1: none */
+    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    CHECK(!plan_degraded(&p, g0), "no penalty, still degraded");
+    /* admission budget: --encode-budget wins; else at least six fields at full N */
+    CHECK(cost_encode_budget(&m, n) >= 6L * n * n, "derived admission budget %ld", cost_encode_budget(&m, n));
+    m.encode_budget = 1234;
+    CHECK(cost_encode_budget(&m, n) == 1234, "--encode-budget ignored");
+    /* announcement: max_resolution is the largest N control_fits_memory accepts */
+    struct capacity_info ci;
+    capacity_info_fill(&m, n, &ci);
+    int top = 0;
+    for (int z = 16; z <= 2048; z *= 2)
+        if (control_fits_memory(z, 256))
+            top = z;
+    CHECK(ci.max_resolution == top && ci.nsizes > 0 && ci.sizes[ci.nsizes - 1].n == 2048, "max_resolution %d want %d",
+          ci.max_resolution, top);
+    for (int i = 0; i < ci.nsizes; i++)
+        CHECK(ci.sizes[i].fits_memory == control_fits_memory(ci.sizes[i].n, 256), "fits_memory of %d", ci.sizes[i].n);
+}
+
 /* Display names (PROTOCOL.md §7.1 `name`): what is accepted and refused,
  * by control_check_name and through control_parse (`name`, and `set`'s
  * optional "name"); a refused name is bad_name with the id kept. */
@@ -809,6 +870,7 @@ static void test_display_names(void)
 
 int main(void)
 {
+    test_capacity_plan();
     test_sets();
     test_subscribe();
     test_subscribe_field_lod();

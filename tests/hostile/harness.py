@@ -56,7 +56,10 @@ class Daemon:
                 "--state-file", os.path.join(self.tmp, "state.json"),
                 "--web-root", os.path.join(self.tmp, "web"),
                 "--resolution", str(resolution), "--tick-rate", str(tick_rate),
-                "--log-level", "warn"] + [str(a) for a in extra]
+                "--log-level", "warn",
+                # the old fixed memory cap (the default now follows the machine, issue 15):
+                # cases that expect N = 2048 refused do not depend on this machine's memory
+                "--max-memory-mb", "256"] + [str(a) for a in extra]
         self.log = open(self.log_path, "ab")
         self.pipe_r = None
         out = self.log

@@ -1203,6 +1203,58 @@ def subscription_churn(d, fig):
           "frames larger after the churn: demand left behind?")
 
 
+# RSS: the admitted layers are real work (~6 M samples per tick at N = 512: a frame of
+# several MB, up to three in flight, the encoders' row buffers), not a leak.
+@case(args=LIBERAL + ("--max-clients", "64"), resolution=512, rss_slack_kb=65536)
+def layer_flood(d, fig):
+    """Issue 16 defect 2 at its repro's size: 25 viewers together ask for every
+    field x LOD x bound (25 groups of six fields, 150 layers) at N = 512. The
+    subscriptions that would push the encode work past the budget the daemon
+    announces (capacity.encode_budget, derived from the tick and the encode
+    speed it measured at start) are refused with `busy` and change nothing;
+    the admitted layers fit the budget; the observer keeps its frames."""
+    fields = ["height", "dx", "dz", "slope_x", "slope_z", "jacobian"]
+    bounds = [0, 0.001, 0.005, 0.01, 0.05]
+    n = 512
+    clients = [attacker(d) for _ in range(25)]
+    hello = [t for t in clients[0][1].texts if t.get("type") == "hello"][0]
+    budget = (hello.get("capacity") or {}).get("encode_budget")
+    check(isinstance(budget, (int, float)) and budget > 0, "hello announces no encode budget: %r" % hello.get("capacity"))
+    default = hello["subscription"]
+    # What is encoded already: the observer's (and everyone's) default subscription.
+    layers = {(f, default["lod"], default["bound"]) for f in default["fields"]}
+    admitted, refused, other = 0, 0, []
+    for k, (s, r) in enumerate(clients):
+        lod, bound = k // 5, bounds[k % 5]
+        m = ask(s, r, json.dumps({"type": "subscribe", "id": "L%d" % k, "fields": fields, "lod": lod, "bound": bound}))
+        if m and m.get("type") == "subscribed":
+            admitted += 1
+            layers |= {(f, lod, bound) for f in fields}
+        elif m and m.get("type") == "error" and m.get("code") == "busy" and m.get("id") == "L%d" % k:
+            refused += 1
+            # changing nothing: the client's subscription is still the default
+            again = ask(s, r, json.dumps({"type": "subscribe", "id": "same"}))
+            sub = (again or {}).get("subscription") or {}
+            if (sub.get("lod"), sub.get("bound"), sub.get("fields")) != (default["lod"], default["bound"], default["fields"]):
+                other.append("client %d: subscription changed by a refused subscribe: %r" % (k, sub))
+        else:
+            other.append("client %d: %r" % (k, m))
+    samples = sum((n >> lod) ** 2 for (f, lod, b) in layers)
+    time.sleep(2.0)   # the observer streams on while the admitted layers are encoded
+    m = d.metrics()
+    for s, r in clients:
+        s.close()
+    fig.update(budget_samples=int(budget), admitted=admitted, refused=refused, layers=len(layers),
+               samples_per_tick=samples, refused_metric=m.get("oceand_subscriptions_refused_busy_total"))
+    log("    25 viewers x 6 fields at every LOD x bound, N=512: %d admitted (%d layers, %d samples/tick), %d refused"
+        " with busy; budget %d samples/tick" % (admitted, len(layers), samples, refused, budget))
+    check(not other, "; ".join(other[:3]))
+    check(refused > 0, "nothing refused: %d layers (%d samples per tick) admitted" % (len(layers), samples))
+    check(samples <= budget, "admitted %d samples per tick, over the announced budget %d" % (samples, budget))
+    check(m.get("oceand_subscriptions_refused_busy_total") == refused, "busy refusals in /metrics: %r, want %d"
+          % (m.get("oceand_subscriptions_refused_busy_total"), refused))
+
+
 @case()
 def http_pipeline_flood(d, fig):
     """30 keep-alive connections each pipeline 400 GET /metrics and never read:

@@ -355,6 +355,27 @@ try {
     }
   });
 
+  await check('resolutions over the memory cap are disabled in the panel (capacity)', async () => {
+    if (args.fake) return;
+    const port3 = await freePort();
+    const small = await startServer({ ...srvOpts, port: port3, extra: ['--max-memory-mb', '64', '--resolution', '64'] });
+    const p = await browser.newPage({ viewport: VIEW });
+    p.on('pageerror', (e) => pageErrors.push(e.message));
+    try {
+      await p.goto(`http://127.0.0.1:${port3}/${QUERY}`);
+      await waitFor(p, 'connected', () => window.oceand.connected && window.oceand.params !== null);
+      const opts = await p.$$eval('[data-param=resolution] select option',
+        (els) => els.map((o) => ({ n: parseInt(o.textContent, 10), disabled: o.disabled, why: o.title })));
+      const off = opts.filter((o) => o.disabled), on = opts.filter((o) => !o.disabled);
+      assert(off.length > 0 && on.length > 0, `options ${JSON.stringify(opts)}`);
+      assert(Math.min(...off.map((o) => o.n)) > Math.max(...on.map((o) => o.n)), `disabled sizes not the largest: ${JSON.stringify(opts)}`);
+      assert(off.every((o) => /memory cap/.test(o.why)), `no reason on a disabled size: ${JSON.stringify(off)}`);
+    } finally {
+      await p.close();
+      await small.stop();
+    }
+  });
+
   // Seen from above, choppy waves move patch edges sideways; where a fine patch meets a
   // coarser one the edges used to part: the sky showed through (without skirts), or the
   // skirt did (with them), as a dashed seam. ?gapprobe=1 paints sky and skirts magenta,

@@ -65,6 +65,27 @@ function buttonRow(folder, kind, items, onClick) {
   return buttons;
 }
 
+// hello/params.capacity (PROTOCOL.md §7.2): resolutions the server would refuse
+// (over its memory cap) are shown disabled with the reason, so the panel cannot
+// pick them; those that would stream degraded with the subscribed fields say so.
+export function showCapacity(ctrl, capacity, nfields) {
+  const select = ctrl?.$select, values = ctrl?._values;
+  if (!select || !values || !capacity) return;
+  const sizes = new Map((capacity.resolutions || []).map((z) => [z.n, z]));
+  values.forEach((n, i) => {
+    const opt = select.options[i], z = sizes.get(Number(n));
+    if (!opt) return;
+    const over = Number(n) > capacity.max_resolution;
+    opt.disabled = over;
+    opt.dataset.capacity = over ? 'memory' : (z && z.full_rate_fields < nfields ? 'degraded' : 'ok');
+    opt.textContent = String(n) + (over ? ' (over memory cap)' : opt.dataset.capacity === 'degraded' ? ' (degraded)' : '');
+    opt.title = over ? `the server's memory cap of ${capacity.memory_cap_mb} MB allows N ≤ ${capacity.max_resolution}`
+      : opt.dataset.capacity === 'degraded'
+        ? `about ${z.est_ms[Math.min(nfields, 6) - 1]} ms per frame with ${nfields} fields, the tick allows ${capacity.budget_ms} ms: served at a coarser LOD or lower rate`
+        : '';
+  });
+}
+
 export class Panel {
   // actions: { set(params), subscribe(sub), name(text), view: {wireframe, freeze, hour, hud}, onView(key, value) }
   constructor(actions, { compact = false } = {}) {
@@ -168,6 +189,8 @@ export class Panel {
     for (const s of hello.schema || []) this.addParam(s);
     this.buildSubscription(hello);
     this.markPreset();
+    this.capacity = hello.capacity;
+    this.refreshCapacity();
     this.note.textContent = `connected as ${hello.client_id}${this.readOnly ? ' (view only)' : ''}`;
     this.setConnected(true);
   }
@@ -237,6 +260,11 @@ export class Panel {
     if (this.subCtrls) for (const c of Object.values(this.subCtrls)) c.disable(!on);
   }
 
+  refreshCapacity() {
+    const nfields = (this.lastFields || ['height', 'dx', 'dz']).length;
+    showCapacity(this.ctrls.resolution, this.capacity, nfields);
+  }
+
   // Connection lost: the values shown are the last known ones.
   disconnected() {
     this.setConnected(false);
@@ -250,6 +278,7 @@ export class Panel {
     if (s.bound !== undefined) this.subValues.bound = s.bound;
     if (s.fields) for (const k of Object.keys(this.subValues)) if (k in this.subCtrls && k !== 'lod' && k !== 'bound') this.subValues[k] = s.fields.includes(k);
     for (const c of Object.values(this.subCtrls)) c.updateDisplay();
+    if (s.fields) { this.lastFields = s.fields; this.refreshCapacity(); }
   }
 
   // Who a change came from: "you", the changer's display name, or its id.
@@ -269,6 +298,7 @@ export class Panel {
     this.params = { ...msg.params };
     Object.assign(this.values, msg.params);
     for (const c of Object.values(this.ctrls)) c.updateDisplay();
+    if (msg.capacity) { this.capacity = msg.capacity; this.refreshCapacity(); }
     const changed = msg.changed || [];
     for (const name of changed) {
       const el = this.ctrls[name]?.domElement;

@@ -1,0 +1,186 @@
+/* capacity.c — the cost model, the plan of a tick, the announcement (capacity.h). */
+#include "capacity.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "ocean.h"
+
+static double nlogn(int n) { return (double)n * n * log2((double)(n < 2 ? 2 : n)); }
+
+static double penalty(const struct cost_model *m) { return m->penalty > 1 ? m->penalty : 1; }
+static double enc_per_sample(const struct cost_model *m) { return m->enc_s_per_sample * penalty(m); }
+
+double cost_step_s(const struct cost_model *m, int n, int nfields)
+{
+    if (nfields <= 0)
+        return 0;
+    double at_n0 = m->step1_s + (m->step6_s - m->step1_s) * (nfields - 1) / 5.0;
+    return at_n0 * nlogn(n) / nlogn(m->n0) * m->step_scale * penalty(m);
+}
+
+double cost_encode_s(const struct cost_model *m, long samples) { return (double)samples * enc_per_sample(m); }
+
+long cost_encode_budget(const struct cost_model *m, int n)
+{
+    if (m->encode_budget > 0)
+        return m->encode_budget;
+    struct cost_model measured = *m; /* admission follows the measured costs, not a transient penalty */
+    measured.penalty = 1;
+    m = &measured;
+    double left = m->budget_s - cost_step_s(m, n, OCEAN_FIELD_COUNT);
+    double derived = left > 0 && m->enc_s_per_sample > 0 ? left / m->enc_s_per_sample : 0;
+    /* At least one client's worth of every field at full resolution: any
+     * single subscription is accepted, and served degraded if it must be. */
+    double floor_samples = (double)OCEAN_FIELD_COUNT * n * n;
+    return (long)fmin(fmax(derived, floor_samples), 2e9);
+}
+
+static int popcount(unsigned v)
+{
+    int c = 0;
+    for (; v; v &= v - 1)
+        c++;
+    return c;
+}
+
+static long group_samples(const struct plan *p, int g, int n)
+{
+    long side = n >> p->lod[g];
+    return (long)popcount(p->fields[g]) * side * side;
+}
+
+static bool can_coarsen(const struct plan *p, int g, int ts) { return p->lod[g] < CTL_MAX_LOD && (ts >> (p->lod[g] + 1)) >= 1; }
+
+/* Keep plans from changing for noise: sixths of the tick rate down to a
+ * half (30 Hz: 25, 20, 15 frames/s), then 1/k, at least one frame/s. */
+static float quantize_rate(double r, double period_s)
+{
+    double q = r >= 0.5 ? floor(r * 6 + 1e-9) / 6 : 1.0 / ceil(1.0 / fmax(r, 1e-6) - 1e-9);
+    if (q < period_s)
+        q = period_s;
+    return (float)(q > 1 ? 1 : q);
+}
+
+void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS], double budget_scale,
+                   struct plan *p)
+{
+    memset(p, 0, sizeof *p);
+    unsigned all = 0;
+    for (int k = 0; k < LAYER_KEYS; k++)
+        if (demand[k] > 0) {
+            int g = plan_group(layer_key_lod(k), layer_key_bound(k));
+            p->fields[g] |= OCEAN_FIELD_BIT(layer_key_field(k));
+            all |= OCEAN_FIELD_BIT(layer_key_field(k));
+        }
+    for (int g = 0; g < PLAN_GROUPS; g++) {
+        p->lod[g] = (unsigned char)(g / CTL_BOUND_COUNT);
+        p->rate[g] = 1;
+    }
+    double budget = m->budget_s * budget_scale;
+    double step = cost_step_s(m, n, popcount(all));
+    /* What encoding may take per frame: the rest of the budget, and at least a
+     * quarter of it even when the step takes it all (then frames come less
+     * often than ticks, step 3, rather than at the coarsest LOD). */
+    double left = fmax(budget - step, budget * 0.25);
+    long cap = left > 0 && m->enc_s_per_sample > 0 ? (long)fmin(left / enc_per_sample(m), 2e9) : 0;
+    if (m->encode_budget > 0 && m->encode_budget < cap)
+        cap = m->encode_budget;
+
+    /* 1. One LOD coarser for the largest group, again and again (a quarter
+     *    of the samples each time), while the samples do not fit. */
+    long total = 0;
+    for (int g = 0; g < PLAN_GROUPS; g++)
+        total += group_samples(p, g, n);
+    const char *how = NULL;
+    while (total > cap) {
+        int worst = -1;
+        for (int g = 0; g < PLAN_GROUPS; g++)
+            if (p->fields[g] && can_coarsen(p, g, ts) && (worst < 0 || group_samples(p, g, n) > group_samples(p, worst, n)))
+                worst = g;
+        if (worst < 0)
+            break;
+        total -= group_samples(p, worst, n);
+        p->lod[worst]++;
+        total += group_samples(p, worst, n);
+        how = "coarser LOD";
+    }
+    /* 2. Still too much (every group as coarse as it goes): the largest
+     *    groups on fewer ticks. */
+    double over = (double)(total - cap);
+    for (int pass = 0; over > 0 && pass < PLAN_GROUPS; pass++) {
+        int worst = -1;
+        for (int g = 0; g < PLAN_GROUPS; g++)
+            if (p->fields[g] && p->rate[g] >= 1 && (worst < 0 || group_samples(p, g, n) > group_samples(p, worst, n)))
+                worst = g;
+        if (worst < 0)
+            break;
+        double s = (double)group_samples(p, worst, n);
+        double r = 1.0 - over / s;
+        p->rate[worst] = quantize_rate(r, m->period_s);
+        over -= s * (1.0 - p->rate[worst]);
+        how = "lower rate";
+    }
+    /* 3. The step alone does not fit: every group on fewer ticks (the frame
+     *    takes longer than a tick; the producer runs one behind the tick). */
+    double frame = step + cost_encode_s(m, total);
+    if (frame > budget && step > 0) {
+        double r = budget / frame;
+        for (int g = 0; g < PLAN_GROUPS; g++)
+            if (p->fields[g] && p->rate[g] > r)
+                p->rate[g] = quantize_rate(r, m->period_s);
+        how = "lower rate for everyone: the step alone does not fit the tick";
+    }
+    if (how)
+        snprintf(p->reason, sizeof p->reason, "%s: N=%d, %ld samples per tick wanted, budget %ld, step %.1f ms of %.1f ms",
+                 how, n, total, cap, step * 1e3, budget * 1e3);
+}
+
+bool plan_degraded(const struct plan *p, int g)
+{
+    return p->fields[g] && (p->lod[g] != g / CTL_BOUND_COUNT || p->rate[g] < 1);
+}
+
+double plan_value(const struct plan *p, int n)
+{
+    double v = 0;
+    for (int g = 0; g < PLAN_GROUPS; g++)
+        v += p->rate[g] * (double)group_samples(p, g, n);
+    return v;
+}
+
+bool plan_same(const struct plan *a, const struct plan *b)
+{
+    for (int g = 0; g < PLAN_GROUPS; g++)
+        if (a->fields[g] != b->fields[g] || a->lod[g] != b->lod[g] || a->rate[g] != b->rate[g])
+            return false;
+    return true;
+}
+
+void capacity_info_fill(const struct cost_model *m, int n, struct capacity_info *c)
+{
+    memset(c, 0, sizeof *c);
+    c->memory_cap_mb = m->max_memory_mb;
+    c->cores = m->cores;
+    c->tick_ms = m->period_s * 1e3;
+    c->budget_ms = m->budget_s * 1e3;
+    c->encode_budget = cost_encode_budget(m, n);
+    const struct param_def *d = param_find("resolution");
+    int lo = d ? (int)d->min : 16, hi = d ? (int)d->max : 2048;
+    int first = lo;
+    while (hi / first >= (1 << CAPACITY_MAX_SIZES)) /* the largest sizes, if the range is wide */
+        first *= 2;
+    for (int size = first; size <= hi && c->nsizes < CAPACITY_MAX_SIZES; size *= 2) {
+        struct capacity_size *z = &c->sizes[c->nsizes++];
+        z->n = size;
+        z->fits_memory = control_fits_memory(size, m->max_memory_mb);
+        if (z->fits_memory)
+            c->max_resolution = size;
+        for (int f = 1; f <= 6; f++) {
+            z->est_ms[f - 1] = (cost_step_s(m, size, f) + cost_encode_s(m, (long)f * size * size)) * 1e3;
+            if (z->est_ms[f - 1] <= c->budget_ms)
+                z->full_rate_fields = f;
+        }
+    }
+}

@@ -1,0 +1,72 @@
+/* capacity.c — the network side of server/capacity.h (issue 15, issue 16
+ * defect 2): the `capacity` member of hello and params, `busy` for a
+ * subscription that would push the distinct layers past the encode budget,
+ * and `degraded` to the clients whose subscription group the tick serves
+ * coarser or less often than asked (PROTOCOL.md §7). lws thread only. */
+#include "net_internal.h"
+
+#include <stdio.h>
+
+#include "capacity.h"
+#include "metrics.h"
+#include "sim_thread.h"
+
+void net_capacity_add(struct net *n, cJSON *msg)
+{
+    if (!n->sim || !msg)
+        return;
+    struct capacity_info ci;
+    sim_capacity(n->sim, &ci);
+    cJSON_AddItemToObject(msg, "capacity", control_capacity_object(&ci));
+}
+
+bool net_capacity_admit(struct net *n, struct session *s, const struct subscription *want, struct ctl_error *e)
+{
+    long need, budget;
+    if (!n->sim || sim_admit(n->sim, &s->sub, want, &need, &budget))
+        return true;
+    atomic_fetch_add(&g_metrics.refused_busy, 1);
+    e->code = "busy";
+    e->param[0] = 0;
+    snprintf(e->message, sizeof e->message,
+             "the daemon would encode %ld samples per tick with this subscription; it can encode %ld at N=%d "
+             "(choose a coarser lod, fewer fields, or what other clients already get)",
+             need, budget, n->applied.resolution);
+    return false;
+}
+
+/* `degraded` for one client: how its group is served now. */
+static void tell(struct net *n, struct session *s, const struct plan *p)
+{
+    int g = plan_group(s->sub.lod, s->sub.bound_index);
+    bool active = plan_degraded(p, g);
+    double rate = (active ? p->rate[g] : 1.0) * n->dc.tick_rate;
+    int lod = active ? p->lod[g] : s->sub.lod;
+    session_queue_json(s, control_degraded_msg(active, s->sub.lod, lod, rate, active ? p->reason : ""));
+    atomic_fetch_add(&g_metrics.degraded_sent, 1);
+}
+
+void net_capacity_tell(struct net *n, struct session *s)
+{
+    if (n->sim && n->told_gen && plan_degraded(&n->told, plan_group(s->sub.lod, s->sub.bound_index)))
+        tell(n, s, &n->told);
+}
+
+void net_capacity_wake(struct net *n)
+{
+    if (!n->sim)
+        return;
+    struct plan p;
+    uint32_t gen = sim_plan(n->sim, &p);
+    if (gen == n->told_gen)
+        return;
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
+        struct session *s = session_of(d);
+        int g = plan_group(s->sub.lod, s->sub.bound_index);
+        bool was = n->told_gen && plan_degraded(&n->told, g), is = plan_degraded(&p, g);
+        if (is ? !was || p.lod[g] != n->told.lod[g] || p.rate[g] != n->told.rate[g] : was)
+            tell(n, s, &p);
+    }
+    n->told = p;
+    n->told_gen = gen;
+}
