@@ -172,7 +172,7 @@ static void sub_keys(const struct subscription *sub, int demand[LAYER_KEYS], int
 {
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
         if (sub->fields & OCEAN_FIELD_BIT(f))
-            demand[layer_key(f, sub->lod, sub->bound_index)] += delta;
+            demand[layer_key(f, subscription_lod(sub, f), sub->bound_index)] += delta;
 }
 
 bool sim_admit(struct sim *s, const struct subscription *old, const struct subscription *want, long *need, long *budget)
