@@ -80,7 +80,7 @@ static bool begin_frame(struct session *s, struct frame *f)
             *slot = NULL;
             if (!(fields & OCEAN_FIELD_BIT(fi)))
                 continue;
-            *slot = frame_layer_cascade(f, c, fi, lod, bound_index);
+            *slot = frame_layer_cascade(f, c, fi, c == 0 ? subscription_lod(&s->sub, fi) : lod, bound_index);
             if (!*slot)
                 return false;
             nf++;
