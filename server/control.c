@@ -48,6 +48,7 @@ void subscription_default(struct subscription *s, double tick_rate)
     memset(s, 0, sizeof *s);
     s->fields = OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_DX) | OCEAN_FIELD_BIT(OCEAN_DZ);
     s->lod = 0;
+    memset(s->field_lod, -1, sizeof s->field_lod);
     s->bound_index = 3; /* 0.01 m */
     s->max_rate = tick_rate;
     s->all_tiles = true;
@@ -334,8 +335,10 @@ int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const
 }
 
 /* fields, lod and bound of a subscription (or of one cascade of it): the
- * members given replace *fields, *lod, *bound_index. */
-static int parse_layer(const cJSON *msg, unsigned *fields, int *lod, int *bound_index, struct ctl_error *e)
+ * members given replace *fields, *lod, *bound_index; field_lod (cascade 0
+ * only, else NULL) the per-field LODs. */
+static int parse_layer(const cJSON *msg, unsigned *fields, int *lod, signed char field_lod[OCEAN_FIELD_COUNT],
+                       int *bound_index, struct ctl_error *e)
 {
     const cJSON *j;
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "fields"))) {
@@ -361,6 +364,32 @@ static int parse_layer(const cJSON *msg, unsigned *fields, int *lod, int *bound_
             return fail(e, "bad_subscription", NULL, "\"lod\" must be an integer 0..%d", CTL_MAX_LOD);
         *lod = (int)j->valuedouble;
     }
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "field_lod"))) {
+        /* Per-field LOD (e.g. foam coarser than the heights); replaces the
+         * previous map, {} clears it. Fields not named follow "lod". */
+        if (!field_lod)
+            return fail(e, "bad_subscription", NULL, "\"field_lod\" is a member of the subscription, not of a cascade");
+        if (!cJSON_IsObject(j))
+            return fail(e, "bad_subscription", NULL, "\"field_lod\" must be an object {\"field\": lod}");
+        signed char map[OCEAN_FIELD_COUNT];
+        memset(map, -1, sizeof map);
+        const cJSON *f;
+        cJSON_ArrayForEach(f, j) {
+            int k = -1;
+            for (int i = 0; f->string && i < OCEAN_FIELD_COUNT; i++)
+                if (strcmp(f->string, ocean_field_name((enum ocean_field)i)) == 0)
+                    k = i;
+            if (k < 0)
+                return fail(e, "bad_subscription", NULL, "\"field_lod\": unknown field \"%.40s\"",
+                            f->string ? f->string : "?");
+            if (!cJSON_IsNumber(f) || f->valuedouble != floor(f->valuedouble) || f->valuedouble < 0 ||
+                f->valuedouble > CTL_MAX_LOD)
+                return fail(e, "bad_subscription", NULL, "\"field_lod\": the LOD of %s must be an integer 0..%d",
+                            ocean_field_name((enum ocean_field)k), CTL_MAX_LOD);
+            map[k] = (signed char)f->valuedouble;
+        }
+        memcpy(field_lod, map, sizeof map);
+    }
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "bound"))) {
         int k = -1;
         for (int i = 0; cJSON_IsNumber(j) && i < CTL_BOUND_COUNT; i++)
@@ -379,7 +408,7 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
     struct subscription tmp; /* ~4 KB: fine on the stack */
     memcpy(&tmp, cur, sizeof tmp);
     const cJSON *j;
-    if (parse_layer(msg, &tmp.fields, &tmp.lod, &tmp.bound_index, e) != 0)
+    if (parse_layer(msg, &tmp.fields, &tmp.lod, tmp.field_lod, &tmp.bound_index, e) != 0)
         return -1;
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "cascades"))) {
         /* The finer cascades 1, 2, ...: each {fields, lod, bound}, any member
@@ -393,7 +422,7 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
             if (!cJSON_IsObject(item))
                 return fail(e, "bad_subscription", NULL, "\"cascades\"[%d] must be an object {fields, lod, bound}", c - 1);
             struct cascade_sub cs = {tmp.fields, tmp.lod, tmp.bound_index};
-            if (parse_layer(item, &cs.fields, &cs.lod, &cs.bound_index, e) != 0)
+            if (parse_layer(item, &cs.fields, &cs.lod, NULL, &cs.bound_index, e) != 0)
                 return -1;
             tmp.cascade[c++] = cs;
         }
@@ -533,6 +562,13 @@ cJSON *control_subscription_object(const struct subscription *s)
         if (s->fields & OCEAN_FIELD_BIT(i))
             cJSON_AddItemToArray(f, cJSON_CreateString(ocean_field_name((enum ocean_field)i)));
     cJSON_AddNumberToObject(o, "lod", s->lod);
+    cJSON *fl = NULL; /* only when some field has its own LOD */
+    for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
+        if (s->field_lod[i] >= 0) {
+            if (!fl)
+                fl = cJSON_AddObjectToObject(o, "field_lod");
+            cJSON_AddNumberToObject(fl, ocean_field_name((enum ocean_field)i), s->field_lod[i]);
+        }
     if (s->all_tiles) {
         cJSON_AddStringToObject(o, "tiles", "all");
     } else {

@@ -11,6 +11,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "ocean.h"
 #include "params.h"
 
 #define CTL_MAX_TILES 1024            /* 32 x 32: tile coordinates are 0..31 (no duplicates kept) */
@@ -36,6 +37,7 @@ struct cascade_sub {
 struct subscription {
     unsigned fields;        /* cascade 0: OCEAN_FIELD_BIT mask, never 0 */
     int lod;                /* 0..CTL_MAX_LOD */
+    signed char field_lod[OCEAN_FIELD_COUNT]; /* cascade 0, per field: its own LOD, or -1: `lod` (subscribe "field_lod") */
     int bound_index;        /* index into ctl_bounds */
     int ncascades;          /* cascades asked for: 1 (cascade 0 only, the default) .. CTL_MAX_CASCADES */
     struct cascade_sub cascade[CTL_MAX_CASCADES]; /* [1 .. ncascades-1]: the finer cascades ([0] unused) */
@@ -74,8 +76,14 @@ struct ctl_msg {
 
 void subscription_default(struct subscription *s, double tick_rate);
 /* The fields, LOD and bound a subscription asks for cascade c: 0 fields
- * when it does not ask for that cascade. */
+ * when it does not ask for that cascade. For cascade 0, *lod is the
+ * subscription's LOD; a field may override it (subscription_lod). */
 unsigned subscription_cascade(const struct subscription *s, int c, int *lod, int *bound_index);
+/* The LOD field f of cascade 0 is sent at: its own ("field_lod") or the subscription's. */
+static inline int subscription_lod(const struct subscription *s, int f)
+{
+    return s->field_lod[f] >= 0 ? s->field_lod[f] : s->lod;
+}
 
 /* Parse one text message. On success returns 0 and fills m (free with
  * ctl_msg_free). On failure returns -1, fills e, and *id_out (if not NULL)

@@ -183,7 +183,7 @@ static void sub_keys(const struct subscription *sub, int demand[LAYER_KEYS_ALL],
         unsigned fields = subscription_cascade(sub, c, &lod, &bound_index);
         for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
             if (fields & OCEAN_FIELD_BIT(f))
-                demand[layer_key_cascade(c, f, lod, bound_index)] += delta;
+                demand[layer_key_cascade(c, f, c == 0 ? subscription_lod(sub, f) : lod, bound_index)] += delta;
     }
 }
 

@@ -32,7 +32,7 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
             break; /* edge: the cluster relays cascade 0 only */
         for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
             if (fields & OCEAN_FIELD_BIT(f)) {
-                int key = layer_key_cascade(c, f, lod, bound_index);
+                int key = layer_key_cascade(c, f, c == 0 ? subscription_lod(sub, f) : lod, bound_index);
                 if (n->cluster.demand) /* edge: the sim is elsewhere */
                     n->cluster.demand(n->cluster.user, key, delta);
                 else {

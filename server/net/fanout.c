@@ -50,7 +50,7 @@ void fanout_want_keyframes(struct net *n, struct session *s, bool want)
         return;
     for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++)
         if (s->sub.fields & OCEAN_FIELD_BIT(fi))
-            sim_want_keyframes(n->sim, layer_key(fi, s->sub.lod, s->sub.bound_index), want ? 1 : -1);
+            sim_want_keyframes(n->sim, layer_key(fi, subscription_lod(&s->sub, fi), s->sub.bound_index), want ? 1 : -1);
     s->key_wanted = want;
 }
 
@@ -120,7 +120,7 @@ static bool begin_frame(struct net *n, struct session *s, struct frame *f)
             s->layers[slot] = NULL;
             if (!(fields & OCEAN_FIELD_BIT(fi)))
                 continue;
-            const struct layer *l = frame_layer_cascade(f, c, fi, lod, bound_index);
+            const struct layer *l = frame_layer_cascade(f, c, fi, c == 0 ? subscription_lod(&s->sub, fi) : lod, bound_index);
             if (!l)
                 return false;
             if (s->sub.temporal && l->shared_off && usable >= l->need) {

@@ -123,7 +123,9 @@ static void test_subscribe(void)
     cJSON_Delete(m);
     const char *bad[] = { "{\"fields\":[]}", "{\"fields\":[\"spray\"]}", "{\"lod\":5}", "{\"lod\":1.5}",
                           "{\"bound\":0.002}", "{\"max_rate\":0}", "{\"tiles\":\"some\"}", "{\"tiles\":[[0,40]]}",
-                          "{\"tiles\":[[0]]}" };
+                          "{\"tiles\":[[0]]}", "{\"field_lod\":[2]}", "{\"field_lod\":{\"spray\":1}}",
+                          "{\"field_lod\":{\"foam\":5}}", "{\"field_lod\":{\"foam\":\"2\"}}",
+                          "{\"field_lod\":{\"foam\":0.5}}" };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         m = cJSON_Parse(bad[i]);
         out = cur;
@@ -131,6 +133,44 @@ static void test_subscribe(void)
               "%s accepted", bad[i]);
         cJSON_Delete(m);
     }
+}
+
+/* Per-field LOD: foam coarser than the heights; fields not named follow "lod";
+ * {} clears the map; subscribed shows it only when some field has its own. */
+static void test_subscribe_field_lod(void)
+{
+    struct subscription cur, out;
+    subscription_default(&cur, 30);
+    struct ctl_error e;
+    for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
+        CHECK(subscription_lod(&cur, f) == 0, "default LOD of field %d", f);
+    char *s = control_print(control_subscribed_msg(&cur, NULL));
+    CHECK(s && !strstr(s, "field_lod"), "default subscription shows field_lod: %s", s ? s : "(null)");
+    free(s);
+    cJSON *m = cJSON_Parse("{\"type\":\"subscribe\",\"fields\":[\"height\",\"foam\"],\"lod\":1,\"field_lod\":{\"foam\":3}}");
+    CHECK(control_apply_subscribe(m, &cur, &lim, &out, &e) == 0, "field_lod rejected: %s", e.message);
+    CHECK(subscription_lod(&out, OCEAN_FOAM) == 3 && subscription_lod(&out, OCEAN_HEIGHT) == 1, "foam %d height %d",
+          subscription_lod(&out, OCEAN_FOAM), subscription_lod(&out, OCEAN_HEIGHT));
+    s = control_print(control_subscribed_msg(&out, NULL));
+    CHECK(s && strstr(s, "\"field_lod\":{\"foam\":3}"), "subscribed text %s", s ? s : "(null)");
+    free(s);
+    cJSON_Delete(m);
+    /* A later lod moves the other fields, not foam; {} clears. */
+    cur = out;
+    m = cJSON_Parse("{\"type\":\"subscribe\",\"lod\":0}");
+    CHECK(control_apply_subscribe(m, &cur, &lim, &out, &e) == 0 && subscription_lod(&out, OCEAN_FOAM) == 3 &&
+              subscription_lod(&out, OCEAN_HEIGHT) == 0, "lod 0 after field_lod");
+    cJSON_Delete(m);
+    cur = out;
+    m = cJSON_Parse("{\"type\":\"subscribe\",\"field_lod\":{}}");
+    CHECK(control_apply_subscribe(m, &cur, &lim, &out, &e) == 0 && subscription_lod(&out, OCEAN_FOAM) == 0, "{} clears");
+    cJSON_Delete(m);
+    /* A refused map changes nothing. */
+    cur = out;
+    m = cJSON_Parse("{\"type\":\"subscribe\",\"lod\":2,\"field_lod\":{\"foam\":1,\"spray\":1}}");
+    CHECK(control_apply_subscribe(m, &cur, &lim, &out, &e) != 0 && strcmp(e.code, "bad_subscription") == 0 &&
+              strstr(e.message, "spray"), "unknown field in field_lod accepted");
+    cJSON_Delete(m);
 }
 
 /* D1 (docs/reliability.md): the whole message must be exactly one JSON
@@ -833,6 +873,7 @@ int main(void)
     test_capacity_plan();
     test_sets();
     test_subscribe();
+    test_subscribe_field_lod();
     test_strict_json();
     test_subscribe_dedupe();
     test_token_equal();

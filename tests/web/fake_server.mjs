@@ -130,11 +130,14 @@ export function startFakeServer({ port, webRoot, resolution }) {
         }
         if (changed.length) { version++; waves = makeWaves(params); }
         for (const c of wss.clients) {
-          if (changed.length || c === ws) send(c, { type: 'params', params, params_version: version, changed, by: ws.clientId, ...(c === ws ? { id: m.id } : {}) });
+          if (changed.length || c === ws) send(c, { type: 'params', params, params_version: version, changed, by: ws.clientId, ...(ws.name ? { by_name: ws.name } : {}), ...(c === ws ? { id: m.id } : {}) });
         }
       } else if (m.type === 'subscribe') {
         for (const k of ['fields', 'lod', 'bound', 'max_rate']) if (m[k] !== undefined) ws.sub[k] = m[k];
         send(ws, { type: 'subscribed', id: m.id, subscription: ws.sub });
+      } else if (m.type === 'name') { // no checks here: the real server's rules are in name.js and control.c
+        ws.name = String(m.name || '');
+        send(ws, { type: 'named', id: m.id, name: ws.name });
       } else if (m.type === 'ping') {
         send(ws, { type: 'pong', id: m.id, t: m.t, server_time_us: Date.now() * 1000 });
       } else send(ws, { type: 'error', code: 'unknown_type', message: m.type, id: m.id });

@@ -25,6 +25,7 @@ const SHOTS = [
   { name: 'fresh', preset: 'fresh', hour: 17.5, cam: '0,14,48', face: { yaw: 20, dist: 100, ty: 2 } },
   { name: 'gale', preset: 'gale', hour: 17.5, cam: '0,24,80', face: { yaw: 25, dist: 140, ty: 2 } },
   { name: 'storm', preset: 'storm', hour: 17.5, cam: '0,30,100', face: { yaw: 25, dist: 160, ty: 2 } },
+  { name: 'whitecaps', preset: 'storm', hour: 13, cam: '0,16,30', target: '0,0,-20' },
   { name: 'sunset', preset: 'fresh', hour: 18.4, cam: '0,12,40', face: { yaw: 8, dist: 120, ty: 4 } },
   { name: 'night', preset: 'fresh', hour: 23, cam: '0,14,48', face: { yaw: 0, dist: 120, ty: 8, moon: true } },
   { name: 'from-800m', preset: 'fresh', hour: 16, cam: '0,800,600', target: '0,0,-200' },
@@ -62,6 +63,13 @@ async function applyPreset(port, name) {
 async function take(browser, port, s, file) {
   const ctxOpts = s.device ? { ...devices[s.device] } : DESKTOP;
   const ctx = await browser.newContext(ctxOpts);
+  ctx.setDefaultTimeout(300000); // software GL on a shared machine: a 1280×720 frame may take long
+  try {
+    return await shoot(ctx, port, s, file);
+  } finally { await ctx.close().catch(() => {}); }
+}
+
+async function shoot(ctx, port, s, file) {
   const page = await ctx.newPage();
   page.setDefaultTimeout(150000); // software GL on a shared 2-core machine can take a while
   const errors = [];
@@ -83,7 +91,6 @@ async function take(browser, port, s, file) {
   await sleep(600);
   await page.screenshot({ path: file, type: 'png' });
   const view = await page.evaluate(() => window.oceand.view);
-  await ctx.close();
   if (errors.length) throw new Error(`page errors: ${errors.join('; ')}`);
   return view;
 }

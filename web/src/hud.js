@@ -72,6 +72,7 @@ export class Hud {
       `stream   ${f(s.framesPerSec, 1)} frames/s  ${f(s.kBps, 0)} kB/s\n` +
       `latency  ${f(s.latencyMs, 0)} ms   dropped ${s.dropped}\n` +
       `decode   ${f(s.decodeMs, 2)} ms  upload ${f(s.uploadMs, 2)} ms\n` +
-      `N ${st.n ?? '–'}  lod ${st.lod ?? '–'}  params v${st.paramsVersion ?? '–'}  seq ${st.lastSeq ?? '–'}` + err;
+      `N ${st.n ?? '–'}  lod ${st.lod ?? '–'}  foam ${st.foamLod === null || st.foamLod === undefined ? 'from folds' : `lod ${st.foamLod}`}\n` +
+      `params v${st.paramsVersion ?? '–'}  seq ${st.lastSeq ?? '–'}` + err;
   }
 }

@@ -48,6 +48,7 @@ const st = {
   connected: false, connectionState: 'idle', clientId: null, role: null,
   framesReceived: 0, lastSeq: null, paramsVersion: null, params: null,
   rendered: 0, n: null, lod: null, frameParamsVersion: null, lastError: null, serverError: null,
+  name: null, subscription: null, foamLod: null, foamM: 0,
   clusterState: null, // edge's {"type":"status"}: 'ok', 'sim_unavailable', 'nats_unavailable'
   referenceErrors: 0, resyncs: 0, // temporal: predicted frames without their references, and resubscriptions
   localDrops: 0,   // temporal: frames dropped here because the worker was MAX_QUEUED behind (breaks the chain)
@@ -75,6 +76,19 @@ let lastResync = -Infinity;
 // Asked for always: the server leaves out cascades that are not in force. ?cascades=0: none.
 const CASCADE_SUB = [1, 2, 3].map(() => ({ fields: ['height'], lod: 1, bound: 0.001 }));
 const useCascades = query.get('cascades') !== '0';
+// Foam: the server's shared `foam` field, at a coarse LOD of its own (a 64×64 grid for
+// any N: 1-5 % more bytes, bench/foam_bytes.py). ?foam=0: don't ask (the shader then
+// makes foam from the Jacobian, as it does with a server that has no foam field).
+const wantFoam = query.get('foam') !== '0';
+const foamLodFor = (n) => Math.max(0, Math.min(4, Math.round(Math.log2((n || 256) / 64))));
+function foamSubscription(hello, n) {
+  if (!wantFoam || !(hello.fields || []).includes('foam')) return null;
+  const field_lod = { foam: foamLodFor(n) };
+  if (wantedSub.fields) return { field_lod }; // the developer panel chose the fields: keep them
+  const fields = hello.subscription?.fields || ['height', 'dx', 'dz'];
+  return { fields: fields.includes('foam') ? fields : [...fields, 'foam'], field_lod };
+}
+let lastHello = null;
 
 const conn = new Connection(serverUrl(), {
   onState(state, detail) {
@@ -90,24 +104,40 @@ const conn = new Connection(serverUrl(), {
     if (probe.onMessage(msg)) return; // the buoy marker's probe/query answers (probe.js)
     switch (msg.type) {
       case 'hello':
-        st.clientId = msg.client_id; st.role = msg.role;
+        st.clientId = msg.client_id; st.role = msg.role; st.name = null;
         st.lastSeq = null; // a new session: seq gaps across a reconnect are not drops
         worker.postMessage({ type: 'reset' }); // its references belong to the old session
         st.params = msg.params; st.paramsVersion = msg.params_version;
         panel.build(msg);
         if (msg.subscription) panel.subscribed(msg.subscription);
-        // After a reconnect, ask again for what the user had chosen; and the finer
-        // cascades, where the server has them (hello.cascade_patch_sizes).
-        if (Object.keys(wantedSub).length || (msg.cascade_patch_sizes && useCascades)) {
-          conn.send({ type: 'subscribe', ...(msg.cascade_patch_sizes && useCascades ? { cascades: CASCADE_SUB } : {}), ...wantedSub });
+        if (panel.me.name) conn.send({ type: 'name', name: panel.me.name }); // our display name, every session
+        ocean.setWind(msg.params?.wind_speed, msg.params?.wind_direction);
+        lastHello = msg;
+        // After a reconnect, ask again for what the user had chosen; the finer cascades,
+        // where the server has them (hello.cascade_patch_sizes); and the foam field.
+        {
+          const foam = foamSubscription(msg, msg.params?.resolution);
+          const casc = msg.cascade_patch_sizes && useCascades ? { cascades: CASCADE_SUB } : null;
+          if (Object.keys(wantedSub).length || foam || casc) conn.send({ type: 'subscribe', ...(casc || {}), ...wantedSub, ...(foam || {}) });
         }
         hud.message('');
         break;
       case 'params':
         st.params = msg.params; st.paramsVersion = msg.params_version;
         panel.update(msg);
+        ocean.setWind(msg.params?.wind_speed, msg.params?.wind_direction);
+        // A new N: keep the foam grid at about 64×64.
+        if ((msg.changed || []).includes('resolution') && lastHello) {
+          const foam = foamSubscription(lastHello, msg.params.resolution);
+          if (foam) conn.send({ type: 'subscribe', field_lod: foam.field_lod });
+        }
+        break;
+      case 'named': // our display name as the server now has it
+        st.name = msg.name;
+        panel.named(msg.name);
         break;
       case 'subscribed':
+        st.subscription = msg.subscription || msg;
         panel.subscribed(msg.subscription || msg);
         break;
       case 'status': // cluster edge: the simulation behind it is unavailable (or back); the socket stays open
@@ -142,6 +172,7 @@ const probe = new ProbeMarker({ scene: ocean.scene, camera, canvas, send: (m) =>
 
 const panel = new Panel({
   set: (params) => conn.send({ type: 'set', params }),
+  name: (name) => conn.send({ type: 'name', name }),
   subscribe: (sub) => { Object.assign(wantedSub, sub); conn.send({ type: 'subscribe', ...sub }); },
   view,
   onView(key, v) {
@@ -202,6 +233,7 @@ function recycle(f) {
   if (f.disp) buffers.push({ buffer: f.disp.buffer, channels: 4 });
   if (f.slope) buffers.push({ buffer: f.slope.buffer, channels: 2 });
   for (const c of f.fine || []) buffers.push({ buffer: c.disp.buffer, channels: 4 });
+  if (f.foam) buffers.push({ buffer: f.foam.buffer, channels: 1 });
   worker.postMessage({ type: 'recycle', buffers }, buffers.map((b) => b.buffer));
 }
 
@@ -223,10 +255,11 @@ function frameLoop() {
     const { uploadMs, released } = ocean.setFrame(f, now, bench);
     stats.uploadMs = uploadMs;
     if (bench && timings.decode.length < 10000) { timings.decode.push(f.decodeMs); timings.assemble.push(f.assembleMs); timings.upload.push(uploadMs); }
-    const buffers = released.map((a) => ({ buffer: a.buffer, channels: a.length === f.m * f.m * 2 ? 2 : 4 }));
+    const buffers = released.map((a) => ({ buffer: a.buffer, channels: a.length === f.m * f.m * 4 ? 4 : a.length === f.m * f.m * 2 ? 2 : 1 }));
     for (const a of ocean.setCascades(f.fine)) buffers.push({ buffer: a.buffer, channels: 4 });
     worker.postMessage({ type: 'recycle', buffers }, buffers.map((b) => b.buffer));
     st.n = f.header.n; st.lod = f.lod; st.frameParamsVersion = f.header.paramsVersion;
+    st.foamLod = f.foam ? f.foamLod : null; st.foamM = f.foam ? f.fm : 0;
     // Latency: server encode time to the frame reaching the screen (clocks of one machine, or NTP).
     stats.latencyMs = (performance.timeOrigin + now) - f.header.serverTimeUs / 1000;
   }
@@ -253,6 +286,10 @@ window.oceand = Object.freeze({
   get params() { return snapshot(st.params); },
   get rendered() { return st.rendered; },
   get clientId() { return st.clientId; },
+  get name() { return st.name; },  // our display name in force on the server (null: none yet)
+  get subscription() { return snapshot(st.subscription); },
+  // Where the foam drawn comes from: the server's field (at lod, F×F) or the Jacobian.
+  get foam() { return snapshot({ source: ocean.uniforms.uFoamField.value ? 'field' : 'jacobian', lod: st.foamLod, size: st.foamM }); },
   get wireframe() { return ocean.wireframe; },
   get view() { return snapshot({ hour: view.hour, hud: hud.visible, compact, sky: sky.state }); },
   get camera() { return snapshot({ position: camera.position.toArray(), target: controls.target.toArray() }); },

@@ -96,6 +96,9 @@ export class Ocean {
       uCPatch: { value: new THREE.Vector3(1, 1, 1) }, uCTexel: { value: new THREE.Vector3(1, 1, 1) },
       uCOn: { value: new THREE.Vector3(0, 0, 0) },
       uMinCell: { value: 1 }, uLodPixel: { value: this.lodPixel },
+      // Foam (shaders.js FOAM): the server's field, two frames like the displacement.
+      uFoamA: { value: null }, uFoamB: { value: null }, uFoamField: { value: 0 }, uFoamTexel: { value: 1 },
+      uFoamWind: { value: new THREE.Vector2(1, 0) }, uFoamWindSpeed: { value: 10 },
     };
     this.material = new THREE.ShaderMaterial({
       uniforms: this.uniforms, vertexShader: waterVertex, fragmentShader: waterFragment,
@@ -118,6 +121,8 @@ export class Ocean {
     this.disp = [null, null];
     this.slope = [null, null];
     this.cascades = [null, null, null, null]; // [c] = { m, tex: [A, B] } for cascades 1..3
+    this.foam = [null, null]; // F×F single-channel float, F = N >> foam LOD
+    this.foamM = 0;
   }
 
   // The finer cascades of a frame (worker.js assembleCascades): each its own pair of
@@ -154,6 +159,34 @@ export class Ocean {
     return this.blankTex;
   }
 
+  // Wind of the shared sea (params): the foam streaks follow it.
+  setWind(speed, directionDeg) {
+    const a = (directionDeg || 0) * Math.PI / 180;
+    this.uniforms.uFoamWind.value.set(Math.cos(a), Math.sin(a));
+    this.uniforms.uFoamWindSpeed.value = speed ?? 10;
+  }
+
+  // The foam field of a frame (or none: the shader falls back to the Jacobian).
+  setFoam(f, released) {
+    const u = this.uniforms;
+    if (!f.foam) { u.uFoamField.value = 0; return; }
+    const fresh = f.fm !== this.foamM || !this.foam[0];
+    if (fresh) {
+      for (const t of this.foam) if (t) t.dispose();
+      this.foam = [0, 1].map(() => floatTexture(new Float32Array(f.fm * f.fm), f.fm, THREE.RedFormat));
+      this.foamM = f.fm;
+    }
+    this.foam.reverse();
+    released.push(this.foam[1].image.data);
+    this.foam[1].image.data = f.foam;
+    this.foam[1].needsUpdate = true;
+    this.renderer.initTexture(this.foam[1]);
+    if (fresh) { this.foam[0].image.data = f.foam.slice(); this.foam[0].needsUpdate = true; }
+    u.uFoamA.value = this.foam[0]; u.uFoamB.value = this.foam[1];
+    u.uFoamTexel.value = 1 / f.fm;
+    u.uFoamField.value = 1;
+  }
+
   set wireframe(on) { this.material.wireframe = on; }
   get wireframe() { return this.material.wireframe; }
 
@@ -178,6 +211,7 @@ export class Ocean {
       this.slope[1].needsUpdate = true;
       this.renderer.initTexture(this.slope[1]);
     }
+    this.setFoam(f, released);
     if (sync) this.renderer.getContext().finish();
     const uploadMs = performance.now() - t0;
     if (!this.hasData) { // first frame: both slots hold it, no blend from zeros

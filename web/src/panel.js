@@ -7,6 +7,7 @@
 // (closed: transform, wireframe, freeze, the subscription).
 import GUI from 'lil-gui';
 import { SEA_PRESETS, VIEW_PRESETS, matchSeaPreset } from './presets.js';
+import { checkName, tidyName, storedName, storeName, NAME_MAX_CHARS } from './name.js';
 
 // Fallback labels and groups for the parameters of today's schema.
 export const PARAM_INFO = {
@@ -86,7 +87,7 @@ export function showCapacity(ctrl, capacity, nfields) {
 }
 
 export class Panel {
-  // actions: { set(params), subscribe(sub), view: {wireframe, freeze, hour, hud}, onView(key, value) }
+  // actions: { set(params), subscribe(sub), name(text), view: {wireframe, freeze, hour, hud}, onView(key, value) }
   constructor(actions, { compact = false } = {}) {
     this.actions = actions;
     this.gui = new GUI({ title: 'oceand' });
@@ -104,6 +105,19 @@ export class Panel {
     this.note.dataset.ui = 'last-change';
     this.note.textContent = 'waiting for the server…';
     this.gui.$children.prepend(this.note);
+
+    // Your display name: shown to others with your changes; kept in localStorage and
+    // sent on every connect. Checked here as the server does (name.js).
+    this.me = { name: storedName() };
+    this.nameCtrl = this.gui.add(this.me, 'name').name('Your name');
+    this.nameCtrl.domElement.dataset.ui = 'name';
+    this.nameCtrl.domElement.title = `shown to others with your changes (at most ${NAME_MAX_CHARS} characters, no markup)`;
+    this.nameCtrl.$input.maxLength = 2 * NAME_MAX_CHARS; // UTF-16 units; checkName counts characters
+    this.nameCtrl.$input.placeholder = 'anonymous';
+    this.nameCtrl.$input.autocomplete = 'nickname';
+    this.nameCtrl.onFinishChange((v) => this.setName(v));
+    this.note.after(this.nameCtrl.domElement);
+    this.serverName = null;    // the name in force on the server (named), null before
 
     // Sea: presets first; the parameters are added on hello.
     this.folders.sea = this.gui.addFolder('Sea');
@@ -130,6 +144,27 @@ export class Panel {
     for (const [k, c] of Object.entries(this.viewCtrls)) c.domElement.dataset.ui = k;
     this.paramFolders = [];    // per-hello sub-folders to destroy on the next hello
     this.setConnected(false);
+  }
+
+  // The field's text: tidy, check, store and send (or say what is wrong).
+  setName(v) {
+    const name = tidyName(v);
+    const why = checkName(name);
+    if (why) {
+      this.note.textContent = `name not set: ${why}`;
+      this.nameCtrl.domElement.classList.add('oc-invalid');
+      return;
+    }
+    this.nameCtrl.domElement.classList.remove('oc-invalid');
+    this.me.name = name;
+    this.nameCtrl.updateDisplay();
+    storeName(name);
+    if (this.connected) this.actions.name(name);
+  }
+  // The server's answer (named): the name now in force.
+  named(name) {
+    this.serverName = name;
+    this.note.textContent = name ? `you are ${name} (${this.myId})` : `connected as ${this.myId}`;
   }
 
   setHour(h) {

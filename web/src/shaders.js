@@ -183,13 +183,121 @@ void main() {
   gl_Position = projectionMatrix * viewMatrix * vec4(p, 1.0);
 }`;
 
+// Foam (whitecaps), kept apart from the rest of the water shading. Coverage comes from
+// the server's shared `foam` field (0..1, field 6, usually at a coarser LOD than the
+// surface; two frames mixed by uMix like the displacement), or, when the field is not
+// streamed, from the Jacobian as before. Detail is procedural, in world metres on the
+// undisplaced (Lagrangian) points, so it rides the orbital motion with the water:
+// a two-octave value noise erodes the coverage (fresh foam nearly solid, fading foam
+// breaks up into lace instead of turning grey), cells of a Worley noise punch bubbles
+// into it, and from about 12 m/s the pattern is stretched along the wind into streaks
+// (Beaufort 7+: "foam blown in streaks along the direction of the wind"). Octaves
+// finer than the pixel footprint are replaced by their mean, so it does not sparkle.
+const FOAM = /* glsl */`
+uniform sampler2D uFoamA;
+uniform sampler2D uFoamB;
+uniform float uFoamField;    // 1: the server's foam field is streamed; 0: from the Jacobian
+uniform float uFoamTexel;    // 1 / foam texture size
+uniform vec2 uFoamWind;      // unit vector the wind blows toward (x, z)
+uniform float uFoamWindSpeed; // m/s
+uniform float uFoam;         // overall strength (1)
+float foamHash(vec2 p) {     // Hoskins' hash without sine: stable for large coordinates
+  vec3 p3 = fract(vec3(p.xyx) * 0.1031);
+  p3 += dot(p3, p3.yzx + 33.33);
+  return fract((p3.x + p3.y) * p3.z);
+}
+float foamValueNoise(vec2 p) {
+  vec2 i = floor(p), f = fract(p);
+  f = f * f * (3.0 - 2.0 * f);
+  return mix(mix(foamHash(i), foamHash(i + vec2(1.0, 0.0)), f.x),
+             mix(foamHash(i + vec2(0.0, 1.0)), foamHash(i + vec2(1.0)), f.x), f.y);
+}
+// Worley noise: (F1, F2), distances to the nearest and second-nearest random point.
+vec2 foamCells(vec2 p) {
+  vec2 i = floor(p), f = fract(p);
+  vec2 d = vec2(8.0);
+  for (int y = -1; y <= 1; y++) for (int x = -1; x <= 1; x++) {
+    vec2 o = vec2(float(x), float(y));
+    vec2 r = o + vec2(foamHash(i + o), foamHash(i + o + 17.3)) - f;
+    float q = dot(r, r);
+    d = q < d.x ? vec2(q, d.x) : vec2(d.x, min(d.y, q));
+  }
+  return sqrt(d);
+}
+// Octave at scale s metres, faded to its mean where a pixel covers more than s.
+float foamOctave(vec2 q, float s, float px) {
+  return mix(foamValueNoise(q / s), 0.5, smoothstep(0.25 * s, s, px));
+}
+float foamFieldAt(vec2 xz) {
+  vec2 uv = xz / uPatch + 0.5 * uFoamTexel;
+  return mix(textureLod(uFoamA, uv, 0.0).r, textureLod(uFoamB, uv, 0.0).r, uMix);
+}
+// The field seen far away: read at the hex-tiled offsets of hexSample (same lattice),
+// so whitecaps do not print the patch lattice from above.
+float foamFieldHex(vec2 xz) {
+  vec2 uv = xz / (0.8 * uPatch) * 3.4641016;
+  vec2 sk = mat2(1.0, 0.0, -0.57735027, 1.15470054) * uv;
+  vec2 id = floor(sk);
+  vec3 t = vec3(fract(sk), 0.0);
+  t.z = 1.0 - t.x - t.y;
+  vec3 w; vec2 v1, v2, v3;
+  if (t.z > 0.0) { w = vec3(t.z, t.y, t.x); v1 = id; v2 = id + vec2(0.0, 1.0); v3 = id + vec2(1.0, 0.0); }
+  else { w = vec3(-t.z, 1.0 - t.y, 1.0 - t.x); v1 = id + vec2(1.0); v2 = id + vec2(1.0, 0.0); v3 = id + vec2(0.0, 1.0); }
+  float f = w.x * foamFieldAt(xz + hexHash(v1) * uPatch) + w.y * foamFieldAt(xz + hexHash(v2) * uPatch)
+          + w.z * foamFieldAt(xz + hexHash(v3) * uPatch);
+  return f / max(w.x + w.y + w.z, 1e-3);
+}
+// Coverage 0..1 at xz: the server's field, or the Jacobian (folds) without it.
+float foamCover(vec2 xz, float jac, float hex) {
+  if (uFoamField < 0.5) return smoothstep(0.7, 0.25, jac);
+  float f = foamFieldAt(xz);
+  if (hex > 0.0) f = mix(f, foamFieldHex(xz), hex);
+  return clamp(f, 0.0, 1.0);
+}
+// How much of the pixel is foam (0..1), with texture; px = pixel footprint in metres.
+// Fresh foam (cover near 1) is nearly solid with bubbles; as it fades it shrinks to the
+// edges of Worley cells, the marbled network left behind a breaker, then to thin threads.
+float foamAmount(vec2 xz, float cover, float px) {
+  if (cover < 0.01) return 0.0;
+  vec2 w = uFoamWind, across = vec2(-w.y, w.x);
+  float streak = 1.0 + 3.0 * smoothstep(12.0, 24.0, uFoamWindSpeed);  // elongation along the wind
+  vec2 q = vec2(dot(xz, w) / streak, dot(xz, across));
+  // Patchiness: coverage varies over metres, so edges are ragged, not the field's bilinear blobs.
+  float n = foamOctave(q, 3.0, px) * 0.65 + foamOctave(q + 41.7, 0.9, px) * 0.35;
+  float cv = clamp(cover * (0.6 + 0.8 * n), 0.0, 1.0);
+  vec2 warp = vec2(foamOctave(q + 7.1, 1.1, px), foamOctave(q + 93.2, 1.1, px)) - 0.5;
+  vec2 cell = foamCells(q / 0.55 + 1.6 * warp);
+  float edge = cell.y - cell.x;                        // 0 on the network's lines
+  float t = 0.04 + 0.9 * smoothstep(0.3, 0.85, cv);    // line half-width grows with coverage
+  float aa = 0.05 + 0.8 * px;
+  float lace = 1.0 - smoothstep(t - aa, t + aa, edge);
+  // Fine bubbles in the dense part.
+  float bub = mix(foamCells(q / 0.2).x, 0.6, smoothstep(0.03, 0.2, px));
+  float a = lace * mix(1.0, 0.6 + 0.4 * smoothstep(0.1, 0.5, bub), smoothstep(0.4, 0.9, cv));
+  // Old foam is thin and torn: broken threads that let the water through.
+  float tear = smoothstep(0.42, 0.62, foamOctave(q * vec2(0.6, 1.4) + 17.9, 1.6, px));
+  a *= smoothstep(0.1, 0.3, cv) * mix(0.4 * tear, 1.0, smoothstep(0.3, 0.65, cv));
+  // Far away the pattern is below a pixel: what is left is about its mean.
+  float far = 0.8 * smoothstep(0.3, 0.8, cover) + 0.12 * smoothstep(0.05, 0.3, cover);
+  return mix(a, far, smoothstep(0.8, 4.0, px));
+}
+
+// Shade foam over the water colour c; light = what lights the water body.
+vec3 foamShade(vec3 c, vec2 xz, float jac, float hex, vec3 light, float px) {
+  float a = foamAmount(xz, foamCover(xz, jac, hex), px) * uFoam;
+  // Thick foam is a bright diffuse white; thin foam lets the water through, a little green-blue.
+  vec3 white = vec3(0.84, 0.88, 0.90) * light * 0.92;
+  return mix(c, mix(white * vec3(0.85, 0.95, 0.97), white, a), a * 0.95);
+}
+`;
+
 export const waterFragment = /* glsl */`
 ${SKY}
 ${SAMPLE}
 ${CASCADES}
 uniform sampler2D uSlopeA;
 uniform sampler2D uSlopeB;
-uniform float uHasSlope, uHasJac, uFogDensity, uFoam;
+uniform float uHasSlope, uHasJac, uFogDensity;
 uniform float uHexNear, uHexFar; // metres: from periodic normals to hex-tiled ones
 uniform vec3 uDeep, uScatter;
 varying vec3 vWorld;
@@ -230,6 +338,7 @@ vec3 hexSample(vec2 xz, float e) {
   vec3 s = w.x * farSample(o1, e) + w.y * farSample(o2, e) + w.z * farSample(o3, e);
   return s / max(length(w), 1e-3);   // (slope x, slope z, height)
 }
+${FOAM}
 
 void main() {
   vec2 xz = vGround;
@@ -286,9 +395,8 @@ void main() {
   vec3 H = normalize(L + V);
   float shin = mix(900.0, 140.0, clamp(dist / 2500.0, 0.0, 1.0));
   c += uSunColor * pow(max(dot(n, H), 0.0), shin) * (shin / 60.0) * F * 1.6 * step(0.0, L.y);
-  // Foam where the surface folds.
-  float foam = smoothstep(0.7, 0.25, jac) * 0.9 * uFoam;
-  c = mix(c, vec3(0.82, 0.86, 0.88) * light * 0.9, foam);
+  // Foam: the server's shared field (or the folds), with texture (FOAM above).
+  c = foamShade(c, xz, jac, hex, light, max(fw.x, fw.y));
   // Aerial perspective into the horizon colour.
   float fog = 1.0 - exp(-dist * uFogDensity);
   // The haze takes the horizon's colour in the direction of view near the horizon,

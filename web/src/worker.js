@@ -2,6 +2,7 @@
 // loop never decodes. Frame tiles are assembled into M×M textures (M = N >> lod):
 //   disp  RGBA float32: (dx, height, dz, jacobian)  — jacobian 1 when not streamed
 //   slope RG   float32: (slope_x, slope_z)          — only when slopes are streamed
+//   foam  R    float32: server foam 0..1, F×F at its own LOD (F = N >> foamLod) — only when streamed
 // Output buffers are transferred to the main thread, which hands them back for
 // reuse (no 4 MB allocation per frame at N=512).
 import { inflateSync } from 'fflate';
@@ -12,7 +13,7 @@ import { decodeFrame, setInflateRaw, DecoderState } from '../../proto/js/oc_deco
 setInflateRaw((src, out) => inflateSync(src, { out }));
 
 const CHANNEL = { dx: [0, 4], height: [1, 4], dz: [2, 4], jacobian: [3, 4], slope_x: [0, 2], slope_z: [1, 2] };
-const pool = { 4: [], 2: [] }; // recycled ArrayBuffers by channel count
+const pool = { 4: [], 2: [], 1: [] }; // recycled ArrayBuffers by channel count
 
 function take(channels, count) {
   const list = pool[channels];
@@ -69,7 +70,13 @@ async function handle(msg, superseded) {
   const t1 = performance.now();
   const h = frame.header;
   const base = frame.tiles.filter((t) => !t.cascade);   // cascade 0 (tile flags 0)
-  const lod = base.length ? base[0].lod : 0;
+  // The surface's LOD; foam may come at a coarser one of its own (subscribe field_lod).
+  const surfTile = base.find((t) => t.fieldName !== 'foam');
+  const lod = surfTile ? surfTile.lod : (base.length ? base[0].lod : 0);
+  const foamTile = base.find((t) => t.fieldName === 'foam');
+  const foamLod = foamTile ? foamTile.lod : null;
+  const fm = foamTile ? h.n >> foamLod : 0;
+  const foam = foamTile ? take(1, fm * fm) : null;
   const m = h.n >> lod;
   const count = m * m;
   const present = {};
@@ -79,6 +86,7 @@ async function handle(msg, superseded) {
   const slope = (present.slope_x || present.slope_z) ? take(2, count) : null;
 
   for (const t of base) {
+    if (t.fieldName === 'foam' && t.lod === foamLod) { placeFoam(t, h, foam, fm); continue; }
     const ch = CHANNEL[t.fieldName];
     if (!ch || t.lod !== lod) continue;
     const [c, stride] = ch;
@@ -98,8 +106,9 @@ async function handle(msg, superseded) {
   const transfer = [disp.buffer];
   if (slope) transfer.push(slope.buffer);
   for (const c of fine) transfer.push(c.disp.buffer);
+  if (foam) transfer.push(foam.buffer);
   self.postMessage({
-    type: 'frame', header: h, lod, m, present, disp, slope, fine, decodeMs, assembleMs, bytes: msg.buf.byteLength,
+    type: 'frame', header: h, lod, m, present, disp, slope, fine, foam, foamLod, fm, decodeMs, assembleMs, bytes: msg.buf.byteLength,
   }, transfer);
 }
 
@@ -127,4 +136,10 @@ function assembleCascades(frame) {
     out.push({ c, m, patch: h.patchSize / CASCADE_RATIO ** c, disp });
   }
   return out;
+}
+
+// A foam tile into the F×F foam array (one channel).
+function placeFoam(t, h, dst, fm) {
+  const step = h.tileSize >> t.lod, x0 = t.tileX * step, z0 = t.tileZ * step, s = t.samples;
+  for (let j = 0; j < t.height; j++) dst.set(s.subarray(j * t.width, (j + 1) * t.width), (z0 + j) * fm + x0);
 }
