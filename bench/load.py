@@ -4,6 +4,8 @@ on loopback. Prints one JSON line per run:
   {"bench":"load","N":256,"clients":200,"fps_median":..,"fps_min":..,"delivered":..,
    "lat_p50_ms":..,"lat_p99_ms":..,"set_latency_ticks_p99":..,"daemon_cpu":..,"rss_mb":..,"overruns":..}
 delivered = share of the frames the daemon made in the window that reached the worst client.
+Clients subscribe with "temporal": true (codec 3, as the web client does) unless --intra;
+mbytes_per_s is all clients together, mbytes_per_s_per_client the mean per client.
 
     /usr/bin/python3 bench/load.py [--runs 256:200,512:100] [--window 10]
     /usr/bin/python3 bench/load.py --capacity      # the issue-15 capacity table (make bench-capacity)
@@ -91,8 +93,10 @@ def run(args, n, k, fields=None):
                 break
             except OSError:
                 time.sleep(0.05)
-        sub = [args.subscribe] if args.subscribe else \
-            [json.dumps({"type": "subscribe", "fields": fields}, separators=(",", ":"))] if fields else []
+        sub = {"type": "subscribe", "temporal": not args.intra}   # temporal: as the web client does
+        if fields:
+            sub["fields"] = fields
+        sub = [args.subscribe] if args.subscribe else [json.dumps(sub, separators=(",", ":"))]
         lc = subprocess.Popen([args.load_client, str(port), str(k), str(args.warmup), str(args.window)] + sub,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = lc.stderr.readline()          # "measuring": the window starts
@@ -117,7 +121,7 @@ def run(args, n, k, fields=None):
         if lc.returncode != 0 or not out.strip():
             raise RuntimeError("load_client failed: %s %s" % (line, err))
         r = json.loads(out)
-        res = {"bench": "load", "N": n, "clients": k, "fields": fields or ["height", "dx", "dz"],
+        res = {"bench": "load", "N": n, "clients": k, "temporal": not args.intra, "fields": fields or ["height", "dx", "dz"],
                "subscribe": args.subscribe, "oceand_args": args.oceand_args, "fps_median": r["fps_median"], "fps_min": r["fps_min"],
                "delivered": r["delivered"], "lat_p50_ms": r["lat_p50_ms"], "lat_p99_ms": r["lat_p99_ms"],
                "set_latency_ticks_p99": r["set_latency_ticks_p99"],
@@ -130,6 +134,7 @@ def run(args, n, k, fields=None):
                "encode_ms_mean": round(1000 * (esum1 - esum0) / max(1, ecnt1 - ecnt0), 2),  # wall, on the encode pool   # deadline -> frame published, histogram bucket
                "degraded_groups_at_end": int(degraded) if degraded == degraded else None,  # NaN: a daemon without the metric
                "connected": r["connected"], "frame_kb": r["frame_kb"], "mbytes_per_s": r["mbytes_per_s"],
+               "mbytes_per_s_per_client": round(r["mbytes_per_s"] / max(1, r["connected"]), 3),
                "set_samples": r["set_samples"], "window_s": args.window,
                "loadavg_1m": round(os.getloadavg()[0], 2)}   # this machine is shared: context for the numbers
         print(json.dumps(res), flush=True)
@@ -150,6 +155,7 @@ def main():
     ap.add_argument("--oceand-args", default="", help="extra daemon flags, e.g. '--sim-nice -10'")
     ap.add_argument("--subscribe", default="", help="a subscribe message every client sends (JSON), e.g. the web client's")
     ap.add_argument("--warmup", type=float, default=2)
+    ap.add_argument("--intra", action="store_true", help="clients do not ask for the temporal codec (codec 1 only)")
     ap.add_argument("--window", type=float, default=10)
     ap.add_argument("--no-query", action="store_true", help="skip the point query / probe runs (query_load.py)")
     import query_load

@@ -308,7 +308,7 @@ int main(int argc, char **argv)
     }
     printf("{\"connected\":%d,\"errors\":%d,\"open_at_end\":%d,\"window_s\":%g,\"frames_made\":%llu,\"fps_median\":%.2f,"
            "\"fps_min\":%.2f,\"delivered\":%.4f,\"delivered_median\":%.4f,\"lat_p50_ms\":%.2f,\"lat_p99_ms\":%.2f,"
-           "\"set_latency_ticks_p50\":%.1f,\"set_latency_ticks_p99\":%.1f,\"set_samples\":%d,\"mbytes_per_s\":%.1f,"
+           "\"set_latency_ticks_p50\":%.1f,\"set_latency_ticks_p99\":%.1f,\"set_samples\":%d,\"mbytes_per_s\":%.3f,"
            "\"frame_kb\":%.1f}\n",
            connected, errors, still_open, window, (unsigned long long)made, pct(fps, (size_t)nclients, 0.5),
            pct(fps, (size_t)nclients, 0), pct(share, (size_t)nclients, 0), pct(share, (size_t)nclients, 0.5),

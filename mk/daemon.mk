@@ -1,6 +1,6 @@
 # mk/daemon.mk — the oceand daemon (issue 4): binary, integration tests, load bench, `make run`.
 
-DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c server/frame.c \
+DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c server/frame.c server/layer_stream.c \
               server/encode_pool.c server/capacity.c server/net/capacity.c \
               server/net/context.c server/net/upgrade.c server/net/session.c server/net/dispatch.c \
               server/net/fanout.c server/net/http.c server/net/cluster.c server/net/rx_guard.c \
@@ -46,6 +46,7 @@ VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-k
 test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	$(BUILD)/test_control
 	/usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
+	/usr/bin/python3 tests/daemon/test_temporal.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
 	$(BUILD)/test_probe
 	/usr/bin/python3 tests/daemon/test_query.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check --query-ref $(BUILD)/query_ref
 
@@ -54,6 +55,8 @@ test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(DAEMON_TEST_DE
 	$(BUILD)/san/test_control
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check --sanitized
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  /usr/bin/python3 tests/daemon/test_temporal.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check --sanitized
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/daemon/test_query.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check \
 	  --query-ref $(BUILD)/query_ref --sanitized

@@ -60,6 +60,9 @@ static const struct param_def opt_table[] = {
       "each N takes a moment, then it is cached in --wisdom-file), 0 = FFTW_ESTIMATE"),
     OPT_STR("wisdom_file", wisdom_file, "auto", 0, "FFTW wisdom cache: \"auto\" = "
       "$XDG_CACHE_HOME/oceand/fftw-wisdom, else ~/.cache/oceand/fftw-wisdom; \"none\" = no cache"),
+    OPT("keyframe_interval", PARAM_INT, keyframe_interval, 0, 100000, 300, NULL, 0, "temporal codec (codec 3): "
+      "each tile starts a new chain (keyframe) every this many ticks, staggered; 0 = only when needed "
+      "(clients without the references get keyframes on demand either way; docs/codec.md has the measurement)"),
     OPT("send_buffer_kb", PARAM_INT, send_buffer_kb, 16, 65536, 512, NULL, 0, "kernel send buffer per client (KiB): "
       "small keeps a slow client's queue, and so its latency, short"),
     OPT("sim_nice", PARAM_INT, sim_nice, -20, 19, 0, NULL, 0, "nice value of the tick thread; below 0 (needs "

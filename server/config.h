@@ -39,6 +39,7 @@ struct daemon_config {
     char   wisdom_file[512];
     int    max_memory_mb;
     int    tile_size;
+    int    keyframe_interval;  /* temporal layers: periodic keyframe every this many ticks (0 = none) */
     int    send_buffer_kb;     /* SO_SNDBUF per client: bounds the frames queued in the kernel */
     int    sim_nice;           /* nice value of the tick thread (< 0 needs CAP_SYS_NICE) */
     char   tls_cert[512];      /* PEM certificate (chain): "" = plain http/ws */

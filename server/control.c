@@ -435,6 +435,11 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
             return fail(e, "bad_subscription", NULL, "\"max_rate\" must be a positive number");
         tmp.max_rate = j->valuedouble > lim->tick_rate ? lim->tick_rate : j->valuedouble;
     }
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "temporal"))) {
+        if (!cJSON_IsBool(j))
+            return fail(e, "bad_subscription", NULL, "\"temporal\" must be true or false");
+        tmp.temporal = cJSON_IsTrue(j);
+    }
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "codec"))) {
         /* One encoding per layer is shared by every client, so a client
          * cannot pick the entropy coder: codec 1 is the only one to ask for
@@ -588,6 +593,7 @@ cJSON *control_subscription_object(const struct subscription *s)
     static const double bound_text[CTL_BOUND_COUNT] = { 0, 0.001, 0.005, 0.01, 0.05 };
     cJSON_AddNumberToObject(o, "bound", bound_text[s->bound_index]);
     cJSON_AddNumberToObject(o, "max_rate", s->max_rate);
+    cJSON_AddBoolToObject(o, "temporal", s->temporal);
     if (s->ncascades > 1) { /* only when asked for: a client that knows no cascades sees what it always saw */
         cJSON *cs = cJSON_AddArrayToObject(o, "cascades");
         for (int c = 1; c < s->ncascades && c < CTL_MAX_CASCADES; c++) {

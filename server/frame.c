@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "layer_stream.h"
 #include "log.h"
 
 struct frame *frame_new(int nlayers)
@@ -33,6 +34,8 @@ void frame_unref(struct frame *f)
     for (int i = 0; i < f->nlayers; i++) {
         oc_buf_free(&f->layers[i].buf);
         free(f->layers[i].tile_off);
+        oc_buf_free(&f->layers[i].shared);
+        free(f->layers[i].shared_off);
     }
     free(f->layers);
     free(f);
@@ -96,6 +99,7 @@ struct frame_job {
     struct oc_frame_header hdr;
     int n, ts, tps;
     long samples;
+    struct layer_streams *streams; /* temporal layers, NULL = none (frame_job_set_streams) */
 };
 
 struct frame_job *frame_job_new(int workers)
@@ -126,6 +130,8 @@ static void drop_unfinished(struct frame_job *j)
     for (int i = 0; i < j->nitems; i++) {
         oc_buf_free(&j->f->layers[i].buf);
         free(j->f->layers[i].tile_off);
+        oc_buf_free(&j->f->layers[i].shared);
+        free(j->f->layers[i].shared_off);
     }
     j->f->nlayers = 0;
     frame_unref(j->f);
@@ -148,6 +154,8 @@ void frame_job_free(struct frame_job *j)
 
 long frame_job_samples(const struct frame_job *j) { return j->samples; }
 
+void frame_job_set_streams(struct frame_job *j, struct layer_streams *streams) { j->streams = streams; }
+
 int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, const struct frame_want *want,
                     const struct oc_frame_header *hdr)
 {
@@ -157,6 +165,17 @@ int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, c
     j->tps = n / j->ts;
     j->want = *want;
     j->hdr = *hdr;
+    if (j->streams) {
+        /* The previous job is finished: its items no longer use the streams. */
+        if (want->reset_streams)
+            layer_streams_reset(j->streams);
+        for (int k = 0; k < want->nkeys; k++) /* a layer degraded to a coarser LOD goes intra */
+            if (want->lod[k] != layer_key_lod(want->keys[k])) {
+                j->want.temporal[want->keys[k]] = 0;
+                j->want.intra[want->keys[k]] = 1;
+            }
+        layer_streams_prepare(j->streams, n, j->ts, &j->want);
+    }
     j->hdr.n = (uint16_t)n;
     j->hdr.tile_size = (uint16_t)j->ts;
     drop_unfinished(j); /* before nitems is reset: it counts that frame's layers */
@@ -205,8 +224,13 @@ void frame_job_item(struct frame_job *j, int index, int worker)
     l->lod = (uint8_t)layer_key_lod(key);
     l->bound_index = (uint8_t)id.bound_index;
     l->encoded_lod = (uint8_t)id.encoded_lod;
-    j->item_rc[index] = encode_layer(j->enc[worker], &id, j->snap[id.cascade][id.field], j->n, j->ts,
-                                     j->last_len[key], l);
+    struct oc_stream *st = j->streams && key < LAYER_KEYS && j->want.temporal[key] ? j->streams->st[key] : NULL;
+    if (st) /* temporal: this layer's stream, used by this thread alone (jobs run one at a time) */
+        j->item_rc[index] = layer_encode_temporal(st, j->enc[worker], j->snap[id.cascade][id.field], j->hdr.seq,
+                                                  j->want.intra[key], j->tps, l);
+    else
+        j->item_rc[index] = encode_layer(j->enc[worker], &id, j->snap[id.cascade][id.field], j->n, j->ts,
+                                         j->last_len[key], l);
 }
 
 void frame_job_warm(struct frame_job *j, const struct ocean *o, int tile_size)
@@ -240,6 +264,8 @@ struct frame *frame_job_finish(struct frame_job *j)
                  l->cascade, oc_strerror(j->item_rc[i]));
             oc_buf_free(&l->buf);
             free(l->tile_off);
+            oc_buf_free(&l->shared);
+            free(l->shared_off);
             continue;
         }
         j->last_len[j->want.keys[j->item_key[i]]] = l->buf.len + l->buf.len / 8;

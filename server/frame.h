@@ -9,6 +9,7 @@
 #define OCEAND_FRAME_H
 
 #include <stdatomic.h>
+#include <stdbool.h>
 #include <stdint.h>
 
 #include "control.h"
@@ -39,13 +40,21 @@ static inline int layer_key_which_cascade(int key) { return key / LAYER_KEYS; }
  * the grid is smaller. hello and params announce this value too. */
 static inline int frame_tile_size(int configured, int n) { return configured < n ? configured : n; }
 
-/* All tiles of one field at one LOD and bound, encoded back to back. */
+/* All tiles of one field at one LOD and bound, encoded back to back.
+ * buf holds intra tiles (codec 1, or 0), which any client can decode: for a
+ * temporal layer these are this tick's keyframe tiles, present only when
+ * some client needed them (else tile_off is NULL). A temporal layer also has
+ * the shared tiles of its stream (PROTOCOL.md §5.9), for the clients that
+ * received the layer in each of the `need` previous ticks. */
 struct layer {
     uint8_t field, lod, bound_index, cascade; /* lod: of the key clients subscribed to */
     uint8_t encoded_lod;        /* lod of its tiles: lod, or coarser when the tick degraded it
                                    (capacity.h; the clients concerned were told with `degraded`) */
+    uint8_t need;               /* temporal: ticks of history the shared tiles need (0 = none) */
     struct oc_buf buf;
-    uint32_t *tile_off;     /* tiles_per_side^2 + 1 offsets into buf; tile i = tz*tps + tx */
+    uint32_t *tile_off;     /* tiles_per_side^2 + 1 offsets into buf; tile i = tz*tps + tx; NULL = none */
+    struct oc_buf shared;   /* temporal: the shared tiles (codec 3, or a chain's keyframe) */
+    uint32_t *shared_off;   /* offsets into shared, as tile_off; NULL = not a temporal layer this tick */
 };
 
 struct frame {
@@ -68,7 +77,12 @@ struct frame_want {
     int nkeys;
     uint16_t keys[LAYER_KEYS_ALL];
     uint8_t lod[LAYER_KEYS_ALL]; /* encoded LOD of keys[i]: layer_key_lod(keys[i]) or coarser */
+    uint8_t temporal[LAYER_KEYS_ALL]; /* by key: a temporal client wants it (encode its stream; cascade 0 only) */
+    uint8_t intra[LAYER_KEYS_ALL];  /* by key: a client needs intra / keyframe tiles this tick */
+    bool reset_streams;         /* the sea changed (N or physics): every temporal layer starts new chains */
 };
+
+struct layer_streams;
 
 /* One frame being encoded, in three steps, so that the encode runs on a pool
  * of threads while the producer steps the next tick:
@@ -91,6 +105,10 @@ void frame_job_free(struct frame_job *j);
  * (0 = nothing to encode), or -1 when out of memory. */
 int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, const struct frame_want *want,
                     const struct oc_frame_header *hdr);
+/* The temporal layers' streams (layer_stream.h) the jobs use, NULL = none: owned by
+ * whoever runs frame_job_begin; frame_job_begin prepares them (the previous job must be
+ * finished), the items of one job each use their own layer's stream. */
+void frame_job_set_streams(struct frame_job *j, struct layer_streams *streams);
 void frame_job_item(struct frame_job *j, int item, int worker);
 /* The frame (one reference, held by the caller), or NULL when out of memory.
  * A layer that failed to encode is left out (logged). */

@@ -140,6 +140,24 @@ size_t metrics_render(char *buf, size_t cap)
         (unsigned long long)atomic_load(&m->closed_output_limit), (unsigned long long)atomic_load(&m->closed_unmasked));
     counter(&o, "oceand_connections_refused_total", "TCP connections closed at accept to keep a reserve of file "
             "descriptors (RLIMIT_NOFILE).", atomic_load(&m->refused_fd_limit));
+    put(&o, "# HELP oceand_stream_tiles_total Tiles encoded by the temporal layers (codec 3): shared tiles "
+            "predicted or keyframes (periodic, new grid, after a gap), and keyframe tiles made on demand for clients "
+            "without the references.\n"
+            "# TYPE oceand_stream_tiles_total counter\n"
+            "oceand_stream_tiles_total{kind=\"predicted\"} %llu\n"
+            "oceand_stream_tiles_total{kind=\"key\"} %llu\n"
+            "oceand_stream_tiles_total{kind=\"demand_key\"} %llu\n",
+        (unsigned long long)atomic_load(&m->stream_predicted_tiles), (unsigned long long)atomic_load(&m->stream_key_tiles),
+        (unsigned long long)atomic_load(&m->stream_demand_key_tiles));
+    put(&o, "# HELP oceand_temporal_tiles_sent_total Tiles of temporal layers sent to temporal clients: the shared "
+            "tiles, or this tick's keyframe tiles (joined, resubscribed, skipped a frame, max_rate).\n"
+            "# TYPE oceand_temporal_tiles_sent_total counter\n"
+            "oceand_temporal_tiles_sent_total{kind=\"shared\"} %llu\n"
+            "oceand_temporal_tiles_sent_total{kind=\"key\"} %llu\n",
+        (unsigned long long)atomic_load(&m->sent_shared_tiles), (unsigned long long)atomic_load(&m->sent_key_tiles));
+    counter(&o, "oceand_frames_waited_keyframe_total", "Frames a temporal client was not sent because it lacked "
+            "their references and they carried no keyframe tiles (it gets the next one).",
+            atomic_load(&m->frames_waited_keyframe));
     put(&o, "# HELP oceand_log_lines_dropped_total Log lines not written: over 10 a second (rate), or stderr full "
             "(blocked).\n"
             "# TYPE oceand_log_lines_dropped_total counter\n"

@@ -67,6 +67,8 @@ static void sim_on_frame(void *user, struct frame *f)
         const struct layer *l = &f->layers[i];
         if (l->cascade != 0)
             continue;
+        if (!l->tile_off)
+            continue; /* no intra tiles this tick (edges always ask for them: their demand counts as intra) */
         info.field = l->field;
         info.lod = l->lod;
         info.bound_index = l->bound_index;

@@ -17,6 +17,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "layer_stream.h"
 #include "capacity.h"
 #include "encode_pool.h"
 #include "log.h"
@@ -66,6 +67,9 @@ struct sim {
     long job_samples;             /* same */
     /* Measuring at start-up (sim_start, before the threads). */
     bool measure_done;
+    struct layer_streams streams; /* the temporal layers' encoder state: used by frame_job_begin (producer)
+                                     and one encode thread per layer, one job at a time (encode_pool) */
+    bool reset_streams;           /* tick only: the sea changed; the next job resets the streams */
 
     /* builder only: the params of the newest state built (applied, or
      * waiting in `ready`): the base the next batch is checked against. */
@@ -97,6 +101,8 @@ struct sim {
     uint32_t plan_gen;                /* +1 per change of plan_pub */
 
     atomic_int demand[LAYER_KEYS_ALL]; /* atomic: lws writes (subscriptions); tick reads */
+    atomic_int tdemand[LAYER_KEYS_ALL]; /* atomic: lws writes (temporal subscriptions, also in demand); tick reads */
+    atomic_int key_want[LAYER_KEYS_ALL]; /* atomic: lws writes (temporal clients lacking references); tick reads */
     _Atomic double now_time;          /* atomic: tick writes; lws reads (state file) */
     atomic_uint_least64_t now_seq;    /* atomic: tick writes; lws reads (a new client's first frame) */
     atomic_int now_n;                 /* atomic: tick writes; lws reads (capacity at the N in force) */
@@ -149,6 +155,8 @@ struct frame *sim_latest(struct sim *s)
 
 uint64_t sim_seq(struct sim *s) { return atomic_load(&s->now_seq); }
 void sim_demand(struct sim *s, int key, int delta) { atomic_fetch_add(&s->demand[key], delta); }
+void sim_demand_temporal(struct sim *s, int key, int delta) { atomic_fetch_add(&s->tdemand[key], delta); }
+void sim_want_keyframes(struct sim *s, int key, int delta) { atomic_fetch_add(&s->key_want[key], delta); }
 double sim_time_now(struct sim *s) { return atomic_load(&s->now_time); }
 
 void sim_capacity(struct sim *s, struct capacity_info *out)
@@ -346,9 +354,14 @@ static void apply_pending(struct sim *s)
             b.params = s->params;
             ocean_surface_free(b.surface); /* a snapshot of what was not committed */
             b.surface = NULL;
-        } else if (n_before != ocean_resolution(s->ocean)) {
-            atomic_fetch_add(&g_metrics.replans, 1);
-            LOGI("resolution now %d", ocean_resolution(s->ocean));
+        } else {
+            /* A new sea (or a new N): the previous frames predict it badly, so
+             * every temporal layer starts new chains (keyframes) with the next job. */
+            s->reset_streams = true;
+            if (n_before != ocean_resolution(s->ocean)) {
+                atomic_fetch_add(&g_metrics.replans, 1);
+                LOGI("resolution now %d", ocean_resolution(s->ocean));
+            }
         }
     }
     pthread_mutex_lock(&s->lock);
@@ -625,6 +638,13 @@ static void tick(struct sim *s, double t_tick)
             pj.want.cfields[layer_key_which_cascade(k)] |= OCEAN_FIELD_BIT(layer_key_field(k));
             pj.want.lod[pj.want.nkeys] = s->plan.lod[g];
             pj.want.keys[pj.want.nkeys++] = (uint16_t)k;
+            /* Temporal layers (PROTOCOL.md §5.9): a stream when a temporal client wants
+             * the key; intra tiles for clients that are not temporal (edges included),
+             * and this tick's keyframes for temporal ones that lack the references. */
+            int temporal = atomic_load(&s->tdemand[k]);
+            pj.want.temporal[k] = temporal > 0;
+            pj.want.intra[k] = demand[k] > temporal || (k < LAYER_KEYS && ((remote[k >> 3] >> (k & 7)) & 1)) ||
+                               atomic_load(&s->key_want[k]) > 0;
         }
     }
     if (!pj.want.nkeys && !probe_fields)
@@ -649,6 +669,8 @@ static void tick(struct sim *s, double t_tick)
     for (int g = 0; g < PLAN_GROUPS; g++)
         if (due[g])
             s->credit[g] -= 1;
+    pj.want.reset_streams = s->reset_streams;
+    s->reset_streams = false;
     pthread_mutex_lock(&s->lock);
     s->pj = pj;
     s->prod_has_job = true; /* one deep: taken when the producer is done with the frame before */
@@ -775,6 +797,7 @@ static void sim_free_parts(struct sim *s)
 {
     encode_pool_free(s->pool);
     frame_job_free(s->job);
+    layer_streams_free(&s->streams);
     ocean_free(s->ocean);
     pthread_cond_destroy(&s->prod_cond);
     pthread_cond_destroy(&s->cond);
@@ -798,6 +821,7 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     s->seq = cfg->start_seq;
     s->pending_tail = &s->pending;
     s->answers_tail = &s->answers;
+    layer_streams_init(&s->streams, cfg->keyframe_interval, cfg->stream_budget);
     const char *hook = getenv("OCEAND_TEST_FAIL_BUILD_SEED");
     s->test_fail_seed = hook && *hook ? atoi(hook) : -1;
     if (s->test_fail_seed >= 0)
@@ -831,6 +855,7 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
         return NULL;
     }
     measure_model(s);
+    frame_job_set_streams(s->job, &s->streams); /* after the start-up measurement: intra only */
     atomic_store(&s->now_time, s->sim_time);
     if (cfg->queries)
         query_version(cfg->queries, s->version, s->sim_time, true, query_snapshot(cfg->queries, s->ocean));

@@ -60,6 +60,8 @@ struct ocean_params params_with(const struct ocean_params *base, const struct oc
 struct sim_config {
     double tick_rate;
     int tile_size;              /* configured; frames use frame_tile_size(tile_size, N) */
+    int keyframe_interval;      /* temporal layers: periodic keyframe every this many ticks (0 = none) */
+    size_t stream_budget;       /* bytes the temporal layers' encoder state may take; beyond it, intra */
     struct ocean_options opts;
     double start_time;          /* sim time to resume from */
     int nice;                   /* of the tick thread; 0 = leave as is */
@@ -104,6 +106,13 @@ struct frame *sim_latest(struct sim *s);                     /* this tick's fram
                                                                NULL when the last tick built none */
 uint64_t sim_seq(struct sim *s);                             /* seq of the last tick run */
 void sim_demand(struct sim *s, int layer_key, int delta);   /* subscriptions in force */
+/* Temporal layers (PROTOCOL.md §5.9): the subscriptions that take codec 3
+ * (counted in sim_demand too), and the clients of a layer that lack the
+ * references of its shared tiles and so need this tick's keyframe tiles. A
+ * layer gets keyframe (intra) tiles in a tick when it has a subscriber that
+ * is not temporal, a remote one (edges), or a key-wanting client. */
+void sim_demand_temporal(struct sim *s, int layer_key, int delta);
+void sim_want_keyframes(struct sim *s, int layer_key, int delta);
 double sim_time_now(struct sim *s);
 /* What this daemon can do at the N in force (capacity.h), for hello/params. */
 void sim_capacity(struct sim *s, struct capacity_info *out);

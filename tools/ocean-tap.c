@@ -63,6 +63,9 @@ static void usage(FILE *to)
         "  --bound B           max abs error of the lossy codec, one of the server's bounds;\n"
         "                      0 = lossless float32 (default: the server's, 0.01)\n"
         "  --max-rate HZ       at most HZ frames per second\n"
+        "  --intra             intra-only frames (each decodable alone); default: the\n"
+        "                      temporal codec (codec 3, ~2.5x fewer bytes), which needs\n"
+        "                      every frame in order (a gap is resynchronised by itself)\n"
         "  --out DIR           write every frame, one file per field: DIR/<field>-<seq>.<ext>\n"
         "  --format F          npy (default; numpy.load), raw (float32), pgm (16-bit\n"
         "                      greyscale, min..max), pgm8 (8-bit); each file gets a .json\n"
@@ -107,6 +110,7 @@ struct opts {
     int lod;
     double bound;         /* < 0 = not given */
     int max_rate;         /* 0 = not given */
+    int intra;            /* --intra: no codec 3 (subscribe "temporal": false) */
     const char *out_dir;
     int format;
     int stats, watch, verbose;
@@ -179,7 +183,7 @@ static int parse_args(int argc, char **argv, struct opts *o)
         {"verbose", no_argument, 0, 'v'},     {"help", no_argument, 0, 'h'},
         {"query", required_argument, 0, 'Q'}, {"probe", required_argument, 0, 'P'},
         {"time", required_argument, 0, 'I'},  {"ticks", required_argument, 0, 'K'},
-        {"csv", no_argument, 0, 'C'},
+        {"csv", no_argument, 0, 'C'},         {"intra", no_argument, 0, 'A'},
         {0, 0, 0, 0}};
     *o = (struct opts){.frames = -1, .fields = 7u, .bound = -1, .format = TAP_NPY, .timeout = 10};
     int c;
@@ -205,6 +209,7 @@ static int parse_args(int argc, char **argv, struct opts *o)
             o->max_rate = (int)strtol(optarg, &end, 10);
             if (*end || o->max_rate <= 0) return usage_error("--max-rate needs a number > 0");
             break;
+        case 'A': o->intra = 1; break;
         case 'o': o->out_dir = optarg; break;
         case 'F':
             o->format = tap_format_from_name(optarg);
@@ -276,6 +281,7 @@ struct session {
     int noutq;
     struct tap_frame *grid; /* the subscribed fields, assembled from tiles */
     long frames_done;
+    double resync_t;      /* when we last resubscribed after a missing reference */
     long ticks_done;      /* probe_data lines printed */
     double last_activity;
     struct stats st;
@@ -395,6 +401,7 @@ static void send_subscribe(struct session *s)
     cJSON_AddStringToObject(j, "tiles", "all");
     if (s->o->bound >= 0) cJSON_AddNumberToObject(j, "bound", s->o->bound);
     if (s->o->max_rate > 0) cJSON_AddNumberToObject(j, "max_rate", s->o->max_rate);
+    cJSON_AddBoolToObject(j, "temporal", !s->o->intra); /* PROTOCOL.md §5.9 */
     send_json(s, j);
 }
 
@@ -662,6 +669,19 @@ static void on_binary(struct session *s, const uint8_t *data, size_t len)
     if (s->stage != ST_RUN || !s->want_frames) return; /* frames of the default subscription */
     struct oc_frame_header fh;
     int r = tap_frame_add(s->grid, data, len, &fh);
+    if (r == OC_E_REFERENCE) {
+        /* A predicted frame whose references we lack (we missed one): subscribing
+         * again makes the server send keyframes next (PROTOCOL.md §5.9). Once a
+         * second at most: frames already on their way fail the same way. */
+        double t = now_s();
+        if (t - s->resync_t >= 1.0) {
+            s->resync_t = t;
+            fprintf(stderr, "ocean-tap: frame %llu lacks its references: resubscribing\n",
+                    (unsigned long long)fh.seq);
+            send_subscribe(s);
+        }
+        return;
+    }
     if (r) {
         fail(s, EXIT_PROTOCOL, "bad binary frame (%zu bytes): %s", len, tap_frame_strerror(r));
         return;

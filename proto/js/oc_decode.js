@@ -159,8 +159,10 @@ function inflateRawInstalled(src, n) {
 // fflate 2.5 ms, streams 4.7 ms; 12 tiles of 128x128, fflate 2.4 ms, streams 1.6 ms.
 const STREAM_MIN_SAMPLES = 128 * 128;
 const haveStreams = typeof DecompressionStream === 'function';
-const preferStream = (t) => (t.codec === CODEC_QUANT_LORENZO || t.codec === CODEC_TEMPORAL)
-  && t.width * t.height >= STREAM_MIN_SAMPLES;
+// Codec 3 tiles inflate to half as many bytes (pair packing) from a quarter of the input, so
+// the stream's set-up dominates: they take the synchronous inflater whenever one is installed
+// (node, CPU per N=256 frame of height+dx+dz: 4.2-5.3 ms with fflate, 5.5-6.5 with streams).
+const preferStream = (t) => t.codec === CODEC_QUANT_LORENZO && t.width * t.height >= STREAM_MIN_SAMPLES;
 
 // One DecompressionStream per tile (async; decodeFrame runs them concurrently).
 async function inflateRawStream(src, n) {
@@ -338,9 +340,19 @@ function readLossyPrefix(t, bytes, start) {
 
 /** The references of predicted tiles: the codes of the last frames of every tile. One per stream. */
 export class DecoderState {
-  constructor() { this.tiles = new Map(); }
+  constructor() { this.tiles = new Map(); this.spare = []; }
   /** Forget every reference (e.g. after resubscribing); predicted tiles then fail until the next keyframe. */
-  reset() { this.tiles.clear(); }
+  reset() { this.tiles.clear(); this.spare.length = 0; }
+}
+// Code arrays of references that left the history, reused for the next tiles' codes: no
+// allocation per tile and frame in a steady stream (decodes of one state never overlap).
+function takeCodes(state, count) {
+  const spare = state && state.spare;
+  while (spare && spare.length) {
+    const c = spare.pop();
+    if (c.length === count) return c;
+  }
+  return new Int32Array(count);
 }
 // A tile's identity for references: cascade (tile flags bits 0-1, PROTOCOL.md §3.2) included.
 const tileKey = (h, t) => `${t.field}/${t.lod}/${t.flags & 3}/${t.tileX}/${t.tileZ}/${h.n}/${h.tileSize}`;
@@ -385,22 +397,31 @@ function readTemporalPrefix(h, t, bytes, start, state) {
 }
 
 // Pair packing: one byte per two samples (15*z1 + z2 when both are below 15, 255 = escaped pair).
+// Scratch arrays are reused (reconstructTemporal never awaits, so tiles cannot interleave here).
 let pairScratch = new Int32Array(4097);
+let yScratch = new Int32Array(64);
+const PAIR_HI = new Int32Array(256), PAIR_LO = new Int32Array(256); // b -> (z1, z2); 255 marks an escape
+for (let b = 0; b < 256; b++) {
+  PAIR_HI[b] = b < PAIR_LIMIT * PAIR_LIMIT ? (b / PAIR_LIMIT) | 0 : -1;
+  PAIR_LO[b] = b < PAIR_LIMIT * PAIR_LIMIT ? b % PAIR_LIMIT : -1;
+}
 function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
   const npairs = (count + 1) >> 1, ny = 2 * pairEsc;
-  const y = new Int32Array(ny);
+  if (yScratch.length < ny) yScratch = new Int32Array(ny);
+  const y = yScratch;
   unpackEscapes(y, packed.subarray(npairs), ny, escCount, escWidth);
-  if (pairScratch.length < count + 1) pairScratch = new Int32Array(count + 1);
-  const zz = pairScratch; // consumed by reconstructTemporal before the next tile (no await in between)
+  if (pairScratch.length < 2 * npairs) pairScratch = new Int32Array(2 * npairs);
+  const zz = pairScratch;
   let e = 0;
-  for (let p = 0; p < npairs; p++) {
+  for (let p = 0, k = 0; p < npairs; p++, k += 2) {
     const b = packed[p];
-    if (b < PAIR_LIMIT * PAIR_LIMIT) {
-      zz[2 * p] = (b / PAIR_LIMIT) | 0;
-      zz[2 * p + 1] = b % PAIR_LIMIT;
+    const hi = PAIR_HI[b];
+    if (hi >= 0) {
+      zz[k] = hi;
+      zz[k + 1] = PAIR_LO[b];
     } else if (b === 255 && e < pairEsc) {
-      zz[2 * p] = y[2 * e];
-      zz[2 * p + 1] = y[2 * e + 1];
+      zz[k] = y[2 * e];
+      zz[k + 1] = y[2 * e + 1];
       e++;
     } else {
       throw fail('corrupt', `pair byte ${b}`);
@@ -411,48 +432,57 @@ function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
   return zz;
 }
 
-// The 5-point Laplacian of a reference's codes, neighbours clamped to the tile, as exact float64
-// (|L| < 2^34); computed once per reference frame and kept with it.
-function laplacian(slot, w, h) {
-  if (slot.lap) return slot.lap;
-  const q = slot.codes, L = new Float64Array(w * h);
-  for (let j = 0; j < h; j++) {
-    const r = j * w, up = (j > 0 ? j - 1 : 0) * w, dn = (j + 1 < h ? j + 1 : h - 1) * w;
-    if (w === 1) { L[r] = q[up] + q[dn] - 2 * q[r]; continue; }
-    L[r] = q[r + 1] + q[up] + q[dn] - 3 * q[r]; // the W neighbour clamps to the sample itself
-    for (let i = 1; i < w - 1; i++) L[r + i] = q[r + i - 1] + q[r + i + 1] + q[up + i] + q[dn + i] - 4 * q[r + i];
-    L[r + w - 1] = q[r + w - 2] + q[up + w - 1] + q[dn + w - 1] - 3 * q[r + w - 1];
-  }
-  slot.lap = L;
-  return L;
-}
-
 // Predictions from the references (no sample of this frame is needed), plus the residuals.
-// Every sum is an exact integer below 2^53 in float64; `| 0` wraps the code to int32 as C does.
-function reconstructTemporal(t, packed, l) {
+// S of §5.8 regrouped: S = Σ a_k·q_k + Σ b_k·L(q_k) = A + L(B), with A = Σ a_k·q_k and
+// B = Σ b_k·q_k, because the clamped 5-point Laplacian is linear. The same integer: with
+// |q| < 2^31 and |a|, |b| < 2^17, |A|, |B| < 2^50 and |L(B)| < 2^53, so every partial sum is
+// exact in float64; one pass builds A and B, a second applies L to B, with no Laplacian per
+// reference (nothing to compute or keep per frame). `| 0` wraps the code to int32 as C does.
+let aScratch = new Float64Array(4096), bScratch = new Float64Array(4096);
+function reconstructTemporal(t, packed, l, state) {
   const w = t.width, h = t.height, count = w * h;
   let zz;
   if (l.packing === 1) zz = unpackPairs(packed, count, l.pairEsc, l.escCount, l.escWidth);
   else if (l.escCount === 0) zz = packed;
   else { zz = new Int32Array(count); unpackEscapes(zz, packed, count, l.escCount, l.escWidth); }
-  const q = new Int32Array(count), out = new Float32Array(count);
+  const q = takeCodes(state, count), out = new Float32Array(count);
   const [c0, c1, c2, c3, c4, c5, c6] = l.coef, depth = l.depth;
-  // S of §5.8 regrouped per reference: S = Σ a_k·q_k + Σ b_k·L(q_k). The same integer (every
-  // partial sum stays below 2^53, so float64 is exact), with fewer operations per sample.
   const a1 = c0, a2 = c1 - c0, a3 = c2 - c1, a4 = -c2, b1 = c3 + c6, b2 = c4 - c3, b3 = c5 - c4, b4 = -c5;
   // Missing references (depth < 4) stand in as q1: their coefficients are 0.
-  const ref = (k) => l.refs[k < depth ? k : 0];
-  const q1 = ref(0).codes, q2 = ref(1).codes, q3 = ref(2).codes, q4 = ref(3).codes;
-  const L1 = laplacian(ref(0), w, h), L2 = laplacian(ref(1), w, h), L3 = laplacian(ref(2), w, h);
-  const L4 = laplacian(ref(3), w, h);
-  const off = t.offset, sc = t.scale;
+  const ref = (k) => l.refs[k < depth ? k : 0].codes;
+  const q1 = ref(0), q2 = ref(1), q3 = ref(2), q4 = ref(3);
+  if (aScratch.length < count) { aScratch = new Float64Array(count); bScratch = new Float64Array(count); }
+  const A = aScratch, B = bScratch;
   for (let k = 0; k < count; k++) {
-    const a = q1[k];
-    const s = a1 * a + a2 * q2[k] + a3 * q3[k] + a4 * q4[k] + b1 * L1[k] + b2 * L2[k] + b3 * L3[k] + b4 * L4[k];
-    const z = zz[k];
-    const v = (a + Math.floor((s + 2048) * (1 / 4096)) + ((z >>> 1) ^ -(z & 1))) | 0; // 1/4096: exact
-    q[k] = v;
-    out[k] = off + v * sc;
+    const x1 = q1[k], x2 = q2[k], x3 = q3[k], x4 = q4[k];
+    A[k] = a1 * x1 + a2 * x2 + a3 * x3 + a4 * x4;
+    B[k] = b1 * x1 + b2 * x2 + b3 * x3 + b4 * x4;
+  }
+  const off = t.offset, sc = t.scale, inv = 1 / 4096; // exact: a power of two
+  for (let j = 0; j < h; j++) {
+    const r = j * w, up = (j > 0 ? j - 1 : 0) * w, dn = (j + 1 < h ? j + 1 : h - 1) * w;
+    if (w === 1) {
+      const S = A[r] + B[up] + B[dn] - 2 * B[r], z = zz[r];
+      const v = (q1[r] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
+      q[r] = v; out[r] = off + v * sc;
+      continue;
+    }
+    // i = 0: the W neighbour clamps to the sample itself.
+    let z = zz[r];
+    let S = A[r] + B[r + 1] + B[up] + B[dn] - 3 * B[r];
+    let v = (q1[r] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
+    q[r] = v; out[r] = off + v * sc;
+    const end = r + w - 1, du = up - r, dd = dn - r;
+    for (let k = r + 1; k < end; k++) {
+      z = zz[k];
+      S = A[k] + B[k - 1] + B[k + 1] + B[k + du] + B[k + dd] - 4 * B[k];
+      v = (q1[k] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
+      q[k] = v; out[k] = off + v * sc;
+    }
+    z = zz[end]; // i = w - 1: the E neighbour clamps
+    S = A[end] + B[end - 1] + B[end + du] + B[end + dd] - 3 * B[end];
+    v = (q1[end] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
+    q[end] = v; out[end] = off + v * sc;
   }
   return { samples: out, codes: q };
 }
@@ -463,24 +493,31 @@ function decodeTileSync(h, t, bytes, start, inflate, state) {
   if (t.codec === CODEC_RAW_F32) return { samples: decodeRaw(t, bytes, start), codes: null };
   if (t.codec === CODEC_TEMPORAL) {
     const l = readTemporalPrefix(h, t, bytes, start, state);
-    return reconstructTemporal(t, inflate(l.src, l.n), l);
+    return reconstructTemporal(t, inflate(l.src, l.n), l, state);
   }
   const l = readLossyPrefix(t, bytes, start);
   const packed = t.codec === CODEC_QUANT_LORENZO ? inflate(l.src, l.n) : unzstd(l.src, l.n);
   const samples = reconstruct(t, packed, l.escCount, l.escWidth, l.coef);
-  return { samples, codes: state ? scratch.slice(0, samples.length) : null };
+  return { samples, codes: state ? copyCodes(state, samples.length) : null };
 }
 
 // One tile with DecompressionStream for codec 1 and 3 (the other codecs are synchronous).
 async function decodeTileStream(h, t, bytes, start, state) {
   if (t.codec === CODEC_TEMPORAL) {
     const l = readTemporalPrefix(h, t, bytes, start, state);
-    return reconstructTemporal(t, await inflateRawStream(l.src, l.n), l);
+    return reconstructTemporal(t, await inflateRawStream(l.src, l.n), l, state);
   }
   if (t.codec !== CODEC_QUANT_LORENZO) return decodeTileSync(h, t, bytes, start, null, state);
   const l = readLossyPrefix(t, bytes, start);
   const samples = reconstruct(t, await inflateRawStream(l.src, l.n), l.escCount, l.escWidth, l.coef);
-  return { samples, codes: state ? scratch.slice(0, samples.length) : null };
+  return { samples, codes: state ? copyCodes(state, samples.length) : null };
+}
+
+// The codes reconstruct() left in scratch, copied into an array the state keeps.
+function copyCodes(state, count) {
+  const c = takeCodes(state, count);
+  c.set(scratch.subarray(0, count));
+  return c;
 }
 
 // After a whole frame decoded: its lossy tiles become references (at most HISTORY_SLOTS per tile;
@@ -495,7 +532,7 @@ function commitReferences(state, header, metas, decoded) {
     if (slots.length >= HISTORY_SLOTS) {
       let oldest = 0;
       slots.forEach((s, k) => { if (s.seq < slots[oldest].seq) oldest = k; });
-      slots.splice(oldest, 1);
+      state.spare.push(slots.splice(oldest, 1)[0].codes);
     }
     slots.push({ seq, offset: t.offset, scale: t.scale, bound: t.bound, codes });
     state.tiles.set(key, slots);

@@ -35,8 +35,11 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
                 int key = layer_key_cascade(c, f, c == 0 ? subscription_lod(sub, f) : lod, bound_index);
                 if (n->cluster.demand) /* edge: the sim is elsewhere */
                     n->cluster.demand(n->cluster.user, key, delta);
-                else
+                else {
                     sim_demand(n->sim, key, delta);
+                    if (sub->temporal && c == 0) /* the temporal codec: cascade 0's layers */
+                        sim_demand_temporal(n->sim, key, delta);
+                }
             }
     }
 }
@@ -506,9 +509,11 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         if (control_apply_subscribe(m.root, &s->sub, &n->lim, ns, &e) != 0 || !net_capacity_admit(n, s, ns, &e)) {
             session_send_error(s, &e, m.id);
         } else {
+            fanout_want_keyframes(n, s, false); /* counted with the old subscription */
             dispatch_demand(n, ns, +1);
             dispatch_demand(n, &s->sub, -1);
             s->sub = *ns;
+            fanout_subscribed(n, s); /* temporal: keyframes from the next frame on (PROTOCOL.md §5.9) */
             session_queue_json(s, control_subscribed_msg(&s->sub, m.id));
             net_capacity_tell(n, s);
         }

@@ -39,6 +39,40 @@ static void count_skipped(struct net *n, const struct frame *f)
     }
 }
 
+/* Depth of a codec 3 tile is at most 4 (PROTOCOL.md §5.6): a client that
+ * holds 4 consecutive ticks can always take the shared tiles. */
+#define TEMPORAL_MAX_NEED 4
+
+void fanout_want_keyframes(struct net *n, struct session *s, bool want)
+{
+    want = want && s->sub.temporal && n->sim; /* edge: its sim sends intra tiles only */
+    if (want == s->key_wanted)
+        return;
+    for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++)
+        if (s->sub.fields & OCEAN_FIELD_BIT(fi))
+            sim_want_keyframes(n->sim, layer_key(fi, subscription_lod(&s->sub, fi), s->sub.bound_index), want ? 1 : -1);
+    s->key_wanted = want;
+}
+
+void fanout_subscribed(struct net *n, struct session *s)
+{
+    s->hist = 0;
+    s->hist_seq = 0;
+    fanout_want_keyframes(n, s, true);
+}
+
+/* A temporal client that will not get the tick before f (it is busy with an
+ * older frame, or max_rate holds it back) loses its chain: it wants this
+ * tick's keyframe tiles, so that the next frames carry them. */
+static void note_gaps(struct net *n, const struct frame *f)
+{
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
+        struct session *s = session_of(d);
+        if (s->sub.temporal && !s->key_wanted && s->hist_seq + 1 < f->hdr.seq)
+            fanout_want_keyframes(n, s, true);
+    }
+}
+
 void fanout_take_latest(struct net *n)
 {
     fanout_set_latest(n, sim_latest(n->sim));
@@ -52,6 +86,7 @@ void fanout_set_latest(struct net *n, struct frame *f)
     }
     if (f) {
         count_skipped(n, f);
+        note_gaps(n, f);
         n->seen_any = true;
         n->seen_index = f->index;
         n->seen_seq = f->hdr.seq;
@@ -67,22 +102,42 @@ bool fanout_want_write(const struct net *n, const struct session *s)
 }
 
 /* Prepare s->cur = f for this client: header, layers, tile list. false if the
- * frame lacks a layer this client needs (its subscription just changed). */
-static bool begin_frame(struct session *s, struct frame *f)
+ * frame lacks a layer this client needs (its subscription just changed), or
+ * a temporal client lacks the references of a layer's shared tiles and the
+ * frame has no keyframe tiles for it (it asked for them: the next frame). */
+static bool begin_frame(struct net *n, struct session *s, struct frame *f)
 {
     int tps = f->tiles_per_side;
     int nf = 0;
+    /* Ticks this client received in a row up to the one before f (§5.9). */
+    int usable = s->hist_seq && s->hist_seq + 1 == f->hdr.seq ? s->hist : 0;
+    int nshared = 0;
     for (int c = 0; c < OCEAN_MAX_CASCADES; c++) {
         int lod, bound_index;
         unsigned fields = c < f->ncascades ? subscription_cascade(&s->sub, c, &lod, &bound_index) : 0;
         for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++) {
-            const struct layer **slot = &s->layers[c * OCEAN_FIELD_COUNT + fi];
-            *slot = NULL;
+            int slot = c * OCEAN_FIELD_COUNT + fi;
+            s->layers[slot] = NULL;
             if (!(fields & OCEAN_FIELD_BIT(fi)))
                 continue;
-            *slot = frame_layer_cascade(f, c, fi, c == 0 ? subscription_lod(&s->sub, fi) : lod, bound_index);
-            if (!*slot)
+            const struct layer *l = frame_layer_cascade(f, c, fi, c == 0 ? subscription_lod(&s->sub, fi) : lod, bound_index);
+            if (!l)
                 return false;
+            if (s->sub.temporal && l->shared_off && usable >= l->need) {
+                s->lbuf[slot] = l->shared.data;
+                s->loff[slot] = l->shared_off;
+                nshared++;
+            } else if (l->tile_off) {
+                s->lbuf[slot] = l->buf.data;
+                s->loff[slot] = l->tile_off;
+            } else {
+                fanout_want_keyframes(n, s, true);
+                if (s->waited_seq != f->hdr.seq)
+                    atomic_fetch_add(&g_metrics.frames_waited_keyframe, 1);
+                s->waited_seq = f->hdr.seq;
+                return false;
+            }
+            s->layers[slot] = l;
             nf++;
         }
     }
@@ -101,7 +156,14 @@ static bool begin_frame(struct session *s, struct frame *f)
     s->total = OC_FRAME_HEADER_SIZE;
     for (int fi = 0; fi < OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT; fi++)
         for (int i = 0; s->layers[fi] && i < s->ntiles; i++)
-            s->total += s->layers[fi]->tile_off[s->tiles[i] + 1] - s->layers[fi]->tile_off[s->tiles[i]];
+            s->total += s->loff[fi][s->tiles[i] + 1] - s->loff[fi][s->tiles[i]];
+    if (s->sub.temporal) {
+        atomic_fetch_add(&g_metrics.sent_shared_tiles, (uint64_t)(nshared * s->ntiles));
+        atomic_fetch_add(&g_metrics.sent_key_tiles, (uint64_t)((nf - nshared) * s->ntiles));
+        s->hist = usable + 1;
+        s->hist_seq = f->hdr.seq;
+        fanout_want_keyframes(n, s, s->hist < TEMPORAL_MAX_NEED || s->sub.max_rate < n->dc.tick_rate);
+    }
     frame_ref(f);
     s->cur = f;
     s->sent = 0;
@@ -125,19 +187,19 @@ static size_t fill(struct session *s, unsigned char *dst, size_t cap)
         n += take;
     }
     while (n < cap && s->fi < OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT) {
-        const struct layer *l = s->layers[s->fi];
-        if (!l || s->ti >= s->ntiles) {
+        if (!s->layers[s->fi] || s->ti >= s->ntiles) {
             s->fi++;
             s->ti = 0;
             s->off = 0;
             continue;
         }
         int tile = s->tiles[s->ti];
-        size_t start = l->tile_off[tile], size = l->tile_off[tile + 1] - start;
+        const uint32_t *off = s->loff[s->fi];
+        size_t start = off[tile], size = off[tile + 1] - start;
         size_t take = size - s->off;
         if (take > cap - n)
             take = cap - n;
-        memcpy(dst + n, l->buf.data + start + s->off, take);
+        memcpy(dst + n, s->lbuf[s->fi] + start + s->off, take);
         n += take;
         s->off += take;
         if (s->off == size) {
@@ -180,7 +242,7 @@ int fanout_write(struct net *n, struct session *s)
         /* max_rate: wait until a period has (almost) passed; half a tick of slack absorbs jitter. */
         if (s->sub.max_rate < n->dc.tick_rate && now - s->last_frame_t < 1.0 / s->sub.max_rate - 0.5 / n->dc.tick_rate)
             return 0;
-        if (!begin_frame(s, f))
+        if (!begin_frame(n, s, f))
             return 0;
         s->last_seq = f->hdr.seq;
         s->last_frame_t = now;

@@ -77,6 +77,8 @@ struct session {
     struct frame *cur;            /* one reference while sending, else NULL */
     uint8_t hdr[OC_FRAME_HEADER_SIZE]; /* its header, with this client's tile count */
     const struct layer *layers[OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT]; /* [cascade * FIELDS + field], NULL = not sent */
+    const uint8_t *lbuf[OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT];  /* per slot: the tiles this client gets (buf or shared) */
+    const uint32_t *loff[OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT]; /* ... and their offsets */
     uint16_t tiles[CTL_MAX_TILES]; /* the frame's tiles this client gets, in order */
     int ntiles;
     size_t total, sent;           /* bytes of this client's frame, and sent so far */
@@ -85,6 +87,11 @@ struct session {
     uint64_t first_seq;           /* frames older than this are never sent (tick at join) */
     uint64_t last_seq;            /* seq of the last frame started, 0 = none yet */
     double last_frame_t;          /* when it started (max_rate) */
+    /* temporal layers (codec 3, PROTOCOL.md §5.9; fanout.c) */
+    uint64_t hist_seq;            /* seq of the last frame started under this subscription, 0 = none */
+    int hist;                     /* consecutive ticks received, up to hist_seq */
+    bool key_wanted;              /* counted in the sim's key_want for the subscription's layers */
+    uint64_t waited_seq;          /* last frame skipped for want of keyframe tiles (counted once) */
     unsigned char *chunk;         /* LWS_PRE + CHUNK_SIZE */
 };
 
@@ -190,6 +197,11 @@ void fanout_set_latest(struct net *n, struct frame *f);      /* takes f's refere
 bool fanout_want_write(const struct net *n, const struct session *s); /* a frame is ready for s */
 int fanout_write(struct net *n, struct session *s);          /* one lws_write of a frame */
 void fanout_session_free(struct session *s);
+/* Temporal clients: the subscription in s->sub is new (join, subscribe):
+ * no history, keyframes wanted. fanout_want_keyframes(false) before the
+ * subscription changes or the session goes, so the counts stay balanced. */
+void fanout_subscribed(struct net *n, struct session *s);
+void fanout_want_keyframes(struct net *n, struct session *s, bool want);
 
 /* capacity.c: capacity in hello/params, `busy`, `degraded` (server/capacity.h) */
 void net_capacity_add(struct net *n, cJSON *msg);            /* "capacity" member into msg */

@@ -165,6 +165,7 @@ static void session_close(struct net *n, struct session *s)
     lws_dll2_remove(&s->list);
     atomic_store(&g_metrics.clients, (int)n->sessions.count);
     LOGD("client %s gone (%d left)", s->client_id, (int)n->sessions.count);
+    fanout_want_keyframes(n, s, false);
     dispatch_demand(n, &s->sub, -1);
     query_client_gone(n->queries, s->serial);
     while (s->tq.head) {

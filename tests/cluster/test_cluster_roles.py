@@ -275,6 +275,30 @@ def test_set_reaches_both_edges_and_frames_are_identical(c):
 
 
 @test
+@with_cluster(edges=1)
+def test_temporal_client_on_an_edge_gets_intra(c):
+    """The sim publishes intra tiles only: a client of an edge that asks for the temporal
+    codec gets keyframe (codec 1) tiles in every frame, each decodable in order with one
+    decoder state (PROTOCOL.md §5.9 lets a server send keyframes at any time)."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+    import oceanproto
+
+    async def run():
+        ws, _ = await connect(c.edges[0])
+        await ws.send('{"type":"subscribe","id":1,"temporal":true}')
+        m = await recv_json(ws, lambda j: j["type"] in ("subscribed", "error"))
+        check(m["type"] == "subscribed" and m["subscription"]["temporal"] is True, "subscribe: %r" % m)
+        state, codecs = oceanproto.DecoderState(), set()
+        for _ in range(15):
+            _, b = await recv_frame(ws, timeout=10)
+            f = oceanproto.decode_frame(b, state)
+            codecs |= {t.codec for t in f.tiles}
+        check(codecs == {1}, "tile codecs through the edge: %r" % codecs)
+        await ws.close()
+    asyncio.run(run())
+
+
+@test
 def test_frames_identical_to_role_all():
     """Paused at the same sim time, same seed and parameters: an edge's frames carry the
     same header fields (but seq and server time) and the same tile bytes as --role all's."""

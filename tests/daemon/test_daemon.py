@@ -576,7 +576,7 @@ def test_subscribe_fields_lod_tiles(d):
                                  "tiles": want + [[0, 0]], "bound": 0.05, "max_rate": 10}))
         s = await recv_json(a, lambda m: m["type"] == "subscribed")
         check(s["id"] == "s" and s["subscription"] == {"fields": ["height", "jacobian"], "lod": 2,
-                                                        "tiles": want, "bound": 0.05, "max_rate": 10},
+                                                        "tiles": want, "bound": 0.05, "max_rate": 10, "temporal": False},
               "normalised subscription %r" % s)
         h, m = await recv_frame(a, lambda h, m: h["tile_count"] == 2 * len(want))
         ts = tiles(m)

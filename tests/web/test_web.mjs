@@ -166,6 +166,29 @@ try {
     assert(ro, 'window.oceand is writable');
   });
 
+  await check('temporal codec by default: predicted frames decode in order, no reference error', async () => {
+    const f0 = (await state(a)).framesReceived;
+    await waitFor(a, '30 more frames', (n) => window.oceand.framesReceived >= n + 30, f0, 60000);
+    const s = await state(a);
+    // (A page whose worker fell behind three times in 10 s gives the temporal codec up.)
+    assert(s.stats.temporal === true || s.stats.localDrops >= 3, 'the page did not ask for the temporal codec');
+    // A reference error is only allowed after the page itself dropped a frame (its worker
+    // fell 8 frames behind on a loaded machine): the server never breaks the chain.
+    assert(s.stats.lastError === null && (s.stats.referenceErrors === 0 || s.stats.localDrops > 0),
+      `decode errors: ${s.stats.referenceErrors} reference (${s.stats.localDrops} dropped by the page), last ${JSON.stringify(s.stats.lastError)}`);
+    if (!args.fake) { // the daemon sent it predicted (shared) tiles, not only keyframes...
+      const m = await (await fetch(`http://127.0.0.1:${port}/metrics`)).text();
+      const num = (re) => Number((m.match(re) || [])[1]);
+      const shared = num(/^oceand_temporal_tiles_sent_total\{kind="shared"\} (\S+)$/m);
+      const degraded = num(/^oceand_degraded_groups (\S+)$/m);
+      // ...unless the capacity plan thinned the stream (every frame then follows a gap: keyframes,
+      // PROTOCOL.md §5.9) or the page gave the temporal codec up (its worker fell behind).
+      if (degraded === 0 && s.stats.temporal && s.stats.localDrops === 0)
+        assert(shared > 0, `no shared (predicted) tiles sent: ${shared}`);
+      else console.log(`     (not checked: ${degraded} degraded groups, ${s.stats.localDrops} frames dropped by the page)`);
+    }
+  });
+
   await check('foam: the shared foam field is subscribed at a coarse LOD and drawn', async () => {
     if (args.fake) return;
     await waitFor(a, 'foam drawn from the field', () => window.oceand.foam.source === 'field', null, 20000);

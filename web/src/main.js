@@ -50,6 +50,8 @@ const st = {
   rendered: 0, n: null, lod: null, frameParamsVersion: null, lastError: null, serverError: null,
   name: null, subscription: null, foamLod: null, foamM: 0,
   clusterState: null, // edge's {"type":"status"}: 'ok', 'sim_unavailable', 'nats_unavailable'
+  referenceErrors: 0, resyncs: 0, // temporal: predicted frames without their references, and resubscriptions
+  localDrops: 0,   // temporal: frames dropped here because the worker was MAX_QUEUED behind (breaks the chain)
 };
 // Local view state: never sent. ?hour=h starts at that local time of day.
 const hourArg = Number(query.get('hour'));
@@ -62,7 +64,13 @@ const timings = { decode: [], assemble: [], upload: [] };
 const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
 let workerBusy = 0;            // frames handed to the worker and not yet back
 let pendingFrame = null;       // newest decoded frame waiting for the render loop
-const wantedSub = {};          // subscription changes made in the panel, kept across reconnects
+// Temporal codec (codec 3, PROTOCOL.md §5.9) unless ?temporal=0 asks for intra-only frames:
+// every frame must then reach the decoder (its codes are the next frame's references), so
+// frames are never dropped before the worker except when it falls far behind (then resync).
+let temporal = query.get('temporal') !== '0';
+const MAX_QUEUED = 8;          // temporal: frames waiting for the worker before we drop and resync
+const wantedSub = temporal ? { temporal: true } : {}; // kept across reconnects, with the panel's changes
+let lastResync = -Infinity;
 // Cascades 1..3 (PROTOCOL.md §4.1): their height, at LOD 1 (each holds waves up to half its
 // Nyquist wavenumber, so LOD 1 loses nothing) and 1 mm (their heights are centimetres).
 // Asked for always: the server leaves out cascades that are not in force. ?cascades=0: none.
@@ -98,6 +106,7 @@ const conn = new Connection(serverUrl(), {
       case 'hello':
         st.clientId = msg.client_id; st.role = msg.role; st.name = null;
         st.lastSeq = null; // a new session: seq gaps across a reconnect are not drops
+        worker.postMessage({ type: 'reset' }); // its references belong to the old session
         st.params = msg.params; st.paramsVersion = msg.params_version;
         panel.build(msg);
         if (msg.subscription) panel.subscribed(msg.subscription);
@@ -147,7 +156,12 @@ const conn = new Connection(serverUrl(), {
     stats.frames++;
     stats.bytes += buf.byteLength;
     // Never queue behind a slow decoder: skip instead of lagging (the seq gap counts it).
-    if (workerBusy >= (bench ? 1 : 2)) return; // bench: one at a time, so each time is one frame's
+    // Temporal: the worker decodes every frame in order and skips only the assembly of
+    // overtaken ones; a frame dropped here breaks the chain, so ask for keyframes.
+    if (temporal ? workerBusy >= MAX_QUEUED : workerBusy >= (bench ? 1 : 2)) { // bench: one at a time
+      if (temporal) dropped();
+      return;
+    }
     workerBusy++;
     worker.postMessage({ type: 'frame', buf }, [buf]);
   },
@@ -173,9 +187,35 @@ window.addEventListener('keydown', (ev) => {
   if ((ev.key === 'h' || ev.key === 'H') && !ev.ctrlKey && !ev.metaKey && !ev.altKey && !(ev.target instanceof HTMLInputElement)) hud.setVisible(!hud.visible);
 });
 
+// The worker cannot keep up with every frame: resync; a third time within 10 s, give up the
+// temporal codec for this page (intra frames can be skipped before decoding).
+const dropTimes = [];
+function dropped() {
+  st.localDrops++;
+  const now = performance.now();
+  dropTimes.push(now);
+  while (dropTimes.length && now - dropTimes[0] > 10000) dropTimes.shift();
+  if (dropTimes.length < 3) { resync(); return; }
+  temporal = false;
+  wantedSub.temporal = false;
+  conn.send({ type: 'subscribe', temporal: false });
+}
+
+// Subscribing again makes the server send keyframe tiles from its next frame on (§5.9): the
+// way out of a broken chain. At most once a second (frames already on their way still fail).
+function resync() {
+  const now = performance.now();
+  if (now - lastResync < 1000) return;
+  lastResync = now;
+  st.resyncs++;
+  conn.send({ type: 'subscribe', ...wantedSub });
+}
+
 worker.onmessage = (ev) => {
   const msg = ev.data;
   workerBusy--;
+  if (msg.type === 'skip') return; // decoded (a reference for the next), overtaken before assembly
+  if (msg.type === 'error' && msg.code === 'reference') { st.referenceErrors++; resync(); return; }
   if (msg.type === 'error') { st.lastError = { code: 'decode', message: msg.message }; return; }
   const h = msg.header;
   st.lastError = null;
@@ -257,6 +297,7 @@ window.oceand = Object.freeze({
     return Object.freeze({
       fps: stats.fps, framesPerSec: stats.framesPerSec, kBps: stats.kBps, latencyMs: stats.latencyMs,
       dropped: stats.dropped, decodeMs: stats.decodeMs, uploadMs: stats.uploadMs, n: st.n, lod: st.lod,
+      temporal, referenceErrors: st.referenceErrors, resyncs: st.resyncs, localDrops: st.localDrops,
       lastError: snapshot(st.lastError), serverError: snapshot(st.serverError),
       ...(bench ? { timings: snapshot(timings) } : {}),
     });

@@ -6,7 +6,7 @@
 // Output buffers are transferred to the main thread, which hands them back for
 // reuse (no 4 MB allocation per frame at N=512).
 import { inflateSync } from 'fflate';
-import { decodeFrame, setInflateRaw } from '../../proto/js/oc_decode.js';
+import { decodeFrame, setInflateRaw, DecoderState } from '../../proto/js/oc_decode.js';
 
 // Codec 1 (raw DEFLATE): fflate's synchronous inflate for small tiles, where one async
 // DecompressionStream per tile costs more than the inflating (the decoder picks per tile).
@@ -24,21 +24,49 @@ function take(channels, count) {
   return new Float32Array(count * channels);
 }
 
-self.onmessage = async (ev) => {
+// Codec 3 (temporal) tiles are predicted from the previous frames: one DecoderState keeps
+// their codes, and frames are decoded strictly one after the other, in arrival order (a
+// frame's tiles may inflate asynchronously, so a queue serialises them). A frame that a
+// newer one has already overtaken in the queue is decoded (its codes are the next frame's
+// references) but not assembled: the render loop would never show it (unless nothing was
+// assembled for 100 ms: a worker that is always behind still shows ten frames a second).
+const state = new DecoderState();
+const queue = [];
+let running = false;
+let lastAssembled = 0;
+
+self.onmessage = (ev) => {
   const msg = ev.data;
   if (msg.type === 'recycle') {
     for (const b of msg.buffers) if (b && pool[b.channels]) pool[b.channels].push(b.buffer);
     return;
   }
+  if (msg.type === 'reset') { state.reset(); return; }
   if (msg.type !== 'frame') return;
+  queue.push(msg);
+  if (!running) drain();
+};
+
+async function drain() {
+  running = true;
+  while (queue.length) {
+    const msg = queue.shift();
+    await handle(msg, queue.length > 0);
+  }
+  running = false;
+}
+
+async function handle(msg, superseded) {
   const t0 = performance.now();
   let frame;
   try {
-    frame = await decodeFrame(msg.buf);
+    frame = await decodeFrame(msg.buf, { state });
   } catch (e) {
-    self.postMessage({ type: 'error', message: String(e && e.message || e) });
+    self.postMessage({ type: 'error', code: e && e.code, message: String(e && e.message || e) });
     return;
   }
+  if (superseded && t0 - lastAssembled < 100) { self.postMessage({ type: 'skip', seq: frame.header.seq }); return; }
+  lastAssembled = t0;
   const t1 = performance.now();
   const h = frame.header;
   const base = frame.tiles.filter((t) => !t.cascade);   // cascade 0 (tile flags 0)
@@ -82,7 +110,7 @@ self.onmessage = async (ev) => {
   self.postMessage({
     type: 'frame', header: h, lod, m, present, disp, slope, fine, foam, foamLod, fm, decodeMs, assembleMs, bytes: msg.buf.byteLength,
   }, transfer);
-};
+}
 
 // Cascades 1..3 (PROTOCOL.md §4.1): each its own M_c x M_c texture (M_c = N >> its LOD),
 // RGBA (dx, height, dz, 0); patch side L_c = patch_size / 3.543^c. Only cascades with tiles.

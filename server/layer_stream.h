@@ -1,0 +1,54 @@
+/* layer_stream.h — temporal layers (codec 3, PROTOCOL.md §5.9): one
+ * oc_stream per layer key that a temporal client subscribes to.
+ *
+ * Owned by the thread that encodes (the tick): each tick, a temporal
+ * layer's stream encodes the shared frame of the layer once (predicted
+ * tiles and the chains' keyframes) and, when some client needs them, this
+ * tick's keyframe tiles; both go into the frame's struct layer, and the lws
+ * thread picks per client which one it sends. The work per layer and tick
+ * is one shared encode plus at most one keyframe encode, whatever the
+ * number of clients. layer_encode_temporal is a self-contained call (the
+ * stream and the encoder are passed in), so layers can be encoded on any
+ * thread, one layer per thread at a time. */
+#ifndef OCEAND_LAYER_STREAM_H
+#define OCEAND_LAYER_STREAM_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "frame.h"
+
+/* The streams of every layer key (tick only). */
+struct layer_streams {
+    struct oc_stream *st[LAYER_KEYS]; /* NULL = no temporal client for that key (yet) */
+    int n, tile_size;                 /* the grid they were made for; another resets all */
+    int keyframe_interval;            /* periodic keyframes, ticks (0 = only when needed) */
+    size_t budget;                    /* bytes the streams may keep (encoder state); beyond: intra */
+    size_t used;                      /* bytes kept by the streams in st[] */
+};
+
+/* Encoder state a stream keeps for a layer of side `side` samples (codes and
+ * Laplacians of 5 ticks): about 40 bytes a sample. */
+size_t layer_stream_bytes(int side);
+
+void layer_streams_init(struct layer_streams *ls, int keyframe_interval, size_t budget);
+/* New chains everywhere: the next tick's shared tiles are keyframes (a change of the sea). */
+void layer_streams_reset(struct layer_streams *ls);
+void layer_streams_free(struct layer_streams *ls);
+
+/* Make the streams agree with this tick's wish: free those of keys no
+ * temporal client wants, create the wanted ones at grid n / tile_size (a
+ * new grid frees them all first). A wanted key whose stream does not fit
+ * the budget (or cannot be allocated) loses its temporal flag in `want` and
+ * gets intra tiles instead (want->intra set). */
+void layer_streams_prepare(struct layer_streams *ls, int n, int tile_size, struct frame_want *want);
+
+/* Encode one temporal layer of this tick into l (field/lod/bound_index set
+ * by the caller): l->shared + l->shared_off + l->need always, l->buf +
+ * l->tile_off (the keyframe tiles) when `keyframes`. data = the full n*n
+ * field. Returns 0 or an OC_E_* (the stream is then reset, l holds nothing). */
+int layer_encode_temporal(struct oc_stream *st, struct oc_encoder *enc, const float *data, uint64_t seq,
+                          bool keyframes, int tiles_per_side, struct layer *l);
+
+#endif

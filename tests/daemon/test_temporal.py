@@ -1,0 +1,276 @@
+#!/usr/bin/python3
+"""Temporal codec (codec 3) against a real daemon (PROTOCOL.md §5.9, issue 11).
+
+Behaviour, not timing: every frame a temporal client receives decodes, in
+order, with one decoder (build/frame_check, C) and lies within the bound of
+the simulation (and of the lossless stream at equal seq, decoded by the
+Python example decoder); a client that joins mid-stream decodes its first
+frame alone; a client throttled by max_rate and a slow reader never get a
+predicted frame without its references; intra-only clients never see codec 3.
+
+    /usr/bin/python3 tests/daemon/test_temporal.py --oceand build/oceand --frame-check build/frame_check
+Uses the harness of test_daemon.py (same flags: --sanitized, -k).
+"""
+import asyncio
+import json
+import os
+import socket
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+import test_daemon as td  # noqa: E402
+from test_daemon import check, connect, recv_json, tiles, parse_header  # noqa: E402
+import oceanproto  # noqa: E402
+import numpy as np  # noqa: E402
+
+TESTS = []
+CODEC_TEMPORAL = 3
+
+
+def test(fn):
+    TESTS.append(fn)
+    return fn
+
+
+async def subscribe(ws, **sub):
+    await ws.send(json.dumps(dict(type="subscribe", id=9, **sub)))
+    m = await recv_json(ws, lambda j: j.get("type") in ("subscribed", "error") and j.get("id") == 9)
+    check(m["type"] == "subscribed", "subscribe refused: %r" % m)
+    return m["subscription"]
+
+
+async def collect(ws, seconds, limit=None):
+    """Every binary frame received for `seconds` (after the caller's `subscribed`)."""
+    out = []
+    t0 = time.time()
+    while time.time() - t0 < seconds and (limit is None or len(out) < limit):
+        m = await asyncio.wait_for(ws.recv(), 5)
+        if isinstance(m, bytes):
+            out.append(m)
+    return out
+
+
+def codecs(frames):
+    c = {}
+    for m in frames:
+        for t in tiles(m):
+            c[t["codec"]] = c.get(t["codec"], 0) + 1
+    return c
+
+
+def check_stream(d, params, frames, bound, what):
+    """frame_check decodes the frames in order with ONE decoder (predicted tiles
+    need their references) and compares every sample with the library."""
+    res = td.frame_check(d, params, frames)
+    check(len(res) == len(frames), "%s: frame_check gave %d lines for %d frames" % (what, len(res), len(frames)))
+    worst = max(r["max_err"] for r in res)
+    check(all(r["bad"] == 0 for r in res) and worst <= bound * (1 + 1e-6),
+          "%s: samples outside the bound %g (max error %g)" % (what, bound, worst))
+    return worst
+
+
+@test
+def test_temporal_stream_within_bound_of_lossless():
+    """A long stream (60 s of sim time: 15 s at time_scale 4, so 450 ticks with
+    four times the motion per tick; periodic keyframes every 60 ticks so every
+    tile restarts its chain 7 times; the default K = 300 would give at most 1.5
+    restarts in 60 s of ticks). Every temporal frame is within the bound of the
+    lossless stream at equal seq and of the simulation."""
+    d = td.Daemon("--keyframe-interval", "60", "--time-scale", "4")
+
+    async def run():
+        a, hello = await connect(d)
+        b, _ = await connect(d)
+        await subscribe(a, temporal=True, bound=0.01)
+        await subscribe(b, bound=0, max_rate=5)      # lossless, a few frames a second
+        ta = asyncio.ensure_future(collect(a, 15))
+        tb = asyncio.ensure_future(collect(b, 15))
+        fa, fb = await ta, await tb
+        await a.close()
+        await b.close()
+        return hello, fa, fb
+    try:
+        hello, fa, fb = asyncio.run(run())
+        c = codecs(fa)
+        seqs = [parse_header(m)["seq"] for m in fa]
+        gaps = sum(y - x - 1 for x, y in zip(seqs, seqs[1:]))
+        print("    temporal: %d frames, %d skipped, tiles by codec %r, %.1f kB/frame; lossless: %d frames"
+              % (len(fa), gaps, c, sum(map(len, fa)) / len(fa) / 1e3, len(fb)))
+        check(len(fa) >= 200, "only %d temporal frames in 15 s" % len(fa))
+        check(c.get(CODEC_TEMPORAL, 0) > 0.8 * sum(c.values()), "mostly predicted tiles expected: %r" % c)
+        check(CODEC_TEMPORAL not in {t["codec"] for t in tiles(fa[0])}, "the first frame must be keyframes")
+        worst = check_stream(d, hello["params"], fa, 0.01, "temporal stream")
+        # The same frames through the Python decoder, against the lossless stream at equal seq.
+        state, lossless, compared, err = oceanproto.DecoderState(), {}, 0, 0.0
+        for m in fb:
+            f = oceanproto.decode_frame(m)
+            lossless[f.seq] = {(t.field, t.x, t.z): t.samples for t in f.tiles}
+        for m in fa:
+            f = oceanproto.decode_frame(m, state)
+            ref = lossless.get(f.seq)
+            if ref is None:
+                continue
+            for t in f.tiles:
+                # The server may send either layer at a coarser LOD when it is short of encode
+                # time (capacity plan): a coarser LOD is plain subsampling (PROTOCOL.md §4).
+                r, a = ref[(t.field, t.x, t.z)], t.samples
+                if r.shape != a.shape:
+                    sa, sr = a.shape[0] // min(a.shape[0], r.shape[0]), r.shape[0] // min(a.shape[0], r.shape[0])
+                    a, r = a[::sa, ::sa], r[::sr, ::sr]
+                e = float(np.max(np.abs(a.astype(np.float64) - r)))
+                err = max(err, e)
+            compared += 1
+        print("    max error %.5f against the simulation, %.5f against the lossless stream (%d frames at equal seq)"
+              % (worst, err, compared))
+        check(compared >= 20, "only %d frames at equal seq with the lossless stream" % compared)
+        check(err <= 0.01 * (1 + 1e-6), "temporal frames differ from the lossless ones by %g > bound" % err)
+        check(d.metric('oceand_stream_tiles_total{kind="predicted"}') > 0, "no predicted tiles counted")
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+    finally:
+        d.kill()
+
+
+@test
+def test_temporal_join_mid_stream(d):
+    """A client that joins a running temporal stream decodes its first frame
+    alone (keyframe tiles of that tick), then takes the shared predicted tiles."""
+    async def run():
+        a, hello = await connect(d)
+        await subscribe(a, temporal=True)
+        first_a = await collect(a, 1.0)
+        b, _ = await connect(d)
+        await subscribe(b, temporal=True)
+        fb = await collect(b, 2.0)
+        rest_a = await collect(a, 0.3)
+        await a.close()
+        await b.close()
+        return hello, first_a + rest_a, fb
+    hello, fa, fb = asyncio.run(run())
+    check(len(fb) >= 10, "the joining client got only %d frames" % len(fb))
+    print("    joiner: first frame codecs %r, all %r" % (codecs(fb[:1]), codecs(fb)))
+    check(CODEC_TEMPORAL not in codecs(fb[:1]), "the joiner's first frame has predicted tiles")
+    check_stream(d, hello["params"], fb[:1], 0.01, "first frame alone")
+    check_stream(d, hello["params"], fb, 0.01, "joiner's stream")
+    check(codecs(fb[-5:]).get(CODEC_TEMPORAL, 0) > 0, "the joiner never switched to the shared predicted tiles")
+    check_stream(d, hello["params"], fa, 0.01, "first client's stream")
+
+
+@test
+def test_temporal_throttled_client(d):
+    """max_rate 10 at 30 Hz: every frame follows a gap, so every frame is keyframe
+    tiles, all decodable in order by one decoder."""
+    async def run():
+        a, hello = await connect(d)
+        fast, _ = await connect(d)
+        await subscribe(fast, temporal=True)   # keeps the layer predicted for others
+        await subscribe(a, temporal=True, max_rate=10)
+        fa = await collect(a, 3.0)
+        await a.close()
+        await fast.close()
+        return hello, fa
+    hello, fa = asyncio.run(run())
+    seqs = [parse_header(m)["seq"] for m in fa]
+    print("    throttled: %d frames, seq steps %r, codecs %r" % (len(fa), sorted(set(y - x for x, y in zip(seqs, seqs[1:]))), codecs(fa)))
+    check(len(fa) >= 15, "throttled client got only %d frames" % len(fa))
+    check(CODEC_TEMPORAL not in codecs(fa), "a throttled client got predicted tiles")
+    check_stream(d, hello["params"], fa, 0.01, "throttled stream")
+
+
+@test
+def test_temporal_slow_reader():
+    """A client that reads slowly (small socket buffers, pauses) skips frames
+    (latest frame wins); every frame it does get decodes in order."""
+    d = td.Daemon("--send-buffer-kb", "16")
+
+    async def run():
+        fast, hello = await connect(d)
+        await subscribe(fast, temporal=True)
+        sock = socket.socket()
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 16384)
+        sock.connect(("127.0.0.1", d.port))
+        a, _ = await connect(d, max_queue=1, read_limit=1 << 14, sock=sock)
+        await subscribe(a, temporal=True)
+        frames = []
+        t0 = time.time()
+        while time.time() - t0 < 3:                  # slow: ~8 frames/s of 30
+            m = await asyncio.wait_for(a.recv(), 10)
+            if isinstance(m, bytes):
+                frames.append(m)
+            await asyncio.sleep(0.12)
+        frames += await collect(a, 1.5)              # then read at full speed: predicted again
+        await a.close()
+        await fast.close()
+        return hello, frames
+    try:
+        hello, frames = asyncio.run(run())
+        seqs = [parse_header(m)["seq"] for m in frames]
+        gaps = sum(y - x - 1 for x, y in zip(seqs, seqs[1:]))
+        print("    slow reader: %d frames, %d skipped, codecs %r, waited for keyframes %d"
+              % (len(frames), gaps, codecs(frames), d.metric("oceand_frames_waited_keyframe_total")))
+        check(gaps >= 10, "the slow client skipped only %d frames: not slow enough to test" % gaps)
+        check_stream(d, hello["params"], frames, 0.01, "slow reader's stream")
+        check(codecs(frames[-5:]).get(CODEC_TEMPORAL, 0) > 0, "caught up, but no predicted tiles")
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+    finally:
+        d.kill()
+
+
+@test
+def test_intra_only_and_resubscribe(d):
+    """A client that does not ask for temporal never gets codec 3, even while
+    another client streams the same layer predicted; a temporal client that
+    changes its subscription (LOD) gets keyframes at once, decodable."""
+    async def run():
+        t, hello = await connect(d)
+        i, _ = await connect(d)
+        await subscribe(t, temporal=True)
+        sub = await subscribe(i, fields=["height", "dx", "dz"])
+        check(sub["temporal"] is False, "temporal is off unless asked for: %r" % sub)
+        fi = await collect(i, 1.5)
+        ft = await collect(t, 0.5)
+        await subscribe(t, lod=1)                 # temporal stays on (omitted members keep their value)
+        ft2 = await collect(t, 1.0)
+        await t.close()
+        await i.close()
+        return hello, fi, ft, ft2
+    hello, fi, ft, ft2 = asyncio.run(run())
+    print("    intra client %r; temporal %r; after lod 1 %r" % (codecs(fi), codecs(ft), codecs(ft2)))
+    check(CODEC_TEMPORAL not in codecs(fi), "an intra-only client got predicted tiles")
+    check_stream(d, hello["params"], fi, 0.01, "intra stream")
+    check(CODEC_TEMPORAL not in codecs(ft2[:1]) and {t["lod"] for t in tiles(ft2[0])} == {1},
+          "first frame after resubscribing is not keyframes at the new LOD")
+    check_stream(d, hello["params"], ft + ft2, 0.01, "temporal stream across a resubscribe")
+
+
+@test
+def test_temporal_across_resolution_change(d):
+    """A change of N resets the streams: the first frame at the new N is all
+    keyframes and the stream stays decodable in order."""
+    async def run():
+        a, hello = await connect(d)
+        await subscribe(a, temporal=True)
+        f1 = await collect(a, 0.7)
+        await a.send(json.dumps({"type": "set", "params": {"resolution": td.BASE_N // 2}}))
+        f2 = []
+        t0 = time.time()
+        while time.time() - t0 < 20 and sum(parse_header(m)["n"] == td.BASE_N // 2 for m in f2) < 15:
+            f2 += await collect(a, 0.2)
+        await a.close()
+        return hello, f1, f2
+    hello, f1, f2 = asyncio.run(run())
+    old = [m for m in f1 + f2 if parse_header(m)["n"] == td.BASE_N]
+    new = [m for m in f2 if parse_header(m)["n"] == td.BASE_N // 2]
+    check(len(new) >= 15, "only %d frames at the new N" % len(new))
+    check(CODEC_TEMPORAL not in codecs(new[:1]), "the first frame at the new N has predicted tiles")
+    check(codecs(new[-5:]).get(CODEC_TEMPORAL, 0) > 0, "no predicted tiles at the new N")
+    check_stream(d, hello["params"], old, 0.01, "stream before the change")
+    check_stream(d, dict(hello["params"], resolution=td.BASE_N // 2), new, 0.01, "stream after the change")
+
+
+if __name__ == "__main__":
+    td.TESTS[:] = TESTS
+    td.main()
