@@ -235,14 +235,8 @@ float foamFieldAt(vec2 xz) {
 // The field seen far away: read at the hex-tiled offsets of hexSample (same lattice),
 // so whitecaps do not print the patch lattice from above.
 float foamFieldHex(vec2 xz) {
-  vec2 uv = xz / (0.8 * uPatch) * 3.4641016;
-  vec2 sk = mat2(1.0, 0.0, -0.57735027, 1.15470054) * uv;
-  vec2 id = floor(sk);
-  vec3 t = vec3(fract(sk), 0.0);
-  t.z = 1.0 - t.x - t.y;
   vec3 w; vec2 v1, v2, v3;
-  if (t.z > 0.0) { w = vec3(t.z, t.y, t.x); v1 = id; v2 = id + vec2(0.0, 1.0); v3 = id + vec2(1.0, 0.0); }
-  else { w = vec3(-t.z, 1.0 - t.y, 1.0 - t.x); v1 = id + vec2(1.0); v2 = id + vec2(1.0, 0.0); v3 = id + vec2(0.0, 1.0); }
+  hexCells(xz, w, v1, v2, v3);
   float f = w.x * foamFieldAt(xz + hexHash(v1) * uPatch) + w.y * foamFieldAt(xz + hexHash(v2) * uPatch)
           + w.z * foamFieldAt(xz + hexHash(v3) * uPatch);
   return f / max(w.x + w.y + w.z, 1e-3);
@@ -325,15 +319,20 @@ vec2 hexHash(vec2 p) { return fract(sin(vec2(dot(p, vec2(127.1, 311.7)), dot(p, 
 // linear sea are Gaussian, so the blend has the same statistics). Wind direction is
 // kept: offsets only, no rotations. The geometry stays periodic, so this is only used
 // where single waves are no longer resolved (uHexNear..uHexFar).
-vec3 hexSample(vec2 xz, float e) {
+// The hex tiling's cell around xz: its three lattice points and their barycentric
+// weights (hexSample, and the foam's foamFieldHex, read at offsets hashed from them).
+void hexCells(vec2 xz, out vec3 w, out vec2 v1, out vec2 v2, out vec2 v3) {
   vec2 uv = xz / (0.8 * uPatch) * 3.4641016;              // cells a little smaller than the patch
   vec2 sk = mat2(1.0, 0.0, -0.57735027, 1.15470054) * uv;  // skewed triangular grid
   vec2 id = floor(sk);
   vec3 t = vec3(fract(sk), 0.0);
   t.z = 1.0 - t.x - t.y;
-  vec3 w; vec2 v1, v2, v3;
   if (t.z > 0.0) { w = vec3(t.z, t.y, t.x); v1 = id; v2 = id + vec2(0.0, 1.0); v3 = id + vec2(1.0, 0.0); }
   else { w = vec3(-t.z, 1.0 - t.y, 1.0 - t.x); v1 = id + vec2(1.0); v2 = id + vec2(1.0, 0.0); v3 = id + vec2(0.0, 1.0); }
+}
+vec3 hexSample(vec2 xz, float e) {
+  vec3 w; vec2 v1, v2, v3;
+  hexCells(xz, w, v1, v2, v3);
   vec2 o1 = xz + hexHash(v1) * uPatch, o2 = xz + hexHash(v2) * uPatch, o3 = xz + hexHash(v3) * uPatch;
   vec3 s = w.x * farSample(o1, e) + w.y * farSample(o2, e) + w.z * farSample(o3, e);
   return s / max(length(w), 1e-3);   // (slope x, slope z, height)
