@@ -867,18 +867,12 @@ int ocean_reconfigure(struct ocean *o, const struct ocean_params *p, char *err, 
     return 0;
 }
 
-/* Step cascade c >= 1: its grid and model stand in for cascade 0's during
- * the call, so ocean_step.c and ocean_dft.c step it like any sea. */
+/* Step cascade c >= 1 on its own grid and model. Nothing of `o` is written:
+ * ocean_prepare may read the live ocean on another thread meanwhile. */
 static int step_cascade(struct ocean *o, int c, double t, unsigned fields)
 {
-    struct ocean_grid *g0 = o->g;
-    struct spectrum_model m0 = o->model;
-    o->g = o->fine[c];
-    o->model = o->fine_model[c];
-    int rc = o->p.transform == TRANSFORM_DFT ? ocean_step_dft(o, t, fields) : ocean_step_fft(o, t, fields);
-    o->g = g0;
-    o->model = m0;
-    return rc;
+    return o->p.transform == TRANSFORM_DFT ? ocean_step_dft_grid(o, o->fine[c], &o->fine_model[c], t, fields)
+                                           : ocean_step_fft_grid(o, o->fine[c], t, fields, NULL);
 }
 
 int ocean_step_cascades(struct ocean *o, double t, const unsigned *fields, int count)

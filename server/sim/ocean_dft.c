@@ -13,8 +13,13 @@
 void ocean_reference_spectrum(const struct ocean *o, double t, enum ocean_transform tr,
                               double complex *out)
 {
-    const struct spectrum_model *m = &o->model;
-    const int n = o->g->n;
+    ocean_reference_spectrum_of(o, o->g, &o->model, t, tr, out);
+}
+
+void ocean_reference_spectrum_of(const struct ocean *o, const struct ocean_grid *g, const struct spectrum_model *m,
+                                 double t, enum ocean_transform tr, double complex *out)
+{
+    const int n = g->n;
     /* Not wrapped into the loop period, unlike the FFT path: the reference
      * is the plain definition, so the tests see whether wrapping is exact. */
     const double L = m->patch, lam = o->p.choppiness, tt = t;
@@ -49,7 +54,12 @@ void ocean_reference_spectrum(const struct ocean *o, double t, enum ocean_transf
 
 int ocean_step_dft(struct ocean *o, double t, unsigned fields)
 {
-    struct ocean_grid *g = o->g;
+    return ocean_step_dft_grid(o, o->g, &o->model, t, fields);
+}
+
+int ocean_step_dft_grid(struct ocean *o, struct ocean_grid *g, const struct spectrum_model *m, double t,
+                        unsigned fields)
+{
     const int n = g->n;
     const size_t nn = (size_t)n * n;
     unsigned tm = ocean_transforms_for(fields);
@@ -73,7 +83,7 @@ int ocean_step_dft(struct ocean *o, double t, unsigned fields)
     for (int tr = 0; tr < TR_COUNT; tr++) {
         if (!(tm & (1u << tr)))
             continue;
-        ocean_reference_spectrum(o, t, tr, spec);
+        ocean_reference_spectrum_of(o, g, m, t, tr, spec);
         float *dst = tr == TR_JXX ? jac[0] : tr == TR_JZZ ? jac[1] : tr == TR_JXZ ? jac[2]
                    : ocean_transform_dest(g, tr);
         for (int z = 0; z < n; z++) {

@@ -158,6 +158,13 @@ unsigned ocean_transforms_for(unsigned fields);
 int ocean_step_fft(struct ocean *o, double t, unsigned fields);
 int ocean_step_fft_foam(struct ocean *o, double t, unsigned fields, const struct ocean_foam_update *foam);
 int ocean_step_dft(struct ocean *o, double t, unsigned fields);
+/* The same on a given grid and model (a finer cascade's): o supplies only the
+ * pool, the parameters shared by every cascade (choppiness, loop period) and
+ * the transform; o itself is not written. */
+int ocean_step_fft_grid(struct ocean *o, struct ocean_grid *g, double t, unsigned fields,
+                        const struct ocean_foam_update *foam);
+int ocean_step_dft_grid(struct ocean *o, struct ocean_grid *g, const struct spectrum_model *m, double t,
+                        unsigned fields);
 /* Only the FFTW executes the step for these fields would run, on whatever
  * the buffers hold (benchmark). */
 void ocean_fft_only(struct ocean *o, unsigned fields);
@@ -174,6 +181,9 @@ void ocean_step_parts(struct ocean *o, double t, unsigned fields, unsigned skip)
  * spectrum model (independently of the fast path's stored amplitudes). */
 void ocean_reference_spectrum(const struct ocean *o, double t, enum ocean_transform tr,
                               double complex *out);
+/* The same for grid g under model m (a finer cascade's). */
+void ocean_reference_spectrum_of(const struct ocean *o, const struct ocean_grid *g, const struct spectrum_model *m,
+                                 double t, enum ocean_transform tr, double complex *out);
 /* Time at which the phases are evaluated: t, or t wrapped into
  * [0, loop_period) so that a looping sea is exactly periodic. */
 double ocean_phase_time(const struct ocean *o, double t);

@@ -64,6 +64,7 @@ static inline void sincos_row(const double *restrict omega, double t, int n, flo
 
 struct fill_ctx {
     struct ocean *o;
+    struct ocean_grid *g; /* the grid stepped: cascade 0's (o->g) or a finer cascade's */
     double t;
     unsigned cols;  /* ocean_column bits */
     unsigned tm;    /* transforms (fields) */
@@ -180,7 +181,7 @@ static void fill_column(const float *restrict col, double t, int n, float *restr
 static void fill_tiles(void *arg, int t0, int t1, int worker)
 {
     const struct fill_ctx *c = arg;
-    struct ocean_grid *g = c->o->g;
+    struct ocean_grid *g = c->g;
     const int n = g->n, T = g->tile;
     const size_t sd = tile_sd(n);
     const float *kz = g->kz;
@@ -266,7 +267,7 @@ static void jacobian_foam(float *restrict J, float *restrict foam, const float *
 static void row_blocks(void *arg, int b0, int b1, int worker)
 {
     const struct fill_ctx *c = arg;
-    struct ocean_grid *g = c->o->g;
+    struct ocean_grid *g = c->g;
     const int n = g->n, nh = g->nh, B = OCEAN_ROW_BLOCK;
     const unsigned tm = c->tm;
     float *buf = g->scratch + (size_t)worker * g->scratch_floats;
@@ -318,23 +319,23 @@ static void row_blocks(void *arg, int b0, int b1, int worker)
  * step run (same arrays, same threads): the benchmark's reference. */
 static void run_step(struct fill_ctx *c, int threads)
 {
-    struct ocean_grid *g = c->o->g;
+    struct ocean_grid *g = c->g;
     struct ocean_pool *pool = c->o->pool;
     /* Tiles cover kx columns 0 .. N/2-1; the Nyquist column is zero. */
     ocean_parallel(pool, threads, (g->n / 2) / g->tile, fill_tiles, c);
     ocean_parallel(pool, threads, g->n / OCEAN_ROW_BLOCK, row_blocks, c);
 }
 
-static int step_threads(const struct ocean *o)
+static int step_threads(const struct ocean_grid *g)
 {
-    return o->g->n >= OCEAN_THREADS_FROM_N ? o->g->workers : 1;
+    return g->n >= OCEAN_THREADS_FROM_N ? g->workers : 1;
 }
 
 void ocean_step_parts(struct ocean *o, double t, unsigned fields, unsigned skip)
 {
     unsigned tm = ocean_transforms_for(fields);
-    struct fill_ctx c = {o, ocean_phase_time(o, t), columns_for(tm), tm, skip, NULL};
-    run_step(&c, step_threads(o));
+    struct fill_ctx c = {o, o->g, ocean_phase_time(o, t), columns_for(tm), tm, skip, NULL};
+    run_step(&c, step_threads(o->g));
 }
 
 void ocean_fft_only(struct ocean *o, unsigned fields)
@@ -342,16 +343,22 @@ void ocean_fft_only(struct ocean *o, unsigned fields)
     ocean_step_parts(o, 0, fields, OCEAN_SKIP_ALL);
 }
 
-int ocean_step_fft_foam(struct ocean *o, double t, unsigned fields, const struct ocean_foam_update *foam)
+int ocean_step_fft_grid(struct ocean *o, struct ocean_grid *g, double t, unsigned fields,
+                        const struct ocean_foam_update *foam)
 {
     unsigned tm = ocean_transforms_for(fields);
     if (!tm)
         return 0;
     if (foam && !(tm & (1u << TR_JXX)))
         return -1;
-    struct fill_ctx c = {o, ocean_phase_time(o, t), columns_for(tm), tm, 0, foam};
-    run_step(&c, step_threads(o));
+    struct fill_ctx c = {o, g, ocean_phase_time(o, t), columns_for(tm), tm, 0, foam};
+    run_step(&c, step_threads(g));
     return 0;
+}
+
+int ocean_step_fft_foam(struct ocean *o, double t, unsigned fields, const struct ocean_foam_update *foam)
+{
+    return ocean_step_fft_grid(o, o->g, t, fields, foam);
 }
 
 int ocean_step_fft(struct ocean *o, double t, unsigned fields)
