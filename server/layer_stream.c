@@ -24,6 +24,12 @@ void layer_streams_reset(struct layer_streams *ls)
         oc_stream_reset(ls->st[k]);
 }
 
+void layer_streams_sea_changed(struct layer_streams *ls)
+{
+    for (int k = 0; k < LAYER_KEYS; k++)
+        oc_stream_sea_changed(ls->st[k]);
+}
+
 static void drop(struct layer_streams *ls, int k)
 {
     if (!ls->st[k])

@@ -35,6 +35,8 @@ size_t layer_stream_bytes(int side);
 void layer_streams_init(struct layer_streams *ls, int keyframe_interval, size_t budget);
 /* New chains everywhere: the next tick's shared tiles are keyframes (a change of the sea). */
 void layer_streams_reset(struct layer_streams *ls);
+/* The sea's amplitudes changed, its phases did not: chains go on (oc_stream_sea_changed). */
+void layer_streams_sea_changed(struct layer_streams *ls);
 void layer_streams_free(struct layer_streams *ls);
 
 /* Make the streams agree with this tick's wish: free those of keys no
