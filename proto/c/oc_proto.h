@@ -168,12 +168,12 @@ void oc_stream_free(struct oc_stream *s);
 /* A periodic keyframe every `ticks` frames (0 = only when needed). Default OC_STREAM_KEYFRAME_INTERVAL. */
 #define OC_STREAM_KEYFRAME_INTERVAL 300
 void oc_stream_set_keyframe_interval(struct oc_stream *s, int ticks);
-/* Grid refinement r: a chain quantises on a grid r times finer than the bound needs and
- * each predicted code is the valid one nearest its prediction (docs/codec.md, "Grid
- * refinement"). 1 = the coarse grid (one valid code per sample). Default, by measurement:
- * 3 for bounds >= 5 mm, 2 for >= 0.5 mm, else 1 (OC_STREAM_GRID_REFINE(bound)).
+/* Grid refinement r: a chain quantises on a grid r times finer than the bound needs, and
+ * a predicted sample whose prediction is within the bound takes it (residual 0; docs/codec.md,
+ * "Grid refinement"). 1 = the coarse grid (one valid code per sample). Default, by
+ * measurement: 3 for bounds >= 0.5 mm (every bound a subscription offers), else 1.
  * Changing it resets the stream. */
-#define OC_STREAM_GRID_REFINE(bound) ((bound) >= 0.005f ? 3 : (bound) >= 0.0005f ? 2 : 1)
+#define OC_STREAM_GRID_REFINE(bound) ((bound) >= 0.0005f ? 3 : 1)
 #define OC_STREAM_GRID_REFINE_MAX 8
 void oc_stream_set_grid_refine(struct oc_stream *s, int refine);
 /* Forget the chain: the next oc_stream_encode writes keyframes on a new grid. */

@@ -17,11 +17,11 @@
 
 #define RING (OC_TEMPORAL_MAX_DEPTH + 1)
 /* Closed-loop quantisation with a choice (measured in docs/codec.md, "Grid refinement"):
- * a chain's grid is `refine` times finer than the bound needs, so most samples have
- * several codes within the bound; a predicted tile takes, per sample, the valid code
- * nearest to its prediction (residual 0 whenever the prediction is within the bound).
- * The references then follow the smooth extrapolation instead of carrying rounding
- * noise, and the residuals shrink (N = 256, 1 cm: 27.7 -> 21.7 kB a frame at 3). */
+ * a chain's grid is `refine` times finer than the bound needs, so every sample has
+ * several codes within the bound; a predicted sample whose prediction is one of them
+ * takes it (residual 0), any other its rounded code (oc_temporal_snap_row). The
+ * references then follow the smooth extrapolation instead of carrying rounding noise,
+ * and the residuals shrink (N = 256, 1 cm, height+dx+dz: 27.7 -> 21.4 kB a frame at 3). */
 /* New grids leave room for values 4x today's magnitude before the float32 margin
  * (PROTOCOL.md §5.5 step 2) runs out; beyond that the tile starts a new chain. */
 #define GRID_HEADROOM 4.0
@@ -143,29 +143,8 @@ static inline int32_t snap(int32_t c, int32_t p, float v, double offset, double 
     return c;
 }
 
-/* snap() for a row, in a form that vectorises: the codes within bound / scale of
- * x = (v - offset) / scale, shrunk by a hair, are valid but for float32 rounding at
- * the edges; the prediction clamped to them is checked exactly, and a code that
- * fails (rare: at an edge) falls back to the rounded code q, which is valid. */
-OC_VECTOR_CLONES
-static void snap_row(int32_t *restrict q, const uint32_t *restrict pred, const float *restrict v, int w,
-                     double offset, double scale, double bound)
-{
-    const double inv = 1.0 / scale, hw = bound / scale * (1.0 - 0x1p-20);
-    for (int i = 0; i < w; i++) {
-        const double x = ((double)v[i] - offset) * inv;
-        const double lo = x - hw, hi = x + hw, p = (double)(int32_t)pred[i];
-        double c = p < lo ? lo : p > hi ? hi : p;          /* then to an integer inside [lo, hi] */
-        double r = (c + 0x1.8p52) - 0x1.8p52;              /* nearest integer (|c| < 2^31) */
-        r = r < lo ? r + 1.0 : r > hi ? r - 1.0 : r;
-        const int32_t cand = (int32_t)r;
-        const int ok = fabs((double)(float)(offset + (double)cand * scale) - (double)v[i]) <= bound;
-        q[i] = ok ? cand : q[i];
-    }
-}
-
-/* Residuals of q against the temporal prediction, each code first moved to the valid
- * code nearest its prediction (q is updated: these are the codes a decoder gets), the
+/* Residuals of q against the temporal prediction, each code first moved to its
+ * prediction where that is within the bound (q is updated: the codes a decoder gets), the
  * smaller packing (estimated from the byte histograms), DEFLATE; appends tile header +
  * codec 3 payload. vals = the tile's samples. */
 static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, int32_t *q, const float *vals,
@@ -184,7 +163,7 @@ static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, int3
         int32_t *qr = q + (size_t)j * w;
         const float *vr = vals + (size_t)j * w;
         uint32_t *z = e->zz + (size_t)j * w;
-        snap_row(qr, pred, vr, w, th->offset, th->scale, th->bound);
+        oc_temporal_snap_row(qr, pred, vr, w, th->offset, th->scale, th->bound);
         for (int i = 0; i < w; i++) {
             uint32_t r = (uint32_t)qr[i] - pred[i];
             z[i] = (r << 1) ^ (0u - (r >> 31));
