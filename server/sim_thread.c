@@ -666,8 +666,14 @@ static void tick(struct sim *s, double t_tick)
              * and this tick's keyframes for temporal ones that lack the references. */
             int temporal = atomic_load(&s->tdemand[k]);
             pj.want.temporal[k] = temporal > 0;
-            pj.want.intra[k] = demand[k] > temporal || (k < LAYER_KEYS && ((remote[k >> 3] >> (k & 7)) & 1)) ||
-                               atomic_load(&s->key_want[k]) > 0;
+            bool edge = k < LAYER_KEYS && ((remote[k >> 3] >> (k & 7)) & 1);
+            int key_want = atomic_load(&s->key_want[k]);
+            pj.want.intra[k] = demand[k] > temporal || edge || key_want > 0;
+            pj.want.kclients[k] = (uint16_t)(key_want < 0 ? 0 : key_want > 65535 ? 65535 : key_want);
+            /* who takes this layer every tick: the stream's grid refinement (layer_stream.h) */
+            pj.want.tclients[k] = (uint16_t)(temporal < 0 ? 0 : temporal > 65535 ? 65535 : temporal);
+            pj.want.iclients[k] = (uint16_t)(edge ? 65535 : demand[k] - temporal > 65535 ? 65535
+                                                         : demand[k] > temporal ? demand[k] - temporal : 0);
         }
     }
     if (!pj.want.nkeys && !probe_fields)
