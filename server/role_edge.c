@@ -61,6 +61,7 @@ static void publish_set(struct role_edge *r, struct cl_frame_set *set)
         .server_time_us = h->server_time_us,
     };
     f->tiles_per_side = h->tiles_per_side;
+    f->ncascades = h->ncascades;
     f->index = r->frames++;
     for (int i = 0; i < set->nlayers; i++) {
         struct cl_layer *cl = set->layers[i];
@@ -68,6 +69,8 @@ static void publish_set(struct role_edge *r, struct cl_frame_set *set)
         l->field = cl->info.field;
         l->lod = cl->info.lod;
         l->bound_index = cl->info.bound_index;
+        l->cascade = cl->info.cascade;
+        l->encoded_lod = cl->info.encoded_lod;
         l->buf = (struct oc_buf){ .data = cl->data, .len = cl->len, .cap = cl->len };
         l->tile_off = cl->tile_off;
         cl->data = NULL;

@@ -57,21 +57,23 @@ static void sim_on_frame(void *user, struct frame *f)
         .seq = f->hdr.seq, .sim_time = f->hdr.sim_time, .params_version = f->hdr.params_version,
         .n = f->hdr.n, .tile_size = f->hdr.tile_size, .patch_size = f->hdr.patch_size,
         .frame_flags = f->hdr.flags, .server_time_us = f->hdr.server_time_us,
-        .tiles_per_side = (uint16_t)f->tiles_per_side,
+        .tiles_per_side = (uint16_t)f->tiles_per_side, .ncascades = (uint8_t)f->ncascades,
     };
-    /* A cluster relays cascade 0 only (its layer keys are cascade 0's). */
-    for (int i = 0; i < f->nlayers; i++)
-        if (f->layers[i].cascade == 0)
-            cl_bit_set(info.encoded, layer_key(f->layers[i].field, f->layers[i].lod, f->layers[i].bound_index), true);
+    /* Every cascade: the layer keys of the cluster are the daemon's (role_link.h). */
     for (int i = 0; i < f->nlayers; i++) {
         const struct layer *l = &f->layers[i];
-        if (l->cascade != 0)
-            continue;
+        if (l->tile_off)
+            cl_bit_set(info.encoded, layer_key_cascade(l->cascade, l->field, l->lod, l->bound_index), true);
+    }
+    for (int i = 0; i < f->nlayers; i++) {
+        const struct layer *l = &f->layers[i];
         if (!l->tile_off)
             continue; /* no intra tiles this tick (edges always ask for them: their demand counts as intra) */
         info.field = l->field;
         info.lod = l->lod;
         info.bound_index = l->bound_index;
+        info.cascade = l->cascade;
+        info.encoded_lod = l->encoded_lod;
         frame_ref(f);
         int rc = cl_sim_publish_layer(r->link, &info, l->buf.data, l->buf.len, l->tile_off, release_frame, f);
         if (rc == CL_OK)

@@ -78,7 +78,7 @@ struct pending {
     void *ctx;
 };
 
-enum sub_kind { SUB_CTL, SUB_HELLO, SUB_DEMAND, SUB_PARAMS, SUB_STATUS, SUB_INBOX, SUB_LAYER, SUB_KINDS };
+enum sub_kind { SUB_CTL, SUB_HELLO, SUB_DEMAND, SUB_PARAMS, SUB_STATUS, SUB_INBOX, SUB_LAYER, SUB_QUERY, SUB_KINDS };
 struct sub_ctx {
     struct cl_link *l;
     enum sub_kind kind;
@@ -517,7 +517,7 @@ static void handle_layer(struct cl_link *l, natsMsg *msg)
     pthread_mutex_lock(&l->in_lock);
     int rc = cl_assembler_add(l->assembler, &part, &layer);
     if (rc == 1) {
-        int key = cl_key(layer->info.field, layer->info.lod, layer->info.bound_index);
+        int key = cl_info_key(&layer->info);
         struct in_event *q = l->layer_ev[key];
         if (q) {
             /* latest layer wins: the lws thread has not taken the older one yet */
@@ -552,6 +552,7 @@ static void on_msg(natsConnection *nc, natsSubscription *sub, natsMsg *msg, void
     switch (c->kind) {
     case SUB_CTL: handle_request(l, msg, CL_KIND_CTL); break;
     case SUB_HELLO: handle_request(l, msg, CL_KIND_HELLO); break;
+    case SUB_QUERY: handle_request(l, msg, CL_KIND_QUERY); break;
     case SUB_DEMAND: handle_demand(l, msg); break;
     case SUB_PARAMS: handle_params(l, msg); break;
     case SUB_STATUS: handle_status(l, msg); break;
@@ -596,9 +597,8 @@ static void sync_layer_subs(struct cl_link *l, const uint8_t want[CL_KEY_BYTES])
     for (int k = 0; k < CL_KEYS; k++) {
         bool on = cl_bit(want, k);
         if (on && !l->layer_subs[k]) {
-            int field = k / (CL_LODS * CL_BOUNDS), lod = (k / CL_BOUNDS) % CL_LODS, bi = k % CL_BOUNDS;
             char subj[CL_SUBJECT_MAX];
-            if (cl_subject_layer(subj, sizeof subj, l->prefix, field, lod, bi) == 0)
+            if (cl_subject_layer(subj, sizeof subj, l->prefix, k) == 0)
                 l->layer_subs[k] = subscribe(l, subj, SUB_LAYER);
         } else if (!on && l->layer_subs[k]) {
             unsubscribe(&l->layer_subs[k]);
@@ -624,7 +624,7 @@ static void publish_layer(struct cl_link *l, struct out_item *it, uint8_t **scra
         return;
     }
     char subj[CL_SUBJECT_MAX];
-    if (cl_subject_layer(subj, sizeof subj, l->prefix, it->info.field, it->info.lod, it->info.bound_index) != 0)
+    if (cl_subject_layer(subj, sizeof subj, l->prefix, cl_info_key(&it->info)) != 0)
         return;
     int64_t maxp = natsConnection_GetMaxPayload(l->nc);
     if (maxp <= 0)
@@ -946,7 +946,7 @@ int cl_edge_set_demand(struct cl_link *l, const uint8_t bits[CL_KEY_BYTES])
 int cl_edge_request(struct cl_link *l, enum cl_kind kind, const char *by, const char *body, size_t len,
                     cl_reply_fn done, void *ctx)
 {
-    if (!l || l->cfg.role != CL_ROLE_EDGE || (kind != CL_KIND_CTL && kind != CL_KIND_HELLO))
+    if (!l || l->cfg.role != CL_ROLE_EDGE || (kind != CL_KIND_CTL && kind != CL_KIND_HELLO && kind != CL_KIND_QUERY))
         return CL_E_ARG;
     STAT_ADD(l, requests_sent, 1);
     if (!atomic_load(&l->connected)) {
@@ -966,7 +966,8 @@ int cl_edge_request(struct cl_link *l, enum cl_kind kind, const char *by, const 
     pthread_mutex_unlock(&l->out_lock);
     char reply[CL_SUBJECT_MAX + 24]; /* push_envelope refuses one over CL_SUBJECT_MAX */
     snprintf(reply, sizeof reply, "%s.%llu", l->inbox, (unsigned long long)p->id);
-    int rc = push_envelope(l, l->subj[kind == CL_KIND_CTL ? SUB_CTL : SUB_HELLO], reply, kind, by, body, len);
+    enum sub_kind sk = kind == CL_KIND_CTL ? SUB_CTL : kind == CL_KIND_HELLO ? SUB_HELLO : SUB_QUERY;
+    int rc = push_envelope(l, l->subj[sk], reply, kind, by, body, len);
     if (rc != CL_OK) {
         pthread_mutex_lock(&l->out_lock);
         for (struct pending **pp = &l->pending; *pp; pp = &(*pp)->next)
@@ -1113,6 +1114,7 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
         l->sctx[i] = (struct sub_ctx){ .l = l, .kind = (enum sub_kind)i };
     cl_subject(l->subj[SUB_CTL], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_CTL);
     cl_subject(l->subj[SUB_HELLO], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_HELLO);
+    cl_subject(l->subj[SUB_QUERY], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_QUERY);
     cl_subject(l->subj[SUB_DEMAND], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_DEMAND);
     cl_subject(l->subj[SUB_PARAMS], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_PARAMS);
     cl_subject(l->subj[SUB_STATUS], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_STATUS);
@@ -1166,6 +1168,7 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
     if (c->role == CL_ROLE_SIM) {
         if (!(l->subs[SUB_CTL] = subscribe(l, l->subj[SUB_CTL], SUB_CTL)) ||
             !(l->subs[SUB_HELLO] = subscribe(l, l->subj[SUB_HELLO], SUB_HELLO)) ||
+            !(l->subs[SUB_QUERY] = subscribe(l, l->subj[SUB_QUERY], SUB_QUERY)) ||
             !(l->subs[SUB_DEMAND] = subscribe(l, l->subj[SUB_DEMAND], SUB_DEMAND))) {
             set_err(err, errlen, "NATS subscribe", NATS_ERR);
             goto fail_conn;

@@ -28,8 +28,6 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
     for (int c = 0; c < CTL_MAX_CASCADES; c++) {
         int lod, bound_index;
         unsigned fields = subscription_cascade(sub, c, &lod, &bound_index);
-        if (c > 0 && n->cluster.demand)
-            break; /* edge: the cluster relays cascade 0 only */
         for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
             if (fields & OCEAN_FIELD_BIT(f)) {
                 int key = layer_key_cascade(c, f, c == 0 ? subscription_lod(sub, f) : lod, bound_index);

@@ -298,11 +298,25 @@ def test_temporal_client_on_an_edge_gets_intra(c):
     asyncio.run(run())
 
 
+# The web client's subscription (web/src/main.js): cascade 0's height/dx/dz plus the
+# foam field at its own LOD, and the finer cascades' height at LOD 1 and 1 mm.
+WEB_SUB = {"type": "subscribe", "id": 2, "fields": ["height", "dx", "dz", "foam"], "field_lod": {"foam": 2},
+           "cascades": [{"fields": ["height"], "lod": 1, "bound": 0.001}] * 3}
+
+
 @test
 def test_frames_identical_to_role_all():
     """Paused at the same sim time, same seed and parameters: an edge's frames carry the
-    same header fields (but seq and server time) and the same tile bytes as --role all's."""
-    state = {"params": {"paused": True, "wind_speed": 13, "seed": 7}, "params_version": 3, "sim_time": 12.5}
+    same header fields (but seq and server time) and the same tile bytes as --role all's,
+    for the default subscription and for the web client's (every cascade in force, foam
+    at its own LOD): the tiles of cascades 1 and 2 decode to the standalone daemon's
+    fields, i.e. to the sim's."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+    import numpy as np
+    import oceanproto
+
+    state = {"params": {"paused": True, "wind_speed": 13, "seed": 7, "cascades": 3}, "params_version": 3,
+             "sim_time": 12.5}
     c = Cluster(edges=1, state=state)
     ok = False
     try:
@@ -311,19 +325,56 @@ def test_frames_identical_to_role_all():
             json.dump(state, f)
         alone = c.node("all", state_file=sf)
 
+        def same(fe, fa, what):
+            ee, aa = parse_header(fe), parse_header(fa)
+            for k in ("sim_time", "params_version", "n", "tile_size", "patch_size", "tile_count"):
+                check(ee[k] == aa[k], "%s: header %s: edge %r, all %r" % (what, k, ee[k], aa[k]))
+            check(ee["sim_time"] == 12.5, "sim_time %r" % ee["sim_time"])
+            check(len(fe) == len(fa), "%s: lengths %d (edge) and %d (all)" % (what, len(fe), len(fa)))
+            check(fe[48:] == fa[48:], "%s: tile bytes differ between the edge and --role all" % what)
+
+        def web_frame(h_, b):
+            return {(t["field"], t["lod"]) for t in td.tiles(b)} >= {(0, 1), (6, 2)}
+
         async def run():
             e, he = await connect(c.edges[0])
             a, ha = await connect(alone)
             check(he["params"] == ha["params"] and he["params_version"] == ha["params_version"] == 3,
                   "hello differs: %r vs %r" % (he["params_version"], ha["params_version"]))
+            check(he.get("cascade_patch_sizes") == ha.get("cascade_patch_sizes") and
+                  len(ha.get("cascade_patch_sizes") or []) == 3, "cascade_patch_sizes %r vs %r" %
+                  (he.get("cascade_patch_sizes"), ha.get("cascade_patch_sizes")))
             _, fe = await recv_frame(e, timeout=10)
             _, fa = await recv_frame(a, timeout=10)
-            ee, aa = parse_header(fe), parse_header(fa)
-            for k in ("sim_time", "params_version", "n", "tile_size", "patch_size", "tile_count"):
-                check(ee[k] == aa[k], "header %s: edge %r, all %r" % (k, ee[k], aa[k]))
-            check(ee["sim_time"] == 12.5, "sim_time %r" % ee["sim_time"])
-            check(fe[48:] == fa[48:], "tile bytes differ between the edge and --role all")
-            check(fe[40:48] != b"" and len(fe) == len(fa), "lengths")
+            same(fe, fa, "default subscription")
+            for ws in (e, a):
+                await ws.send(json.dumps(WEB_SUB))
+            se = await recv_json(e, lambda m: m["type"] in ("subscribed", "error"))
+            sa = await recv_json(a, lambda m: m["type"] in ("subscribed", "error"))
+            check(se == sa and se["type"] == "subscribed", "subscribed: edge %r, all %r" % (se, sa))
+            _, fe = await recv_frame(e, web_frame, timeout=10)
+            _, fa = await recv_frame(a, web_frame, timeout=10)
+            same(fe, fa, "web subscription")
+            de, da = oceanproto.decode_frame(fe), oceanproto.decode_frame(fa)
+            by = {}
+            for t in de.tiles:
+                by.setdefault((t.cascade, t.field, t.lod), []).append(t)
+            for casc in (1, 2):
+                ts = by.get((casc, "height", 1), [])
+                check(len(ts) == len(td.tiles(fe)) // 6 and ts, "cascade %d: %d height tiles at LOD 1 (%r)" %
+                      (casc, len(ts), sorted(by)))
+                got = np.concatenate([t.samples.ravel() for t in ts])
+                want = np.concatenate([t.samples.ravel() for t in da.tiles if (t.cascade, t.field, t.lod) ==
+                                       (casc, "height", 1)])
+                check(got.shape == want.shape and np.array_equal(got, want),
+                      "cascade %d decodes to other heights than the sim's" % casc)
+                check(float(np.abs(got).max()) > 1e-4, "cascade %d is flat (max |h| %g)" % (casc, np.abs(got).max()))
+            check(set(by) == {(0, "height", 0), (0, "dx", 0), (0, "dz", 0), (0, "foam", 2), (1, "height", 1),
+                              (2, "height", 1)}, "layers through the edge: %r" % sorted(by))
+            # cascade 3 is asked for too (kept until it is in force: PROTOCOL.md §7.1 subscribe)
+            check(sorted(c.sim.health()["layers"]) == sorted(["height.0.3", "dx.0.3", "dz.0.3", "foam.2.3",
+                                                              "c1.height.1.1", "c2.height.1.1", "c3.height.1.1"]),
+                  "the edge's demand at the sim: %r" % sorted(c.sim.health()["layers"]))
             await e.close()
             await a.close()
         asyncio.run(run())
