@@ -46,6 +46,10 @@ struct net_cluster_hooks {
      * token checks, to be answered later with net_send_text(serial) */
     void (*forward)(void *user, uint64_t serial, const char *client_id, const void *id_json,
                     const char *text, size_t len);
+    /* edge: a `query` that passed the rate limit and the local checks (query_parse),
+     * to be answered later with net_send_text(serial): the sim's answer or an error */
+    void (*forward_query)(void *user, uint64_t serial, const char *client_id, const void *id_json,
+                          const char *text, size_t len);
     /* sim: an applied set's `params` event (no id), who caused it */
     void (*on_params_event)(void *user, const char *text, const char *origin, const char *by);
     /* /healthz: returns "ok" or "degraded" and appends ,"member":... to extra */
@@ -76,6 +80,11 @@ void net_set_status(struct net *n, const char *text, const char *ok_text);
 typedef void (*net_reply_fn)(void *ctx, const char *text);
 void net_remote_control(struct net *n, const char *origin, const char *by, const char *text, size_t len,
                         net_reply_fn reply, void *ctx);
+/* sim: a `query` (its JSON text) from a client of another daemon, checked and
+ * queued exactly like a local one (PROTOCOL.md §7.4); reply(ctx, text) is
+ * called exactly once: `query_result` or an error with the request's id, later,
+ * from the query workers' results (text NULL = dropped unanswered, at shutdown). */
+void net_remote_query(struct net *n, const char *text, size_t len, net_reply_fn reply, void *ctx);
 /* sim: answers every remote request still waiting with NULL (before the link closes). */
 void net_drop_remote_requests(struct net *n);
 /* sim: the hello the sim would send (client_id ""), malloc'd; for edges. */

@@ -4,7 +4,9 @@
  * clients want, rebuilds frames from them (cl_collector: the layers of one
  * seq) and hands them to the usual latest-frame-wins fan-out; it forwards
  * set / pause / resume to the sim after the local size, rate and token
- * checks and relays the answers; it keeps the sim's hello for new clients.
+ * checks, and `query` after the rate limit and the query's own checks (at
+ * most EDGE_QUERIES_* in flight), and relays the answers; it keeps the
+ * sim's hello for new clients.
  * Stateless: nothing here outlives the process. Everything runs on the lws
  * thread (hooks and cl_link_dispatch handlers). */
 #include "roles.h"
@@ -22,11 +24,12 @@
 enum edge_state { EDGE_UNKNOWN, EDGE_OK, EDGE_SIM_DOWN, EDGE_NATS_DOWN };
 static const char *const state_name[] = { "unknown", "ok", "sim_unavailable", "nats_unavailable" };
 
-/* A request on its way to the sim: a client's control message, or hello. */
+/* A request on its way to the sim: a client's control message or query, or hello. */
 struct forward {
     struct forward *prev, *next;  /* in role_edge.forwards (freed at close if never answered) */
     struct role_edge *r;
     bool hello;
+    bool query;
     uint64_t serial;              /* the client that sent it */
     cJSON *id;                    /* its request id (for our own `unavailable` error), or NULL */
 };
@@ -40,6 +43,7 @@ struct role_edge {
     uint64_t frames;              /* frames handed to the fan-out (frame.index) */
     enum edge_state state;
     struct forward *forwards;
+    int queries;                  /* forwards that are queries */
     bool hello_needed;            /* ask the sim for hello (again) at the next chance */
     bool hello_in_flight;
     double hello_t;               /* when it was last asked */
@@ -130,6 +134,8 @@ static struct forward *forward_new(struct role_edge *r, bool hello, uint64_t ser
 
 static void forward_free(struct forward *fw)
 {
+    if (fw->query)
+        fw->r->queries--;
     if (fw->prev)
         fw->prev->next = fw->next;
     else
@@ -205,6 +211,46 @@ static void edge_forward(void *user, uint64_t serial, const char *client_id, con
         return;
     }
     int rc = cl_edge_request(r->link, CL_KIND_CTL, client_id, text, len, on_reply, fw);
+    if (rc != CL_OK) {
+        send_unavailable(r, serial, id_json, rc);
+        forward_free(fw);
+    }
+}
+
+/* Point queries (PROTOCOL.md §7.4) go to the sim, whose answer is relayed
+ * as it is. In flight at most EDGE_QUERIES_PER_CLIENT per client and
+ * EDGE_QUERIES_TOTAL for the edge: a query costs the sim milliseconds and
+ * the edge a pending entry until answered or timed out (5 s). */
+#define EDGE_QUERIES_PER_CLIENT 4
+#define EDGE_QUERIES_TOTAL 64
+static void edge_forward_query(void *user, uint64_t serial, const char *client_id, const void *id_json,
+                               const char *text, size_t len)
+{
+    struct role_edge *r = user;
+    int mine = 0;
+    for (struct forward *fw = r->forwards; fw; fw = fw->next)
+        mine += fw->query && fw->serial == serial;
+    if (mine >= EDGE_QUERIES_PER_CLIENT || r->queries >= EDGE_QUERIES_TOTAL) {
+        struct ctl_error e = { .code = "busy" };
+        snprintf(e.message, sizeof e.message,
+                 "%d queries %s on their way to the simulation through this edge (at most %d per client, %d in "
+                 "all); try again when one is answered", mine >= EDGE_QUERIES_PER_CLIENT ? mine : r->queries,
+                 mine >= EDGE_QUERIES_PER_CLIENT ? "of this client are" : "are", EDGE_QUERIES_PER_CLIENT,
+                 EDGE_QUERIES_TOTAL);
+        char *out = control_print(control_error_msg(&e, id_json));
+        if (out)
+            net_send_text(r->net, serial, out);
+        free(out);
+        return;
+    }
+    struct forward *fw = forward_new(r, false, serial, id_json);
+    if (!fw) {
+        send_unavailable(r, serial, id_json, CL_E_NOMEM);
+        return;
+    }
+    fw->query = true;
+    r->queries++;
+    int rc = cl_edge_request(r->link, CL_KIND_QUERY, client_id, text, len, on_reply, fw);
     if (rc != CL_OK) {
         send_unavailable(r, serial, id_json, rc);
         forward_free(fw);
@@ -312,6 +358,7 @@ struct role_edge *role_edge_open(const struct daemon_config *dc, struct net *n, 
     }
     struct net_cluster_hooks h = {
         .user = r, .on_wake = edge_on_wake, .demand = edge_demand, .forward = edge_forward,
+        .forward_query = edge_forward_query,
         .health = edge_health, .metrics = edge_metrics,
     };
     net_set_cluster(n, &h);

@@ -2,7 +2,8 @@
  * and encodes as --role all does, but for the layers the edges demand
  * (their heartbeats, through the NATS link), publishes each encoded layer
  * once on NATS, answers the edges' set / pause / resume (validated by the
- * same code as a local client's, server/net/dispatch.c) and hello
+ * same code as a local client's, server/net/dispatch.c), their clients'
+ * point queries (the same query workers as a local client's) and hello
  * requests, and publishes every params event. No viewers connect to it.
  * Threads: the hooks on_frame / remote_demand run on the tick thread and
  * only queue (cl_sim_publish_layer, cl_sim_demand); the rest runs on the
@@ -114,7 +115,10 @@ static void sim_on_request(void *user, struct cl_request *req)
     }
     p->link = r->link;
     p->req = req;
-    net_remote_control(r->net, req->origin, req->by, req->body, req->len, answer, p);
+    if (req->kind == CL_KIND_QUERY) /* answered when the query workers are done */
+        net_remote_query(r->net, req->body, req->len, answer, p);
+    else
+        net_remote_control(r->net, req->origin, req->by, req->body, req->len, answer, p);
 }
 
 static void sim_on_state(void *user, enum cl_event ev)

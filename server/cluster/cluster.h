@@ -336,7 +336,8 @@ struct cl_handlers {
 };
 
 /* Called for each request the edge sent: status 0 with the sim's reply text,
- * or CL_E_TIMEOUT / CL_E_NO_RESPONDERS / CL_E_NOT_CONNECTED (text NULL). */
+ * or CL_E_TIMEOUT / CL_E_NO_RESPONDERS / CL_E_NOT_CONNECTED (text NULL).
+ * Exactly once, inside cl_link_dispatch, unless the link is closed first. */
 typedef void (*cl_reply_fn)(void *ctx, int status, const char *text, size_t len);
 
 struct cl_config {
@@ -351,6 +352,7 @@ struct cl_config {
     double demand_ttl_s;        /* edge: expiry it announces; 0 = 3 */
     double sim_timeout_s;       /* edge: sim down after this long without status; 0 = 2 */
     double request_timeout_s;   /* edge: 0 = 2 */
+    double query_timeout_s;     /* edge: for QUERY requests (the sim's workers may queue them); 0 = 5 */
     double reconnect_min_s, reconnect_max_s; /* backoff; 0 = 0.1, 2 */
     size_t outbox_max_bytes;    /* 0 = 64 MiB */
     void (*wake)(void *user);   /* called from NATS/pump threads when there is something to dispatch */

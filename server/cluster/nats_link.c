@@ -960,7 +960,7 @@ int cl_edge_request(struct cl_link *l, enum cl_kind kind, const char *by, const 
     p->ctx = ctx;
     pthread_mutex_lock(&l->out_lock);
     p->id = ++l->next_id;
-    p->deadline = mono_now() + l->cfg.request_timeout_s;
+    p->deadline = mono_now() + (kind == CL_KIND_QUERY ? l->cfg.query_timeout_s : l->cfg.request_timeout_s);
     p->next = l->pending;
     l->pending = p;
     pthread_mutex_unlock(&l->out_lock);
@@ -1084,6 +1084,8 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
         c->sim_timeout_s = 2.0;
     if (c->request_timeout_s <= 0)
         c->request_timeout_s = 2.0;
+    if (c->query_timeout_s <= 0)
+        c->query_timeout_s = 5.0;
     if (c->reconnect_min_s <= 0)
         c->reconnect_min_s = 0.1;
     if (c->reconnect_max_s < c->reconnect_min_s)

@@ -92,8 +92,16 @@ void dispatch_free_requests(struct net *n)
     }
 }
 
+static struct remote_query *remote_query_of(lws_dll2_t *d) { return lws_container_of(d, struct remote_query, list); }
+
 void net_drop_remote_requests(struct net *n)
 {
+    while (n->remote_queries.head) {
+        struct remote_query *rq = remote_query_of(n->remote_queries.head);
+        lws_dll2_remove(&rq->list);
+        rq->reply(rq->reply_ctx, NULL);
+        free(rq);
+    }
     for (lws_dll2_t *d = lws_dll2_get_head(&n->requests), *next; d; d = next) {
         next = d->next;
         struct request *r = request_of(d);
@@ -384,11 +392,17 @@ bool dispatch_take_token(struct net *n, struct session *s, const char *text, siz
 
 #define PROBE_QUEUE_MAX 16 /* JSON messages queued: a client this far behind misses probe ticks */
 
-static void dispatch_query(struct net *n, struct session *s, const cJSON *root, const cJSON *id)
+static void dispatch_query(struct net *n, struct session *s, const cJSON *root, const cJSON *id, const char *text,
+                           size_t len)
 {
     struct ctl_error e;
     struct query_req *r = malloc(sizeof *r); /* 4 kB of points: not on the stack */
-    if (!r || !n->queries) {
+    if (r && n->cluster.forward_query) { /* edge: the sim answers; bad ones are refused here */
+        if (query_parse(root, r, &e) != 0)
+            session_send_error(s, &e, id);
+        else
+            n->cluster.forward_query(n->cluster.user, s->serial, s->client_id, id, text, len);
+    } else if (!r || !n->queries) {
         struct ctl_error oom = { .code = "internal", .message = "point queries are not available" };
         session_send_error(s, &oom, id);
     } else if (query_parse(root, r, &e) != 0 ||
@@ -396,6 +410,44 @@ static void dispatch_query(struct net *n, struct session *s, const cJSON *root, 
         session_send_error(s, &e, id);
     }
     free(r);
+}
+
+void net_remote_query(struct net *n, const char *text, size_t len, net_reply_fn reply, void *ctx)
+{
+    struct remote rm = { .origin = "", .by = "", .reply = reply, .ctx = ctx };
+    atomic_fetch_add(&g_metrics.control_messages, 1);
+    struct ctl_msg m;
+    struct ctl_error e;
+    cJSON *bad_id = NULL;
+    if (control_parse(text, len, &m, &bad_id, &e) != 0) {
+        respond_error(NULL, &rm, &e, bad_id);
+        cJSON_Delete(bad_id);
+        return;
+    }
+    struct query_req *r = malloc(sizeof *r);
+    struct remote_query *rq = calloc(1, sizeof *rq);
+    if (m.type != CTL_QUERY) {
+        struct ctl_error f = { .code = "bad_message", .message = "only query goes to the simulation's query workers" };
+        respond_error(NULL, &rm, &f, m.id);
+    } else if (!r || !rq || !n->queries || !n->sim) {
+        struct ctl_error f = { .code = "internal", .message = "point queries are not available" };
+        respond_error(NULL, &rm, &f, m.id);
+    } else if (query_parse(m.root, r, &e) == 0) {
+        rq->serial = NET_REMOTE_SERIAL | ++n->next_remote;
+        rq->reply = reply;
+        rq->reply_ctx = ctx;
+        if (query_submit(n->queries, rq->serial, m.id, r, sim_time_now(n->sim), &e) == 0) {
+            lws_dll2_add_tail(&rq->list, &n->remote_queries);
+            rq = NULL; /* answered from dispatch_query_results */
+        } else {
+            respond_error(NULL, &rm, &e, m.id);
+        }
+    } else {
+        respond_error(NULL, &rm, &e, m.id);
+    }
+    free(rq);
+    free(r);
+    ctl_msg_free(&m);
 }
 
 static void dispatch_probe(struct net *n, struct session *s, const cJSON *root, const cJSON *id)
@@ -419,6 +471,20 @@ void dispatch_query_results(struct net *n)
     struct query_out *o = query_take_results(n->queries);
     while (o) {
         struct query_out *next = o->next;
+        if (o->serial & NET_REMOTE_SERIAL) { /* sim role: an edge's client asked */
+            for (lws_dll2_t *d = lws_dll2_get_head(&n->remote_queries); d && !o->probe; d = d->next) {
+                struct remote_query *rq = remote_query_of(d);
+                if (rq->serial == o->serial) {
+                    lws_dll2_remove(&rq->list);
+                    rq->reply(rq->reply_ctx, o->text);
+                    free(rq);
+                    break;
+                }
+            }
+            query_out_free(o);
+            o = next;
+            continue;
+        }
         struct session *s = session_find(n, o->serial);
         if (s && s->wsi && !s->closing && !(o->probe && s->tq.count >= PROBE_QUEUE_MAX))
             session_queue_text(s, o->text, false);
@@ -526,7 +592,7 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         session_queue_json(s, control_named_msg(s->name, m.id));
         break;
     case CTL_QUERY:
-        dispatch_query(n, s, m.root, m.id);
+        dispatch_query(n, s, m.root, m.id, text, len);
         break;
     case CTL_PROBE:
         dispatch_probe(n, s, m.root, m.id);

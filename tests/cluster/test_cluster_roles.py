@@ -304,6 +304,15 @@ WEB_SUB = {"type": "subscribe", "id": 2, "fields": ["height", "dx", "dz", "foam"
            "cascades": [{"fields": ["height"], "lod": 1, "bound": 0.001}] * 3}
 
 
+QUERIES = [
+    '{"type":"query","id":7,"points":[[12.5,-3],[1e6,40],[0,0]]}',
+    '{"type":"query","id":"t","points":[[3,4]],"time":12.5}',
+    '{"type":"query","id":8,"points":[[3,4]],"time":11}',         # before the window: the sim says so
+    '{"type":"query","id":9,"points":[[1,2,3]]}',                 # bad_query: the edge says so
+    '{"type":"query","id":10,"points":%s}' % json.dumps([[i, i] for i in range(257)]),
+]
+
+
 @test
 def test_frames_identical_to_role_all():
     """Paused at the same sim time, same seed and parameters: an edge's frames carry the
@@ -375,6 +384,15 @@ def test_frames_identical_to_role_all():
             check(sorted(c.sim.health()["layers"]) == sorted(["height.0.3", "dx.0.3", "dz.0.3", "foam.2.3",
                                                               "c1.height.1.1", "c2.height.1.1", "c3.height.1.1"]),
                   "the edge's demand at the sim: %r" % sorted(c.sim.health()["layers"]))
+            # Point queries through the edge: the sim's answer, exactly --role all's (same sea,
+            # paused); its errors too, whether the edge refuses (bad_query) or the sim does.
+            for q in QUERIES:
+                await e.send(q)
+                await a.send(q)
+                re = await recv_json(e, lambda m: m["type"] in ("query_result", "error"))
+                ra = await recv_json(a, lambda m: m["type"] in ("query_result", "error"))
+                check(re == ra, "%s\n through the edge: %r\n --role all:       %r" % (q, re, ra))
+            check(c.sim.metric("oceand_cluster_requests_received_total") >= 2, "the queries did not reach the sim")
             await e.close()
             await a.close()
         asyncio.run(run())
@@ -511,6 +529,9 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
         await ws.send('{"type":"set","id":2,"params":{"wind_speed":5}}')
         e = await recv_json(ws, lambda m: m["type"] in ("params", "error"))
         check(e["type"] == "error" and e["code"] == "unavailable" and e["id"] == 2, "set while down: %r" % e)
+        await ws.send('{"type":"query","id":21,"points":[[1,2]]}')
+        e = await recv_json(ws, lambda m: m["type"] in ("query_result", "error"))
+        check(e["type"] == "error" and e["code"] == "unavailable" and e["id"] == 21, "query while down: %r" % e)
         await ws.send('{"type":"ping","id":3}')
         await recv_json(ws, lambda m: m["type"] == "pong")          # still connected to the edge
         late, hl = await connect(c.edges[0])                          # joining while down: hello + banner
@@ -522,6 +543,32 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
         check(h2["seq"] > hb["seq"], "seq went back after the sim restarted: %d after %d" % (h2["seq"], hb["seq"]))
         c3, h3 = await connect(c.edges[0])
         check(h3["params"]["wind_speed"] == 17 and h3["params_version"] == version, "params after restart")
+        # A sim that does not answer (stopped): queries wait at most 5 s, at most 4 per client
+        # and 64 per edge are on their way; the edge itself keeps answering meanwhile.
+        c.sim.proc.send_signal(signal.SIGSTOP)
+        try:
+            for i in range(5):
+                await ws.send('{"type":"query","id":%d,"points":[[%d,1]]}' % (30 + i, i))
+            busy = await recv_json(ws, lambda m: m["type"] in ("query_result", "error"), timeout=3)
+            check(busy["type"] == "error" and busy["code"] == "busy" and busy["id"] == 34 and
+                  "at most 4 per client" in busy["message"], "fifth query in flight: %r" % busy)
+            await c3.send('{"type":"query","id":40,"points":[[1,1]]}')  # another client: its own 4
+            await ws.send('{"type":"ping","id":35}')
+            await recv_json(ws, lambda m: m["type"] in ("pong", "query_result", "error") and m.get("id") == 35,
+                            timeout=2)
+            waited = [await recv_json(ws, lambda m: m["type"] in ("query_result", "error"), timeout=8)
+                      for _ in range(4)]
+            check(sorted(m["id"] for m in waited) == [30, 31, 32, 33] and
+                  all(m["type"] == "error" and m["code"] == "unavailable" and "no reply in time" in m["message"]
+                      for m in waited), "queries to a stopped sim: %r" % waited)
+            m = await recv_json(c3, lambda m: m["type"] in ("query_result", "error"), timeout=8)
+            check(m["code"] == "unavailable" and m["id"] == 40, "other client's query: %r" % m)
+        finally:
+            c.sim.proc.send_signal(signal.SIGCONT)
+        await expect_status(ws, "ok", timeout=15)
+        await ws.send('{"type":"query","id":41,"points":[[1,1]]}')
+        m = await recv_json(ws, lambda m: m["type"] in ("query_result", "error"), timeout=8)
+        check(m["type"] == "query_result" and m["id"] == 41 and len(m["points"]) == 1, "query after SIGCONT: %r" % m)
         for w in (ws, late, c3):
             await w.close()
     asyncio.run(run())
