@@ -49,6 +49,9 @@
  *   PREFIX.hello                        edge -> sim request/reply: current params + schema (OCNE HELLO -> REPLY)
  *   PREFIX.demand                       edges -> sim: demand heartbeats with expiry (OCNE DEMAND)
  *   PREFIX.query                        edge -> sim request/reply: a client's point query (OCNE QUERY -> REPLY)
+ *   PREFIX.probe                        edge -> sim request/reply: a client's probe (OCNE PROBE -> REPLY),
+ *                                       repeated as a keepalive; the sim then streams
+ *   <edge inbox>.p                      sim -> edge: probe_data of its clients' probes (OCNE PROBE_DATA)
  * Several seas share one NATS cluster by using different prefixes.
  */
 #ifndef OCEAND_CLUSTER_H
@@ -119,7 +122,7 @@ const char *cl_strerror(int err);
 /* A prefix is 1..64 characters: dot-separated non-empty tokens of
  * [A-Za-z0-9_-] (no wildcards, no spaces). */
 bool cl_prefix_valid(const char *prefix);
-enum cl_subject { CL_SUBJ_PARAMS, CL_SUBJ_STATUS, CL_SUBJ_CTL, CL_SUBJ_HELLO, CL_SUBJ_DEMAND, CL_SUBJ_QUERY };
+enum cl_subject { CL_SUBJ_PARAMS, CL_SUBJ_STATUS, CL_SUBJ_CTL, CL_SUBJ_HELLO, CL_SUBJ_DEMAND, CL_SUBJ_QUERY, CL_SUBJ_PROBE };
 int cl_subject(char *out, size_t cap, const char *prefix, enum cl_subject which);
 /* The subject of layer key `key` (cl_key_cascade). */
 int cl_subject_layer(char *out, size_t cap, const char *prefix, int key);
@@ -259,7 +262,7 @@ bool cl_layer_info_valid(const struct cl_layer_info *info);
  * origin = the daemon that sent it (edge or sim name); by = the WebSocket
  * client it acts for ("" if none). Both printable ASCII, at most 63 bytes. */
 #define CL_ENV_MAGIC    "OCNE"
-#define CL_ENV_VERSION  2   /* 2: 128-byte key bitmaps in DEMAND, kind QUERY */
+#define CL_ENV_VERSION  2   /* 2: 128-byte key bitmaps in DEMAND, kinds QUERY, PROBE, PROBE_DATA */
 #define CL_ENV_HEADER   12
 #define CL_NAME_MAX     64   /* incl. NUL */
 #define CL_BODY_MAX     (1u << 20)
@@ -271,6 +274,9 @@ enum cl_kind {
     CL_KIND_STATUS = 5,  /* sim -> edges: heartbeat; body = JSON status text */
     CL_KIND_DEMAND = 6,  /* edge -> sim: body = u32 ttl_ms + u8[CL_KEY_BYTES] keys */
     CL_KIND_QUERY = 7,   /* edge -> sim request: a client's `query` JSON (answered by REPLY) */
+    CL_KIND_PROBE = 8,   /* edge -> sim request: a client's `probe` JSON (REPLY: `probing` or an error);
+                            sent again unchanged every CL_PROBE_KEEPALIVE_S while the probe lasts */
+    CL_KIND_PROBE_DATA = 9, /* sim -> edge, on <the edge's reply inbox>.p: one `probe_data` JSON; by = the client */
 };
 struct cl_envelope {
     enum cl_kind kind;
@@ -318,7 +324,7 @@ const char *cl_event_name(enum cl_event ev);
  * with cl_request_reply (which frees it), now or later (a `set` is answered
  * when the tick applies it). */
 struct cl_request {
-    enum cl_kind kind;       /* CL_KIND_CTL, CL_KIND_HELLO or CL_KIND_QUERY */
+    enum cl_kind kind;       /* CL_KIND_CTL, CL_KIND_HELLO, CL_KIND_QUERY or CL_KIND_PROBE */
     char origin[CL_NAME_MAX];/* the edge */
     char by[CL_NAME_MAX];    /* the client on that edge */
     char *body;              /* NUL-terminated copy (JSON text for CTL) */
@@ -333,7 +339,19 @@ struct cl_handlers {
     /* edge role: the layer is the handler's (cl_layer_free it) */
     void (*on_layer)(void *user, struct cl_layer *layer);
     void (*on_params)(void *user, const char *origin, const char *by, const char *text, size_t len);
+    /* edge role: a `probe_data` message for client `by` (PROBE_DATA) */
+    void (*on_probe_data)(void *user, const char *by, const char *text, size_t len);
 };
+
+/* Probes through an edge: the edge repeats each live probe request this
+ * often; the sim forgets a remote probe not heard of for CL_PROBE_EXPIRE_S
+ * (the edge or its client is gone). */
+#define CL_PROBE_KEEPALIVE_S 2.0
+#define CL_PROBE_EXPIRE_S 7.0
+/* The subject the sim streams an edge's probe_data to, from the reply
+ * subject of that edge's PROBE request ("<inbox>.<id>" -> "<inbox>.p").
+ * CL_E_ARG if reply_to has no '.', CL_E_TOO_LARGE if out is too small. */
+int cl_probe_stream_subject(const char *reply_to, char *out, size_t cap);
 
 /* Called for each request the edge sent: status 0 with the sim's reply text,
  * or CL_E_TIMEOUT / CL_E_NO_RESPONDERS / CL_E_NOT_CONNECTED (text NULL).
@@ -403,6 +421,11 @@ void cl_sim_set_status(struct cl_link *l, const char *text, size_t len);  /* bod
 int cl_sim_demand(struct cl_link *l, uint8_t out[CL_KEY_BYTES]);          /* tick thread; returns live edges */
 /* text NULL: drop without answering. */
 void cl_request_reply(struct cl_link *l, struct cl_request *req, const char *text, size_t len);
+/* One probe_data text for client `by` of the edge whose stream subject is
+ * `stream` (cl_probe_stream_subject). Dropped (counted in events_dropped)
+ * while the outbox holds more than outbox_max_bytes: probes are per tick,
+ * the next one replaces it. */
+int cl_sim_publish_probe_data(struct cl_link *l, const char *stream, const char *by, const char *text, size_t len);
 
 /* Edge role. */
 int cl_edge_set_demand(struct cl_link *l, const uint8_t bits[CL_KEY_BYTES]); /* subscribes + heartbeats now */

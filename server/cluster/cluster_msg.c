@@ -85,11 +85,12 @@ bool cl_prefix_valid(const char *prefix)
 static const char *const subject_names[] = {
     [CL_SUBJ_PARAMS] = "params", [CL_SUBJ_STATUS] = "status", [CL_SUBJ_CTL] = "ctl",
     [CL_SUBJ_HELLO] = "hello", [CL_SUBJ_DEMAND] = "demand", [CL_SUBJ_QUERY] = "query",
+    [CL_SUBJ_PROBE] = "probe",
 };
 
 int cl_subject(char *out, size_t cap, const char *prefix, enum cl_subject which)
 {
-    if (!cl_prefix_valid(prefix) || (unsigned)which > CL_SUBJ_QUERY)
+    if (!cl_prefix_valid(prefix) || (unsigned)which > CL_SUBJ_PROBE)
         return CL_E_ARG;
     int n = snprintf(out, cap, "%s.%s", prefix, subject_names[which]);
     return n < 0 || (size_t)n >= cap ? CL_E_TOO_LARGE : CL_OK;
@@ -131,6 +132,15 @@ int cl_subject_layer_parse(const char *subject, const char *prefix)
     if (lod >= CL_LODS || bi >= CL_BOUNDS)
         return CL_E_CORRUPT;
     return cl_key_cascade(cascade, field, lod, bi);
+}
+
+int cl_probe_stream_subject(const char *reply_to, char *out, size_t cap)
+{
+    const char *dot = reply_to ? strrchr(reply_to, '.') : NULL;
+    if (!dot || dot == reply_to)
+        return CL_E_ARG;
+    int n = snprintf(out, cap, "%.*s.p", (int)(dot - reply_to), reply_to);
+    return n < 0 || (size_t)n >= cap ? CL_E_TOO_LARGE : CL_OK;
 }
 
 /* ---- layer parts ---- */
@@ -498,7 +508,7 @@ long cl_envelope_write(uint8_t *dst, size_t cap, enum cl_kind kind, const char *
     origin = origin ? origin : "";
     by = by ? by : "";
     size_t ol = strlen(origin), bl = strlen(by);
-    if (!dst || kind < CL_KIND_CTL || kind > CL_KIND_QUERY || !name_ok(origin, ol) || !name_ok(by, bl) ||
+    if (!dst || kind < CL_KIND_CTL || kind > CL_KIND_PROBE_DATA || !name_ok(origin, ol) || !name_ok(by, bl) ||
         body_len > CL_BODY_MAX || (body_len && !body))
         return CL_E_ARG;
     size_t size = CL_ENV_HEADER + ol + bl + body_len;
@@ -530,7 +540,7 @@ int cl_envelope_parse(const uint8_t *msg, size_t len, struct cl_envelope *out)
     unsigned kind = msg[5];
     size_t ol = msg[6], bl = msg[7];
     uint32_t body_len = get32(msg + 8);
-    if (kind < CL_KIND_CTL || kind > CL_KIND_QUERY)
+    if (kind < CL_KIND_CTL || kind > CL_KIND_PROBE_DATA)
         return CL_E_CORRUPT;
     if (body_len > CL_BODY_MAX)
         return CL_E_TOO_LARGE;

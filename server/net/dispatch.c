@@ -390,7 +390,6 @@ bool dispatch_take_token(struct net *n, struct session *s, const char *text, siz
 
 /* ---- point queries and probes (query_worker.c does the work) ---- */
 
-#define PROBE_QUEUE_MAX 16 /* JSON messages queued: a client this far behind misses probe ticks */
 
 static void dispatch_query(struct net *n, struct session *s, const cJSON *root, const cJSON *id, const char *text,
                            size_t len)
@@ -450,11 +449,17 @@ void net_remote_query(struct net *n, const char *text, size_t len, net_reply_fn 
     ctl_msg_free(&m);
 }
 
-static void dispatch_probe(struct net *n, struct session *s, const cJSON *root, const cJSON *id)
+static void dispatch_probe(struct net *n, struct session *s, const cJSON *root, const cJSON *id, const char *text,
+                           size_t len)
 {
     struct ctl_error e;
     struct probe_req *p = malloc(sizeof *p);
-    if (!p || !n->queries) {
+    if (p && n->cluster.forward_probe) { /* edge: the sim probes; bad ones are refused here */
+        if (probe_parse(root, n->dc.probe_max_points, p, &e) != 0)
+            session_send_error(s, &e, id);
+        else
+            n->cluster.forward_probe(n->cluster.user, s->serial, s->client_id, id, text, len);
+    } else if (!p || !n->queries) {
         struct ctl_error oom = { .code = "internal", .message = "probes are not available" };
         session_send_error(s, &oom, id);
     } else if (probe_parse(root, n->dc.probe_max_points, p, &e) != 0 ||
@@ -466,12 +471,52 @@ static void dispatch_probe(struct net *n, struct session *s, const cJSON *root, 
     free(p);
 }
 
+uint64_t net_remote_serial(struct net *n) { return NET_REMOTE_SERIAL | ++n->next_remote; }
+
+char *net_remote_probe(struct net *n, uint64_t serial, const char *text, size_t len, int *npoints)
+{
+    *npoints = -1;
+    atomic_fetch_add(&g_metrics.control_messages, 1);
+    struct ctl_msg m;
+    struct ctl_error e;
+    cJSON *bad_id = NULL, *answer;
+    if (control_parse(text, len, &m, &bad_id, &e) != 0) {
+        answer = control_error_msg(&e, bad_id);
+        cJSON_Delete(bad_id);
+        char *out = control_print(answer);
+        return out;
+    }
+    struct probe_req *p = malloc(sizeof *p);
+    if (m.type != CTL_PROBE) {
+        struct ctl_error f = { .code = "bad_message", .message = "only probe goes to the simulation's probes" };
+        answer = control_error_msg(&f, m.id);
+    } else if (!p || !n->queries) {
+        struct ctl_error f = { .code = "internal", .message = "probes are not available" };
+        answer = control_error_msg(&f, m.id);
+    } else if (probe_parse(m.root, n->dc.probe_max_points, p, &e) != 0 ||
+               query_probe_set(n->queries, serial, p, &e) != 0) {
+        answer = control_error_msg(&e, m.id);
+    } else {
+        answer = probing_msg(m.id, p->n, (const double(*)[2])p->xz);
+        *npoints = p->n;
+    }
+    if (*npoints < 0)
+        atomic_fetch_add(&g_metrics.control_errors, 1);
+    free(p);
+    ctl_msg_free(&m);
+    return control_print(answer);
+}
+
+void net_remote_probe_gone(struct net *n, uint64_t serial) { query_client_gone(n->queries, serial); }
+
 void dispatch_query_results(struct net *n)
 {
     struct query_out *o = query_take_results(n->queries);
     while (o) {
         struct query_out *next = o->next;
         if (o->serial & NET_REMOTE_SERIAL) { /* sim role: an edge's client asked */
+            if (o->probe && n->cluster.on_probe_data)
+                n->cluster.on_probe_data(n->cluster.user, o->serial, o->text);
             for (lws_dll2_t *d = lws_dll2_get_head(&n->remote_queries); d && !o->probe; d = d->next) {
                 struct remote_query *rq = remote_query_of(d);
                 if (rq->serial == o->serial) {
@@ -486,7 +531,7 @@ void dispatch_query_results(struct net *n)
             continue;
         }
         struct session *s = session_find(n, o->serial);
-        if (s && s->wsi && !s->closing && !(o->probe && s->tq.count >= PROBE_QUEUE_MAX))
+        if (s && s->wsi && !s->closing && !(o->probe && s->tq.count >= NET_PROBE_QUEUE_MAX))
             session_queue_text(s, o->text, false);
         query_out_free(o);
         o = next;
@@ -595,7 +640,7 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         dispatch_query(n, s, m.root, m.id, text, len);
         break;
     case CTL_PROBE:
-        dispatch_probe(n, s, m.root, m.id);
+        dispatch_probe(n, s, m.root, m.id, text, len);
         break;
     }
     ctl_msg_free(&m);

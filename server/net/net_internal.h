@@ -114,6 +114,7 @@ struct request {
  * a serial of its own (NET_REMOTE_SERIAL set: never a session's), answered
  * through reply(reply_ctx) when the result comes back. */
 #define NET_REMOTE_SERIAL (1ull << 63)
+#define NET_PROBE_QUEUE_MAX 16 /* JSON messages queued: a client this far behind misses probe ticks */
 struct remote_query {
     lws_dll2_t list;              /* in net.remote_queries */
     uint64_t serial;

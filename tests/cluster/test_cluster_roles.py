@@ -393,8 +393,28 @@ def test_frames_identical_to_role_all():
                 ra = await recv_json(a, lambda m: m["type"] in ("query_result", "error"))
                 check(re == ra, "%s\n through the edge: %r\n --role all:       %r" % (q, re, ra))
             check(c.sim.metric("oceand_cluster_requests_received_total") >= 2, "the queries did not reach the sim")
+            # A probe through the edge: the sim's `probing`, then its probe_data, as --role all's
+            # (but seq); a bad one refused alike.
+            for ws in (e, a):
+                await ws.send('{"type":"probe","id":11,"points":[[0,0],[10,-3]]}')
+            pe = await recv_json(e, lambda m: m["type"] in ("probing", "error"))
+            pa = await recv_json(a, lambda m: m["type"] in ("probing", "error"))
+            check(pe == pa and pe["type"] == "probing", "probing: edge %r, all %r" % (pe, pa))
+            de = [await recv_json(e, lambda m: m["type"] == "probe_data") for _ in range(4)]
+            da = [await recv_json(a, lambda m: m["type"] == "probe_data") for _ in range(4)]
+            for m in de + da:
+                del m["seq"]
+            check(de[3] == da[3] and len(de[3]["points"]) == 2, "probe_data: edge %r, all %r" % (de[3], da[3]))
+            check(c.sim.metric("oceand_probe_points") == 2, "the sim probes %r points" % c.sim.metric("oceand_probe_points"))
+            for ws in (e, a):
+                await ws.send('{"type":"probe","id":12,"points":[[0,0,0]]}')
+            be = await recv_json(e, lambda m: m["type"] in ("probing", "error"))
+            ba = await recv_json(a, lambda m: m["type"] in ("probing", "error"))
+            check(be == ba and be["code"] == "bad_probe", "bad probe: edge %r, all %r" % (be, ba))
             await e.close()
             await a.close()
+            # the edge's client left: its probe ends at the sim
+            await await_for(lambda: c.sim.metric("oceand_probe_points") == 0, "the probe ended at the sim", timeout=5)
         asyncio.run(run())
         ok = True
     finally:
@@ -519,6 +539,10 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
         check(p["type"] == "params", "set: %r" % p)
         version = p["params_version"]
         hb, _ = await recv_frame(ws, lambda h_, m: h_["params_version"] == version)
+        await ws.send('{"type":"probe","id":50,"points":[[1,2],[3,4],[5,6]]}')
+        pr = await recv_json(ws, lambda m: m["type"] in ("probing", "error"))
+        check(pr["type"] == "probing" and pr["id"] == 50, "probe: %r" % pr)
+        await recv_json(ws, lambda m: m["type"] == "probe_data")
         await await_for(lambda: os.path.exists(c.sim.state_file) and
                         json.load(open(c.sim.state_file)).get("params_version") == version, "state saved")
         c.sim.kill()
@@ -529,6 +553,9 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
         await ws.send('{"type":"set","id":2,"params":{"wind_speed":5}}')
         e = await recv_json(ws, lambda m: m["type"] in ("params", "error"))
         check(e["type"] == "error" and e["code"] == "unavailable" and e["id"] == 2, "set while down: %r" % e)
+        await ws.send('{"type":"probe","id":22,"points":[[1,1]]}')
+        e = await recv_json(ws, lambda m: m["type"] in ("probing", "error"))
+        check(e["type"] == "error" and e["code"] == "unavailable" and e["id"] == 22, "probe while down: %r" % e)
         await ws.send('{"type":"query","id":21,"points":[[1,2]]}')
         e = await recv_json(ws, lambda m: m["type"] in ("query_result", "error"))
         check(e["type"] == "error" and e["code"] == "unavailable" and e["id"] == 21, "query while down: %r" % e)
@@ -541,6 +568,11 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
         h2, _ = await recv_frame(ws, timeout=5)
         check(h2["params_version"] == version, "version after restart %r, want %r" % (h2["params_version"], version))
         check(h2["seq"] > hb["seq"], "seq went back after the sim restarted: %d after %d" % (h2["seq"], hb["seq"]))
+        # The probe set before the restart streams again from the new sim (the edge's keepalive
+        # finds it unknown there and sends it again), with 3 points as before.
+        pd = await recv_json(ws, lambda m: m["type"] == "probe_data", timeout=10)
+        check(len(pd["points"]) == 3 and pd["seq"] > hb["seq"], "probe_data after restart: %r" % pd)
+        check(c.sim.metric("oceand_probe_points") == 3, "the new sim probes %r points" % c.sim.metric("oceand_probe_points"))
         c3, h3 = await connect(c.edges[0])
         check(h3["params"]["wind_speed"] == 17 and h3["params_version"] == version, "params after restart")
         # A sim that does not answer (stopped): queries wait at most 5 s, at most 4 per client
@@ -628,6 +660,13 @@ def test_kill_restart_cycles_under_load(c):
             await fresh_frames(a)
             b, _ = await connect(c.edges[1])
             await recv_frame(b)
+            if cycle == 0:  # a probe of edge B's client: kept alive by B, forgotten by the sim when B dies
+                await b.send('{"type":"probe","id":1,"points":[[0,0]]}')
+                await recv_json(b, lambda m: m["type"] == "probe_data")
+                check(c.sim.metric("oceand_probe_points") == 1, "sim probe points before B dies")
+                c.edges[1].kill()
+                await await_for(lambda: c.sim.metric("oceand_probe_points") == 0, "the dead edge's probe expired",
+                                timeout=12)
             await b.close()
             c.edges[1].restart()
             wait_for(lambda: c.edges[1].health()["cluster"] == "ok", "edge B back")
