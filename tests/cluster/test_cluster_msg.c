@@ -50,6 +50,13 @@ static void test_subjects(void)
     CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_DEMAND) == 0 && strcmp(s, "eu.sea.demand") == 0, "demand: %s", s);
     CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_CTL) == 0 && strcmp(s, "eu.sea.ctl") == 0, "ctl: %s", s);
     CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_QUERY) == 0 && strcmp(s, "eu.sea.query") == 0, "query: %s", s);
+    CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_PROBE) == 0 && strcmp(s, "eu.sea.probe") == 0, "probe: %s", s);
+    CHECK(cl_subject(s, sizeof s, "eu.sea", (enum cl_subject)(CL_SUBJ_PROBE + 1)) == CL_E_ARG, "unknown subject");
+    CHECK(cl_probe_stream_subject("_INBOX.abc.17", s, sizeof s) == 0 && strcmp(s, "_INBOX.abc.p") == 0,
+          "probe stream: %s", s);
+    CHECK(cl_probe_stream_subject("nodot", s, sizeof s) == CL_E_ARG, "probe stream of a subject without a dot");
+    CHECK(cl_probe_stream_subject(".x", s, sizeof s) == CL_E_ARG, "probe stream of an empty inbox");
+    CHECK(cl_probe_stream_subject("_INBOX.abc.17", s, 8) == CL_E_TOO_LARGE, "probe stream: small buffer");
     CHECK(cl_subject(s, sizeof s, "a*", CL_SUBJ_CTL) == CL_E_ARG, "bad prefix accepted");
     CHECK(cl_subject_layer(s, sizeof s, "sea", CL_KEYS) == CL_E_ARG, "key out of range accepted");
     CHECK(cl_subject_layer(s, sizeof s, "sea", -1) == CL_E_ARG, "negative key accepted");
@@ -370,8 +377,10 @@ static void test_envelope(void)
     CHECK(trunc_ok, "a truncated envelope parsed");
     m[5] = 0;
     CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "kind 0 accepted");
-    m[5] = 8;
-    CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "kind 8 accepted");
+    m[5] = CL_KIND_PROBE_DATA + 1;
+    CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "kind %d accepted", CL_KIND_PROBE_DATA + 1);
+    m[5] = CL_KIND_PROBE_DATA;
+    CHECK(cl_envelope_parse(m, size, &e) == 0 && e.kind == CL_KIND_PROBE_DATA, "kind PROBE_DATA refused");
     m[5] = CL_KIND_CTL;
     m[12] = ' ';
     CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "a space in origin accepted");
