@@ -117,6 +117,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     int k = cl_subject_layer_parse(subj, "oceand");
     if (k >= CL_KEYS)
         abort();
+    char stream[CL_SUBJECT_MAX];
+    if (cl_probe_stream_subject(subj, stream, sizeof stream) == CL_OK &&
+        (strlen(stream) < 2 || strcmp(stream + strlen(stream) - 2, ".p") != 0 || strlen(stream) > size + 1))
+        abort();
     free(subj);
     cl_assembler_free(a);
     cl_demand_free(d);
