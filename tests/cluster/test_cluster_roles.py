@@ -577,6 +577,7 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
         check(h3["params"]["wind_speed"] == 17 and h3["params_version"] == version, "params after restart")
         # A sim that does not answer (stopped): queries wait at most 5 s, at most 4 per client
         # and 64 per edge are on their way; the edge itself keeps answering meanwhile.
+        extra = [(await connect(c.edges[0]))[0] for _ in range(15)]
         c.sim.proc.send_signal(signal.SIGSTOP)
         try:
             for i in range(5):
@@ -584,7 +585,17 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
             busy = await recv_json(ws, lambda m: m["type"] in ("query_result", "error"), timeout=3)
             check(busy["type"] == "error" and busy["code"] == "busy" and busy["id"] == 34 and
                   "at most 4 per client" in busy["message"], "fifth query in flight: %r" % busy)
-            await c3.send('{"type":"query","id":40,"points":[[1,1]]}')  # another client: its own 4
+            # 15 more clients x 4 fill the edge's 64; then any client's query is one too many
+            for x in extra:
+                for i in range(4):
+                    await x.send('{"type":"query","id":%d,"points":[[1,1]]}' % (60 + i))
+                await x.send('{"type":"ping","id":99}')  # its queries are in the edge once it answers
+            for x in extra:
+                await recv_json(x, lambda m: m["type"] in ("pong", "error") and m.get("id") == 99, timeout=3)
+            await c3.send('{"type":"query","id":42,"points":[[1,1]]}')
+            m = await recv_json(c3, lambda m: m["type"] in ("query_result", "error"), timeout=3)
+            check(m["code"] == "busy" and m["id"] == 42 and "64 queries and probes are on their way" in m["message"],
+                  "65th query through the edge: %r" % m)
             await ws.send('{"type":"ping","id":35}')
             await recv_json(ws, lambda m: m["type"] in ("pong", "query_result", "error") and m.get("id") == 35,
                             timeout=2)
@@ -593,15 +604,18 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
             check(sorted(m["id"] for m in waited) == [30, 31, 32, 33] and
                   all(m["type"] == "error" and m["code"] == "unavailable" and "no reply in time" in m["message"]
                       for m in waited), "queries to a stopped sim: %r" % waited)
-            m = await recv_json(c3, lambda m: m["type"] in ("query_result", "error"), timeout=8)
-            check(m["code"] == "unavailable" and m["id"] == 40, "other client's query: %r" % m)
+            got = []
+            for x in extra:
+                got += [await recv_json(x, lambda m: m["type"] in ("query_result", "error"), timeout=8)
+                        for _ in range(4)]
+            check(all(m["code"] == "unavailable" for m in got), "the edge's 64: %r" % got)
         finally:
             c.sim.proc.send_signal(signal.SIGCONT)
         await expect_status(ws, "ok", timeout=15)
         await ws.send('{"type":"query","id":41,"points":[[1,1]]}')
         m = await recv_json(ws, lambda m: m["type"] in ("query_result", "error"), timeout=8)
         check(m["type"] == "query_result" and m["id"] == 41 and len(m["points"]) == 1, "query after SIGCONT: %r" % m)
-        for w in (ws, late, c3):
+        for w in [ws, late, c3] + extra:
             await w.close()
     asyncio.run(run())
 
