@@ -390,7 +390,6 @@ bool dispatch_take_token(struct net *n, struct session *s, const char *text, siz
 
 /* ---- point queries and probes (query_worker.c does the work) ---- */
 
-
 static void dispatch_query(struct net *n, struct session *s, const cJSON *root, const cJSON *id, const char *text,
                            size_t len)
 {
@@ -432,7 +431,7 @@ void net_remote_query(struct net *n, const char *text, size_t len, net_reply_fn 
         struct ctl_error f = { .code = "internal", .message = "point queries are not available" };
         respond_error(NULL, &rm, &f, m.id);
     } else if (query_parse(m.root, r, &e) == 0) {
-        rq->serial = NET_REMOTE_SERIAL | ++n->next_remote;
+        rq->serial = net_remote_serial(n);
         rq->reply = reply;
         rq->reply_ctx = ctx;
         if (query_submit(n->queries, rq->serial, m.id, r, sim_time_now(n->sim), &e) == 0) {
@@ -481,10 +480,10 @@ char *net_remote_probe(struct net *n, uint64_t serial, const char *text, size_t 
     struct ctl_error e;
     cJSON *bad_id = NULL, *answer;
     if (control_parse(text, len, &m, &bad_id, &e) != 0) {
+        atomic_fetch_add(&g_metrics.control_errors, 1);
         answer = control_error_msg(&e, bad_id);
         cJSON_Delete(bad_id);
-        char *out = control_print(answer);
-        return out;
+        return control_print(answer);
     }
     struct probe_req *p = malloc(sizeof *p);
     if (m.type != CTL_PROBE) {

@@ -166,7 +166,7 @@ struct net {
     struct net_cluster_hooks cluster; /* main writes (net_set_cluster) before the loop */
     char *status_text;            /* edge: {"type":"status",...} for new clients, NULL = healthy */
     lws_dll2_owner_t remote_queries; /* sim: struct remote_query, queries of edges' clients in the workers */
-    uint64_t next_remote;         /* sim: last remote query serial handed out (without NET_REMOTE_SERIAL) */
+    uint64_t next_remote;         /* sim: last remote query / probe serial handed out (net_remote_serial) */
     uint64_t published;           /* edge: frames handed to net_publish_frame (frame.index) */
 };
 
