@@ -542,12 +542,14 @@ int main(void)
             CHECK(b->kind == CL_KIND_PROBE && strcmp(b->by, "c9") == 0 && strcmp(b->body, pr) == 0, "probe as received");
             char stream[CL_SUBJECT_MAX];
             CHECK(cl_probe_stream_subject(b->reply_to, stream, sizeof stream) == 0, "stream subject of %s", b->reply_to);
-            cl_request_reply(sim.link, a, "{\"type\":\"query_result\"}", 26);
-            cl_request_reply(sim.link, b, "{\"type\":\"probing\"}", 19);
+            const char *qr = "{\"type\":\"query_result\"}", *pg = "{\"type\":\"probing\"}";
+            cl_request_reply(sim.link, a, qr, strlen(qr));
+            cl_request_reply(sim.link, b, pg, strlen(pg));
             sim.nreqs = 0;
-            CHECK(spin_until(5, p_reply, &rq) && rq.status == 0 && strcmp(rq.text, "{\"type\":\"query_result\"}") == 0,
+            CHECK(spin_until(5, p_reply, &rq) && rq.status == 0 && strcmp(rq.text, qr) == 0,
                   "query reply: %s", rq.text);
-            CHECK(spin_until(5, p_reply, &rp) && rp.status == 0, "probe reply: %d", rp.status);
+            CHECK(spin_until(5, p_reply, &rp) && rp.status == 0 && strcmp(rp.text, pg) == 0, "probe reply: %d %s",
+                  rp.status, rp.text);
             const char *pd = "{\"type\":\"probe_data\",\"seq\":1}";
             CHECK(cl_sim_publish_probe_data(sim.link, stream, "c9", pd, strlen(pd)) == 0, "publish probe_data");
             CHECK(cl_sim_publish_probe_data(sim.link, stream, "", pd, strlen(pd)) == CL_E_ARG, "probe_data for nobody");
