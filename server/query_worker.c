@@ -48,15 +48,16 @@ struct job {
     double xz[][2];
 };
 
-/* One tick's copy of the grids the probes read. */
+/* One tick's copy of the grids the probes read: height, dx, dz of every
+ * cascade (one block: h of cascade c at h + 3 c N^2, then its dx, dz). */
 struct grids {
-    int n;
-    double patch;
+    int n, ncasc;
+    double patch[OCEAN_MAX_CASCADES];
     uint64_t seq;
     double t;
     uint32_t version;
-    size_t cap;                   /* samples allocated per field */
-    float *h, *dx, *dz;
+    size_t cap;                   /* floats allocated in h */
+    float *h;
 };
 
 struct probe_client {
@@ -316,7 +317,14 @@ static void apply_cmds(struct query_service *q, struct probe_cmd *c)
 static void run_probes(struct query_service *q, struct grids *g)
 {
     double t0 = mono_now();
-    struct probe_grids pg = { .n = g->n, .patch = g->patch, .h = g->h, .dx = g->dx, .dz = g->dz };
+    struct probe_grids pg = { .n = g->n, .ncasc = g->ncasc };
+    const size_t samples = (size_t)g->n * g->n;
+    for (int c = 0; c < g->ncasc; c++) {
+        pg.patch[c] = g->patch[c];
+        pg.h[c] = g->h + 3 * c * samples;
+        pg.dx[c] = pg.h[c] + samples;
+        pg.dz[c] = pg.dx[c] + samples;
+    }
     struct query_out *first = NULL, **tail = &first, *last = NULL;
     struct probe_value v[PROBE_MAX_POINTS];
     for (struct probe_client *c = q->clients; c; c = c->next) {
@@ -423,9 +431,16 @@ void query_tick(struct query_service *q, const struct ocean *o, uint64_t seq, do
 {
     if (!q || !atomic_load(&q->probe_fields))
         return;
-    const float *h = ocean_field(o, OCEAN_HEIGHT), *dx = ocean_field(o, OCEAN_DX), *dz = ocean_field(o, OCEAN_DZ);
-    if (!h || !dx || !dz)
-        return;
+    /* Every cascade in force: the probes answer the whole sea. */
+    const int nc = ocean_cascades(o);
+    const float *f[OCEAN_MAX_CASCADES][3];
+    for (int c = 0; c < nc; c++) {
+        f[c][0] = ocean_cascade_field(o, c, OCEAN_HEIGHT);
+        f[c][1] = ocean_cascade_field(o, c, OCEAN_DX);
+        f[c][2] = ocean_cascade_field(o, c, OCEAN_DZ);
+        if (!f[c][0] || !f[c][1] || !f[c][2])
+            return;
+    }
     pthread_mutex_lock(&q->lock);
     struct grids *g = q->spare;
     q->spare = NULL;
@@ -436,26 +451,26 @@ void query_tick(struct query_service *q, const struct ocean *o, uint64_t seq, do
     }
     pthread_mutex_unlock(&q->lock);
     const int n = ocean_resolution(o);
-    const size_t samples = (size_t)n * n;
+    const size_t samples = (size_t)n * n, floats = 3 * (size_t)nc * samples;
     if (!g)
         g = calloc(1, sizeof *g);
-    if (g && g->cap < samples) { /* first tick, or N grew: one block for the three fields */
+    if (g && g->cap < floats) { /* first tick, or N or the cascades grew: one block for all fields */
         free(g->h);
-        g->h = malloc(3 * samples * sizeof(float));
-        g->cap = g->h ? samples : 0;
+        g->h = malloc(floats * sizeof(float));
+        g->cap = g->h ? floats : 0;
     }
     if (!g || !g->h) {
         if (g)
             free(g);
         return;
     }
-    g->dx = g->h + samples;
-    g->dz = g->dx + samples;
-    memcpy(g->h, h, samples * sizeof(float));
-    memcpy(g->dx, dx, samples * sizeof(float));
-    memcpy(g->dz, dz, samples * sizeof(float));
+    for (int c = 0; c < nc; c++)
+        for (int k = 0; k < 3; k++)
+            memcpy(g->h + (3 * (size_t)c + k) * samples, f[c][k], samples * sizeof(float));
     g->n = n;
-    g->patch = ocean_get_params(o)->patch_size;
+    g->ncasc = nc;
+    for (int c = 0; c < nc; c++)
+        g->patch[c] = ocean_cascade_patch(ocean_get_params(o)->patch_size, c);
     g->seq = seq;
     g->t = sim_time;
     g->version = version;
