@@ -21,6 +21,7 @@
 #include "probe.h"
 
 #define MAX_EPOCHS 32             /* versions kept at most (a burst of sets inside the window) */
+#define QUERY_UNIT_MODES 32639    /* modes of one cascade at N = 256: the budget's unit point */
 #define MAX_SNAPSHOTS 3           /* distinct snapshots kept (7 MB each at N = 512): under a stream of
                                    * physics changes the window shrinks to the last three of them */
 
@@ -28,7 +29,8 @@
 struct snap {
     atomic_int refs;
     struct ocean_surface *surf;   /* NULL: could not be made (no memory) */
-    double cost;                  /* budget units per point: (N/256)^2 */
+    double cost;                  /* budget units per point: its modes (all cascades) over those of
+                                   * one cascade at N = 256, ~(N/256)^2 x 1.4 at 3 cascades */
 };
 
 struct epoch {
@@ -119,8 +121,10 @@ static struct snap *snap_new(struct ocean_surface *surf)
     }
     atomic_init(&s->refs, 1);
     s->surf = surf;
-    double n = surf ? ocean_surface_params(surf)->resolution : 256;
-    s->cost = (n / 256.0) * (n / 256.0);
+    /* A point costs in proportion to the modes summed (bench-query). */
+    s->cost = surf ? ocean_surface_modes(surf) / (double)QUERY_UNIT_MODES : 1.0;
+    if (!(s->cost > 0))
+        s->cost = 1.0 / QUERY_UNIT_MODES; /* a calm sea: no modes, still a point */
     return s;
 }
 

@@ -22,7 +22,7 @@ struct query_config {
     int threads;                /* query worker threads (>= 1) */
     double window;              /* s of sim time before now that `time` may ask for */
     double budget;              /* query points per second, all clients together, counted at N = 256
-                                 * (a point at resolution N costs (N/256)^2) */
+                                 * (a point costs its modes over those of one cascade at N = 256) */
     int queue;                  /* queries waiting at most; more: busy */
     int probe_max_points;       /* per client */
     int probe_max_total;        /* all clients together */
