@@ -431,14 +431,18 @@ unsigned query_probe_fields(const struct query_service *q)
     return q ? atomic_load(&q->probe_fields) : 0;
 }
 
-void query_tick(struct query_service *q, const struct ocean *o, uint64_t seq, double sim_time, uint32_t version)
+void query_tick(struct query_service *q, const struct ocean *o, const unsigned *stepped, uint64_t seq,
+                double sim_time, uint32_t version)
 {
-    if (!q || !atomic_load(&q->probe_fields))
+    const unsigned need = OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_DX) | OCEAN_FIELD_BIT(OCEAN_DZ);
+    if (!q || !stepped || !atomic_load(&q->probe_fields))
         return;
     /* Every cascade in force: the probes answer the whole sea. */
     const int nc = ocean_cascades(o);
     const float *f[OCEAN_MAX_CASCADES][3];
     for (int c = 0; c < nc; c++) {
+        if ((stepped[c] & need) != need)
+            return; /* planned before the probes came: this tick's grids are not all fresh */
         f[c][0] = ocean_cascade_field(o, c, OCEAN_HEIGHT);
         f[c][1] = ocean_cascade_field(o, c, OCEAN_DX);
         f[c][2] = ocean_cascade_field(o, c, OCEAN_DZ);

@@ -52,8 +52,13 @@ void query_version(struct query_service *q, uint32_t version, double since, bool
                    struct ocean_surface *surface);
 /* Fields the tick must compute for the probes (0 when nobody probes). Tick thread. */
 unsigned query_probe_fields(const struct query_service *q);
-/* After the step: copy what the probes need and hand it to a worker. Tick thread. */
-void query_tick(struct query_service *q, const struct ocean *o, uint64_t seq, double sim_time, uint32_t version);
+/* After the step: copy what the probes need (height, dx, dz of every cascade
+ * in force) and hand it to a worker. stepped[c]: the fields cascade c was
+ * stepped for at this tick (OCEAN_MAX_CASCADES masks): a tick planned before
+ * the first probe arrived, whose cascades were not all stepped for the
+ * probes' fields, is skipped rather than read stale grids. Tick thread. */
+void query_tick(struct query_service *q, const struct ocean *o, const unsigned *stepped, uint64_t seq,
+                double sim_time, uint32_t version);
 
 /* ---- lws thread ---- */
 

@@ -469,7 +469,8 @@ static void produce(struct sim *s, const struct prod_job *pj)
     }
     double t_step = mono_now() - t0;
     histogram_observe(&g_metrics.step_seconds, t_step);
-    query_tick(s->cfg.queries, s->ocean, pj->seq, pj->sim_time, pj->version); /* probes: copies 3 grids per cascade */
+    /* probes: copies 3 grids per cascade */
+    query_tick(s->cfg.queries, s->ocean, pj->want.cfields, pj->seq, pj->sim_time, pj->version);
     if (!pj->want.nkeys)
         return; /* stepped for the probes only: no frame */
     pthread_mutex_lock(&s->lock);
