@@ -695,7 +695,7 @@ struct query_service *query_service_new(const struct query_config *c, char *err,
     q->jobs_tail = &q->jobs;
     q->cmds_tail = &q->cmds;
     q->out_tail = &q->out;
-    q->tokens = fmax(2 * c->budget, QUERY_MAX_POINTS);
+    q->tokens = INFINITY; /* a full bucket: clipped to its cap (which depends on the snapshot) at first use */
     q->tokens_t = mono_now();
     pthread_mutex_init(&q->lock, NULL);
     pthread_cond_init(&q->cond, NULL);

@@ -8,7 +8,7 @@ against a real oceand, reusing test_daemon.py's harness.
 - `query` equals the library's exact reference (build/query_ref: ocean_query
   for the same parameters and sim time) at random points, including negative
   and very large coordinates, with choppiness 0, 1 and 2;
-- on grid nodes with choppiness 0, `query` heights equal the lossless
+- one cascade, on grid nodes with choppiness 0: `query` heights equal the lossless
   streamed grid of the same tick (float32 FFT vs double sum: within 0.1 mm);
 - with 3 cascades, a query is the sum of the streamed cascades: the lossless
   grids of every cascade's height, dx, dz and slopes of the query's tick,
@@ -29,11 +29,9 @@ import json
 import math
 import os
 import random
-import shutil
 import subprocess
 import sys
 import time
-import traceback
 
 import numpy as np
 
@@ -42,7 +40,8 @@ sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "proto", "examples"))
 import test_daemon as td  # noqa: E402
 import oceanproto  # noqa: E402
-from test_daemon import TestFailure, check, connect, recv_json, recv_frame  # noqa: E402
+from test_daemon import check, connect, recv_json, recv_frame  # noqa: E402
+from harness import running, run_tests  # noqa: E402
 
 TESTS = []
 QUERY_REF = None
@@ -124,11 +123,12 @@ def frame_grid(msg, field="height"):
 
 @test
 def test_query_on_grid_nodes_equals_streamed_grid(d):
-    """Choppiness 0: a grid node is its own source, so query height = the FFT
-    grid's sample at the same tick (lossless frame)."""
+    """One cascade (periodic in the patch), choppiness 0: a grid node is its
+    own source, so query height = the FFT grid's sample at the same tick
+    (lossless frame). Three cascades: test_query_is_the_sum_of_the_streamed_cascades."""
     async def run():
         ws, hello = await connect(d)
-        await set_params(ws, {"choppiness": 0}, 1)
+        await set_params(ws, {"choppiness": 0, "cascades": 1}, 1)
         await ws.send(json.dumps({"type": "subscribe", "id": 2, "fields": ["height"], "lod": 0, "bound": 0}))
         await recv_json(ws, lambda m: m.get("id") == 2)
         _, msg = await recv_frame(ws, lambda h, b: h["params_version"] >= 1 and
@@ -299,8 +299,7 @@ def test_probes_sum_the_cascades():
     """64 probes on the 3-cascade sea against exact queries at the same tick:
     the cheap path's height error stays at its documented 5-6 mm rms
     (docs/query.md), well below the 13 mm rms of cascade 0 alone."""
-    d = td.Daemon("--probe-max-points", "64")
-    try:
+    with running(td.Daemon, "--probe-max-points", "64") as d:
         async def run():
             ws, hello = await connect(d)
             await set_params(ws, {"cascades": 3, "choppiness": 1}, 1)
@@ -320,10 +319,6 @@ def test_probes_sum_the_cascades():
             check(rms < 0.008 and nerr < 6, "probes vs queries: %.4f m rms, normal %.2f deg" % (rms, nerr))
             await ws.close()
         asyncio.run(run())
-        check(d.stop()[0] == 0, "exit code")
-    finally:
-        d.kill()
-        shutil.rmtree(d.tmp, ignore_errors=True)
 
 
 BAD_QUERIES = [
@@ -383,7 +378,7 @@ def test_past_time_and_snapshot_limit(d):
         v0 = hello["params_version"]
         await ws.send(json.dumps({"type": "query", "id": 1, "points": [[3, 4]]}))
         r0 = await recv_json(ws, lambda m: m.get("id") == 1)
-        t0, h0 = r0["sim_time"], r0["points"][0]["height"]
+        t0 = r0["sim_time"]
         for i, w in enumerate((11, 12, 13, 14)):
             await set_params(ws, {"wind_speed": w}, 10 + i)
         # the current tick: the newest version
@@ -415,8 +410,7 @@ def test_past_time_and_snapshot_limit(d):
 
 @test
 def test_query_budget_answers_busy():
-    d = td.Daemon("--query-budget", "10")
-    try:
+    with running(td.Daemon, "--query-budget", "10") as d:
         async def run():
             ws, _ = await connect(d)
             pts = [[i * 0.7, -i * 1.3] for i in range(256)]
@@ -429,10 +423,6 @@ def test_query_budget_answers_busy():
             check("busy" in codes[1:], "budget of 10 points/s not enforced: %r" % codes)
             await ws.close()
         asyncio.run(run())
-        check(d.stop()[0] == 0, "exit code")
-    finally:
-        d.kill()
-        shutil.rmtree(d.tmp, ignore_errors=True)
 
 
 
@@ -453,8 +443,7 @@ def test_probe_heave_hs_and_peak():
     within 5 % of 4 sqrt(var) of the streamed height field over the same span,
     spectral peak at the field's peak frequency."""
     scale = 4.0
-    d = td.Daemon("--time-scale", str(scale), "--probe-max-points", "64")
-    try:
+    with running(td.Daemon, "--time-scale", str(scale), "--probe-max-points", "64") as d:
         async def run():
             ws, hello = await connect(d)
             L = hello["params"]["patch_size"]
@@ -504,10 +493,6 @@ def test_probe_heave_hs_and_peak():
         check(rel <= 0.05, "Hs of the probes %.3f m vs the field %.3f m: %.1f %% apart" % (hs_probe, hs_field, 100 * rel))
         check(abs(fp_probe - fp_field) <= 1.5 * max(df, dfg),
               "heave peak %.4f Hz vs the field's %.4f Hz" % (fp_probe, fp_field))
-        check(d.stop()[0] == 0, "exit code")
-    finally:
-        d.kill()
-        shutil.rmtree(d.tmp, ignore_errors=True)
 
 
 def main():
@@ -523,34 +508,7 @@ def main():
     QUERY_REF = args.query_ref
     if args.sanitized:
         td.BASE_N = 128
-    passed = failed = 0
-    for fn in TESTS:
-        if args.k not in fn.__name__:
-            continue
-        t0 = time.time()
-        print("--- %s" % fn.__name__, flush=True)
-        try:
-            if fn.__code__.co_argcount == 1:
-                d = td.Daemon()
-                try:
-                    fn(d)
-                    rc, _ = d.stop()
-                    check(rc == 0, "daemon exit code %r; log:\n%s" % (rc, d.read_log()))
-                    log = d.read_log()
-                    check("ERROR: AddressSanitizer" not in log and "runtime error:" not in log,
-                          "sanitizer report:\n%s" % log)
-                finally:
-                    d.kill()
-                    shutil.rmtree(d.tmp, ignore_errors=True)
-            else:
-                fn()
-            passed += 1
-            print("ok   %s (%.1f s)" % (fn.__name__, time.time() - t0), flush=True)
-        except Exception as e:
-            failed += 1
-            print("FAIL %s: %s" % (fn.__name__, e), flush=True)
-            if not isinstance(e, TestFailure):
-                traceback.print_exc()
+    passed, failed = run_tests(TESTS, args.k, td.Daemon)
     print("%d passed, %d failed" % (passed, failed))
     sys.exit(1 if failed else 0)
 
