@@ -1,10 +1,11 @@
 /* query_worker.h — point queries and probes off the tick and lws threads.
  *
  * Exact queries (`query`) run on a small pool of query worker threads over
- * ref-counted snapshots of the sea's amplitudes (struct ocean_surface), one
- * per parameter version still inside the time window. Probes (`probe`) are
- * computed once per tick on a worker from a copy of the tick's height/dx/dz
- * grids (probe.c). Results go back to the lws thread through a locked list
+ * ref-counted snapshots of the sea's amplitudes, every cascade's (struct
+ * ocean_surface), one per parameter version still inside the time window.
+ * Probes (`probe`) are computed once per tick on a worker from a copy of the
+ * tick's height/dx/dz grids of every cascade (probe.c). Both answer the sum
+ * of the cascades. Results go back to the lws thread through a locked list
  * and a wake-up (lws_cancel_service). docs/threads.md has the contract;
  * docs/query.md the method, limits and figures. */
 #ifndef OCEAND_QUERY_WORKER_H
