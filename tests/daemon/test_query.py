@@ -298,8 +298,10 @@ def test_cascades_change_with_queries_in_flight(d):
 def test_probes_sum_the_cascades():
     """64 probes on the 3-cascade sea against exact queries at the same tick:
     the cheap path's height error stays at its documented 5-6 mm rms
-    (docs/query.md), well below the 13 mm rms of cascade 0 alone."""
-    with running(td.Daemon, "--probe-max-points", "64") as d:
+    (docs/query.md), well below the 13 mm rms of cascade 0 alone. At N = 256
+    (the documented figures) even under the sanitizers: the interpolation
+    error grows at a coarser N (12 mm rms at 128)."""
+    with running(td.Daemon, "--probe-max-points", "64", "--resolution", "256") as d:
         async def run():
             ws, hello = await connect(d)
             await set_params(ws, {"cascades": 3, "choppiness": 1}, 1)
