@@ -485,14 +485,15 @@ static int popcount_u(unsigned v)
 static void produce(struct sim *s, const struct prod_job *pj)
 {
     double t0 = mono_now();
-    /* Each cascade is stepped for the fields asked of it (probes read cascade 0). */
+    /* Each cascade is stepped for the fields asked of it (probes read every cascade). */
     if (ocean_step_cascades(s->ocean, pj->sim_time, pj->want.cfields, OCEAN_MAX_CASCADES) != 0) {
         LOGE("ocean_step failed at t=%g", pj->sim_time);
         return;
     }
     double t_step = mono_now() - t0;
     histogram_observe(&g_metrics.step_seconds, t_step);
-    query_tick(s->cfg.queries, s->ocean, pj->seq, pj->sim_time, pj->version); /* probes: copies 3 grids */
+    /* probes: copies 3 grids per cascade */
+    query_tick(s->cfg.queries, s->ocean, pj->want.cfields, pj->seq, pj->sim_time, pj->version);
     if (!pj->want.nkeys)
         return; /* stepped for the probes only: no frame */
     pthread_mutex_lock(&s->lock);
@@ -621,11 +622,11 @@ static void tick(struct sim *s, double t_tick)
     int demand[LAYER_KEYS_ALL];
     bool any = false;
     uint8_t remote[SIM_DEMAND_BYTES] = { 0 };
-    if (s->cfg.remote_demand) /* --role sim: the layer keys other daemons want (cascade 0's only) */
+    if (s->cfg.remote_demand) /* --role sim: the layer keys other daemons want */
         s->cfg.remote_demand(s->cfg.cluster_user, remote);
     for (int k = 0; k < LAYER_KEYS_ALL; k++) {
         demand[k] = atomic_load(&s->demand[k]);
-        if (demand[k] <= 0 && k < LAYER_KEYS && ((remote[k >> 3] >> (k & 7)) & 1))
+        if (demand[k] <= 0 && ((remote[k >> 3] >> (k & 7)) & 1))
             demand[k] = 1;
         any |= demand[k] > 0;
     }
@@ -666,7 +667,7 @@ static void tick(struct sim *s, double t_tick)
              * and this tick's keyframes for temporal ones that lack the references. */
             int temporal = atomic_load(&s->tdemand[k]);
             pj.want.temporal[k] = temporal > 0;
-            bool edge = k < LAYER_KEYS && ((remote[k >> 3] >> (k & 7)) & 1);
+            bool edge = (remote[k >> 3] >> (k & 7)) & 1;
             int key_want = atomic_load(&s->key_want[k]);
             pj.want.intra[k] = demand[k] > temporal || edge || key_want > 0;
             pj.want.kclients[k] = (uint16_t)(key_want < 0 ? 0 : key_want > 65535 ? 65535 : key_want);
@@ -679,7 +680,8 @@ static void tick(struct sim *s, double t_tick)
     if (!pj.want.nkeys && !probe_fields)
         return; /* a degraded group's off tick */
     pj.want.fields |= probe_fields; /* stepped for the probes, not encoded unless a layer wants them */
-    pj.want.cfields[0] |= probe_fields;
+    for (int c = 0; c < OCEAN_MAX_CASCADES; c++) /* probes sum every cascade in force */
+        pj.want.cfields[c] |= probe_fields;
     if (!idle && set_ready)
         return; /* let the producer drain so that the parameter change applies next tick */
     if (queued) {
