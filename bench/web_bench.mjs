@@ -7,11 +7,11 @@
 // cascades 1..(cascades-1) height at LOD 1 and 1 mm (the daemon's default: 3 cascades). At
 // N=256 a third row per codec, "layers":"base", is the page with ?cascades=0&foam=0 (height,
 // dx, dz only), to show what the cascades and foam cost. One JSON line per row, medians.
-//   node bench/web_bench.mjs --oceand build/oceand --web-root build/web [--seconds 8]
+//   node bench/web_bench.mjs --oceand build/oceand --web-root build/web [--seconds 8] [--sizes 256,512]
 import { loadavg } from 'node:os';
 import { parseArgs, freePort, startServer, launchBrowser, waitFor } from '../tests/web/harness.mjs';
 
-const args = parseArgs(process.argv, { oceand: 'build/oceand', webRoot: 'build/web', seconds: '8', fake: false });
+const args = parseArgs(process.argv, { oceand: 'build/oceand', webRoot: 'build/web', seconds: '8', sizes: '256,512', fake: false });
 const median = (a) => { const s = [...a].sort((x, y) => x - y); return s.length ? s[s.length >> 1] : null; };
 // The subscription in force (the server's `subscribed`), in one line.
 function describe(sub) {
@@ -25,7 +25,7 @@ const browser = await launchBrowser();
 let status = 0;
 try {
   const runs = [];
-  for (const n of [256, 512]) for (const codec of ['temporal', 'intra']) {
+  for (const n of args.sizes.split(',').map(Number)) for (const codec of ['temporal', 'intra']) {
     runs.push({ n, codec, layers: 'default' });
     if (n === 256) runs.push({ n, codec, layers: 'base' });
   }

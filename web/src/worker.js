@@ -15,11 +15,13 @@ setInflateRaw((src, out) => inflateSync(src, { out }));
 const CHANNEL = { dx: [0, 4], height: [1, 4], dz: [2, 4], jacobian: [3, 4], slope_x: [0, 2], slope_z: [1, 2] };
 const pool = { 4: [], 2: [], 1: [] }; // recycled ArrayBuffers by channel count
 
+// The pool of a channel count holds buffers of several sizes (the surface's and the cascades'
+// RGBA arrays): take one of the size wanted and keep the others (dropping them, as this did,
+// made a new 1 MB array most frames once cascades were subscribed).
 function take(channels, count) {
-  const list = pool[channels];
-  while (list.length) {
-    const b = list.pop();
-    if (b.byteLength === count * channels * 4) return new Float32Array(b);
+  const list = pool[channels], bytes = count * channels * 4;
+  for (let i = list.length - 1; i >= 0; i--) {
+    if (list[i].byteLength === bytes) return new Float32Array(list.splice(i, 1)[0]);
   }
   return new Float32Array(count * channels);
 }
