@@ -126,7 +126,10 @@ test('random truncations and bit flips of a predicted frame are rejected or deco
 // options.target: every stream decoded straight into one interleaved array (3 floats per sample,
 // each tile its own region, rows padded) gives the same float32 bits as the tiles' own arrays.
 test('options.target places the same bits as samples (strided, offset, padded rows)', async () => {
-  for (const st of manifest.streams) {
+  const single = manifest.vectors.filter((v) => haveZstd || v.tiles.every((t) => t.codec !== 2))
+    .map((v) => ({ name: v.name, frames: [{ file: v.file, seq: 0 }] }));
+  assert.ok(single.some((v) => manifest.vectors.find((x) => x.name === v.name).tiles.some((t) => t.codec === 0)), 'no raw (codec 0) vector');
+  for (const st of [...manifest.streams, ...single]) {
     const own = new DecoderState(), placed = new DecoderState();
     for (const f of st.frames) {
       if (f.error) continue;

@@ -323,9 +323,11 @@ function decodeRaw(t, bytes, start, dst) {
     new Uint8Array(out.buffer, out.byteOffset + 4 * dst.offset, w * h * 4).set(bytes.subarray(start, start + t.payloadLen));
     return;
   }
+  // Strided or big-endian: as 32-bit patterns (a float round trip could change a NaN's bits).
   const dv = new DataView(bytes.buffer, bytes.byteOffset + start, t.payloadLen);
+  const bits = new Uint32Array(out.buffer, out.byteOffset, out.length);
   for (let j = 0, k = 0; j < h; j++) {
-    for (let i = 0, o = dst.offset + j * dst.rowStride; i < w; i++, k++, o += os) out[o] = dv.getFloat32(4 * k, true);
+    for (let i = 0, o = dst.offset + j * dst.rowStride; i < w; i++, k++, o += os) bits[o] = dv.getUint32(4 * k, true);
   }
 }
 
