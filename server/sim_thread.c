@@ -566,6 +566,11 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], int n, 
             s->credit[g] = fmod(0.618034 * (g + 1), 1.0);
     }
     atomic_store(&g_metrics.degraded_groups, degraded);
+    for (int g = 0; g < PLAN_GROUPS; g++)
+        if (next.fields[g])
+            LOGD("plan: lod %d bound %g: encoded at lod %d, %g frames/s (%s)", g / CTL_BOUND_COUNT,
+                 ctl_bounds[g % CTL_BOUND_COUNT], next.lod[g], next.rate[g] * s->cfg.tick_rate,
+                 next.reason[0] ? next.reason : "not degraded");
     s->plan = next;
     pthread_mutex_lock(&s->lock);
     s->plan_pub = next;
