@@ -59,7 +59,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             check(e.code && e.message[0]);
         } else {
             check(p.n >= 0 && p.n <= 8);
-            struct probe_grids g = { .n = GN, .patch = 20.0, .h = gh, .dx = gdx, .dz = gdz };
+            /* two cascades (the same grids on incommensurate patches): the summed path */
+            struct probe_grids g = { .n = GN, .ncasc = 2, .patch = { 20.0, 20.0 / 3.543 }, .h = { gh, gh },
+                                     .dx = { gdx, gdx }, .dz = { gdz, gdz } };
             struct probe_value v[8];
             for (int i = 0; i < p.n; i++) {
                 double guess[2] = { p.xz[i][0], p.xz[i][1] };

@@ -71,7 +71,8 @@ static const struct param_def opt_table[] = {
     OPT("query_window", PARAM_FLOAT, query_window, 0, 60, 5, NULL, 0, "seconds of sim time before now that a "
         "query's \"time\" may ask for"),
     OPT("query_budget", PARAM_FLOAT, query_budget, 1, 1e6, 1000, NULL, 0, "exact query points per second, all "
-        "clients together, counted at N = 256 (a point at N costs (N/256)^2); over it: busy"),
+        "clients together, counted at N = 256 and one cascade (a point costs in proportion to the modes it sums: "
+        "(N/256)^2, times 1.4 with 3 cascades); over it: busy"),
     OPT("query_queue", PARAM_INT, query_queue, 1, 4096, 64, NULL, 0, "queries waiting at most; more: busy"),
     OPT("probe_max_points", PARAM_INT, probe_max_points, 1, 64, 16, NULL, 0, "probe points per client"),
     OPT("probe_max_total", PARAM_INT, probe_max_total, 1, 100000, 2048, NULL, 0, "probe points, all clients together"),

@@ -21,6 +21,7 @@
 #include "probe.h"
 
 #define MAX_EPOCHS 32             /* versions kept at most (a burst of sets inside the window) */
+#define QUERY_UNIT_MODES 32639    /* modes of one cascade at N = 256: the budget's unit point */
 #define MAX_SNAPSHOTS 3           /* distinct snapshots kept (7 MB each at N = 512): under a stream of
                                    * physics changes the window shrinks to the last three of them */
 
@@ -28,7 +29,8 @@
 struct snap {
     atomic_int refs;
     struct ocean_surface *surf;   /* NULL: could not be made (no memory) */
-    double cost;                  /* budget units per point: (N/256)^2 */
+    double cost;                  /* budget units per point: its modes (all cascades) over those of
+                                   * one cascade at N = 256, ~(N/256)^2 x 1.4 at 3 cascades */
 };
 
 struct epoch {
@@ -48,15 +50,16 @@ struct job {
     double xz[][2];
 };
 
-/* One tick's copy of the grids the probes read. */
+/* One tick's copy of the grids the probes read: height, dx, dz of every
+ * cascade (one block: h of cascade c at h + 3 c N^2, then its dx, dz). */
 struct grids {
-    int n;
-    double patch;
+    int n, ncasc;
+    double patch[OCEAN_MAX_CASCADES];
     uint64_t seq;
     double t;
     uint32_t version;
-    size_t cap;                   /* samples allocated per field */
-    float *h, *dx, *dz;
+    size_t cap;                   /* floats allocated in h */
+    float *h;
 };
 
 struct probe_client {
@@ -118,8 +121,10 @@ static struct snap *snap_new(struct ocean_surface *surf)
     }
     atomic_init(&s->refs, 1);
     s->surf = surf;
-    double n = surf ? ocean_surface_params(surf)->resolution : 256;
-    s->cost = (n / 256.0) * (n / 256.0);
+    /* A point costs in proportion to the modes summed (bench-query). */
+    s->cost = surf ? ocean_surface_modes(surf) / (double)QUERY_UNIT_MODES : 1.0;
+    if (!(s->cost > 0))
+        s->cost = 1.0 / QUERY_UNIT_MODES; /* a calm sea: no modes, still a point */
     return s;
 }
 
@@ -316,7 +321,14 @@ static void apply_cmds(struct query_service *q, struct probe_cmd *c)
 static void run_probes(struct query_service *q, struct grids *g)
 {
     double t0 = mono_now();
-    struct probe_grids pg = { .n = g->n, .patch = g->patch, .h = g->h, .dx = g->dx, .dz = g->dz };
+    struct probe_grids pg = { .n = g->n, .ncasc = g->ncasc };
+    const size_t samples = (size_t)g->n * g->n;
+    for (int c = 0; c < g->ncasc; c++) {
+        pg.patch[c] = g->patch[c];
+        pg.h[c] = g->h + 3 * c * samples;
+        pg.dx[c] = pg.h[c] + samples;
+        pg.dz[c] = pg.dx[c] + samples;
+    }
     struct query_out *first = NULL, **tail = &first, *last = NULL;
     struct probe_value v[PROBE_MAX_POINTS];
     for (struct probe_client *c = q->clients; c; c = c->next) {
@@ -419,13 +431,24 @@ unsigned query_probe_fields(const struct query_service *q)
     return q ? atomic_load(&q->probe_fields) : 0;
 }
 
-void query_tick(struct query_service *q, const struct ocean *o, uint64_t seq, double sim_time, uint32_t version)
+void query_tick(struct query_service *q, const struct ocean *o, const unsigned *stepped, uint64_t seq,
+                double sim_time, uint32_t version)
 {
-    if (!q || !atomic_load(&q->probe_fields))
+    const unsigned need = OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_DX) | OCEAN_FIELD_BIT(OCEAN_DZ);
+    if (!q || !stepped || !atomic_load(&q->probe_fields))
         return;
-    const float *h = ocean_field(o, OCEAN_HEIGHT), *dx = ocean_field(o, OCEAN_DX), *dz = ocean_field(o, OCEAN_DZ);
-    if (!h || !dx || !dz)
-        return;
+    /* Every cascade in force: the probes answer the whole sea. */
+    const int nc = ocean_cascades(o);
+    const float *f[OCEAN_MAX_CASCADES][3];
+    for (int c = 0; c < nc; c++) {
+        if ((stepped[c] & need) != need)
+            return; /* planned before the probes came: this tick's grids are not all fresh */
+        f[c][0] = ocean_cascade_field(o, c, OCEAN_HEIGHT);
+        f[c][1] = ocean_cascade_field(o, c, OCEAN_DX);
+        f[c][2] = ocean_cascade_field(o, c, OCEAN_DZ);
+        if (!f[c][0] || !f[c][1] || !f[c][2])
+            return;
+    }
     pthread_mutex_lock(&q->lock);
     struct grids *g = q->spare;
     q->spare = NULL;
@@ -436,26 +459,26 @@ void query_tick(struct query_service *q, const struct ocean *o, uint64_t seq, do
     }
     pthread_mutex_unlock(&q->lock);
     const int n = ocean_resolution(o);
-    const size_t samples = (size_t)n * n;
+    const size_t samples = (size_t)n * n, floats = 3 * (size_t)nc * samples;
     if (!g)
         g = calloc(1, sizeof *g);
-    if (g && g->cap < samples) { /* first tick, or N grew: one block for the three fields */
+    if (g && g->cap < floats) { /* first tick, or N or the cascades grew: one block for all fields */
         free(g->h);
-        g->h = malloc(3 * samples * sizeof(float));
-        g->cap = g->h ? samples : 0;
+        g->h = malloc(floats * sizeof(float));
+        g->cap = g->h ? floats : 0;
     }
     if (!g || !g->h) {
         if (g)
             free(g);
         return;
     }
-    g->dx = g->h + samples;
-    g->dz = g->dx + samples;
-    memcpy(g->h, h, samples * sizeof(float));
-    memcpy(g->dx, dx, samples * sizeof(float));
-    memcpy(g->dz, dz, samples * sizeof(float));
+    for (int c = 0; c < nc; c++)
+        for (int k = 0; k < 3; k++)
+            memcpy(g->h + (3 * (size_t)c + k) * samples, f[c][k], samples * sizeof(float));
     g->n = n;
-    g->patch = ocean_get_params(o)->patch_size;
+    g->ncasc = nc;
+    for (int c = 0; c < nc; c++)
+        g->patch[c] = ocean_cascade_patch(ocean_get_params(o)->patch_size, c);
     g->seq = seq;
     g->t = sim_time;
     g->version = version;
@@ -672,7 +695,7 @@ struct query_service *query_service_new(const struct query_config *c, char *err,
     q->jobs_tail = &q->jobs;
     q->cmds_tail = &q->cmds;
     q->out_tail = &q->out;
-    q->tokens = fmax(2 * c->budget, QUERY_MAX_POINTS);
+    q->tokens = INFINITY; /* a full bucket: clipped to its cap (which depends on the snapshot) at first use */
     q->tokens_t = mono_now();
     pthread_mutex_init(&q->lock, NULL);
     pthread_cond_init(&q->cond, NULL);

@@ -1,10 +1,11 @@
 /* query_worker.h — point queries and probes off the tick and lws threads.
  *
  * Exact queries (`query`) run on a small pool of query worker threads over
- * ref-counted snapshots of the sea's amplitudes (struct ocean_surface), one
- * per parameter version still inside the time window. Probes (`probe`) are
- * computed once per tick on a worker from a copy of the tick's height/dx/dz
- * grids (probe.c). Results go back to the lws thread through a locked list
+ * ref-counted snapshots of the sea's amplitudes, every cascade's (struct
+ * ocean_surface), one per parameter version still inside the time window.
+ * Probes (`probe`) are computed once per tick on a worker from a copy of the
+ * tick's height/dx/dz grids of every cascade (probe.c). Both answer the sum
+ * of the cascades. Results go back to the lws thread through a locked list
  * and a wake-up (lws_cancel_service). docs/threads.md has the contract;
  * docs/query.md the method, limits and figures. */
 #ifndef OCEAND_QUERY_WORKER_H
@@ -22,7 +23,7 @@ struct query_config {
     int threads;                /* query worker threads (>= 1) */
     double window;              /* s of sim time before now that `time` may ask for */
     double budget;              /* query points per second, all clients together, counted at N = 256
-                                 * (a point at resolution N costs (N/256)^2) */
+                                 * (a point costs its modes over those of one cascade at N = 256) */
     int queue;                  /* queries waiting at most; more: busy */
     int probe_max_points;       /* per client */
     int probe_max_total;        /* all clients together */
@@ -52,8 +53,13 @@ void query_version(struct query_service *q, uint32_t version, double since, bool
                    struct ocean_surface *surface);
 /* Fields the tick must compute for the probes (0 when nobody probes). Tick thread. */
 unsigned query_probe_fields(const struct query_service *q);
-/* After the step: copy what the probes need and hand it to a worker. Tick thread. */
-void query_tick(struct query_service *q, const struct ocean *o, uint64_t seq, double sim_time, uint32_t version);
+/* After the step: copy what the probes need (height, dx, dz of every cascade
+ * in force) and hand it to a worker. stepped[c]: the fields cascade c was
+ * stepped for at this tick (OCEAN_MAX_CASCADES masks): a tick planned before
+ * the first probe arrived, whose cascades were not all stepped for the
+ * probes' fields, is skipped rather than read stale grids. Tick thread. */
+void query_tick(struct query_service *q, const struct ocean *o, const unsigned *stepped, uint64_t seq,
+                double sim_time, uint32_t version);
 
 /* ---- lws thread ---- */
 

@@ -463,14 +463,15 @@ static int popcount_u(unsigned v)
 static void produce(struct sim *s, const struct prod_job *pj)
 {
     double t0 = mono_now();
-    /* Each cascade is stepped for the fields asked of it (probes read cascade 0). */
+    /* Each cascade is stepped for the fields asked of it (probes read every cascade). */
     if (ocean_step_cascades(s->ocean, pj->sim_time, pj->want.cfields, OCEAN_MAX_CASCADES) != 0) {
         LOGE("ocean_step failed at t=%g", pj->sim_time);
         return;
     }
     double t_step = mono_now() - t0;
     histogram_observe(&g_metrics.step_seconds, t_step);
-    query_tick(s->cfg.queries, s->ocean, pj->seq, pj->sim_time, pj->version); /* probes: copies 3 grids */
+    /* probes: copies 3 grids per cascade */
+    query_tick(s->cfg.queries, s->ocean, pj->want.cfields, pj->seq, pj->sim_time, pj->version);
     if (!pj->want.nkeys)
         return; /* stepped for the probes only: no frame */
     pthread_mutex_lock(&s->lock);
@@ -661,7 +662,8 @@ static void tick(struct sim *s, double t_tick)
     if (!pj.want.nkeys && !probe_fields)
         return; /* a degraded group's off tick */
     pj.want.fields |= probe_fields; /* stepped for the probes, not encoded unless a layer wants them */
-    pj.want.cfields[0] |= probe_fields;
+    for (int c = 0; c < OCEAN_MAX_CASCADES; c++) /* probes sum every cascade in force */
+        pj.want.cfields[c] |= probe_fields;
     if (!idle && set_ready)
         return; /* let the producer drain so that the parameter change applies next tick */
     if (queued) {

@@ -838,18 +838,27 @@ struct ocean_surface *ocean_prepared_surface(const struct ocean *o, const struct
         snprintf(err, errlen, "no simulation");
         return NULL;
     }
-    const struct cascade_prep *cp = &pr->c[0]; /* queries sum cascade 0 only (docs/simulation.md) */
-    if (cp->grid) /* a new N: the whole new grid */
-        return ocean_surface_from(cp->grid, &pr->p, err, errlen);
-    /* Same N: o's grid with the prepared amplitudes (what ocean_commit swaps in).
-     * A shallow copy: the snapshot reads only n, nh, modes and the amplitudes. */
-    struct ocean_grid view = *o->g;
-    view.a = cp->amps.a;
-    view.b = cp->amps.b;
-    view.d = cp->amps.d;
-    view.e = cp->amps.e;
-    view.omega = cp->amps.omega;
-    return ocean_surface_from(&view, &pr->p, err, errlen);
+    /* Every cascade in force after the commit (queries sum them all): a new
+     * grid (new N, new cascade) as it is; else the live grid with the prepared
+     * amplitudes, a shallow copy (the snapshot reads only n, nh, modes and
+     * the amplitudes). */
+    struct ocean_grid view[OCEAN_MAX_CASCADES];
+    const struct ocean_grid *grids[OCEAN_MAX_CASCADES];
+    for (int c = 0; c < pr->ncascades; c++) {
+        const struct cascade_prep *cp = &pr->c[c];
+        if (cp->grid) {
+            grids[c] = cp->grid;
+            continue;
+        }
+        view[c] = *cascade_grid(o, c);
+        view[c].a = cp->amps.a;
+        view[c].b = cp->amps.b;
+        view[c].d = cp->amps.d;
+        view[c].e = cp->amps.e;
+        view[c].omega = cp->amps.omega;
+        grids[c] = &view[c];
+    }
+    return ocean_surface_from(grids, pr->ncascades, &pr->p, err, errlen);
 }
 
 /* ---- public API ------------------------------------------------------- */

@@ -213,8 +213,9 @@ void ocean_fftw_init(void);
 void ocean_fftw_lock(void);
 void ocean_fftw_unlock(void);
 
-/* ocean_query.c: a query snapshot of g's amplitudes under parameters p. */
-struct ocean_surface *ocean_surface_from(const struct ocean_grid *g, const struct ocean_params *p, char *err,
-                                         size_t errlen);
+/* ocean_query.c: a query snapshot of the amplitudes of cascades 0 .. count-1,
+ * grids[c] (all of one N), under parameters p: queries sum them all. */
+struct ocean_surface *ocean_surface_from(const struct ocean_grid *const *grids, int count,
+                                         const struct ocean_params *p, char *err, size_t errlen);
 
 #endif

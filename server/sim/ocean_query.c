@@ -24,8 +24,19 @@
  * (measured for the default sea: dropping the weakest 1000 of 32639 modes
  * at N = 256 already allows 0.1 m), so truncation would buy nothing safe.
  *
- * Coordinates are reduced modulo the patch L first (kx L = 2 pi mx exactly,
- * so this changes no phase), which keeps the phases exact for any finite x. */
+ * The sea is the sum of the cascades (ocean.h, docs/simulation.md
+ * "Cascades"): cascade c has its own patch L_c = L / 3.543^c and its own
+ * band of modes, and every sum above runs over the modes of every cascade
+ * (their tables are concatenated, each row knowing its cascade), so height,
+ * displacement, slopes and time derivatives are those of the whole sea and
+ * Newton inverts the summed displacement. The horizontal factor is
+ * coth(k depth)/k (displacement_over_k), as on the FFT path.
+ *
+ * Coordinates are reduced modulo each cascade's patch L_c separately (kx L_c
+ * = 2 pi mx exactly, so this changes no phase), which keeps the phases exact
+ * for any finite x. The cascades' periods are incommensurate, so a point is
+ * carried as its raw coordinates plus a small offset (the Newton unknown),
+ * never as one reduced coordinate. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -34,20 +45,25 @@
 #include "ocean_internal.h"
 
 #define NEWTON_TOL 1e-9   /* m, |x0 + D(x0) - x| */
+#define MAXC OCEAN_MAX_CASCADES
 
 struct ocean_surface {
     struct ocean_params p;
-    double lambda, patch, loop;     /* choppiness, L, loop period (0 = none) */
-    int n, nh, rows;                /* N, N/2 + 1, rows that hold kept modes */
-    int modes, spans;               /* non-zero modes; entries of the row spans */
+    double lambda, loop;            /* choppiness, loop period (0 = none) */
+    int ncasc;                      /* cascades summed */
+    double patch[MAXC];             /* L_c */
+    int crow[MAXC + 1];             /* rows of cascade c: [crow[c], crow[c + 1]) */
+    int n, nh, rows;                /* N, N/2 + 1, rows that hold kept modes (all cascades) */
+    int modes, spans;               /* non-zero modes; entries of the row spans (all cascades) */
     /* Rows: the modes of row r are [row_start[r], row_start[r + 1]), the
      * columns mx = row_c0[r], row_c0[r] + 1, ... in order (a contiguous
      * span, so the inner loops vectorise; a mode inside a span may be
      * zero), all with kz = row_kz[r] and integer wavenumber row_mz[r]. */
     int *row_start, *row_mz, *row_c0;
     double *row_kz;
-    /* Per mode: kx, 1/k (0 at k = 0), w, and a, b, d, e (ocean_internal.h)
-     * with the weight w_k (1 for kx = 0, else 2: the mirrored half) folded in. */
+    /* Per mode: kx, coth(k depth)/k (0 at k = 0), w, and a, b, d, e
+     * (ocean_internal.h) with the weight w_k (1 for kx = 0, else 2: the
+     * mirrored half) folded in. */
     double *kx, *invk, *omega, *a, *b, *d, *e;
 };
 
@@ -57,51 +73,78 @@ struct ocean_surface *ocean_surface_new(const struct ocean *o, char *err, size_t
         snprintf(err, errlen, "no simulation");
         return NULL;
     }
-    return ocean_surface_from(o->g, &o->p, err, errlen);
+    const struct ocean_grid *grids[MAXC] = {o->g};
+    int count = o->ncascades < 1 ? 1 : o->ncascades > MAXC ? MAXC : o->ncascades;
+    for (int c = 1; c < count; c++)
+        grids[c] = o->fine[c];
+    return ocean_surface_from(grids, count, &o->p, err, errlen);
 }
 
-/* The snapshot of grid g's amplitudes under parameters pp (ocean.c also
- * calls it on a prepared state). */
-struct ocean_surface *ocean_surface_from(const struct ocean_grid *g, const struct ocean_params *pp, char *err,
-                                         size_t errlen)
+/* Which modes of grid g to keep (non-zero amplitude: the Nyquist row and
+ * column, k = 0, a calm sea and a finer cascade's modes outside its band
+ * add nothing), and per row the span from its first to its last kept
+ * column. Returns the spans' total length; *kept counts kept modes. */
+static size_t grid_spans(const struct ocean_grid *g, char *keep, size_t *kept, int *rows)
 {
     const int n = g->n, nh = g->nh;
-    const double L = pp->patch_size, lam = pp->choppiness;
-    struct ocean_surface *s = calloc(1, sizeof *s);
-    char *keep = calloc(g->modes, 1);
-    if (!s || !keep)
-        goto nomem;
-    s->p = *pp;
-    s->lambda = lam;
-    s->patch = L;
-    s->loop = pp->loop_period > 0 ? pp->loop_period : 0;
-    s->n = n;
-    s->nh = nh;
-
-    /* Modes with zero amplitude (the Nyquist row and column, k = 0, a
-     * calm sea) add nothing: rows and row ends made of them are left out. */
+    size_t span = 0;
     for (size_t i = 0; i < g->modes; i++)
         keep[i] = g->a[i] != 0 || g->b[i] != 0 || g->d[i] != 0 || g->e[i] != 0;
-
-    /* Each row keeps the span from its first to its last kept column. */
-    size_t span = 0, kept = 0;
     for (int iz = 0; iz < n; iz++) {
         int c0 = -1, c1 = -1;
         for (int ix = 0; ix < nh; ix++)
             if (keep[(size_t)iz * nh + ix]) {
                 c0 = c0 < 0 ? ix : c0;
                 c1 = ix;
-                kept++;
+                ++*kept;
             }
         span += c0 < 0 ? 0 : (size_t)(c1 - c0 + 1);
+        *rows += c0 >= 0;
+    }
+    return span;
+}
+
+/* The snapshot of the grids of cascades 0 .. count-1 (all of the same N)
+ * under parameters pp (ocean.c also calls it on a prepared state). */
+struct ocean_surface *ocean_surface_from(const struct ocean_grid *const *grids, int count,
+                                         const struct ocean_params *pp, char *err, size_t errlen)
+{
+    if (count < 1 || count > MAXC || !grids || !grids[0]) {
+        snprintf(err, errlen, "no simulation");
+        return NULL;
+    }
+    const int n = grids[0]->n, nh = grids[0]->nh;
+    for (int c = 1; c < count; c++)
+        if (!grids[c] || grids[c]->n != n) {
+            snprintf(err, errlen, "cascade %d missing or of another resolution", c);
+            return NULL;
+        }
+    struct ocean_surface *s = calloc(1, sizeof *s);
+    char *keep[MAXC] = {NULL};
+    if (!s)
+        goto nomem;
+    s->p = *pp;
+    s->lambda = pp->choppiness;
+    s->loop = pp->loop_period > 0 ? pp->loop_period : 0;
+    s->n = n;
+    s->nh = nh;
+    s->ncasc = count;
+
+    size_t span = 0, kept = 0;
+    int rows = 0;
+    for (int c = 0; c < count; c++) {
+        keep[c] = calloc(grids[c]->modes, 1);
+        if (!keep[c])
+            goto nomem;
+        span += grid_spans(grids[c], keep[c], &kept, &rows);
     }
     s->modes = (int)kept;
     size_t m = span ? span : 1;
     s->spans = (int)span;
-    s->row_start = malloc((size_t)(n + 1) * sizeof *s->row_start);
-    s->row_mz = malloc((size_t)n * sizeof *s->row_mz);
-    s->row_c0 = malloc((size_t)n * sizeof *s->row_c0);
-    s->row_kz = malloc((size_t)n * sizeof *s->row_kz);
+    s->row_start = malloc((size_t)(rows + 1) * sizeof *s->row_start);
+    s->row_mz = malloc((size_t)(rows + 1) * sizeof *s->row_mz);
+    s->row_c0 = malloc((size_t)(rows + 1) * sizeof *s->row_c0);
+    s->row_kz = malloc((size_t)(rows + 1) * sizeof *s->row_kz);
     double **arrays[] = {&s->kx, &s->invk, &s->omega, &s->a, &s->b, &s->d, &s->e};
     for (size_t j = 0; j < sizeof arrays / sizeof arrays[0]; j++)
         *arrays[j] = calloc(m, sizeof(double));
@@ -109,40 +152,49 @@ struct ocean_surface *ocean_surface_from(const struct ocean_grid *g, const struc
         !s->b || !s->d || !s->e)
         goto nomem;
     size_t at = 0;
-    for (int iz = 0; iz < n; iz++) {
-        int c0 = -1, c1 = -1;
-        for (int ix = 0; ix < nh; ix++)
-            if (keep[(size_t)iz * nh + ix]) {
-                c0 = c0 < 0 ? ix : c0;
-                c1 = ix;
+    for (int c = 0; c < count; c++) {
+        const struct ocean_grid *g = grids[c];
+        const double L = ocean_cascade_patch(pp->patch_size, c);
+        s->patch[c] = L;
+        s->crow[c] = s->rows;
+        for (int iz = 0; iz < n; iz++) {
+            int c0 = -1, c1 = -1;
+            for (int ix = 0; ix < nh; ix++)
+                if (keep[c][(size_t)iz * nh + ix]) {
+                    c0 = c0 < 0 ? ix : c0;
+                    c1 = ix;
+                }
+            if (c0 < 0)
+                continue;
+            double kz = ocean_wavenumber(iz, n, L);
+            s->row_start[s->rows] = (int)at;
+            s->row_mz[s->rows] = iz > n / 2 ? iz - n : iz;
+            s->row_c0[s->rows] = c0;
+            s->row_kz[s->rows] = kz;
+            s->rows++;
+            for (int ix = c0; ix <= c1; ix++, at++) {
+                size_t i = (size_t)iz * nh + ix;
+                double kx = ocean_wavenumber(ix, n, L), k = hypot(kx, kz), w = ix == 0 ? 1.0 : 2.0;
+                s->kx[at] = kx;
+                s->invk[at] = displacement_over_k(k, pp->depth);
+                s->omega[at] = g->omega[i];
+                if (!keep[c][i])
+                    continue; /* zero amplitude: stays 0 */
+                s->a[at] = w * g->a[i];
+                s->b[at] = w * g->b[i];
+                s->d[at] = w * g->d[i];
+                s->e[at] = w * g->e[i];
             }
-        if (c0 < 0)
-            continue;
-        double kz = ocean_wavenumber(iz, n, L);
-        s->row_start[s->rows] = (int)at;
-        s->row_mz[s->rows] = iz > n / 2 ? iz - n : iz;
-        s->row_c0[s->rows] = c0;
-        s->row_kz[s->rows] = kz;
-        s->rows++;
-        for (int ix = c0; ix <= c1; ix++, at++) {
-            size_t i = (size_t)iz * nh + ix;
-            double kx = ocean_wavenumber(ix, n, L), k = hypot(kx, kz), w = ix == 0 ? 1.0 : 2.0;
-            s->kx[at] = kx;
-            s->invk[at] = k > 0 ? 1.0 / k : 0.0;
-            s->omega[at] = g->omega[i];
-            if (!keep[i])
-                continue; /* zero amplitude: stays 0 */
-            s->a[at] = w * g->a[i];
-            s->b[at] = w * g->b[i];
-            s->d[at] = w * g->d[i];
-            s->e[at] = w * g->e[i];
         }
     }
+    s->crow[count] = s->rows;
     s->row_start[s->rows] = (int)at;
-    free(keep);
+    for (int c = 0; c < count; c++)
+        free(keep[c]);
     return s;
 nomem:
-    free(keep);
+    for (int c = 0; c < MAXC; c++)
+        free(keep[c]);
     ocean_surface_free(s);
     snprintf(err, errlen, "out of memory for a query snapshot");
     return NULL;
@@ -197,6 +249,12 @@ struct surface_sums {
                                                 * these are psi's third derivatives */
 };
 
+/* A world point (x, z) reduced modulo each cascade's patch (exact: fmod),
+ * x[c] in [0, L_c); the points evaluated are base + a small offset. */
+struct base {
+    double x[MAXC], z[MAXC];
+};
+
 /* x in [0, L) * 2 pi / L as a fraction u in [0, 1): exact for any finite x
  * (fmod is exact), so e^{i kx x} = e^{2 pi i mx u} loses nothing. */
 static double turns(double x, double L)
@@ -237,35 +295,37 @@ static inline void row_phase(const struct ocean_surface *s, const struct work *w
 
 /* D and grad D only: what one Newton step needs (5 sums instead of 26). */
 __attribute__((target_clones("avx2", "default")))
-static void eval_displacement(const struct ocean_surface *s, struct work *w, double ux, double uz,
-                              struct surface_sums *o)
+static void eval_displacement(const struct ocean_surface *s, struct work *w, const struct base *b, double ox,
+                              double oz, struct surface_sums *o)
 {
-    phase_table(ux, s->nh, w->cx, w->sx);
-    phase_table(uz, s->nh, w->cz, w->sz);
     double dx = 0, dz = 0, dxx = 0, dxz = 0, dzz = 0;
-    for (int r = 0; r < s->rows; r++) {
-        double cz, sz, kz = s->row_kz[r];
-        row_phase(s, w, r, &cz, &sz);
-        double rdx = 0, rdz = 0, rdxx = 0, rdxz = 0, rdzz = 0;
-        const int m0 = s->row_start[r], m1 = s->row_start[r + 1];
-        const double *cxr = w->cx + s->row_c0[r] - m0, *sxr = w->sx + s->row_c0[r] - m0; /* index by mode */
+    for (int c = 0; c < s->ncasc; c++) {
+        phase_table(turns(b->x[c] + ox, s->patch[c]), s->nh, w->cx, w->sx);
+        phase_table(turns(b->z[c] + oz, s->patch[c]), s->nh, w->cz, w->sz);
+        for (int r = s->crow[c]; r < s->crow[c + 1]; r++) {
+            double cz, sz, kz = s->row_kz[r];
+            row_phase(s, w, r, &cz, &sz);
+            double rdx = 0, rdz = 0, rdxx = 0, rdxz = 0, rdzz = 0;
+            const int m0 = s->row_start[r], m1 = s->row_start[r + 1];
+            const double *cxr = w->cx + s->row_c0[r] - m0, *sxr = w->sx + s->row_c0[r] - m0; /* index by mode */
 #pragma omp simd reduction(+ : rdx, rdz, rdxx, rdxz, rdzz)
-        for (int m = m0; m < m1; m++) {
-            double cx = cxr[m], sx = sxr[m];
-            double er = cx * cz - sx * sz, ei = cx * sz + sx * cz;
-            double pr = w->pr[m] * er - w->pi[m] * ei, pi = w->pr[m] * ei + w->pi[m] * er;
-            double g = s->invk[m], kx = s->kx[m], gpi = g * pi, gpr = g * pr;
-            rdx += kx * gpi;
-            rdz += gpi;
-            rdxx += kx * kx * gpr;
-            rdxz += kx * gpr;
-            rdzz += gpr;
+            for (int m = m0; m < m1; m++) {
+                double cx = cxr[m], sx = sxr[m];
+                double er = cx * cz - sx * sz, ei = cx * sz + sx * cz;
+                double pr = w->pr[m] * er - w->pi[m] * ei, pi = w->pr[m] * ei + w->pi[m] * er;
+                double g = s->invk[m], kx = s->kx[m], gpi = g * pi, gpr = g * pr;
+                rdx += kx * gpi;
+                rdz += gpi;
+                rdxx += kx * kx * gpr;
+                rdxz += kx * gpr;
+                rdzz += gpr;
+            }
+            dx -= rdx;
+            dz -= kz * rdz;
+            dxx -= rdxx;
+            dxz -= kz * rdxz;
+            dzz -= kz * kz * rdzz;
         }
-        dx -= rdx;
-        dz -= kz * rdz;
-        dxx -= rdxx;
-        dxz -= kz * rdxz;
-        dzz -= kz * kz * rdzz;
     }
     const double lam = s->lambda;
     o->dx = lam * dx;
@@ -280,79 +340,82 @@ static void eval_displacement(const struct ocean_surface *s, struct work *w, dou
  * Dx = Re(i lambda kx/k P), d/dt h~ = Q, d2/dt2 h~ = -w^2 h~, and so on;
  * factors that depend on kz only are applied once per row. */
 __attribute__((target_clones("avx2", "default")))
-static void eval_all(const struct ocean_surface *s, struct work *w, double ux, double uz, struct surface_sums *o)
+static void eval_all(const struct ocean_surface *s, struct work *w, const struct base *b, double ox, double oz,
+                     struct surface_sums *o)
 {
-    phase_table(ux, s->nh, w->cx, w->sx);
-    phase_table(uz, s->nh, w->cz, w->sz);
     memset(o, 0, sizeof *o);
-    for (int r = 0; r < s->rows; r++) {
-        double cz, sz;
-        row_phase(s, w, r, &cz, &sz);
-        double kz = s->row_kz[r], kz2 = kz * kz;
-        double h = 0, hx = 0, spi = 0, hxx = 0, kxpr = 0, ht = 0, htx = 0, sqi = 0, htt = 0;
-        double dx = 0, dz = 0, dxx = 0, dxz = 0, dzz = 0, dtx = 0, dtz = 0, dttx = 0, dttz = 0;
-        double dtxx = 0, dtxz = 0, dtzz = 0, d3xxx = 0, d3xxz = 0;
-        const int m0 = s->row_start[r], m1 = s->row_start[r + 1];
-        const double *cxr = w->cx + s->row_c0[r] - m0, *sxr = w->sx + s->row_c0[r] - m0;
+    for (int c = 0; c < s->ncasc; c++) {
+        phase_table(turns(b->x[c] + ox, s->patch[c]), s->nh, w->cx, w->sx);
+        phase_table(turns(b->z[c] + oz, s->patch[c]), s->nh, w->cz, w->sz);
+        for (int r = s->crow[c]; r < s->crow[c + 1]; r++) {
+            double cz, sz;
+            row_phase(s, w, r, &cz, &sz);
+            double kz = s->row_kz[r], kz2 = kz * kz;
+            double h = 0, hx = 0, spi = 0, hxx = 0, kxpr = 0, ht = 0, htx = 0, sqi = 0, htt = 0;
+            double dx = 0, dz = 0, dxx = 0, dxz = 0, dzz = 0, dtx = 0, dtz = 0, dttx = 0, dttz = 0;
+            double dtxx = 0, dtxz = 0, dtzz = 0, d3xxx = 0, d3xxz = 0;
+            const int m0 = s->row_start[r], m1 = s->row_start[r + 1];
+            const double *cxr = w->cx + s->row_c0[r] - m0, *sxr = w->sx + s->row_c0[r] - m0;
 #pragma omp simd reduction(+ : h, hx, spi, hxx, kxpr, ht, htx, sqi, htt, dx, dz, dxx, dxz, dzz, dtx, dtz, dttx, \
-                                   dttz, dtxx, dtxz, dtzz, d3xxx, d3xxz)
-        for (int m = m0; m < m1; m++) {
-            double cx = cxr[m], sx = sxr[m];
-            double er = cx * cz - sx * sz, ei = cx * sz + sx * cz;
-            double pr = w->pr[m] * er - w->pi[m] * ei, pi = w->pr[m] * ei + w->pi[m] * er;
-            double qr = w->qr[m] * er - w->qi[m] * ei, qi = w->qr[m] * ei + w->qi[m] * er;
-            double g = s->invk[m], kx = s->kx[m], kx2 = kx * kx, om2 = s->omega[m] * s->omega[m];
-            double gpi = g * pi, gpr = g * pr, gqi = g * qi, gqr = g * qr;
-            h += pr;
-            hx += kx * pi;
-            spi += pi;
-            hxx += kx2 * pr;
-            kxpr += kx * pr;
-            ht += qr;
-            htx += kx * qi;
-            sqi += qi;
-            htt += om2 * pr;
-            dx += kx * gpi;
-            dz += gpi;
-            dxx += kx2 * gpr;
-            dxz += kx * gpr;
-            dzz += gpr;
-            dtx += kx * gqi;
-            dtz += gqi;
-            dttx += om2 * kx * gpi;
-            dttz += om2 * gpi;
-            dtxx += kx2 * gqr;
-            dtxz += kx * gqr;
-            dtzz += gqr;
-            d3xxx += kx2 * kx * gpi;
-            d3xxz += kx2 * gpi;
+                                       dttz, dtxx, dtxz, dtzz, d3xxx, d3xxz)
+            for (int m = m0; m < m1; m++) {
+                double cx = cxr[m], sx = sxr[m];
+                double er = cx * cz - sx * sz, ei = cx * sz + sx * cz;
+                double pr = w->pr[m] * er - w->pi[m] * ei, pi = w->pr[m] * ei + w->pi[m] * er;
+                double qr = w->qr[m] * er - w->qi[m] * ei, qi = w->qr[m] * ei + w->qi[m] * er;
+                double g = s->invk[m], kx = s->kx[m], kx2 = kx * kx, om2 = s->omega[m] * s->omega[m];
+                double gpi = g * pi, gpr = g * pr, gqi = g * qi, gqr = g * qr;
+                h += pr;
+                hx += kx * pi;
+                spi += pi;
+                hxx += kx2 * pr;
+                kxpr += kx * pr;
+                ht += qr;
+                htx += kx * qi;
+                sqi += qi;
+                htt += om2 * pr;
+                dx += kx * gpi;
+                dz += gpi;
+                dxx += kx2 * gpr;
+                dxz += kx * gpr;
+                dzz += gpr;
+                dtx += kx * gqi;
+                dtz += gqi;
+                dttx += om2 * kx * gpi;
+                dttz += om2 * gpi;
+                dtxx += kx2 * gqr;
+                dtxz += kx * gqr;
+                dtzz += gqr;
+                d3xxx += kx2 * kx * gpi;
+                d3xxz += kx2 * gpi;
+            }
+            o->h += h;
+            o->hx -= hx;
+            o->hz -= kz * spi;
+            o->hxx -= hxx;
+            o->hxz -= kz * kxpr;
+            o->hzz -= kz2 * h;
+            o->ht += ht;
+            o->htx -= htx;
+            o->htz -= kz * sqi;
+            o->htt -= htt;
+            o->dx -= dx;
+            o->dz -= kz * dz;
+            o->dxx -= dxx;
+            o->dxz -= kz * dxz;
+            o->dzz -= kz2 * dzz;
+            o->dtx -= dtx;
+            o->dtz -= kz * dtz;
+            o->dttx += dttx;
+            o->dttz += kz * dttz;
+            o->dtxx -= dtxx;
+            o->dtxz -= kz * dtxz;
+            o->dtzz -= kz2 * dtzz;
+            o->d3xxx += d3xxx;
+            o->d3xxz += kz * d3xxz;
+            o->d3xzz += kz2 * dx;
+            o->d3zzz += kz2 * kz * dz;
         }
-        o->h += h;
-        o->hx -= hx;
-        o->hz -= kz * spi;
-        o->hxx -= hxx;
-        o->hxz -= kz * kxpr;
-        o->hzz -= kz2 * h;
-        o->ht += ht;
-        o->htx -= htx;
-        o->htz -= kz * sqi;
-        o->htt -= htt;
-        o->dx -= dx;
-        o->dz -= kz * dz;
-        o->dxx -= dxx;
-        o->dxz -= kz * dxz;
-        o->dzz -= kz2 * dzz;
-        o->dtx -= dtx;
-        o->dtz -= kz * dtz;
-        o->dttx += dttx;
-        o->dttz += kz * dttz;
-        o->dtxx -= dtxx;
-        o->dtxz -= kz * dtxz;
-        o->dtzz -= kz2 * dtzz;
-        o->d3xxx += d3xxx;
-        o->d3xxz += kz * d3xxz;
-        o->d3xzz += kz2 * dx;
-        o->d3zzz += kz2 * kz * dz;
     }
     const double lam = s->lambda;
     double *dterms[] = {&o->dx, &o->dz, &o->dxx, &o->dxz, &o->dzz, &o->dtx, &o->dtz, &o->dttx, &o->dttz,
@@ -361,17 +424,18 @@ static void eval_all(const struct ocean_surface *s, struct work *w, double ux, d
         *dterms[i] *= lam;
 }
 
-/* Newton's method with a backtracking line search for x0 + D(x0) = (xr, zr)
- * (reduced coordinates, metres) from the start (x, z); where the map is
- * singular (det A ~ 0, the crest of a fold) a fixed-point step is taken.
- * Returns the final residual |x0 + D(x0) - x|; *steps += iterations. */
-static double newton(const struct ocean_surface *s, struct work *w, double xr, double zr, double x, double z,
+/* Newton's method with a backtracking line search for the offset o of the
+ * source from the world point b: o + D(b + o) = 0 (metres), from the start
+ * (x, z); where the map is singular (det A ~ 0, the crest of a fold) a
+ * fixed-point step is taken. Returns the final residual |o + D(b + o)|;
+ * *steps += iterations. */
+static double newton(const struct ocean_surface *s, struct work *w, const struct base *b, double x, double z,
                      int max_steps, double *x0, double *z0, int *steps)
 {
-    const double L = s->patch;
+    const double L = s->patch[0];
     struct surface_sums d;
-    eval_displacement(s, w, turns(x, L), turns(z, L), &d);
-    double rx = x + d.dx - xr, rz = z + d.dz - zr, res = hypot(rx, rz);
+    eval_displacement(s, w, b, x, z, &d);
+    double rx = x + d.dx, rz = z + d.dz, res = hypot(rx, rz);
     for (int it = 0; it < max_steps && res >= NEWTON_TOL; it++) {
         double a11 = 1 + d.dxx, a12 = d.dxz, a22 = 1 + d.dzz, det = a11 * a22 - a12 * a12;
         double sx = rx, sz = rz; /* fixed-point step: x0 <- x - D(x0) */
@@ -388,9 +452,9 @@ static double newton(const struct ocean_surface *s, struct work *w, double xr, d
         for (int tries = 0; tries < 8; tries++, step *= 0.5) {
             nx = x - step * sx;
             nz = z - step * sz;
-            eval_displacement(s, w, turns(nx, L), turns(nz, L), &d);
-            nrx = nx + d.dx - xr;
-            nrz = nz + d.dz - zr;
+            eval_displacement(s, w, b, nx, nz, &d);
+            nrx = nx + d.dx;
+            nrz = nz + d.dz;
             nres = hypot(nrx, nrz);
             if (nres < res)
                 break;
@@ -407,35 +471,36 @@ static double newton(const struct ocean_surface *s, struct work *w, double xr, d
     return res;
 }
 
-/* Source of the world point (xr, zr). Newton from the point itself almost
- * always converges; where the surface folds it can stall in a local minimum
- * of the residual, and then it is restarted from points around, at the
+/* Offset (x0, z0) of the source of the world point b from it, starting
+ * from the offset (sx0, sz0). Newton from the point itself almost always
+ * converges; where the surface folds it can stall in a local minimum of
+ * the residual, and then it is restarted from points around, at the
  * distance of the displacement found so far (a fold has several sources:
  * any converged one is a correct answer). */
-static void invert_displacement(const struct ocean_surface *s, struct work *w, double xr, double zr, double sx0,
+static void invert_displacement(const struct ocean_surface *s, struct work *w, const struct base *b, double sx0,
                                 double sz0, double *x0, double *z0, int *iterations, int *converged)
 {
     *iterations = 0;
     *converged = 0;
     if (s->lambda == 0) { /* no horizontal displacement: the point is its own source */
-        *x0 = xr;
-        *z0 = zr;
+        *x0 = 0;
+        *z0 = 0;
         *converged = 1;
         return;
     }
-    double bx, bz, best = newton(s, w, xr, zr, sx0, sz0, 30, &bx, &bz, iterations);
-    if (best >= NEWTON_TOL && (sx0 != xr || sz0 != zr)) { /* a poor guess: start over from the point */
-        double cx, cz, res = newton(s, w, xr, zr, xr, zr, 30, &cx, &cz, iterations);
+    double bx, bz, best = newton(s, w, b, sx0, sz0, 30, &bx, &bz, iterations);
+    if (best >= NEWTON_TOL && (sx0 != 0 || sz0 != 0)) { /* a poor guess: start over from the point */
+        double cx, cz, res = newton(s, w, b, 0, 0, 30, &cx, &cz, iterations);
         if (res < best) {
             best = res;
             bx = cx;
             bz = cz;
         }
     }
-    double radius = fmax(hypot(bx - xr, bz - zr), 1e-3 * s->patch);
+    double radius = fmax(hypot(bx, bz), 1e-3 * s->patch[0]);
     for (int k = 0; k < 24 && best >= NEWTON_TOL; k++) {
         double ang = 2.0 * M_PI * k / 8.0, r = radius * (0.5 + 0.5 * (k / 8)); /* 3 rings of 8 */
-        double cx, cz, res = newton(s, w, xr, zr, xr + r * cos(ang), zr + r * sin(ang), 30, &cx, &cz, iterations);
+        double cx, cz, res = newton(s, w, b, r * cos(ang), r * sin(ang), 30, &cx, &cz, iterations);
         if (res < best) {
             best = res;
             bx = cx;
@@ -537,25 +602,29 @@ int ocean_surface_query_from(const struct ocean_surface *s, double t, const doub
         w.qi[i] = -om * (s->d[i] * sn + s->e[i] * c);
     }
     for (int i = 0; i < npoints; i++) {
-        const double L = s->patch;
+        const double L = s->patch[0];
         double x = xz[i][0], z = xz[i][1];
-        double xr = turns(x, L) * L, zr = turns(z, L) * L; /* in [0, L) */
-        double x0, z0;
+        struct base bs;
+        for (int c = 0; c < s->ncasc; c++) { /* in [0, L_c) */
+            bs.x[c] = turns(x, s->patch[c]) * s->patch[c];
+            bs.z[c] = turns(z, s->patch[c]) * s->patch[c];
+        }
+        double ox, oz;
         struct ocean_point *p = &out[i];
         memset(p, 0, sizeof *p);
-        /* The guess, as an offset from the point, moved to the reduced point;
-         * guesses further than L/4 away are not guesses. */
-        double gx = xr, gz = zr;
+        /* The guess, as an offset from the point; guesses further than L/4
+         * away are not guesses. */
+        double gx = 0, gz = 0;
         if (start && fabs(start[i][0] - x) < 0.25 * L && fabs(start[i][1] - z) < 0.25 * L) {
-            gx = xr + (start[i][0] - x);
-            gz = zr + (start[i][1] - z);
+            gx = start[i][0] - x;
+            gz = start[i][1] - z;
         }
-        invert_displacement(s, &w, xr, zr, gx, gz, &x0, &z0, &p->iterations, &p->converged);
+        invert_displacement(s, &w, &bs, gx, gz, &ox, &oz, &p->iterations, &p->converged);
         struct surface_sums q;
-        eval_all(s, &w, turns(x0, L), turns(z0, L), &q);
+        eval_all(s, &w, &bs, ox, oz, &q);
         fill_point(&q, p);
-        p->source[0] = x + (x0 - xr);
-        p->source[1] = z + (z0 - zr);
+        p->source[0] = x + ox;
+        p->source[1] = z + oz;
     }
     free(buf);
     return 0;

@@ -20,7 +20,6 @@ import subprocess
 import sys
 import tempfile
 import time
-import traceback
 import http.client
 import urllib.error
 import urllib.request
@@ -41,13 +40,7 @@ FRAME_HDR = struct.Struct("<4sHHQdIHHfHHQ")      # 48 bytes, see proto/c/oc_prot
 TILE_HDR = struct.Struct("<BBBBHHHHfddII")       # 40 bytes
 
 
-class TestFailure(Exception):
-    pass
-
-
-def check(cond, msg):
-    if not cond:
-        raise TestFailure(msg)
+from harness import TestFailure, check, running, run_tests  # noqa: E402,F401 (re-exported to the other suites)
 
 
 def free_port():
@@ -651,13 +644,9 @@ def test_static_files():
     os.makedirs(os.path.join(tmp, "web"))
     with open(os.path.join(tmp, "web", "index.html"), "w") as f:
         f.write("<!doctype html><title>ocean web client</title>")
-    d = Daemon(tmpdir=tmp)
-    try:
+    with running(Daemon, tmpdir=tmp, stop=False) as d:
         st, ct, body = d.get("/")
         check(st == 200 and "ocean web client" in body and ct.startswith("text/html"), "index.html not served")
-    finally:
-        d.kill()
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 TESTS.append(test_static_files)
@@ -685,7 +674,6 @@ def test_dropped_frames_match_seq_gaps():
     between two wake-ups of the network thread included: the client's holes in
     seq equal oceand_frames_dropped_total{reason="slow_client"} (it is the only client)."""
     metric = 'oceand_frames_dropped_total{reason="slow_client"}'
-    d = Daemon("--send-buffer-kb", "16")
 
     async def run():
         drops0 = d.metric(metric)
@@ -719,12 +707,8 @@ def test_dropped_frames_match_seq_gaps():
         check(gaps - missed <= drops <= gaps + 3, "skipped frames counted %d, holes in seq %d, overruns %d"
               % (drops, gaps, missed))
         await a.close()
-    try:
+    with running(Daemon, "--send-buffer-kb", "16") as d:
         asyncio.run(run())
-        rc, _ = d.stop()
-        check(rc == 0, "exit code %r" % rc)
-    finally:
-        d.kill()
 
 
 TESTS.append(test_dropped_frames_match_seq_gaps)
@@ -747,8 +731,7 @@ def test_tls():
     tmp = tempfile.mkdtemp(prefix="oceand-tls-")
     cert, key = make_cert(tmp)
     ctx = ssl.create_default_context(cafile=cert)
-    d = Daemon("--tls-cert", cert, "--tls-key", key, tmpdir=tmp, tls_ctx=ctx)
-    try:
+    with running(Daemon, "--tls-cert", cert, "--tls-key", key, tmpdir=tmp, tls_ctx=ctx, stop=False) as d:
         check(d.url.startswith("wss://"), "url %s" % d.url)
         st, _, body = d.get("/healthz")
         check(st == 200 and json.loads(body)["status"] == "ok", "https /healthz: %r" % body)
@@ -787,9 +770,6 @@ def test_tls():
         rc, _ = d.stop()
         check(rc == 0, "exit code %r" % rc)
         check("ERROR" not in d.read_log(), "errors in the log:\n%s" % d.read_log())
-    finally:
-        d.kill()
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 TESTS.append(test_tls)
@@ -799,8 +779,7 @@ def test_allowed_origins():
     """--allowed-origins: a browser (Origin header) from a listed origin gets in,
     a foreign one and the same host (not listed) are refused; programs that
     send no Origin are not browsers and get in."""
-    d = Daemon("--allowed-origins", "http://good.example:8080,https://also.example")
-    try:
+    with running(Daemon, "--allowed-origins", "http://good.example:8080,https://also.example") as d:
         async def run():
             for origin in ("http://good.example:8080", "https://also.example"):
                 ws, _ = await connect(d, origin=origin)
@@ -818,18 +797,13 @@ def test_allowed_origins():
             await ws.close()
             check(d.metric('oceand_clients_rejected_total{reason="origin"}') == 5, "origin rejections not counted")
         asyncio.run(run())
-        rc, _ = d.stop()
-        check(rc == 0, "exit code %r" % rc)
-    finally:
-        d.kill()
 
 
 TESTS.append(test_allowed_origins)
 
 
 def test_max_clients():
-    d = Daemon("--max-clients", "2")
-    try:
+    with running(Daemon, "--max-clients", "2", stop=False) as d:
         async def run():
             a, _ = await connect(d)
             b, _ = await connect(d)
@@ -844,16 +818,13 @@ def test_max_clients():
             await c.close()
             await b.close()
         asyncio.run(run())
-    finally:
-        d.kill()
 
 
 TESTS.append(test_max_clients)
 
 
 def test_control_token_roles():
-    d = Daemon("--control-token", "s3cret")
-    try:
+    with running(Daemon, "--control-token", "s3cret") as d:
         async def run():
             a, h = await connect(d)
             check(h["role"] == "viewer", "role %r with a control token set" % h["role"])
@@ -868,10 +839,6 @@ def test_control_token_roles():
             check(p["type"] == "params" and p["params"]["wind_speed"] == 13, "set with token: %r" % p)
             await a.close()
         asyncio.run(run())
-        rc, _ = d.stop()
-        check(rc == 0, "exit code %r" % rc)
-    finally:
-        d.kill()
 
 
 TESTS.append(test_control_token_roles)
@@ -879,8 +846,7 @@ TESTS.append(test_control_token_roles)
 
 def test_idle_client_is_dropped():
     """A client that never answers pings is hung up after --idle-timeout."""
-    d = Daemon("--ping-interval", "1", "--idle-timeout", "2")
-    try:
+    with running(Daemon, "--ping-interval", "1", "--idle-timeout", "2") as d:
         async def run():
             a, _ = await connect(d)            # answers pings (websockets does)
             s = raw_ws_socket(d.port)         # never reads, never pongs
@@ -893,10 +859,6 @@ def test_idle_client_is_dropped():
             s.close()
             await a.close()
         asyncio.run(run())
-        rc, _ = d.stop()
-        check(rc == 0, "exit code %r" % rc)
-    finally:
-        d.kill()
 
 
 TESTS.append(test_idle_client_is_dropped)
@@ -905,8 +867,7 @@ TESTS.append(test_idle_client_is_dropped)
 def test_sigterm_and_state_restore():
     tmp = tempfile.mkdtemp(prefix="oceand-test-")
     state = os.path.join(tmp, "state.json")
-    d = Daemon(state_file=state, tmpdir=tmp)
-    try:
+    with running(Daemon, state_file=state, tmpdir=tmp, stop=False) as d:
         async def run():
             a, h = await connect(d)
             await a.send('{"type":"set","params":{"wind_speed":17.5,"spectrum":"tma"}}')
@@ -922,8 +883,7 @@ def test_sigterm_and_state_restore():
         saved = json.load(open(state))
         check(saved["params"]["wind_speed"] == 17.5, "state file %r" % saved)
         d.kill()
-        d2 = Daemon(state_file=state, tmpdir=tmp)
-        try:
+        with running(Daemon, state_file=state, tmpdir=tmp, stop=False, remove=False) as d2:
             async def run2():
                 a, h = await connect(d2)
                 check(h["params"]["wind_speed"] == 17.5 and h["params"]["spectrum"] == "tma", "not restored: %r" % h["params"])
@@ -934,11 +894,6 @@ def test_sigterm_and_state_restore():
             asyncio.run(run2())
             rc, _ = d2.stop(signal.SIGINT)
             check(rc == 0, "exit code %r after SIGINT" % rc)
-        finally:
-            d2.kill()
-    finally:
-        d.kill()
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 TESTS.append(test_sigterm_and_state_restore)
@@ -952,8 +907,7 @@ def test_config_precedence():
     state = os.path.join(tmp, "state.json")
     with open(state, "w") as f:
         json.dump({"params": {"wind_speed": 3, "amplitude": 3, "seed": 9}, "params_version": 4}, f)
-    d = Daemon("--config", cfg, "--wind-speed", "6", state_file=state, tmpdir=tmp)
-    try:
+    with running(Daemon, "--config", cfg, "--wind-speed", "6", state_file=state, tmpdir=tmp, stop=False) as d:
         async def run():
             a, h = await connect(d)
             p = h["params"]
@@ -962,9 +916,6 @@ def test_config_precedence():
             check(p["seed"] == 9, "saved state must win over defaults: %r" % p["seed"])
             await a.close()
         asyncio.run(run())
-    finally:
-        d.kill()
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 TESTS.append(test_config_precedence)
@@ -980,8 +931,7 @@ FAIL_SEED = 4242
 def test_failed_set_keeps_pending_sets_in_view():
     """Issue 10 defect 1: a set that fails at apply time must not drop the
     sets accepted after it from the view the next set is checked against."""
-    d = Daemon(env={"OCEAND_TEST_FAIL_BUILD_SEED": str(FAIL_SEED)})
-    try:
+    with running(Daemon, env={"OCEAND_TEST_FAIL_BUILD_SEED": str(FAIL_SEED)}) as d:
         async def run():
             a, h = await connect(d)
             v0 = h["params_version"]
@@ -1000,11 +950,6 @@ def test_failed_set_keeps_pending_sets_in_view():
                   "set 3 was checked against the wrong base: %r" % r)
             await a.close()
         asyncio.run(run())
-        rc, _ = d.stop()
-        check(rc == 0, "exit code %r" % rc)
-    finally:
-        d.kill()
-        shutil.rmtree(d.tmp, ignore_errors=True)
 
 
 TESTS.append(test_failed_set_keeps_pending_sets_in_view)
@@ -1013,8 +958,7 @@ TESTS.append(test_failed_set_keeps_pending_sets_in_view)
 def test_build_out_of_memory_answers_and_keeps_base():
     """Issue 10 defect 2: a batch whose build runs out of memory gets a coded
     error for every sender, and the base of later sets does not move."""
-    d = Daemon(env={"OCEAND_TEST_FAIL_BUILD_SEED": str(FAIL_SEED)})
-    try:
+    with running(Daemon, env={"OCEAND_TEST_FAIL_BUILD_SEED": str(FAIL_SEED)}) as d:
         async def run():
             a, h = await connect(d)
             b, _ = await connect(d)
@@ -1035,11 +979,6 @@ def test_build_out_of_memory_answers_and_keeps_base():
             await a.close()
             await b.close()
         asyncio.run(run())
-        rc, _ = d.stop()
-        check(rc == 0, "exit code %r" % rc)
-    finally:
-        d.kill()
-        shutil.rmtree(d.tmp, ignore_errors=True)
 
 
 TESTS.append(test_build_out_of_memory_answers_and_keeps_base)
@@ -1070,8 +1009,7 @@ def test_join_after_idle_gets_a_current_frame(d):
 
 def test_tile_size_follows_resolution():
     """Issue 10 defect 5: hello and params announce the tile size frames use."""
-    d = Daemon("--resolution", "64")
-    try:
+    with running(Daemon, "--resolution", "64", stop=False) as d:
         async def run():
             a, h = await connect(d)
             fh, _ = await recv_frame(a)
@@ -1090,9 +1028,6 @@ def test_tile_size_follows_resolution():
             await a.close()
             await b.close()
         asyncio.run(run())
-    finally:
-        d.kill()
-        shutil.rmtree(d.tmp, ignore_errors=True)
 
 
 TESTS.append(test_tile_size_follows_resolution)
@@ -1171,8 +1106,7 @@ def test_spec_gaps_codec_tiles_id_pong(d):
 def test_state_saved_on_change():
     """State saving listens to applied changes: the file follows a set within
     a second or so, without a shutdown (a kill -9 keeps it)."""
-    d = Daemon()
-    try:
+    with running(Daemon, stop=False) as d:
         async def run():
             a, _ = await connect(d)
             await a.send('{"type":"set","id":1,"params":{"wind_speed":13.5}}')
@@ -1192,9 +1126,6 @@ def test_state_saved_on_change():
             time.sleep(0.1)
         check(saved and saved["params"]["wind_speed"] == 13.5 and saved["params_version"] == p["params_version"],
               "state file not written after a set: %r" % saved)
-    finally:
-        d.kill()
-        shutil.rmtree(d.tmp, ignore_errors=True)
 
 
 TESTS.append(test_state_saved_on_change)
@@ -1229,8 +1160,7 @@ def test_sighup_saves_state():
     kept) and the daemon keeps running; the configuration is not reloaded."""
     tmp = tempfile.mkdtemp(prefix="oceand-test-")
     state = os.path.join(tmp, "state.json")
-    d = Daemon(state_file=state, tmpdir=tmp)
-    try:
+    with running(Daemon, state_file=state, tmpdir=tmp) as d:
         async def run():
             a, _ = await connect(d)
             await a.send('{"type":"set","params":{"wind_speed":13.25}}')
@@ -1254,11 +1184,6 @@ def test_sighup_saves_state():
             await a.close()
         asyncio.run(run())
         check("SIGHUP" in d.read_log(), "SIGHUP not logged")
-        rc, _ = d.stop()
-        check(rc == 0, "exit code %r" % rc)
-    finally:
-        d.kill()
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 TESTS.append(test_sighup_saves_state)
@@ -1273,8 +1198,7 @@ def test_bad_state_files_do_not_stop_the_daemon():
     try:
         with open(state, "w") as f:
             json.dump({"params": {"resolution": 2048, "wind_speed": 7}, "params_version": 5, "sim_time": 1e15}, f)
-        d = Daemon("--max-memory-mb", "64", state_file=state, tmpdir=tmp)
-        try:
+        with running(Daemon, "--max-memory-mb", "64", state_file=state, tmpdir=tmp, remove=False) as d:
             async def run():
                 a, h = await connect(d)
                 check(h["params"]["wind_speed"] == 7 and h["params_version"] == 5, "state not used: %r" % h)
@@ -1284,10 +1208,6 @@ def test_bad_state_files_do_not_stop_the_daemon():
             asyncio.run(run())
             log = d.read_log()
             check("sim_time" in log, "no warning about sim_time:\n" + log)
-            rc, _ = d.stop()
-            check(rc == 0, "exit code %r" % rc)
-        finally:
-            d.kill()
         # Without --resolution on the command line (Daemon() sets one), so that
         # the saved N=2048 is the one in force: the daemon must start at the default.
         with open(state, "w") as f:
@@ -1360,8 +1280,7 @@ def test_capacity_announced_matches_refusals():
     """hello and params announce the largest N the memory cap allows; the daemon
     refuses exactly the N above it (the panel disables those)."""
     for mem in (64, 256):
-        d = Daemon("--max-memory-mb", str(mem), "--resolution", "128")
-        try:
+        with running(Daemon, "--max-memory-mb", str(mem), "--resolution", "128") as d:
             async def run():
                 a, ha = await connect(d)
                 cap = ha.get("capacity")
@@ -1378,24 +1297,15 @@ def test_capacity_announced_matches_refusals():
                 check_capacity(p.get("capacity"), "params")
                 await a.close()
             asyncio.run(run())
-            rc, _ = d.stop()
-            check(rc == 0, "exit %r" % rc)
-        finally:
-            d.kill()
-            shutil.rmtree(d.tmp, ignore_errors=True)
     # 64 MB must announce less than 256 MB does (the cap is really used)
     caps = []
     for mem in (64, 256):
-        d = Daemon("--max-memory-mb", str(mem), "--resolution", "64")
-        try:
+        with running(Daemon, "--max-memory-mb", str(mem), "--resolution", "64", stop=False) as d:
             async def get():
                 a, h = await connect(d)
                 await a.close()
                 return h["capacity"]["max_resolution"]
             caps.append(asyncio.run(get()))
-        finally:
-            d.kill()
-            shutil.rmtree(d.tmp, ignore_errors=True)
     check(caps[0] < caps[1], "max_resolution %r at 64 MB vs %r at 256 MB" % tuple(caps))
 
 
@@ -1410,8 +1320,7 @@ def test_encode_budget_busy_and_degraded():
     coarser LOD, and the group is restored (and told) when demand falls."""
     n = BASE_N
     budget = 3 * n * n + n * n // 2          # the default group (3 n^2) fits, plus a little
-    d = Daemon("--encode-budget", str(budget))
-    try:
+    with running(Daemon, "--encode-budget", str(budget)) as d:
         async def run():
             a, ha = await connect(d)
             check(ha["capacity"]["encode_budget"] == budget, "announced budget %r" % ha["capacity"]["encode_budget"])
@@ -1444,11 +1353,6 @@ def test_encode_budget_busy_and_degraded():
             h, fb = await recv_frame(b_ws, lambda h, b: {t["lod"] for t in tiles(b)} == {0}, timeout=10)
             await b_ws.close()
         asyncio.run(run())
-        rc, _ = d.stop()
-        check(rc == 0, "exit %r" % rc)
-    finally:
-        d.kill()
-        shutil.rmtree(d.tmp, ignore_errors=True)
 
 
 TESTS.append(test_encode_budget_busy_and_degraded)
@@ -1460,8 +1364,7 @@ def test_viewers_cannot_exceed_encode_budget():
     adds up to no more than it; a layer someone already gets is always free."""
     n = BASE_N
     budget = 4 * n * n
-    d = Daemon("--encode-budget", str(budget), "--control-token", "s3cret", "--max-clients", "64")
-    try:
+    with running(Daemon, "--encode-budget", str(budget), "--control-token", "s3cret", "--max-clients", "64") as d:
         async def run():
             clients = []
             for _ in range(25):
@@ -1500,11 +1403,6 @@ def test_viewers_cannot_exceed_encode_budget():
             for c in clients:
                 await c.close()
         asyncio.run(run())
-        rc, _ = d.stop()
-        check(rc == 0, "exit %r" % rc)
-    finally:
-        d.kill()
-        shutil.rmtree(d.tmp, ignore_errors=True)
 
 
 TESTS.append(test_viewers_cannot_exceed_encode_budget)
@@ -1686,36 +1584,8 @@ def main():
     ARGS = ap.parse_args()
     if ARGS.sanitized:
         BASE_N = 128
-    passed = failed = 0
     t_all = time.time()
-    for fn in TESTS:
-        if ARGS.k not in fn.__name__:
-            continue
-        t0 = time.time()
-        print("--- %s" % fn.__name__, flush=True)
-        d = None
-        try:
-            if fn.__code__.co_argcount == 1:
-                d = Daemon()
-                try:
-                    fn(d)
-                    rc, _ = d.stop()
-                    check(rc == 0, "daemon exit code %r at the end; log:\n%s" % (rc, d.read_log()))
-                    log = d.read_log()
-                    check("ERROR: AddressSanitizer" not in log and "runtime error:" not in log,
-                          "sanitizer report:\n%s" % log)
-                finally:
-                    d.kill()
-                    shutil.rmtree(d.tmp, ignore_errors=True)
-            else:
-                fn()
-            passed += 1
-            print("ok   %s (%.1f s)" % (fn.__name__, time.time() - t0), flush=True)
-        except Exception as e:
-            failed += 1
-            print("FAIL %s: %s" % (fn.__name__, e), flush=True)
-            if not isinstance(e, TestFailure):
-                traceback.print_exc()
+    passed, failed = run_tests(TESTS, ARGS.k, Daemon)
     print("daemon tests took %.0f s" % (time.time() - t_all))
     print("%d passed, %d failed" % (passed, failed))
     sys.exit(1 if failed else 0)
