@@ -96,7 +96,8 @@ struct sim {
         float patch_size;
         struct frame_want want;
     } pj;
-    uint64_t penalized_seq;           /* tick: the queued job (seq) the penalty was last raised for */
+    uint64_t penalized_seq;           /* tick: the queued job (seq) the penalty was last raised for... */
+    int penalized_ticks;              /* ...and on how many ticks */
     struct cost_model model;          /* producer and encode_done update (EWMA); tick and lws read */
     struct plan plan_pub;             /* tick writes; lws reads (sim_plan) */
     uint32_t plan_gen;                /* +1 per change of plan_pub */
@@ -675,15 +676,19 @@ static void tick(struct sim *s, double t_tick)
          * back (x64 -> x1 in ~2.7 s), whether or not frames are rare. */
         atomic_fetch_add(&g_metrics.overruns, 1);
         pthread_mutex_lock(&s->lock);
-        /* Once per job found waiting, not on every tick it keeps waiting:
-         * one step slowed to 300 ms by the machine (another process, a
-         * page-fault storm) used to find the same job queued on 9 ticks in
-         * a row and raise the costs x1.25^9 = x7.5, which planned the
-         * client down to 1-2 frames/s for seconds (seen at N = 2048). */
+        /* On the first three ticks a job is found waiting, not on every
+         * tick it keeps waiting: one step slowed to 300 ms by the machine
+         * (another process, a page-fault storm) used to find the same job
+         * queued on 9 ticks in a row and raise the costs x1.25^9 = x7.5,
+         * which planned the client down to 1-2 frames/s for seconds (seen
+         * at N = 2048). At most x1.95 per job now; jobs found waiting one
+         * after the other still add up. */
         if (s->pj.seq != s->penalized_seq) {
             s->penalized_seq = s->pj.seq;
-            s->model.penalty = fmin(fmax(s->model.penalty, 1) * 1.25, 64);
+            s->penalized_ticks = 0;
         }
+        if (s->penalized_ticks++ < 3)
+            s->model.penalty = fmin(fmax(s->model.penalty, 1) * 1.25, 64);
         pthread_mutex_unlock(&s->lock);
         return;
     }
