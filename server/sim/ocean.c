@@ -558,23 +558,26 @@ struct amp_ctx {
     struct ocean_amps *amps;
 };
 
-/* Columns per item of the amplitude pass (one 64-byte line of each
- * row-major array per row), and rows per block of the column-major copy. */
+/* Columns per tile of the amplitude pass (one 64-byte line of each
+ * row-major array per row), and rows per block (an item). */
 #define AMP_TILE 16
 #define AMP_ROWS 16
 #define AMP_AHEAD 2 /* rows prefetched ahead */
 
 /* h~0(k) and h~0(-k) per mode from the radial table, the spreading's angle
  * and the cached normals; then a, b, d, e and omega (see ocean_grid) and,
- * in the same pass, the fill's column-major copy (ocean_amp_col) of the
- * tile's columns. Items are tiles of AMP_TILE columns (kx); rows go in
- * blocks of AMP_ROWS, kept in a small buffer and written down each column
- * a whole cache line at a time (the copy's 6 arrays per column lie a
- * multiple of 4 KiB apart: written a float at a time, 16 columns' worth
- * fall into one L1 set). Until this round a row pass wrote the row-major
- * arrays and a second pass read them back column by column (stride
- * N/2 + 1) to make the copy. Same values, bit for bit. */
-static void amp_tiles(void *arg, int t0, int t1, int worker)
+ * in the same pass, the fill's column-major copy (ocean_amp_col). Items are
+ * blocks of AMP_ROWS rows, done tile by tile (AMP_TILE columns, kx): the
+ * row-major arrays are read and written a line per row and tile, moving
+ * along the rows (a tile walked down all N rows started a new page on every
+ * row of every array: a TLB and cache miss each); the block's tile is kept
+ * in a small buffer and written down each column of the copy a whole cache
+ * line at a time (the copy's 6 arrays per column lie a multiple of 4 KiB
+ * apart: written a float at a time, 16 columns' worth fall into one L1
+ * set). Until this round a row pass wrote the row-major arrays and a second
+ * pass read them back column by column (stride N/2 + 1) to make the copy.
+ * Same values, bit for bit. */
+static void amp_tiles(void *arg, int b0, int b1, int worker)
 {
     (void)worker;
     const struct amp_ctx *c = arg;
@@ -586,21 +589,29 @@ static void amp_tiles(void *arg, int t0, int t1, int worker)
     const double lambda = c->lambda;
     float buf[5][AMP_TILE][AMP_ROWS]; /* a, b, d, e, linvk of the block, per column */
     double wbuf[AMP_TILE][AMP_ROWS];
-    for (int t = t0; t < t1; t++) {
-        const int x0 = t * AMP_TILE, x1 = x0 + AMP_TILE < nh ? x0 + AMP_TILE : nh;
-        for (int z0 = 0; z0 < n; z0 += rows) {
+    const int tiles = (nh + AMP_TILE - 1) / AMP_TILE;
+    for (int blk = b0; blk < b1; blk++) {
+        const int z0 = blk * rows;
+        for (int t = 0; t < tiles; t++) {
+            const int x0 = t * AMP_TILE, x1 = x0 + AMP_TILE < nh ? x0 + AMP_TILE : nh;
             for (int iz = z0; iz < z0 + rows; iz++) {
                 int mz = iz > n / 2 ? iz - n : iz;
                 /* The radial table is larger than the cache at large N (40 B
                  * per ring, ~400 k rings at N = 2048) and the rings of a
-                 * tile's modes lie far apart in it: ask for the next rows'
-                 * entries now (a hint; it changes no value). */
-                if (iz + AMP_AHEAD < n)
-                    for (int ix = x0; ix < x1; ix++) {
-                        const struct spectrum_radial *ahead = &c->radial[g->ring[(size_t)(iz + AMP_AHEAD) * nh + ix]];
-                        __builtin_prefetch(ahead);
-                        __builtin_prefetch((const char *)(ahead + 1) - 1);
-                    }
+                 * tile's modes lie far apart in it: ask for the entries
+                 * AMP_AHEAD rows on now (past the block: the next tile's
+                 * first rows). A hint; it changes no value. */
+                int pz = iz + AMP_AHEAD, px0 = x0, px1 = x1;
+                if (pz >= z0 + rows) {
+                    pz -= rows;
+                    px0 = x1;
+                    px1 = x1 + AMP_TILE < nh ? x1 + AMP_TILE : nh;
+                }
+                for (int ix = px0; ix < px1; ix++) {
+                    const struct spectrum_radial *ahead = &c->radial[g->ring[(size_t)pz * nh + ix]];
+                    __builtin_prefetch(ahead);
+                    __builtin_prefetch((const char *)(ahead + 1) - 1);
+                }
                 for (int ix = x0; ix < x1; ix++) {
                     size_t i = (size_t)iz * nh + ix;
                     int mx = ix;
@@ -665,7 +676,7 @@ static bool amps_compute(const struct ocean_grid *g, const struct spectrum_model
     struct radial_ctx rc = {m, g->ring_m2, radial, g->rings, 64};
     ocean_parallel(pool, threads, rc.chunks, radial_chunks, &rc);
     struct amp_ctx c = {g, m, lambda, radial, gauss, amps};
-    ocean_parallel(pool, threads, (g->nh + AMP_TILE - 1) / AMP_TILE, amp_tiles, &c);
+    ocean_parallel(pool, threads, g->n < AMP_ROWS ? 1 : g->n / AMP_ROWS, amp_tiles, &c);
     free(radial);
     return true;
 }
