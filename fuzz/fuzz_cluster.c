@@ -87,9 +87,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         abort();
     /* the edge wants the layers whose key bits the input's first bytes set */
     uint8_t want[CL_KEY_BYTES] = { 0 };
-    for (size_t i = 0; i < size && i < 19; i++)
-        want[i] = data[i];
-    want[18] &= 0x3f; /* keys 0..149 only */
+    for (int k = 0; k < 150 && (size_t)(k >> 3) < size; k++) /* keys 0..149 of every cascade */
+        if ((data[k >> 3] >> (k & 7)) & 1)
+            for (int c = 0; c < CL_CASCADES; c++)
+                cl_bit_set(want, c * CL_CASCADE_KEYS + k, true);
     double t = 0;
     for (size_t pos = 0; pos + 4 <= size;) {
         uint32_t len = (uint32_t)data[pos] | (uint32_t)data[pos + 1] << 8 | (uint32_t)data[pos + 2] << 16 |
@@ -115,6 +116,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     subj[size] = 0;
     int k = cl_subject_layer_parse(subj, "oceand");
     if (k >= CL_KEYS)
+        abort();
+    char stream[CL_SUBJECT_MAX];
+    if (cl_probe_stream_subject(subj, stream, sizeof stream) == CL_OK &&
+        (strlen(stream) < 2 || strcmp(stream + strlen(stream) - 2, ".p") != 0 || strlen(stream) > size + 1))
         abort();
     free(subj);
     cl_assembler_free(a);

@@ -46,6 +46,18 @@ struct net_cluster_hooks {
      * token checks, to be answered later with net_send_text(serial) */
     void (*forward)(void *user, uint64_t serial, const char *client_id, const void *id_json,
                     const char *text, size_t len);
+    /* edge: a `query` that passed the rate limit and the local checks (query_parse),
+     * to be answered later with net_send_text(serial): the sim's answer or an error */
+    void (*forward_query)(void *user, uint64_t serial, const char *client_id, const void *id_json,
+                          const char *text, size_t len);
+    /* edge: a `probe` that passed the rate limit and probe_parse, to be
+     * answered with net_send_text(serial); its probe_data with net_send_probe_data */
+    void (*forward_probe)(void *user, uint64_t serial, const char *client_id, const void *id_json,
+                          const char *text, size_t len);
+    /* edge: client `serial` disconnected (its probe, if any, ends) */
+    void (*client_gone)(void *user, uint64_t serial);
+    /* sim: one probe_data text of a remote probe (net_remote_probe) */
+    void (*on_probe_data)(void *user, uint64_t serial, const char *text);
     /* sim: an applied set's `params` event (no id), who caused it */
     void (*on_params_event)(void *user, const char *text, const char *origin, const char *by);
     /* /healthz: returns "ok" or "degraded" and appends ,"member":... to extra */
@@ -76,6 +88,23 @@ void net_set_status(struct net *n, const char *text, const char *ok_text);
 typedef void (*net_reply_fn)(void *ctx, const char *text);
 void net_remote_control(struct net *n, const char *origin, const char *by, const char *text, size_t len,
                         net_reply_fn reply, void *ctx);
+/* sim: a `query` (its JSON text) from a client of another daemon, checked and
+ * queued exactly like a local one (PROTOCOL.md §7.4); reply(ctx, text) is
+ * called exactly once: `query_result` or an error with the request's id, later,
+ * from the query workers' results (text NULL = dropped unanswered, at shutdown). */
+void net_remote_query(struct net *n, const char *text, size_t len, net_reply_fn reply, void *ctx);
+/* sim: a serial for a remote probe (never a session's nor a remote query's). */
+uint64_t net_remote_serial(struct net *n);
+/* sim: a `probe` (its JSON text) of a client of another daemon, set under
+ * `serial` exactly like a local one (PROTOCOL.md §7.4); its probe_data go to
+ * the on_probe_data hook. Returns the answer text (malloc'd: `probing` or an
+ * error with the request's id, NULL when out of memory) and in *npoints the
+ * points now probed, or -1 when it failed (then nothing changed). */
+char *net_remote_probe(struct net *n, uint64_t serial, const char *text, size_t len, int *npoints);
+/* sim: the remote probe under serial ends. */
+void net_remote_probe_gone(struct net *n, uint64_t serial);
+/* edge: one probe_data text to client `serial`, unless it is 16 messages behind (it misses the tick). */
+void net_send_probe_data(struct net *n, uint64_t serial, const char *text);
 /* sim: answers every remote request still waiting with NULL (before the link closes). */
 void net_drop_remote_requests(struct net *n);
 /* sim: the hello the sim would send (client_id ""), malloc'd; for edges. */

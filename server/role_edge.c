@@ -4,7 +4,9 @@
  * clients want, rebuilds frames from them (cl_collector: the layers of one
  * seq) and hands them to the usual latest-frame-wins fan-out; it forwards
  * set / pause / resume to the sim after the local size, rate and token
- * checks and relays the answers; it keeps the sim's hello for new clients.
+ * checks, and `query` after the rate limit and the query's own checks (at
+ * most EDGE_QUERIES_* in flight), and relays the answers; it keeps the
+ * sim's hello for new clients.
  * Stateless: nothing here outlives the process. Everything runs on the lws
  * thread (hooks and cl_link_dispatch handlers). */
 #include "roles.h"
@@ -22,11 +24,28 @@
 enum edge_state { EDGE_UNKNOWN, EDGE_OK, EDGE_SIM_DOWN, EDGE_NATS_DOWN };
 static const char *const state_name[] = { "unknown", "ok", "sim_unavailable", "nats_unavailable" };
 
-/* A request on its way to the sim: a client's control message, or hello. */
+/* A client's probe that the sim accepted (non-empty): kept alive, and sent
+ * again to a sim that does not know it (restarted). */
+struct eprobe {
+    struct eprobe *next;
+    uint64_t serial;
+    char client[CL_NAME_MAX];
+    char *text;                   /* the client's `probe` message */
+    size_t len;
+    bool in_flight;               /* a keepalive or resend is on its way */
+};
+
+/* A request on its way to the sim: a client's control message or query, or hello. */
 struct forward {
     struct forward *prev, *next;  /* in role_edge.forwards (freed at close if never answered) */
     struct role_edge *r;
     bool hello;
+    bool query;                   /* counted in role_edge.queries (queries and clients' probes) */
+    enum { FW_NONE, FW_PROBE, FW_KEEPALIVE, FW_RESEND, FW_END } probe;
+    bool gone;                    /* its client disconnected meanwhile */
+    char client[CL_NAME_MAX];     /* probes: the client's id */
+    char *text;                   /* FW_PROBE: the client's probe, kept if the sim accepts it */
+    size_t len;
     uint64_t serial;              /* the client that sent it */
     cJSON *id;                    /* its request id (for our own `unavailable` error), or NULL */
 };
@@ -40,6 +59,9 @@ struct role_edge {
     uint64_t frames;              /* frames handed to the fan-out (frame.index) */
     enum edge_state state;
     struct forward *forwards;
+    int queries;                  /* forwards that are queries or clients' probes */
+    struct eprobe *probes;        /* clients' probes the sim accepted */
+    double keepalive_t;           /* when the probes' keepalives were last sent */
     bool hello_needed;            /* ask the sim for hello (again) at the next chance */
     bool hello_in_flight;
     double hello_t;               /* when it was last asked */
@@ -61,6 +83,7 @@ static void publish_set(struct role_edge *r, struct cl_frame_set *set)
         .server_time_us = h->server_time_us,
     };
     f->tiles_per_side = h->tiles_per_side;
+    f->ncascades = h->ncascades;
     f->index = r->frames++;
     for (int i = 0; i < set->nlayers; i++) {
         struct cl_layer *cl = set->layers[i];
@@ -68,6 +91,8 @@ static void publish_set(struct role_edge *r, struct cl_frame_set *set)
         l->field = cl->info.field;
         l->lod = cl->info.lod;
         l->bound_index = cl->info.bound_index;
+        l->cascade = cl->info.cascade;
+        l->encoded_lod = cl->info.encoded_lod;
         l->buf = (struct oc_buf){ .data = cl->data, .len = cl->len, .cap = cl->len };
         l->tile_off = cl->tile_off;
         cl->data = NULL;
@@ -127,6 +152,8 @@ static struct forward *forward_new(struct role_edge *r, bool hello, uint64_t ser
 
 static void forward_free(struct forward *fw)
 {
+    if (fw->query)
+        fw->r->queries--;
     if (fw->prev)
         fw->prev->next = fw->next;
     else
@@ -134,7 +161,28 @@ static void forward_free(struct forward *fw)
     if (fw->next)
         fw->next->prev = fw->prev;
     cJSON_Delete(fw->id);
+    free(fw->text);
     free(fw);
+}
+
+static struct eprobe *eprobe_find(struct role_edge *r, uint64_t serial)
+{
+    for (struct eprobe *p = r->probes; p; p = p->next)
+        if (p->serial == serial)
+            return p;
+    return NULL;
+}
+
+static void eprobe_drop(struct role_edge *r, uint64_t serial)
+{
+    for (struct eprobe **pp = &r->probes; *pp; pp = &(*pp)->next)
+        if ((*pp)->serial == serial) {
+            struct eprobe *p = *pp;
+            *pp = p->next;
+            free(p->text);
+            free(p);
+            return;
+        }
 }
 
 static void send_unavailable(struct role_edge *r, uint64_t serial, const cJSON *id, int status)
@@ -147,11 +195,101 @@ static void send_unavailable(struct role_edge *r, uint64_t serial, const cJSON *
     free(text);
 }
 
+static void send_probe_request(struct role_edge *r, int kind, uint64_t serial, const char *client, const char *text,
+                               size_t len);
+
+/* The type of a JSON message, and whether its `points` is a non-empty array. */
+static void reply_type(const char *text, size_t len, char *type, size_t cap, char *code, size_t ccap, bool *points)
+{
+    type[0] = code[0] = '\0';
+    *points = false;
+    cJSON *root = cJSON_ParseWithLength(text, len);
+    const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "type");
+    const cJSON *c = cJSON_GetObjectItemCaseSensitive(root, "code");
+    const cJSON *p = cJSON_GetObjectItemCaseSensitive(root, "points");
+    if (cJSON_IsString(t))
+        snprintf(type, cap, "%s", t->valuestring);
+    if (cJSON_IsString(c))
+        snprintf(code, ccap, "%s", c->valuestring);
+    *points = cJSON_IsArray(p) && cJSON_GetArraySize(p) > 0;
+    cJSON_Delete(root);
+}
+
+static void relay(struct role_edge *r, uint64_t serial, const char *text, size_t len)
+{
+    char *copy = malloc(len + 1);
+    if (copy) {
+        memcpy(copy, text, len);
+        copy[len] = '\0';
+        net_send_text(r->net, serial, copy);
+        free(copy);
+    }
+}
+
+/* The sim's answer to a probe request of any kind (or status: none came). */
+static void on_probe_reply(struct role_edge *r, struct forward *fw, int status, const char *text, size_t len)
+{
+    struct eprobe *p = eprobe_find(r, fw->serial);
+    if (p && (fw->probe == FW_KEEPALIVE || fw->probe == FW_RESEND))
+        p->in_flight = false;
+    char type[32], code[32];
+    bool points = false;
+    if (status == 0)
+        reply_type(text, len, type, sizeof type, code, sizeof code, &points);
+    switch (fw->probe) {
+    case FW_PROBE:
+        if (status != 0) {
+            send_unavailable(r, fw->serial, fw->id, status);
+        } else if (fw->gone) { /* its client left while the sim set it: end it there too */
+            if (strcmp(type, "probing") == 0 && points)
+                send_probe_request(r, FW_END, fw->serial, fw->client, NULL, 0);
+        } else {
+            relay(r, fw->serial, text, len);
+            if (strcmp(type, "probing") == 0 && !points) {
+                eprobe_drop(r, fw->serial);
+            } else if (strcmp(type, "probing") == 0) {
+                if (!p && (p = calloc(1, sizeof *p))) {
+                    p->serial = fw->serial;
+                    snprintf(p->client, sizeof p->client, "%s", fw->client);
+                    p->next = r->probes;
+                    r->probes = p;
+                }
+                if (p) {
+                    free(p->text);
+                    p->text = fw->text;
+                    p->len = fw->len;
+                    fw->text = NULL;
+                }
+            }
+        }
+        break;
+    case FW_KEEPALIVE:
+        if (status == 0 && p && strcmp(code, "unknown_probe") == 0) { /* a new sim: probe again */
+            p->in_flight = true;
+            send_probe_request(r, FW_RESEND, p->serial, p->client, p->text, p->len);
+        } else if (status == 0 && p && strcmp(type, "error") == 0) {
+            relay(r, p->serial, text, len);
+            eprobe_drop(r, p->serial);
+        }
+        break;
+    case FW_RESEND:
+        if (status == 0 && p && strcmp(type, "error") == 0) { /* e.g. busy on the new sim: the probe has ended */
+            relay(r, p->serial, text, len);
+            eprobe_drop(r, p->serial);
+        }
+        break;
+    default:
+        break;
+    }
+}
+
 static void on_reply(void *ctx, int status, const char *text, size_t len)
 {
     struct forward *fw = ctx;
     struct role_edge *r = fw->r;
-    if (fw->hello) {
+    if (fw->probe != FW_NONE) {
+        on_probe_reply(r, fw, status, text, len);
+    } else if (fw->hello) {
         r->hello_in_flight = false;
         if (status == 0 && net_adopt_hello(r->net, text, len) == 0) {
             r->hello_needed = false;
@@ -160,13 +298,7 @@ static void on_reply(void *ctx, int status, const char *text, size_t len)
             LOGD("cluster: no hello from the sim: %s (asking again)", status ? cl_strerror(status) : "bad hello");
         }
     } else if (status == 0) {
-        char *copy = malloc(len + 1);
-        if (copy) {
-            memcpy(copy, text, len);
-            copy[len] = '\0';
-            net_send_text(r->net, fw->serial, copy);
-            free(copy);
-        }
+        relay(r, fw->serial, text, len);
     } else {
         send_unavailable(r, fw->serial, fw->id, status);
     }
@@ -208,6 +340,144 @@ static void edge_forward(void *user, uint64_t serial, const char *client_id, con
     }
 }
 
+/* Point queries and probes (PROTOCOL.md §7.4) go to the sim, whose answer
+ * is relayed as it is. In flight at most EDGE_QUERIES_PER_CLIENT per client
+ * and EDGE_QUERIES_TOTAL for the edge: a query costs the sim milliseconds
+ * and the edge a pending entry until answered or timed out (5 s). */
+#define EDGE_QUERIES_PER_CLIENT 4
+#define EDGE_QUERIES_TOTAL 64
+static bool over_bounds(struct role_edge *r, uint64_t serial, const void *id_json)
+{
+    int mine = 0;
+    for (struct forward *fw = r->forwards; fw; fw = fw->next)
+        mine += fw->query && fw->serial == serial;
+    if (mine < EDGE_QUERIES_PER_CLIENT && r->queries < EDGE_QUERIES_TOTAL)
+        return false;
+    struct ctl_error e = { .code = "busy" };
+    snprintf(e.message, sizeof e.message,
+             "%d queries and probes %s on their way to the simulation through this edge (at most %d per client, "
+             "%d in all); try again when one is answered", mine >= EDGE_QUERIES_PER_CLIENT ? mine : r->queries,
+             mine >= EDGE_QUERIES_PER_CLIENT ? "of this client are" : "are", EDGE_QUERIES_PER_CLIENT,
+             EDGE_QUERIES_TOTAL);
+    char *out = control_print(control_error_msg(&e, id_json));
+    if (out)
+        net_send_text(r->net, serial, out);
+    free(out);
+    return true;
+}
+
+static void edge_forward_query(void *user, uint64_t serial, const char *client_id, const void *id_json,
+                               const char *text, size_t len)
+{
+    struct role_edge *r = user;
+    if (over_bounds(r, serial, id_json))
+        return;
+    struct forward *fw = forward_new(r, false, serial, id_json);
+    if (!fw) {
+        send_unavailable(r, serial, id_json, CL_E_NOMEM);
+        return;
+    }
+    fw->query = true;
+    r->queries++;
+    int rc = cl_edge_request(r->link, CL_KIND_QUERY, client_id, text, len, on_reply, fw);
+    if (rc != CL_OK) {
+        send_unavailable(r, serial, id_json, rc);
+        forward_free(fw);
+    }
+}
+
+/* A probe request of the edge's own (keepalive: no body; resend; end: an
+ * empty probe): answered in on_probe_reply, never to a client directly. */
+static void send_probe_request(struct role_edge *r, int kind, uint64_t serial, const char *client, const char *text,
+                               size_t len)
+{
+    static const char end[] = "{\"type\":\"probe\",\"points\":[]}";
+    struct forward *fw = forward_new(r, false, serial, NULL);
+    if (!fw)
+        return;
+    fw->probe = kind;
+    snprintf(fw->client, sizeof fw->client, "%s", client);
+    if (kind == FW_END) {
+        text = end;
+        len = strlen(end);
+    } else if (kind == FW_KEEPALIVE) {
+        text = "";
+        len = 0;
+    }
+    if (cl_edge_request(r->link, CL_KIND_PROBE, client, text, len, on_reply, fw) != CL_OK) {
+        struct eprobe *p = eprobe_find(r, serial);
+        if (p)
+            p->in_flight = false;
+        forward_free(fw);
+    }
+}
+
+static void edge_forward_probe(void *user, uint64_t serial, const char *client_id, const void *id_json,
+                               const char *text, size_t len)
+{
+    struct role_edge *r = user;
+    if (over_bounds(r, serial, id_json))
+        return;
+    struct forward *fw = forward_new(r, false, serial, id_json);
+    char *copy = malloc(len ? len : 1);
+    if (!fw || !copy) {
+        free(copy);
+        if (fw)
+            forward_free(fw);
+        send_unavailable(r, serial, id_json, CL_E_NOMEM);
+        return;
+    }
+    memcpy(copy, text, len);
+    fw->text = copy;
+    fw->len = len;
+    fw->query = true;
+    fw->probe = FW_PROBE;
+    snprintf(fw->client, sizeof fw->client, "%s", client_id);
+    r->queries++;
+    int rc = cl_edge_request(r->link, CL_KIND_PROBE, client_id, text, len, on_reply, fw);
+    if (rc != CL_OK) {
+        send_unavailable(r, serial, id_json, rc);
+        forward_free(fw);
+    }
+}
+
+/* Every CL_PROBE_KEEPALIVE_S: one keepalive per live probe (none while one
+ * is on its way), so the sim keeps it, or tells us it lost it. */
+static void probe_keepalives(struct role_edge *r, double now)
+{
+    if (!r->probes || now - r->keepalive_t < CL_PROBE_KEEPALIVE_S || !cl_link_connected(r->link))
+        return;
+    r->keepalive_t = now;
+    for (struct eprobe *p = r->probes; p; p = p->next)
+        if (!p->in_flight) {
+            p->in_flight = true;
+            send_probe_request(r, FW_KEEPALIVE, p->serial, p->client, NULL, 0);
+        }
+}
+
+static void edge_on_probe_data(void *user, const char *by, const char *text, size_t len)
+{
+    struct role_edge *r = user;
+    for (struct eprobe *p = r->probes; p; p = p->next)
+        if (strcmp(p->client, by) == 0) {
+            net_send_probe_data(r->net, p->serial, text);
+            return;
+        }
+}
+
+static void edge_client_gone(void *user, uint64_t serial)
+{
+    struct role_edge *r = user;
+    for (struct forward *fw = r->forwards; fw; fw = fw->next)
+        if (fw->serial == serial && !fw->hello)
+            fw->gone = true;
+    struct eprobe *p = eprobe_find(r, serial);
+    if (p) {
+        send_probe_request(r, FW_END, serial, p->client, NULL, 0); /* else the sim lets it expire */
+        eprobe_drop(r, serial);
+    }
+}
+
 /* ---- state ---- */
 
 static void update_state(struct role_edge *r)
@@ -234,8 +504,10 @@ static void edge_on_state(void *user, enum cl_event ev)
 {
     struct role_edge *r = user;
     LOGI("cluster: %s", cl_event_name(ev));
-    if (ev == CL_EV_CONNECTED || ev == CL_EV_RECONNECTED || ev == CL_EV_SIM_UP)
+    if (ev == CL_EV_CONNECTED || ev == CL_EV_RECONNECTED || ev == CL_EV_SIM_UP) {
         request_hello(r); /* the sim may have moved on (or restarted) meanwhile */
+        r->keepalive_t = 0; /* and may have lost our probes: ask now */
+    }
     update_state(r);
 }
 
@@ -252,8 +524,10 @@ static void edge_on_wake(void *user)
 {
     struct role_edge *r = user;
     cl_link_dispatch(r->link);
-    if (r->hello_needed && !r->hello_in_flight && cl_link_connected(r->link) && mono_now() - r->hello_t >= HELLO_RETRY)
+    double now = mono_now();
+    if (r->hello_needed && !r->hello_in_flight && cl_link_connected(r->link) && now - r->hello_t >= HELLO_RETRY)
         request_hello(r);
+    probe_keepalives(r, now);
 }
 
 static const char *edge_health(void *user, char *extra, size_t cap)
@@ -299,6 +573,7 @@ struct role_edge *role_edge_open(const struct daemon_config *dc, struct net *n, 
     cfg.h.on_state = edge_on_state;
     cfg.h.on_layer = edge_on_layer;
     cfg.h.on_params = edge_on_params;
+    cfg.h.on_probe_data = edge_on_probe_data;
     char lerr[256];
     r->link = cl_link_open(&cfg, lerr, sizeof lerr);
     if (!r->link) {
@@ -309,6 +584,7 @@ struct role_edge *role_edge_open(const struct daemon_config *dc, struct net *n, 
     }
     struct net_cluster_hooks h = {
         .user = r, .on_wake = edge_on_wake, .demand = edge_demand, .forward = edge_forward,
+        .forward_query = edge_forward_query, .forward_probe = edge_forward_probe, .client_gone = edge_client_gone,
         .health = edge_health, .metrics = edge_metrics,
     };
     net_set_cluster(n, &h);
@@ -328,6 +604,8 @@ void role_edge_close(struct role_edge *r)
     cl_link_close(r->link); /* drops unanswered requests without calling back: free them here */
     while (r->forwards)
         forward_free(r->forwards);
+    while (r->probes)
+        eprobe_drop(r, r->probes->serial);
     cl_collector_free(r->collector);
     free(r);
 }

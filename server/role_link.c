@@ -60,7 +60,9 @@ size_t role_keys_json(const uint8_t bits[CL_KEY_BYTES], char *buf, size_t cap)
     int n = 0;
     for (int k = 0; k < CL_KEYS && off < cap; k++)
         if (cl_bit(bits, k))
-            off += (size_t)snprintf(buf + off, cap - off, "%s\"%s.%d.%d\"", n++ ? "," : "",
+            off += (size_t)snprintf(buf + off, cap - off, "%s\"%s%.0d%s%s.%d.%d\"", n++ ? "," : "",
+                                    layer_key_which_cascade(k) ? "c" : "", layer_key_which_cascade(k),
+                                    layer_key_which_cascade(k) ? "." : "",
                                     ocean_field_name((enum ocean_field)layer_key_field(k)), layer_key_lod(k),
                                     layer_key_bound(k));
     if (off < cap)

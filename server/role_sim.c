@@ -2,7 +2,9 @@
  * and encodes as --role all does, but for the layers the edges demand
  * (their heartbeats, through the NATS link), publishes each encoded layer
  * once on NATS, answers the edges' set / pause / resume (validated by the
- * same code as a local client's, server/net/dispatch.c) and hello
+ * same code as a local client's, server/net/dispatch.c), their clients'
+ * point queries and probes (the same query workers as a local client's,
+ * probe_data streamed to the edge) and hello
  * requests, and publishes every params event. No viewers connect to it.
  * Threads: the hooks on_frame / remote_demand run on the tick thread and
  * only queue (cl_sim_publish_layer, cl_sim_demand); the rest runs on the
@@ -22,9 +24,23 @@
 
 #define STATUS_PERIOD 0.25 /* s between updates of the heartbeat body (the link sends it at its own rate) */
 
+/* A probe of a client of an edge (PROTOCOL.md §7.4 through an edge,
+ * docs/scaling.md): set in the query workers under a serial of its own; its
+ * probe_data go to the edge's stream subject. Forgotten when the edge stops
+ * its keepalives for CL_PROBE_EXPIRE_S. Lws thread only. */
+struct rprobe {
+    struct rprobe *next;
+    uint64_t serial;
+    char origin[CL_NAME_MAX], by[CL_NAME_MAX];
+    char stream[CL_SUBJECT_MAX];
+    double seen;                                  /* mono time of its last request or keepalive */
+};
+
 struct role_sim {
     struct net *net;
     struct cl_link *link;
+    struct rprobe *probes;
+    double probes_t;                              /* when expiry was last checked */
     double status_t;                              /* lws: when the heartbeat body was last set */
     _Atomic uint64_t demand[CL_KEY_BYTES / 8];    /* tick writes (last union), lws reads (/healthz) */
     atomic_uint_least64_t layers_encoded;         /* tick writes, lws reads (/metrics) */
@@ -57,21 +73,23 @@ static void sim_on_frame(void *user, struct frame *f)
         .seq = f->hdr.seq, .sim_time = f->hdr.sim_time, .params_version = f->hdr.params_version,
         .n = f->hdr.n, .tile_size = f->hdr.tile_size, .patch_size = f->hdr.patch_size,
         .frame_flags = f->hdr.flags, .server_time_us = f->hdr.server_time_us,
-        .tiles_per_side = (uint16_t)f->tiles_per_side,
+        .tiles_per_side = (uint16_t)f->tiles_per_side, .ncascades = (uint8_t)f->ncascades,
     };
-    /* A cluster relays cascade 0 only (its layer keys are cascade 0's). */
-    for (int i = 0; i < f->nlayers; i++)
-        if (f->layers[i].cascade == 0)
-            cl_bit_set(info.encoded, layer_key(f->layers[i].field, f->layers[i].lod, f->layers[i].bound_index), true);
+    /* Every cascade: the layer keys of the cluster are the daemon's (role_link.h). */
     for (int i = 0; i < f->nlayers; i++) {
         const struct layer *l = &f->layers[i];
-        if (l->cascade != 0)
-            continue;
+        if (l->tile_off)
+            cl_bit_set(info.encoded, layer_key_cascade(l->cascade, l->field, l->lod, l->bound_index), true);
+    }
+    for (int i = 0; i < f->nlayers; i++) {
+        const struct layer *l = &f->layers[i];
         if (!l->tile_off)
             continue; /* no intra tiles this tick (edges always ask for them: their demand counts as intra) */
         info.field = l->field;
         info.lod = l->lod;
         info.bound_index = l->bound_index;
+        info.cascade = l->cascade;
+        info.encoded_lod = l->encoded_lod;
         frame_ref(f);
         int rc = cl_sim_publish_layer(r->link, &info, l->buf.data, l->buf.len, l->tile_off, release_frame, f);
         if (rc == CL_OK)
@@ -96,9 +114,106 @@ static void answer(void *ctx, const char *text)
     free(p);
 }
 
+static struct rprobe *rprobe_find(struct role_sim *r, const char *origin, const char *by)
+{
+    for (struct rprobe *p = r->probes; p; p = p->next)
+        if (strcmp(p->origin, origin) == 0 && strcmp(p->by, by) == 0)
+            return p;
+    return NULL;
+}
+
+static void rprobe_remove(struct role_sim *r, struct rprobe *gone)
+{
+    for (struct rprobe **pp = &r->probes; *pp; pp = &(*pp)->next)
+        if (*pp == gone) {
+            *pp = gone->next;
+            free(gone);
+            return;
+        }
+}
+
+/* A PROBE request: with a body, the client's `probe` (set as a local
+ * client's, answered with the sim's `probing` or error); with none, the
+ * edge's keepalive of a probe it has (answered `probing`, or error
+ * `unknown_probe` when this sim does not know it: restarted, or expired;
+ * the edge then sends the probe again). */
+static void sim_probe(struct role_sim *r, struct cl_request *req)
+{
+    static const char alive[] = "{\"type\":\"probing\",\"keepalive\":true}";
+    static const char unknown[] = "{\"type\":\"error\",\"code\":\"unknown_probe\",\"message\":\"this simulation "
+                                  "has no such probe: send it again\"}";
+    char stream[CL_SUBJECT_MAX];
+    if (!req->by[0] || !req->origin[0] || cl_probe_stream_subject(req->reply_to, stream, sizeof stream) != CL_OK) {
+        static const char bad[] = "{\"type\":\"error\",\"code\":\"bad_message\",\"message\":\"a probe needs its "
+                                  "edge, client and reply inbox\"}";
+        cl_request_reply(r->link, req, bad, strlen(bad));
+        return;
+    }
+    struct rprobe *p = rprobe_find(r, req->origin, req->by);
+    if (req->len == 0) { /* keepalive */
+        if (p) {
+            p->seen = mono_now();
+            snprintf(p->stream, sizeof p->stream, "%s", stream);
+        }
+        cl_request_reply(r->link, req, p ? alive : unknown, strlen(p ? alive : unknown));
+        return;
+    }
+    bool fresh = !p;
+    if (fresh && !(p = calloc(1, sizeof *p))) {
+        cl_request_reply(r->link, req, NULL, 0); /* the edge times it out: unavailable */
+        return;
+    }
+    if (fresh) {
+        p->serial = net_remote_serial(r->net);
+        snprintf(p->origin, sizeof p->origin, "%s", req->origin);
+        snprintf(p->by, sizeof p->by, "%s", req->by);
+        p->next = r->probes;
+        r->probes = p;
+    }
+    int npoints;
+    char *answer = net_remote_probe(r->net, p->serial, req->body, req->len, &npoints);
+    if (npoints > 0) {
+        p->seen = mono_now();
+        snprintf(p->stream, sizeof p->stream, "%s", stream);
+    } else if (npoints == 0 || fresh) {
+        rprobe_remove(r, p); /* ended, or a failed first probe (nothing was set) */
+    }
+    cl_request_reply(r->link, req, answer, answer ? strlen(answer) : 0);
+    free(answer);
+}
+
+static void sim_on_probe_data(void *user, uint64_t serial, const char *text)
+{
+    struct role_sim *r = user;
+    for (struct rprobe *p = r->probes; p; p = p->next)
+        if (p->serial == serial) {
+            cl_sim_publish_probe_data(r->link, p->stream, p->by, text, strlen(text));
+            return;
+        }
+}
+
+static void expire_probes(struct role_sim *r, double now)
+{
+    for (struct rprobe **pp = &r->probes; *pp;) {
+        struct rprobe *p = *pp;
+        if (now - p->seen > CL_PROBE_EXPIRE_S) {
+            LOGI("cluster: probe of %s on %s expired (no keepalive)", p->by, p->origin);
+            net_remote_probe_gone(r->net, p->serial);
+            *pp = p->next;
+            free(p);
+        } else {
+            pp = &p->next;
+        }
+    }
+}
+
 static void sim_on_request(void *user, struct cl_request *req)
 {
     struct role_sim *r = user;
+    if (req->kind == CL_KIND_PROBE) {
+        sim_probe(r, req);
+        return;
+    }
     if (req->kind == CL_KIND_HELLO) {
         char *hello = net_hello_text(r->net);
         cl_request_reply(r->link, req, hello, hello ? strlen(hello) : 0);
@@ -112,7 +227,10 @@ static void sim_on_request(void *user, struct cl_request *req)
     }
     p->link = r->link;
     p->req = req;
-    net_remote_control(r->net, req->origin, req->by, req->body, req->len, answer, p);
+    if (req->kind == CL_KIND_QUERY) /* answered when the query workers are done */
+        net_remote_query(r->net, req->body, req->len, answer, p);
+    else
+        net_remote_control(r->net, req->origin, req->by, req->body, req->len, answer, p);
 }
 
 static void sim_on_state(void *user, enum cl_event ev)
@@ -133,6 +251,10 @@ static void sim_on_wake(void *user)
     struct role_sim *r = user;
     cl_link_dispatch(r->link);
     double now = mono_now();
+    if (now - r->probes_t >= 0.5) {
+        r->probes_t = now;
+        expire_probes(r, now);
+    }
     if (now - r->status_t >= STATUS_PERIOD) {
         r->status_t = now;
         char st[160];
@@ -204,6 +326,7 @@ struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, st
     sc->cluster_user = r;
     struct net_cluster_hooks h = {
         .user = r, .no_viewers = true, .on_wake = sim_on_wake, .on_params_event = sim_on_params_event,
+        .on_probe_data = sim_on_probe_data,
         .health = sim_health, .metrics = sim_metrics,
     };
     net_set_cluster(n, &h);
@@ -220,5 +343,10 @@ void role_sim_close(struct role_sim *r)
     struct net_cluster_hooks none = { .no_viewers = true };
     net_set_cluster(r->net, &none);
     cl_link_close(r->link);
+    while (r->probes) { /* the query service is freed after this: nothing to tell it */
+        struct rprobe *p = r->probes;
+        r->probes = p->next;
+        free(p);
+    }
     free(r);
 }

@@ -611,11 +611,11 @@ static void tick(struct sim *s, double t_tick)
     int demand[LAYER_KEYS_ALL];
     bool any = false;
     uint8_t remote[SIM_DEMAND_BYTES] = { 0 };
-    if (s->cfg.remote_demand) /* --role sim: the layer keys other daemons want (cascade 0's only) */
+    if (s->cfg.remote_demand) /* --role sim: the layer keys other daemons want */
         s->cfg.remote_demand(s->cfg.cluster_user, remote);
     for (int k = 0; k < LAYER_KEYS_ALL; k++) {
         demand[k] = atomic_load(&s->demand[k]);
-        if (demand[k] <= 0 && k < LAYER_KEYS && ((remote[k >> 3] >> (k & 7)) & 1))
+        if (demand[k] <= 0 && ((remote[k >> 3] >> (k & 7)) & 1))
             demand[k] = 1;
         any |= demand[k] > 0;
     }
@@ -656,7 +656,7 @@ static void tick(struct sim *s, double t_tick)
              * and this tick's keyframes for temporal ones that lack the references. */
             int temporal = atomic_load(&s->tdemand[k]);
             pj.want.temporal[k] = temporal > 0;
-            pj.want.intra[k] = demand[k] > temporal || (k < LAYER_KEYS && ((remote[k >> 3] >> (k & 7)) & 1)) ||
+            pj.want.intra[k] = demand[k] > temporal || ((remote[k >> 3] >> (k & 7)) & 1) ||
                                atomic_load(&s->key_want[k]) > 0;
         }
     }

@@ -85,8 +85,8 @@ struct sim_config {
     void (*on_frame)(void *user, struct frame *f);
     void *cluster_user;
 };
-#define SIM_DEMAND_BYTES 32         /* bitmap of layer keys handed to remote_demand */
-_Static_assert(LAYER_KEYS <= SIM_DEMAND_BYTES * 8, "layer keys fit the remote demand bitmap");
+#define SIM_DEMAND_BYTES 128        /* bitmap of layer keys (every cascade) handed to remote_demand */
+_Static_assert(LAYER_KEYS_ALL <= SIM_DEMAND_BYTES * 8, "layer keys fit the remote demand bitmap");
 
 struct sim;
 /* Creates the ocean (may take a while at large N) and starts the tick

@@ -41,12 +41,17 @@
  * every drop is counted in struct cl_stats.
  *
  * ---- Subjects (PREFIX is --nats-prefix, default "oceand") ----------------
- *   PREFIX.frame.<field>.<lod>.<bound>  sim -> edges: layer parts (OCNL), e.g. oceand.frame.height.0.2
+ *   PREFIX.frame.<c>.<field>.<lod>.<bound>  sim -> edges: layer parts (OCNL) of cascade c,
+ *                                       e.g. oceand.frame.0.height.0.2
  *   PREFIX.params                       sim -> edges: params events (OCNE kind PARAMS)
  *   PREFIX.status                       sim -> edges: sim heartbeat (OCNE kind STATUS)
  *   PREFIX.ctl                          edge -> sim request/reply: set, pause, resume (OCNE CTL -> REPLY)
  *   PREFIX.hello                        edge -> sim request/reply: current params + schema (OCNE HELLO -> REPLY)
  *   PREFIX.demand                       edges -> sim: demand heartbeats with expiry (OCNE DEMAND)
+ *   PREFIX.query                        edge -> sim request/reply: a client's point query (OCNE QUERY -> REPLY)
+ *   PREFIX.probe                        edge -> sim request/reply: a client's probe (OCNE PROBE -> REPLY),
+ *                                       repeated as a keepalive; the sim then streams
+ *   <edge inbox>.p                      sim -> edge: probe_data of its clients' probes (OCNE PROBE_DATA)
  * Several seas share one NATS cluster by using different prefixes.
  */
 #ifndef OCEAND_CLUSTER_H
@@ -57,18 +62,29 @@
 #include <stdint.h>
 
 /* ---- layer keys --------------------------------------------------------
- * A layer is one field at one LOD and one error bound. Its key is the same
- * number as the daemon's sim_demand_key (the daemon checks the constants
- * agree at compile time). */
+ * A layer is one field of one cascade at one LOD and one error bound. Its
+ * key is the same number as the daemon's layer_key_cascade (the daemon
+ * checks the constants agree at compile time): cascade 0's keys first. */
 #define CL_FIELDS    7   /* OC_FIELD_COUNT */
 #define CL_LODS      5   /* OC_MAX_LOD + 1 */
 #define CL_BOUNDS    5   /* CTL_BOUND_COUNT */
-#define CL_KEYS      (CL_FIELDS * CL_LODS * CL_BOUNDS)
-#define CL_KEY_BYTES 32  /* bitmaps of keys: 256 bits, room to grow */
+#define CL_CASCADES  4   /* OCEAN_MAX_CASCADES; tile-header flags bits 0-1 */
+#define CL_CASCADE_KEYS (CL_FIELDS * CL_LODS * CL_BOUNDS)
+#define CL_KEYS      (CL_CASCADES * CL_CASCADE_KEYS)
+#define CL_KEY_BYTES 128 /* bitmaps of keys: 1024 bits (700 used), room to grow */
+/* Cascade 0's key. */
 static inline int cl_key(int field, int lod, int bound_index)
 {
     return (field * CL_LODS + lod) * CL_BOUNDS + bound_index;
 }
+static inline int cl_key_cascade(int cascade, int field, int lod, int bound_index)
+{
+    return cascade * CL_CASCADE_KEYS + cl_key(field, lod, bound_index);
+}
+static inline int cl_key_which_cascade(int key) { return key / CL_CASCADE_KEYS; }
+static inline int cl_key_field(int key) { return key % CL_CASCADE_KEYS / (CL_LODS * CL_BOUNDS); }
+static inline int cl_key_lod(int key) { return key / CL_BOUNDS % CL_LODS; }
+static inline int cl_key_bound(int key) { return key % CL_BOUNDS; }
 static inline bool cl_bit(const uint8_t bits[CL_KEY_BYTES], int key)
 {
     return (bits[key >> 3] >> (key & 7)) & 1;
@@ -106,9 +122,10 @@ const char *cl_strerror(int err);
 /* A prefix is 1..64 characters: dot-separated non-empty tokens of
  * [A-Za-z0-9_-] (no wildcards, no spaces). */
 bool cl_prefix_valid(const char *prefix);
-enum cl_subject { CL_SUBJ_PARAMS, CL_SUBJ_STATUS, CL_SUBJ_CTL, CL_SUBJ_HELLO, CL_SUBJ_DEMAND };
+enum cl_subject { CL_SUBJ_PARAMS, CL_SUBJ_STATUS, CL_SUBJ_CTL, CL_SUBJ_HELLO, CL_SUBJ_DEMAND, CL_SUBJ_QUERY, CL_SUBJ_PROBE };
 int cl_subject(char *out, size_t cap, const char *prefix, enum cl_subject which);
-int cl_subject_layer(char *out, size_t cap, const char *prefix, int field, int lod, int bound_index);
+/* The subject of layer key `key` (cl_key_cascade). */
+int cl_subject_layer(char *out, size_t cap, const char *prefix, int key);
 /* Inverse of cl_subject_layer: the key, or a negative CL_E_*. */
 int cl_subject_layer_parse(const char *subject, const char *prefix);
 
@@ -117,22 +134,24 @@ int cl_subject_layer_parse(const char *subject, const char *prefix);
  * one layer at one tick: a whole layer when it fits the server's
  * max_payload, else consecutive parts. Little-endian:
  *   0  "OCNL"            38 u8  field          48 u64 server_time_us
- *   4  u16 version (1)   39 u8  lod            56 u32 data_len
- *   6  u16 header_size   40 u8  bound_index    60 u32 reserved (0)
- *   8  u64 seq           41 u8  layer_flags    64 u8[32] encoded: keys the
- *   16 f64 sim_time      42 u16 tiles_per_side        sim encoded this tick
- *   24 u32 params_version 44 u16 tile_first
- *   28 u16 n             46 u16 tile_count
- *   30 u16 tile_size
+ *   4  u16 version (2)   39 u8  lod            56 u32 data_len
+ *   6  u16 header_size   40 u8  bound_index    60 u8  cascade (0..ncascades-1)
+ *   8  u64 seq           41 u8  layer_flags    61 u8  ncascades (1..4: in force)
+ *   16 f64 sim_time      42 u16 tiles_per_side 62 u8  encoded_lod (lod..4: of its tiles)
+ *   24 u32 params_version 44 u16 tile_first    63 u8  reserved (0)
+ *   28 u16 n             46 u16 tile_count     64 u8[128] encoded: keys the
+ *   30 u16 tile_size                                  sim encoded this tick
  *   32 f32 patch_size
  *   36 u16 frame_flags
- *   96 u32 off[tile_count + 1]: tile i of the part is data[off[i], off[i+1])
- *      then data_len bytes: the tiles as on the WebSocket (tile header + payload)
+ *   192 u32 off[tile_count + 1]: tile i of the part is data[off[i], off[i+1])
+ *      then data_len bytes: the tiles as on the WebSocket (tile header + payload;
+ *      its flags byte is the cascade, its lod byte encoded_lod)
  * Bytes 8..47 carry the fields of the WebSocket frame header, so an edge
- * rebuilds byte-identical frames. */
+ * rebuilds byte-identical frames. Version 1 (cascade 0 only, 32-byte key
+ * bitmaps, header 96) is not read any more: sim and edges upgrade together. */
 #define CL_LAYER_MAGIC       "OCNL"
-#define CL_LAYER_VERSION     1
-#define CL_LAYER_HEADER_SIZE 96
+#define CL_LAYER_VERSION     2
+#define CL_LAYER_HEADER_SIZE (64 + CL_KEY_BYTES)
 #define CL_MAX_TILES_PER_SIDE 256
 #define CL_MAX_LAYER_BYTES   (64u << 20)
 
@@ -145,9 +164,15 @@ struct cl_layer_info {
     uint16_t frame_flags;
     uint64_t server_time_us;
     uint8_t field, lod, bound_index, layer_flags;
+    uint8_t cascade, ncascades, encoded_lod;
     uint16_t tiles_per_side;
     uint8_t encoded[CL_KEY_BYTES];
 };
+/* The layer's key (cl_key_cascade). */
+static inline int cl_info_key(const struct cl_layer_info *i)
+{
+    return cl_key_cascade(i->cascade, i->field, i->lod, i->bound_index);
+}
 
 /* A parsed part: pointers into the message, valid while it lives. */
 struct cl_layer_part {
@@ -158,8 +183,8 @@ struct cl_layer_part {
     uint32_t data_len;
 };
 uint32_t cl_part_off(const struct cl_layer_part *p, int i);
-/* Checks every field and every tile's framing (OC tile header: field, lod,
- * 40 + payload_len == its span). Returns 0 or a negative CL_E_*. */
+/* Checks every field and every tile's framing (OC tile header: field,
+ * encoded_lod, flags == cascade, 40 + payload_len == its span). Returns 0 or a negative CL_E_*. */
 int cl_layer_part_parse(const uint8_t *msg, size_t len, struct cl_layer_part *out);
 /* Bytes of a part with tile_count tiles and data_len bytes of tiles. */
 size_t cl_layer_part_size(int tile_count, size_t data_len);
@@ -237,7 +262,7 @@ bool cl_layer_info_valid(const struct cl_layer_info *info);
  * origin = the daemon that sent it (edge or sim name); by = the WebSocket
  * client it acts for ("" if none). Both printable ASCII, at most 63 bytes. */
 #define CL_ENV_MAGIC    "OCNE"
-#define CL_ENV_VERSION  1
+#define CL_ENV_VERSION  2   /* 2: 128-byte key bitmaps in DEMAND, kinds QUERY, PROBE, PROBE_DATA */
 #define CL_ENV_HEADER   12
 #define CL_NAME_MAX     64   /* incl. NUL */
 #define CL_BODY_MAX     (1u << 20)
@@ -247,7 +272,11 @@ enum cl_kind {
     CL_KIND_REPLY = 3,   /* sim -> edge: the JSON answer */
     CL_KIND_PARAMS = 4,  /* sim -> edges: params event JSON; origin/by = who caused it */
     CL_KIND_STATUS = 5,  /* sim -> edges: heartbeat; body = JSON status text */
-    CL_KIND_DEMAND = 6,  /* edge -> sim: body = u32 ttl_ms + u8[32] keys */
+    CL_KIND_DEMAND = 6,  /* edge -> sim: body = u32 ttl_ms + u8[CL_KEY_BYTES] keys */
+    CL_KIND_QUERY = 7,   /* edge -> sim request: a client's `query` JSON (answered by REPLY) */
+    CL_KIND_PROBE = 8,   /* edge -> sim request: a client's `probe` JSON (REPLY: `probing` or an error);
+                            sent again unchanged every CL_PROBE_KEEPALIVE_S while the probe lasts */
+    CL_KIND_PROBE_DATA = 9, /* sim -> edge, on <the edge's reply inbox>.p: one `probe_data` JSON; by = the client */
 };
 struct cl_envelope {
     enum cl_kind kind;
@@ -259,7 +288,7 @@ int cl_envelope_parse(const uint8_t *msg, size_t len, struct cl_envelope *out);
 size_t cl_envelope_size(const char *origin, const char *by, size_t body_len);
 long cl_envelope_write(uint8_t *dst, size_t cap, enum cl_kind kind, const char *origin, const char *by,
                        const void *body, size_t body_len);
-#define CL_DEMAND_BODY 36
+#define CL_DEMAND_BODY (4 + CL_KEY_BYTES)
 void cl_demand_body_write(uint8_t dst[CL_DEMAND_BODY], uint32_t ttl_ms, const uint8_t bits[CL_KEY_BYTES]);
 int cl_demand_body_parse(const uint8_t *body, size_t len, uint32_t *ttl_ms, uint8_t bits[CL_KEY_BYTES]);
 
@@ -295,7 +324,7 @@ const char *cl_event_name(enum cl_event ev);
  * with cl_request_reply (which frees it), now or later (a `set` is answered
  * when the tick applies it). */
 struct cl_request {
-    enum cl_kind kind;       /* CL_KIND_CTL or CL_KIND_HELLO */
+    enum cl_kind kind;       /* CL_KIND_CTL, CL_KIND_HELLO, CL_KIND_QUERY or CL_KIND_PROBE */
     char origin[CL_NAME_MAX];/* the edge */
     char by[CL_NAME_MAX];    /* the client on that edge */
     char *body;              /* NUL-terminated copy (JSON text for CTL) */
@@ -310,10 +339,23 @@ struct cl_handlers {
     /* edge role: the layer is the handler's (cl_layer_free it) */
     void (*on_layer)(void *user, struct cl_layer *layer);
     void (*on_params)(void *user, const char *origin, const char *by, const char *text, size_t len);
+    /* edge role: a `probe_data` message for client `by` (PROBE_DATA) */
+    void (*on_probe_data)(void *user, const char *by, const char *text, size_t len);
 };
 
+/* Probes through an edge: the edge repeats each live probe request this
+ * often; the sim forgets a remote probe not heard of for CL_PROBE_EXPIRE_S
+ * (the edge or its client is gone). */
+#define CL_PROBE_KEEPALIVE_S 2.0
+#define CL_PROBE_EXPIRE_S 7.0
+/* The subject the sim streams an edge's probe_data to, from the reply
+ * subject of that edge's PROBE request ("<inbox>.<id>" -> "<inbox>.p").
+ * CL_E_ARG if reply_to has no '.', CL_E_TOO_LARGE if out is too small. */
+int cl_probe_stream_subject(const char *reply_to, char *out, size_t cap);
+
 /* Called for each request the edge sent: status 0 with the sim's reply text,
- * or CL_E_TIMEOUT / CL_E_NO_RESPONDERS / CL_E_NOT_CONNECTED (text NULL). */
+ * or CL_E_TIMEOUT / CL_E_NO_RESPONDERS / CL_E_NOT_CONNECTED (text NULL).
+ * Exactly once, inside cl_link_dispatch, unless the link is closed first. */
 typedef void (*cl_reply_fn)(void *ctx, int status, const char *text, size_t len);
 
 struct cl_config {
@@ -328,6 +370,7 @@ struct cl_config {
     double demand_ttl_s;        /* edge: expiry it announces; 0 = 3 */
     double sim_timeout_s;       /* edge: sim down after this long without status; 0 = 2 */
     double request_timeout_s;   /* edge: 0 = 2 */
+    double query_timeout_s;     /* edge: for QUERY requests (the sim's workers may queue them); 0 = 5 */
     double reconnect_min_s, reconnect_max_s; /* backoff; 0 = 0.1, 2 */
     size_t outbox_max_bytes;    /* 0 = 64 MiB */
     void (*wake)(void *user);   /* called from NATS/pump threads when there is something to dispatch */
@@ -378,6 +421,11 @@ void cl_sim_set_status(struct cl_link *l, const char *text, size_t len);  /* bod
 int cl_sim_demand(struct cl_link *l, uint8_t out[CL_KEY_BYTES]);          /* tick thread; returns live edges */
 /* text NULL: drop without answering. */
 void cl_request_reply(struct cl_link *l, struct cl_request *req, const char *text, size_t len);
+/* One probe_data text for client `by` of the edge whose stream subject is
+ * `stream` (cl_probe_stream_subject). Dropped (counted in events_dropped)
+ * while the outbox holds more than outbox_max_bytes: probes are per tick,
+ * the next one replaces it. */
+int cl_sim_publish_probe_data(struct cl_link *l, const char *stream, const char *by, const char *text, size_t len);
 
 /* Edge role. */
 int cl_edge_set_demand(struct cl_link *l, const uint8_t bits[CL_KEY_BYTES]); /* subscribes + heartbeats now */

@@ -39,10 +39,11 @@ static bool same_frame(const struct cl_layer_info *a, const struct cl_layer_info
            a->params_version == b->params_version && a->n == b->n && a->tile_size == b->tile_size &&
            memcmp(&a->patch_size, &b->patch_size, sizeof a->patch_size) == 0 && a->frame_flags == b->frame_flags &&
            a->server_time_us == b->server_time_us && a->tiles_per_side == b->tiles_per_side &&
+           a->ncascades == b->ncascades &&
            memcmp(a->encoded, b->encoded, CL_KEY_BYTES) == 0;
 }
 
-static int key_of(const struct cl_layer *l) { return cl_key(l->info.field, l->info.lod, l->info.bound_index); }
+static int key_of(const struct cl_layer *l) { return cl_info_key(&l->info); }
 
 static bool complete(const struct cl_frame_set *f, const uint8_t want[CL_KEY_BYTES])
 {

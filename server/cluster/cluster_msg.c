@@ -84,23 +84,24 @@ bool cl_prefix_valid(const char *prefix)
 
 static const char *const subject_names[] = {
     [CL_SUBJ_PARAMS] = "params", [CL_SUBJ_STATUS] = "status", [CL_SUBJ_CTL] = "ctl",
-    [CL_SUBJ_HELLO] = "hello", [CL_SUBJ_DEMAND] = "demand",
+    [CL_SUBJ_HELLO] = "hello", [CL_SUBJ_DEMAND] = "demand", [CL_SUBJ_QUERY] = "query",
+    [CL_SUBJ_PROBE] = "probe",
 };
 
 int cl_subject(char *out, size_t cap, const char *prefix, enum cl_subject which)
 {
-    if (!cl_prefix_valid(prefix) || (unsigned)which > CL_SUBJ_DEMAND)
+    if (!cl_prefix_valid(prefix) || (unsigned)which > CL_SUBJ_PROBE)
         return CL_E_ARG;
     int n = snprintf(out, cap, "%s.%s", prefix, subject_names[which]);
     return n < 0 || (size_t)n >= cap ? CL_E_TOO_LARGE : CL_OK;
 }
 
-int cl_subject_layer(char *out, size_t cap, const char *prefix, int field, int lod, int bound_index)
+int cl_subject_layer(char *out, size_t cap, const char *prefix, int key)
 {
-    if (!cl_prefix_valid(prefix) || field < 0 || field >= CL_FIELDS || lod < 0 || lod >= CL_LODS ||
-        bound_index < 0 || bound_index >= CL_BOUNDS)
+    if (!cl_prefix_valid(prefix) || key < 0 || key >= CL_KEYS)
         return CL_E_ARG;
-    int n = snprintf(out, cap, "%s.frame.%s.%d.%d", prefix, oc_field_name((enum oc_field)field), lod, bound_index);
+    int n = snprintf(out, cap, "%s.frame.%d.%s.%d.%d", prefix, cl_key_which_cascade(key),
+                     oc_field_name((enum oc_field)cl_key_field(key)), cl_key_lod(key), cl_key_bound(key));
     return n < 0 || (size_t)n >= cap ? CL_E_TOO_LARGE : CL_OK;
 }
 
@@ -112,6 +113,11 @@ int cl_subject_layer_parse(const char *subject, const char *prefix)
     if (strncmp(subject, prefix, pl) != 0 || strncmp(subject + pl, ".frame.", 7) != 0)
         return CL_E_CORRUPT;
     const char *f = subject + pl + 7;
+    /* "<cascade digit>." first */
+    if (f[0] < '0' || f[0] >= '0' + CL_CASCADES || f[1] != '.')
+        return CL_E_CORRUPT;
+    int cascade = f[0] - '0';
+    f += 2;
     const char *dot = strchr(f, '.');
     if (!dot || dot - f >= 16)
         return CL_E_CORRUPT;
@@ -125,7 +131,16 @@ int cl_subject_layer_parse(const char *subject, const char *prefix)
     int lod = dot[1] - '0', bi = dot[3] - '0';
     if (lod >= CL_LODS || bi >= CL_BOUNDS)
         return CL_E_CORRUPT;
-    return cl_key(field, lod, bi);
+    return cl_key_cascade(cascade, field, lod, bi);
+}
+
+int cl_probe_stream_subject(const char *reply_to, char *out, size_t cap)
+{
+    const char *dot = reply_to ? strrchr(reply_to, '.') : NULL;
+    if (!dot || dot == reply_to)
+        return CL_E_ARG;
+    int n = snprintf(out, cap, "%.*s.p", (int)(dot - reply_to), reply_to);
+    return n < 0 || (size_t)n >= cap ? CL_E_TOO_LARGE : CL_OK;
 }
 
 /* ---- layer parts ---- */
@@ -148,7 +163,11 @@ static int info_check(const struct cl_layer_info *h)
         return CL_E_CORRUPT;
     if (!isfinite(h->sim_time) || !isfinite(h->patch_size) || !(h->patch_size > 0) || h->layer_flags > 1)
         return CL_E_CORRUPT;
-    if (!cl_bit(h->encoded, cl_key(h->field, h->lod, h->bound_index)))
+    if (h->ncascades < 1 || h->ncascades > CL_CASCADES || h->cascade >= h->ncascades)
+        return CL_E_CORRUPT;
+    if (h->encoded_lod < h->lod || h->encoded_lod >= CL_LODS || (h->tile_size >> h->encoded_lod) < 1)
+        return CL_E_CORRUPT;
+    if (!cl_bit(h->encoded, cl_info_key(h)))
         return CL_E_CORRUPT; /* a layer the sim says it did not encode */
     for (int k = CL_KEYS; k < CL_KEY_BYTES * 8; k++)
         if (cl_bit(h->encoded, k))
@@ -156,11 +175,11 @@ static int info_check(const struct cl_layer_info *h)
     return CL_OK;
 }
 
-/* Tile framing as the WebSocket frame will carry it: field, lod, and
- * header + payload_len == the span the offsets give it. */
+/* Tile framing as the WebSocket frame will carry it: field, encoded lod,
+ * cascade, and header + payload_len == the span the offsets give it. */
 static int tile_check(const uint8_t *t, uint32_t span, const struct cl_layer_info *h)
 {
-    if (span < OC_TILE_HEADER_SIZE || t[0] != h->field || t[1] != h->lod)
+    if (span < OC_TILE_HEADER_SIZE || t[0] != h->field || t[1] != h->encoded_lod || t[3] != h->cascade)
         return CL_E_CORRUPT;
     if ((uint64_t)OC_TILE_HEADER_SIZE + get32(t + 32) != span)
         return CL_E_CORRUPT;
@@ -206,7 +225,10 @@ long cl_layer_part_write(uint8_t *dst, size_t cap, const struct cl_layer_info *i
     put16(p + 46, (uint16_t)tile_count);
     put64(p + 48, info->server_time_us);
     put32(p + 56, end - base);
-    put32(p + 60, 0);
+    p[60] = info->cascade;
+    p[61] = info->ncascades;
+    p[62] = info->encoded_lod;
+    p[63] = 0;
     memcpy(p + 64, info->encoded, CL_KEY_BYTES);
     uint8_t *off = p + CL_LAYER_HEADER_SIZE;
     for (int i = 0; i <= tile_count; i++) {
@@ -264,8 +286,11 @@ int cl_layer_part_parse(const uint8_t *msg, size_t len, struct cl_layer_part *ou
     p.tile_count = get16(msg + 46);
     h->server_time_us = get64(msg + 48);
     p.data_len = get32(msg + 56);
+    h->cascade = msg[60];
+    h->ncascades = msg[61];
+    h->encoded_lod = msg[62];
     memcpy(h->encoded, msg + 64, CL_KEY_BYTES);
-    if (get32(msg + 60) != 0)
+    if (msg[63] != 0)
         return CL_E_CORRUPT;
     int rc = info_check(h);
     if (rc)
@@ -376,7 +401,8 @@ static bool info_same(const struct cl_layer_info *a, const struct cl_layer_info 
            a->params_version == b->params_version && a->n == b->n && a->tile_size == b->tile_size &&
            memcmp(&a->patch_size, &b->patch_size, sizeof a->patch_size) == 0 && a->frame_flags == b->frame_flags &&
            a->server_time_us == b->server_time_us && a->field == b->field && a->lod == b->lod &&
-           a->bound_index == b->bound_index && a->layer_flags == b->layer_flags &&
+           a->bound_index == b->bound_index && a->layer_flags == b->layer_flags && a->cascade == b->cascade &&
+           a->ncascades == b->ncascades && a->encoded_lod == b->encoded_lod &&
            a->tiles_per_side == b->tiles_per_side && memcmp(a->encoded, b->encoded, CL_KEY_BYTES) == 0;
 }
 
@@ -385,7 +411,7 @@ int cl_assembler_add(struct cl_assembler *a, const struct cl_layer_part *p, stru
     if (!a || !p || !out)
         return CL_E_ARG;
     *out = NULL;
-    struct slot *s = &a->slots[cl_key(p->info.field, p->info.lod, p->info.bound_index)];
+    struct slot *s = &a->slots[cl_info_key(&p->info)];
     if (p->tile_first == 0) {
         if (s->active)
             a->dropped++; /* a new layer began before the old one was complete */
@@ -482,7 +508,7 @@ long cl_envelope_write(uint8_t *dst, size_t cap, enum cl_kind kind, const char *
     origin = origin ? origin : "";
     by = by ? by : "";
     size_t ol = strlen(origin), bl = strlen(by);
-    if (!dst || kind < CL_KIND_CTL || kind > CL_KIND_DEMAND || !name_ok(origin, ol) || !name_ok(by, bl) ||
+    if (!dst || kind < CL_KIND_CTL || kind > CL_KIND_PROBE_DATA || !name_ok(origin, ol) || !name_ok(by, bl) ||
         body_len > CL_BODY_MAX || (body_len && !body))
         return CL_E_ARG;
     size_t size = CL_ENV_HEADER + ol + bl + body_len;
@@ -514,7 +540,7 @@ int cl_envelope_parse(const uint8_t *msg, size_t len, struct cl_envelope *out)
     unsigned kind = msg[5];
     size_t ol = msg[6], bl = msg[7];
     uint32_t body_len = get32(msg + 8);
-    if (kind < CL_KIND_CTL || kind > CL_KIND_DEMAND)
+    if (kind < CL_KIND_CTL || kind > CL_KIND_PROBE_DATA)
         return CL_E_CORRUPT;
     if (body_len > CL_BODY_MAX)
         return CL_E_TOO_LARGE;

@@ -55,7 +55,7 @@ struct out_item {
     uint8_t *buf;
 };
 
-enum in_type { IN_STATE, IN_REQUEST, IN_LAYER, IN_PARAMS, IN_REPLY };
+enum in_type { IN_STATE, IN_REQUEST, IN_LAYER, IN_PARAMS, IN_REPLY, IN_PROBE_DATA };
 struct in_event {
     struct in_event *next;
     enum in_type type;
@@ -78,7 +78,7 @@ struct pending {
     void *ctx;
 };
 
-enum sub_kind { SUB_CTL, SUB_HELLO, SUB_DEMAND, SUB_PARAMS, SUB_STATUS, SUB_INBOX, SUB_LAYER, SUB_KINDS };
+enum sub_kind { SUB_CTL, SUB_HELLO, SUB_DEMAND, SUB_PARAMS, SUB_STATUS, SUB_INBOX, SUB_LAYER, SUB_QUERY, SUB_PROBE, SUB_KINDS };
 struct sub_ctx {
     struct cl_link *l;
     enum sub_kind kind;
@@ -281,6 +281,10 @@ int cl_link_dispatch(struct cl_link *l)
             if (e->done)
                 e->done(e->ctx, e->status, e->text, e->len);
             break;
+        case IN_PROBE_DATA:
+            if (h->on_probe_data)
+                h->on_probe_data(u, e->by, e->text, e->len);
+            break;
         }
         event_free(e);
         e = next;
@@ -460,6 +464,31 @@ static void handle_status(struct cl_link *l, natsMsg *msg)
     }
 }
 
+static void handle_probe_data(struct cl_link *l, natsMsg *msg)
+{
+    struct cl_envelope env;
+    if (cl_envelope_parse((const uint8_t *)natsMsg_GetData(msg), (size_t)natsMsg_GetDataLength(msg), &env) != 0 ||
+        env.kind != CL_KIND_PROBE_DATA || !env.by[0]) {
+        STAT_ADD(l, bad_messages, 1);
+        return;
+    }
+    struct in_event *e = calloc(1, sizeof *e);
+    char *text = malloc((size_t)env.body_len + 1);
+    if (!e || !text) {
+        free(e);
+        free(text);
+        STAT_ADD(l, events_dropped, 1);
+        return;
+    }
+    memcpy(text, env.body, env.body_len);
+    text[env.body_len] = 0;
+    e->type = IN_PROBE_DATA;
+    strcpy(e->by, env.by);
+    e->text = text;
+    e->len = env.body_len;
+    push_event(l, e);
+}
+
 static void handle_reply(struct cl_link *l, natsMsg *msg)
 {
     const char *subj = natsMsg_GetSubject(msg);
@@ -467,6 +496,10 @@ static void handle_reply(struct cl_link *l, natsMsg *msg)
     char *end;
     if (strncmp(subj, l->inbox, il) != 0 || subj[il] != '.') {
         STAT_ADD(l, bad_messages, 1);
+        return;
+    }
+    if (strcmp(subj + il + 1, "p") == 0) { /* the sim's probe_data for our clients */
+        handle_probe_data(l, msg);
         return;
     }
     errno = 0;
@@ -517,7 +550,7 @@ static void handle_layer(struct cl_link *l, natsMsg *msg)
     pthread_mutex_lock(&l->in_lock);
     int rc = cl_assembler_add(l->assembler, &part, &layer);
     if (rc == 1) {
-        int key = cl_key(layer->info.field, layer->info.lod, layer->info.bound_index);
+        int key = cl_info_key(&layer->info);
         struct in_event *q = l->layer_ev[key];
         if (q) {
             /* latest layer wins: the lws thread has not taken the older one yet */
@@ -552,6 +585,8 @@ static void on_msg(natsConnection *nc, natsSubscription *sub, natsMsg *msg, void
     switch (c->kind) {
     case SUB_CTL: handle_request(l, msg, CL_KIND_CTL); break;
     case SUB_HELLO: handle_request(l, msg, CL_KIND_HELLO); break;
+    case SUB_QUERY: handle_request(l, msg, CL_KIND_QUERY); break;
+    case SUB_PROBE: handle_request(l, msg, CL_KIND_PROBE); break;
     case SUB_DEMAND: handle_demand(l, msg); break;
     case SUB_PARAMS: handle_params(l, msg); break;
     case SUB_STATUS: handle_status(l, msg); break;
@@ -596,9 +631,8 @@ static void sync_layer_subs(struct cl_link *l, const uint8_t want[CL_KEY_BYTES])
     for (int k = 0; k < CL_KEYS; k++) {
         bool on = cl_bit(want, k);
         if (on && !l->layer_subs[k]) {
-            int field = k / (CL_LODS * CL_BOUNDS), lod = (k / CL_BOUNDS) % CL_LODS, bi = k % CL_BOUNDS;
             char subj[CL_SUBJECT_MAX];
-            if (cl_subject_layer(subj, sizeof subj, l->prefix, field, lod, bi) == 0)
+            if (cl_subject_layer(subj, sizeof subj, l->prefix, k) == 0)
                 l->layer_subs[k] = subscribe(l, subj, SUB_LAYER);
         } else if (!on && l->layer_subs[k]) {
             unsubscribe(&l->layer_subs[k]);
@@ -624,7 +658,7 @@ static void publish_layer(struct cl_link *l, struct out_item *it, uint8_t **scra
         return;
     }
     char subj[CL_SUBJECT_MAX];
-    if (cl_subject_layer(subj, sizeof subj, l->prefix, it->info.field, it->info.lod, it->info.bound_index) != 0)
+    if (cl_subject_layer(subj, sizeof subj, l->prefix, cl_info_key(&it->info)) != 0)
         return;
     int64_t maxp = natsConnection_GetMaxPayload(l->nc);
     if (maxp <= 0)
@@ -943,10 +977,25 @@ int cl_edge_set_demand(struct cl_link *l, const uint8_t bits[CL_KEY_BYTES])
     return CL_OK;
 }
 
+int cl_sim_publish_probe_data(struct cl_link *l, const char *stream, const char *by, const char *text, size_t len)
+{
+    if (!l || l->cfg.role != CL_ROLE_SIM || !stream || !by || !by[0])
+        return CL_E_ARG;
+    pthread_mutex_lock(&l->out_lock);
+    bool full = l->out_bytes > l->cfg.outbox_max_bytes;
+    pthread_mutex_unlock(&l->out_lock);
+    if (full || !atomic_load(&l->connected)) {
+        STAT_ADD(l, events_dropped, 1);
+        return full ? CL_E_FULL : CL_E_NOT_CONNECTED;
+    }
+    return push_envelope(l, stream, NULL, CL_KIND_PROBE_DATA, by, text, len);
+}
+
 int cl_edge_request(struct cl_link *l, enum cl_kind kind, const char *by, const char *body, size_t len,
                     cl_reply_fn done, void *ctx)
 {
-    if (!l || l->cfg.role != CL_ROLE_EDGE || (kind != CL_KIND_CTL && kind != CL_KIND_HELLO))
+    if (!l || l->cfg.role != CL_ROLE_EDGE || (kind != CL_KIND_CTL && kind != CL_KIND_HELLO && kind != CL_KIND_QUERY &&
+                                             kind != CL_KIND_PROBE))
         return CL_E_ARG;
     STAT_ADD(l, requests_sent, 1);
     if (!atomic_load(&l->connected)) {
@@ -960,13 +1009,15 @@ int cl_edge_request(struct cl_link *l, enum cl_kind kind, const char *by, const 
     p->ctx = ctx;
     pthread_mutex_lock(&l->out_lock);
     p->id = ++l->next_id;
-    p->deadline = mono_now() + l->cfg.request_timeout_s;
+    p->deadline = mono_now() + (kind == CL_KIND_QUERY ? l->cfg.query_timeout_s : l->cfg.request_timeout_s);
     p->next = l->pending;
     l->pending = p;
     pthread_mutex_unlock(&l->out_lock);
     char reply[CL_SUBJECT_MAX + 24]; /* push_envelope refuses one over CL_SUBJECT_MAX */
     snprintf(reply, sizeof reply, "%s.%llu", l->inbox, (unsigned long long)p->id);
-    int rc = push_envelope(l, l->subj[kind == CL_KIND_CTL ? SUB_CTL : SUB_HELLO], reply, kind, by, body, len);
+    enum sub_kind sk = kind == CL_KIND_CTL ? SUB_CTL : kind == CL_KIND_HELLO ? SUB_HELLO
+                     : kind == CL_KIND_QUERY ? SUB_QUERY : SUB_PROBE;
+    int rc = push_envelope(l, l->subj[sk], reply, kind, by, body, len);
     if (rc != CL_OK) {
         pthread_mutex_lock(&l->out_lock);
         for (struct pending **pp = &l->pending; *pp; pp = &(*pp)->next)
@@ -1083,6 +1134,8 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
         c->sim_timeout_s = 2.0;
     if (c->request_timeout_s <= 0)
         c->request_timeout_s = 2.0;
+    if (c->query_timeout_s <= 0)
+        c->query_timeout_s = 5.0;
     if (c->reconnect_min_s <= 0)
         c->reconnect_min_s = 0.1;
     if (c->reconnect_max_s < c->reconnect_min_s)
@@ -1113,6 +1166,8 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
         l->sctx[i] = (struct sub_ctx){ .l = l, .kind = (enum sub_kind)i };
     cl_subject(l->subj[SUB_CTL], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_CTL);
     cl_subject(l->subj[SUB_HELLO], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_HELLO);
+    cl_subject(l->subj[SUB_QUERY], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_QUERY);
+    cl_subject(l->subj[SUB_PROBE], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_PROBE);
     cl_subject(l->subj[SUB_DEMAND], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_DEMAND);
     cl_subject(l->subj[SUB_PARAMS], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_PARAMS);
     cl_subject(l->subj[SUB_STATUS], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_STATUS);
@@ -1166,6 +1221,8 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
     if (c->role == CL_ROLE_SIM) {
         if (!(l->subs[SUB_CTL] = subscribe(l, l->subj[SUB_CTL], SUB_CTL)) ||
             !(l->subs[SUB_HELLO] = subscribe(l, l->subj[SUB_HELLO], SUB_HELLO)) ||
+            !(l->subs[SUB_QUERY] = subscribe(l, l->subj[SUB_QUERY], SUB_QUERY)) ||
+            !(l->subs[SUB_PROBE] = subscribe(l, l->subj[SUB_PROBE], SUB_PROBE)) ||
             !(l->subs[SUB_DEMAND] = subscribe(l, l->subj[SUB_DEMAND], SUB_DEMAND))) {
             set_err(err, errlen, "NATS subscribe", NATS_ERR);
             goto fail_conn;

@@ -38,6 +38,13 @@ void net_send_text(struct net *n, uint64_t serial, const char *text)
         session_queue_text(s, text, false);
 }
 
+void net_send_probe_data(struct net *n, uint64_t serial, const char *text)
+{
+    struct session *s = session_find(n, serial);
+    if (s && s->wsi && !s->closing && s->tq.count < NET_PROBE_QUEUE_MAX)
+        session_queue_text(s, text, false);
+}
+
 static void send_all(struct net *n, const char *text, const char *skip_client)
 {
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)

@@ -28,8 +28,6 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
     for (int c = 0; c < CTL_MAX_CASCADES; c++) {
         int lod, bound_index;
         unsigned fields = subscription_cascade(sub, c, &lod, &bound_index);
-        if (c > 0 && n->cluster.demand)
-            break; /* edge: the cluster relays cascade 0 only */
         for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
             if (fields & OCEAN_FIELD_BIT(f)) {
                 int key = layer_key_cascade(c, f, c == 0 ? subscription_lod(sub, f) : lod, bound_index);
@@ -94,8 +92,16 @@ void dispatch_free_requests(struct net *n)
     }
 }
 
+static struct remote_query *remote_query_of(lws_dll2_t *d) { return lws_container_of(d, struct remote_query, list); }
+
 void net_drop_remote_requests(struct net *n)
 {
+    while (n->remote_queries.head) {
+        struct remote_query *rq = remote_query_of(n->remote_queries.head);
+        lws_dll2_remove(&rq->list);
+        rq->reply(rq->reply_ctx, NULL);
+        free(rq);
+    }
     for (lws_dll2_t *d = lws_dll2_get_head(&n->requests), *next; d; d = next) {
         next = d->next;
         struct request *r = request_of(d);
@@ -384,13 +390,17 @@ bool dispatch_take_token(struct net *n, struct session *s, const char *text, siz
 
 /* ---- point queries and probes (query_worker.c does the work) ---- */
 
-#define PROBE_QUEUE_MAX 16 /* JSON messages queued: a client this far behind misses probe ticks */
-
-static void dispatch_query(struct net *n, struct session *s, const cJSON *root, const cJSON *id)
+static void dispatch_query(struct net *n, struct session *s, const cJSON *root, const cJSON *id, const char *text,
+                           size_t len)
 {
     struct ctl_error e;
     struct query_req *r = malloc(sizeof *r); /* 4 kB of points: not on the stack */
-    if (!r || !n->queries) {
+    if (r && n->cluster.forward_query) { /* edge: the sim answers; bad ones are refused here */
+        if (query_parse(root, r, &e) != 0)
+            session_send_error(s, &e, id);
+        else
+            n->cluster.forward_query(n->cluster.user, s->serial, s->client_id, id, text, len);
+    } else if (!r || !n->queries) {
         struct ctl_error oom = { .code = "internal", .message = "point queries are not available" };
         session_send_error(s, &oom, id);
     } else if (query_parse(root, r, &e) != 0 ||
@@ -400,11 +410,55 @@ static void dispatch_query(struct net *n, struct session *s, const cJSON *root, 
     free(r);
 }
 
-static void dispatch_probe(struct net *n, struct session *s, const cJSON *root, const cJSON *id)
+void net_remote_query(struct net *n, const char *text, size_t len, net_reply_fn reply, void *ctx)
+{
+    struct remote rm = { .origin = "", .by = "", .reply = reply, .ctx = ctx };
+    atomic_fetch_add(&g_metrics.control_messages, 1);
+    struct ctl_msg m;
+    struct ctl_error e;
+    cJSON *bad_id = NULL;
+    if (control_parse(text, len, &m, &bad_id, &e) != 0) {
+        respond_error(NULL, &rm, &e, bad_id);
+        cJSON_Delete(bad_id);
+        return;
+    }
+    struct query_req *r = malloc(sizeof *r);
+    struct remote_query *rq = calloc(1, sizeof *rq);
+    if (m.type != CTL_QUERY) {
+        struct ctl_error f = { .code = "bad_message", .message = "only query goes to the simulation's query workers" };
+        respond_error(NULL, &rm, &f, m.id);
+    } else if (!r || !rq || !n->queries || !n->sim) {
+        struct ctl_error f = { .code = "internal", .message = "point queries are not available" };
+        respond_error(NULL, &rm, &f, m.id);
+    } else if (query_parse(m.root, r, &e) == 0) {
+        rq->serial = net_remote_serial(n);
+        rq->reply = reply;
+        rq->reply_ctx = ctx;
+        if (query_submit(n->queries, rq->serial, m.id, r, sim_time_now(n->sim), &e) == 0) {
+            lws_dll2_add_tail(&rq->list, &n->remote_queries);
+            rq = NULL; /* answered from dispatch_query_results */
+        } else {
+            respond_error(NULL, &rm, &e, m.id);
+        }
+    } else {
+        respond_error(NULL, &rm, &e, m.id);
+    }
+    free(rq);
+    free(r);
+    ctl_msg_free(&m);
+}
+
+static void dispatch_probe(struct net *n, struct session *s, const cJSON *root, const cJSON *id, const char *text,
+                           size_t len)
 {
     struct ctl_error e;
     struct probe_req *p = malloc(sizeof *p);
-    if (!p || !n->queries) {
+    if (p && n->cluster.forward_probe) { /* edge: the sim probes; bad ones are refused here */
+        if (probe_parse(root, n->dc.probe_max_points, p, &e) != 0)
+            session_send_error(s, &e, id);
+        else
+            n->cluster.forward_probe(n->cluster.user, s->serial, s->client_id, id, text, len);
+    } else if (!p || !n->queries) {
         struct ctl_error oom = { .code = "internal", .message = "probes are not available" };
         session_send_error(s, &oom, id);
     } else if (probe_parse(root, n->dc.probe_max_points, p, &e) != 0 ||
@@ -416,13 +470,67 @@ static void dispatch_probe(struct net *n, struct session *s, const cJSON *root, 
     free(p);
 }
 
+uint64_t net_remote_serial(struct net *n) { return NET_REMOTE_SERIAL | ++n->next_remote; }
+
+char *net_remote_probe(struct net *n, uint64_t serial, const char *text, size_t len, int *npoints)
+{
+    *npoints = -1;
+    atomic_fetch_add(&g_metrics.control_messages, 1);
+    struct ctl_msg m;
+    struct ctl_error e;
+    cJSON *bad_id = NULL, *answer;
+    if (control_parse(text, len, &m, &bad_id, &e) != 0) {
+        atomic_fetch_add(&g_metrics.control_errors, 1);
+        answer = control_error_msg(&e, bad_id);
+        cJSON_Delete(bad_id);
+        return control_print(answer);
+    }
+    struct probe_req *p = malloc(sizeof *p);
+    if (m.type != CTL_PROBE) {
+        struct ctl_error f = { .code = "bad_message", .message = "only probe goes to the simulation's probes" };
+        answer = control_error_msg(&f, m.id);
+    } else if (!p || !n->queries) {
+        struct ctl_error f = { .code = "internal", .message = "probes are not available" };
+        answer = control_error_msg(&f, m.id);
+    } else if (probe_parse(m.root, n->dc.probe_max_points, p, &e) != 0 ||
+               query_probe_set(n->queries, serial, p, &e) != 0) {
+        answer = control_error_msg(&e, m.id);
+    } else {
+        answer = probing_msg(m.id, p->n, (const double(*)[2])p->xz);
+        *npoints = p->n;
+    }
+    if (*npoints < 0)
+        atomic_fetch_add(&g_metrics.control_errors, 1);
+    free(p);
+    ctl_msg_free(&m);
+    return control_print(answer);
+}
+
+void net_remote_probe_gone(struct net *n, uint64_t serial) { query_client_gone(n->queries, serial); }
+
 void dispatch_query_results(struct net *n)
 {
     struct query_out *o = query_take_results(n->queries);
     while (o) {
         struct query_out *next = o->next;
+        if (o->serial & NET_REMOTE_SERIAL) { /* sim role: an edge's client asked */
+            if (o->probe && n->cluster.on_probe_data)
+                n->cluster.on_probe_data(n->cluster.user, o->serial, o->text);
+            for (lws_dll2_t *d = lws_dll2_get_head(&n->remote_queries); d && !o->probe; d = d->next) {
+                struct remote_query *rq = remote_query_of(d);
+                if (rq->serial == o->serial) {
+                    lws_dll2_remove(&rq->list);
+                    rq->reply(rq->reply_ctx, o->text);
+                    free(rq);
+                    break;
+                }
+            }
+            query_out_free(o);
+            o = next;
+            continue;
+        }
         struct session *s = session_find(n, o->serial);
-        if (s && s->wsi && !s->closing && !(o->probe && s->tq.count >= PROBE_QUEUE_MAX))
+        if (s && s->wsi && !s->closing && !(o->probe && s->tq.count >= NET_PROBE_QUEUE_MAX))
             session_queue_text(s, o->text, false);
         query_out_free(o);
         o = next;
@@ -528,10 +636,10 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         session_queue_json(s, control_named_msg(s->name, m.id));
         break;
     case CTL_QUERY:
-        dispatch_query(n, s, m.root, m.id);
+        dispatch_query(n, s, m.root, m.id, text, len);
         break;
     case CTL_PROBE:
-        dispatch_probe(n, s, m.root, m.id);
+        dispatch_probe(n, s, m.root, m.id, text, len);
         break;
     }
     ctl_msg_free(&m);

@@ -110,6 +110,18 @@ struct request {
     uint64_t mask;                /* ...replayed onto the applied params to rebuild the view */
 };
 
+/* sim role: a `query` from a client of an edge, in the query workers under
+ * a serial of its own (NET_REMOTE_SERIAL set: never a session's), answered
+ * through reply(reply_ctx) when the result comes back. */
+#define NET_REMOTE_SERIAL (1ull << 63)
+#define NET_PROBE_QUEUE_MAX 16 /* JSON messages queued: a client this far behind misses probe ticks */
+struct remote_query {
+    lws_dll2_t list;              /* in net.remote_queries */
+    uint64_t serial;
+    net_reply_fn reply;
+    void *reply_ctx;
+};
+
 /* Per-connection data of the HTTP protocol. */
 struct http_session {
     unsigned char *body;          /* LWS_PRE + len */
@@ -153,6 +165,8 @@ struct net {
     /* Cluster roles (net.h, cluster.c); all zero for --role all. */
     struct net_cluster_hooks cluster; /* main writes (net_set_cluster) before the loop */
     char *status_text;            /* edge: {"type":"status",...} for new clients, NULL = healthy */
+    lws_dll2_owner_t remote_queries; /* sim: struct remote_query, queries of edges' clients in the workers */
+    uint64_t next_remote;         /* sim: last remote query / probe serial handed out (net_remote_serial) */
     uint64_t published;           /* edge: frames handed to net_publish_frame (frame.index) */
 };
 

@@ -168,6 +168,8 @@ static void session_close(struct net *n, struct session *s)
     fanout_want_keyframes(n, s, false);
     dispatch_demand(n, &s->sub, -1);
     query_client_gone(n->queries, s->serial);
+    if (n->cluster.client_gone) /* edge: its probe at the sim ends */
+        n->cluster.client_gone(n->cluster.user, s->serial);
     while (s->tq.head) {
         struct text *t = lws_container_of(s->tq.head, struct text, list);
         lws_dll2_remove(&t->list);

@@ -42,6 +42,8 @@ static inline int gen_layer_make(struct gen_layer *g, int n, int tile_size, int 
     h->lod = (uint8_t)lod;
     h->bound_index = (uint8_t)bound;
     h->tiles_per_side = (uint16_t)(n / tile_size);
+    h->ncascades = 1;
+    h->encoded_lod = (uint8_t)lod;
     cl_bit_set(h->encoded, cl_key(field, lod, bound), true);
     int total = h->tiles_per_side * h->tiles_per_side;
     g->tile_off = malloc(sizeof(uint32_t) * ((size_t)total + 1));
@@ -72,6 +74,20 @@ static inline int gen_layer_make(struct gen_layer *g, int n, int tile_size, int 
     return 0;
 }
 
+/* Makes it a layer of cascade `cascade` of `ncascades`: header, encoded bit
+ * and every tile header's flags byte (PROTOCOL.md §3.2). */
+static inline void gen_layer_cascade(struct gen_layer *g, int cascade, int ncascades)
+{
+    struct cl_layer_info *h = &g->info;
+    cl_bit_set(h->encoded, cl_info_key(h), false);
+    h->cascade = (uint8_t)cascade;
+    h->ncascades = (uint8_t)ncascades;
+    cl_bit_set(h->encoded, cl_info_key(h), true);
+    int total = h->tiles_per_side * h->tiles_per_side;
+    for (int t = 0; t < total; t++)
+        g->data[g->tile_off[t] + 3] = (uint8_t)cascade;
+}
+
 static inline void gen_layer_free(struct gen_layer *g)
 {
     free(g->data);
@@ -87,6 +103,7 @@ static inline int gen_layer_equal(const struct gen_layer *g, const struct cl_lay
         a->n != b->n || a->tile_size != b->tile_size || a->patch_size != b->patch_size ||
         a->frame_flags != b->frame_flags || a->server_time_us != b->server_time_us || a->field != b->field ||
         a->lod != b->lod || a->bound_index != b->bound_index || a->layer_flags != b->layer_flags ||
+        a->cascade != b->cascade || a->ncascades != b->ncascades || a->encoded_lod != b->encoded_lod ||
         a->tiles_per_side != b->tiles_per_side || memcmp(a->encoded, b->encoded, CL_KEY_BYTES) != 0)
         return 0;
     int total = a->tiles_per_side * a->tiles_per_side;

@@ -43,32 +43,45 @@ static void test_subjects(void)
     CHECK(cl_prefix_valid(longp + 1), "a %d-character prefix should be valid", CL_PREFIX_MAX);
 
     char s[CL_SUBJECT_MAX];
-    CHECK(cl_subject_layer(s, sizeof s, "sea", 0, 0, 2) == 0 && strcmp(s, "sea.frame.height.0.2") == 0,
+    CHECK(cl_subject_layer(s, sizeof s, "sea", cl_key(0, 0, 2)) == 0 && strcmp(s, "sea.frame.0.height.0.2") == 0,
           "layer subject: %s", s);
+    CHECK(cl_subject_layer(s, sizeof s, "sea", cl_key_cascade(2, 0, 1, 4)) == 0 &&
+          strcmp(s, "sea.frame.2.height.1.4") == 0, "cascade 2 layer subject: %s", s);
     CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_DEMAND) == 0 && strcmp(s, "eu.sea.demand") == 0, "demand: %s", s);
     CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_CTL) == 0 && strcmp(s, "eu.sea.ctl") == 0, "ctl: %s", s);
+    CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_QUERY) == 0 && strcmp(s, "eu.sea.query") == 0, "query: %s", s);
+    CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_PROBE) == 0 && strcmp(s, "eu.sea.probe") == 0, "probe: %s", s);
+    CHECK(cl_subject(s, sizeof s, "eu.sea", (enum cl_subject)(CL_SUBJ_PROBE + 1)) == CL_E_ARG, "unknown subject");
+    CHECK(cl_probe_stream_subject("_INBOX.abc.17", s, sizeof s) == 0 && strcmp(s, "_INBOX.abc.p") == 0,
+          "probe stream: %s", s);
+    CHECK(cl_probe_stream_subject("nodot", s, sizeof s) == CL_E_ARG, "probe stream of a subject without a dot");
+    CHECK(cl_probe_stream_subject(".x", s, sizeof s) == CL_E_ARG, "probe stream of an empty inbox");
+    CHECK(cl_probe_stream_subject("_INBOX.abc.17", s, 8) == CL_E_TOO_LARGE, "probe stream: small buffer");
     CHECK(cl_subject(s, sizeof s, "a*", CL_SUBJ_CTL) == CL_E_ARG, "bad prefix accepted");
-    CHECK(cl_subject_layer(s, sizeof s, "sea", CL_FIELDS, 0, 0) == CL_E_ARG, "field out of range accepted");
-    CHECK(cl_subject_layer(s, sizeof s, "sea", 0, CL_LODS, 0) == CL_E_ARG, "lod out of range accepted");
-    CHECK(cl_subject_layer(s, sizeof s, "sea", 0, 0, CL_BOUNDS) == CL_E_ARG, "bound out of range accepted");
-    CHECK(cl_subject_layer(s, 10, "sea", 0, 0, 0) == CL_E_TOO_LARGE, "small buffer not reported");
+    CHECK(cl_subject_layer(s, sizeof s, "sea", CL_KEYS) == CL_E_ARG, "key out of range accepted");
+    CHECK(cl_subject_layer(s, sizeof s, "sea", -1) == CL_E_ARG, "negative key accepted");
+    CHECK(cl_subject_layer(s, 10, "sea", 0) == CL_E_TOO_LARGE, "small buffer not reported");
 
-    /* every key round-trips through its subject, and all subjects differ */
+    /* every key of every cascade round-trips through its subject, and all subjects differ */
     int ok = 1;
-    for (int f = 0; f < CL_FIELDS; f++)
-        for (int l = 0; l < CL_LODS; l++)
-            for (int b = 0; b < CL_BOUNDS; b++) {
-                cl_subject_layer(s, sizeof s, "x.y", f, l, b);
-                if (cl_subject_layer_parse(s, "x.y") != cl_key(f, l, b))
-                    ok = 0;
-            }
+    for (int c = 0; c < CL_CASCADES; c++)
+        for (int f = 0; f < CL_FIELDS; f++)
+            for (int l = 0; l < CL_LODS; l++)
+                for (int b = 0; b < CL_BOUNDS; b++) {
+                    int k = cl_key_cascade(c, f, l, b);
+                    cl_subject_layer(s, sizeof s, "x.y", k);
+                    if (cl_subject_layer_parse(s, "x.y") != k || cl_key_which_cascade(k) != c ||
+                        cl_key_field(k) != f || cl_key_lod(k) != l || cl_key_bound(k) != b)
+                        ok = 0;
+                }
     CHECK(ok, "some layer subject does not parse back to its key");
-    const char *bad_subj[] = { "x.y.frame.height.0", "x.y.frame.height.0.2.3", "x.y.frame.sky.0.0",
-                               "x.y.frame.height.5.0", "x.y.frame.height.0.5", "x.y.frames.height.0.0",
-                               "x.z.frame.height.0.0", "x.y.frame.height.00.0", NULL };
+    const char *bad_subj[] = { "x.y.frame.0.height.0", "x.y.frame.0.height.0.2.3", "x.y.frame.0.sky.0.0",
+                               "x.y.frame.0.height.5.0", "x.y.frame.0.height.0.5", "x.y.frames.0.height.0.0",
+                               "x.z.frame.0.height.0.0", "x.y.frame.0.height.00.0", "x.y.frame.height.0.0",
+                               "x.y.frame.4.height.0.0", "x.y.frame.01.height.0.0", "x.y.frame.-1.height.0.0", NULL };
     for (int i = 0; bad_subj[i]; i++)
         CHECK(cl_subject_layer_parse(bad_subj[i], "x.y") < 0, "subject %s should not parse", bad_subj[i]);
-    CHECK(cl_key(CL_FIELDS - 1, CL_LODS - 1, CL_BOUNDS - 1) == CL_KEYS - 1, "keys not dense");
+    CHECK(cl_key_cascade(CL_CASCADES - 1, CL_FIELDS - 1, CL_LODS - 1, CL_BOUNDS - 1) == CL_KEYS - 1, "keys not dense");
 }
 
 /* ---- layer parts ---- */
@@ -144,8 +157,8 @@ static void expect_bad(const char *what, void (*mutate)(uint8_t *msg), int want)
     gen_layer_free(&g);
 }
 static void m_magic(uint8_t *m) { m[3] = 'X'; }
-static void m_version(uint8_t *m) { m[4] = 2; }
-static void m_hsize(uint8_t *m) { m[6] = 95; }
+static void m_version(uint8_t *m) { m[4] = 1; } /* version 1: cascade 0 only, 32-byte bitmaps */
+static void m_hsize(uint8_t *m) { m[6] = CL_LAYER_HEADER_SIZE - 1; }
 static void m_field(uint8_t *m) { m[38] = CL_FIELDS; }
 static void m_lod(uint8_t *m) { m[39] = CL_LODS; }
 static void m_bound(uint8_t *m) { m[40] = CL_BOUNDS; }
@@ -153,15 +166,22 @@ static void m_tps(uint8_t *m) { m[42] = 3; }
 static void m_n(uint8_t *m) { m[28] = 48; } /* 48 / tile_size 16 = 3 tiles per side, header says 2 */
 static void m_tile_count(uint8_t *m) { m[46] = 5; }
 static void m_tile_first(uint8_t *m) { m[44] = 1; }
-static void m_reserved(uint8_t *m) { m[60] = 1; }
-static void m_encoded(uint8_t *m) { memset(m + 64, 0, 32); }
-static void m_encoded_high(uint8_t *m) { m[95] = 0x80; }
+static void m_reserved(uint8_t *m) { m[63] = 1; }
+static void m_cascade(uint8_t *m) { m[60] = 1; }      /* cascade 1 of 1 */
+static void m_ncascades0(uint8_t *m) { m[61] = 0; }
+static void m_ncascades5(uint8_t *m) { m[61] = 5; }
+static void m_encoded_lod(uint8_t *m) { m[62] = CL_LODS; }
+static void m_encoded(uint8_t *m) { memset(m + 64, 0, CL_KEY_BYTES); }
+static void m_encoded_high(uint8_t *m) { m[64 + CL_KEY_BYTES - 1] = 0x80; }
 static void m_simtime(uint8_t *m) { memset(m + 16, 0xff, 8); } /* NaN */
 static void m_patch(uint8_t *m) { memset(m + 32, 0, 4); }
-static void m_off0(uint8_t *m) { m[96] = 1; }
-static void m_off_order(uint8_t *m) { m[100] = 0; m[101] = 0; m[102] = 0; m[103] = 0; }
-static void m_tile_field(uint8_t *m) { m[96 + 5 * 4] = 1; } /* first tile's header says field 1 */
-static void m_tile_len(uint8_t *m) { m[96 + 5 * 4 + 32] ^= 1; }
+#define HS CL_LAYER_HEADER_SIZE
+static void m_off0(uint8_t *m) { m[HS] = 1; }
+static void m_off_order(uint8_t *m) { m[HS + 4] = 0; m[HS + 5] = 0; m[HS + 6] = 0; m[HS + 7] = 0; }
+static void m_tile_field(uint8_t *m) { m[HS + 5 * 4] = 1; } /* first tile's header says field 1 */
+static void m_tile_lod(uint8_t *m) { m[HS + 5 * 4 + 1] = 1; } /* ... lod 1 (the layer's encoded_lod is 0) */
+static void m_tile_cascade(uint8_t *m) { m[HS + 5 * 4 + 3] = 1; } /* ... cascade 1 (flags bits 0-1) */
+static void m_tile_len(uint8_t *m) { m[HS + 5 * 4 + 32] ^= 1; }
 static void m_layer_flags(uint8_t *m) { m[41] = 2; }
 
 static void test_part_rejects(void)
@@ -178,6 +198,10 @@ static void test_part_rejects(void)
     expect_bad("tile count", m_tile_count, CL_E_CORRUPT);
     expect_bad("tile first + count beyond the layer", m_tile_first, CL_E_CORRUPT);
     expect_bad("reserved", m_reserved, CL_E_CORRUPT);
+    expect_bad("cascade not in force", m_cascade, CL_E_CORRUPT);
+    expect_bad("0 cascades", m_ncascades0, CL_E_CORRUPT);
+    expect_bad("5 cascades", m_ncascades5, CL_E_CORRUPT);
+    expect_bad("encoded_lod beyond the LODs", m_encoded_lod, CL_E_CORRUPT);
     expect_bad("own key not in encoded", m_encoded, CL_E_CORRUPT);
     expect_bad("key bit beyond CL_KEYS", m_encoded_high, CL_E_CORRUPT);
     expect_bad("sim_time NaN", m_simtime, CL_E_CORRUPT);
@@ -185,6 +209,8 @@ static void test_part_rejects(void)
     expect_bad("first offset not 0", m_off0, CL_E_CORRUPT);
     expect_bad("offsets out of order", m_off_order, CL_E_CORRUPT);
     expect_bad("tile header field", m_tile_field, CL_E_CORRUPT);
+    expect_bad("tile header lod", m_tile_lod, CL_E_CORRUPT);
+    expect_bad("tile header cascade", m_tile_cascade, CL_E_CORRUPT);
     expect_bad("tile payload_len", m_tile_len, CL_E_CORRUPT);
     expect_bad("layer flags", m_layer_flags, CL_E_CORRUPT);
 }
@@ -262,6 +288,74 @@ static void test_split_assemble(void)
     gen_layer_free(&g);
 }
 
+/* The finer cascades (PROTOCOL.md §4.1): same field, LOD and bound in two
+ * cascades are two layers, assembled side by side (parts interleaved) and
+ * collected into one frame, cascade 0's first. */
+static void test_cascades(void)
+{
+    current = "cascades";
+    struct gen_layer g0, g2;
+    gen_layer_make(&g0, 128, 16, 0, 1, 4, 50, 900, 11);
+    gen_layer_make(&g2, 128, 16, 0, 1, 4, 50, 900, 12);
+    gen_layer_cascade(&g0, 0, 3);
+    gen_layer_cascade(&g2, 2, 3);
+    const int k0 = cl_key_cascade(0, 0, 1, 4), k2 = cl_key_cascade(2, 0, 1, 4);
+    CHECK(cl_info_key(&g2.info) == k2 && k2 != k0, "cascade 2's key");
+    cl_bit_set(g0.info.encoded, k2, true); /* both encoded this tick */
+    cl_bit_set(g2.info.encoded, k0, true);
+    const size_t maxp = 8192;
+    const int total = 64;
+    uint8_t *buf = malloc(maxp);
+    struct cl_assembler *a = cl_assembler_new();
+    struct cl_layer *got[2] = { NULL, NULL };
+    int first[2] = { 0, 0 }, parts = 0;
+    struct gen_layer *gs[2] = { &g0, &g2 };
+    while (first[0] < total || first[1] < total)
+        for (int i = 0; i < 2; i++) {
+            if (first[i] >= total)
+                continue;
+            int k = cl_layer_part_tiles(gs[i]->tile_off, first[i], total, maxp);
+            long w = cl_layer_part_write(buf, maxp, &gs[i]->info, first[i], k, gs[i]->data, gs[i]->tile_off);
+            struct cl_layer_part p;
+            int rc = w > 0 ? cl_layer_part_parse(buf, (size_t)w, &p) : (int)w;
+            CHECK(rc == 0, "cascade %d part at %d: %s", gs[i]->info.cascade, first[i], cl_strerror(rc));
+            if (rc != 0)
+                goto out;
+            struct cl_layer *l = NULL;
+            rc = cl_assembler_add(a, &p, &l);
+            CHECK(rc == (first[i] + k == total ? 1 : 0), "assembler: %d", rc);
+            if (l)
+                got[i] = l;
+            first[i] += k;
+            parts++;
+        }
+    CHECK(parts > 4 && cl_assembler_dropped(a) == 0, "interleaved parts dropped a layer (%d parts)", parts);
+    CHECK(got[0] && gen_layer_equal(&g0, got[0]), "cascade 0 layer differs");
+    CHECK(got[1] && gen_layer_equal(&g2, got[1]) && got[1]->info.cascade == 2 && got[1]->info.ncascades == 3,
+          "cascade 2 layer differs");
+    if (got[0] && got[1]) {
+        uint8_t want[CL_KEY_BYTES] = { 0 };
+        cl_bit_set(want, k0, true);
+        cl_bit_set(want, k2, true);
+        struct cl_collector *c = cl_collector_new();
+        struct cl_frame_set *out[2] = { NULL, NULL };
+        CHECK(cl_collector_add(c, got[1], want, out) == 0, "cascade 2 alone is not the frame");
+        CHECK(cl_collector_add(c, got[0], want, out) == 1 && out[0]->nlayers == 2 && !out[0]->partial &&
+              out[0]->layers[0]->info.cascade == 0 && out[0]->layers[1]->info.cascade == 2 &&
+              out[0]->hdr.ncascades == 3, "one frame of both cascades, cascade 0 first");
+        got[0] = got[1] = NULL;
+        cl_frame_set_free(out[0]);
+        cl_collector_free(c);
+    }
+out:
+    cl_layer_free(got[0]);
+    cl_layer_free(got[1]);
+    cl_assembler_free(a);
+    free(buf);
+    gen_layer_free(&g0);
+    gen_layer_free(&g2);
+}
+
 /* ---- envelopes ---- */
 
 static void test_envelope(void)
@@ -283,15 +377,17 @@ static void test_envelope(void)
     CHECK(trunc_ok, "a truncated envelope parsed");
     m[5] = 0;
     CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "kind 0 accepted");
-    m[5] = 7;
-    CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "kind 7 accepted");
+    m[5] = CL_KIND_PROBE_DATA + 1;
+    CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "kind %d accepted", CL_KIND_PROBE_DATA + 1);
+    m[5] = CL_KIND_PROBE_DATA;
+    CHECK(cl_envelope_parse(m, size, &e) == 0 && e.kind == CL_KIND_PROBE_DATA, "kind PROBE_DATA refused");
     m[5] = CL_KIND_CTL;
     m[12] = ' ';
     CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "a space in origin accepted");
     m[12] = 'e';
-    m[4] = 2;
-    CHECK(cl_envelope_parse(m, size, &e) == CL_E_VERSION, "version 2 accepted");
     m[4] = 1;
+    CHECK(cl_envelope_parse(m, size, &e) == CL_E_VERSION, "version 1 (32-byte demand bitmaps) accepted");
+    m[4] = CL_ENV_VERSION;
     m[8] = (uint8_t)(m[8] - 1);
     CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "a byte after the body accepted");
     free(m);
@@ -510,6 +606,7 @@ int main(void)
     test_part_roundtrip();
     test_part_rejects();
     test_split_assemble();
+    test_cascades();
     test_assembler_budget();
     test_envelope();
     test_demand();

@@ -185,6 +185,8 @@ struct obs {
     int nreqs;
     char params_text[256], params_origin[CL_NAME_MAX], params_by[CL_NAME_MAX];
     int nparams;
+    char probe_text[256], probe_by[CL_NAME_MAX];
+    int nprobe;
 };
 
 struct reply_box {
@@ -221,7 +223,7 @@ static void h_request(void *user, struct cl_request *req)
 static void h_layer(void *user, struct cl_layer *l)
 {
     struct obs *o = user;
-    int k = cl_key(l->info.field, l->info.lod, l->info.bound_index);
+    int k = cl_info_key(&l->info);
     cl_layer_free(o->layers[k]);
     o->layers[k] = l;
     o->nlayers++;
@@ -233,6 +235,13 @@ static void h_params(void *user, const char *origin, const char *by, const char 
     snprintf(o->params_origin, sizeof o->params_origin, "%s", origin);
     snprintf(o->params_by, sizeof o->params_by, "%s", by);
     o->nparams++;
+}
+static void h_probe_data(void *user, const char *by, const char *text, size_t len)
+{
+    struct obs *o = user;
+    snprintf(o->probe_text, sizeof o->probe_text, "%.*s", (int)len, text);
+    snprintf(o->probe_by, sizeof o->probe_by, "%s", by);
+    o->nprobe++;
 }
 static void h_reply(void *ctx, int status, const char *text, size_t len)
 {
@@ -299,7 +308,8 @@ static struct cl_link *open_link_ex(struct obs *o, enum cl_role role, const char
         .demand_ttl_s = 1.5, .sim_timeout_s = 1.0, .request_timeout_s = 3.0,
         .reconnect_min_s = 0.05, .reconnect_max_s = 0.5,
         .wake = wake, .user = o,
-        .h = { .on_state = h_state, .on_request = h_request, .on_layer = h_layer, .on_params = h_params },
+        .h = { .on_state = h_state, .on_request = h_request, .on_layer = h_layer, .on_params = h_params,
+               .on_probe_data = h_probe_data },
     };
     o->link = cl_link_open(&c, err, sizeof err);
     if (!o->link && !may_fail)
@@ -348,6 +358,7 @@ static bool p_reply(void *a) { return ((struct reply_box *)a)->done; }
 struct reqwant { struct obs *o; int n; };
 static bool p_reqs(void *a) { return ((struct reqwant *)a)->o->nreqs >= ((struct reqwant *)a)->n; }
 struct parwant { struct obs *o; int n; };
+static bool p_probe(void *a) { return ((struct parwant *)a)->o->nprobe >= ((struct parwant *)a)->n; }
 static bool p_params(void *a) { return ((struct parwant *)a)->o->nparams >= ((struct parwant *)a)->n; }
 static atomic_int released;
 static void release_cb(void *ctx) { atomic_fetch_add(&released, 1); }
@@ -516,6 +527,38 @@ int main(void)
         }
         CHECK(cl_edge_request(ea.link, CL_KIND_REPLY, "c1", "x", 1, h_reply, &rb) == CL_E_ARG,
               "a request of kind reply accepted");
+        /* a query and a probe go to their own subjects; probe_data then streams to the
+         * edge that asked (its inbox + ".p"), for the client it names, and to no other edge */
+        const char *q = "{\"type\":\"query\",\"id\":3,\"points\":[[1,2]]}";
+        const char *pr = "{\"type\":\"probe\",\"id\":4,\"points\":[[0,0]]}";
+        struct reply_box rq = { 0 }, rp = { 0 };
+        CHECK(cl_edge_request(ea.link, CL_KIND_QUERY, "c8", q, strlen(q), h_reply, &rq) == 0, "query request");
+        CHECK(cl_edge_request(ea.link, CL_KIND_PROBE, "c9", pr, strlen(pr), h_reply, &rp) == 0, "probe request");
+        struct reqwant w3 = { &sim, 2 };
+        CHECK(spin_until(5, p_reqs, &w3), "the sim got %d of the query and the probe", sim.nreqs);
+        if (sim.nreqs >= 2) {
+            struct cl_request *a = sim.reqs[0], *b = sim.reqs[1];
+            CHECK(a->kind == CL_KIND_QUERY && strcmp(a->by, "c8") == 0 && strcmp(a->body, q) == 0, "query as received");
+            CHECK(b->kind == CL_KIND_PROBE && strcmp(b->by, "c9") == 0 && strcmp(b->body, pr) == 0, "probe as received");
+            char stream[CL_SUBJECT_MAX];
+            CHECK(cl_probe_stream_subject(b->reply_to, stream, sizeof stream) == 0, "stream subject of %s", b->reply_to);
+            const char *qr = "{\"type\":\"query_result\"}", *pg = "{\"type\":\"probing\"}";
+            cl_request_reply(sim.link, a, qr, strlen(qr));
+            cl_request_reply(sim.link, b, pg, strlen(pg));
+            sim.nreqs = 0;
+            CHECK(spin_until(5, p_reply, &rq) && rq.status == 0 && strcmp(rq.text, qr) == 0,
+                  "query reply: %s", rq.text);
+            CHECK(spin_until(5, p_reply, &rp) && rp.status == 0 && strcmp(rp.text, pg) == 0, "probe reply: %d %s",
+                  rp.status, rp.text);
+            const char *pd = "{\"type\":\"probe_data\",\"seq\":1}";
+            CHECK(cl_sim_publish_probe_data(sim.link, stream, "c9", pd, strlen(pd)) == 0, "publish probe_data");
+            CHECK(cl_sim_publish_probe_data(sim.link, stream, "", pd, strlen(pd)) == CL_E_ARG, "probe_data for nobody");
+            struct parwant wp = { &ea, 1 };
+            CHECK(spin_until(5, p_probe, &wp) && strcmp(ea.probe_text, pd) == 0 && strcmp(ea.probe_by, "c9") == 0,
+                  "edge-a probe_data: %s for %s", ea.probe_text, ea.probe_by);
+            spin_until(0.2, NULL, NULL);
+            CHECK(eb.nprobe == 0, "edge-b got another edge's probe_data");
+        }
     }
 
     current = "params events";

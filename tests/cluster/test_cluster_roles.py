@@ -262,7 +262,13 @@ def test_set_reaches_both_edges_and_frames_are_identical(c):
         check(len(common) >= 4, "only %d common seqs" % len(common))
         for s in common:
             check(fa[s] == fb[s], "frames of seq %d differ between edges" % s)
-            check(parse_header(fa[s])["params_version"] >= v0 + 1, "old version after the set")
+        # A frame computed before the set may still arrive after `params` (PROTOCOL.md
+        # section 7: frames carry their own version); versions never go back, and the
+        # new one arrives.
+        for f in (fa, fb):
+            vs = [parse_header(f[s])["params_version"] for s in sorted(f)]
+            check(vs == sorted(vs), "params_version went back: %r" % vs)
+            check(vs[-1] >= v0 + 1, "no frame of the new version: %r" % vs)
         # A client joining edge B late: hello with the new params, a frame soon after.
         c2, h2 = await connect(c.edges[1])
         check(h2["params_version"] == v0 + 1 and h2["params"]["wind_speed"] == 20, "late hello %r" % h2["params"])
@@ -298,11 +304,34 @@ def test_temporal_client_on_an_edge_gets_intra(c):
     asyncio.run(run())
 
 
+# The web client's subscription (web/src/main.js): cascade 0's height/dx/dz plus the
+# foam field at its own LOD, and the finer cascades' height at LOD 1 and 1 mm.
+WEB_SUB = {"type": "subscribe", "id": 2, "fields": ["height", "dx", "dz", "foam"], "field_lod": {"foam": 2},
+           "cascades": [{"fields": ["height"], "lod": 1, "bound": 0.001}] * 3}
+
+
+QUERIES = [
+    '{"type":"query","id":7,"points":[[12.5,-3],[1e6,40],[0,0]]}',
+    '{"type":"query","id":"t","points":[[3,4]],"time":12.5}',
+    '{"type":"query","id":8,"points":[[3,4]],"time":11}',         # before the window: the sim says so
+    '{"type":"query","id":9,"points":[[1,2,3]]}',                 # bad_query: the edge says so
+    '{"type":"query","id":10,"points":%s}' % json.dumps([[i, i] for i in range(257)]),
+]
+
+
 @test
 def test_frames_identical_to_role_all():
     """Paused at the same sim time, same seed and parameters: an edge's frames carry the
-    same header fields (but seq and server time) and the same tile bytes as --role all's."""
-    state = {"params": {"paused": True, "wind_speed": 13, "seed": 7}, "params_version": 3, "sim_time": 12.5}
+    same header fields (but seq and server time) and the same tile bytes as --role all's,
+    for the default subscription and for the web client's (every cascade in force, foam
+    at its own LOD): the tiles of cascades 1 and 2 decode to the standalone daemon's
+    fields, i.e. to the sim's."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+    import numpy as np
+    import oceanproto
+
+    state = {"params": {"paused": True, "wind_speed": 13, "seed": 7, "cascades": 3}, "params_version": 3,
+             "sim_time": 12.5}
     c = Cluster(edges=1, state=state)
     ok = False
     try:
@@ -311,21 +340,87 @@ def test_frames_identical_to_role_all():
             json.dump(state, f)
         alone = c.node("all", state_file=sf)
 
+        def same(fe, fa, what):
+            ee, aa = parse_header(fe), parse_header(fa)
+            for k in ("sim_time", "params_version", "n", "tile_size", "patch_size", "tile_count"):
+                check(ee[k] == aa[k], "%s: header %s: edge %r, all %r" % (what, k, ee[k], aa[k]))
+            check(ee["sim_time"] == 12.5, "sim_time %r" % ee["sim_time"])
+            check(len(fe) == len(fa), "%s: lengths %d (edge) and %d (all)" % (what, len(fe), len(fa)))
+            check(fe[48:] == fa[48:], "%s: tile bytes differ between the edge and --role all" % what)
+
+        def web_frame(h_, b):
+            return {(t["field"], t["lod"]) for t in td.tiles(b)} >= {(0, 1), (6, 2)}
+
         async def run():
             e, he = await connect(c.edges[0])
             a, ha = await connect(alone)
             check(he["params"] == ha["params"] and he["params_version"] == ha["params_version"] == 3,
                   "hello differs: %r vs %r" % (he["params_version"], ha["params_version"]))
+            check(he.get("cascade_patch_sizes") == ha.get("cascade_patch_sizes") and
+                  len(ha.get("cascade_patch_sizes") or []) == 3, "cascade_patch_sizes %r vs %r" %
+                  (he.get("cascade_patch_sizes"), ha.get("cascade_patch_sizes")))
             _, fe = await recv_frame(e, timeout=10)
             _, fa = await recv_frame(a, timeout=10)
-            ee, aa = parse_header(fe), parse_header(fa)
-            for k in ("sim_time", "params_version", "n", "tile_size", "patch_size", "tile_count"):
-                check(ee[k] == aa[k], "header %s: edge %r, all %r" % (k, ee[k], aa[k]))
-            check(ee["sim_time"] == 12.5, "sim_time %r" % ee["sim_time"])
-            check(fe[48:] == fa[48:], "tile bytes differ between the edge and --role all")
-            check(fe[40:48] != b"" and len(fe) == len(fa), "lengths")
+            same(fe, fa, "default subscription")
+            for ws in (e, a):
+                await ws.send(json.dumps(WEB_SUB))
+            se = await recv_json(e, lambda m: m["type"] in ("subscribed", "error"))
+            sa = await recv_json(a, lambda m: m["type"] in ("subscribed", "error"))
+            check(se == sa and se["type"] == "subscribed", "subscribed: edge %r, all %r" % (se, sa))
+            _, fe = await recv_frame(e, web_frame, timeout=10)
+            _, fa = await recv_frame(a, web_frame, timeout=10)
+            same(fe, fa, "web subscription")
+            de, da = oceanproto.decode_frame(fe), oceanproto.decode_frame(fa)
+            by = {}
+            for t in de.tiles:
+                by.setdefault((t.cascade, t.field, t.lod), []).append(t)
+            for casc in (1, 2):
+                ts = by.get((casc, "height", 1), [])
+                check(len(ts) == len(td.tiles(fe)) // 6 and ts, "cascade %d: %d height tiles at LOD 1 (%r)" %
+                      (casc, len(ts), sorted(by)))
+                got = np.concatenate([t.samples.ravel() for t in ts])
+                want = np.concatenate([t.samples.ravel() for t in da.tiles if (t.cascade, t.field, t.lod) ==
+                                       (casc, "height", 1)])
+                check(got.shape == want.shape and np.array_equal(got, want),
+                      "cascade %d decodes to other heights than the sim's" % casc)
+                check(float(np.abs(got).max()) > 1e-4, "cascade %d is flat (max |h| %g)" % (casc, np.abs(got).max()))
+            check(set(by) == {(0, "height", 0), (0, "dx", 0), (0, "dz", 0), (0, "foam", 2), (1, "height", 1),
+                              (2, "height", 1)}, "layers through the edge: %r" % sorted(by))
+            # cascade 3 is asked for too (kept until it is in force: PROTOCOL.md §7.1 subscribe)
+            check(sorted(c.sim.health()["layers"]) == sorted(["height.0.3", "dx.0.3", "dz.0.3", "foam.2.3",
+                                                              "c1.height.1.1", "c2.height.1.1", "c3.height.1.1"]),
+                  "the edge's demand at the sim: %r" % sorted(c.sim.health()["layers"]))
+            # Point queries through the edge: the sim's answer, exactly --role all's (same sea,
+            # paused); its errors too, whether the edge refuses (bad_query) or the sim does.
+            for q in QUERIES:
+                await e.send(q)
+                await a.send(q)
+                re = await recv_json(e, lambda m: m["type"] in ("query_result", "error"))
+                ra = await recv_json(a, lambda m: m["type"] in ("query_result", "error"))
+                check(re == ra, "%s\n through the edge: %r\n --role all:       %r" % (q, re, ra))
+            check(c.sim.metric("oceand_cluster_requests_received_total") >= 2, "the queries did not reach the sim")
+            # A probe through the edge: the sim's `probing`, then its probe_data, as --role all's
+            # (but seq); a bad one refused alike.
+            for ws in (e, a):
+                await ws.send('{"type":"probe","id":11,"points":[[0,0],[10,-3]]}')
+            pe = await recv_json(e, lambda m: m["type"] in ("probing", "error"))
+            pa = await recv_json(a, lambda m: m["type"] in ("probing", "error"))
+            check(pe == pa and pe["type"] == "probing", "probing: edge %r, all %r" % (pe, pa))
+            de = [await recv_json(e, lambda m: m["type"] == "probe_data") for _ in range(4)]
+            da = [await recv_json(a, lambda m: m["type"] == "probe_data") for _ in range(4)]
+            for m in de + da:
+                del m["seq"]
+            check(de[3] == da[3] and len(de[3]["points"]) == 2, "probe_data: edge %r, all %r" % (de[3], da[3]))
+            check(c.sim.metric("oceand_probe_points") == 2, "the sim probes %r points" % c.sim.metric("oceand_probe_points"))
+            for ws in (e, a):
+                await ws.send('{"type":"probe","id":12,"points":[[0,0,0]]}')
+            be = await recv_json(e, lambda m: m["type"] in ("probing", "error"))
+            ba = await recv_json(a, lambda m: m["type"] in ("probing", "error"))
+            check(be == ba and be["code"] == "bad_probe", "bad probe: edge %r, all %r" % (be, ba))
             await e.close()
             await a.close()
+            # the edge's client left: its probe ends at the sim
+            await await_for(lambda: c.sim.metric("oceand_probe_points") == 0, "the probe ended at the sim", timeout=5)
         asyncio.run(run())
         ok = True
     finally:
@@ -450,6 +545,10 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
         check(p["type"] == "params", "set: %r" % p)
         version = p["params_version"]
         hb, _ = await recv_frame(ws, lambda h_, m: h_["params_version"] == version)
+        await ws.send('{"type":"probe","id":50,"points":[[1,2],[3,4],[5,6]]}')
+        pr = await recv_json(ws, lambda m: m["type"] in ("probing", "error"))
+        check(pr["type"] == "probing" and pr["id"] == 50, "probe: %r" % pr)
+        await recv_json(ws, lambda m: m["type"] == "probe_data")
         await await_for(lambda: os.path.exists(c.sim.state_file) and
                         json.load(open(c.sim.state_file)).get("params_version") == version, "state saved")
         c.sim.kill()
@@ -460,6 +559,12 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
         await ws.send('{"type":"set","id":2,"params":{"wind_speed":5}}')
         e = await recv_json(ws, lambda m: m["type"] in ("params", "error"))
         check(e["type"] == "error" and e["code"] == "unavailable" and e["id"] == 2, "set while down: %r" % e)
+        await ws.send('{"type":"probe","id":22,"points":[[1,1]]}')
+        e = await recv_json(ws, lambda m: m["type"] in ("probing", "error"))
+        check(e["type"] == "error" and e["code"] == "unavailable" and e["id"] == 22, "probe while down: %r" % e)
+        await ws.send('{"type":"query","id":21,"points":[[1,2]]}')
+        e = await recv_json(ws, lambda m: m["type"] in ("query_result", "error"))
+        check(e["type"] == "error" and e["code"] == "unavailable" and e["id"] == 21, "query while down: %r" % e)
         await ws.send('{"type":"ping","id":3}')
         await recv_json(ws, lambda m: m["type"] == "pong")          # still connected to the edge
         late, hl = await connect(c.edges[0])                          # joining while down: hello + banner
@@ -469,9 +574,54 @@ def test_sim_down_keeps_clients_and_resumes_with_same_params(c):
         h2, _ = await recv_frame(ws, timeout=5)
         check(h2["params_version"] == version, "version after restart %r, want %r" % (h2["params_version"], version))
         check(h2["seq"] > hb["seq"], "seq went back after the sim restarted: %d after %d" % (h2["seq"], hb["seq"]))
+        # The probe set before the restart streams again from the new sim (the edge's keepalive
+        # finds it unknown there and sends it again), with 3 points as before.
+        pd = await recv_json(ws, lambda m: m["type"] == "probe_data", timeout=10)
+        check(len(pd["points"]) == 3 and pd["seq"] > hb["seq"], "probe_data after restart: %r" % pd)
+        check(c.sim.metric("oceand_probe_points") == 3, "the new sim probes %r points" % c.sim.metric("oceand_probe_points"))
         c3, h3 = await connect(c.edges[0])
         check(h3["params"]["wind_speed"] == 17 and h3["params_version"] == version, "params after restart")
-        for w in (ws, late, c3):
+        # A sim that does not answer (stopped): queries wait at most 5 s, at most 4 per client
+        # and 64 per edge are on their way; the edge itself keeps answering meanwhile.
+        extra = [(await connect(c.edges[0]))[0] for _ in range(15)]
+        c.sim.proc.send_signal(signal.SIGSTOP)
+        try:
+            for i in range(5):
+                await ws.send('{"type":"query","id":%d,"points":[[%d,1]]}' % (30 + i, i))
+            busy = await recv_json(ws, lambda m: m["type"] in ("query_result", "error"), timeout=3)
+            check(busy["type"] == "error" and busy["code"] == "busy" and busy["id"] == 34 and
+                  "at most 4 per client" in busy["message"], "fifth query in flight: %r" % busy)
+            # 15 more clients x 4 fill the edge's 64; then any client's query is one too many
+            for x in extra:
+                for i in range(4):
+                    await x.send('{"type":"query","id":%d,"points":[[1,1]]}' % (60 + i))
+                await x.send('{"type":"ping","id":99}')  # its queries are in the edge once it answers
+            for x in extra:
+                await recv_json(x, lambda m: m["type"] in ("pong", "error") and m.get("id") == 99, timeout=3)
+            await c3.send('{"type":"query","id":42,"points":[[1,1]]}')
+            m = await recv_json(c3, lambda m: m["type"] in ("query_result", "error"), timeout=3)
+            check(m["code"] == "busy" and m["id"] == 42 and "64 queries and probes are on their way" in m["message"],
+                  "65th query through the edge: %r" % m)
+            await ws.send('{"type":"ping","id":35}')
+            await recv_json(ws, lambda m: m["type"] in ("pong", "query_result", "error") and m.get("id") == 35,
+                            timeout=2)
+            waited = [await recv_json(ws, lambda m: m["type"] in ("query_result", "error"), timeout=8)
+                      for _ in range(4)]
+            check(sorted(m["id"] for m in waited) == [30, 31, 32, 33] and
+                  all(m["type"] == "error" and m["code"] == "unavailable" and "no reply in time" in m["message"]
+                      for m in waited), "queries to a stopped sim: %r" % waited)
+            got = []
+            for x in extra:
+                got += [await recv_json(x, lambda m: m["type"] in ("query_result", "error"), timeout=8)
+                        for _ in range(4)]
+            check(all(m["code"] == "unavailable" for m in got), "the edge's 64: %r" % got)
+        finally:
+            c.sim.proc.send_signal(signal.SIGCONT)
+        await expect_status(ws, "ok", timeout=15)
+        await ws.send('{"type":"query","id":41,"points":[[1,1]]}')
+        m = await recv_json(ws, lambda m: m["type"] in ("query_result", "error"), timeout=8)
+        check(m["type"] == "query_result" and m["id"] == 41 and len(m["points"]) == 1, "query after SIGCONT: %r" % m)
+        for w in [ws, late, c3] + extra:
             await w.close()
     asyncio.run(run())
 
@@ -530,6 +680,13 @@ def test_kill_restart_cycles_under_load(c):
             await fresh_frames(a)
             b, _ = await connect(c.edges[1])
             await recv_frame(b)
+            if cycle == 0:  # a probe of edge B's client: kept alive by B, forgotten by the sim when B dies
+                await b.send('{"type":"probe","id":1,"points":[[0,0]]}')
+                await recv_json(b, lambda m: m["type"] == "probe_data")
+                check(c.sim.metric("oceand_probe_points") == 1, "sim probe points before B dies")
+                c.edges[1].kill()
+                await await_for(lambda: c.sim.metric("oceand_probe_points") == 0, "the dead edge's probe expired",
+                                timeout=12)
             await b.close()
             c.edges[1].restart()
             wait_for(lambda: c.edges[1].health()["cluster"] == "ok", "edge B back")
