@@ -226,7 +226,7 @@ void frame_job_item(struct frame_job *j, int index, int worker)
     l->lod = (uint8_t)layer_key_lod(key);
     l->bound_index = (uint8_t)id.bound_index;
     l->encoded_lod = (uint8_t)id.encoded_lod;
-    struct oc_stream *st = j->streams && key < LAYER_KEYS && j->want.temporal[key] ? j->streams->st[key] : NULL;
+    struct oc_stream *st = j->streams && j->want.temporal[key] ? j->streams->st[key] : NULL;
     if (st) /* temporal: this layer's stream, used by this thread alone (jobs run one at a time) */
         j->item_rc[index] = layer_encode_temporal(st, j->enc[worker], j->snap[id.cascade][id.field], j->hdr.seq,
                                                   j->want.intra[key], j->tps, l);

@@ -77,7 +77,7 @@ struct frame_want {
     int nkeys;
     uint16_t keys[LAYER_KEYS_ALL];
     uint8_t lod[LAYER_KEYS_ALL]; /* encoded LOD of keys[i]: layer_key_lod(keys[i]) or coarser */
-    uint8_t temporal[LAYER_KEYS_ALL]; /* by key: a temporal client wants it (encode its stream; cascade 0 only) */
+    uint8_t temporal[LAYER_KEYS_ALL]; /* by key: a temporal client wants it (encode its stream; any cascade) */
     uint8_t intra[LAYER_KEYS_ALL];  /* by key: a client needs intra / keyframe tiles this tick */
     uint16_t tclients[LAYER_KEYS_ALL]; /* by key: temporal clients (saturating) */
     uint16_t iclients[LAYER_KEYS_ALL]; /* by key: clients that take intra tiles every tick (an edge: 65535) */

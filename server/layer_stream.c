@@ -20,13 +20,13 @@ void layer_streams_init(struct layer_streams *ls, int keyframe_interval, size_t 
 
 void layer_streams_reset(struct layer_streams *ls)
 {
-    for (int k = 0; k < LAYER_KEYS; k++)
+    for (int k = 0; k < LAYER_KEYS_ALL; k++)
         oc_stream_reset(ls->st[k]);
 }
 
 void layer_streams_sea_changed(struct layer_streams *ls)
 {
-    for (int k = 0; k < LAYER_KEYS; k++)
+    for (int k = 0; k < LAYER_KEYS_ALL; k++)
         oc_stream_sea_changed(ls->st[k]);
 }
 
@@ -42,7 +42,7 @@ static void drop(struct layer_streams *ls, int k)
 
 void layer_streams_free(struct layer_streams *ls)
 {
-    for (int k = 0; k < LAYER_KEYS; k++)
+    for (int k = 0; k < LAYER_KEYS_ALL; k++)
         drop(ls, k);
 }
 
@@ -67,14 +67,14 @@ void layer_streams_prepare(struct layer_streams *ls, int n, int tile_size, struc
         ls->n = n;
         ls->tile_size = tile_size;
     }
-    for (int k = 0; k < LAYER_KEYS; k++)
+    for (int k = 0; k < LAYER_KEYS_ALL; k++)
         if (ls->st[k] && !want->temporal[k])
             drop(ls, k);
     for (int i = 0; i < want->nkeys; i++) {
         int k = want->keys[i];
         int side = tile_size >> layer_key_lod(k);
-        if (k >= LAYER_KEYS || !want->temporal[k])
-            continue; /* streams are for cascade 0's keys */
+        if (!want->temporal[k])
+            continue;
         if (ls->st[k]) {
             pick_refine(ls, k, want);
             continue;
@@ -96,13 +96,16 @@ void layer_streams_prepare(struct layer_streams *ls, int n, int tile_size, struc
     }
 }
 
-/* Copy one tile (header + payload) into buf, recording its offset. */
-static int append(struct oc_buf *buf, uint32_t *off, const uint8_t *tile, size_t len)
+/* Copy one tile (header + payload) into buf, recording its offset, and mark
+ * its cascade in the header's flags (bits 0-1, PROTOCOL.md §3.2), as
+ * oc_encode_tile_cascade does: oc_stream writes 0 there. */
+static int append(struct oc_buf *buf, uint32_t *off, const uint8_t *tile, size_t len, int cascade)
 {
     *off = (uint32_t)buf->len;
-    if (oc_buf_reserve(buf, len))
-        return OC_E_NOMEM;
+    if (len < OC_TILE_HEADER_SIZE || oc_buf_reserve(buf, len))
+        return len < OC_TILE_HEADER_SIZE ? OC_E_ARG : OC_E_NOMEM;
     memcpy(buf->data + buf->len, tile, len);
+    buf->data[buf->len + 3] = (uint8_t)cascade;
     buf->len += len;
     return 0;
 }
@@ -120,6 +123,7 @@ static void clear(struct layer *l)
 int layer_encode_temporal(struct oc_stream *st, struct oc_encoder *enc, const float *data, uint64_t seq,
                           bool keyframes, int tps, struct layer *l)
 {
+    int cascade = l->cascade;
     struct oc_stream_stats before, after;
     oc_stream_stats(st, &before);
     int rc = oc_stream_encode(st, enc, data, seq);
@@ -134,9 +138,9 @@ int layer_encode_temporal(struct oc_stream *st, struct oc_encoder *enc, const fl
             size_t len;
             rc = oc_stream_tile(st, tx, tz, &p, &len);
             if (rc == 0)
-                rc = append(&l->shared, &l->shared_off[tz * tps + tx], p, len);
+                rc = append(&l->shared, &l->shared_off[tz * tps + tx], p, len, cascade);
             if (rc == 0 && keyframes && (rc = oc_stream_keyframe_tile(st, enc, tx, tz, &p, &len)) == 0)
-                rc = append(&l->buf, &l->tile_off[tz * tps + tx], p, len);
+                rc = append(&l->buf, &l->tile_off[tz * tps + tx], p, len, cascade);
         }
     if (rc != 0) {
         oc_stream_reset(st);

@@ -21,13 +21,13 @@
 
 /* The streams of every layer key (tick only). */
 struct layer_streams {
-    struct oc_stream *st[LAYER_KEYS]; /* NULL = no temporal client for that key (yet) */
+    struct oc_stream *st[LAYER_KEYS_ALL]; /* every cascade's keys; NULL = no temporal client for that key (yet) */
     int n, tile_size;                 /* the grid they were made for; another resets all */
     int keyframe_interval;            /* periodic keyframes, ticks (0 = only when needed) */
     size_t budget;                    /* bytes the streams may keep (encoder state); beyond: intra */
     size_t used;                      /* bytes kept by the streams in st[] */
-    int coarse_ticks[LAYER_KEYS];     /* consecutive ticks the fine grid was the better one */
-    float key_rate[LAYER_KEYS];       /* temporal clients taking keyframe tiles per tick, smoothed */
+    int coarse_ticks[LAYER_KEYS_ALL];    /* consecutive ticks the fine grid was the better one */
+    float key_rate[LAYER_KEYS_ALL];      /* temporal clients taking keyframe tiles per tick, smoothed */
 };
 
 /* Encoder state a stream keeps for a layer of side `side` samples (codes and
@@ -55,8 +55,8 @@ void layer_streams_free(struct layer_streams *ls);
  * new chains). */
 void layer_streams_prepare(struct layer_streams *ls, int n, int tile_size, struct frame_want *want);
 
-/* Encode one temporal layer of this tick into l (field/lod/bound_index set
- * by the caller): l->shared + l->shared_off + l->need always, l->buf +
+/* Encode one temporal layer of this tick into l (field/lod/bound_index/cascade
+ * set by the caller; the tiles' headers carry l->cascade): l->shared + l->shared_off + l->need always, l->buf +
  * l->tile_off (the keyframe tiles) when `keyframes`. data = the full n*n
  * field. Returns 0 or an OC_E_* (the stream is then reset, l holds nothing). */
 int layer_encode_temporal(struct oc_stream *st, struct oc_encoder *enc, const float *data, uint64_t seq,

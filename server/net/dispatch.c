@@ -35,7 +35,7 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
                     n->cluster.demand(n->cluster.user, key, delta);
                 else {
                     sim_demand(n->sim, key, delta);
-                    if (sub->temporal && c == 0) /* the temporal codec: cascade 0's layers */
+                    if (sub->temporal) /* the temporal codec: every cascade's layers */
                         sim_demand_temporal(n->sim, key, delta);
                 }
             }

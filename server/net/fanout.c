@@ -48,9 +48,14 @@ void fanout_want_keyframes(struct net *n, struct session *s, bool want)
     want = want && s->sub.temporal && n->sim; /* edge: its sim sends intra tiles only */
     if (want == s->key_wanted)
         return;
-    for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++)
-        if (s->sub.fields & OCEAN_FIELD_BIT(fi))
-            sim_want_keyframes(n->sim, layer_key(fi, subscription_lod(&s->sub, fi), s->sub.bound_index), want ? 1 : -1);
+    for (int c = 0; c < CTL_MAX_CASCADES; c++) { /* the keys dispatch_demand counts as temporal */
+        int lod, bound_index;
+        unsigned fields = subscription_cascade(&s->sub, c, &lod, &bound_index);
+        for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++)
+            if (fields & OCEAN_FIELD_BIT(fi))
+                sim_want_keyframes(n->sim, layer_key_cascade(c, fi, c == 0 ? subscription_lod(&s->sub, fi) : lod, bound_index),
+                                   want ? 1 : -1);
+    }
     s->key_wanted = want;
 }
 

@@ -159,6 +159,56 @@ def test_temporal_join_mid_stream(d):
 
 
 @test
+def test_temporal_finer_cascades(d):
+    """The finer cascades are temporal too: a temporal client of cascades 0-2
+    (the web client's kind of subscription, 3 cascades in force by default)
+    gets predicted tiles of cascades 1 and 2, and every tile, decoded in order
+    by one decoder keyed by cascade, is within its bound of the lossless stream
+    at equal seq."""
+    fine = [{"fields": ["height"], "lod": 1, "bound": 0.001}] * 2
+
+    async def run():
+        a, hello = await connect(d)
+        b, _ = await connect(d)
+        await subscribe(a, temporal=True, fields=["height", "dx"], bound=0.01, cascades=fine)
+        await subscribe(b, fields=["height", "dx"], bound=0, max_rate=10,
+                        cascades=[dict(c, bound=0) for c in fine])
+        ta = asyncio.ensure_future(collect(a, 2))
+        tb = asyncio.ensure_future(collect(b, 2))
+        fa, fb = await ta, await tb
+        await a.close()
+        await b.close()
+        return hello, fa, fb
+    hello, fa, fb = asyncio.run(run())
+    check(hello["params"]["cascades"] >= 3, "3 cascades in force expected: %r" % hello["params"]["cascades"])
+    lossless = {}
+    for m in fb:
+        f = oceanproto.decode_frame(m)
+        lossless[f.seq] = {(t.cascade, t.field, t.x, t.z): t.samples for t in f.tiles}
+    state, predicted, compared, excess = oceanproto.DecoderState(), {}, 0, 0.0
+    for m in fa:
+        f = oceanproto.decode_frame(m, state)
+        for t in f.tiles:
+            predicted[(t.cascade, t.codec)] = predicted.get((t.cascade, t.codec), 0) + 1
+        ref = lossless.get(f.seq)
+        if ref is None:
+            continue
+        for t in f.tiles:
+            r, s = ref[(t.cascade, t.field, t.x, t.z)], t.samples
+            if r.shape != s.shape:   # a layer the capacity plan sent coarser: plain subsampling (§4)
+                m_ = min(s.shape[0], r.shape[0])
+                s, r = s[::s.shape[0] // m_, ::s.shape[0] // m_], r[::r.shape[0] // m_, ::r.shape[0] // m_]
+            excess = max(excess, float(np.max(np.abs(s.astype(np.float64) - r))) / t.bound - 1)
+        compared += 1
+    print("    %d temporal frames, tiles by (cascade, codec) %r; %d at equal seq with the lossless stream, "
+          "worst error %.3f x bound" % (len(fa), sorted(predicted.items()), compared, excess + 1))
+    for c in (0, 1, 2):
+        check(predicted.get((c, CODEC_TEMPORAL), 0) > 0, "no predicted (codec 3) tiles of cascade %d: %r" % (c, predicted))
+    check(compared >= 10, "only %d frames at equal seq with the lossless stream" % compared)
+    check(excess <= 1e-6, "temporal tiles differ from the lossless ones by %g x their bound" % (excess + 1))
+
+
+@test
 def test_temporal_throttled_client(d):
     """max_rate 10 at 30 Hz: every frame follows a gap, so every frame is keyframe
     tiles, all decodable in order by one decoder."""
