@@ -19,8 +19,8 @@
 /* A layer key: one (cascade, field, LOD, bound index) combination.
  * Subscriptions are counted per key (demand); a frame holds one layer per
  * key that had demand when it was built. Cascade 0's keys are
- * 0..LAYER_KEYS-1 (what a cluster relays: server/cluster knows only those);
- * cascade c's are c * LAYER_KEYS + the same, up to LAYER_KEYS_ALL - 1. */
+ * 0..LAYER_KEYS-1; cascade c's are c * LAYER_KEYS + the same, up to
+ * LAYER_KEYS_ALL - 1 (server/cluster's CL_KEYS, role_link.h). */
 #define LAYER_KEYS (OCEAN_FIELD_COUNT * (CTL_MAX_LOD + 1) * CTL_BOUND_COUNT)
 #define LAYER_KEYS_ALL (LAYER_KEYS * OCEAN_MAX_CASCADES)
 static inline int layer_key(int field, int lod, int bound_index)

@@ -43,9 +43,10 @@ void layer_streams_free(struct layer_streams *ls);
 
 /* Make the streams agree with this tick's wish: free those of keys no
  * temporal client wants, create the wanted ones at grid n / tile_size (a
- * new grid frees them all first). A wanted key whose stream does not fit
- * the budget (or cannot be allocated) loses its temporal flag in `want` and
- * gets intra tiles instead (want->intra set).
+ * new grid frees them all first). A wanted key (of any cascade) whose stream
+ * does not fit the budget (or cannot be allocated) loses its temporal flag in
+ * `want` and gets intra tiles instead (want->intra set). Streams are made in
+ * key order, so cascade 0's layers come first when the budget runs short.
  * Also picks each stream's grid refinement (docs/codec.md, "Grid refinement"):
  * the fine grid makes the shared tiles ~23 % smaller and the keyframe tiles ~50 %
  * larger. Keyframe takers per tick = clients that are not temporal + the temporal
