@@ -188,11 +188,12 @@ void main() {
 // surface; two frames mixed by uMix like the displacement), or, when the field is not
 // streamed, from the Jacobian as before. Detail is procedural, in world metres on the
 // undisplaced (Lagrangian) points, so it rides the orbital motion with the water:
-// a two-octave value noise erodes the coverage (fresh foam nearly solid, fading foam
-// breaks up into lace instead of turning grey), cells of a Worley noise punch bubbles
-// into it, and from about 12 m/s the pattern is stretched along the wind into streaks
-// (Beaufort 7+: "foam blown in streaks along the direction of the wind"). Octaves
-// finer than the pixel footprint are replaced by their mean, so it does not sparkle.
+// a domain-warped fractal noise is thresholded by the coverage (fresh foam nearly solid
+// with bubbles and holes, fading foam breaks up into patches and curved, torn threads
+// instead of turning grey; no cells, no period), and from about 12 m/s the pattern is
+// stretched along the wind into streaks (Beaufort 7+: "foam blown in streaks along the
+// direction of the wind"). Octaves finer than the pixel footprint are replaced by their
+// mean and widen the threshold instead, so it does not sparkle.
 const FOAM = /* glsl */`
 uniform sampler2D uFoamA;
 uniform sampler2D uFoamB;
