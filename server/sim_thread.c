@@ -69,7 +69,8 @@ struct sim {
     bool measure_done;
     struct layer_streams streams; /* the temporal layers' encoder state: used by frame_job_begin (producer)
                                      and one encode thread per layer, one job at a time (encode_pool) */
-    bool reset_streams;           /* tick only: the sea changed; the next job resets the streams */
+    bool reset_streams;           /* tick only: a new sea (seed, patch, depth, loop, N): the next job resets the streams */
+    bool sea_changed;             /* tick only: same phases, new amplitudes: the next job keeps the chains (codec.md) */
 
     /* builder only: the params of the newest state built (applied, or
      * waiting in `ready`): the base the next batch is checked against. */
@@ -96,6 +97,8 @@ struct sim {
         float patch_size;
         struct frame_want want;
     } pj;
+    uint64_t penalized_seq;           /* tick: the queued job (seq) the penalty was last raised for... */
+    int penalized_ticks;              /* ...and on how many ticks */
     struct cost_model model;          /* producer and encode_done update (EWMA); tick and lws read */
     struct plan plan_pub;             /* tick writes; lws reads (sim_plan) */
     uint32_t plan_gen;                /* +1 per change of plan_pub */
@@ -221,6 +224,20 @@ static uint64_t params_diff(const struct ocean_params *a, const struct ocean_par
     for (size_t i = 0; i < param_count && i < 64; i++)
         if (param_get(a, &param_table[i]) != param_get(b, &param_table[i]))
             m |= 1ull << i;
+    return m;
+}
+
+/* The parameters whose change gives the sea other phases (or another grid): the
+ * previous frames do not predict it. */
+static uint64_t phase_params(void)
+{
+    static const char *const names[] = { "resolution", "patch_size", "depth", "loop_period", "seed" };
+    uint64_t m = 0;
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        const struct param_def *d = param_find(names[i]);
+        if (d && d - param_table < 64)
+            m |= 1ull << (d - param_table);
+    }
     return m;
 }
 
@@ -355,9 +372,17 @@ static void apply_pending(struct sim *s)
             ocean_surface_free(b.surface); /* a snapshot of what was not committed */
             b.surface = NULL;
         } else {
-            /* A new sea (or a new N): the previous frames predict it badly, so
-             * every temporal layer starts new chains (keyframes) with the next job. */
-            s->reset_streams = true;
+            /* A sea with other phases (seed, patch size, depth, loop period) or a new N:
+             * the previous frames do not predict it, so every temporal layer starts new
+             * chains (keyframes) with the next job. Any other change (wind, amplitude,
+             * choppiness, spectrum shape, ...) keeps the phases: the chains go on and each
+             * tile of the next frame is predicted or intra on its chain's grid, whichever
+             * is smaller (docs/codec.md, "Changes of the sea"). Either way every frame
+             * decodes; the split only decides bytes. */
+            if (params_diff(&s->params, ocean_get_params(s->ocean)) & phase_params())
+                s->reset_streams = true;
+            else
+                s->sea_changed = true;
             if (n_before != ocean_resolution(s->ocean)) {
                 atomic_fetch_add(&g_metrics.replans, 1);
                 LOGI("resolution now %d", ocean_resolution(s->ocean));
@@ -528,8 +553,13 @@ static void *producer_main(void *arg)
 /* ---- tick thread: the clock, the plan, and handing frames to the producer ---- */
 
 /* Re-plan from the demand: a more degraded plan at once, a less degraded
- * one only after it has held for three seconds with 40 % headroom
- * (hysteresis: clients are told every change). */
+ * one only after it has held for three seconds with 20 % headroom
+ * (hysteresis: clients are told every change). The headroom was 40 %: a
+ * plan bound by the step (N = 2048: a step of 20-30 ms against a budget of
+ * 26.7) never had it, so once degraded by a slow moment it stayed there
+ * (20 frames/s where 25-30 fit). A degrade needs the value to fall under
+ * 90 % of the plan in force, so the two thresholds still leave a band. */
+#define PLAN_EASY_SCALE 0.8
 static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], int n, int ts)
 {
     pthread_mutex_lock(&s->lock);
@@ -545,7 +575,7 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], int n, 
         next = now;
         s->lower_ticks = 0;
     } else {
-        capacity_plan(&m, n, ts, demand, 0.6, &easy);
+        capacity_plan(&m, n, ts, demand, PLAN_EASY_SCALE, &easy);
         if (plan_value(&easy, n) > plan_value(&s->plan, n)) {
             if (++s->lower_ticks >= 3 * (int)s->cfg.tick_rate) {
                 next = easy;
@@ -567,6 +597,11 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], int n, 
             s->credit[g] = fmod(0.618034 * (g + 1), 1.0);
     }
     atomic_store(&g_metrics.degraded_groups, degraded);
+    for (int g = 0; g < PLAN_GROUPS; g++)
+        if (next.fields[g])
+            LOGD("plan: lod %d bound %g: encoded at lod %d, %g frames/s (%s)", g / CTL_BOUND_COUNT,
+                 ctl_bounds[g % CTL_BOUND_COUNT], next.lod[g], next.rate[g] * s->cfg.tick_rate,
+                 next.reason[0] ? next.reason : "not degraded");
     s->plan = next;
     pthread_mutex_lock(&s->lock);
     s->plan_pub = next;
@@ -644,8 +679,14 @@ static void tick(struct sim *s, double t_tick)
              * and this tick's keyframes for temporal ones that lack the references. */
             int temporal = atomic_load(&s->tdemand[k]);
             pj.want.temporal[k] = temporal > 0;
-            pj.want.intra[k] = demand[k] > temporal || ((remote[k >> 3] >> (k & 7)) & 1) ||
-                               atomic_load(&s->key_want[k]) > 0;
+            bool edge = (remote[k >> 3] >> (k & 7)) & 1;
+            int key_want = atomic_load(&s->key_want[k]);
+            pj.want.intra[k] = demand[k] > temporal || edge || key_want > 0;
+            pj.want.kclients[k] = (uint16_t)(key_want < 0 ? 0 : key_want > 65535 ? 65535 : key_want);
+            /* who takes this layer every tick: the stream's grid refinement (layer_stream.h) */
+            pj.want.tclients[k] = (uint16_t)(temporal < 0 ? 0 : temporal > 65535 ? 65535 : temporal);
+            pj.want.iclients[k] = (uint16_t)(edge ? 65535 : demand[k] - temporal > 65535 ? 65535
+                                                         : demand[k] > temporal ? demand[k] - temporal : 0);
         }
     }
     if (!pj.want.nkeys && !probe_fields)
@@ -664,7 +705,19 @@ static void tick(struct sim *s, double t_tick)
          * back (x64 -> x1 in ~2.7 s), whether or not frames are rare. */
         atomic_fetch_add(&g_metrics.overruns, 1);
         pthread_mutex_lock(&s->lock);
-        s->model.penalty = fmin(fmax(s->model.penalty, 1) * 1.25, 64);
+        /* On the first three ticks a job is found waiting, not on every
+         * tick it keeps waiting: one step slowed to 300 ms by the machine
+         * (another process, a page-fault storm) used to find the same job
+         * queued on 9 ticks in a row and raise the costs x1.25^9 = x7.5,
+         * which planned the client down to 1-2 frames/s for seconds (seen
+         * at N = 2048). At most x1.95 per job now; jobs found waiting one
+         * after the other still add up. */
+        if (s->pj.seq != s->penalized_seq) {
+            s->penalized_seq = s->pj.seq;
+            s->penalized_ticks = 0;
+        }
+        if (s->penalized_ticks++ < 3)
+            s->model.penalty = fmin(fmax(s->model.penalty, 1) * 1.25, 64);
         pthread_mutex_unlock(&s->lock);
         return;
     }
@@ -672,7 +725,9 @@ static void tick(struct sim *s, double t_tick)
         if (due[g])
             s->credit[g] -= 1;
     pj.want.reset_streams = s->reset_streams;
+    pj.want.sea_changed = s->sea_changed && !s->reset_streams;
     s->reset_streams = false;
+    s->sea_changed = false;
     pthread_mutex_lock(&s->lock);
     s->pj = pj;
     s->prod_has_job = true; /* one deep: taken when the producer is done with the frame before */
