@@ -3,7 +3,9 @@
 // as a real client would, with one `set` over the WebSocket; the view (time of day,
 // camera) comes from the page's URL options.
 //   node tests/web/screenshots.mjs --oceand build/oceand --web-root build/web --out docs/gallery
-//        [--only calm,night] [--shot docs/screenshot.png]
+//        [--only calm,night] [--shot docs/screenshot.png] [--size 640x400]
+// --size overrides the desktop viewport (small pictures while iterating: software GL is slow);
+// --only also takes the study views below (STUDY), which are not part of the gallery.
 import fs from 'node:fs';
 import path from 'node:path';
 import { createRequire } from 'node:module';
@@ -16,8 +18,9 @@ const require = createRequire(path.join(ROOT, 'web', 'package.json'));
 const { devices } = require('playwright-core');
 const WebSocket = require('ws');
 
-const args = parseArgs(process.argv, { oceand: 'build/oceand', webRoot: 'build/web', out: 'docs/gallery', only: '', shot: 'docs/screenshot.png' });
-const DESKTOP = { viewport: { width: 1280, height: 720 } };
+const args = parseArgs(process.argv, { oceand: 'build/oceand', webRoot: 'build/web', out: 'docs/gallery', only: '', shot: 'docs/screenshot.png', size: '1280x720' });
+const [W, H] = args.size.split('x').map(Number);
+const DESKTOP = { viewport: { width: W, height: H } };
 // cam/target in metres; hour = local solar time; preset = Beaufort sea preset.
 // face: look toward the sun's azimuth turned by `yaw` degrees, `dist` m ahead, down to height ty.
 const SHOTS = [
@@ -30,6 +33,19 @@ const SHOTS = [
   { name: 'night', preset: 'fresh', hour: 23, cam: '0,14,48', face: { yaw: 0, dist: 120, ty: 8, moon: true } },
   { name: 'from-800m', preset: 'fresh', hour: 16, cam: '0,800,600', target: '0,0,-200' },
   { name: 'phone', preset: 'fresh', hour: 17.5, device: 'Pixel 7', hud: true, face: { yaw: 20, dist: 100, ty: 2 } },
+];
+// Foam at other distances and winds (iterating on the foam texture; `--only foam-gale,...`).
+// ramp: coverage rises 0 → 1 over that many metres of x (ocean.js ?foamramp=), every stage in one view.
+const STUDY = [
+  { name: 'ramp-top', preset: 'fresh', hour: 13, cam: '0,6,0.01', target: '0,0,0', ramp: 10 },
+  { name: 'ramp-top-storm', preset: 'storm', hour: 13, cam: '0,6,0.01', target: '0,0,0', ramp: 10 },
+  { name: 'ramp-close', preset: 'storm', hour: 13, cam: '0,4,3', target: '0,0,-3', ramp: 10 },
+  { name: 'ramp-mid', preset: 'gale', hour: 13, cam: '0,12,14', target: '0,0,-10', ramp: 30 },
+  { name: 'ramp-fresh', preset: 'fresh', hour: 13, cam: '0,6,8', target: '0,0,-4', ramp: 16 },
+  { name: 'foam-3m', preset: 'storm', hour: 13, cam: '0,3,6', target: '0,0,-3' },
+  { name: 'foam-gale', preset: 'gale', hour: 13, cam: '0,6,12', target: '0,0,-6' },
+  { name: 'foam-fresh', preset: 'fresh', hour: 13, cam: '0,8,16', target: '0,0,-10' },
+  { name: 'foam-far', preset: 'storm', hour: 13, cam: '0,60,120', target: '0,0,-150' },
 ];
 // Moon direction of sky.js (altitude 38°, azimuth 155°), for the night shot.
 const MOON = { x: -Math.sin(155 * Math.PI / 180), z: Math.cos(155 * Math.PI / 180) };
@@ -76,6 +92,7 @@ async function shoot(ctx, port, s, file) {
   page.on('pageerror', (e) => errors.push(e.message));
   const q = new URLSearchParams({ test: '1', hour: String(s.hour) });
   if (s.cam) q.set('cam', s.cam);
+  if (s.ramp) q.set('foamramp', String(s.ramp));
   if (s.face) q.set('target', faceTarget(s));
   else if (s.target) q.set('target', s.target);
   if (!s.hud) q.set('hud', '0');
@@ -101,8 +118,8 @@ const browser = await launchBrowser();
 fs.mkdirSync(args.out, { recursive: true });
 let failed = 0;
 try {
-  for (const s of SHOTS) {
-    if (only.size && !only.has(s.name)) continue;
+  for (const s of [...SHOTS, ...STUDY]) {
+    if (only.size ? !only.has(s.name) : STUDY.includes(s)) continue;
     const file = path.join(args.out, `${s.name}.png`);
     const t0 = Date.now();
     try {

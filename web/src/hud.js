@@ -62,13 +62,13 @@ export class Hud {
     const err = st.lastError ? `\n<span class="bad">${esc(st.lastError.code)}: ${esc(st.lastError.message)}</span>` : '';
     if (this.compact) {
       this.text.innerHTML =
-        `<span class="${cls}">●</span> ${esc(st.connected ? st.clientId || '' : st.connectionState)} ${f(s.fps, 0)} fps\n` +
+        `<span class="${cls}">●</span> ${esc(st.connected ? st.clientId || '' : st.connectionState)} ${f(s.fps, s.fps < 10 ? 1 : 0)} fps\n` +
         `${f(s.framesPerSec, 0)} f/s ${f(s.kBps, 0)} kB/s` + err;
       return;
     }
     this.text.innerHTML =
       `<span class="${cls}">● ${esc(st.connectionState)}</span>  ${esc(st.clientId || '')}\n` +
-      `render   ${f(s.fps, 0)} fps\n` +
+      `render   ${f(s.fps, s.fps < 10 ? 1 : 0)} fps\n` +
       `stream   ${f(s.framesPerSec, 1)} frames/s  ${f(s.kBps, 0)} kB/s\n` +
       `latency  ${f(s.latencyMs, 0)} ms   dropped ${s.dropped}\n` +
       `decode   ${f(s.decodeMs, 2)} ms  upload ${f(s.uploadMs, 2)} ms\n` +

@@ -99,6 +99,9 @@ export class Ocean {
       // Foam (shaders.js FOAM): the server's field, two frames like the displacement.
       uFoamA: { value: null }, uFoamB: { value: null }, uFoamField: { value: 0 }, uFoamTexel: { value: 1 },
       uFoamWind: { value: new THREE.Vector2(1, 0) }, uFoamWindSpeed: { value: 10 },
+      // ?foamramp=M (pictures of the foam texture): coverage rises 0 → 1 over M metres of x
+      // from x = -M/2, instead of the field's, so every stage of the foam shows in one view.
+      uFoamRamp: { value: Number(new URLSearchParams(globalThis.location?.search).get('foamramp')) || 0 },
     };
     this.material = new THREE.ShaderMaterial({
       uniforms: this.uniforms, vertexShader: waterVertex, fragmentShader: waterFragment,

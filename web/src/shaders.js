@@ -188,11 +188,12 @@ void main() {
 // surface; two frames mixed by uMix like the displacement), or, when the field is not
 // streamed, from the Jacobian as before. Detail is procedural, in world metres on the
 // undisplaced (Lagrangian) points, so it rides the orbital motion with the water:
-// a two-octave value noise erodes the coverage (fresh foam nearly solid, fading foam
-// breaks up into lace instead of turning grey), cells of a Worley noise punch bubbles
-// into it, and from about 12 m/s the pattern is stretched along the wind into streaks
-// (Beaufort 7+: "foam blown in streaks along the direction of the wind"). Octaves
-// finer than the pixel footprint are replaced by their mean, so it does not sparkle.
+// a domain-warped fractal noise is thresholded by the coverage (fresh foam nearly solid
+// with bubbles and holes, fading foam breaks up into patches and curved, torn threads
+// instead of turning grey; no cells, no period), and from about 12 m/s the pattern is
+// stretched along the wind into streaks (Beaufort 7+: "foam blown in streaks along the
+// direction of the wind"). Octaves finer than the pixel footprint are replaced by their
+// mean and widen the threshold instead, so it does not sparkle.
 const FOAM = /* glsl */`
 uniform sampler2D uFoamA;
 uniform sampler2D uFoamB;
@@ -201,6 +202,7 @@ uniform float uFoamTexel;    // 1 / foam texture size
 uniform vec2 uFoamWind;      // unit vector the wind blows toward (x, z)
 uniform float uFoamWindSpeed; // m/s
 uniform float uFoam;         // overall strength (1)
+uniform float uFoamRamp;     // > 0: coverage is a ramp along x over this many metres (pictures)
 float foamHash(vec2 p) {     // Hoskins' hash without sine: stable for large coordinates
   vec3 p3 = fract(vec3(p.xyx) * 0.1031);
   p3 += dot(p3, p3.yzx + 33.33);
@@ -212,21 +214,40 @@ float foamValueNoise(vec2 p) {
   return mix(mix(foamHash(i), foamHash(i + vec2(1.0, 0.0)), f.x),
              mix(foamHash(i + vec2(0.0, 1.0)), foamHash(i + vec2(1.0)), f.x), f.y);
 }
-// Worley noise: (F1, F2), distances to the nearest and second-nearest random point.
+// Worley noise: F1, distance to the nearest random point, and that point's own random value.
 vec2 foamCells(vec2 p) {
   vec2 i = floor(p), f = fract(p);
-  vec2 d = vec2(8.0);
+  vec2 d = vec2(8.0, 0.0);
   for (int y = -1; y <= 1; y++) for (int x = -1; x <= 1; x++) {
     vec2 o = vec2(float(x), float(y));
     vec2 r = o + vec2(foamHash(i + o), foamHash(i + o + 17.3)) - f;
     float q = dot(r, r);
-    d = q < d.x ? vec2(q, d.x) : vec2(d.x, min(d.y, q));
+    if (q < d.x) d = vec2(q, foamHash(i + o + 41.9));
   }
-  return sqrt(d);
+  return vec2(sqrt(d.x), d.y);
 }
 // Octave at scale s metres, faded to its mean where a pixel covers more than s.
 float foamOctave(vec2 q, float s, float px) {
   return mix(foamValueNoise(q / s), 0.5, smoothstep(0.25 * s, s, px));
+}
+// Fractal value noise from scale s (m) down, n octaves (at most 5), each turned by 37°
+// and scaled by 0.47 (no common axis or period, so no grid shows): x = value (mean 0.5),
+// y = the standard deviation of the octaves a pixel of footprint px no longer resolves,
+// used to widen the threshold below (the pattern is averaged, not aliased).
+vec2 foamFbm(vec2 q, float s, int n, float px) {
+  const mat2 turn = mat2(0.8, 0.6, -0.6, 0.8);
+  float sum = 0.0, norm = 0.0, lost = 0.0, amp = 1.0;
+  for (int i = 0; i < 5; i++) {
+    if (i >= n) break;
+    float gone = smoothstep(0.25 * s, s, px);
+    sum += amp * mix(foamValueNoise(q / s), 0.5, gone);
+    lost += amp * amp * gone;
+    norm += amp;
+    q = turn * q + 19.7;
+    s *= 0.47;
+    amp *= 0.6;
+  }
+  return vec2(sum / norm, 0.29 * sqrt(lost) / norm);  // 0.29: std of one octave of value noise
 }
 float foamFieldAt(vec2 xz) {
   vec2 uv = xz / uPatch + 0.5 * uFoamTexel;
@@ -243,36 +264,56 @@ float foamFieldHex(vec2 xz) {
 }
 // Coverage 0..1 at xz: the server's field, or the Jacobian (folds) without it.
 float foamCover(vec2 xz, float jac, float hex) {
+  if (uFoamRamp > 0.0) return clamp(xz.x / uFoamRamp + 0.5, 0.0, 1.0);
   if (uFoamField < 0.5) return smoothstep(0.7, 0.25, jac);
   float f = foamFieldAt(xz);
   if (hex > 0.0) f = mix(f, foamFieldHex(xz), hex);
   return clamp(f, 0.0, 1.0);
 }
 // How much of the pixel is foam (0..1), with texture; px = pixel footprint in metres.
-// Fresh foam (cover near 1) is nearly solid with bubbles; as it fades it shrinks to the
-// edges of Worley cells, the marbled network left behind a breaker, then to thin threads.
+// A domain-warped fractal noise (swirled like foam stirred by the breaking, many scales,
+// nothing periodic) is thresholded by the coverage: fresh foam (cover near 1) is nearly
+// solid, with holes and bubbles; as it fades it breaks into patches and then into thin
+// marbled threads, the contour lines of a second warped noise, torn in places.
 float foamAmount(vec2 xz, float cover, float px) {
   if (cover < 0.01) return 0.0;
+  // Far away the pattern is below a pixel: what is left is about its mean.
+  float far = 0.8 * smoothstep(0.3, 0.8, cover) + 0.12 * smoothstep(0.05, 0.3, cover);
+  if (px > 4.0) return far;
   vec2 w = uFoamWind, across = vec2(-w.y, w.x);
   float streak = 1.0 + 3.0 * smoothstep(12.0, 24.0, uFoamWindSpeed);  // elongation along the wind
   vec2 q = vec2(dot(xz, w) / streak, dot(xz, across));
-  // Patchiness: coverage varies over metres, so edges are ragged, not the field's bilinear blobs.
-  float n = foamOctave(q, 3.0, px) * 0.65 + foamOctave(q + 41.7, 0.9, px) * 0.35;
-  float cv = clamp(cover * (0.6 + 0.8 * n), 0.0, 1.0);
-  vec2 warp = vec2(foamOctave(q + 7.1, 1.1, px), foamOctave(q + 93.2, 1.1, px)) - 0.5;
-  vec2 cell = foamCells(q / 0.55 + 1.6 * warp);
-  float edge = cell.y - cell.x;                        // 0 on the network's lines
-  float t = 0.04 + 0.9 * smoothstep(0.3, 0.85, cv);    // line half-width grows with coverage
-  float aa = 0.05 + 0.8 * px;
-  float lace = 1.0 - smoothstep(t - aa, t + aa, edge);
-  // Fine bubbles in the dense part.
-  float bub = mix(foamCells(q / 0.2).x, 0.6, smoothstep(0.03, 0.2, px));
-  float a = lace * mix(1.0, 0.6 + 0.4 * smoothstep(0.1, 0.5, bub), smoothstep(0.4, 0.9, cv));
-  // Old foam is thin and torn: broken threads that let the water through.
-  float tear = smoothstep(0.42, 0.62, foamOctave(q * vec2(0.6, 1.4) + 17.9, 1.6, px));
-  a *= smoothstep(0.1, 0.3, cv) * mix(0.4 * tear, 1.0, smoothstep(0.3, 0.65, cv));
-  // Far away the pattern is below a pixel: what is left is about its mean.
-  float far = 0.8 * smoothstep(0.3, 0.8, cover) + 0.12 * smoothstep(0.05, 0.3, cover);
+  // Patchiness over metres: ragged edges, not the field's bilinear blobs.
+  float n = foamFbm(q + 41.7, 4.0, 2, px).x;
+  float cv = clamp(cover * (0.55 + 0.9 * n), 0.0, 1.0);
+  // Swirls: the pattern is read through a warp of about half a metre.
+  vec2 warp = vec2(foamFbm(q + 7.1, 1.8, 2, px).x, foamFbm(q + 93.2, 1.8, 2, px).x) - 0.5;
+  vec2 p = q + 1.3 * warp;
+  // Body: the part of the noise above a threshold that falls as coverage rises.
+  vec2 b = foamFbm(p, 1.0, 5, px);
+  float th = mix(0.68, 0.3, smoothstep(0.15, 0.95, cv));
+  float body = smoothstep(th - 0.012 - b.y, th + 0.012 + b.y, b.x);
+  // Threads: bands around the mid level of two more noises (a coarse and a fine
+  // network of curved lines, wider with coverage); an unresolved band counts its area.
+  // Torn: threads thin out and break where a coarser noise is low.
+  float tear = smoothstep(0.36, 0.58, foamFbm(q * vec2(0.6, 1.4) + 17.9, 1.6, 2, px).x);
+  float tw = mix(0.012, 0.05, smoothstep(0.1, 0.7, cv)) * (0.5 + 0.8 * tear);
+  vec2 l1 = foamFbm(p + 57.3, 1.2, 4, px), l2 = foamFbm(p + 11.9, 0.45, 3, px);
+  float w1 = 0.006 + l1.y, w2 = 0.006 + l2.y;
+  float thread = max((1.0 - smoothstep(tw - w1, tw + w1, abs(l1.x - 0.5))) * min(1.0, tw / w1),
+                     0.8 * (1.0 - smoothstep(0.7 * tw - w2, 0.7 * tw + w2, abs(l2.x - 0.5))) * min(1.0, 0.7 * tw / w2));
+  float a = max(body, thread * mix(0.4 + 0.6 * tear, 1.0, smoothstep(0.4, 0.8, cv)));
+  // Dense foam is not flat: its thickness varies, and small holes and bubbles open in it,
+  // round ones (Worley F1 against a random radius per bubble, mostly tiny) and ragged
+  // ones (a fine noise's low values).
+  vec2 h = foamFbm(p * 2.3 + 3.3, 0.5, 3, px);
+  vec2 cell = foamCells(q / 0.1);
+  float r = 0.4 * cell.y * cell.y * cell.y;
+  float bub = mix(smoothstep(r - 0.1, r + 0.1, cell.x), 1.0, smoothstep(0.015, 0.08, px));
+  float hole = smoothstep(0.28 - h.y - 0.02, 0.34 + h.y, h.x);
+  a *= mix(1.0, (0.55 + 0.45 * bub) * (0.6 + 0.4 * hole) * (0.8 + 0.4 * h.x), smoothstep(0.35, 0.9, cv));
+  // Thin old foam lets the water through.
+  a *= smoothstep(0.05, 0.25, cv) * mix(0.7, 1.0, smoothstep(0.3, 0.65, cv));
   return mix(a, far, smoothstep(0.8, 4.0, px));
 }
 
