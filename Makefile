@@ -43,16 +43,45 @@ deps:
 	@scripts/deps.sh
 
 # Every suite runs even if one fails; the closing line counts suites.
+# First every test binary is built in parallel (test-bins), so that the suites
+# below do not compile their sanitizer/fuzz/TSan flavours one file at a time.
+# Then the suites that mostly wait (real daemons on loopback at 30 Hz,
+# observer windows, NATS restarts: wall time >> CPU time) run concurrently
+# with each other (free ports, own temp dirs), each into its own log, printed
+# whole and in order; then the CPU-heavy suites (ASan, valgrind, TSan, fuzz,
+# SwiftShader) one at a time, alone on the machine.
+TESTS_CONCURRENT := test-hostile test-cluster-roles test-daemon test-tap test-ops
+TEST_LOGS        := $(BUILD)/test-logs
 test: deps
 	@$(MAKE) --no-print-directory build-all
-	@pass=0; fail=0; failed=""; \
-	for t in $(TESTS); do \
+	@$(MAKE) --no-print-directory -k -j$$(nproc) test-bins >$(TEST_LOGS).build 2>&1 || \
+	  echo "test-bins: some test binaries did not build (their suites report it; log: $(TEST_LOGS).build)"
+	@pass=0; fail=0; failed=""; pids=(); \
+	rm -rf $(TEST_LOGS) && mkdir -p $(TEST_LOGS); \
+	conc="$(filter $(TESTS_CONCURRENT),$(TESTS))"; \
+	trap 'for p in "$${pids[@]}"; do kill -TERM -- -$$p 2>/dev/null; done; exit 130' INT TERM; \
+	echo "=== running concurrently:$$conc (logs in $(TEST_LOGS)/)"; \
+	for t in $$conc; do setsid $(MAKE) --no-print-directory $$t >$(TEST_LOGS)/$$t.log 2>&1 & pids+=($$!); done; \
+	i=0; for t in $$conc; do \
+	  echo "=== $$t"; \
+	  if wait $${pids[$$i]}; then ok=1; else ok=0; fi; i=$$((i+1)); \
+	  cat $(TEST_LOGS)/$$t.log; \
+	  if [ $$ok = 1 ]; then pass=$$((pass+1)); else fail=$$((fail+1)); failed="$$failed $$t"; fi; \
+	done; \
+	for t in $(filter-out $(TESTS_CONCURRENT),$(TESTS)); do \
 	  echo "=== $$t"; \
 	  if $(MAKE) --no-print-directory $$t; then pass=$$((pass+1)); \
 	  else fail=$$((fail+1)); failed="$$failed $$t"; fi; \
 	done; \
 	[ -n "$$failed" ] && echo "failed suites:$$failed"; \
 	echo "$$pass passed, $$fail failed"; [ $$fail -eq 0 ]
+
+# Every binary a suite runs that build-all does not make (sanitizer, TSan and
+# fuzz flavours, test helpers). One missing here is still built by its suite.
+TEST_BINS = $(DAEMON_TEST_DEPS) $(FUZZ_BINS) $(BUILD)/tsan/test_ocean \
+            $(addprefix $(BUILD)/san/,oceand test_control test_cluster_msg test_cluster_nats test_proto test_ocean test_query)
+.PHONY: test-bins
+test-bins: $(TEST_BINS)
 
 bench: deps
 	@$(MAKE) --no-print-directory build-all

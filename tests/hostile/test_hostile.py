@@ -19,6 +19,7 @@ import argparse
 import json
 import math
 import os
+import re
 import select
 import shutil
 import signal
@@ -26,6 +27,7 @@ import socket
 import struct
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -1876,6 +1878,46 @@ def run_case(fn, fig):
         shutil.rmtree(d.tmp, ignore_errors=True)
 
 
+def run_jobs(jobs):
+    """Run the battery as `jobs` shards in parallel processes (cases I, I+jobs, ...); print each
+    shard's log whole, in order; one closing "N passed, M failed" line. Returns the exit code."""
+    base = [sys.executable, os.path.abspath(__file__), "--oceand", ARGS.oceand, "-k", ARGS.k]
+    base += ["--strict"] if ARGS.strict else []
+    t_all = time.time()
+    files = [tempfile.TemporaryFile("w+") for _ in range(jobs)]   # not pipes: a full one would stall its shard
+    procs = [subprocess.Popen(base + ["--shard", "%d/%d" % (i, jobs)], stdout=f, stderr=subprocess.STDOUT, text=True)
+             for i, f in enumerate(files)]
+    outs = []
+    for p, f in zip(procs, files):
+        p.wait()
+        f.seek(0)
+        outs.append(f.read())
+        f.close()
+    passed = failed = 0
+    failed_names = []
+    for i, (p, out) in enumerate(zip(procs, outs)):
+        log("=== shard %d/%d (exit %d)" % (i, jobs, p.returncode))
+        lines = out.splitlines()
+        last = lines[-1] if lines else ""
+        m = re.match(r"(\d+) passed, (\d+) failed$", last)
+        log("\n".join(lines[:-1] if m else lines))
+        if not m:
+            failed += 1
+            failed_names.append("shard-%d(no summary, exit %d)" % (i, p.returncode))
+            continue
+        passed += int(m.group(1))
+        failed += int(m.group(2))
+        failed_names += [l[len("failed: "):] for l in lines if l.startswith("failed: ")]
+        if p.returncode != 0 and int(m.group(2)) == 0:
+            failed += 1
+            failed_names.append("shard-%d(exit %d)" % (i, p.returncode))
+    log("hostile battery took %.0f s (%d processes)" % (time.time() - t_all, jobs))
+    if failed_names:
+        log("failed: " + " ".join(failed_names))
+    log("%d passed, %d failed" % (passed, failed))
+    return 0 if not failed else 1
+
+
 def main():
     global ARGS, OUT
     ap = argparse.ArgumentParser()
@@ -1885,14 +1927,24 @@ def main():
     ap.add_argument("--strict", action="store_true",
                     help="no noise allowance: < 99%% observer delivery fails even when the daemon waited for a core")
     ap.add_argument("--bench", action="store_true", help="like --json, and exit 0 even when a case fails")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="run the cases in this many processes at once (each case keeps its own daemon and "
+                         "observer; the battery mostly waits on observer windows); logs printed in order")
+    ap.add_argument("--shard", default="0/1", help=argparse.SUPPRESS)   # I/N: cases I, I+N, ... (--jobs uses it)
     ARGS = ap.parse_args()
     if ARGS.json or ARGS.bench:
         OUT = sys.stderr
+        ARGS.jobs = 1          # figures are measured with the battery alone on the machine
+    if ARGS.jobs > 1:
+        sys.exit(run_jobs(ARGS.jobs))
+    shard, shards = (int(x) for x in ARGS.shard.split("/"))
     passed = failed = 0
     failed_names = []
     t_all = time.time()
-    for fn in CASES:
+    for i, fn in enumerate(CASES):
         if not any(k in fn.__name__ for k in ARGS.k.split(",")):
+            continue
+        if i % shards != shard:
             continue
         log("--- %s" % fn.__name__)
         t0 = time.time()
