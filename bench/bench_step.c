@@ -26,6 +26,7 @@
  *   {"bench":"dft_vs_fft",...}   the thesis's Table IV.1: brute-force DFT vs
  *     FFT step, all fields, one thread.
  * Plans use FFTW_MEASURE with the wisdom file, as the daemon does. */
+#include <malloc.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -67,17 +68,26 @@ static int reps_for(int n)
     return n <= 64 ? 200 : n <= 128 ? 100 : n <= 256 ? 40 : n <= 512 ? 20 : n <= 1024 ? 11 : 7;
 }
 
-static struct ocean *make(int n, int threads, const char *wisdom, int rigor)
+/* One cascade unless asked: the step/FFTW ratio is about one grid, and
+ * ocean_step steps every cascade in force (with the default 3 the `step`
+ * rows read 3.3-3.8: three grids' steps against one grid's FFTW). */
+static struct ocean *make_cascades(int n, int threads, const char *wisdom, int rigor, int cascades)
 {
     struct ocean_params p;
     params_defaults(&p);
     p.resolution = n;
+    p.cascades = cascades;
     struct ocean_options opt = {threads, wisdom, rigor};
     char err[256];
     struct ocean *o = ocean_create(&p, &opt, err, sizeof err);
     if (!o)
         fprintf(stderr, "bench_step: N=%d: %s\n", n, err);
     return o;
+}
+
+static struct ocean *make(int n, int threads, const char *wisdom, int rigor)
+{
+    return make_cascades(n, threads, wisdom, rigor, 1);
 }
 
 static void bench_step(int n, int threads, const char *wisdom)
@@ -309,6 +319,7 @@ static void bench_reconfigure(int n, int threads, const char *wisdom)
     struct ocean_params p;
     params_defaults(&p);
     p.resolution = n;
+    p.cascades = 1; /* as make() */
     struct ocean *o = make(n, threads, wisdom, 1);
     if (!o)
         return;
@@ -489,6 +500,111 @@ static void bench_parts(int n, const char *wisdom)
     ocean_free(o);
 }
 
+/* What one `set` of the wind costs the daemon's builder at N (load.py's
+ * client sends one every 0.3 s after the previous is answered): ocean_prepare
+ * of every cascade in force, the query snapshot of the prepared state, the
+ * commit and freeing the old state; process CPU (the builder's prepare pool
+ * has `threads` threads) and wall, medians. malloc as the daemon sets it up
+ * (sim_start: fixed 128 KB mmap threshold, so each amplitude array is a
+ * fresh mapping whose pages the kernel clears on first touch). */
+static void bench_set(int n, int cascades, const char *wisdom)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = n;
+    p.cascades = cascades;
+    struct ocean_options opt = {2, wisdom, 1};
+    char err[256];
+    struct ocean *o = ocean_create(&p, &opt, err, sizeof err);
+    if (!o) {
+        fprintf(stderr, "bench_step: N=%d: %s\n", n, err);
+        return;
+    }
+    enum { REPS = 7 };
+    double pw[REPS], pc[REPS], sw[REPS], sc[REPS], tw[REPS], tc[REPS];
+    for (int r = 0; r < REPS; r++) {
+        p.wind_speed = r % 2 ? 11.0 : 12.0;
+        double c0 = cpu_ms(), t0 = now_ms();
+        struct ocean_prepared *pr = ocean_prepare(o, &p, err, sizeof err);
+        double t1 = now_ms(), c1 = cpu_ms();
+        struct ocean_surface *surf = pr ? ocean_prepared_surface(o, pr, err, sizeof err) : NULL;
+        double t2 = now_ms(), c2 = cpu_ms();
+        if (pr)
+            ocean_commit(o, pr);
+        ocean_prepared_free(pr);
+        ocean_surface_free(surf);
+        double t3 = now_ms(), c3 = cpu_ms();
+        pw[r] = t1 - t0;
+        pc[r] = c1 - c0;
+        sw[r] = t2 - t1;
+        sc[r] = c2 - c1;
+        tw[r] = t3 - t0;
+        tc[r] = c3 - c0;
+    }
+    printf("{\"bench\":\"capacity_set\",\"N\":%d,\"cascades\":%d,\"threads\":2,\"prepare_ms\":%.2f,"
+           "\"prepare_cpu_ms\":%.2f,\"snapshot_ms\":%.2f,\"snapshot_cpu_ms\":%.2f,\"total_ms\":%.2f,"
+           "\"total_cpu_ms\":%.2f,\"reps\":%d}\n", n, cascades, median(pw, REPS), median(pc, REPS), median(sw, REPS),
+           median(sc, REPS), median(tw, REPS), median(tc, REPS), REPS);
+    fflush(stdout);
+    ocean_free(o);
+}
+
+/* The capacity rows (bench/load.py --capacity, README): the step exactly as
+ * the daemon's producer runs it for one client's fields (cascade 0 only,
+ * ocean_step_cascades, no foam unless asked; default parameters, so three
+ * cascades exist but only cascade 0 is stepped), against the bare FFTW
+ * executes of those fields (ocean_fft_only: same plans, arrays, threads),
+ * interleaved, on 1 and 2 threads. The tick's CPU budget on this machine is
+ * cores x period (2 x 33.3 ms at 30 Hz): fftw_share_of_budget says how much
+ * of it FFTW alone takes at 30 frames/s, before any fill or encode. */
+static void bench_rows(const char *wisdom)
+{
+    const unsigned H = OCEAN_FIELD_BIT(OCEAN_HEIGHT),
+                   HDD = H | OCEAN_FIELD_BIT(OCEAN_DX) | OCEAN_FIELD_BIT(OCEAN_DZ),
+                   SIX = OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM);
+    static const struct { int n; unsigned fields; const char *name; } rows[] = {
+        {512, 0, "six"}, {1024, 0, "h,dx,dz"}, {1024, 0, "six"}, {2048, 0, "height"}, {2048, 0, "h,dx,dz"},
+    };
+    const unsigned masks[] = {SIX, HDD, SIX, H, HDD};
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    const double budget_cpu_ms = (double)cores * 1000.0 / 30.0;
+    for (size_t i = 0; i < sizeof rows / sizeof rows[0]; i++)
+        for (int threads = 1; threads <= 2; threads++) {
+            struct ocean *o = make_cascades(rows[i].n, threads, wisdom, 1, 3); /* the daemon's default */
+            if (!o)
+                continue;
+            unsigned f[OCEAN_MAX_CASCADES] = {masks[i]};
+            int reps = 2 * reps_for(rows[i].n) + 1;
+            double *sw = malloc(reps * sizeof *sw), *sc = malloc(reps * sizeof *sc), *fw = malloc(reps * sizeof *fw),
+                   *fc = malloc(reps * sizeof *fc);
+            ocean_step_cascades(o, 0.5, f, OCEAN_MAX_CASCADES);
+            for (int r = 0; r < reps; r++) {
+                double c0 = cpu_ms(), t0 = now_ms();
+                ocean_step_cascades(o, 1.0 + r * 0.033, f, OCEAN_MAX_CASCADES);
+                double t1 = now_ms(), c1 = cpu_ms();
+                ocean_fft_only(o, masks[i]);
+                double t2 = now_ms(), c2 = cpu_ms();
+                sw[r] = t1 - t0;
+                sc[r] = c1 - c0;
+                fw[r] = t2 - t1;
+                fc[r] = c2 - c1;
+            }
+            double msw = median(sw, reps), msc = median(sc, reps), mfw = median(fw, reps), mfc = median(fc, reps);
+            printf("{\"bench\":\"capacity_row\",\"N\":%d,\"fields\":\"%s\",\"threads\":%d,\"step_ms\":%.3f,"
+                   "\"step_cpu_ms\":%.3f,\"fftw_ms\":%.3f,\"fftw_cpu_ms\":%.3f,\"cpu_ratio\":%.3f,"
+                   "\"step_min_ms\":%.3f,\"fftw_min_ms\":%.3f,\"budget_cpu_ms\":%.1f,"
+                   "\"fftw_share_of_budget\":%.3f,\"step_share_of_budget\":%.3f,\"reps\":%d}\n",
+                   rows[i].n, rows[i].name, threads, msw, msc, mfw, mfc, msc / mfc, sw[0], fw[0], budget_cpu_ms,
+                   mfc / budget_cpu_ms, msc / budget_cpu_ms, reps);
+            fflush(stdout);
+            free(sw);
+            free(sc);
+            free(fw);
+            free(fc);
+            ocean_free(o);
+        }
+}
+
 int main(int argc, char **argv)
 {
     const char *wisdom = argc > 1 && *argv[1] ? argv[1] : NULL;
@@ -524,5 +640,14 @@ int main(int argc, char **argv)
         bench_dft(n, wisdom);
     for (int n = 256; n <= 512 && WANT("cascades"); n *= 2)
         bench_cascades(n, wisdom);
+    if (WANT("rows"))
+        bench_rows(wisdom);
+    if (WANT("rows") || WANT("sets")) {
+        mallopt(M_MMAP_THRESHOLD, 128 * 1024); /* as sim_start (server/sim_thread.c) */
+        mallopt(M_TRIM_THRESHOLD, 256 * 1024);
+        for (int n = 512; n <= 2048; n *= 2)
+            for (int c = 1; c <= 3; c += 2)
+                bench_set(n, c, wisdom);
+    }
     return 0;
 }

@@ -277,16 +277,28 @@ static void *zalloc(size_t bytes, bool *ok)
     return p;
 }
 
+/* Not zeroed: for arrays that amps_compute writes whole (every mode, every
+ * column of the copy), so a parameter change does not write them twice. */
+static void *xalloc(size_t bytes, bool *ok)
+{
+    void *p = fftwf_malloc(bytes);
+    if (p)
+        atomic_fetch_add_explicit(&ocean_alloc_bytes, bytes, memory_order_relaxed);
+    else
+        *ok = false;
+    return p;
+}
+
 static bool amps_alloc(struct ocean_amps *s, int n)
 {
     bool ok = true;
     size_t modes = (size_t)n * (n / 2 + 1);
-    s->a = zalloc(modes * sizeof(float), &ok);
-    s->b = zalloc(modes * sizeof(float), &ok);
-    s->d = zalloc(modes * sizeof(float), &ok);
-    s->e = zalloc(modes * sizeof(float), &ok);
-    s->omega = zalloc(modes * sizeof(double), &ok);
-    s->ampc = zalloc((size_t)(n / 2) * OCEAN_AMP_COL_FLOATS(n) * sizeof(float), &ok);
+    s->a = xalloc(modes * sizeof(float), &ok);
+    s->b = xalloc(modes * sizeof(float), &ok);
+    s->d = xalloc(modes * sizeof(float), &ok);
+    s->e = xalloc(modes * sizeof(float), &ok);
+    s->omega = xalloc(modes * sizeof(double), &ok);
+    s->ampc = xalloc((size_t)(n / 2) * OCEAN_AMP_COL_FLOATS(n) * sizeof(float), &ok);
     if (!ok)
         amps_free(s);
     return ok;
@@ -546,65 +558,107 @@ struct amp_ctx {
     struct ocean_amps *amps;
 };
 
+/* Columns per tile of the amplitude pass (one 64-byte line of each
+ * row-major array per row), and rows per block (an item). */
+#define AMP_TILE 16
+#define AMP_ROWS 16
+#define AMP_AHEAD 2 /* rows prefetched ahead */
+
 /* h~0(k) and h~0(-k) per mode from the radial table, the spreading's angle
- * and the cached normals; then a, b, d, e and omega (see ocean_grid). */
-static void amp_rows(void *arg, int r0, int r1, int worker)
+ * and the cached normals; then a, b, d, e and omega (see ocean_grid) and,
+ * in the same pass, the fill's column-major copy (ocean_amp_col). Items are
+ * blocks of AMP_ROWS rows, done tile by tile (AMP_TILE columns, kx): the
+ * row-major arrays are read and written a line per row and tile, moving
+ * along the rows (a tile walked down all N rows started a new page on every
+ * row of every array: a TLB and cache miss each); the block's tile is kept
+ * in a small buffer and written down each column of the copy a whole cache
+ * line at a time (the copy's 6 arrays per column lie a multiple of 4 KiB
+ * apart: written a float at a time, 16 columns' worth fall into one L1
+ * set). Until this round a row pass wrote the row-major arrays and a second
+ * pass read them back column by column (stride N/2 + 1) to make the copy.
+ * Same values, bit for bit. */
+static void amp_tiles(void *arg, int b0, int b1, int worker)
 {
+    (void)worker;
     const struct amp_ctx *c = arg;
     const struct ocean_grid *g = c->g;
     const struct spectrum_model *m = c->m;
     struct ocean_amps *s = c->amps;
-    const int n = g->n, nh = g->nh;
+    const int n = g->n, nh = g->nh, rows = n < AMP_ROWS ? n : AMP_ROWS;
     const double half_dk = 0.5 * 2.0 * M_PI / m->patch, wx = cos(m->wind_angle), wz = sin(m->wind_angle);
-    for (int iz = r0; iz < r1; iz++) {
-        int mz = iz > n / 2 ? iz - n : iz;
-        for (int ix = 0; ix < nh; ix++) {
-            size_t i = (size_t)iz * nh + ix;
-            int mx = ix;
-            /* Nyquist row and column stay zero: their -k aliases onto
-             * themselves, so they could not be both hermitian and random. */
-            if (ix == n / 2 || iz == n / 2 || !spectrum_in_band(m, mx, mz)) { /* or a coarser cascade's */
-                s->a[i] = s->b[i] = s->d[i] = s->e[i] = 0;
-                s->omega[i] = 0;
-                continue;
-            }
-            const struct spectrum_radial *r = &c->radial[g->ring[i]];
-            double len = sqrt((double)mx * mx + (double)mz * mz);
-            double cs = len > 0 ? (mx * wx + mz * wz) / len : 0; /* cos(angle of k - wind) */
-            double psi_p = r->psi_k > 0 ? r->psi_k * spectrum_spreading_cos(m, r, cs) : 0;
-            double psi_m = r->psi_k > 0 ? r->psi_k * spectrum_spreading_cos(m, r, -cs) : 0;
-            double ap = psi_p > 0 ? half_dk * sqrt(psi_p) : 0, am = psi_m > 0 ? half_dk * sqrt(psi_m) : 0;
-            const float *q = c->gauss + 4 * i;
-            /* p = h~0(k), conj(h~0(-k)) = mr - i mi */
-            double pr = ap * q[0], pi = ap * q[1], mr = am * q[2], mi = -am * q[3];
-            s->a[i] = (float)(pr + mr);
-            s->b[i] = (float)(pi - mi);
-            s->d[i] = (float)(pi + mi);
-            s->e[i] = (float)(pr - mr);
-            s->omega[i] = r->omega;
-        }
-    }
-}
-
-/* The fill's column-major copy (ocean_amp_col), columns [c0, c1). */
-static void amp_columns(void *arg, int c0, int c1, int worker)
-{
-    const struct amp_ctx *c = arg;
-    const struct ocean_grid *g = c->g;
-    struct ocean_amps *s = c->amps;
-    const int n = g->n, nh = g->nh;
     const double lambda = c->lambda;
-    for (int ix = c0; ix < c1; ix++) {
-        float *col = ocean_amp_col(s->ampc, n, ix);
-        double *omega = (double *)(col + 5 * (size_t)n);
-        for (int iz = 0; iz < n; iz++) {
-            size_t i = (size_t)iz * nh + ix;
-            col[iz] = s->a[i];
-            col[n + iz] = s->b[i];
-            col[2 * n + iz] = s->d[i];
-            col[3 * n + iz] = s->e[i];
-            col[4 * n + iz] = iz == n / 2 ? 0.0f : (float)(lambda * c->radial[g->ring[i]].disp);
-            omega[iz] = s->omega[i];
+    float buf[5][AMP_TILE][AMP_ROWS]; /* a, b, d, e, linvk of the block, per column */
+    double wbuf[AMP_TILE][AMP_ROWS];
+    const int tiles = (nh + AMP_TILE - 1) / AMP_TILE;
+    for (int blk = b0; blk < b1; blk++) {
+        const int z0 = blk * rows;
+        for (int t = 0; t < tiles; t++) {
+            const int x0 = t * AMP_TILE, x1 = x0 + AMP_TILE < nh ? x0 + AMP_TILE : nh;
+            for (int iz = z0; iz < z0 + rows; iz++) {
+                int mz = iz > n / 2 ? iz - n : iz;
+                /* The radial table is larger than the cache at large N (40 B
+                 * per ring, ~400 k rings at N = 2048) and the rings of a
+                 * tile's modes lie far apart in it: ask for the entries
+                 * AMP_AHEAD rows on now (past the block: the next tile's
+                 * first rows). A hint; it changes no value. */
+                int pz = iz + AMP_AHEAD, px0 = x0, px1 = x1;
+                if (pz >= z0 + rows) {
+                    pz -= rows;
+                    px0 = x1;
+                    px1 = x1 + AMP_TILE < nh ? x1 + AMP_TILE : nh;
+                }
+                for (int ix = px0; ix < px1; ix++) {
+                    const struct spectrum_radial *ahead = &c->radial[g->ring[(size_t)pz * nh + ix]];
+                    __builtin_prefetch(ahead);
+                    __builtin_prefetch((const char *)(ahead + 1) - 1);
+                }
+                for (int ix = x0; ix < x1; ix++) {
+                    size_t i = (size_t)iz * nh + ix;
+                    int mx = ix;
+                    float a = 0, b = 0, d = 0, e = 0;
+                    double omega = 0;
+                    /* Nyquist row and column stay zero: their -k aliases onto
+                     * themselves, so they could not be both hermitian and random. */
+                    if (ix != n / 2 && iz != n / 2 && spectrum_in_band(m, mx, mz)) { /* or a coarser cascade's */
+                        const struct spectrum_radial *r = &c->radial[g->ring[i]];
+                        double len = sqrt((double)mx * mx + (double)mz * mz);
+                        double cs = len > 0 ? (mx * wx + mz * wz) / len : 0; /* cos(angle of k - wind) */
+                        double psi_p = r->psi_k > 0 ? r->psi_k * spectrum_spreading_cos(m, r, cs) : 0;
+                        double psi_m = r->psi_k > 0 ? r->psi_k * spectrum_spreading_cos(m, r, -cs) : 0;
+                        double ap = psi_p > 0 ? half_dk * sqrt(psi_p) : 0, am = psi_m > 0 ? half_dk * sqrt(psi_m) : 0;
+                        const float *q = c->gauss + 4 * i;
+                        /* p = h~0(k), conj(h~0(-k)) = mr - i mi */
+                        double pr = ap * q[0], pi = ap * q[1], mr = am * q[2], mi = -am * q[3];
+                        a = (float)(pr + mr);
+                        b = (float)(pi - mi);
+                        d = (float)(pi + mi);
+                        e = (float)(pr - mr);
+                        omega = r->omega;
+                    }
+                    s->a[i] = a;
+                    s->b[i] = b;
+                    s->d[i] = d;
+                    s->e[i] = e;
+                    s->omega[i] = omega;
+                    if (ix == n / 2)
+                        continue; /* the Nyquist column has no column-major copy */
+                    const int x = ix - x0, z = iz - z0;
+                    buf[0][x][z] = a;
+                    buf[1][x][z] = b;
+                    buf[2][x][z] = d;
+                    buf[3][x][z] = e;
+                    /* the fill's 1/k factor: every row but the Nyquist one, in band or not */
+                    buf[4][x][z] = iz == n / 2 ? 0.0f : (float)(lambda * c->radial[g->ring[i]].disp);
+                    wbuf[x][z] = omega;
+                }
+            }
+            const int xc = x1 < n / 2 ? x1 : n / 2; /* columns with a copy */
+            for (int ix = x0; ix < xc; ix++) {
+                float *col = ocean_amp_col(s->ampc, n, ix);
+                for (int k = 0; k < 5; k++)
+                    memcpy(col + (size_t)k * n + z0, buf[k][ix - x0], (size_t)rows * sizeof(float));
+                memcpy((double *)(col + 5 * (size_t)n) + z0, wbuf[ix - x0], (size_t)rows * sizeof(double));
+            }
         }
     }
 }
@@ -622,8 +676,7 @@ static bool amps_compute(const struct ocean_grid *g, const struct spectrum_model
     struct radial_ctx rc = {m, g->ring_m2, radial, g->rings, 64};
     ocean_parallel(pool, threads, rc.chunks, radial_chunks, &rc);
     struct amp_ctx c = {g, m, lambda, radial, gauss, amps};
-    ocean_parallel(pool, threads, g->n, amp_rows, &c);
-    ocean_parallel(pool, threads, g->n / 2, amp_columns, &c);
+    ocean_parallel(pool, threads, g->n < AMP_ROWS ? 1 : g->n / AMP_ROWS, amp_tiles, &c);
     free(radial);
     return true;
 }
