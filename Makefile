@@ -54,8 +54,8 @@ TESTS_CONCURRENT := test-hostile test-cluster-roles test-daemon test-tap test-op
 TEST_LOGS        := $(BUILD)/test-logs
 test: deps
 	@$(MAKE) --no-print-directory build-all
-	@$(MAKE) --no-print-directory -k -j$$(nproc) test-bins >$(TEST_LOGS).build 2>&1 || \
-	  echo "test-bins: some test binaries did not build (their suites report it; log: $(TEST_LOGS).build)"
+	@$(MAKE) --no-print-directory -k -j$$(nproc) test-bins >$(BUILD)/test-bins.log 2>&1 || \
+	  echo "test-bins: some test binaries did not build (their suites report it; log: $(BUILD)/test-bins.log)"
 	@pass=0; fail=0; failed=""; pids=(); \
 	rm -rf $(TEST_LOGS) && mkdir -p $(TEST_LOGS); \
 	conc="$(filter $(TESTS_CONCURRENT),$(TESTS))"; \
