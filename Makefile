@@ -45,12 +45,12 @@ deps:
 # Every suite runs even if one fails; the closing line counts suites.
 # First every test binary is built in parallel (test-bins), so that the suites
 # below do not compile their sanitizer/fuzz/TSan flavours one file at a time.
-# Then the suites that mostly wait (real daemons on loopback at 30 Hz,
-# observer windows, NATS restarts: wall time >> CPU time) run concurrently
-# with each other (free ports, own temp dirs), each into its own log, printed
-# whole and in order; then the CPU-heavy suites (ASan, valgrind, TSan, fuzz,
-# SwiftShader) one at a time, alone on the machine.
-TESTS_CONCURRENT := test-hostile test-cluster-roles test-daemon test-tap test-ops
+# Then the suites that mostly wait (real daemons on loopback at 30 Hz, NATS
+# restarts: wall time >> CPU time) run concurrently with each other (free
+# ports, own temp dirs), each into its own log, printed whole and in order;
+# then the others one at a time, alone on the machine: CPU-heavy ones (ASan,
+# valgrind, TSan, fuzz, SwiftShader) and the hostile battery (it measures
+# the observer's share of frames; it runs its light cases 2 at a time itself).
 TEST_LOGS        := $(BUILD)/test-logs
 test: deps
 	@$(MAKE) --no-print-directory build-all

@@ -1878,25 +1878,39 @@ def run_case(fn, fig):
         shutil.rmtree(d.tmp, ignore_errors=True)
 
 
+# Cases that load the daemon (N > 64, hundreds of clients or sets, 10 MB messages) run alone
+# under --jobs, after the light ones: they measure the observer against a busy daemon.
+SOLO = {"connections_500", "churn", "resolution_flapping", "params_fanout", "message_10mb"}
+
+
+def solo(fn):
+    return fn.__name__ in SOLO or fn.opts["resolution"] > 64
+
+
 def run_jobs(jobs):
-    """Run the battery as `jobs` shards in parallel processes (cases I, I+jobs, ...); print each
-    shard's log whole, in order; one closing "N passed, M failed" line. Returns the exit code."""
+    """Run the light cases as `jobs` shards in parallel processes (each case still has its own
+    daemon and observer), then the solo() cases in one process alone; print each process's log
+    whole, in order; one closing "N passed, M failed" line. Returns the exit code."""
     base = [sys.executable, os.path.abspath(__file__), "--oceand", ARGS.oceand, "-k", ARGS.k]
     base += ["--strict"] if ARGS.strict else []
     t_all = time.time()
-    files = [tempfile.TemporaryFile("w+") for _ in range(jobs)]   # not pipes: a full one would stall its shard
-    procs = [subprocess.Popen(base + ["--shard", "%d/%d" % (i, jobs)], stdout=f, stderr=subprocess.STDOUT, text=True)
-             for i, f in enumerate(files)]
-    outs = []
-    for p, f in zip(procs, files):
+    shards = ["%d/%d" % (i, jobs) for i in range(jobs)]
+    files = [tempfile.TemporaryFile("w+") for _ in range(jobs + 1)]   # not pipes: a full one would stall its shard
+    procs = [subprocess.Popen(base + ["--shard", sh], stdout=f, stderr=subprocess.STDOUT, text=True)
+             for sh, f in zip(shards, files)]
+    for p in procs:
         p.wait()
+    procs.append(subprocess.Popen(base + ["--shard", "solo"], stdout=files[-1], stderr=subprocess.STDOUT, text=True))
+    procs[-1].wait()
+    outs = []
+    for f in files:
         f.seek(0)
         outs.append(f.read())
         f.close()
     passed = failed = 0
     failed_names = []
     for i, (p, out) in enumerate(zip(procs, outs)):
-        log("=== shard %d/%d (exit %d)" % (i, jobs, p.returncode))
+        log("=== %s (exit %d)" % ("light cases, shard %s" % shards[i] if i < jobs else "solo cases", p.returncode))
         lines = out.splitlines()
         last = lines[-1] if lines else ""
         m = re.match(r"(\d+) passed, (\d+) failed$", last)
@@ -1937,14 +1951,16 @@ def main():
         ARGS.jobs = 1          # figures are measured with the battery alone on the machine
     if ARGS.jobs > 1:
         sys.exit(run_jobs(ARGS.jobs))
-    shard, shards = (int(x) for x in ARGS.shard.split("/"))
+    if ARGS.shard == "solo":
+        cases = [fn for fn in CASES if solo(fn)]
+    else:
+        shard, shards = (int(x) for x in ARGS.shard.split("/"))
+        cases = CASES if shards == 1 else [fn for fn in CASES if not solo(fn)][shard::shards]
     passed = failed = 0
     failed_names = []
     t_all = time.time()
-    for i, fn in enumerate(CASES):
+    for fn in cases:
         if not any(k in fn.__name__ for k in ARGS.k.split(",")):
-            continue
-        if i % shards != shard:
             continue
         log("--- %s" % fn.__name__)
         t0 = time.time()
