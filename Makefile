@@ -62,7 +62,10 @@ test: deps
 	conc="$(filter $(TESTS_CONCURRENT),$(TESTS))"; \
 	trap 'for p in "$${pids[@]}"; do kill -TERM -- -$$p 2>/dev/null; done; exit 130' INT TERM; \
 	echo "=== running concurrently:$$conc (logs in $(TEST_LOGS)/)"; \
-	for t in $$conc; do setsid $(MAKE) --no-print-directory $$t >$(TEST_LOGS)/$$t.log 2>&1 & pids+=($$!); done; \
+	for t in $$conc; do \
+	  setsid bash -c '$(MAKE) --no-print-directory $$0; rc=$$?; echo "--- $$0: exit $$rc after $$SECONDS s"; exit $$rc' \
+	    $$t >$(TEST_LOGS)/$$t.log 2>&1 & pids+=($$!); \
+	done; \
 	i=0; for t in $$conc; do \
 	  echo "=== $$t"; \
 	  if wait $${pids[$$i]}; then ok=1; else ok=0; fi; i=$$((i+1)); \
@@ -70,9 +73,10 @@ test: deps
 	  if [ $$ok = 1 ]; then pass=$$((pass+1)); else fail=$$((fail+1)); failed="$$failed $$t"; fi; \
 	done; \
 	for t in $(filter-out $(TESTS_CONCURRENT),$(TESTS)); do \
-	  echo "=== $$t"; \
-	  if $(MAKE) --no-print-directory $$t; then pass=$$((pass+1)); \
-	  else fail=$$((fail+1)); failed="$$failed $$t"; fi; \
+	  echo "=== $$t"; s=$$SECONDS; \
+	  if $(MAKE) --no-print-directory $$t; then pass=$$((pass+1)); rc=0; \
+	  else rc=$$?; fail=$$((fail+1)); failed="$$failed $$t"; fi; \
+	  echo "--- $$t: exit $$rc after $$((SECONDS-s)) s"; \
 	done; \
 	[ -n "$$failed" ] && echo "failed suites:$$failed"; \
 	echo "$$pass passed, $$fail failed"; [ $$fail -eq 0 ]
