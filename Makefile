@@ -43,7 +43,7 @@ deps:
 	@scripts/deps.sh
 
 # Every suite runs even if one fails; the closing line counts suites.
-# First every test binary is built in parallel (test-bins), so that the suites
+# First everything is built in parallel (build-all, then test-bins), so that the suites
 # below do not compile their sanitizer/fuzz/TSan flavours one file at a time.
 # Then the suites that mostly wait (real daemons on loopback at 30 Hz, NATS
 # restarts: wall time >> CPU time) run concurrently with each other (free
@@ -54,7 +54,7 @@ deps:
 TESTS_CONCURRENT := test-cluster-roles test-daemon test-tap test-ops
 TEST_LOGS        := $(BUILD)/test-logs
 test: deps
-	@$(MAKE) --no-print-directory build-all
+	@$(MAKE) --no-print-directory -j$$(nproc) build-all
 	@$(MAKE) --no-print-directory -k -j$$(nproc) test-bins >$(BUILD)/test-bins.log 2>&1 || \
 	  echo "test-bins: some test binaries did not build (their suites report it; log: $(BUILD)/test-bins.log)"
 	@pass=0; fail=0; failed=""; pids=(); \
