@@ -9,6 +9,8 @@ mbytes_per_s is all clients together, mbytes_per_s_per_client the mean per clien
 
     /usr/bin/python3 bench/load.py [--runs 256:200,512:100] [--window 10]
     /usr/bin/python3 bench/load.py --capacity      # the issue-15 capacity table (make bench-capacity)
+Client 0 sets the wind (11 <-> 12 m/s) every --set-interval s: 0.3 by default (someone
+steering); 0 under --capacity (issue 15's one viewer; pass --set-interval 0.3 to add steering).
 """
 import argparse
 import json
@@ -97,8 +99,9 @@ def run(args, n, k, fields=None):
         if fields:
             sub["fields"] = fields
         sub = [args.subscribe] if args.subscribe else [json.dumps(sub, separators=(",", ":"))]
+        env = dict(os.environ, LOAD_SET_INTERVAL_S=str(args.set_interval))
         lc = subprocess.Popen([args.load_client, str(port), str(k), str(args.warmup), str(args.window)] + sub,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
         line = lc.stderr.readline()          # "measuring": the window starts
         cpu0, t0, wait0 = cpu_seconds(d.pid), time.monotonic(), runq_wait_seconds(d.pid)
         over0 = metric(port, "oceand_tick_overruns_total")
@@ -135,7 +138,7 @@ def run(args, n, k, fields=None):
                "degraded_groups_at_end": int(degraded) if degraded == degraded else None,  # NaN: a daemon without the metric
                "connected": r["connected"], "frame_kb": r["frame_kb"], "mbytes_per_s": r["mbytes_per_s"],
                "mbytes_per_s_per_client": round(r["mbytes_per_s"] / max(1, r["connected"]), 3),
-               "set_samples": r["set_samples"], "window_s": args.window,
+               "set_samples": r["set_samples"], "set_interval_s": args.set_interval, "window_s": args.window,
                "loadavg_1m": round(os.getloadavg()[0], 2)}   # this machine is shared: context for the numbers
         print(json.dumps(res), flush=True)
     finally:
@@ -163,7 +166,11 @@ def main():
     ap.add_argument("--capacity", action="store_true", help="issue 15's capacity rows, --repeat times each, "
                     "then one median line per row")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--set-interval", type=float, default=None,
+                    help="seconds between client 0's wind sets (default 0.3; --capacity: 0, the sea left alone)")
     args = ap.parse_args()
+    if args.set_interval is None:   # capacity is issue 15's one viewer watching; load has someone steering
+        args.set_interval = 0.0 if args.capacity else 0.3
     if args.capacity:
         capacity(args)
         return
@@ -199,7 +206,8 @@ def capacity(args):
             line = buf.getvalue().strip()
             print(line, flush=True)
             runs.append(json.loads(line))
-        med = {"bench": "capacity", "N": n, "clients": k, "fields": runs[0]["fields"], "runs": len(runs)}
+        med = {"bench": "capacity", "N": n, "clients": k, "fields": runs[0]["fields"], "runs": len(runs),
+               "set_interval_s": args.set_interval}
         for key in ("fps_median", "fps_min", "delivered", "overruns", "overruns_clock_late", "tick_ms_mean", "tick_ms_p50_bucket",
                     "encode_ms_mean",
                     "lat_p50_ms", "daemon_cpu", "daemon_runq_wait", "rss_mb", "degraded_groups_at_end", "loadavg_1m"):

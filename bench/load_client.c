@@ -12,7 +12,9 @@
  *
  *   load_client PORT CLIENTS WARMUP_S WINDOW_S [SUBSCRIBE_JSON]
  * SUBSCRIBE_JSON (at most 125 bytes) is sent by every client after the
- * handshake, e.g. {"type":"subscribe","fields":["height"]}. */
+ * handshake, e.g. {"type":"subscribe","fields":["height"]}.
+ * Environment LOAD_SET_INTERVAL_S: seconds between client 0's wind sets
+ * (default 0.3, someone steering; 0 = no sets, the sea left alone). */
 #include <arpa/inet.h>
 #include <errno.h>
 #include <netinet/in.h>
@@ -262,6 +264,8 @@ int main(int argc, char **argv)
     }
     static uint8_t buf[1 << 18];
     double t_start = now_s() + warmup, next_set = 0;
+    const char *si = getenv("LOAD_SET_INTERVAL_S");
+    double set_interval = si && *si ? atof(si) : 0.3;
     uint64_t seq_start = 0;
     struct epoll_event evs[256];
     for (;;) {
@@ -284,14 +288,14 @@ int main(int argc, char **argv)
             fprintf(stderr, "measuring\n"); /* the driver samples daemon CPU from here */
             fflush(stderr);
         }
-        if (measuring && clients[0].open && t >= next_set && !set_waiting) {
+        if (set_interval > 0 && measuring && clients[0].open && t >= next_set && !set_waiting) {
             char msg[96];
             int len = snprintf(msg, sizeof msg, "{\"type\":\"set\",\"params\":{\"wind_speed\":%d}}", 11 + (set_value++ % 2));
             set_waiting = true;
             set_seq = clients[0].last_seq;
             set_version = clients[0].last_version;
             send_frame(&clients[0], 1, msg, (size_t)len);
-            next_set = t + 0.3;
+            next_set = t + set_interval;
         }
         if (measuring && t >= t_start + window)
             break;

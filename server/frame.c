@@ -169,6 +169,8 @@ int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, c
         /* The previous job is finished: its items no longer use the streams. */
         if (want->reset_streams)
             layer_streams_reset(j->streams);
+        else if (want->sea_changed)
+            layer_streams_sea_changed(j->streams);
         for (int k = 0; k < want->nkeys; k++) /* a layer degraded to a coarser LOD goes intra */
             if (want->lod[k] != layer_key_lod(want->keys[k])) {
                 j->want.temporal[want->keys[k]] = 0;

@@ -79,7 +79,11 @@ struct frame_want {
     uint8_t lod[LAYER_KEYS_ALL]; /* encoded LOD of keys[i]: layer_key_lod(keys[i]) or coarser */
     uint8_t temporal[LAYER_KEYS_ALL]; /* by key: a temporal client wants it (encode its stream; cascade 0 only) */
     uint8_t intra[LAYER_KEYS_ALL];  /* by key: a client needs intra / keyframe tiles this tick */
-    bool reset_streams;         /* the sea changed (N or physics): every temporal layer starts new chains */
+    uint16_t tclients[LAYER_KEYS_ALL]; /* by key: temporal clients (saturating) */
+    uint16_t iclients[LAYER_KEYS_ALL]; /* by key: clients that take intra tiles every tick (an edge: 65535) */
+    uint16_t kclients[LAYER_KEYS_ALL]; /* by key: temporal clients that need this tick's keyframe tiles */
+    bool reset_streams;         /* a new sea (N, seed, patch, depth, loop): every temporal layer starts new chains */
+    bool sea_changed;           /* the sea's amplitudes changed (same phases): chains go on, oc_stream_sea_changed */
 };
 
 struct layer_streams;

@@ -24,6 +24,12 @@ void layer_streams_reset(struct layer_streams *ls)
         oc_stream_reset(ls->st[k]);
 }
 
+void layer_streams_sea_changed(struct layer_streams *ls)
+{
+    for (int k = 0; k < LAYER_KEYS; k++)
+        oc_stream_sea_changed(ls->st[k]);
+}
+
 static void drop(struct layer_streams *ls, int k)
 {
     if (!ls->st[k])
@@ -40,6 +46,20 @@ void layer_streams_free(struct layer_streams *ls)
         drop(ls, k);
 }
 
+/* Bytes per frame at N = 256, 1 cm (docs/codec.md): shared 21.4 kB fine vs 27.7 coarse,
+ * keyframes 105 vs 68 kB: the fine grid pays when tclients * 6.3 > iclients * 37. */
+static void pick_refine(struct layer_streams *ls, int k, const struct frame_want *want)
+{
+    ls->key_rate[k] += (want->kclients[k] - ls->key_rate[k]) / 32;
+    double takers = want->iclients[k] + ls->key_rate[k], keep = want->tclients[k] - ls->key_rate[k];
+    bool coarse = want->iclients[k] == 65535 || takers * 6 > keep + 1;   /* + 1: a client joining is not a trend */
+    ls->coarse_ticks[k] = coarse ? 0 : ls->coarse_ticks[k] + 1;
+    if (coarse)
+        oc_stream_set_grid_refine(ls->st[k], 1);                 /* no-op when already there */
+    else if (ls->coarse_ticks[k] >= 64)
+        oc_stream_set_grid_refine(ls->st[k], OC_STREAM_GRID_REFINE(ctl_bounds[layer_key_bound(k)]));
+}
+
 void layer_streams_prepare(struct layer_streams *ls, int n, int tile_size, struct frame_want *want)
 {
     if (ls->n != n || ls->tile_size != tile_size) {
@@ -53,8 +73,12 @@ void layer_streams_prepare(struct layer_streams *ls, int n, int tile_size, struc
     for (int i = 0; i < want->nkeys; i++) {
         int k = want->keys[i];
         int side = tile_size >> layer_key_lod(k);
-        if (k >= LAYER_KEYS || !want->temporal[k] || ls->st[k])
+        if (k >= LAYER_KEYS || !want->temporal[k])
             continue; /* streams are for cascade 0's keys */
+        if (ls->st[k]) {
+            pick_refine(ls, k, want);
+            continue;
+        }
         size_t bytes = layer_stream_bytes(side) * (size_t)(n / tile_size) * (size_t)(n / tile_size);
         if (side >= 1 && ls->used + bytes <= ls->budget)
             ls->st[k] = oc_stream_new(n, tile_size, layer_key_lod(k), (enum oc_field)layer_key_field(k),
@@ -65,6 +89,9 @@ void layer_streams_prepare(struct layer_streams *ls, int n, int tile_size, struc
             continue;
         }
         oc_stream_set_keyframe_interval(ls->st[k], ls->keyframe_interval);
+        ls->coarse_ticks[k] = 64;
+        ls->key_rate[k] = 0;
+        pick_refine(ls, k, want);
         ls->used += bytes;
     }
 }

@@ -26,6 +26,8 @@ struct layer_streams {
     int keyframe_interval;            /* periodic keyframes, ticks (0 = only when needed) */
     size_t budget;                    /* bytes the streams may keep (encoder state); beyond: intra */
     size_t used;                      /* bytes kept by the streams in st[] */
+    int coarse_ticks[LAYER_KEYS];     /* consecutive ticks the fine grid was the better one */
+    float key_rate[LAYER_KEYS];       /* temporal clients taking keyframe tiles per tick, smoothed */
 };
 
 /* Encoder state a stream keeps for a layer of side `side` samples (codes and
@@ -35,13 +37,22 @@ size_t layer_stream_bytes(int side);
 void layer_streams_init(struct layer_streams *ls, int keyframe_interval, size_t budget);
 /* New chains everywhere: the next tick's shared tiles are keyframes (a change of the sea). */
 void layer_streams_reset(struct layer_streams *ls);
+/* The sea's amplitudes changed, its phases did not: chains go on (oc_stream_sea_changed). */
+void layer_streams_sea_changed(struct layer_streams *ls);
 void layer_streams_free(struct layer_streams *ls);
 
 /* Make the streams agree with this tick's wish: free those of keys no
  * temporal client wants, create the wanted ones at grid n / tile_size (a
  * new grid frees them all first). A wanted key whose stream does not fit
  * the budget (or cannot be allocated) loses its temporal flag in `want` and
- * gets intra tiles instead (want->intra set). */
+ * gets intra tiles instead (want->intra set).
+ * Also picks each stream's grid refinement (docs/codec.md, "Grid refinement"):
+ * the fine grid makes the shared tiles ~23 % smaller and the keyframe tiles ~50 %
+ * larger. Keyframe takers per tick = clients that are not temporal + the temporal
+ * ones short of references (throttled, skipping, joining; smoothed over ~30 ticks);
+ * per key, the coarse grid (1) while takers * 6 > the others + 1 (or an edge
+ * takes the layer), the fine one once that has not held for 64 ticks (a switch starts
+ * new chains). */
 void layer_streams_prepare(struct layer_streams *ls, int n, int tile_size, struct frame_want *want);
 
 /* Encode one temporal layer of this tick into l (field/lod/bound_index set

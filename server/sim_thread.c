@@ -69,7 +69,8 @@ struct sim {
     bool measure_done;
     struct layer_streams streams; /* the temporal layers' encoder state: used by frame_job_begin (producer)
                                      and one encode thread per layer, one job at a time (encode_pool) */
-    bool reset_streams;           /* tick only: the sea changed; the next job resets the streams */
+    bool reset_streams;           /* tick only: a new sea (seed, patch, depth, loop, N): the next job resets the streams */
+    bool sea_changed;             /* tick only: same phases, new amplitudes: the next job keeps the chains (codec.md) */
 
     /* builder only: the params of the newest state built (applied, or
      * waiting in `ready`): the base the next batch is checked against. */
@@ -226,6 +227,20 @@ static uint64_t params_diff(const struct ocean_params *a, const struct ocean_par
     return m;
 }
 
+/* The parameters whose change gives the sea other phases (or another grid): the
+ * previous frames do not predict it. */
+static uint64_t phase_params(void)
+{
+    static const char *const names[] = { "resolution", "patch_size", "depth", "loop_period", "seed" };
+    uint64_t m = 0;
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        const struct param_def *d = param_find(names[i]);
+        if (d && d - param_table < 64)
+            m |= 1ull << (d - param_table);
+    }
+    return m;
+}
+
 static bool physics_differ(const struct ocean_params *a, const struct ocean_params *b)
 {
     for (size_t i = 0; i < param_count; i++)
@@ -357,9 +372,17 @@ static void apply_pending(struct sim *s)
             ocean_surface_free(b.surface); /* a snapshot of what was not committed */
             b.surface = NULL;
         } else {
-            /* A new sea (or a new N): the previous frames predict it badly, so
-             * every temporal layer starts new chains (keyframes) with the next job. */
-            s->reset_streams = true;
+            /* A sea with other phases (seed, patch size, depth, loop period) or a new N:
+             * the previous frames do not predict it, so every temporal layer starts new
+             * chains (keyframes) with the next job. Any other change (wind, amplitude,
+             * choppiness, spectrum shape, ...) keeps the phases: the chains go on and each
+             * tile of the next frame is predicted or intra on its chain's grid, whichever
+             * is smaller (docs/codec.md, "Changes of the sea"). Either way every frame
+             * decodes; the split only decides bytes. */
+            if (params_diff(&s->params, ocean_get_params(s->ocean)) & phase_params())
+                s->reset_streams = true;
+            else
+                s->sea_changed = true;
             if (n_before != ocean_resolution(s->ocean)) {
                 atomic_fetch_add(&g_metrics.replans, 1);
                 LOGI("resolution now %d", ocean_resolution(s->ocean));
@@ -656,8 +679,14 @@ static void tick(struct sim *s, double t_tick)
              * and this tick's keyframes for temporal ones that lack the references. */
             int temporal = atomic_load(&s->tdemand[k]);
             pj.want.temporal[k] = temporal > 0;
-            pj.want.intra[k] = demand[k] > temporal || ((remote[k >> 3] >> (k & 7)) & 1) ||
-                               atomic_load(&s->key_want[k]) > 0;
+            bool edge = (remote[k >> 3] >> (k & 7)) & 1;
+            int key_want = atomic_load(&s->key_want[k]);
+            pj.want.intra[k] = demand[k] > temporal || edge || key_want > 0;
+            pj.want.kclients[k] = (uint16_t)(key_want < 0 ? 0 : key_want > 65535 ? 65535 : key_want);
+            /* who takes this layer every tick: the stream's grid refinement (layer_stream.h) */
+            pj.want.tclients[k] = (uint16_t)(temporal < 0 ? 0 : temporal > 65535 ? 65535 : temporal);
+            pj.want.iclients[k] = (uint16_t)(edge ? 65535 : demand[k] - temporal > 65535 ? 65535
+                                                         : demand[k] > temporal ? demand[k] - temporal : 0);
         }
     }
     if (!pj.want.nkeys && !probe_fields)
@@ -696,7 +725,9 @@ static void tick(struct sim *s, double t_tick)
         if (due[g])
             s->credit[g] -= 1;
     pj.want.reset_streams = s->reset_streams;
+    pj.want.sea_changed = s->sea_changed && !s->reset_streams;
     s->reset_streams = false;
+    s->sea_changed = false;
     pthread_mutex_lock(&s->lock);
     s->pj = pj;
     s->prod_has_job = true; /* one deep: taken when the producer is done with the frame before */

@@ -5,6 +5,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync, readdirSync, existsSync } from 'node:fs';
+import { execFileSync } from 'node:child_process';
 import { fileURLToPath } from 'node:url';
 import { dirname, join } from 'node:path';
 import { createRequire } from 'node:module';
@@ -120,6 +121,73 @@ test('random truncations and bit flips of a predicted frame are rejected or deco
   // every mutation decodes against the same references (a failed frame changes nothing; a decoded
   // one adds seq 105's codes, which the next mutation of 105 may still use)
   await mutateAndDecode(load(chain[5].file), 777, (it) => ({ useNodeZlib: it % 4 < 2, state }), ['reference']);
+});
+
+// options.target: every stream decoded straight into one interleaved array (3 floats per sample,
+// each tile its own region, rows padded) gives the same float32 bits as the tiles' own arrays.
+test('options.target places the same bits as samples (strided, offset, padded rows)', async () => {
+  const single = manifest.vectors.filter((v) => haveZstd || v.tiles.every((t) => t.codec !== 2))
+    .map((v) => ({ name: v.name, frames: [{ file: v.file, seq: 0 }] }));
+  assert.ok(single.some((v) => manifest.vectors.find((x) => x.name === v.name).tiles.some((t) => t.codec === 0)), 'no raw (codec 0) vector');
+  for (const st of [...manifest.streams, ...single]) {
+    const own = new DecoderState(), placed = new DecoderState();
+    for (const f of st.frames) {
+      if (f.error) continue;
+      const a = await decodeFrame(load(f.file), { state: own });
+      let arr = null;
+      const regions = [];
+      const b = await decodeFrame(load(f.file), {
+        state: placed,
+        target: (h, tiles) => {
+          let size = 0;
+          for (const t of tiles) { regions.push({ offset: size + 5, rowStride: 3 * t.width + 7 }); size += 5 + t.height * (3 * t.width + 7); }
+          arr = new Float32Array(size);
+          return tiles.map((t, i) => ({ array: arr, offset: regions[i].offset + 1, stride: 3, rowStride: regions[i].rowStride }));
+        },
+      });
+      a.tiles.forEach((t, i) => {
+        assert.equal(b.tiles[i].samples, null);
+        const got = new Float32Array(t.samples.length);
+        for (let j = 0; j < t.height; j++) for (let x = 0; x < t.width; x++) got[j * t.width + x] = arr[regions[i].offset + 1 + j * regions[i].rowStride + 3 * x];
+        assert.deepEqual(new Uint32Array(got.buffer), new Uint32Array(t.samples.buffer, t.samples.byteOffset, t.samples.length), `${st.name} seq ${f.seq} tile ${i}`);
+      });
+    }
+  }
+  await assert.rejects(decodeFrame(load(manifest.vectors[0].file), { target: () => [{ array: new Float32Array(4), offset: 0, stride: 1, rowStride: 1 }] }), RangeError);
+});
+
+// A predicted tile whose coefficients are all 0 (P = q1: the decoder's shortcut) against the Python
+// reference decoder (proto/tools/ref_decode.py), on the vectors' chain with its coefficients zeroed.
+test('predicted tiles with all coefficients 0 match the reference decoder', { skip: !existsSync('/usr/bin/python3') && 'no python3' }, async () => {
+  const chain = manifest.streams.find((x) => x.name === 's01_chain').frames.filter((f) => !f.error);
+  const frames = chain.map((f) => {
+    const b = Buffer.from(load(f.file));
+    for (let pos = b.readUInt16LE(6), i = 0, n = b.readUInt16LE(36); i < n; i++) {
+      if (b[pos + 2] === 3) b.fill(0, pos + 40 + 24, pos + 40 + 24 + 14);
+      pos += 40 + b.readUInt32LE(pos + 32);
+    }
+    return b;
+  });
+  assert.ok(frames.some((b) => b.includes(Buffer.from([3]))));
+  const py = `import sys, json, struct, base64
+sys.path.insert(0, ${JSON.stringify(join(root, 'proto/tools'))})
+from ref_decode import decode_frame
+refs, out = {}, []
+for line in sys.stdin:
+    h, tiles = decode_frame(base64.b64decode(line), refs)
+    s = [x for t in tiles for x in t["samples"]]
+    out.append(base64.b64encode(struct.pack("<%df" % len(s), *s)).decode())
+print(json.dumps(out))`;
+  const want = JSON.parse(execFileSync('/usr/bin/python3', ['-c', py], { input: frames.map((b) => b.toString('base64')).join('\n') + '\n' }).toString());
+  const state = new DecoderState();
+  let predicted = 0;
+  for (const [k, b] of frames.entries()) {
+    const fr = await decodeFrame(b, { state, useNodeZlib: k % 2 === 0 });
+    predicted += fr.tiles.filter((t) => t.codec === 3).length;
+    const got = Buffer.concat(fr.tiles.map((t) => Buffer.from(t.samples.buffer, t.samples.byteOffset, t.samples.byteLength)));
+    assert.equal(got.toString('base64'), want[k], `frame ${k}`);
+  }
+  assert.ok(predicted > 0, 'no predicted tile decoded');
 });
 
 test('typed-array views and offsets are accepted', async () => {

@@ -104,6 +104,9 @@ void oc_temporal_predict_row(const int32_t *const *refs, int depth, int w, int h
 /* Encoder side: Laplacians of a reference (|q| < OC_TEMPORAL_CODE_MAX), predictions of row j
  * from the references and their Laplacians, and the least-squares coefficients for codes q. */
 void oc_temporal_laplacian(const int32_t *q, int w, int h, int32_t *L);
+/* Encoder: each code of a row moved to the code within the bound nearest its prediction. */
+void oc_temporal_snap_row(int32_t *q, const uint32_t *pred, const float *v, int w, double offset, double scale,
+                          double bound);
 void oc_temporal_predict_row_cached(const int32_t *const *refs, const int32_t *const *laps, int depth, int w, int j,
                                     const int16_t coef[OC_TEMPORAL_COEFS], uint32_t *pred);
 void oc_temporal_fit(const int32_t *const *refs, const int32_t *const *laps, int depth, const int32_t *q, int w,

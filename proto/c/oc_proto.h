@@ -168,8 +168,20 @@ void oc_stream_free(struct oc_stream *s);
 /* A periodic keyframe every `ticks` frames (0 = only when needed). Default OC_STREAM_KEYFRAME_INTERVAL. */
 #define OC_STREAM_KEYFRAME_INTERVAL 300
 void oc_stream_set_keyframe_interval(struct oc_stream *s, int ticks);
+/* Grid refinement r: a chain quantises on a grid r times finer than the bound needs, and
+ * a predicted sample whose prediction is within the bound takes it (residual 0; docs/codec.md,
+ * "Grid refinement"). 1 = the coarse grid (one valid code per sample). Default, by
+ * measurement: 3 for bounds >= 0.5 mm (every bound a subscription offers), else 1.
+ * Changing it resets the stream. */
+#define OC_STREAM_GRID_REFINE(bound) ((bound) >= 0.0005f ? 3 : 1)
+#define OC_STREAM_GRID_REFINE_MAX 8
+void oc_stream_set_grid_refine(struct oc_stream *s, int refine);
 /* Forget the chain: the next oc_stream_encode writes keyframes on a new grid. */
 void oc_stream_reset(struct oc_stream *s);
+/* The sea changed but keeps its phases (e.g. wind or amplitude, not the seed): the next
+ * oc_stream_encode keeps the chains and sends each tile predicted or intra on the
+ * chain's grid, whichever is smaller; the ticks after it predict at full depth. */
+void oc_stream_sea_changed(struct oc_stream *s);
 /* Encode this tick's shared frame of the layer. field_data = the full n*n field,
  * seq = the frame's seq. A seq that does not follow the previous call's by 1
  * starts a new chain (keyframes). Non-finite input: OC_E_ARG (stream reset). */
@@ -184,7 +196,8 @@ int oc_stream_tile(const struct oc_stream *s, int tile_x, int tile_z, const uint
 int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_x, int tile_z,
                             const uint8_t **data, size_t *len);
 /* Counters for metrics and benchmarks: shared tiles encoded as keyframes, keyframe tiles made on demand. */
-struct oc_stream_stats { uint64_t ticks, key_tiles, predicted_tiles, demand_key_tiles; };
+/* change_intra_tiles: shared tiles sent intra on their chain's grid after oc_stream_sea_changed. */
+struct oc_stream_stats { uint64_t ticks, key_tiles, predicted_tiles, demand_key_tiles, change_intra_tiles; };
 void oc_stream_stats(const struct oc_stream *s, struct oc_stream_stats *out);
 
 #endif

@@ -16,6 +16,12 @@
 #include <string.h>
 
 #define RING (OC_TEMPORAL_MAX_DEPTH + 1)
+/* Closed-loop quantisation with a choice (measured in docs/codec.md, "Grid refinement"):
+ * a chain's grid is `refine` times finer than the bound needs, so every sample has
+ * several codes within the bound; a predicted sample whose prediction is one of them
+ * takes it (residual 0), any other its rounded code (oc_temporal_snap_row). The
+ * references then follow the smooth extrapolation instead of carrying rounding noise,
+ * and the residuals shrink (N = 256, 1 cm, height+dx+dz: 27.7 -> 21.4 kB a frame at 3). */
 /* New grids leave room for values 4x today's magnitude before the float32 margin
  * (PROTOCOL.md §5.5 step 2) runs out; beyond that the tile starts a new chain. */
 #define GRID_HEADROOM 4.0
@@ -34,7 +40,10 @@ struct oc_stream {
     int n, tile_size, lod, side, grid;
     enum oc_field field;
     float bound;
-    int interval;
+    int interval, refine;
+    int changed;              /* the sea changed since the last encode (oc_stream_sea_changed) */
+    int32_t *scratch;         /* a candidate's codes (count) */
+    struct oc_buf cand;       /* a candidate tile */
     uint64_t seq, ticks;
     int encoded;              /* oc_stream_encode succeeded at least once since the last reset */
     int head, need;
@@ -55,6 +64,7 @@ struct oc_stream *oc_stream_new(int n, int tile_size, int lod, enum oc_field fie
     s->side = tile_size >> lod;
     s->grid = n / tile_size;
     s->interval = OC_STREAM_KEYFRAME_INTERVAL;
+    s->refine = OC_STREAM_GRID_REFINE(bound);
     s->tiles = calloc((size_t)s->grid * s->grid, sizeof *s->tiles);
     if (!s->tiles) { free(s); return NULL; }
     return s;
@@ -69,12 +79,27 @@ void oc_stream_free(struct oc_stream *s)
         oc_buf_free(&s->tiles[t].key);
     }
     free(s->tiles);
+    free(s->scratch);
+    oc_buf_free(&s->cand);
     free(s);
 }
 
 void oc_stream_set_keyframe_interval(struct oc_stream *s, int ticks)
 {
     if (s) s->interval = ticks > 0 ? ticks : 0;
+}
+
+void oc_stream_set_grid_refine(struct oc_stream *s, int refine)
+{
+    if (s && refine >= 1 && refine <= OC_STREAM_GRID_REFINE_MAX && refine != s->refine) {
+        s->refine = refine;
+        oc_stream_reset(s);
+    }
+}
+
+void oc_stream_sea_changed(struct oc_stream *s)
+{
+    if (s) s->changed = 1;
 }
 
 void oc_stream_reset(struct oc_stream *s)
@@ -100,9 +125,29 @@ static double entropy_bits(const uint32_t hist[256], size_t total)
     return bits;
 }
 
-/* Residuals of q against the temporal prediction, the smaller packing (estimated
- * from the byte histograms), DEFLATE; appends tile header + codec 3 payload. */
-static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q,
+/* Does code c reconstruct v within the bound (exactly as a decoder does, §5.4)? */
+static inline int fits(int32_t c, float v, double offset, double scale, double bound)
+{
+    return fabs((double)oc_dequant(c, offset, scale) - (double)v) <= bound;
+}
+
+/* The code nearest to p that meets the bound, starting from c, which does. */
+static inline int32_t snap(int32_t c, int32_t p, float v, double offset, double scale, double bound)
+{
+    if (c == p || fits(p, v, offset, scale, bound)) return p;
+    while (c != p) {
+        int32_t next = c + (p > c ? 1 : -1);
+        if (!fits(next, v, offset, scale, bound)) break;
+        c = next;
+    }
+    return c;
+}
+
+/* Residuals of q against the temporal prediction, each code first moved to its
+ * prediction where that is within the bound (q is updated: the codes a decoder gets), the
+ * smaller packing (estimated from the byte histograms), DEFLATE; appends tile header +
+ * codec 3 payload. vals = the tile's samples. */
+static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, int32_t *q, const float *vals,
                            const int32_t *const *refs, const int32_t *const *laps, int depth, uint64_t ref_seq,
                            struct oc_buf *out)
 {
@@ -115,8 +160,10 @@ static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, cons
     uint32_t pred[OC_MAX_N];   /* one row of predictions */
     for (int j = 0; j < h; j++) {
         oc_temporal_predict_row_cached(refs, laps, depth, w, j, coef, pred);
-        const int32_t *qr = q + (size_t)j * w;
+        int32_t *qr = q + (size_t)j * w;
+        const float *vr = vals + (size_t)j * w;
         uint32_t *z = e->zz + (size_t)j * w;
+        oc_temporal_snap_row(qr, pred, vr, w, th->offset, th->scale, th->bound);
         for (int i = 0; i < w; i++) {
             uint32_t r = (uint32_t)qr[i] - pred[i];
             z[i] = (r << 1) ^ (0u - (r >> 31));
@@ -170,6 +217,115 @@ static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, cons
     return OC_OK;
 }
 
+static inline int64_t floor_div64(int64_t x) { return x < 0 ? ~(~x >> 6) : x >> 6; }
+
+/* Intra (codec 1) on the chain's grid with each code moved, in decoding order, to the
+ * valid code nearest its spatial prediction (§5.3, coefficients fitted on the rounded
+ * codes q, which this replaces). */
+static int intra_snapped(struct oc_encoder *e, struct oc_tile_header *th, int32_t *q, struct oc_buf *out)
+{
+    const int w = th->width, h = th->height;
+    const float *v = e->vals;
+    int8_t c[OC_PRED_COEFS];
+    oc_predict_fit(q, w, h, c);
+    for (int j = 0; j < h; j++)
+        for (int i = 0; i < w; i++) {
+            const size_t k = (size_t)j * w + i;
+            int64_t p;
+            if (j == 0) p = i == 0 ? 0 : q[k - 1];
+            else if (i == 0) p = q[k - w];
+            else if (j >= 2 && w >= 4 && i >= 2 && i <= w - 2)
+                p = floor_div64((int64_t)c[0] * q[k - 1] + (int64_t)c[1] * q[k - w] + (int64_t)c[2] * q[k - w - 1]
+                                + (int64_t)c[3] * q[k - w + 1] + (int64_t)c[4] * q[k - 2] + (int64_t)c[5] * q[k - 2 * (size_t)w] + 32);
+            else p = (int64_t)q[k - 1] + q[k - w] - q[k - w - 1];
+            p = p < INT32_MIN ? INT32_MIN : p > INT32_MAX ? INT32_MAX : p;   /* only steers the choice */
+            q[k] = snap(q[k], (int32_t)p, v[k], th->offset, th->scale, th->bound);
+        }
+    /* The residuals must use the coefficients the choice was made with. */
+    const int force = e->force;
+    int8_t forced[OC_PRED_COEFS];
+    memcpy(forced, e->forced, sizeof forced);
+    e->force = 1;
+    memcpy(e->forced, c, sizeof c);
+    int rc = oc_enc_append_intra(e, th, q, 0, out);
+    e->force = force;
+    memcpy(e->forced, forced, sizeof forced);
+    return rc;
+}
+
+/* Intra (codec 1) on the chain's grid with codes that are multiples of `refine` (the
+ * coarse grid's codes) and the Lorenzo predictor, whose predictions of such codes are
+ * multiples too: it costs what the coarse grid's Lorenzo intra costs. 0 = not every
+ * sample has such a code within the bound (then nothing is written). */
+static int intra_coarse(struct oc_encoder *e, struct oc_tile_header *th, int refine, int32_t *q, struct oc_buf *out,
+                        int *ok)
+{
+    static const int8_t lorenzo[OC_PRED_COEFS] = { 64, 64, -64, 0, 0, 0 };
+    const size_t count = (size_t)th->width * th->height;
+    const double coarse = th->scale * refine;
+    *ok = 0;
+    for (size_t k = 0; k < count; k++) {
+        const float v = e->vals[k];
+        double x = nearbyint(((double)v - th->offset) / coarse);
+        if (!(fabs(x) * refine < OC_TEMPORAL_CODE_MAX)) return OC_OK;
+        int32_t c = (int32_t)x * refine;
+        if (!fits(c, v, th->offset, th->scale, th->bound)) {
+            if (fits(c - refine, v, th->offset, th->scale, th->bound)) c -= refine;
+            else if (fits(c + refine, v, th->offset, th->scale, th->bound)) c += refine;
+            else return OC_OK;
+        }
+        q[k] = c;
+    }
+    const int force = e->force;
+    int8_t forced[OC_PRED_COEFS];
+    memcpy(forced, e->forced, sizeof forced);
+    e->force = 1;
+    memcpy(e->forced, lorenzo, sizeof lorenzo);
+    int rc = oc_enc_append_intra(e, th, q, 0, out);
+    e->force = force;
+    memcpy(e->forced, forced, sizeof forced);
+    *ok = rc == OC_OK;
+    return rc;
+}
+
+/* The smallest intra tile of this tick on the chain's grid (th: offset, scale set) whose
+ * codes start from the rounded codes in e->q: `cur` gets its codes, `out` the tile. When
+ * `out` already holds a tile (the predicted one, codes in cur), it is kept unless an
+ * intra one is smaller. Returns 0 or an OC_E_*; *intra = the intra one was kept. */
+static int smallest_intra(struct oc_stream *s, struct oc_encoder *e, struct oc_tile_header *th, int32_t *cur,
+                          struct oc_buf *out, int *intra)
+{
+    const size_t count = (size_t)th->width * th->height;
+    *intra = 0;
+    if (!s->scratch && !(s->scratch = malloc(sizeof(int32_t) * (size_t)s->side * s->side))) return OC_E_NOMEM;
+    int have = out->len > 0, rc;
+    /* 1: the rounded codes snapped to the spatial prediction */
+    memcpy(s->scratch, e->q, count * sizeof(int32_t));
+    s->cand.len = 0;
+    if ((rc = intra_snapped(e, th, s->scratch, &s->cand))) return rc;
+    if (!have || s->cand.len < out->len) {
+        out->len = 0;
+        if ((rc = oc_buf_reserve(out, s->cand.len))) return rc;
+        memcpy(out->data, s->cand.data, s->cand.len);
+        out->len = s->cand.len;
+        memcpy(cur, s->scratch, count * sizeof(int32_t));
+        have = 1;
+        *intra = 1;
+    }
+    /* 2: the coarse grid's codes with Lorenzo */
+    int ok;
+    s->cand.len = 0;
+    if (s->refine > 1 && (rc = intra_coarse(e, th, s->refine, s->scratch, &s->cand, &ok))) return rc;
+    if (s->refine > 1 && ok && s->cand.len < out->len) {
+        out->len = 0;
+        memcpy(out->data, s->cand.data, s->cand.len);   /* smaller than what out holds */
+        out->len = s->cand.len;
+        memcpy(cur, s->scratch, count * sizeof(int32_t));
+        *intra = 1;
+    }
+    return OC_OK;
+}
+
 /* Encode one tile of this tick into t->shared. */
 static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *field_data, int tx, int tz,
                        int consecutive, int periodic)
@@ -192,9 +348,11 @@ static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *f
         .width = (uint16_t)s->side, .height = (uint16_t)s->side, .bound = s->bound,
     };
     int32_t *cur = t->ring[s->head];
+    /* e->q: the rounded codes on the fine grid (within bound / refine, so within the bound) */
+    const double fine_bound = (double)s->bound / s->refine;
     if (s->bound > 0 && consecutive && !periodic && t->hist > 0
-        && oc_enc_quantise_on(e, count, vmin, vmax, s->bound, t->offset, t->scale)
-        && oc_max_abs(e->q, count) < OC_TEMPORAL_CODE_MAX) {
+        && oc_enc_quantise_on(e, count, vmin, vmax, fine_bound, t->offset, t->scale)
+        && oc_max_abs(e->q, count) < (uint32_t)(OC_TEMPORAL_CODE_MAX - s->refine)) {
         /* Predicted from the previous ticks of the chain. */
         const int32_t *refs[OC_TEMPORAL_MAX_DEPTH], *laps[OC_TEMPORAL_MAX_DEPTH];
         int depth = t->hist < OC_TEMPORAL_MAX_DEPTH ? t->hist : OC_TEMPORAL_MAX_DEPTH;
@@ -203,29 +361,44 @@ static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *f
             laps[i] = t->lap[(s->head + RING - 1 - i) % RING];
         }
         memcpy(cur, e->q, count * sizeof(int32_t));
-        oc_temporal_laplacian(cur, s->side, s->side, t->lap[s->head]);
         th.offset = t->offset;
         th.scale = t->scale;
-        if ((rc = append_temporal(e, &th, cur, refs, laps, depth, s->seq - 1, &t->shared))) return rc;
+        if ((rc = append_temporal(e, &th, cur, e->vals, refs, laps, depth, s->seq - 1, &t->shared))) return rc;
         t->depth = depth;
         t->hist++;
-        s->stats.predicted_tiles++;
+        if (s->changed) {
+            /* The sea changed (same phases, new amplitudes): the jump is a new sea's worth of
+             * detail, which the spatial predictor may code in fewer bytes. Either way the
+             * chain goes on (an intra tile on its grid is a reference like any other), so
+             * the next ticks predict from the full depth at once. */
+            int intra;
+            th.bound = s->bound;
+            if ((rc = smallest_intra(s, e, &th, cur, &t->shared, &intra))) return rc;
+            if (intra) {
+                t->depth = 0;
+                t->key_ready = 1;
+                s->stats.change_intra_tiles++;
+            }
+        }
+        if (t->depth) s->stats.predicted_tiles++;
+        oc_temporal_laplacian(cur, s->side, s->side, t->lap[s->head]);
         return OC_OK;
     }
     /* Keyframe on a new grid (or raw when the tile cannot be quantised). */
     s->stats.key_tiles++;
     t->key_ready = 1;
-    if (s->bound == 0 || !oc_enc_quantise_new(e, count, vmin, vmax, s->bound, GRID_HEADROOM, &th.offset, &th.scale)
-        || oc_max_abs(e->q, count) >= OC_TEMPORAL_CODE_MAX) {
+    if (s->bound == 0 || !oc_enc_quantise_new(e, count, vmin, vmax, fine_bound, GRID_HEADROOM, &th.offset, &th.scale)
+        || oc_max_abs(e->q, count) >= (uint32_t)(OC_TEMPORAL_CODE_MAX - s->refine)) {
         t->hist = 0;
         return oc_enc_append_raw(&t->shared, &th, e->vals, count);
     }
-    memcpy(cur, e->q, count * sizeof(int32_t));
-    oc_temporal_laplacian(cur, s->side, s->side, t->lap[s->head]);
     t->offset = th.offset;
     t->scale = th.scale;
     t->hist = 1;
-    return oc_enc_append_intra(e, &th, cur, 0, &t->shared);
+    int intra;
+    if ((rc = smallest_intra(s, e, &th, cur, &t->shared, &intra))) return rc;
+    oc_temporal_laplacian(cur, s->side, s->side, t->lap[s->head]);
+    return OC_OK;
 }
 
 int oc_stream_encode(struct oc_stream *s, struct oc_encoder *e, const float *field_data, uint64_t seq)
@@ -246,6 +419,7 @@ int oc_stream_encode(struct oc_stream *s, struct oc_encoder *e, const float *fie
         if (s->tiles[k].depth > s->need) s->need = s->tiles[k].depth;
     }
     s->encoded = 1;
+    s->changed = 0;
     s->ticks++;
     s->stats.ticks++;
     return OC_OK;

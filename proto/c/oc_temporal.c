@@ -151,6 +151,21 @@ void oc_temporal_predict_row_cached(const int32_t *const *refs, const int32_t *c
     predict_cached(q[0], q[1], q[2], q[3], l[0], l[1], l[2], l[3], w, coef, pred);
 }
 
+/* The encoder's choice of codes on a refined grid (oc_stream.c): a sample whose
+ * prediction reconstructs within the bound takes it (residual 0); any other keeps its
+ * rounded code q, the centre of its valid codes. (Measured against the valid code
+ * nearest the prediction: 0.5 % fewer bytes at 1 cm and one exact check per sample.) */
+OC_VECTOR_CLONES
+void oc_temporal_snap_row(int32_t *restrict q, const uint32_t *restrict pred, const float *restrict v, int w,
+                          double offset, double scale, double bound)
+{
+    for (int i = 0; i < w; i++) {
+        const int32_t p = (int32_t)pred[i];
+        const int ok = fabs((double)(float)(offset + (double)p * scale) - (double)v[i]) <= bound;
+        q[i] = ok ? p : q[i];
+    }
+}
+
 /* Least squares over every FIT_ROW_STEP-th row (the fit only steers the encoder; the
  * coefficients travel in the payload). Features the depth does not allow get 0. */
 #define FIT_ROW_STEP 16

@@ -12,6 +12,10 @@
 // Last, `codec_js_decode_stream` lines: the temporal streams bench_codec wrote (stream_N*_*.frames,
 // 10 s at 30 Hz of height, dx, dz at 1 cm, joined into one frame per tick), decoded in order with
 // one DecoderState; ms = median per frame (predicted frames dominate), per inflater.
+//   node proto/js/bench_decode.mjs --stream FILE   (FILE from record_frames.mjs: a daemon's frames with
+// the web client's default subscription) instead: `codec_js_decode_recorded` lines, the stream decoded in
+// order the way the web worker does (fflate + streams), whole and split by layers (cascade 0's
+// height/dx/dz, foam, cascades 1-3: the same frames with only those tiles kept); cpu_ms = CPU per frame.
 import { readFileSync, readdirSync, existsSync } from 'node:fs';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -19,7 +23,8 @@ import { createRequire } from 'node:module';
 import { decodeFrame, setZstdDecompressor, setInflateRaw, DecoderState } from './oc_decode.js';
 
 const root = join(dirname(fileURLToPath(import.meta.url)), '../..');
-const dir = process.argv[2] || join(root, 'build/bench_frames');
+const streamArg = process.argv[2] === '--stream' ? process.argv[3] : null;
+const dir = (!streamArg && process.argv[2]) || join(root, 'build/bench_frames');
 const fzstdFrom = process.env.OCEAND_FZSTD_FROM || join(root, 'web/package.json');
 let zstd = false;
 try {
@@ -50,6 +55,55 @@ async function timeDecode(buf, opts, reps) {
   const cpu = process.cpuUsage(cpu0);
   times.sort((x, y) => x - y);
   return { ms: times[times.length >> 1], cpuMs: (cpu.user + cpu.system) / 1e3 / reps };
+}
+
+if (streamArg) {
+  await benchRecorded(streamArg);
+  process.exit(0);
+}
+// A recorded stream (u32 LE length + frame, repeated), decoded as the web worker does, by layers.
+async function benchRecorded(path) {
+  const b = readFileSync(path), frames = [];
+  for (let p = 0; p + 4 <= b.length; p += 4 + b.readUInt32LE(p)) frames.push(b.subarray(p + 4, p + 4 + b.readUInt32LE(p)));
+  // The same frame with only the tiles keep(field, cascade) accepts.
+  const only = (f, keep) => {
+    const parts = [Buffer.from(f.subarray(0, f.readUInt16LE(6)))];
+    let pos = f.readUInt16LE(6), n = 0;
+    for (let i = 0, cnt = f.readUInt16LE(36); i < cnt; i++) {
+      const len = f.readUInt32LE(pos + 32);
+      if (keep(f[pos], f[pos + 3] & 3)) { parts.push(f.subarray(pos, pos + 40 + len)); n++; }
+      pos += 40 + len;
+    }
+    const out = Buffer.concat(parts);
+    out.writeUInt16LE(n, 36);
+    return out.buffer.slice(out.byteOffset, out.byteOffset + out.length);
+  };
+  const sets = {
+    all: () => true, 'height,dx,dz': (fl, c) => c === 0 && fl !== 6, foam: (fl) => fl === 6, 'cascades 1-3': (fl, c) => c > 0,
+  };
+  setInflateRaw(fflateInflate);
+  for (const [layers, keep] of Object.entries(sets)) {
+    const fr = frames.map((f) => only(f, keep));
+    const times = [];
+    const cpu0 = process.cpuUsage();
+    for (let rep = 0; rep < 3; rep++) {
+      const state = new DecoderState();
+      for (const f of fr) {
+        const t0 = performance.now();
+        await decodeFrame(f, { state, useNodeZlib: false });
+        if (rep) times.push(performance.now() - t0);
+      }
+    }
+    const cpu = process.cpuUsage(cpu0);
+    times.sort((x, y) => x - y);
+    console.log(JSON.stringify({
+      bench: 'codec_js_decode_recorded', file: path.split('/').pop(), layers, frames: fr.length,
+      kB_per_frame: +(fr.reduce((c, f) => c + f.byteLength, 0) / fr.length / 1e3).toFixed(1),
+      inflate: fflateInflate ? 'fflate+streams' : 'streams',
+      ms: +times[times.length >> 1].toFixed(2), cpu_ms: +((cpu.user + cpu.system) / 1e3 / (3 * fr.length)).toFixed(2),
+    }));
+  }
+  setInflateRaw(null);
 }
 
 if (!existsSync(dir)) {

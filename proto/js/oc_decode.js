@@ -243,7 +243,7 @@ function predictWide(c, W, N, NW, NE, WW, NN) {
 // before `| 0` wraps it to int32, as the C decoder's uint32 arithmetic does.
 // z = src[k] is a zigzag value (a stream A byte, or from unpackEscapes); its residual is
 // (z >>> 1) ^ -(z & 1).
-function reconstruct(t, packed, escCount, escWidth, coef) {
+function reconstruct(t, packed, escCount, escWidth, coef, dst) {
   const w = t.width, h = t.height, count = w * h;
   if (scratch.length < count) scratch = new Int32Array(count);
   const q = scratch;
@@ -253,30 +253,34 @@ function reconstruct(t, packed, escCount, escWidth, coef) {
     src = zzScratch;
     unpackEscapes(src, packed, count, escCount, escWidth);
   }
-  const out = new Float32Array(count); // the store rounds to float32, as the C cast does
+  const out = dst.array; // the store rounds to float32, as the C cast does
+  const os = dst.stride, ors = dst.rowStride;
   const off = t.offset, sc = t.scale;
-  let z = src[0];
+  let z = src[0], o = dst.offset;
   let wv = (z >>> 1) ^ -(z & 1); // (0, 0): P = 0
-  q[0] = wv; out[0] = off + wv * sc;
+  q[0] = wv; out[o] = off + wv * sc;
   for (let i = 1; i < w; i++) { // row 0: P = W
     z = src[i];
     wv = (((z >>> 1) ^ -(z & 1)) + wv) | 0;
-    q[i] = wv; out[i] = off + wv * sc;
+    o += os;
+    q[i] = wv; out[o] = off + wv * sc;
   }
   const cW = coef[0], cN = coef[1], cNW = coef[2], cNE = coef[3], cWW = coef[4], cNN = coef[5];
   const hasInterior = w >= 4 && h >= 3;
   for (let j = 1; j < h; j++) {
     const r = j * w, u = r - w;
+    o = dst.offset + j * ors;
     z = src[r];
     wv = (((z >>> 1) ^ -(z & 1)) + q[u]) | 0; // column 0: P = N
-    q[r] = wv; out[r] = off + wv * sc;
+    q[r] = wv; out[o] = off + wv * sc;
     let nw = q[u];
     if (j < 2 || !hasInterior) { // Lorenzo across the row
       for (let i = 1; i < w; i++) {
         const n = q[u + i];
         z = src[r + i];
         wv = (((z >>> 1) ^ -(z & 1)) + wv + n - nw) | 0;
-        q[r + i] = wv; out[r + i] = off + wv * sc;
+        o += os;
+        q[r + i] = wv; out[o] = off + wv * sc;
         nw = n;
       }
       continue;
@@ -285,7 +289,8 @@ function reconstruct(t, packed, escCount, escWidth, coef) {
     let ww = wv, n = q[u + 1];
     z = src[r + 1];
     wv = (((z >>> 1) ^ -(z & 1)) + wv + n - nw) | 0; // i = 1: Lorenzo
-    q[r + 1] = wv; out[r + 1] = off + wv * sc;
+    o += os;
+    q[r + 1] = wv; out[o] = off + wv * sc;
     nw = n; n = q[u + 2];
     for (let i = 2; i < w - 1; i++) { // interior: the 6-neighbour predictor
       const ne = q[u + i + 1], nn = q[u2 + i];
@@ -299,26 +304,31 @@ function reconstruct(t, packed, escCount, escWidth, coef) {
       const p = s >= -2147483648 && s <= 2147483647 ? s >> 6 : predictWide(coef, wv, n, nw, ne, ww, nn);
       ww = wv;
       wv = (res + p) | 0;
-      q[r + i] = wv; out[r + i] = off + wv * sc;
+      o += os;
+      q[r + i] = wv; out[o] = off + wv * sc;
       nw = n; n = ne;
     }
     z = src[r + w - 1];
     wv = (((z >>> 1) ^ -(z & 1)) + wv + n - nw) | 0; // i = w - 1: Lorenzo
-    q[r + w - 1] = wv; out[r + w - 1] = off + wv * sc;
+    o += os;
+    q[r + w - 1] = wv; out[o] = off + wv * sc;
   }
-  return out;
 }
 
-function decodeRaw(t, bytes, start) {
-  const count = t.width * t.height;
-  if (t.payloadLen !== count * 4) throw fail('corrupt', `raw payload ${t.payloadLen} bytes for ${count} samples`);
-  const out = new Float32Array(count);
-  new Uint8Array(out.buffer).set(bytes.subarray(start, start + t.payloadLen));
-  if (new Uint8Array(new Uint16Array([1]).buffer)[0] !== 1) { // big-endian host: decode explicitly
-    const dv = new DataView(bytes.buffer, bytes.byteOffset + start, t.payloadLen);
-    for (let k = 0; k < count; k++) out[k] = dv.getFloat32(4 * k, true);
+function decodeRaw(t, bytes, start, dst) {
+  const w = t.width, h = t.height;
+  if (t.payloadLen !== w * h * 4) throw fail('corrupt', `raw payload ${t.payloadLen} bytes for ${w * h} samples`);
+  const out = dst.array, os = dst.stride;
+  if (os === 1 && dst.rowStride === w && new Uint8Array(new Uint16Array([1]).buffer)[0] === 1) { // little-endian, contiguous
+    new Uint8Array(out.buffer, out.byteOffset + 4 * dst.offset, w * h * 4).set(bytes.subarray(start, start + t.payloadLen));
+    return;
   }
-  return out;
+  // Strided or big-endian: as 32-bit patterns (a float round trip could change a NaN's bits).
+  const dv = new DataView(bytes.buffer, bytes.byteOffset + start, t.payloadLen);
+  const bits = new Uint32Array(out.buffer, out.byteOffset, out.length);
+  for (let j = 0, k = 0; j < h; j++) {
+    for (let i = 0, o = dst.offset + j * dst.rowStride; i < w; i++, k++, o += os) bits[o] = dv.getUint32(4 * k, true);
+  }
 }
 
 // The 16-byte prefix of a lossy payload (§5.1), validated; src = the entropy-coded stream.
@@ -439,18 +449,28 @@ function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
 // exact in float64; one pass builds A and B, a second applies L to B, with no Laplacian per
 // reference (nothing to compute or keep per frame). `| 0` wraps the code to int32 as C does.
 let aScratch = new Float64Array(4096), bScratch = new Float64Array(4096);
-function reconstructTemporal(t, packed, l, state) {
+function reconstructTemporal(t, packed, l, state, dst) {
   const w = t.width, h = t.height, count = w * h;
   let zz;
   if (l.packing === 1) zz = unpackPairs(packed, count, l.pairEsc, l.escCount, l.escWidth);
   else if (l.escCount === 0) zz = packed;
   else { zz = new Int32Array(count); unpackEscapes(zz, packed, count, l.escCount, l.escWidth); }
-  const q = takeCodes(state, count), out = new Float32Array(count);
+  const q = takeCodes(state, count), out = dst.array, os = dst.stride, ors = dst.rowStride;
   const [c0, c1, c2, c3, c4, c5, c6] = l.coef, depth = l.depth;
   const a1 = c0, a2 = c1 - c0, a3 = c2 - c1, a4 = -c2, b1 = c3 + c6, b2 = c4 - c3, b3 = c5 - c4, b4 = -c5;
   // Missing references (depth < 4) stand in as q1: their coefficients are 0.
   const ref = (k) => l.refs[k < depth ? k : 0].codes;
   const q1 = ref(0), q2 = ref(1), q3 = ref(2), q4 = ref(3);
+  const off = t.offset, sc = t.scale;
+  if (!(c0 | c1 | c2 | c3 | c4 | c5 | c6)) { // all coefficients 0 (a still tile): S = 0, P = q1
+    for (let j = 0, k = 0; j < h; j++) {
+      for (let i = 0, o = dst.offset + j * ors; i < w; i++, k++, o += os) {
+        const z = zz[k], v = (q1[k] + ((z >>> 1) ^ -(z & 1))) | 0;
+        q[k] = v; out[o] = off + v * sc;
+      }
+    }
+    return q;
+  }
   if (aScratch.length < count) { aScratch = new Float64Array(count); bScratch = new Float64Array(count); }
   const A = aScratch, B = bScratch;
   for (let k = 0; k < count; k++) {
@@ -458,59 +478,65 @@ function reconstructTemporal(t, packed, l, state) {
     A[k] = a1 * x1 + a2 * x2 + a3 * x3 + a4 * x4;
     B[k] = b1 * x1 + b2 * x2 + b3 * x3 + b4 * x4;
   }
-  const off = t.offset, sc = t.scale, inv = 1 / 4096; // exact: a power of two
+  const inv = 1 / 4096; // exact: a power of two
   for (let j = 0; j < h; j++) {
     const r = j * w, up = (j > 0 ? j - 1 : 0) * w, dn = (j + 1 < h ? j + 1 : h - 1) * w;
+    let o = dst.offset + j * ors;
     if (w === 1) {
       const S = A[r] + B[up] + B[dn] - 2 * B[r], z = zz[r];
       const v = (q1[r] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
-      q[r] = v; out[r] = off + v * sc;
+      q[r] = v; out[o] = off + v * sc;
       continue;
     }
     // i = 0: the W neighbour clamps to the sample itself.
     let z = zz[r];
     let S = A[r] + B[r + 1] + B[up] + B[dn] - 3 * B[r];
     let v = (q1[r] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
-    q[r] = v; out[r] = off + v * sc;
+    q[r] = v; out[o] = off + v * sc;
     const end = r + w - 1, du = up - r, dd = dn - r;
     for (let k = r + 1; k < end; k++) {
       z = zz[k];
       S = A[k] + B[k - 1] + B[k + 1] + B[k + du] + B[k + dd] - 4 * B[k];
       v = (q1[k] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
-      q[k] = v; out[k] = off + v * sc;
+      o += os;
+      q[k] = v; out[o] = off + v * sc;
     }
     z = zz[end]; // i = w - 1: the E neighbour clamps
     S = A[end] + B[end - 1] + B[end + du] + B[end + dd] - 3 * B[end];
     v = (q1[end] + Math.floor((S + 2048) * inv) + ((z >>> 1) ^ -(z & 1))) | 0;
-    q[end] = v; out[end] = off + v * sc;
+    q[end] = v; out[o + os] = off + v * sc;
   }
-  return { samples: out, codes: q };
+  return q;
 }
 
-// One tile, synchronously; inflate = a synchronous raw-DEFLATE inflater. Returns {samples, codes}
-// (codes: the tile's int32 codes when a state keeps them, else null).
-function decodeTileSync(h, t, bytes, start, inflate, state) {
-  if (t.codec === CODEC_RAW_F32) return { samples: decodeRaw(t, bytes, start), codes: null };
+// Where a tile's samples go: sample (i, j) to dst.array[dst.offset + j * dst.rowStride + i * dst.stride].
+// Without a caller's target, a new Float32Array of the tile (the returned tile's `samples`).
+const ownArray = (t) => ({ array: new Float32Array(t.width * t.height), offset: 0, stride: 1, rowStride: t.width });
+
+// One tile, synchronously; inflate = a synchronous raw-DEFLATE inflater. Writes the samples to
+// dst; returns the tile's int32 codes when a state keeps them, else null.
+function decodeTileSync(h, t, bytes, start, inflate, state, dst) {
+  if (t.codec === CODEC_RAW_F32) { decodeRaw(t, bytes, start, dst); return null; }
   if (t.codec === CODEC_TEMPORAL) {
     const l = readTemporalPrefix(h, t, bytes, start, state);
-    return reconstructTemporal(t, inflate(l.src, l.n), l, state);
+    return reconstructTemporal(t, inflate(l.src, l.n), l, state, dst);
   }
   const l = readLossyPrefix(t, bytes, start);
   const packed = t.codec === CODEC_QUANT_LORENZO ? inflate(l.src, l.n) : unzstd(l.src, l.n);
-  const samples = reconstruct(t, packed, l.escCount, l.escWidth, l.coef);
-  return { samples, codes: state ? copyCodes(state, samples.length) : null };
+  reconstruct(t, packed, l.escCount, l.escWidth, l.coef, dst);
+  return state ? copyCodes(state, t.width * t.height) : null;
 }
 
 // One tile with DecompressionStream for codec 1 and 3 (the other codecs are synchronous).
-async function decodeTileStream(h, t, bytes, start, state) {
+async function decodeTileStream(h, t, bytes, start, state, dst) {
   if (t.codec === CODEC_TEMPORAL) {
     const l = readTemporalPrefix(h, t, bytes, start, state);
-    return reconstructTemporal(t, await inflateRawStream(l.src, l.n), l, state);
+    return reconstructTemporal(t, await inflateRawStream(l.src, l.n), l, state, dst);
   }
-  if (t.codec !== CODEC_QUANT_LORENZO) return decodeTileSync(h, t, bytes, start, null, state);
+  if (t.codec !== CODEC_QUANT_LORENZO) return decodeTileSync(h, t, bytes, start, null, state, dst);
   const l = readLossyPrefix(t, bytes, start);
-  const samples = reconstruct(t, await inflateRawStream(l.src, l.n), l.escCount, l.escWidth, l.coef);
-  return { samples, codes: state ? copyCodes(state, samples.length) : null };
+  reconstruct(t, await inflateRawStream(l.src, l.n), l.escCount, l.escWidth, l.coef, dst);
+  return state ? copyCodes(state, t.width * t.height) : null;
 }
 
 // The codes reconstruct() left in scratch, copied into an array the state keeps.
@@ -525,7 +551,7 @@ function copyCodes(state, count) {
 function commitReferences(state, header, metas, decoded) {
   const seq = BigInt(header.seq);
   metas.forEach(({ t }, i) => {
-    const codes = decoded[i].codes;
+    const codes = decoded[i];
     if (!codes) return;
     const key = tileKey(header, t);
     const slots = state.tiles.get(key) || [];
@@ -545,6 +571,12 @@ function commitReferences(state, header, metas, decoded) {
  * (then DecompressionStream and any setInflateRaw() inflater are used, as in a browser: the tests cover
  * the browser paths so). options.state = a DecoderState: keeps the references predicted tiles (codec 3)
  * need; decode the frames of one stream in order with the same state. A frame that throws leaves it as it was.
+ * options.target(header, tiles) (optional) places the samples where the caller wants them (e.g. straight into
+ * interleaved texture arrays: no array per tile, no copy): called once the frame's headers are validated, with
+ * the tiles' descriptions (as returned, without samples), it returns an array with, per tile, null (that tile
+ * gets its own `samples`) or {array: Float32Array, offset, stride, rowStride}: sample (i, j) of the tile goes to
+ * array[offset + j * rowStride + i * stride] (the caller keeps tiles' regions apart and in bounds). Such a
+ * tile is returned with `samples: null`. A frame that throws may have written to the targets.
  */
 export async function decodeFrame(arrayBuffer, options = {}) {
   const useNodeZlib = options.useNodeZlib !== false;
@@ -562,31 +594,47 @@ export async function decodeFrame(arrayBuffer, options = {}) {
     pos += t.payloadLen;
   }
   if (pos !== bytes.length) throw fail('corrupt', `${bytes.length - pos} bytes after the last tile`);
-  let samples;
+  const describe = (t) => ({
+    field: t.field, fieldName: FIELD_NAMES[t.field], lod: t.lod, codec: t.codec, cascade: t.flags & 3,
+    tileX: t.tileX, tileZ: t.tileZ, width: t.width, height: t.height, bound: t.bound, offset: t.offset, scale: t.scale,
+  });
+  const tiles = metas.map(({ t }) => describe(t));
+  const wanted = options.target ? options.target(header, tiles) : null;
+  metas.forEach((m, i) => {
+    const d = wanted && wanted[i];
+    if (d) {
+      const { array, offset, stride, rowStride } = d, t = m.t;
+      const last = offset + (t.height - 1) * rowStride + (t.width - 1) * stride;
+      if (!(array instanceof Float32Array) || !Number.isInteger(offset) || !Number.isInteger(stride) || !Number.isInteger(rowStride)
+        || offset < 0 || last >= array.length || (t.height > 1 && rowStride < 0) || stride < 0)
+        throw new RangeError(`oceand decodeFrame: target of tile ${i} out of bounds`);
+      m.dst = d;
+      tiles[i].samples = null;
+    } else {
+      m.dst = ownArray(m.t);
+      tiles[i].samples = m.dst.array;
+    }
+  });
+  let codes; // per tile: its int32 codes (references for the next frames), or null
   if (nodeZlib && useNodeZlib) {
     // Synchronous: tile after tile, the first bad payload throws.
-    samples = metas.map(({ t, start }) => decodeTileSync(header, t, bytes, start, inflateRawNode, state));
+    codes = metas.map(({ t, start, dst }) => decodeTileSync(header, t, bytes, start, inflateRawNode, state, dst));
   } else if (inflateRawSync && !(haveStreams && metas.some(({ t }) => preferStream(t)))) {
-    samples = metas.map(({ t, start }) => decodeTileSync(header, t, bytes, start, inflateRawInstalled, state));
+    codes = metas.map(({ t, start, dst }) => decodeTileSync(header, t, bytes, start, inflateRawInstalled, state, dst));
   } else {
     // Some tiles through DecompressionStream, all in flight at once; the others synchronously.
     // The first bad payload in frame order wins.
-    const decoded = await Promise.allSettled(metas.map(({ t, start }) => {
+    const decoded = await Promise.allSettled(metas.map(({ t, start, dst }) => {
       if ((t.codec === CODEC_QUANT_LORENZO || t.codec === CODEC_TEMPORAL) && (!inflateRawSync || preferStream(t)))
-        return decodeTileStream(header, t, bytes, start, state);
+        return decodeTileStream(header, t, bytes, start, state, dst);
       try {
-        return Promise.resolve(decodeTileSync(header, t, bytes, start, inflateRawInstalled, state));
+        return Promise.resolve(decodeTileSync(header, t, bytes, start, inflateRawInstalled, state, dst));
       } catch (e) {
         return Promise.reject(e);
       }
     }));
-    samples = decoded.map((d) => { if (d.status === 'rejected') throw d.reason; return d.value; });
+    codes = decoded.map((d) => { if (d.status === 'rejected') throw d.reason; return d.value; });
   }
-  if (state) commitReferences(state, header, metas, samples);
-  const tiles = metas.map(({ t }, i) => ({
-    field: t.field, fieldName: FIELD_NAMES[t.field], lod: t.lod, codec: t.codec, cascade: t.flags & 3,
-    tileX: t.tileX, tileZ: t.tileZ, width: t.width, height: t.height,
-    bound: t.bound, offset: t.offset, scale: t.scale, samples: samples[i].samples,
-  }));
+  if (state) commitReferences(state, header, metas, codes);
   return { header, tiles };
 }

@@ -302,7 +302,12 @@ static void s_frame_n(struct s_out *o, const uint8_t *data, size_t len, int k, i
 static void emit_streams(void)
 {
     struct oc_encoder *e = oc_encoder_new();
-    for (int l = 0; l < 2; l++) s_layers[l].st = oc_stream_new(S_N, S_TS, s_layers[l].lod, s_layers[l].field, s_layers[l].bound);
+    /* Grid refinement 1 (one valid code per sample): the vectors and the worked example of
+     * §8.2 predate it; a refined stream is the same format (tests/test_proto.c decodes one). */
+    for (int l = 0; l < 2; l++) {
+        s_layers[l].st = oc_stream_new(S_N, S_TS, s_layers[l].lod, s_layers[l].field, s_layers[l].bound);
+        oc_stream_set_grid_refine(s_layers[l].st, 1);
+    }
     struct s_out chain, join, broken, mismatch, badcoef;
     struct oc_buf buf = { 0 }, frames[S_TICKS];
     memset(frames, 0, sizeof frames);
@@ -360,6 +365,7 @@ static void emit_streams(void)
     /* The worked example of PROTOCOL.md §8.2: one 4x4 height tile, keyframe then depth 1 and 2. */
     {
         struct oc_stream *tiny = oc_stream_new(4, 4, 0, OC_FIELD_HEIGHT, 0.01f);
+        oc_stream_set_grid_refine(tiny, 1);
         struct s_out ex;
         s_begin(&ex, "s06_tiny", "the PROTOCOL.md worked example: a 4x4 height tile at 1 cm, keyframe (seq 7), then depth 1 (seq 8) and depth 2 (seq 9)");
         for (int k = 0; k < 3; k++) {

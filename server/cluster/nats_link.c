@@ -418,6 +418,26 @@ static void handle_demand(struct cl_link *l, natsMsg *msg)
         STAT_ADD(l, bad_messages, 1); /* table full: this edge's demand is not counted */
 }
 
+/* A new event of this type carrying a NUL-terminated copy of env's body;
+ * NULL (counted as dropped) when out of memory. */
+static struct in_event *event_with_body(struct cl_link *l, const struct cl_envelope *env, enum in_type type)
+{
+    struct in_event *e = calloc(1, sizeof *e);
+    char *text = malloc((size_t)env->body_len + 1);
+    if (!e || !text) {
+        free(e);
+        free(text);
+        STAT_ADD(l, events_dropped, 1);
+        return NULL;
+    }
+    memcpy(text, env->body, env->body_len);
+    text[env->body_len] = 0;
+    e->type = type;
+    e->text = text;
+    e->len = env->body_len;
+    return e;
+}
+
 static void handle_params(struct cl_link *l, natsMsg *msg)
 {
     struct cl_envelope env;
@@ -426,21 +446,11 @@ static void handle_params(struct cl_link *l, natsMsg *msg)
         STAT_ADD(l, bad_messages, 1);
         return;
     }
-    struct in_event *e = calloc(1, sizeof *e);
-    char *text = malloc((size_t)env.body_len + 1);
-    if (!e || !text) {
-        free(e);
-        free(text);
-        STAT_ADD(l, events_dropped, 1);
+    struct in_event *e = event_with_body(l, &env, IN_PARAMS);
+    if (!e)
         return;
-    }
-    memcpy(text, env.body, env.body_len);
-    text[env.body_len] = 0;
-    e->type = IN_PARAMS;
     strcpy(e->origin, env.origin);
     strcpy(e->by, env.by);
-    e->text = text;
-    e->len = env.body_len;
     push_event(l, e);
 }
 
@@ -472,20 +482,10 @@ static void handle_probe_data(struct cl_link *l, natsMsg *msg)
         STAT_ADD(l, bad_messages, 1);
         return;
     }
-    struct in_event *e = calloc(1, sizeof *e);
-    char *text = malloc((size_t)env.body_len + 1);
-    if (!e || !text) {
-        free(e);
-        free(text);
-        STAT_ADD(l, events_dropped, 1);
+    struct in_event *e = event_with_body(l, &env, IN_PROBE_DATA);
+    if (!e)
         return;
-    }
-    memcpy(text, env.body, env.body_len);
-    text[env.body_len] = 0;
-    e->type = IN_PROBE_DATA;
     strcpy(e->by, env.by);
-    e->text = text;
-    e->len = env.body_len;
     push_event(l, e);
 }
 

@@ -271,6 +271,88 @@ def test_temporal_across_resolution_change(d):
     check_stream(d, dict(hello["params"], resolution=td.BASE_N // 2), new, 0.01, "stream after the change")
 
 
+def tile_grids(b):
+    """Per tile (field, tx, tz): (codec, offset, scale, depth); depth = a codec 3 tile's reference count."""
+    h = parse_header(b)
+    off, out = 48, {}
+    for _ in range(h["tile_count"]):
+        f, lod, codec, fl, tx, tz, w, hh, bound, o, sc, plen, _r = td.TILE_HDR.unpack_from(b, off)
+        depth = b[off + 40] if codec == CODEC_TEMPORAL else 0
+        out[(f, tx, tz)] = (codec, o, sc, depth)
+        off += 40 + plen
+    return out
+
+
+@test
+def test_temporal_sea_changes():
+    """Changes of the sea (PROTOCOL.md §5.9, docs/codec.md "Changes of the sea"): a
+    wind change keeps the phases, so every tile's chain goes on (same grid) and the
+    next tick predicts from the full depth at once; a seed change is a new sea: every
+    tile starts a new chain (new grid, depth ramping from 1). One decoder takes the
+    whole stream in order, within the bound of the lossless stream at equal seq."""
+    d = td.Daemon("--keyframe-interval", "0")      # no periodic keyframes: each grid change is the policy's
+
+    async def run():
+        a, hello = await connect(d)
+        b, _ = await connect(d)
+        await subscribe(a, temporal=True, bound=0.01)
+        await subscribe(b, bound=0, fields=["height"])          # lossless reference, height only
+        ta = asyncio.ensure_future(collect(a, 2.4))
+        tb = asyncio.ensure_future(collect(b, 2.4))
+        await asyncio.sleep(0.8)
+        await a.send(json.dumps({"type": "set", "params": {"wind_speed": 12}}))
+        await asyncio.sleep(0.8)
+        await a.send(json.dumps({"type": "set", "params": {"seed": 7}}))
+        return hello, await ta, await tb
+    try:
+        hello, fa, fb = asyncio.run(run())
+        versions = sorted({parse_header(m)["params_version"] for m in fa})
+        check(len(versions) >= 3, "expected frames of three params versions, got %r" % versions)
+        v0, v_wind, v_seed = versions[0], versions[1], versions[2]
+        first = {}
+        for i, m in enumerate(fa):
+            first.setdefault(parse_header(m)["params_version"], i)
+        iw, isd = first[v_wind], first[v_seed]
+        check(iw > 0 and isd > iw + 1, "frames around the changes missing: %r" % first)
+        before_w, at_w, before_s, at_s = (tile_grids(fa[i]) for i in (iw - 1, iw, isd - 1, isd))
+        sizes = [len(m) for m in fa]
+        print("    %d frames; wind change at frame %d (%.1f kB, before %.1f kB), seed change at %d (%.1f kB); codecs at "
+              "the wind change %r, at the seed change %r" % (len(fa), iw, sizes[iw] / 1e3, sizes[iw - 1] / 1e3, isd,
+                                                            sizes[isd] / 1e3, codecs(fa[iw:iw + 1]), codecs(fa[isd:isd + 1])))
+        # wind: the same grid on every tile before and after (a chain that restarted has a new grid)
+        same = [k for k in at_w if before_w.get(k, (0, None, None))[1:3] == at_w[k][1:3]]
+        check(len(same) == len(at_w), "wind change: %d of %d tiles restarted their chain" % (len(at_w) - len(same), len(at_w)))
+        sw = [parse_header(m)["seq"] for m in fa]
+        if iw + 1 < len(fa) and sw[iw + 1] == sw[iw] + 1 and sw[iw] == sw[iw - 1] + 1:
+            depths = {v[3] for v in tile_grids(fa[iw + 1]).values()}
+            check(depths == {4}, "the tick after a wind change predicts from depth %r, not 4" % depths)
+        # seed: every tile a keyframe on a new grid
+        check(all(v[0] != CODEC_TEMPORAL for v in at_s.values()), "seed change: predicted tiles %r" % codecs(fa[isd:isd + 1]))
+        moved = [k for k in at_s if before_s.get(k, (0, None, None))[1:3] != at_s[k][1:3]]
+        check(len(moved) == len(at_s), "seed change: %d of %d tiles kept their grid" % (len(at_s) - len(moved), len(at_s)))
+        # every frame decodes in order, within the bound of the lossless stream
+        state, lossless, compared, err = oceanproto.DecoderState(), {}, 0, 0.0
+        for m in fb:
+            f = oceanproto.decode_frame(m)
+            lossless[f.seq] = {(t.x, t.z): t.samples for t in f.tiles}
+        for m in fa:
+            f = oceanproto.decode_frame(m, state)
+            ref = lossless.get(f.seq)
+            if ref is None:
+                continue
+            for t in f.tiles:
+                if t.field == "height" and (t.x, t.z) in ref and ref[(t.x, t.z)].shape == t.samples.shape:
+                    err = max(err, float(np.max(np.abs(t.samples.astype(np.float64) - ref[(t.x, t.z)]))))
+            compared += 1
+        print("    max error %.5f against the lossless stream (%d frames at equal seq)" % (err, compared))
+        check(compared >= 20, "only %d frames at equal seq with the lossless stream" % compared)
+        check(err <= 0.01 * (1 + 1e-6), "temporal frames differ from the lossless ones by %g > bound" % err)
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+    finally:
+        d.kill()
+
+
 if __name__ == "__main__":
     td.TESTS[:] = TESTS
     td.main()

@@ -51,7 +51,9 @@ const st = {
   name: null, subscription: null, foamLod: null, foamM: 0,
   clusterState: null, // edge's {"type":"status"}: 'ok', 'sim_unavailable', 'nats_unavailable'
   referenceErrors: 0, resyncs: 0, // temporal: predicted frames without their references, and resubscriptions
-  localDrops: 0,   // temporal: frames dropped here because the worker was MAX_QUEUED behind (breaks the chain)
+  localDrops: 0,   // temporal: times the page dropped frames because the decoder fell behind (breaks the chain)
+  firstDrawnMs: null, // when the first frame was drawn (ms since the page loaded): the grace starts
+  fallback: null,  // temporal given up: { atMs (since the page loaded), drops (within 10 s) }
 };
 // Local view state: never sent. ?hour=h starts at that local time of day.
 const hourArg = Number(query.get('hour'));
@@ -68,7 +70,16 @@ let pendingFrame = null;       // newest decoded frame waiting for the render lo
 // every frame must then reach the decoder (its codes are the next frame's references), so
 // frames are never dropped before the worker except when it falls far behind (then resync).
 let temporal = query.get('temporal') !== '0';
-const MAX_QUEUED = 8;          // temporal: frames waiting for the worker before we drop and resync
+// Temporal: every frame goes to the worker, which alone can tell whether the decoder keeps up
+// (worker.js MAX_WAIT_MS); this thread counts frames it handed over and has not heard back
+// about, which grows while it is busy itself (rendering, compiling shaders) without the
+// decoder being behind: it drops only past MAX_IN_FLIGHT (10 s at 30 Hz; bounds the memory).
+const MAX_IN_FLIGHT = 300;
+// The first seconds of a page (shaders compile, the JIT warms up, the first frames come in
+// a burst) say nothing about whether it keeps up: drops then resync but never make the page
+// give the temporal codec up. The grace ends GRACE_MS after the first frame is drawn.
+const GRACE_MS = 10000;
+let graceEnd = Infinity;
 const wantedSub = temporal ? { temporal: true } : {}; // kept across reconnects, with the panel's changes
 let lastResync = -Infinity;
 // Cascades 1..3 (PROTOCOL.md §4.1): their height, at LOD 1 (each holds waves up to half its
@@ -156,14 +167,14 @@ const conn = new Connection(serverUrl(), {
     stats.frames++;
     stats.bytes += buf.byteLength;
     // Never queue behind a slow decoder: skip instead of lagging (the seq gap counts it).
-    // Temporal: the worker decodes every frame in order and skips only the assembly of
-    // overtaken ones; a frame dropped here breaks the chain, so ask for keyframes.
-    if (temporal ? workerBusy >= MAX_QUEUED : workerBusy >= (bench ? 1 : 2)) { // bench: one at a time
+    // Temporal: the worker decodes every frame in order, skips only the assembly of
+    // overtaken ones, and drops its queue when it falls behind (then we ask for keyframes).
+    if (temporal ? workerBusy >= MAX_IN_FLIGHT : workerBusy >= (bench ? 1 : 2)) { // bench: one at a time
       if (temporal) dropped();
       return;
     }
     workerBusy++;
-    worker.postMessage({ type: 'frame', buf }, [buf]);
+    worker.postMessage({ type: 'frame', buf, temporal }, [buf]);
   },
 });
 
@@ -187,16 +198,19 @@ window.addEventListener('keydown', (ev) => {
   if ((ev.key === 'h' || ev.key === 'H') && !ev.ctrlKey && !ev.metaKey && !ev.altKey && !(ev.target instanceof HTMLInputElement)) hud.setVisible(!hud.visible);
 });
 
-// The worker cannot keep up with every frame: resync; a third time within 10 s, give up the
-// temporal codec for this page (intra frames can be skipped before decoding).
+// The decoder fell behind and frames were dropped: resync; a third time within 10 s after the
+// start-up grace, give up the temporal codec for this page (intra frames can be skipped
+// before decoding, so a slow decoder then shows fewer frames instead of falling behind).
 const dropTimes = [];
 function dropped() {
   st.localDrops++;
   const now = performance.now();
+  if (now < graceEnd) { resync(); return; }
   dropTimes.push(now);
   while (dropTimes.length && now - dropTimes[0] > 10000) dropTimes.shift();
   if (dropTimes.length < 3) { resync(); return; }
   temporal = false;
+  st.fallback = { atMs: Math.round(now), drops: dropTimes.length };
   wantedSub.temporal = false;
   conn.send({ type: 'subscribe', temporal: false });
 }
@@ -213,6 +227,7 @@ function resync() {
 
 worker.onmessage = (ev) => {
   const msg = ev.data;
+  if (msg.type === 'behind') { workerBusy -= msg.count; dropped(); return; } // it dropped its queue
   workerBusy--;
   if (msg.type === 'skip') return; // decoded (a reference for the next), overtaken before assembly
   if (msg.type === 'error' && msg.code === 'reference') { st.referenceErrors++; resync(); return; }
@@ -259,6 +274,7 @@ function frameLoop() {
     for (const a of ocean.setCascades(f.fine)) buffers.push({ buffer: a.buffer, channels: 4 });
     worker.postMessage({ type: 'recycle', buffers }, buffers.map((b) => b.buffer));
     st.n = f.header.n; st.lod = f.lod; st.frameParamsVersion = f.header.paramsVersion;
+    if (graceEnd === Infinity) { graceEnd = now + GRACE_MS; st.firstDrawnMs = Math.round(now); }
     st.foamLod = f.foam ? f.foamLod : null; st.foamM = f.foam ? f.fm : 0;
     // Latency: server encode time to the frame reaching the screen (clocks of one machine, or NTP).
     stats.latencyMs = (performance.timeOrigin + now) - f.header.serverTimeUs / 1000;
@@ -298,6 +314,7 @@ window.oceand = Object.freeze({
       fps: stats.fps, framesPerSec: stats.framesPerSec, kBps: stats.kBps, latencyMs: stats.latencyMs,
       dropped: stats.dropped, decodeMs: stats.decodeMs, uploadMs: stats.uploadMs, n: st.n, lod: st.lod,
       temporal, referenceErrors: st.referenceErrors, resyncs: st.resyncs, localDrops: st.localDrops,
+      fallback: snapshot(st.fallback), firstDrawnMs: st.firstDrawnMs, graceMs: GRACE_MS,
       lastError: snapshot(st.lastError), serverError: snapshot(st.serverError),
       ...(bench ? { timings: snapshot(timings) } : {}),
     });

@@ -15,11 +15,13 @@ setInflateRaw((src, out) => inflateSync(src, { out }));
 const CHANNEL = { dx: [0, 4], height: [1, 4], dz: [2, 4], jacobian: [3, 4], slope_x: [0, 2], slope_z: [1, 2] };
 const pool = { 4: [], 2: [], 1: [] }; // recycled ArrayBuffers by channel count
 
+// The pool of a channel count holds buffers of several sizes (the surface's and the cascades'
+// RGBA arrays): take one of the size wanted and keep the others (dropping them, as this did,
+// made a new 1 MB array most frames once cascades were subscribed).
 function take(channels, count) {
-  const list = pool[channels];
-  while (list.length) {
-    const b = list.pop();
-    if (b.byteLength === count * channels * 4) return new Float32Array(b);
+  const list = pool[channels], bytes = count * channels * 4;
+  for (let i = list.length - 1; i >= 0; i--) {
+    if (list[i].byteLength === bytes) return new Float32Array(list.splice(i, 1)[0]);
   }
   return new Float32Array(count * channels);
 }
@@ -30,6 +32,12 @@ function take(channels, count) {
 // newer one has already overtaken in the queue is decoded (its codes are the next frame's
 // references) but not assembled: the render loop would never show it (unless nothing was
 // assembled for 100 ms: a worker that is always behind still shows ten frames a second).
+// The main thread hands every temporal frame over at once, however busy it is itself (a page
+// that renders slowly, or compiles its shaders, gets its messages in bursts); only this
+// worker can tell whether the *decoder* keeps up: when the oldest frame in its queue has
+// waited more than MAX_WAIT_MS, it drops the whole queue (the chain is broken: the main thread
+// resubscribes for keyframes, and counts the event towards giving the temporal codec up).
+const MAX_WAIT_MS = 1000;
 const state = new DecoderState();
 const queue = [];
 let running = false;
@@ -43,34 +51,76 @@ self.onmessage = (ev) => {
   }
   if (msg.type === 'reset') { state.reset(); return; }
   if (msg.type !== 'frame') return;
+  msg.arrived = performance.now();
   queue.push(msg);
   if (!running) drain();
 };
 
+// Yield to the event loop between frames (a message, not a clamped timer), so that frames
+// arriving meanwhile join the queue: its length and age are then the decoder's real backlog.
+const yieldChannel = new MessageChannel();
+const yieldWaiters = [];
+yieldChannel.port1.onmessage = () => yieldWaiters.shift()?.();
+const yieldTask = () => new Promise((resolve) => { yieldWaiters.push(resolve); yieldChannel.port2.postMessage(0); });
+
 async function drain() {
   running = true;
   while (queue.length) {
+    if (queue[0].temporal && performance.now() - queue[0].arrived > MAX_WAIT_MS) {
+      const count = queue.length;
+      queue.length = 0;
+      self.postMessage({ type: 'behind', count });
+      break;
+    }
     const msg = queue.shift();
     await handle(msg, queue.length > 0);
+    await yieldTask();
   }
   running = false;
 }
 
 async function handle(msg, superseded) {
   const t0 = performance.now();
-  let frame;
+  // A frame overtaken in the queue is decoded (references) but not assembled: samples only.
+  const assemble = !(superseded && t0 - lastAssembled < 100);
+  let frame, plan = null, layoutMs = 0;
   try {
-    frame = await decodeFrame(msg.buf, { state });
+    frame = await decodeFrame(msg.buf, {
+      state,
+      target: assemble ? (h, tiles) => {
+        const t = performance.now();
+        plan = layout(h, tiles);
+        layoutMs = performance.now() - t;
+        return plan.targets;
+      } : null,
+    });
   } catch (e) {
+    if (plan) release(plan);
     self.postMessage({ type: 'error', code: e && e.code, message: String(e && e.message || e) });
     return;
   }
-  if (superseded && t0 - lastAssembled < 100) { self.postMessage({ type: 'skip', seq: frame.header.seq }); return; }
+  if (!assemble) { self.postMessage({ type: 'skip', seq: frame.header.seq }); return; }
   lastAssembled = t0;
-  const t1 = performance.now();
-  const h = frame.header;
-  const base = frame.tiles.filter((t) => !t.cascade);   // cascade 0 (tile flags 0)
-  // The surface's LOD; foam may come at a coarser one of its own (subscribe field_lod).
+  const { lod, m, present, disp, slope, fine, foam, foamLod, fm } = plan;
+  const decodeMs = performance.now() - t0;
+  const transfer = [disp.buffer];
+  if (slope) transfer.push(slope.buffer);
+  for (const c of fine) transfer.push(c.disp.buffer);
+  if (foam) transfer.push(foam.buffer);
+  self.postMessage({
+    type: 'frame', header: frame.header, lod, m, present, disp, slope, fine, foam, foamLod, fm, decodeMs, assembleMs: layoutMs, bytes: msg.buf.byteLength,
+  }, transfer);
+}
+
+// Where each tile's samples go, decided from the tile headers before any payload is decoded:
+// the decoder writes them straight into the texture arrays (decodeFrame's `target`), so there is
+// no array per tile and no copy. Cascade 0's surface fields into disp/slope at the surface's LOD;
+// foam (at a coarser LOD of its own, subscribe field_lod) into its F×F array; cascades 1..3
+// (PROTOCOL.md §4.1) each into its own M_c×M_c RGBA (dx, height, dz, 0), M_c = N >> its LOD,
+// patch side L_c = patch_size / 3.543^c. Tiles that fit nowhere get their own arrays (unused).
+const CASCADE_RATIO = 3.543;
+function layout(h, tiles) {
+  const base = tiles.filter((t) => !t.cascade);   // cascade 0 (tile flags 0)
   const surfTile = base.find((t) => t.fieldName !== 'foam');
   const lod = surfTile ? surfTile.lod : (base.length ? base[0].lod : 0);
   const foamTile = base.find((t) => t.fieldName === 'foam');
@@ -84,62 +134,34 @@ async function handle(msg, superseded) {
   const disp = take(4, count);
   if (!present.jacobian) for (let i = 3; i < disp.length; i += 4) disp[i] = 1;
   const slope = (present.slope_x || present.slope_z) ? take(2, count) : null;
-
-  for (const t of base) {
-    if (t.fieldName === 'foam' && t.lod === foamLod) { placeFoam(t, h, foam, fm); continue; }
-    const ch = CHANNEL[t.fieldName];
-    if (!ch || t.lod !== lod) continue;
-    const [c, stride] = ch;
-    const dst = stride === 4 ? disp : slope;
-    const step = h.tileSize >> lod;           // samples per tile side at this LOD
-    const x0 = t.tileX * step, z0 = t.tileZ * step;
-    const s = t.samples;
-    for (let j = 0; j < t.height; j++) {
-      let o = ((z0 + j) * m + x0) * stride + c;
-      let i0 = j * t.width;
-      for (let i = 0; i < t.width; i++, o += stride) dst[o] = s[i0 + i];
-    }
-  }
-  const fine = assembleCascades(frame);
-  const t2 = performance.now();
-  const decodeMs = t2 - t0, assembleMs = t2 - t1;
-  const transfer = [disp.buffer];
-  if (slope) transfer.push(slope.buffer);
-  for (const c of fine) transfer.push(c.disp.buffer);
-  if (foam) transfer.push(foam.buffer);
-  self.postMessage({
-    type: 'frame', header: h, lod, m, present, disp, slope, fine, foam, foamLod, fm, decodeMs, assembleMs, bytes: msg.buf.byteLength,
-  }, transfer);
-}
-
-// Cascades 1..3 (PROTOCOL.md §4.1): each its own M_c x M_c texture (M_c = N >> its LOD),
-// RGBA (dx, height, dz, 0); patch side L_c = patch_size / 3.543^c. Only cascades with tiles.
-const CASCADE_RATIO = 3.543;
-function assembleCascades(frame) {
-  const h = frame.header, out = [];
+  const fine = [], fineLod = {};
   for (let c = 1; c < 4; c++) {
-    const tiles = frame.tiles.filter((t) => t.cascade === c && CHANNEL[t.fieldName] && CHANNEL[t.fieldName][1] === 4);
-    if (!tiles.length) continue;
-    const lod = tiles[0].lod, m = h.n >> lod, step = h.tileSize >> lod;
-    const disp = take(4, m * m);
-    disp.fill(0);
-    for (const t of tiles) {
-      if (t.lod !== lod) continue;
-      const ch = CHANNEL[t.fieldName][0], s = t.samples;
-      const x0 = t.tileX * step, z0 = t.tileZ * step;
-      for (let j = 0; j < t.height; j++) {
-        let o = ((z0 + j) * m + x0) * 4 + ch;
-        const i0 = j * t.width;
-        for (let i = 0; i < t.width; i++, o += 4) disp[o] = s[i0 + i];
-      }
-    }
-    out.push({ c, m, patch: h.patchSize / CASCADE_RATIO ** c, disp });
+    const first = tiles.find((t) => t.cascade === c && CHANNEL[t.fieldName] && CHANNEL[t.fieldName][1] === 4);
+    if (!first) continue;
+    const mc = h.n >> first.lod, d = take(4, mc * mc);
+    d.fill(0);
+    fineLod[c] = { lod: first.lod, m: mc, disp: d };
+    fine.push({ c, m: mc, patch: h.patchSize / CASCADE_RATIO ** c, disp: d });
   }
-  return out;
+  const targets = tiles.map((t) => {
+    const ch = CHANNEL[t.fieldName];
+    let array, mm, c, stride;
+    if (!t.cascade && t.fieldName === 'foam' && t.lod === foamLod) { array = foam; mm = fm; c = 0; stride = 1; }
+    else if (!t.cascade && ch && t.lod === lod) { [c, stride] = ch; array = stride === 4 ? disp : slope; mm = m; }
+    else if (t.cascade && ch && ch[1] === 4 && fineLod[t.cascade] && fineLod[t.cascade].lod === t.lod) {
+      array = fineLod[t.cascade].disp; mm = fineLod[t.cascade].m; c = ch[0]; stride = 4;
+    } else return null;
+    const step = h.tileSize >> t.lod;           // samples per tile side at this LOD
+    const x0 = t.tileX * step, z0 = t.tileZ * step;
+    return { array, offset: (z0 * mm + x0) * stride + c, stride, rowStride: mm * stride };
+  });
+  return { targets, lod, m, present, disp, slope, fine, foam, foamLod, fm };
 }
 
-// A foam tile into the F×F foam array (one channel).
-function placeFoam(t, h, dst, fm) {
-  const step = h.tileSize >> t.lod, x0 = t.tileX * step, z0 = t.tileZ * step, s = t.samples;
-  for (let j = 0; j < t.height; j++) dst.set(s.subarray(j * t.width, (j + 1) * t.width), (z0 + j) * fm + x0);
+// A frame that failed: its arrays back to the pool.
+function release(plan) {
+  if (plan.disp) pool[4].push(plan.disp.buffer);
+  if (plan.slope) pool[2].push(plan.slope.buffer);
+  for (const c of plan.fine) pool[4].push(c.disp.buffer);
+  if (plan.foam) pool[1].push(plan.foam.buffer);
 }
