@@ -19,6 +19,7 @@ import argparse
 import json
 import math
 import os
+import re
 import select
 import shutil
 import signal
@@ -26,6 +27,7 @@ import socket
 import struct
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -1876,6 +1878,60 @@ def run_case(fn, fig):
         shutil.rmtree(d.tmp, ignore_errors=True)
 
 
+# Cases that load the daemon (N > 64, hundreds of clients or sets, 10 MB messages) run alone
+# under --jobs, after the light ones: they measure the observer against a busy daemon.
+SOLO = {"connections_500", "churn", "resolution_flapping", "params_fanout", "message_10mb"}
+
+
+def solo(fn):
+    return fn.__name__ in SOLO or fn.opts["resolution"] > 64
+
+
+def run_jobs(jobs):
+    """Run the light cases as `jobs` shards in parallel processes (each case still has its own
+    daemon and observer), then the solo() cases in one process alone; print each process's log
+    whole, in order; one closing "N passed, M failed" line. Returns the exit code."""
+    base = [sys.executable, os.path.abspath(__file__), "--oceand", ARGS.oceand, "-k", ARGS.k]
+    base += ["--strict"] if ARGS.strict else []
+    t_all = time.time()
+    shards = ["%d/%d" % (i, jobs) for i in range(jobs)]
+    files = [tempfile.TemporaryFile("w+") for _ in range(jobs + 1)]   # not pipes: a full one would stall its shard
+    procs = [subprocess.Popen(base + ["--shard", sh], stdout=f, stderr=subprocess.STDOUT, text=True)
+             for sh, f in zip(shards, files)]
+    for p in procs:
+        p.wait()
+    procs.append(subprocess.Popen(base + ["--shard", "solo"], stdout=files[-1], stderr=subprocess.STDOUT, text=True))
+    procs[-1].wait()
+    outs = []
+    for f in files:
+        f.seek(0)
+        outs.append(f.read())
+        f.close()
+    passed = failed = 0
+    failed_names = []
+    for i, (p, out) in enumerate(zip(procs, outs)):
+        log("=== %s (exit %d)" % ("light cases, shard %s" % shards[i] if i < jobs else "solo cases", p.returncode))
+        lines = out.splitlines()
+        last = lines[-1] if lines else ""
+        m = re.match(r"(\d+) passed, (\d+) failed$", last)
+        log("\n".join(lines[:-1] if m else lines))
+        if not m:
+            failed += 1
+            failed_names.append("shard-%d(no summary, exit %d)" % (i, p.returncode))
+            continue
+        passed += int(m.group(1))
+        failed += int(m.group(2))
+        failed_names += [l[len("failed: "):] for l in lines if l.startswith("failed: ")]
+        if p.returncode != 0 and int(m.group(2)) == 0:
+            failed += 1
+            failed_names.append("shard-%d(exit %d)" % (i, p.returncode))
+    log("hostile battery took %.0f s (%d processes)" % (time.time() - t_all, jobs))
+    if failed_names:
+        log("failed: " + " ".join(failed_names))
+    log("%d passed, %d failed" % (passed, failed))
+    return 0 if not failed else 1
+
+
 def main():
     global ARGS, OUT
     ap = argparse.ArgumentParser()
@@ -1885,13 +1941,25 @@ def main():
     ap.add_argument("--strict", action="store_true",
                     help="no noise allowance: < 99%% observer delivery fails even when the daemon waited for a core")
     ap.add_argument("--bench", action="store_true", help="like --json, and exit 0 even when a case fails")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="run the cases in this many processes at once (each case keeps its own daemon and "
+                         "observer; the battery mostly waits on observer windows); logs printed in order")
+    ap.add_argument("--shard", default="0/1", help=argparse.SUPPRESS)   # I/N: cases I, I+N, ... (--jobs uses it)
     ARGS = ap.parse_args()
     if ARGS.json or ARGS.bench:
         OUT = sys.stderr
+        ARGS.jobs = 1          # figures are measured with the battery alone on the machine
+    if ARGS.jobs > 1:
+        sys.exit(run_jobs(ARGS.jobs))
+    if ARGS.shard == "solo":
+        cases = [fn for fn in CASES if solo(fn)]
+    else:
+        shard, shards = (int(x) for x in ARGS.shard.split("/"))
+        cases = CASES if shards == 1 else [fn for fn in CASES if not solo(fn)][shard::shards]
     passed = failed = 0
     failed_names = []
     t_all = time.time()
-    for fn in CASES:
+    for fn in cases:
         if not any(k in fn.__name__ for k in ARGS.k.split(",")):
             continue
         log("--- %s" % fn.__name__)
