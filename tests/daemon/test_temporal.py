@@ -99,7 +99,12 @@ def test_temporal_stream_within_bound_of_lossless():
         print("    temporal: %d frames, %d skipped, tiles by codec %r, %.1f kB/frame; lossless: %d frames"
               % (len(fa), gaps, c, sum(map(len, fa)) / len(fa) / 1e3, len(fb)))
         check(len(fa) >= 200, "only %d temporal frames in 15 s" % len(fa))
-        check(c.get(CODEC_TEMPORAL, 0) > 0.8 * sum(c.values()), "mostly predicted tiles expected: %r" % c)
+        # A frame skipped under load (latest-frame-wins) sends that client keyframe tiles until it
+        # has references again: judge the predictor on frames with no gap among the 4 before them.
+        steady = [m for i, m in enumerate(fa) if i >= 4 and seqs[i] - seqs[i - 4] == 4]
+        cs = codecs(steady)
+        check(len(steady) >= 100, "only %d frames without a recent gap" % len(steady))
+        check(cs.get(CODEC_TEMPORAL, 0) > 0.8 * sum(cs.values()), "mostly predicted tiles expected: %r" % cs)
         check(CODEC_TEMPORAL not in {t["codec"] for t in tiles(fa[0])}, "the first frame must be keyframes")
         worst = check_stream(d, hello["params"], fa, 0.01, "temporal stream")
         # The same frames through the Python decoder, against the lossless stream at equal seq.
