@@ -410,18 +410,28 @@ static void dispatch_query(struct net *n, struct session *s, const cJSON *root, 
     free(r);
 }
 
+/* Parse a control message that came from a remote peer (an edge): counted
+ * like a local one; a parse error is answered to the peer. 0 = m filled. */
+static int remote_parse(const struct remote *rm, const char *text, size_t len, struct ctl_msg *m)
+{
+    atomic_fetch_add(&g_metrics.control_messages, 1);
+    struct ctl_error e;
+    cJSON *bad_id = NULL;
+    if (control_parse(text, len, m, &bad_id, &e) != 0) {
+        respond_error(NULL, rm, &e, bad_id);
+        cJSON_Delete(bad_id);
+        return -1;
+    }
+    return 0;
+}
+
 void net_remote_query(struct net *n, const char *text, size_t len, net_reply_fn reply, void *ctx)
 {
     struct remote rm = { .origin = "", .by = "", .reply = reply, .ctx = ctx };
-    atomic_fetch_add(&g_metrics.control_messages, 1);
     struct ctl_msg m;
-    struct ctl_error e;
-    cJSON *bad_id = NULL;
-    if (control_parse(text, len, &m, &bad_id, &e) != 0) {
-        respond_error(NULL, &rm, &e, bad_id);
-        cJSON_Delete(bad_id);
+    if (remote_parse(&rm, text, len, &m) != 0)
         return;
-    }
+    struct ctl_error e;
     struct query_req *r = malloc(sizeof *r);
     struct remote_query *rq = calloc(1, sizeof *rq);
     if (m.type != CTL_QUERY) {
@@ -554,15 +564,9 @@ void net_remote_control(struct net *n, const char *origin, const char *by, const
                         net_reply_fn reply, void *ctx)
 {
     struct remote rm = { .origin = origin, .by = by, .reply = reply, .ctx = ctx };
-    atomic_fetch_add(&g_metrics.control_messages, 1);
     struct ctl_msg m;
-    struct ctl_error e;
-    cJSON *bad_id = NULL;
-    if (control_parse(text, len, &m, &bad_id, &e) != 0) {
-        respond_error(NULL, &rm, &e, bad_id);
-        cJSON_Delete(bad_id);
+    if (remote_parse(&rm, text, len, &m) != 0)
         return;
-    }
     if (!n->sim || (m.type != CTL_SET && m.type != CTL_PAUSE && m.type != CTL_RESUME)) {
         struct ctl_error f = { .code = "bad_message", .message = "only set, pause and resume go to the simulation" };
         respond_error(NULL, &rm, &f, m.id);
