@@ -36,7 +36,7 @@ const sky = new SkyModel(renderer);
 // ?skirt=0 / ?stitch=0: turn off the crack fixes (to see, and test, what they hide);
 // ?hex=0: periodic normals to the horizon (to measure what the hex tiling breaks up).
 const ocean = new Ocean(renderer, sky.uniforms, { detail: Number(query.get('detail') || 1), skirts: query.get('skirt') !== '0', hexTiling: query.get('hex') !== '0' });
-ocean.uniforms.uStitch.value = query.get('stitch') === '0' ? 0 : 1;
+ocean.setCrackFixes({ stitch: query.get('stitch') !== '0', skirts: query.get('skirt') !== '0' });
 sky.uniforms.uGapProbe.value = query.get('gapprobe') === '1' ? 1 : 0; // ?gapprobe=1: magenta sky and skirts (tests)
 const stats = new Stats();
 const hud = new Hud(document.getElementById('hud'), document.getElementById('banner'), { compact });
@@ -320,6 +320,14 @@ window.oceand = Object.freeze({
     });
   },
 });
+
+// ?test=1 only: switches a test needs on one held frame (the page's own state, never sent).
+if (query.has('test')) {
+  window.oceandTest = Object.freeze({
+    freeze(on) { view.freeze = !!on; panel.refreshView(); },
+    crackFixes(fixes) { ocean.setCrackFixes(fixes); },
+  });
+}
 
 conn.start();
 requestAnimationFrame(frameLoop);

@@ -266,6 +266,13 @@ export class Ocean {
     this.layoutKey = '';
   }
 
+  // The crack fixes on or off (?stitch=0, ?skirt=0, or tests on one frozen frame).
+  setCrackFixes({ stitch = true, skirts = true } = {}) {
+    this.skirts = skirts;
+    this.uniforms.uStitch.value = stitch ? 1 : 0;
+    this.uniforms.uSkirtDepth.value = skirts ? SKIRT_DEPTH : 0;
+  }
+
   // Place patch instances around the camera; only when the camera changes cell.
   layout(camera) {
     const L = this.patch, R = this.ring;
