@@ -166,9 +166,11 @@ export class SkyModel {
     const sunT0 = sunTransmittance(sinAlt, turbidity);
     const lit = u.uCloudLit.value;
     lit.copy(sunT0).multiplyScalar(0.35 * s01(-0.05, 0.2, sinAlt));
-    lit.r += 0.5 * s01(-0.1, 0.4, sinAlt) + 0.010;
-    lit.g += 0.52 * s01(-0.1, 0.4, sinAlt) + 0.012;
-    lit.b += 0.56 * s01(-0.1, 0.4, sinAlt) + 0.018;
+    // The night floor is the moonlit sky's blue (as the dome's uNight), not a neutral grey:
+    // grey clouds against the blue night sky read olive-brown.
+    lit.r += 0.5 * s01(-0.1, 0.4, sinAlt) + 0.0075;
+    lit.g += 0.52 * s01(-0.1, 0.4, sinAlt) + 0.0105;
+    lit.b += 0.56 * s01(-0.1, 0.4, sinAlt) + 0.0200;
     lit.multiplyScalar(1 - darkening);
     // Key light: the sun, then the moon (fixed high in the south-east) once the sun is down.
     const sunT = sunTransmittance(sinAlt, turbidity);
@@ -188,8 +190,10 @@ export class SkyModel {
       U.uDiscSize.value = Math.cos(0.26 * Math.PI / 180);
     }
     U.uStars.value = night * (1 - s01(0.3, 0.8, overcast));
-    // The eye adapts, but not fully: twilight and night stay darker than day.
-    U.uExposure.value = 0.5 + 0.8 * (1 - s01(-0.05, 0.3, sinAlt)) + 2.2 * night;
+    // The eye adapts, but not fully: twilight and night stay darker than day. While the sun
+    // is up the exposure is kept for the bright sky around it (as a camera would), so the
+    // sunset sky keeps its colour and the water before it stays dark; it opens up at dusk.
+    U.uExposure.value = 0.5 + 0.8 * (1 - s01(-0.1, 0.1, sinAlt)) + 2.2 * night;
     this.state = { hour, wind, sun: sun.toArray(), sunAltitudeDeg: Math.asin(sinAlt) * 180 / Math.PI, overcast, darkening };
     this.cubeCamera.update(this.renderer, this.scene);
     return true;
