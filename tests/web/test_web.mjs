@@ -37,7 +37,8 @@ function assert(cond, msg) { if (!cond) throw new Error(msg); }
 // below the horizon, left of the panel and below the HUD (so neither can make a
 // flat canvas look varied).
 async function shot(page, name) {
-  const png = await page.screenshot({ type: 'png' });
+  // (a frame of software GL on a loaded 2-core machine can take longer than the default 30 s)
+  const png = await page.screenshot({ type: 'png', timeout: 120000 });
   const variance = await page.evaluate(async ({ b64, name }) => {
     const panel = document.getElementById('panel').getBoundingClientRect();
     const hud = document.getElementById('hud').getBoundingClientRect();
@@ -106,12 +107,16 @@ async function seamPixels(browser, port, query = '') {
   try {
     await p.goto(`http://127.0.0.1:${port}/?test=1&aa=0&detail=0.5&ui=0&gapprobe=1&cam=0,150,150&target=0,0,-100${query}`);
     await waitFor(p, 'rendering', () => window.oceand.connected && window.oceand.rendered > 3, null, 60000);
+    // Hold a frame of the full subscription (finer cascades move the vertices too; they come
+    // with the foam field, in one subscribe) at full detail, not one from before it.
+    if (!args.fake) await waitFor(p, 'frames with the subscription', () => window.oceand.foam.source === 'field' && window.oceand.stats.lod === 0, null, 60000);
+    await renderedMore(p, 2);
     await p.evaluate(() => window.oceandTest.freeze(true));
     await renderedMore(p, 2); // the held frame fully blended in (uMix 1)
     const count = async (fixes) => {
       await p.evaluate((f) => window.oceandTest.crackFixes(f), fixes);
       await renderedMore(p, 2);
-      const png = await p.screenshot({ type: 'png' });
+      const png = await p.screenshot({ type: 'png', timeout: 120000 });
       return await p.evaluate(async (b64) => {
         const img = new Image();
         img.src = `data:image/png;base64,${b64}`;
