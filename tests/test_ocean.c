@@ -1241,7 +1241,12 @@ static void test_easing(void)
     const size_t nn = (size_t)n * n;
     const double t0 = 40.0, dt = 1.0 / 30, len = 8 * dt;
     char err[256];
+    size_t alloc0 = ocean_alloc_bytes;
     struct ocean_prepared *pr = ocean_prepare(o, &q, err, sizeof err);
+    /* What a memory cap counts for a change being built (server/control.c:
+     * a second simulation, ocean_memory_bytes per cascade) covers the
+     * prepared amplitudes and the easing buffers the first eased change makes. */
+    size_t change_bytes = ocean_alloc_bytes - alloc0, model_bytes = ocean_memory_bytes(n, 2) * (size_t)p.cascades;
     int easable = ocean_prepared_easable(pr);
     int rc = pr ? ocean_commit_eased(o, pr, t0, len) : -1;
     ocean_prepared_free(pr);
@@ -1270,6 +1275,9 @@ static void test_easing(void)
           "easing.reaches_new", "wind %g -> %g m/s over %g s: old sea at t0 %s, new at t0 + len %s (both cascades), "
           "half way the mean of both within %.1e m (the seas differ by %.2f m)", p.wind_speed, q.wind_speed, len,
           start_old ? "bit for bit" : "NO", end_new ? "bit for bit" : "NO", dmid, dab);
+    check(change_bytes > 0 && change_bytes <= model_bytes / 2, "easing.memory",
+          "the first eased change allocates %.2f MB (new amplitudes + easing buffers), the cap counts %.2f MB "
+          "for a change being built", change_bytes / 1e6, model_bytes / 1e6);
     free(h0);
     free(ha);
     free(hm);

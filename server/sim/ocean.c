@@ -774,13 +774,13 @@ oom:
  * cascade keeps its grid, normals and wavenumbers (same N, seed, patch,
  * cascade count), the frequencies are the same (depth, loop period), the
  * FFT path runs before and after (the DFT path recomputes the spectrum from
- * the model), and some amplitude h~0 changes (a change of choppiness alone
+ * the model), N <= OCEAN_EASE_MAX_N, and some amplitude h~0 changes (a change of choppiness alone
  * is not eased: its factor is not an amplitude). Then a grid that has no
  * easing buffer yet gets one here, off the tick. False: out of memory. */
 static bool prepare_ease(const struct ocean *o, struct ocean_prepared *pr)
 {
     pr->easable = false;
-    if (!o->g || pr->ncascades != o->ncascades || pr->p.transform != TRANSFORM_FFT ||
+    if (!o->g || o->g->n > OCEAN_EASE_MAX_N || pr->ncascades != o->ncascades || pr->p.transform != TRANSFORM_FFT ||
         o->p.transform != TRANSFORM_FFT || pr->p.patch_size != o->p.patch_size || pr->p.depth != o->p.depth ||
         pr->p.loop_period != o->p.loop_period)
         return true;

@@ -100,7 +100,7 @@ void ocean_prepared_free(struct ocean_prepared *pr);
  * commits like ocean_commit, but when the change alters only the
  * amplitudes h~0 (ocean_prepared_easable: same N, seed, patch, depth, loop
  * period and cascades, FFT path; wind, amplitude, spectrum, fetch, ...)
- * and len > 0, the sea eases from the amplitudes in force at t0 (during
+ * N <= OCEAN_EASE_MAX_N and len > 0, the sea eases from the amplitudes in force at t0 (during
  * another easing: its mix at t0, so there is no jump) to the new ones over
  * sim time [t0, t0 + len]: a step at t uses from + w (to - from) per mode,
  * w = (t - t0) / len clamped to [0, 1]. Choppiness changes at once. Any
@@ -108,6 +108,10 @@ void ocean_prepared_free(struct ocean_prepared *pr);
  * with len 0. Same threads as ocean_commit; the start of an easing copies
  * the amplitudes in force (O(N^2), on o's own workers). */
 int ocean_commit_eased(struct ocean *o, struct ocean_prepared *pr, double t0, double len);
+/* Largest N eased: the start of an easing copies 8 N^2 bytes per cascade on
+ * the committing (tick) thread, 5 ms at N = 1024 with 3 cascades, 30 ms at
+ * 2048 (a whole tick): there a change applies at once, as before. */
+#define OCEAN_EASE_MAX_N 1024
 bool ocean_prepared_easable(const struct ocean_prepared *pr);
 /* The easing in force (len 0: none), for callers that must know when the
  * sea is exactly the parameters' (tests, frame checks). */
