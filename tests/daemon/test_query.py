@@ -160,10 +160,12 @@ def test_query_during_an_easing_equals_the_stream(d):
     same sea (one cascade, choppiness 0, grid nodes, as above)."""
     async def run():
         ws, hello = await connect(d)
-        await set_params(ws, {"choppiness": 0, "cascades": 1, "wind_speed": 9}, 1)
+        p1 = await set_params(ws, {"choppiness": 0, "cascades": 1, "wind_speed": 9}, 1)
         await ws.send(json.dumps({"type": "subscribe", "id": 2, "fields": ["height"], "lod": 0, "bound": 0}))
         await recv_json(ws, lambda m: m.get("id") == 2)
-        await asyncio.sleep(0.5)       # the easing to 9 m/s is over
+        h1, _ = await recv_frame(ws, lambda h, b: h["params_version"] == p1["params_version"], timeout=10)
+        await recv_frame(ws, lambda h, b: h["sim_time"] >= h1["sim_time"] + (td.EASE_TICKS + 1) / td.TICK,
+                         timeout=10)   # the easing to 9 m/s is over
         p = await set_params(ws, {"wind_speed": 14}, 3)
         _, msg = await recv_frame(ws, lambda h, b: h["params_version"] == p["params_version"] and
                                   td.tiles(b) and td.tiles(b)[0]["codec"] == 0, timeout=10)
