@@ -160,6 +160,8 @@ def test_query_during_an_easing_equals_the_stream(d):
     same sea (one cascade, choppiness 0, grid nodes, as above)."""
     async def run():
         ws, hello = await connect(d)
+        check(hello.get("ease_ticks") == td.EASE_TICKS, "hello announces ease_ticks %r, the daemon eases over %d"
+              % (hello.get("ease_ticks"), td.EASE_TICKS))
         p1 = await set_params(ws, {"choppiness": 0, "cascades": 1, "wind_speed": 9}, 1)
         await ws.send(json.dumps({"type": "subscribe", "id": 2, "fields": ["height"], "lod": 0, "bound": 0}))
         await recv_json(ws, lambda m: m.get("id") == 2)
