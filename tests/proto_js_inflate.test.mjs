@@ -1,8 +1,10 @@
-// oc_decode_inflate.test.mjs — the decoder with an installed synchronous inflater
-// (setInflateRaw + fflate's inflateSync, as web/src/worker.js wires it in the browser) must
-// reproduce every deflate vector bit for bit and reject every bad input with the listed code,
-// like the node-zlib and DecompressionStream paths in tests/proto_js.test.mjs.
-//   node --test proto/js/oc_decode_inflate.test.mjs      (skipped when web/node_modules lacks fflate)
+// proto_js_inflate.test.mjs — the decoder with an installed synchronous inflater, each of the
+// two web/src/worker.js wires in the browser: fflate's inflateSync (the fallback) and the
+// WebAssembly one (proto/wasm/oc_inflate.c via proto/js/oc_wasm.js, build/wasm/oc_kernels.wasm:
+// `make` builds it; missing, these tests fail). Each must reproduce every deflate vector bit for
+// bit and reject every bad input with the listed code, like the node-zlib and
+// DecompressionStream paths in tests/proto_js.test.mjs.
+//   node --test tests/proto_js_inflate.test.mjs      (fflate's: skipped when web/node_modules lacks it)
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync, existsSync } from 'node:fs';
@@ -11,6 +13,7 @@ import { dirname, join } from 'node:path';
 import { createRequire } from 'node:module';
 import { decodeFrame, setInflateRaw, DecoderState } from '../proto/js/oc_decode.js';
 import { mutateAndDecode } from './proto_js_mutate.mjs';
+import { loadKernels } from '../proto/js/oc_wasm.js';
 
 const root = join(dirname(fileURLToPath(import.meta.url)), '..');
 const vdir = join(root, 'proto/vectors');
@@ -20,55 +23,17 @@ const load = (name) => {
   return b.buffer.slice(b.byteOffset, b.byteOffset + b.byteLength);
 };
 const haveFflate = existsSync(join(root, 'web/node_modules/fflate'));
-const skip = !haveFflate && 'fflate not installed in web/node_modules';
+const inflaters = [];
 if (haveFflate) {
   const { inflateSync } = createRequire(join(root, 'web/package.json'))('fflate');
-  setInflateRaw((src, out) => inflateSync(src, { out }));
+  inflaters.push({ name: 'fflate', fn: (src, out) => inflateSync(src, { out }) });
+} else {
+  inflaters.push({ name: 'fflate', fn: null, skip: 'fflate not installed in web/node_modules' });
 }
+const kernels = await loadKernels(readFileSync(join(root, 'build/wasm/oc_kernels.wasm')));
+assert.ok(kernels, 'the WebAssembly kernels load in node');
+inflaters.push({ name: 'wasm', fn: kernels.inflateRaw });
 const opts = { useNodeZlib: false }; // under node, zlib would win otherwise
-
-for (const v of manifest.vectors.filter((x) => x.tiles.every((t) => t.codec !== 2))) {
-  test(`vector ${v.name} (setInflateRaw + fflate)`, { skip }, async () => {
-    const frame = await decodeFrame(load(v.file), opts);
-    const expected = new Uint32Array(load(v.expected));
-    assert.equal(frame.tiles.length, v.tiles.length);
-    frame.tiles.forEach((t, i) => {
-      const off = v.tiles[i].sampleOffset;
-      assert.deepEqual(new Uint32Array(t.samples.buffer, t.samples.byteOffset, t.samples.length),
-        expected.subarray(off, off + t.samples.length), `tile ${i}: float32 bits`);
-    });
-  });
-}
-
-for (const b of manifest.bad) {
-  test(`bad input ${b.name} -> ${b.error} (setInflateRaw + fflate)`, { skip }, async () => {
-    await assert.rejects(decodeFrame(load(b.file), opts), (e) => {
-      assert.equal(e.code, b.error, e.message);
-      return true;
-    });
-  });
-}
-
-test('deflate streams that end early or run long are corrupt (setInflateRaw + fflate)', { skip }, async () => {
-  const v = manifest.vectors.find((x) => x.name === 'v03_height_1mm');
-  const raw = new Uint8Array(load(v.file));
-  const dv = new DataView(raw.buffer);
-  const { deflateRawSync } = await import('node:zlib');
-  // Re-encode tile 0's stream with one byte more or less of content, keeping the frame consistent.
-  const start = 48 + 40, len = dv.getUint32(48 + 32, true);
-  const { inflateRawSync } = await import('node:zlib');
-  const content = inflateRawSync(raw.subarray(start + 16, start + len));
-  for (const c of [content.subarray(0, content.length - 1), Buffer.concat([content, Buffer.from([0])])]) {
-    const stream = deflateRawSync(c);
-    const frame = new Uint8Array(raw.length - (len - 16) + stream.length);
-    frame.set(raw.subarray(0, start + 16));
-    frame.set(stream, start + 16);
-    frame.set(raw.subarray(start + len), start + 16 + stream.length);
-    new DataView(frame.buffer).setUint32(48 + 32, 16 + stream.length, true);
-    await assert.rejects(decodeFrame(frame.buffer, opts), (e) => e.code === 'corrupt');
-    await assert.rejects(decodeFrame(frame.buffer), (e) => e.code === 'corrupt'); // node zlib agrees
-  }
-});
 
 // A frame with a 128x128 tile (inflated by DecompressionStream when both exist) and an 8x8 one
 // (by the installed inflater), built here: both must equal node zlib's decode, and a bad stream in
@@ -100,7 +65,55 @@ function mixedFrame(deflateRawSync, badTile = -1) {
   return b.buffer.slice(b.byteOffset, b.byteOffset + b.length);
 }
 
-test('large tiles via DecompressionStream, small ones via the installed inflater, same bits', { skip }, async () => {
+for (const inf of inflaters) {
+for (const v of manifest.vectors.filter((x) => x.tiles.every((t) => t.codec !== 2))) {
+  test(`vector ${v.name} (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
+    setInflateRaw(inf.fn);
+    const frame = await decodeFrame(load(v.file), opts);
+    const expected = new Uint32Array(load(v.expected));
+    assert.equal(frame.tiles.length, v.tiles.length);
+    frame.tiles.forEach((t, i) => {
+      const off = v.tiles[i].sampleOffset;
+      assert.deepEqual(new Uint32Array(t.samples.buffer, t.samples.byteOffset, t.samples.length),
+        expected.subarray(off, off + t.samples.length), `tile ${i}: float32 bits`);
+    });
+  });
+}
+
+for (const b of manifest.bad) {
+  test(`bad input ${b.name} -> ${b.error} (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
+    setInflateRaw(inf.fn);
+    await assert.rejects(decodeFrame(load(b.file), opts), (e) => {
+      assert.equal(e.code, b.error, e.message);
+      return true;
+    });
+  });
+}
+
+test(`deflate streams that end early or run long are corrupt (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
+    setInflateRaw(inf.fn);
+  const v = manifest.vectors.find((x) => x.name === 'v03_height_1mm');
+  const raw = new Uint8Array(load(v.file));
+  const dv = new DataView(raw.buffer);
+  const { deflateRawSync } = await import('node:zlib');
+  // Re-encode tile 0's stream with one byte more or less of content, keeping the frame consistent.
+  const start = 48 + 40, len = dv.getUint32(48 + 32, true);
+  const { inflateRawSync } = await import('node:zlib');
+  const content = inflateRawSync(raw.subarray(start + 16, start + len));
+  for (const c of [content.subarray(0, content.length - 1), Buffer.concat([content, Buffer.from([0])])]) {
+    const stream = deflateRawSync(c);
+    const frame = new Uint8Array(raw.length - (len - 16) + stream.length);
+    frame.set(raw.subarray(0, start + 16));
+    frame.set(stream, start + 16);
+    frame.set(raw.subarray(start + len), start + 16 + stream.length);
+    new DataView(frame.buffer).setUint32(48 + 32, 16 + stream.length, true);
+    await assert.rejects(decodeFrame(frame.buffer, opts), (e) => e.code === 'corrupt');
+    await assert.rejects(decodeFrame(frame.buffer), (e) => e.code === 'corrupt'); // node zlib agrees
+  }
+});
+
+test(`large tiles via DecompressionStream, small ones via the installed inflater (${inf.name}), same bits`, { skip: inf.skip }, async () => {
+    setInflateRaw(inf.fn);
   const { deflateRawSync } = await import('node:zlib');
   const buf = mixedFrame(deflateRawSync);
   const want = await decodeFrame(buf); // node zlib
@@ -110,14 +123,16 @@ test('large tiles via DecompressionStream, small ones via the installed inflater
   for (const bad of [0, 1]) await assert.rejects(decodeFrame(mixedFrame(deflateRawSync, bad), opts), (e) => e.code === 'corrupt');
 });
 
-test('random truncations and bit flips are rejected or decode (setInflateRaw + fflate)', { skip }, async () => {
+test(`random truncations and bit flips are rejected or decode (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
+    setInflateRaw(inf.fn);
   const frame = load(manifest.vectors.find((v) => v.name === 'v03_height_1mm').file);
   await mutateAndDecode(frame, 777, () => opts);
 });
 
 // Temporal streams (codec 3) through the installed inflater: frames in order, one DecoderState.
 for (const st of manifest.streams) {
-  test(`stream ${st.name} (setInflateRaw + fflate)`, { skip }, async () => {
+  test(`stream ${st.name} (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
+    setInflateRaw(inf.fn);
     const state = new DecoderState();
     for (const [i, f] of st.frames.entries()) {
       if (f.error) {
@@ -135,4 +150,5 @@ for (const st of manifest.streams) {
       assert.equal(k, expected.length);
     }
   });
+}
 }

@@ -1,0 +1,46 @@
+// oc_wasm.js — the decoder's WebAssembly kernels (proto/wasm/, built by the Makefile into
+// build/wasm/oc_kernels.wasm with Debian's clang + wasm-ld; the web bundle embeds the bytes).
+// No imports, like oc_decode.js: the caller brings the module's bytes.
+//   const k = await loadKernels(bytes);        // null when WebAssembly is missing or refuses it
+//   setInflateRaw(k.inflateRaw);                // oc_decode.js then inflates codec 1/3 tiles with it
+// inflateRaw(src, out) has setInflateRaw()'s contract: the inflated bytes (a view of `out`),
+// throwing on a bad stream or one longer than `out`. The pure-JavaScript path (fflate, or
+// DecompressionStream) stays the fallback, and both are checked bit-exact on proto/vectors/.
+
+const ERRORS = { '-1': 'corrupt stream', '-2': 'truncated stream', '-3': 'stream longer than expected', '-4': 'bytes after the end of the stream' };
+
+/** Instantiate the kernels from the module's bytes (Uint8Array / ArrayBuffer / WebAssembly.Module). */
+export async function loadKernels(bytes) {
+  if (typeof WebAssembly !== 'object') return null;
+  let instance;
+  try {
+    const mod = bytes instanceof WebAssembly.Module ? bytes : await WebAssembly.compile(bytes);
+    instance = await WebAssembly.instantiate(mod, {});
+  } catch {
+    return null; // no SIMD / bulk memory in this engine: the caller keeps the JavaScript path
+  }
+  return makeKernels(instance.exports);
+}
+
+function makeKernels(x) {
+  const memory = x.memory;
+  const align = (v) => (v + 15) & ~15;
+  const scratch = align(x.__heap_base.value);          // the inflater's state
+  const inPtr = align(scratch + x.oc_inflate_scratch_size());
+  let u8 = new Uint8Array(memory.buffer);
+  // The input, then the output, after the scratch: grow the memory when a tile needs more.
+  function reserve(end) {
+    if (end > memory.buffer.byteLength) memory.grow(Math.ceil((end - memory.buffer.byteLength) / 65536));
+    if (u8.buffer !== memory.buffer) u8 = new Uint8Array(memory.buffer);
+  }
+  function inflateRaw(src, out) {
+    const outPtr = align(inPtr + src.length);
+    reserve(outPtr + out.length);
+    u8.set(src, inPtr);
+    const n = x.oc_inflate_raw(inPtr, src.length, outPtr, out.length, scratch);
+    if (n < 0) throw new Error(`deflate: ${ERRORS[n] || n}`);
+    out.set(u8.subarray(outPtr, outPtr + n));
+    return out.subarray(0, n);
+  }
+  return { inflateRaw, memory };
+}
