@@ -3,7 +3,7 @@
 // zlib) must give the same float32 bits as the C decoder on every deflate
 // vector and reject every bad input with the listed code, and decode the temporal streams
 // (codec 3) frame by frame with one DecoderState; all of it twice: with DecompressionStream,
-// then with the WebAssembly inflater (proto/js/oc_wasm.js, build/wasm/). Skipped when no
+// then with the WebAssembly inflater and prediction (proto/js/oc_wasm.js, build/wasm/). Skipped when no
 // Chromium is installed.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
@@ -65,10 +65,10 @@ for (const st of streams) {
 }
 }
 await runAll('streams: ');
-// Again with the WebAssembly inflater installed, as the web worker does once it has loaded.
+// Again with the WebAssembly inflater and codec 3 prediction, as the web worker does once they have loaded.
 const kernels = await loadKernels(ab(wasmB64));
 if (!kernels) res.fail.push('the WebAssembly kernels did not load');
-else { setInflateRaw(kernels.inflateRaw); await runAll('wasm: '); }
+else { setInflateRaw(kernels.inflateRaw); setTemporalKernel(kernels.temporal); await runAll('wasm: '); }
 document.getElementById('out').textContent = 'RESULT' + JSON.stringify(res) + 'END';
 </script>`;
   const dir = mkdtempSync(join(tmpdir(), 'oceand-proto-'));

@@ -11,7 +11,7 @@ import { readFileSync, existsSync } from 'node:fs';
 import { fileURLToPath } from 'node:url';
 import { dirname, join } from 'node:path';
 import { createRequire } from 'node:module';
-import { decodeFrame, setInflateRaw, DecoderState } from '../proto/js/oc_decode.js';
+import { decodeFrame, setInflateRaw, setTemporalKernel, DecoderState } from '../proto/js/oc_decode.js';
 import { mutateAndDecode } from './proto_js_mutate.mjs';
 import { loadKernels } from '../proto/js/oc_wasm.js';
 
@@ -26,13 +26,13 @@ const haveFflate = existsSync(join(root, 'web/node_modules/fflate'));
 const inflaters = [];
 if (haveFflate) {
   const { inflateSync } = createRequire(join(root, 'web/package.json'))('fflate');
-  inflaters.push({ name: 'fflate', fn: (src, out) => inflateSync(src, { out }) });
+  inflaters.push({ name: 'fflate', fn: (src, out) => inflateSync(src, { out }), temporal: null });
 } else {
   inflaters.push({ name: 'fflate', fn: null, skip: 'fflate not installed in web/node_modules' });
 }
 const kernels = await loadKernels(readFileSync(join(root, 'build/wasm/oc_kernels.wasm')));
 assert.ok(kernels, 'the WebAssembly kernels load in node');
-inflaters.push({ name: 'wasm', fn: kernels.inflateRaw });
+inflaters.push({ name: 'wasm', fn: kernels.inflateRaw, temporal: kernels.temporal }); // + codec 3 prediction in SIMD
 const opts = { useNodeZlib: false }; // under node, zlib would win otherwise
 
 // A frame with a 128x128 tile (inflated by DecompressionStream when both exist) and an 8x8 one
@@ -69,6 +69,7 @@ for (const inf of inflaters) {
 for (const v of manifest.vectors.filter((x) => x.tiles.every((t) => t.codec !== 2))) {
   test(`vector ${v.name} (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
     setInflateRaw(inf.fn);
+    setTemporalKernel(inf.temporal);
     const frame = await decodeFrame(load(v.file), opts);
     const expected = new Uint32Array(load(v.expected));
     assert.equal(frame.tiles.length, v.tiles.length);
@@ -83,6 +84,7 @@ for (const v of manifest.vectors.filter((x) => x.tiles.every((t) => t.codec !== 
 for (const b of manifest.bad) {
   test(`bad input ${b.name} -> ${b.error} (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
     setInflateRaw(inf.fn);
+    setTemporalKernel(inf.temporal);
     await assert.rejects(decodeFrame(load(b.file), opts), (e) => {
       assert.equal(e.code, b.error, e.message);
       return true;
@@ -92,6 +94,7 @@ for (const b of manifest.bad) {
 
 test(`deflate streams that end early or run long are corrupt (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
     setInflateRaw(inf.fn);
+    setTemporalKernel(inf.temporal);
   const v = manifest.vectors.find((x) => x.name === 'v03_height_1mm');
   const raw = new Uint8Array(load(v.file));
   const dv = new DataView(raw.buffer);
@@ -114,6 +117,7 @@ test(`deflate streams that end early or run long are corrupt (setInflateRaw + ${
 
 test(`large tiles via DecompressionStream, small ones via the installed inflater (${inf.name}), same bits`, { skip: inf.skip }, async () => {
     setInflateRaw(inf.fn);
+    setTemporalKernel(inf.temporal);
   const { deflateRawSync } = await import('node:zlib');
   const buf = mixedFrame(deflateRawSync);
   const want = await decodeFrame(buf); // node zlib
@@ -125,6 +129,7 @@ test(`large tiles via DecompressionStream, small ones via the installed inflater
 
 test(`random truncations and bit flips are rejected or decode (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
     setInflateRaw(inf.fn);
+    setTemporalKernel(inf.temporal);
   const frame = load(manifest.vectors.find((v) => v.name === 'v03_height_1mm').file);
   await mutateAndDecode(frame, 777, () => opts);
 });
@@ -133,6 +138,7 @@ test(`random truncations and bit flips are rejected or decode (setInflateRaw + $
 for (const st of manifest.streams) {
   test(`stream ${st.name} (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
     setInflateRaw(inf.fn);
+    setTemporalKernel(inf.temporal);
     const state = new DecoderState();
     for (const [i, f] of st.frames.entries()) {
       if (f.error) {
@@ -152,3 +158,40 @@ for (const st of manifest.streams) {
   });
 }
 }
+
+// The SIMD prediction kernel against §5.8 computed here in BigInt (exact), on random tiles of
+// every depth and small sizes (edge columns and rows, w = 1), and its refusal beyond its bound.
+test('wasm temporal kernel = §5.8 in BigInt; refuses codes beyond its int32 bound', () => {
+  let seed = 7;
+  const rnd = () => (seed = (seed * 1103515245 + 12345) >>> 0) / 2 ** 32;
+  const ri = (lo, hi) => lo + Math.floor(rnd() * (hi - lo + 1));
+  const MASK = [0, 0x40, 0x49, 0x5b, 0x7f];
+  for (let trial = 0; trial < 200; trial++) {
+    const w = [1, 2, 3, 5, 8, 16][trial % 6], h = ri(1, 6), count = w * h, depth = ri(1, 4);
+    const big = trial % 10 === 9; // codes near 2^30: beyond the bound
+    const refs = Array.from({ length: depth }, () => Int32Array.from({ length: count }, () => (big ? ri(-(2 ** 30), 2 ** 30) : ri(-3000, 3000))));
+    const coef = Array.from({ length: 7 }, (_, k) => (MASK[depth] & (1 << k) ? ri(-9000, 9000) : 0));
+    const zz = Uint32Array.from({ length: count }, () => (rnd() < 0.9 ? ri(0, 14) : ri(0, 2 ** 32 - 1)));
+    const offset = rnd() * 2 - 1, scale = 0.0199;
+    const q = new Int32Array(count), out = new Float32Array(4 * count);
+    const ok = kernels.temporal(refs, depth, new Int32Array(zz.buffer), w, h, coef, q, { array: out, offset: 1, stride: 4, rowStride: 4 * w }, offset, scale);
+    if (big) { assert.equal(ok, false, `trial ${trial}: codes ~2^30 must be refused`); continue; }
+    assert.equal(ok, true);
+    const R = (k) => refs[k < depth ? k : 0];
+    const L = (a, i, j) => {
+      const at = (ii, jj) => BigInt(a[Math.min(h - 1, Math.max(0, jj)) * w + Math.min(w - 1, Math.max(0, ii))]);
+      return at(i - 1, j) + at(i + 1, j) + at(i, j - 1) + at(i, j + 1) - 4n * at(i, j);
+    };
+    for (let j = 0; j < h; j++) for (let i = 0; i < w; i++) {
+      const k = j * w + i, c = coef.map(BigInt), x = [0, 1, 2, 3].map((m) => BigInt(R(m)[k]));
+      const l = [0, 1, 2, 3].map((m) => L(R(m), i, j));
+      const S = c[0] * (x[0] - x[1]) + c[1] * (x[1] - x[2]) + c[2] * (x[2] - x[3]) + c[3] * (l[0] - l[1])
+        + c[4] * (l[1] - l[2]) + c[5] * (l[2] - l[3]) + c[6] * l[0];
+      const num = S + 2048n, fl = num >= 0n ? num / 4096n : -((-num + 4095n) / 4096n);
+      const r = BigInt((zz[k] >>> 1) ^ -(zz[k] & 1));
+      const v = Number(BigInt.asIntN(32, x[0] + fl + r));
+      assert.equal(q[k], v, `trial ${trial} sample (${i}, ${j})`);
+      assert.equal(out[1 + 4 * k], Math.fround(offset + v * scale));
+    }
+  }
+});

@@ -48,6 +48,15 @@ let inflateRawSync = null;
  */
 export function setInflateRaw(fn) { inflateRawSync = fn; }
 
+let temporalKernel = null;
+/**
+ * Install a codec 3 prediction kernel (null removes it): fn(refs, depth, zz, w, h, coef, q, dst, offset, scale)
+ * -> true when it wrote the tile's codes to q (Int32Array) and its samples to dst ({array, offset, stride,
+ * rowStride}), false to leave the tile to this module's JavaScript (bit-identical). The WebAssembly one:
+ * proto/js/oc_wasm.js's loadKernels(bytes).temporal.
+ */
+export function setTemporalKernel(fn) { temporalKernel = fn; }
+
 /** Error thrown for bad input; `code` says which kind. */
 export class FrameError extends Error {
   constructor(code, message) {
@@ -457,6 +466,7 @@ function reconstructTemporal(t, packed, l, state, dst) {
   else { zz = new Int32Array(count); unpackEscapes(zz, packed, count, l.escCount, l.escWidth); }
   const q = takeCodes(state, count), out = dst.array, os = dst.stride, ors = dst.rowStride;
   const [c0, c1, c2, c3, c4, c5, c6] = l.coef, depth = l.depth;
+  if (temporalKernel && temporalKernel(l.refs.map((r) => r.codes), depth, zz, w, h, l.coef, q, dst, t.offset, t.scale)) return q;
   const a1 = c0, a2 = c1 - c0, a3 = c2 - c1, a4 = -c2, b1 = c3 + c6, b2 = c4 - c3, b3 = c5 - c4, b4 = -c5;
   // Missing references (depth < 4) stand in as q1: their coefficients are 0.
   const ref = (k) => l.refs[k < depth ? k : 0].codes;

@@ -3,6 +3,7 @@
 // No imports, like oc_decode.js: the caller brings the module's bytes.
 //   const k = await loadKernels(bytes);        // null when WebAssembly is missing or refuses it
 //   setInflateRaw(k.inflateRaw);                // oc_decode.js then inflates codec 1/3 tiles with it
+//   setTemporalKernel(k.temporal);              // and predicts codec 3 tiles with it (SIMD)
 // inflateRaw(src, out) has setInflateRaw()'s contract: the inflated bytes (a view of `out`),
 // throwing on a bad stream or one longer than `out`. The pure-JavaScript path (fflate, or
 // DecompressionStream) stays the fallback, and both are checked bit-exact on proto/vectors/.
@@ -42,5 +43,27 @@ function makeKernels(x) {
     out.set(u8.subarray(outPtr, outPtr + n));
     return out.subarray(0, n);
   }
-  return { inflateRaw, memory };
+  // Codec 3's prediction (oc_predict.c): the references, residuals and scratch copied into the
+  // module's memory, the codes and samples copied back (strided into the caller's target).
+  // false = the tile is outside the kernel's int32 bound: the caller decodes it in JavaScript.
+  function temporal(refs, depth, zz, w, h, coef, q, dst, offset, scale) {
+    const count = w * h, bytes = 4 * count;
+    const base = align(scratch + x.oc_inflate_scratch_size());
+    const refPtr = base, zzPtr = refPtr + depth * bytes, coefPtr = zzPtr + bytes, aPtr = coefPtr + 32,
+      bPtr = aPtr + bytes, qPtr = bPtr + bytes, fPtr = qPtr + bytes;
+    reserve(fPtr + bytes);
+    const i32 = new Int32Array(memory.buffer);
+    for (let k = 0; k < depth; k++) i32.set(refs[k], (refPtr >> 2) + k * count);
+    i32.set(zz.length === count ? zz : zz.subarray(0, count), zzPtr >> 2); // zigzag values (u32 patterns; bytes widen)
+    for (let k = 0; k < 7; k++) i32[(coefPtr >> 2) + k] = coef[k];
+    if (x.oc_temporal_predict(refPtr, depth, zzPtr, w, h, coefPtr, aPtr, bPtr, qPtr, fPtr, offset, scale)) return false;
+    q.set(i32.subarray(qPtr >> 2, (qPtr >> 2) + count));
+    const f = new Float32Array(memory.buffer, fPtr, count), out = dst.array, os = dst.stride, ors = dst.rowStride;
+    if (os === 1 && ors === w) { out.set(f, dst.offset); return true; }
+    for (let j = 0, k = 0; j < h; j++) {
+      for (let i = 0, o = dst.offset + j * ors; i < w; i++, k++, o += os) out[o] = f[k];
+    }
+    return true;
+  }
+  return { inflateRaw, temporal, memory };
 }

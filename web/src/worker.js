@@ -7,18 +7,19 @@
 // reuse (no 4 MB allocation per frame at N=512).
 import { inflateSync } from 'fflate';
 import kernelBytes from 'oc-kernels.wasm';
-import { decodeFrame, setInflateRaw, DecoderState } from '../../proto/js/oc_decode.js';
+import { decodeFrame, setInflateRaw, setTemporalKernel, DecoderState } from '../../proto/js/oc_decode.js';
 import { loadKernels } from '../../proto/js/oc_wasm.js';
 
 // Raw DEFLATE (codecs 1 and 3): a synchronous inflater for small tiles, where one async
 // DecompressionStream per tile costs more than the inflating (the decoder picks per tile).
 // The WebAssembly one (proto/wasm/oc_inflate.c, embedded in this bundle) once it has loaded;
 // fflate until then, and for good where WebAssembly is missing or refuses the module
-// (same bytes, checked on proto/vectors/: tests/proto_js_inflate.test.mjs).
+// (same bytes, checked on proto/vectors/: tests/proto_js_inflate.test.mjs). The module also
+// predicts codec 3 tiles (SIMD, proto/wasm/oc_predict.c); the JavaScript predictor is its fallback.
 let inflater = 'fflate';
 setInflateRaw((src, out) => inflateSync(src, { out }));
 const kernelsReady = loadKernels(kernelBytes).then((k) => {
-  if (k) { setInflateRaw(k.inflateRaw); inflater = 'wasm'; }
+  if (k) { setInflateRaw(k.inflateRaw); setTemporalKernel(k.temporal); inflater = 'wasm'; }
 }, () => {});
 
 const CHANNEL = { dx: [0, 4], height: [1, 4], dz: [2, 4], jacobian: [3, 4], slope_x: [0, 2], slope_z: [1, 2] };
