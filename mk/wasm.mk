@@ -7,7 +7,7 @@ WASM_CC      := clang
 WASM_FLAGS   := --target=wasm32 -O3 -std=c11 -ffreestanding -nostdlib -mbulk-memory -msimd128 $(WARN) \
                 -Wl,--no-entry -Wl,--export=__heap_base \
                 -Wl,--export=oc_inflate_raw -Wl,--export=oc_inflate_scratch_size \
-                -Wl,--export=oc_temporal_predict
+                -Wl,--export=oc_temporal_predict -Wl,--export=oc_unpack_pairs
 WASM_SRCS    := $(wildcard proto/wasm/*.c)
 
 BINS += $(BUILD)/wasm/oc_kernels.wasm

@@ -50,8 +50,8 @@ export function setInflateRaw(fn) { inflateRawSync = fn; }
 
 let temporalKernel = null;
 /**
- * Install a codec 3 prediction kernel (null removes it): fn(refs, depth, zz, w, h, coef, q, dst, offset, scale)
- * -> true when it wrote the tile's codes to q (Int32Array) and its samples to dst ({array, offset, stride,
+ * Install a codec 3 prediction kernel (null removes it): fn(refs, depth, zz, w, h, coef, q, dst, offset, scale, pairs)
+ * (zz: the zigzag residuals, or with pairs = true stream A of pair packing without escaped pairs) -> true when it wrote the tile's codes to q (Int32Array) and its samples to dst ({array, offset, stride,
  * rowStride}), false to leave the tile to this module's JavaScript (bit-identical). The WebAssembly one:
  * proto/js/oc_wasm.js's loadKernels(bytes).temporal.
  */
@@ -460,6 +460,11 @@ function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
 let aScratch = new Float64Array(4096), bScratch = new Float64Array(4096);
 function reconstructTemporal(t, packed, l, state, dst) {
   const w = t.width, h = t.height, count = w * h;
+  if (temporalKernel && l.packing === 1 && l.pairEsc === 0) { // the kernel unpacks the pairs too
+    const q = takeCodes(state, count);
+    if (temporalKernel(l.refs.map((r) => r.codes), l.depth, packed, w, h, l.coef, q, dst, t.offset, t.scale, true)) return q;
+    if (state) state.spare.push(q);
+  }
   let zz;
   if (l.packing === 1) zz = unpackPairs(packed, count, l.pairEsc, l.escCount, l.escWidth);
   else if (l.escCount === 0) zz = packed;

@@ -46,7 +46,8 @@ function makeKernels(x) {
   // Codec 3's prediction (oc_predict.c): the references, residuals and scratch copied into the
   // module's memory, the codes and samples copied back (strided into the caller's target).
   // false = the tile is outside the kernel's int32 bound: the caller decodes it in JavaScript.
-  function temporal(refs, depth, zz, w, h, coef, q, dst, offset, scale) {
+  // pairs = true: zz is stream A of pair packing (PROTOCOL.md §5.7) without escaped pairs, unpacked here.
+  function temporal(refs, depth, zz, w, h, coef, q, dst, offset, scale, pairs = false) {
     const count = w * h, bytes = 4 * count;
     const base = align(scratch + x.oc_inflate_scratch_size());
     const refPtr = base, zzPtr = refPtr + depth * bytes, coefPtr = zzPtr + bytes, aPtr = coefPtr + 32,
@@ -54,7 +55,14 @@ function makeKernels(x) {
     reserve(fPtr + bytes);
     const i32 = new Int32Array(memory.buffer);
     for (let k = 0; k < depth; k++) i32.set(refs[k], (refPtr >> 2) + k * count);
-    i32.set(zz.length === count ? zz : zz.subarray(0, count), zzPtr >> 2); // zigzag values (u32 patterns; bytes widen)
+    if (pairs) {
+      const pPtr = fPtr; // the samples' room, free until the prediction writes them
+      u8 = new Uint8Array(memory.buffer);
+      u8.set(zz.subarray(0, (count + 1) >> 1), pPtr);
+      if (x.oc_unpack_pairs(pPtr, count, zzPtr)) return false;
+    } else {
+      i32.set(zz.length === count ? zz : zz.subarray(0, count), zzPtr >> 2); // zigzag values (u32 patterns; bytes widen)
+    }
     for (let k = 0; k < 7; k++) i32[(coefPtr >> 2) + k] = coef[k];
     if (x.oc_temporal_predict(refPtr, depth, zzPtr, w, h, coefPtr, aPtr, bPtr, qPtr, fPtr, offset, scale)) return false;
     q.set(i32.subarray(qPtr >> 2, (qPtr >> 2) + count));

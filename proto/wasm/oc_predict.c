@@ -11,6 +11,19 @@
 
 static inline uint32_t uabs(int32_t v) { return v < 0 ? 0u - (uint32_t)v : (uint32_t)v; }
 
+/* A = sum a_k q_k and B = sum b_k q_k modulo 2^32 (restrict: vectorised without alias checks) */
+static void ab_pass(const int32_t *restrict q1, const int32_t *restrict q2, const int32_t *restrict q3,
+                    const int32_t *restrict q4, size_t count, uint32_t a1, uint32_t a2, uint32_t a3, uint32_t a4,
+                    uint32_t b1, uint32_t b2, uint32_t b3, uint32_t b4, uint32_t *restrict A, uint32_t *restrict B)
+{
+#pragma clang loop vectorize(enable)
+    for (size_t k = 0; k < count; k++) {
+        uint32_t x1 = (uint32_t)q1[k], x2 = (uint32_t)q2[k], x3 = (uint32_t)q3[k], x4 = (uint32_t)q4[k];
+        A[k] = a1 * x1 + a2 * x2 + a3 * x3 + a4 * x4;
+        B[k] = b1 * x1 + b2 * x2 + b3 * x3 + b4 * x4;
+    }
+}
+
 /* refs: depth (1..4) arrays of count codes each, back to back (q1 first); zz: zigzag residuals;
  * coef: the tile's 7 coefficients; A, B: scratch of count int32 each; q: the codes out; f: the
  * samples out (row-major, w per row). 0 = done, 1 = outside the int32 bound (nothing usable). */
@@ -32,11 +45,7 @@ int oc_temporal_predict(const int32_t *refs, int depth, const uint32_t *zz, int 
     /* A = sum a_k q_k, B = sum b_k q_k, modulo 2^32 */
     const uint32_t ua1 = (uint32_t)a1, ua2 = (uint32_t)a2, ua3 = (uint32_t)a3, ua4 = (uint32_t)a4;
     const uint32_t ub1 = (uint32_t)b1, ub2 = (uint32_t)b2, ub3 = (uint32_t)b3, ub4 = (uint32_t)b4;
-    for (size_t k = 0; k < count; k++) {
-        uint32_t x1 = (uint32_t)q1[k], x2 = (uint32_t)q2[k], x3 = (uint32_t)q3[k], x4 = (uint32_t)q4[k];
-        A[k] = (int32_t)(ua1 * x1 + ua2 * x2 + ua3 * x3 + ua4 * x4);
-        B[k] = (int32_t)(ub1 * x1 + ub2 * x2 + ub3 * x3 + ub4 * x4);
-    }
+    ab_pass(q1, q2, q3, q4, count, ua1, ua2, ua3, ua4, ub1, ub2, ub3, ub4, (uint32_t *)A, (uint32_t *)B);
     const uint32_t *uA = (const uint32_t *)A, *uB = (const uint32_t *)B;
     for (int j = 0; j < h; j++) {
         const size_t r = (size_t)j * w, up = (size_t)(j > 0 ? j - 1 : 0) * w, dn = (size_t)(j + 1 < h ? j + 1 : h - 1) * w;
@@ -65,4 +74,25 @@ int oc_temporal_predict(const int32_t *refs, int depth, const uint32_t *zz, int 
         }
     }
     return 0;
+}
+
+/* Pair packing (PROTOCOL.md §5.7) without escaped pairs: byte b = 15 z1 + z2 (b < 225) -> the
+ * zigzag values z1, z2 of two samples; count odd: the last pair's z2 is padding and must be 0.
+ * 0 = done; 1 = a byte >= 225 or bad padding (the caller's JavaScript reports the error). */
+int oc_unpack_pairs(const uint8_t *p, size_t count, uint32_t *zz)
+{
+    const size_t npairs = (count + 1) / 2;
+    uint32_t bad = 0;
+    for (size_t k = 0; k < count / 2; k++) {
+        uint32_t b = p[k], hi = (b * 137u) >> 11;   /* = b / 15 for b < 225 (checked by the tests) */
+        bad |= b >= 225;
+        zz[2 * k] = hi;
+        zz[2 * k + 1] = b - 15u * hi;
+    }
+    if (count & 1) {
+        uint32_t b = p[npairs - 1];
+        bad |= b >= 225 || b % 15 != 0;
+        zz[count - 1] = b / 15;
+    }
+    return bad != 0;
 }
