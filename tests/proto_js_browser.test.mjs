@@ -68,7 +68,7 @@ await runAll('streams: ');
 // Again with the WebAssembly inflater and codec 3 prediction, as the web worker does once they have loaded.
 const kernels = await loadKernels(ab(wasmB64));
 if (!kernels) res.fail.push('the WebAssembly kernels did not load');
-else { setInflateRaw(kernels.inflateRaw); setTemporalKernel(kernels.temporal); await runAll('wasm: '); }
+else { setInflateRaw(kernels.inflateRaw, { allTiles: true }); setTemporalKernel(kernels.temporal); await runAll('wasm: '); }
 document.getElementById('out').textContent = 'RESULT' + JSON.stringify(res) + 'END';
 </script>`;
   const dir = mkdtempSync(join(tmpdir(), 'oceand-proto-'));

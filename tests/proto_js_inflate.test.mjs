@@ -32,7 +32,7 @@ if (haveFflate) {
 }
 const kernels = await loadKernels(readFileSync(join(root, 'build/wasm/oc_kernels.wasm')));
 assert.ok(kernels, 'the WebAssembly kernels load in node');
-inflaters.push({ name: 'wasm', fn: kernels.inflateRaw, temporal: kernels.temporal }); // + codec 3 prediction in SIMD
+inflaters.push({ name: 'wasm', fn: kernels.inflateRaw, temporal: kernels.temporal, all: true }); // + codec 3 prediction in SIMD; every tile, as the worker
 const opts = { useNodeZlib: false }; // under node, zlib would win otherwise
 
 // A frame with a 128x128 tile (inflated by DecompressionStream when both exist) and an 8x8 one
@@ -68,7 +68,7 @@ function mixedFrame(deflateRawSync, badTile = -1) {
 for (const inf of inflaters) {
 for (const v of manifest.vectors.filter((x) => x.tiles.every((t) => t.codec !== 2))) {
   test(`vector ${v.name} (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
-    setInflateRaw(inf.fn);
+    setInflateRaw(inf.fn, { allTiles: inf.all });
     setTemporalKernel(inf.temporal);
     const frame = await decodeFrame(load(v.file), opts);
     const expected = new Uint32Array(load(v.expected));
@@ -83,7 +83,7 @@ for (const v of manifest.vectors.filter((x) => x.tiles.every((t) => t.codec !== 
 
 for (const b of manifest.bad) {
   test(`bad input ${b.name} -> ${b.error} (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
-    setInflateRaw(inf.fn);
+    setInflateRaw(inf.fn, { allTiles: inf.all });
     setTemporalKernel(inf.temporal);
     await assert.rejects(decodeFrame(load(b.file), opts), (e) => {
       assert.equal(e.code, b.error, e.message);
@@ -93,7 +93,7 @@ for (const b of manifest.bad) {
 }
 
 test(`deflate streams that end early or run long are corrupt (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
-    setInflateRaw(inf.fn);
+    setInflateRaw(inf.fn, { allTiles: inf.all });
     setTemporalKernel(inf.temporal);
   const v = manifest.vectors.find((x) => x.name === 'v03_height_1mm');
   const raw = new Uint8Array(load(v.file));
@@ -115,8 +115,8 @@ test(`deflate streams that end early or run long are corrupt (setInflateRaw + ${
   }
 });
 
-test(`large tiles via DecompressionStream, small ones via the installed inflater (${inf.name}), same bits`, { skip: inf.skip }, async () => {
-    setInflateRaw(inf.fn);
+test(`large tiles via DecompressionStream (${inf.name}: ${inf.all ? "the inflater, allTiles" : "streams"}), small ones via the installed inflater, same bits`, { skip: inf.skip }, async () => {
+    setInflateRaw(inf.fn, { allTiles: inf.all });
     setTemporalKernel(inf.temporal);
   const { deflateRawSync } = await import('node:zlib');
   const buf = mixedFrame(deflateRawSync);
@@ -128,7 +128,7 @@ test(`large tiles via DecompressionStream, small ones via the installed inflater
 });
 
 test(`random truncations and bit flips are rejected or decode (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
-    setInflateRaw(inf.fn);
+    setInflateRaw(inf.fn, { allTiles: inf.all });
     setTemporalKernel(inf.temporal);
   const frame = load(manifest.vectors.find((v) => v.name === 'v03_height_1mm').file);
   await mutateAndDecode(frame, 777, () => opts);
@@ -137,7 +137,7 @@ test(`random truncations and bit flips are rejected or decode (setInflateRaw + $
 // Temporal streams (codec 3) through the installed inflater: frames in order, one DecoderState.
 for (const st of manifest.streams) {
   test(`stream ${st.name} (setInflateRaw + ${inf.name})`, { skip: inf.skip }, async () => {
-    setInflateRaw(inf.fn);
+    setInflateRaw(inf.fn, { allTiles: inf.all });
     setTemporalKernel(inf.temporal);
     const state = new DecoderState();
     for (const [i, f] of st.frames.entries()) {

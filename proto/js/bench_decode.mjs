@@ -90,7 +90,7 @@ async function benchRecorded(path) {
   const variants = [{ name: fflateInflate ? 'fflate+streams' : 'streams', inflate: fflateInflate, temporal: null }];
   if (kernels) variants.push({ name: 'wasm', inflate: kernels.inflateRaw, temporal: kernels.temporal });
   for (const [layers, keep] of Object.entries(sets)) for (const v of variants) {
-    setInflateRaw(v.inflate);
+    setInflateRaw(v.inflate, { allTiles: v.name === 'wasm' });
     setTemporalKernel(v.temporal);
     const fr = frames.map((f) => only(f, keep));
     const times = [];

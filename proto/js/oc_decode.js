@@ -46,7 +46,10 @@ let inflateRawSync = null;
  * Used for tiles below STREAM_MIN_SAMPLES (all tiles where DecompressionStream is missing);
  * under node only with options.useNodeZlib = false.
  */
-export function setInflateRaw(fn) { inflateRawSync = fn; }
+export function setInflateRaw(fn, options = {}) { inflateRawSync = fn; inflateAll = !!(fn && options.allTiles); }
+// options.allTiles: the installed inflater takes every tile, large ones too (the WebAssembly one,
+// faster than a DecompressionStream at any tile size).
+let inflateAll = false;
 
 let temporalKernel = null;
 /**
@@ -171,7 +174,7 @@ const haveStreams = typeof DecompressionStream === 'function';
 // Codec 3 tiles inflate to half as many bytes (pair packing) from a quarter of the input, so
 // the stream's set-up dominates: they take the synchronous inflater whenever one is installed
 // (node, CPU per N=256 frame of height+dx+dz: 4.2-5.3 ms with fflate, 5.5-6.5 with streams).
-const preferStream = (t) => t.codec === CODEC_QUANT_LORENZO && t.width * t.height >= STREAM_MIN_SAMPLES;
+const preferStream = (t) => !inflateAll && t.codec === CODEC_QUANT_LORENZO && t.width * t.height >= STREAM_MIN_SAMPLES;
 
 // One DecompressionStream per tile (async; decodeFrame runs them concurrently).
 async function inflateRawStream(src, n) {

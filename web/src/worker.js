@@ -19,7 +19,8 @@ import { loadKernels } from '../../proto/js/oc_wasm.js';
 let inflater = 'fflate';
 setInflateRaw((src, out) => inflateSync(src, { out }));
 const kernelsReady = loadKernels(kernelBytes).then((k) => {
-  if (k) { setInflateRaw(k.inflateRaw); setTemporalKernel(k.temporal); inflater = 'wasm'; }
+  // every tile: faster than a DecompressionStream at any size (docs/web.md)
+  if (k) { setInflateRaw(k.inflateRaw, { allTiles: true }); setTemporalKernel(k.temporal); inflater = 'wasm'; }
 }, () => {});
 
 const CHANNEL = { dx: [0, 4], height: [1, 4], dz: [2, 4], jacobian: [3, 4], slope_x: [0, 2], slope_z: [1, 2] };
