@@ -169,32 +169,45 @@ static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, int3
             z[i] = (r << 1) ^ (0u - (r >> 31));
         }
     }
-    /* Which packing: byte per sample or pairs, by the order-0 entropy of the bytes each gives. */
-    uint32_t h1[256] = { 0 }, h2[256] = { 0 };
-    size_t wide1 = 0, n2 = npairs, wide2 = 0;
-    for (size_t p = 0; p < npairs; p++) {
-        uint32_t z1 = e->zz[2 * p], z2 = 2 * p + 1 < count ? e->zz[2 * p + 1] : 0;
-        h1[z1 < 255 ? z1 : 255]++;
-        wide1 += z1 >= 255;
-        if (2 * p + 1 < count) { h1[z2 < 255 ? z2 : 255]++; wide1 += z2 >= 255; }
-        if (z1 < OC_PAIR_LIMIT && z2 < OC_PAIR_LIMIT) {
-            h2[OC_PAIR_LIMIT * z1 + z2]++;
-        } else {
-            h2[255]++;
+    /* Which packing: byte per sample or pairs, by the order-0 entropy of the bytes each gives.
+     * Both are written (bytes at packed + count, pairs at packed) and their histograms kept
+     * for the entropy coder. */
+    uint8_t *const pb = e->packed, *const cb = e->packed + count;
+    int esc_width1;
+    const size_t esc_count1 = oc_pack_escapes(e->zz, count, cb, e->esc, &esc_width1);
+    const size_t plain1 = count + esc_count1 * (size_t)esc_width1;
+    oc_pair_bytes(e->zz, count, pb);
+    uint32_t h1[256] = { 0 }, hp[256] = { 0 }, h2[256];
+    oc_byte_hist_add(cb, count, h1);
+    oc_byte_hist_add(pb, npairs, hp);
+    memcpy(h2, hp, sizeof h2);
+    const size_t wide1 = h1[255], n2 = npairs + 2 * (size_t)hp[255];
+    size_t wide2 = 0;
+    if (hp[255])       /* the escaped pairs: their two values, each a byte in the estimate */
+        for (const uint8_t *x = pb, *end = pb + npairs; (x = memchr(x, 255, (size_t)(end - x))) != NULL; x++) {
+            const size_t p = (size_t)(x - pb);
+            const uint32_t z1 = e->zz[2 * p], z2 = 2 * p + 1 < count ? e->zz[2 * p + 1] : 0;
             h2[z1 < 255 ? z1 : 255]++;
             h2[z2 < 255 ? z2 : 255]++;
-            n2 += 2;
             wide2 += (z1 >= 255) + (z2 >= 255);
         }
-    }
     const int pairs = entropy_bits(h2, n2) + 16.0 * wide2 < entropy_bits(h1, count) + 16.0 * wide1;
     int esc_width;
     size_t esc_count, pair_esc = 0, plain;
+    const uint8_t *src;
+    uint32_t *hist;
     if (pairs) {
-        plain = oc_pack_pairs(e->zz, count, e->packed, e->esc, &pair_esc, &esc_count, &esc_width);
+        plain = oc_pack_pair_escapes(e->zz, count, pb, e->esc, &pair_esc, &esc_count, &esc_width);
+        oc_byte_hist_add(pb + npairs, plain - npairs, hp);
+        src = pb;
+        hist = hp;
     } else {
-        esc_count = oc_pack_escapes(e->zz, count, e->packed, e->esc, &esc_width);
-        plain = count + esc_count * (size_t)esc_width;
+        esc_count = esc_count1;
+        esc_width = esc_width1;
+        plain = plain1;
+        oc_byte_hist_add(cb + count, plain - count, h1);
+        src = cb;
+        hist = h1;
     }
     size_t cap = OC_TEMPORAL_PREFIX + oc_entropy_bound(OC_CODEC_QUANT_LORENZO, plain);
     if ((rc = oc_buf_reserve(out, OC_TILE_HEADER_SIZE + cap))) return rc;
@@ -207,8 +220,8 @@ static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, int3
     oc_put_u32(payload + 8, (uint32_t)pair_esc);
     oc_put_u64(payload + 16, ref_seq);
     for (int k = 0; k < OC_TEMPORAL_COEFS; k++) oc_put_u16(payload + 24 + 2 * k, (uint16_t)coef[k]);
-    size_t clen = oc_entropy_compress(e->ent, OC_CODEC_QUANT_LORENZO, 1, e->packed, plain,
-                                      payload + OC_TEMPORAL_PREFIX, cap - OC_TEMPORAL_PREFIX);
+    size_t clen = oc_entropy_compress_hist(e->ent, OC_CODEC_QUANT_LORENZO, 1, src, plain, hist,
+                                           payload + OC_TEMPORAL_PREFIX, cap - OC_TEMPORAL_PREFIX);
     if (clen == 0) return OC_E_NOMEM;
     th->codec = OC_CODEC_TEMPORAL;
     th->payload_len = (uint32_t)(OC_TEMPORAL_PREFIX + clen);

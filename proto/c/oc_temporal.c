@@ -301,25 +301,46 @@ void oc_temporal_fit(const int32_t *const *refs, const int32_t *const *laps, int
 /* Pair packing: one byte per two samples when both zigzag values are below 15
  * (measured: at 1 cm most residuals are 0 or +-1, and DEFLATE's Huffman code
  * spends at least one bit per byte; two samples per byte halves that floor). */
-size_t oc_pack_pairs(const uint32_t *zz, size_t count, uint8_t *out, uint32_t *esc_scratch,
-                     size_t *pair_esc_count, size_t *esc_count, int *esc_width)
+OC_VECTOR_CLONES
+static void pair_bytes_even(const uint32_t *restrict zz, size_t npairs, uint8_t *restrict out)
+{
+    for (size_t p = 0; p < npairs; p++) {
+        const uint32_t z1 = zz[2 * p], z2 = zz[2 * p + 1];
+        out[p] = z1 < OC_PAIR_LIMIT && z2 < OC_PAIR_LIMIT ? (uint8_t)(OC_PAIR_LIMIT * z1 + z2) : 255;
+    }
+}
+
+void oc_pair_bytes(const uint32_t *zz, size_t count, uint8_t *out)
+{
+    pair_bytes_even(zz, count / 2, out);
+    if (count & 1) {                                        /* the last pair's second value is 0 */
+        const uint32_t z1 = zz[count - 1];
+        out[count / 2] = z1 < OC_PAIR_LIMIT ? (uint8_t)(OC_PAIR_LIMIT * z1) : 255;
+    }
+}
+
+size_t oc_pack_pair_escapes(const uint32_t *zz, size_t count, uint8_t *out, uint32_t *esc_scratch,
+                            size_t *pair_esc_count, size_t *esc_count, int *esc_width)
 {
     const size_t npairs = (count + 1) / 2;
     size_t ny = 0;
     uint32_t *y = esc_scratch + count;                     /* the escaped pairs' values (<= count + 1) */
-    for (size_t p = 0; p < npairs; p++) {
-        uint32_t z1 = zz[2 * p], z2 = 2 * p + 1 < count ? zz[2 * p + 1] : 0;
-        if (z1 < OC_PAIR_LIMIT && z2 < OC_PAIR_LIMIT) {
-            out[p] = (uint8_t)(OC_PAIR_LIMIT * z1 + z2);
-        } else {
-            out[p] = 255;
-            y[ny++] = z1;
-            y[ny++] = z2;
-        }
+    /* Escaped pairs are rare: find them with memchr (SIMD in every libc). */
+    for (const uint8_t *q = out, *end = out + npairs; (q = memchr(q, 255, (size_t)(end - q))) != NULL; q++) {
+        const size_t p = (size_t)(q - out);
+        y[ny++] = zz[2 * p];
+        y[ny++] = 2 * p + 1 < count ? zz[2 * p + 1] : 0;
     }
     *pair_esc_count = ny / 2;
     *esc_count = oc_pack_escapes(y, ny, out + npairs, esc_scratch, esc_width);
     return npairs + ny + *esc_count * (size_t)*esc_width;
+}
+
+size_t oc_pack_pairs(const uint32_t *zz, size_t count, uint8_t *out, uint32_t *esc_scratch,
+                     size_t *pair_esc_count, size_t *esc_count, int *esc_width)
+{
+    oc_pair_bytes(zz, count, out);
+    return oc_pack_pair_escapes(zz, count, out, esc_scratch, pair_esc_count, esc_count, esc_width);
 }
 
 int oc_unpack_pairs(const uint8_t *in, size_t plain_len, size_t count, size_t pair_esc_count, size_t esc_count,
