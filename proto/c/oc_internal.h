@@ -82,8 +82,9 @@ int oc_enc_quantise_new(struct oc_encoder *e, size_t count, float vmin, float vm
 int oc_enc_quantise_on(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound, double offset,
                        double scale);
 int oc_enc_append_raw(struct oc_buf *out, struct oc_tile_header *th, const float *vals, size_t count);
-int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q, int allow_raw,
-                        struct oc_buf *out);
+/* coef: the predictor coefficients, or NULL for the encoder's (fitted, or the test hook's). */
+int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q,
+                        const int8_t *coef, int allow_raw, struct oc_buf *out);
 
 /* Temporal prediction (codec 3, oc_temporal.c), PROTOCOL.md §5.6-5.8.
  * Payload prefix, 40 bytes:

@@ -255,15 +255,7 @@ static int intra_snapped(struct oc_encoder *e, struct oc_tile_header *th, int32_
             q[k] = snap(q[k], (int32_t)p, v[k], th->offset, th->scale, th->bound);
         }
     /* The residuals must use the coefficients the choice was made with. */
-    const int force = e->force;
-    int8_t forced[OC_PRED_COEFS];
-    memcpy(forced, e->forced, sizeof forced);
-    e->force = 1;
-    memcpy(e->forced, c, sizeof c);
-    int rc = oc_enc_append_intra(e, th, q, 0, out);
-    e->force = force;
-    memcpy(e->forced, forced, sizeof forced);
-    return rc;
+    return oc_enc_append_intra(e, th, q, c, 0, out);
 }
 
 /* Intra (codec 1) on the chain's grid with codes that are multiples of `refine` (the
@@ -273,7 +265,6 @@ static int intra_snapped(struct oc_encoder *e, struct oc_tile_header *th, int32_
 static int intra_coarse(struct oc_encoder *e, struct oc_tile_header *th, int refine, int32_t *q, struct oc_buf *out,
                         int *ok)
 {
-    static const int8_t lorenzo[OC_PRED_COEFS] = { 64, 64, -64, 0, 0, 0 };
     const size_t count = (size_t)th->width * th->height;
     const double coarse = th->scale * refine;
     *ok = 0;
@@ -289,14 +280,7 @@ static int intra_coarse(struct oc_encoder *e, struct oc_tile_header *th, int ref
         }
         q[k] = c;
     }
-    const int force = e->force;
-    int8_t forced[OC_PRED_COEFS];
-    memcpy(forced, e->forced, sizeof forced);
-    e->force = 1;
-    memcpy(e->forced, lorenzo, sizeof lorenzo);
-    int rc = oc_enc_append_intra(e, th, q, 0, out);
-    e->force = force;
-    memcpy(e->forced, forced, sizeof forced);
+    int rc = oc_enc_append_intra(e, th, q, oc_lorenzo_coef, 0, out);
     *ok = rc == OC_OK;
     return rc;
 }
@@ -474,7 +458,7 @@ int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_
         .offset = t->offset, .scale = t->scale,
     };
     t->key.len = 0;
-    int rc = oc_enc_append_intra(e, &th, t->ring[s->head], 0, &t->key);
+    int rc = oc_enc_append_intra(e, &th, t->ring[s->head], NULL, 0, &t->key);
     if (rc) return rc;
     t->key_ready = 1;
     s->stats.demand_key_tiles++;
