@@ -170,27 +170,34 @@ static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, int3
         }
     }
     /* Which packing: byte per sample or pairs, by the order-0 entropy of the bytes each gives.
-     * Both are written (bytes at packed + count, pairs at packed) and their histograms kept
-     * for the entropy coder. */
+     * The pair bytes are written first (at packed) and histogrammed; the byte-per-sample
+     * histogram follows from theirs (a pair byte 15*z1 + z2 holds both values) plus the
+     * escaped pairs' values, so the bytes (at packed + count) are written only if chosen. */
     uint8_t *const pb = e->packed, *const cb = e->packed + count;
-    int esc_width1;
-    const size_t esc_count1 = oc_pack_escapes(e->zz, count, cb, e->esc, &esc_width1);
-    const size_t plain1 = count + esc_count1 * (size_t)esc_width1;
     oc_pair_bytes(e->zz, count, pb);
     uint32_t h1[256] = { 0 }, hp[256] = { 0 }, h2[256];
-    oc_byte_hist_add(cb, count, h1);
     oc_byte_hist_add(pb, npairs, hp);
     memcpy(h2, hp, sizeof h2);
-    const size_t wide1 = h1[255], n2 = npairs + 2 * (size_t)hp[255];
+    for (int z1 = 0; z1 < OC_PAIR_LIMIT; z1++)
+        for (int z2 = 0; z2 < OC_PAIR_LIMIT; z2++) {
+            h1[z1] += hp[OC_PAIR_LIMIT * z1 + z2];
+            h1[z2] += hp[OC_PAIR_LIMIT * z1 + z2];
+        }
+    if ((count & 1) && pb[npairs - 1] != 255) h1[0]--;     /* the odd count's padding value is no sample */
+    const size_t n2 = npairs + 2 * (size_t)hp[255];
     size_t wide2 = 0;
     if (hp[255])       /* the escaped pairs: their two values, each a byte in the estimate */
         for (const uint8_t *x = pb, *end = pb + npairs; (x = memchr(x, 255, (size_t)(end - x))) != NULL; x++) {
             const size_t p = (size_t)(x - pb);
-            const uint32_t z1 = e->zz[2 * p], z2 = 2 * p + 1 < count ? e->zz[2 * p + 1] : 0;
+            const int real2 = 2 * p + 1 < count;
+            const uint32_t z1 = e->zz[2 * p], z2 = real2 ? e->zz[2 * p + 1] : 0;
             h2[z1 < 255 ? z1 : 255]++;
             h2[z2 < 255 ? z2 : 255]++;
             wide2 += (z1 >= 255) + (z2 >= 255);
+            h1[z1 < 255 ? z1 : 255]++;
+            if (real2) h1[z2 < 255 ? z2 : 255]++;
         }
+    const size_t wide1 = h1[255];
     const int pairs = entropy_bits(h2, n2) + 16.0 * wide2 < entropy_bits(h1, count) + 16.0 * wide1;
     int esc_width;
     size_t esc_count, pair_esc = 0, plain;
@@ -202,9 +209,8 @@ static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, int3
         src = pb;
         hist = hp;
     } else {
-        esc_count = esc_count1;
-        esc_width = esc_width1;
-        plain = plain1;
+        esc_count = oc_pack_escapes(e->zz, count, cb, e->esc, &esc_width);
+        plain = count + esc_count * (size_t)esc_width;
         oc_byte_hist_add(cb + count, plain - count, h1);
         src = cb;
         hist = h1;
