@@ -128,18 +128,18 @@ done:
     return 1;
 }
 
-/* Quantise vals on a given grid (a temporal chain's): 1 if every sample meets
- * the bound with codes below 2^30 in magnitude, 0 if the grid no longer fits. */
-int oc_enc_quantise_on(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound, double offset,
-                       double scale)
+/* Quantise vals on a given grid (a temporal chain's) into q (count codes): 1 if every
+ * sample meets the bound with codes below 2^30 in magnitude, 0 if the grid no longer fits. */
+int oc_enc_quantise_on(struct oc_encoder *e, int32_t *q, size_t count, float vmin, float vmax, double bound,
+                       double offset, double scale)
 {
     if (fmax(fabs((double)vmax - offset), fabs((double)vmin - offset)) / scale > 0x1p30) return 0;
-    if (!quantise_pass(e->vals, e->q, count, offset, scale, bound)) return 1;
+    if (!quantise_pass(e->vals, q, count, offset, scale, bound)) return 1;
     for (size_t k = 0; k < count; k++) {
         const float v = e->vals[k];
-        if (fabs((double)oc_dequant(e->q[k], offset, scale) - (double)v) <= bound) continue;
-        if (fabs((double)oc_dequant(e->q[k] - 1, offset, scale) - (double)v) <= bound) e->q[k] -= 1;
-        else if (fabs((double)oc_dequant(e->q[k] + 1, offset, scale) - (double)v) <= bound) e->q[k] += 1;
+        if (fabs((double)oc_dequant(q[k], offset, scale) - (double)v) <= bound) continue;
+        if (fabs((double)oc_dequant(q[k] - 1, offset, scale) - (double)v) <= bound) q[k] -= 1;
+        else if (fabs((double)oc_dequant(q[k] + 1, offset, scale) - (double)v) <= bound) q[k] += 1;
         else return 0;
     }
     return 1;

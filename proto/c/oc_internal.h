@@ -79,8 +79,8 @@ int oc_enc_gather(struct oc_encoder *e, const float *field_data, int n, int tile
                   int lod, float *vmin, float *vmax);
 int oc_enc_quantise_new(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound, double headroom,
                         double *offset, double *scale);
-int oc_enc_quantise_on(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound, double offset,
-                       double scale);
+int oc_enc_quantise_on(struct oc_encoder *e, int32_t *q, size_t count, float vmin, float vmax, double bound,
+                       double offset, double scale);
 int oc_enc_append_raw(struct oc_buf *out, struct oc_tile_header *th, const float *vals, size_t count);
 /* coef: the predictor coefficients, or NULL for the encoder's (fitted, or the test hook's). */
 int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q,

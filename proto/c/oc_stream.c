@@ -350,12 +350,15 @@ static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *f
         .field = (uint8_t)s->field, .lod = (uint8_t)s->lod, .tile_x = (uint16_t)tx, .tile_z = (uint16_t)tz,
         .width = (uint16_t)s->side, .height = (uint16_t)s->side, .bound = s->bound,
     };
-    int32_t *cur = t->ring[s->head];
-    /* e->q: the rounded codes on the fine grid (within bound / refine, so within the bound) */
+    int32_t *cur = t->ring[s->head];   /* this tick's slot: no reference of it */
+    /* The rounded codes on the fine grid (within bound / refine, so within the bound):
+     * straight into cur, unless a changed sea's intra candidates need them after the
+     * predicted tile has moved cur's codes (then in e->q, and copied). */
+    int32_t *rounded = s->changed ? e->q : cur;
     const double fine_bound = (double)s->bound / s->refine;
     if (s->bound > 0 && consecutive && !periodic && t->hist > 0
-        && oc_enc_quantise_on(e, count, vmin, vmax, fine_bound, t->offset, t->scale)
-        && oc_max_abs(e->q, count) < (uint32_t)(OC_TEMPORAL_CODE_MAX - s->refine)) {
+        && oc_enc_quantise_on(e, rounded, count, vmin, vmax, fine_bound, t->offset, t->scale)
+        && oc_max_abs(rounded, count) < (uint32_t)(OC_TEMPORAL_CODE_MAX - s->refine)) {
         /* Predicted from the previous ticks of the chain. */
         const int32_t *refs[OC_TEMPORAL_MAX_DEPTH], *laps[OC_TEMPORAL_MAX_DEPTH];
         int depth = t->hist < OC_TEMPORAL_MAX_DEPTH ? t->hist : OC_TEMPORAL_MAX_DEPTH;
@@ -363,7 +366,7 @@ static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *f
             refs[i] = t->ring[(s->head + RING - 1 - i) % RING];
             laps[i] = t->lap[(s->head + RING - 1 - i) % RING];
         }
-        memcpy(cur, e->q, count * sizeof(int32_t));
+        if (rounded != cur) memcpy(cur, rounded, count * sizeof(int32_t));
         th.offset = t->offset;
         th.scale = t->scale;
         if ((rc = append_temporal(e, &th, cur, e->vals, refs, laps, depth, s->seq - 1, &t->shared))) return rc;
