@@ -25,13 +25,23 @@
 #include "control.h"
 #include "frame.h"
 
+#define CAP_SIDES 13 /* layer sides 1 .. 4096 (N <= 2048) */
+
 struct cost_model {
     double period_s;            /* 1 / tick rate */
     double budget_s;            /* share of the period a frame may take (0.8 period) */
     int n0;                     /* N the step was measured at */
     double step1_s, step6_s;    /* step at n0: height only, all six fields */
     double step_scale;          /* live correction: measured / predicted (EWMA) */
-    double enc_s_per_sample;    /* encode wall per sample on the pool (EWMA) */
+    double enc_s_per_sample;    /* encode wall per sample on the pool (EWMA over every frame; the
+                                   start-up measure: intra, height, lod 0) */
+    double enc_side_s[CAP_SIDES]; /* the same per layer side (N >> lod; index log2 side), learned
+                                   from the frames that encoded that side, 0 = not yet: a sample
+                                   does not cost the same at every size (1024 h/dx/dz temporal,
+                                   two cores: 7 ns at side 1024, 3.6 at 512: the larger layers
+                                   and their references fall out of the caches). Without it a
+                                   group degraded to lod 1 measured the cheap side, predicted
+                                   that lod 0 fit, went back, and degraded again (flapping) */
     double penalty;             /* transient factor on both costs (<= 1 = none): x1.25 for each tick
                                    the producer had not even started the frame before, back
                                    toward 1 on each tick it had (sim_thread.c, tick). Kept apart
@@ -45,6 +55,19 @@ struct cost_model {
 
 double cost_step_s(const struct cost_model *m, int n, int nfields);
 double cost_encode_s(const struct cost_model *m, long samples);
+/* Encode seconds per sample of a layer of this side (N >> lod): what frames
+ * of that side cost, else the all-frames figure; with the penalty. */
+double cost_encode_side_s(const struct cost_model *m, int side);
+/* Learn from a frame: side_samples[i] samples of side 2^i took `seconds` on
+ * the pool. Up quickly enough to follow the machine, but one frame counts
+ * as at most twice the prediction: a frame's first keyframes, a chain's
+ * start and the first touch of its buffers cost 3-7 times the steady
+ * figure (first frames of 1024 h/dx/dz temporal: 24 ns/sample against 7),
+ * and used to degrade a subscription that fits before it had been
+ * served once. Sustained slowness still raises it 10 % a frame; overruns
+ * raise the penalty at once (sim_thread.c). */
+void cost_learn_encode(struct cost_model *m, const long side_samples[CAP_SIDES], double seconds);
+
 /* Samples per tick the distinct layers may add up to at resolution n (the
  * admission limit): --encode-budget if set, else what fits the budget after
  * a step of all six fields, and at least six fields at full resolution. */
@@ -60,7 +83,9 @@ struct plan {
     unsigned fields[PLAN_GROUPS];   /* demanded fields per group (0 = no demand) */
     unsigned char lod[PLAN_GROUPS]; /* encoded LOD per group (>= the group's own) */
     float rate[PLAN_GROUPS];        /* share of ticks the group is encoded on, (0, 1] */
-    char reason[160];               /* why, when anything is degraded */
+    char reason[200];               /* why, when anything is degraded: the demand at full detail
+                                       (samples per tick), the budget in samples at what those
+                                       sizes cost, the step and the frame budget */
 };
 
 /* Demand -> plan at resolution n with tile side ts (per-tick samples and
@@ -72,6 +97,14 @@ bool plan_degraded(const struct plan *p, int group);
  * sum over groups of rate * samples encoded. */
 double plan_value(const struct plan *p, int n);
 bool plan_same(const struct plan *a, const struct plan *b);
+/* Forget what sides not in `keep` (bit i = side 2^i) cost: they fall back to
+ * the all-frames figure (a degraded group's recovery probe, sim_thread.c). */
+void cost_forget_sides(struct cost_model *m, unsigned keep);
+/* Bit log2(side) of every side the plan encodes (for cost_forget_sides),
+ * and its samples per side; only the groups with due[g] unless due is NULL. */
+unsigned plan_sides(const struct plan *p, int n, const bool *due, long side_samples[CAP_SIDES]);
+/* The model's moving average: down fast (a quarter), up slowly (a tenth). */
+double cost_ewma(double model, double measured);
 
 /* The announcement (control.h) from the model, at the current resolution. */
 void capacity_info_fill(const struct cost_model *m, int n, struct capacity_info *out);

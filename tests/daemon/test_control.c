@@ -803,6 +803,86 @@ static void test_capacity_plan(void)
         CHECK(ci.sizes[i].fits_memory == control_fits_memory(ci.sizes[i].n, (int)param_find("cascades")->def, 256), "fits_memory of %d", ci.sizes[i].n);
 }
 
+/* capacity.c: the encode cost per layer side, what a degraded message says,
+ * and learning from frames (the N = 1024 h/dx/dz flapping: a group degraded
+ * to lod 1 measured the cheap side, predicted lod 0 fit, went back and
+ * degraded again every 3.5 s). Fixed numbers: behaviour only. */
+static void test_capacity_sides(void)
+{
+    struct cost_model m = {
+        .period_s = 1.0 / 30, .budget_s = 0.8 / 30, .n0 = 1024, .step1_s = 0.002, .step6_s = 0.011,
+        .step_scale = 1, .enc_s_per_sample = 3.6e-9, .max_memory_mb = 2048, .cores = 2,
+    };
+    const int n = 1024, ts = 128, g0 = plan_group(0, 3);
+    int demand[LAYER_KEYS_ALL] = { 0 };
+    for (int f = 0; f < 3; f++)
+        demand[layer_key(f, 0, 3)] = 1;            /* h, dx, dz at lod 0, 1 cm: 3 n^2 samples */
+    struct plan p;
+    /* the all-frames figure says lod 0 fits (3 n^2 x 3.6 ns = 11 ms + a 5.6 ms step) */
+    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    CHECK(!plan_degraded(&p, g0), "fits at 3.6 ns/sample but degraded: lod %d", p.lod[g0]);
+    /* frames of side 1024 cost 7 ns: lod 0 does not fit (22 ms + 5.6), lod 1 (side 512) does */
+    m.enc_side_s[10] = 7e-9;
+    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    CHECK(p.lod[g0] == 1 && p.rate[g0] == 1, "side 1024 at 7 ns: lod %d rate %g", p.lod[g0], p.rate[g0]);
+    /* the reason gives the demand at full detail, over the budget in samples at that size's cost */
+    long wanted = -1, budget = -1;
+    const char *w = strstr(p.reason, "samples per tick wanted, budget ");
+    CHECK(w && sscanf(p.reason, "coarser LOD: N=1024, %ld samples", &wanted) == 1 &&
+          sscanf(w, "samples per tick wanted, budget %ld", &budget) == 1, "reason: %s", p.reason);
+    CHECK(wanted == 3L * n * n && budget < wanted && budget > 3L * (n / 2) * (n / 2),
+          "reason reads under budget: wanted %ld budget %ld (%s)", wanted, budget, p.reason);
+    /* a cheap side 512 does not talk lod 0 back into fitting (the old flapping) */
+    m.enc_side_s[9] = 2e-9;
+    capacity_plan(&m, n, ts, demand, 0.8, &p);
+    CHECK(p.lod[g0] == 1, "recovery predicted from the cheap side: lod %d", p.lod[g0]);
+    /* forgetting the sides a plan does not encode: back to the all-frames figure (the probe) */
+    long ss[CAP_SIDES];
+    unsigned keep = plan_sides(&p, n, NULL, ss);
+    CHECK(keep == 1u << 9 && ss[9] == 3L * 512 * 512 && ss[10] == 0, "plan_sides %#x %ld %ld", keep, ss[9], ss[10]);
+    bool due[PLAN_GROUPS] = { false };
+    CHECK(plan_sides(&p, n, due, ss) == 0 && ss[9] == 0, "plan_sides with nothing due");
+    struct cost_model fresh = m;
+    cost_forget_sides(&fresh, keep);
+    CHECK(fresh.enc_side_s[10] == 0 && fresh.enc_side_s[9] == 2e-9, "forget: %g %g", fresh.enc_side_s[10], fresh.enc_side_s[9]);
+    capacity_plan(&fresh, n, ts, demand, 0.8, &p);
+    CHECK(!plan_degraded(&p, g0), "probe plan still degraded: lod %d", p.lod[g0]);
+    /* learning: a cold frame (7x the prediction) counts as twice it at most */
+    struct cost_model l = m;
+    memset(l.enc_side_s, 0, sizeof l.enc_side_s);
+    memset(ss, 0, sizeof ss);
+    ss[10] = 3L * n * n;
+    cost_learn_encode(&l, ss, 7 * 3.6e-9 * (double)ss[10]);
+    CHECK(l.enc_side_s[10] > 3.6e-9 && l.enc_side_s[10] <= 1.1 * 3.6e-9 + 1e-15, "cold frame: %g", l.enc_side_s[10]);
+    CHECK(l.enc_side_s[9] == 0 && l.enc_s_per_sample <= 1.1 * 3.6e-9 + 1e-15, "other side or global moved: %g %g",
+          l.enc_side_s[9], l.enc_s_per_sample);
+    /* steady frames: the side converges on what it costs; the global figure follows */
+    for (int i = 0; i < 100; i++)
+        cost_learn_encode(&l, ss, 7e-9 * (double)ss[10]);
+    CHECK(fabs(l.enc_side_s[10] - 7e-9) < 0.1e-9 && fabs(l.enc_s_per_sample - 7e-9) < 0.1e-9, "steady: %g %g",
+          l.enc_side_s[10], l.enc_s_per_sample);
+    /* faster frames come down quickly (a quarter per frame) */
+    cost_learn_encode(&l, ss, 3e-9 * (double)ss[10]);
+    CHECK(l.enc_side_s[10] < 6.1e-9, "down: %g", l.enc_side_s[10]);
+    /* a frame of two sides: both by the frame's ratio to the prediction */
+    l.enc_side_s[9] = 2e-9;
+    l.enc_side_s[10] = 4e-9;
+    ss[9] = 1000000;
+    ss[10] = 1000000;
+    cost_learn_encode(&l, ss, 1.5 * 6e-9 * 1e6);
+    CHECK(fabs(l.enc_side_s[9] / l.enc_side_s[10] - 0.5) < 1e-9 && l.enc_side_s[9] > 2e-9, "two sides: %g %g",
+          l.enc_side_s[9], l.enc_side_s[10]);
+    /* the announcement's estimate at N uses the cost of side N */
+    struct capacity_info ci;
+    m.enc_side_s[10] = 7e-9;
+    capacity_info_fill(&m, n, &ci);
+    for (int i = 0; i < ci.nsizes; i++)
+        if (ci.sizes[i].n == 1024)
+            CHECK(fabs(ci.sizes[i].est_ms[2] - (cost_step_s(&m, 1024, 3) + 7e-9 * 3 * 1024 * 1024) * 1e3) < 1e-6,
+                  "est_ms at 1024: %g", ci.sizes[i].est_ms[2]);
+    passed++;
+}
+
 /* Display names (PROTOCOL.md §7.1 `name`): what is accepted and refused,
  * by control_check_name and through control_parse (`name`, and `set`'s
  * optional "name"); a refused name is bad_name with the id kept. */
@@ -871,6 +951,7 @@ static void test_display_names(void)
 int main(void)
 {
     test_capacity_plan();
+    test_capacity_sides();
     test_sets();
     test_subscribe();
     test_subscribe_field_lod();
