@@ -51,20 +51,14 @@ static long group_samples(const struct plan *p, int g, int n)
     return (long)popcount(p->fields[g]) * side * side;
 }
 
-static int side_index(long side)
+static double codec_cost(const struct cost_model *m, int codec)
 {
-    int i = 0;
-    while (i < CAP_SIDES - 1 && (1L << i) < side)
-        i++;
-    return i;
+    if (codec == CAP_TEMPORAL)
+        return m->enc_temporal_s > 0 ? m->enc_temporal_s : CAP_TEMPORAL_PRIOR * m->enc_s_per_sample;
+    return m->enc_s_per_sample;
 }
 
-static double side_cost(const struct cost_model *m, int i)
-{
-    return m->enc_side_s[i] > 0 ? m->enc_side_s[i] : m->enc_s_per_sample;
-}
-
-double cost_encode_side_s(const struct cost_model *m, int side) { return side_cost(m, side_index(side)) * penalty(m); }
+double cost_encode_codec_s(const struct cost_model *m, int codec) { return codec_cost(m, codec) * penalty(m); }
 
 double cost_ewma(double model, double measured)
 {
@@ -72,52 +66,39 @@ double cost_ewma(double model, double measured)
     return (1 - a) * model + a * measured;
 }
 
-void cost_learn_encode(struct cost_model *m, const long side_samples[CAP_SIDES], double seconds)
+void cost_learn_encode(struct cost_model *m, const long samples[CAP_CODECS], double seconds)
 {
     double predicted = 0;
-    long total = 0;
-    for (int i = 0; i < CAP_SIDES; i++)
-        if (side_samples[i] > 0) {
-            predicted += (double)side_samples[i] * side_cost(m, i);
-            total += side_samples[i];
-        }
-    if (total <= 0 || predicted <= 0 || !(seconds > 0))
+    for (int c = 0; c < CAP_CODECS; c++)
+        if (samples[c] > 0)
+            predicted += (double)samples[c] * codec_cost(m, c);
+    if (!(predicted > 0) || !(seconds > 0))
         return;
-    /* Each side by the frame's ratio to the prediction (a frame of several
-     * sides cannot tell them apart: each takes the same share). */
     double ratio = fmin(seconds / predicted, 2.0);
-    for (int i = 0; i < CAP_SIDES; i++)
-        if (side_samples[i] > 0) {
-            double c = side_cost(m, i);
-            m->enc_side_s[i] = cost_ewma(c, c * ratio);
-        }
-    m->enc_s_per_sample = cost_ewma(m->enc_s_per_sample, fmin(seconds / (double)total, 2 * m->enc_s_per_sample));
+    double intra = codec_cost(m, CAP_INTRA), temporal = codec_cost(m, CAP_TEMPORAL);
+    if (samples[CAP_INTRA] > 0)
+        m->enc_s_per_sample = cost_ewma(intra, intra * ratio);
+    if (samples[CAP_TEMPORAL] > 0)
+        m->enc_temporal_s = cost_ewma(temporal, temporal * ratio);
 }
 
-void cost_forget_sides(struct cost_model *m, unsigned keep)
-{
-    for (int i = 0; i < CAP_SIDES; i++)
-        if (!(keep & (1u << i)))
-            m->enc_side_s[i] = 0;
-}
+void cost_forget_temporal(struct cost_model *m) { m->enc_temporal_s = 0; }
 
-unsigned plan_sides(const struct plan *p, int n, const bool *due, long side_samples[CAP_SIDES])
+static bool group_temporal(const struct plan *p, int g) { return p->temporal[g] && p->lod[g] == g / CTL_BOUND_COUNT; }
+
+void plan_samples(const struct plan *p, int n, const bool *due, long samples[CAP_CODECS])
 {
-    unsigned bits = 0;
-    memset(side_samples, 0, CAP_SIDES * sizeof *side_samples);
+    for (int c = 0; c < CAP_CODECS; c++)
+        samples[c] = 0;
     for (int g = 0; g < PLAN_GROUPS; g++)
-        if (p->fields[g] && (!due || due[g])) {
-            int i = side_index(n >> p->lod[g]);
-            side_samples[i] += group_samples(p, g, n);
-            bits |= 1u << i;
-        }
-    return bits;
+        if (p->fields[g] && (!due || due[g]))
+            samples[group_temporal(p, g) ? CAP_TEMPORAL : CAP_INTRA] += group_samples(p, g, n);
 }
 
 /* Seconds to encode a group at its planned LOD (every tick). */
 static double group_time(const struct cost_model *m, const struct plan *p, int g, int n)
 {
-    return (double)group_samples(p, g, n) * cost_encode_side_s(m, n >> p->lod[g]);
+    return (double)group_samples(p, g, n) * cost_encode_codec_s(m, group_temporal(p, g) ? CAP_TEMPORAL : CAP_INTRA);
 }
 
 static bool can_coarsen(const struct plan *p, int g, int ts) { return p->lod[g] < CTL_MAX_LOD && (ts >> (p->lod[g] + 1)) >= 1; }
@@ -132,8 +113,8 @@ static float quantize_rate(double r, double period_s)
     return (float)(q > 1 ? 1 : q);
 }
 
-void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS_ALL], double budget_scale,
-                   struct plan *p)
+void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS_ALL],
+                   const int tdemand[LAYER_KEYS_ALL], double budget_scale, struct plan *p)
 {
     memset(p, 0, sizeof *p);
     unsigned all = 0;
@@ -144,6 +125,7 @@ void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[L
         if (demand[k] > 0) {
             int g = plan_group(layer_key_lod(k), layer_key_bound(k));
             p->fields[g] |= OCEAN_FIELD_BIT(layer_key_field(k));
+            p->temporal[g] |= tdemand && tdemand[k] > 0;
             all |= OCEAN_FIELD_BIT(layer_key_field(k));
         }
     for (int g = 0; g < PLAN_GROUPS; g++) {
@@ -155,8 +137,8 @@ void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[L
     /* What encoding may take per frame: the rest of the budget, and at least a
      * quarter of it even when the step takes it all (then frames come less
      * often than ticks, step 3, rather than at the coarsest LOD). Each group
-     * costs what a sample of its layers' side costs (cost_encode_side_s);
-     * --encode-budget caps the samples besides. */
+     * costs what a sample of its codec costs (temporal at its own LOD, else
+     * intra: cost_encode_codec_s); --encode-budget caps the samples besides. */
     double left = fmax(budget - step, budget * 0.25);
     double scap = m->encode_budget > 0 ? (double)m->encode_budget : 1e18;
 
@@ -241,7 +223,8 @@ double plan_value(const struct plan *p, int n)
 bool plan_same(const struct plan *a, const struct plan *b)
 {
     for (int g = 0; g < PLAN_GROUPS; g++)
-        if (a->fields[g] != b->fields[g] || a->lod[g] != b->lod[g] || a->rate[g] != b->rate[g])
+        if (a->fields[g] != b->fields[g] || a->lod[g] != b->lod[g] || a->rate[g] != b->rate[g] ||
+            a->temporal[g] != b->temporal[g])
             return false;
     return true;
 }
@@ -269,7 +252,7 @@ void capacity_info_fill(const struct cost_model *m, int n, struct capacity_info 
         if (z->fits_memory)
             c->max_resolution = size;
         for (int f = 1; f <= 6; f++) {
-            z->est_ms[f - 1] = (cost_step_s(m, size, f) + (double)f * size * size * cost_encode_side_s(m, size)) * 1e3;
+            z->est_ms[f - 1] = (cost_step_s(m, size, f) + cost_encode_s(m, (long)f * size * size)) * 1e3;
             if (z->est_ms[f - 1] <= c->budget_ms)
                 z->full_rate_fields = f;
         }

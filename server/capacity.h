@@ -25,7 +25,8 @@
 #include "control.h"
 #include "frame.h"
 
-#define CAP_SIDES 13 /* layer sides 1 .. 4096 (N <= 2048) */
+enum { CAP_INTRA, CAP_TEMPORAL, CAP_CODECS }; /* how a group's layers are encoded */
+#define CAP_TEMPORAL_PRIOR 2.0 /* temporal / intra cost per sample until frames tell (measured above) */
 
 struct cost_model {
     double period_s;            /* 1 / tick rate */
@@ -33,15 +34,16 @@ struct cost_model {
     int n0;                     /* N the step was measured at */
     double step1_s, step6_s;    /* step at n0: height only, all six fields */
     double step_scale;          /* live correction: measured / predicted (EWMA) */
-    double enc_s_per_sample;    /* encode wall per sample on the pool (EWMA over every frame; the
-                                   start-up measure: intra, height, lod 0) */
-    double enc_side_s[CAP_SIDES]; /* the same per layer side (N >> lod; index log2 side), learned
-                                   from the frames that encoded that side, 0 = not yet: a sample
-                                   does not cost the same at every size (1024 h/dx/dz temporal,
-                                   two cores: 7 ns at side 1024, 3.6 at 512: the larger layers
-                                   and their references fall out of the caches). Without it a
-                                   group degraded to lod 1 measured the cheap side, predicted
-                                   that lod 0 fit, went back, and degraded again (flapping) */
+    double enc_s_per_sample;    /* encode wall per sample on the pool, intra (codec 1): the start-up
+                                   measure (height, lod 0), then EWMA from the frames */
+    double enc_temporal_s;      /* the same for temporal layers (codec 3, each tile predicted and
+                                   intra, the smaller sent): 0 = not measured yet, taken as
+                                   CAP_TEMPORAL_PRIOR x intra. Kept apart because it is twice
+                                   the intra figure (N = 1024 h/dx/dz, two cores: 7.0 against
+                                   3.3-3.6 ns/sample) and a group degraded to a coarser LOD is
+                                   sent intra (frame.c): one figure for both measured the cheap
+                                   codec while degraded, predicted that lod 0 fit, went back, and
+                                   degraded again within 0.2 s (flapping every 3.5 s) */
     double penalty;             /* transient factor on both costs (<= 1 = none): x1.25 for each tick
                                    the producer had not even started the frame before, back
                                    toward 1 on each tick it had (sim_thread.c, tick). Kept apart
@@ -55,18 +57,18 @@ struct cost_model {
 
 double cost_step_s(const struct cost_model *m, int n, int nfields);
 double cost_encode_s(const struct cost_model *m, long samples);
-/* Encode seconds per sample of a layer of this side (N >> lod): what frames
- * of that side cost, else the all-frames figure; with the penalty. */
-double cost_encode_side_s(const struct cost_model *m, int side);
-/* Learn from a frame: side_samples[i] samples of side 2^i took `seconds` on
- * the pool. Up quickly enough to follow the machine, but one frame counts
- * as at most twice the prediction: a frame's first keyframes, a chain's
- * start and the first touch of its buffers cost 3-7 times the steady
- * figure (first frames of 1024 h/dx/dz temporal: 24 ns/sample against 7),
- * and used to degrade a subscription that fits before it had been
- * served once. Sustained slowness still raises it 10 % a frame; overruns
- * raise the penalty at once (sim_thread.c). */
-void cost_learn_encode(struct cost_model *m, const long side_samples[CAP_SIDES], double seconds);
+/* Encode seconds per sample with this codec (CAP_INTRA, CAP_TEMPORAL), with the penalty. */
+double cost_encode_codec_s(const struct cost_model *m, int codec);
+/* Learn from a frame: samples[c] samples with codec c took `seconds` on the
+ * pool. A frame of one codec teaches that codec's figure, a mixed one moves
+ * both by its ratio to the prediction. Up slowly enough to ride out noise,
+ * and one frame counts as at most twice the prediction: a frame's first
+ * keyframes, a chain's start and the first touch of its buffers cost 3-7
+ * times the steady figure (first frames of 1024 h/dx/dz temporal: 11-27
+ * ns/sample against 7) and used to degrade a subscription before it had
+ * been served once. Sustained slowness still raises it 10 % a frame;
+ * overruns raise the penalty at once (sim_thread.c). */
+void cost_learn_encode(struct cost_model *m, const long samples[CAP_CODECS], double seconds);
 
 /* Samples per tick the distinct layers may add up to at resolution n (the
  * admission limit): --encode-budget if set, else what fits the budget after
@@ -83,26 +85,30 @@ struct plan {
     unsigned fields[PLAN_GROUPS];   /* demanded fields per group (0 = no demand) */
     unsigned char lod[PLAN_GROUPS]; /* encoded LOD per group (>= the group's own) */
     float rate[PLAN_GROUPS];        /* share of ticks the group is encoded on, (0, 1] */
+    bool temporal[PLAN_GROUPS];     /* a temporal client asked for one of its layers */
     char reason[200];               /* why, when anything is degraded: the demand at full detail
                                        (samples per tick), the budget in samples at what those
                                        sizes cost, the step and the frame budget */
 };
 
 /* Demand -> plan at resolution n with tile side ts (per-tick samples and
- * time from the model; budget_scale < 1 plans with headroom). */
-void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS_ALL], double budget_scale,
-                   struct plan *out);
+ * time from the model; budget_scale < 1 plans with headroom). tdemand: the
+ * temporal clients per key (NULL: none). */
+void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS_ALL],
+                   const int tdemand[LAYER_KEYS_ALL], double budget_scale, struct plan *out);
 bool plan_degraded(const struct plan *p, int group);
 /* What the plan delivers, comparable between plans of the same demand:
  * sum over groups of rate * samples encoded. */
 double plan_value(const struct plan *p, int n);
 bool plan_same(const struct plan *a, const struct plan *b);
-/* Forget what sides not in `keep` (bit i = side 2^i) cost: they fall back to
- * the all-frames figure (a degraded group's recovery probe, sim_thread.c). */
-void cost_forget_sides(struct cost_model *m, unsigned keep);
-/* Bit log2(side) of every side the plan encodes (for cost_forget_sides),
- * and its samples per side; only the groups with due[g] unless due is NULL. */
-unsigned plan_sides(const struct plan *p, int n, const bool *due, long side_samples[CAP_SIDES]);
+/* Forget the temporal figure (back to CAP_TEMPORAL_PRIOR x intra): what a
+ * degraded group's recovery probe assumes when no temporal layer has been
+ * encoded to keep it current (sim_thread.c, update_plan). */
+void cost_forget_temporal(struct cost_model *m);
+/* Samples per codec the plan encodes (only the groups with due[g] unless
+ * due is NULL): a group is temporal when it has temporal demand and is
+ * encoded at its own LOD (a coarser one goes intra). */
+void plan_samples(const struct plan *p, int n, const bool *due, long samples[CAP_CODECS]);
 /* The model's moving average: down fast (a quarter), up slowly (a tenth). */
 double cost_ewma(double model, double measured);
 

@@ -70,7 +70,7 @@ struct sim {
     uint64_t published;           /* encode_done only (jobs are serial): frames published, for struct frame.index */
     double job_t_tick, job_t_enc; /* producer writes before the job starts; encode_done reads */
     long job_samples;             /* same */
-    long job_side_samples[CAP_SIDES]; /* same: the samples per layer side (capacity.h) */
+    long job_codec_samples[CAP_CODECS]; /* same: the plan's samples per codec (capacity.h) */
     /* Measuring at start-up (sim_start, before the threads). */
     bool measure_done;
     struct layer_streams streams; /* the temporal layers' encoder state: used by frame_job_begin (producer)
@@ -101,7 +101,7 @@ struct sim {
         uint64_t seq;
         uint32_t version;
         float patch_size;
-        long side_samples[CAP_SIDES]; /* the plan's samples per layer side on this tick (cost model) */
+        long codec_samples[CAP_CODECS]; /* the plan's samples per codec on this tick (cost model) */
         struct frame_want want;
     } pj;
     uint64_t penalized_seq;           /* tick: the queued job (seq) the penalty was last raised for... */
@@ -467,7 +467,7 @@ static void encode_done(void *ctx)
      * frame at most twice the prediction; down quickly). */
     if (s->job_samples >= 4096) { /* tiny jobs are all overhead: they would skew the per-sample cost */
         pthread_mutex_lock(&s->lock);
-        cost_learn_encode(&s->model, s->job_side_samples, enc);
+        cost_learn_encode(&s->model, s->job_codec_samples, enc);
         pthread_mutex_unlock(&s->lock);
     }
     if (s->cfg.wake)
@@ -526,7 +526,7 @@ static void produce(struct sim *s, const struct prod_job *pj)
     s->job_t_tick = pj->t_tick;
     s->job_t_enc = mono_now();
     s->job_samples = frame_job_samples(s->job);
-    memcpy(s->job_side_samples, pj->side_samples, sizeof s->job_side_samples);
+    memcpy(s->job_codec_samples, pj->codec_samples, sizeof s->job_codec_samples);
     encode_pool_start(s->pool, items, encode_item, encode_done, s);
 }
 
@@ -561,16 +561,18 @@ static void *producer_main(void *arg)
  * there (20 frames/s where 25-30 fit). A degrade needs the value to fall
  * under 90 % of the plan in force, so the two thresholds still leave a band.
  *
- * Recovery probe: a degraded group's own size is not encoded, so what it
- * costs (cost_model.enc_side_s) is not measured again, and a figure taken
- * under load or from a slow start would keep it degraded for good. After
- * hold_ticks degraded with no recovery in sight, the plan is computed again
- * with the sizes it does not encode costing what frames cost now; if that
- * fits with the headroom, it is taken (the sizes' figures start afresh) and
- * its frames tell. A recovery undone within PLAN_FAILED_S (the probe, or a
- * recovery the model predicted, did not fit) doubles hold_ticks, up to
- * PLAN_HOLD_MAX_S, so a group that does not fit is tried less and less
- * often; a new demand, or a recovery that holds PLAN_HELD_S, resets it. */
+ * Recovery probe: a group degraded to a coarser LOD is sent intra, so
+ * while no temporal layer is encoded the temporal cost figure is not
+ * measured again, and one taken under load or from a slow start would keep
+ * the group degraded for good. After hold_ticks degraded with no recovery
+ * in sight, the plan is computed again with the temporal figure forgotten
+ * (CAP_TEMPORAL_PRIOR x the intra figure, which the degraded frames keep
+ * current); if that fits with the headroom it is taken (the figure starts
+ * afresh) and its frames tell. A recovery undone within PLAN_FAILED_S (the
+ * probe, or a recovery the model predicted, did not fit) doubles
+ * hold_ticks, up to PLAN_HOLD_MAX_S, so a group that does not fit is tried
+ * less and less often; a new demand, or a recovery that holds PLAN_HELD_S,
+ * resets it. */
 #define PLAN_EASY_SCALE 0.8
 #define PLAN_HOLD_S 3
 #define PLAN_HOLD_MAX_S 60
@@ -584,7 +586,7 @@ static bool plan_any_degraded(const struct plan *p)
     return false;
 }
 
-static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], int n, int ts)
+static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], const int tdemand[LAYER_KEYS_ALL], int n, int ts)
 {
     const int rate = (int)s->cfg.tick_rate > 0 ? (int)s->cfg.tick_rate : 1;
     if (s->hold_ticks <= 0)
@@ -595,10 +597,10 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], int n, 
     struct cost_model m = s->model;
     pthread_mutex_unlock(&s->lock);
     struct plan now, easy;
-    capacity_plan(&m, n, ts, demand, 1.0, &now);
+    capacity_plan(&m, n, ts, demand, tdemand, 1.0, &now);
     bool same_demand = true;
     for (int g = 0; g < PLAN_GROUPS; g++)
-        same_demand &= now.fields[g] == s->plan.fields[g];
+        same_demand &= now.fields[g] == s->plan.fields[g] && now.temporal[g] == s->plan.temporal[g];
     struct plan next = s->plan;
     bool probe = false;
     if (!same_demand) {
@@ -611,7 +613,7 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], int n, 
         if (s->recovered && s->since_change < PLAN_FAILED_S * rate) /* the recovery did not fit */
             s->hold_ticks = s->hold_ticks * 2 < PLAN_HOLD_MAX_S * rate ? s->hold_ticks * 2 : PLAN_HOLD_MAX_S * rate;
     } else {
-        capacity_plan(&m, n, ts, demand, PLAN_EASY_SCALE, &easy);
+        capacity_plan(&m, n, ts, demand, tdemand, PLAN_EASY_SCALE, &easy);
         if (plan_value(&easy, n) > plan_value(&s->plan, n)) {
             if (++s->lower_ticks >= s->hold_ticks) {
                 next = easy;
@@ -619,11 +621,13 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], int n, 
             }
         } else {
             s->lower_ticks = 0;
-            if (s->since_change >= s->hold_ticks && plan_any_degraded(&s->plan)) {
-                long side_samples[CAP_SIDES];
+            long encoded[CAP_CODECS];
+            plan_samples(&s->plan, n, NULL, encoded);
+            if (s->since_change >= s->hold_ticks && plan_any_degraded(&s->plan) && encoded[CAP_TEMPORAL] == 0 &&
+                m.enc_temporal_s > 0) {
                 struct cost_model fresh = m;
-                cost_forget_sides(&fresh, plan_sides(&s->plan, n, NULL, side_samples));
-                capacity_plan(&fresh, n, ts, demand, PLAN_EASY_SCALE, &easy);
+                cost_forget_temporal(&fresh);
+                capacity_plan(&fresh, n, ts, demand, tdemand, PLAN_EASY_SCALE, &easy);
                 if (plan_value(&easy, n) > plan_value(&s->plan, n)) {
                     next = easy;
                     probe = true;
@@ -639,11 +643,9 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], int n, 
         s->grace_seq = s->seq + (uint64_t)(rate / 2 + 1);
     if (plan_same(&next, &s->plan))
         return;
-    if (probe) { /* the sizes the plan did not encode: their figures start afresh from its frames */
-        long side_samples[CAP_SIDES];
-        unsigned keep = plan_sides(&s->plan, n, NULL, side_samples);
+    if (probe) { /* the temporal figure starts afresh from the probe's frames */
         pthread_mutex_lock(&s->lock);
-        cost_forget_sides(&s->model, keep);
+        cost_forget_temporal(&s->model);
         pthread_mutex_unlock(&s->lock);
     }
     s->recovered = same_demand && plan_value(&next, n) > plan_value(&s->plan, n);
@@ -695,13 +697,14 @@ static void tick(struct sim *s, double t_tick)
     atomic_store(&g_metrics.params_version, s->version);
     atomic_store(&g_metrics.resolution, n);
 
-    int demand[LAYER_KEYS_ALL];
+    int demand[LAYER_KEYS_ALL], tdemand[LAYER_KEYS_ALL];
     bool any = false;
     uint8_t remote[SIM_DEMAND_BYTES] = { 0 };
     if (s->cfg.remote_demand) /* --role sim: the layer keys other daemons want */
         s->cfg.remote_demand(s->cfg.cluster_user, remote);
     for (int k = 0; k < LAYER_KEYS_ALL; k++) {
         demand[k] = atomic_load(&s->demand[k]);
+        tdemand[k] = atomic_load(&s->tdemand[k]);
         if (demand[k] <= 0 && ((remote[k >> 3] >> (k & 7)) & 1))
             demand[k] = 1;
         any |= demand[k] > 0;
@@ -715,7 +718,7 @@ static void tick(struct sim *s, double t_tick)
             return;
     } else {
         s->had_demand = true;
-        update_plan(s, demand, n, frame_tile_size(s->cfg.tile_size, n));
+        update_plan(s, demand, tdemand, n, frame_tile_size(s->cfg.tile_size, n));
     }
 
     /* The groups due this tick, at their planned LOD. */
@@ -794,7 +797,7 @@ static void tick(struct sim *s, double t_tick)
     for (int g = 0; g < PLAN_GROUPS; g++)
         if (due[g])
             s->credit[g] -= 1;
-    plan_sides(&s->plan, n, due, pj.side_samples);
+    plan_samples(&s->plan, n, due, pj.codec_samples);
     pj.want.reset_streams = s->reset_streams;
     pj.want.sea_changed = s->sea_changed && !s->reset_streams;
     s->reset_streams = false;
