@@ -4,7 +4,8 @@
  * A cost model measured at start-up (sim_start: a few steps and encodes at
  * the starting N, on this machine) and kept current from every frame:
  *   step(N, fields)  scaled from the measured N by N^2 log2 N,
- *   encode(samples)  wall seconds per sample on the encode pool.
+ *   encode(samples)  wall seconds per sample on the encode pool, per codec
+ *                    (intra; temporal, about twice as much).
  * From it:
  *   - the encode budget: samples per tick that may be encoded at N (what a
  *     frame may take, 80 % of the tick, minus the step), or --encode-budget;
