@@ -252,7 +252,8 @@ void capacity_info_fill(const struct cost_model *m, int n, struct capacity_info 
         if (z->fits_memory)
             c->max_resolution = size;
         for (int f = 1; f <= 6; f++) {
-            z->est_ms[f - 1] = (cost_step_s(m, size, f) + cost_encode_s(m, (long)f * size * size)) * 1e3;
+            /* with the temporal codec: what the web client asks for (intra costs about half) */
+            z->est_ms[f - 1] = (cost_step_s(m, size, f) + (double)f * size * size * cost_encode_codec_s(m, CAP_TEMPORAL)) * 1e3;
             if (z->est_ms[f - 1] <= c->budget_ms)
                 z->full_rate_fields = f;
         }

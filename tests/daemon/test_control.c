@@ -876,6 +876,13 @@ static void test_capacity_codecs(void)
     cost_learn_encode(&l, mixed, 1.5 * 6e-9 * 1e6);
     CHECK(fabs(l.enc_s_per_sample / l.enc_temporal_s - 0.5) < 1e-9 && l.enc_s_per_sample > 2e-9, "mixed: %g %g",
           l.enc_s_per_sample, l.enc_temporal_s);
+    /* the announcement's estimate: the step and the temporal codec at lod 0 */
+    struct capacity_info ci;
+    capacity_info_fill(&l, n, &ci);
+    for (int i = 0; i < ci.nsizes; i++)
+        if (ci.sizes[i].n == 1024)
+            CHECK(fabs(ci.sizes[i].est_ms[2] - (cost_step_s(&l, 1024, 3) + l.enc_temporal_s * 3 * 1024 * 1024) * 1e3) < 1e-3,
+                  "est_ms at 1024: %g", ci.sizes[i].est_ms[2]);
     passed++;
 }
 
