@@ -648,6 +648,9 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], const i
         cost_forget_temporal(&s->model);
         pthread_mutex_unlock(&s->lock);
     }
+    LOGD("plan change at seq %llu: step x%.2f, encode %.2f ns/sample intra, %.2f temporal%s, penalty x%.2f, hold %.0f s%s",
+         (unsigned long long)s->seq, m.step_scale, m.enc_s_per_sample * 1e9, cost_encode_codec_s(&m, CAP_TEMPORAL) * 1e9 / fmax(m.penalty, 1),
+         m.enc_temporal_s > 0 ? "" : " (prior)", fmax(m.penalty, 1), s->hold_ticks / (double)rate, probe ? ", recovery probe" : "");
     s->recovered = same_demand && plan_value(&next, n) > plan_value(&s->plan, n);
     s->since_change = 0;
     /* New layers or LODs start with keyframes and cold buffers: their first
