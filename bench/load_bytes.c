@@ -9,7 +9,8 @@
  *   cc -O2 -std=c11 -D_GNU_SOURCE -Iproto/c -Iserver/sim/include -o build/load_bytes bench/load_bytes.c \
  *      build/liboc_proto.a build/libocean.a -lfftw3f -lfftw3f_threads -lzstd -lz -ldeflate -lm -pthread
  *   [REFINE=r] [BOUND=b] [TILE=t] [KEY=1] [V=1] build/load_bytes POLICY [PERIOD [TICKS [PARAM A B]]]
- * KEY=1 also encodes every tick's keyframe tiles (what a joining/skipping client gets). */
+ * KEY=1 also encodes every tick's keyframe tiles (what a joining/skipping client gets).
+ * EASE=K eases each change in over K ticks (ocean_commit_eased, the daemon's --ease-ticks). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -46,7 +47,11 @@ int main(int argc, char **argv)
         int change = policy > 0 && tick > 0 && tick % period == 0;
         if (change) {
             param_set(&prm, pd, (nsets++ % 2) ? vb : va, err, sizeof err);
-            if (ocean_reconfigure(o, &prm, err, sizeof err)) { fprintf(stderr, "%s\n", err); return 1; }
+            /* EASE=K: ease the change in over K ticks from the previous tick, as the daemon (--ease-ticks) */
+            struct ocean_prepared *pr = ocean_prepare(o, &prm, err, sizeof err);
+            double dt = 1 / 30.0, ease = getenv("EASE") ? atof(getenv("EASE")) : 0;
+            if (!pr || ocean_commit_eased(o, pr, 10.0 + tick / 30.0 - dt, ease * dt)) { fprintf(stderr, "%s\n", err); return 1; }
+            ocean_prepared_free(pr);
         }
         if (ocean_step(o, 10.0 + tick / 30.0, 7)) return 1;
         double fr = 48;

@@ -63,6 +63,9 @@ static const struct param_def opt_table[] = {
     OPT("keyframe_interval", PARAM_INT, keyframe_interval, 0, 100000, 300, NULL, 0, "temporal codec (codec 3): "
       "each tile starts a new chain (keyframe) every this many ticks, staggered; 0 = only when needed "
       "(clients without the references get keyframes on demand either way; docs/codec.md has the measurement)"),
+    OPT("ease_ticks", PARAM_INT, ease_ticks, 0, 300, 8, NULL, 0, "a change of the wave amplitudes alone (wind, "
+      "amplitude, spectrum, fetch, ...) eases the sea from the old amplitudes to the new over this many ticks "
+      "(linear; 0 = at once; N above 1024: at once; docs/simulation.md \"Easing\" has the measurement)"),
     OPT("send_buffer_kb", PARAM_INT, send_buffer_kb, 16, 65536, 512, NULL, 0, "kernel send buffer per client (KiB): "
       "small keeps a slow client's queue, and so its latency, short"),
     OPT("sim_nice", PARAM_INT, sim_nice, -20, 19, 0, NULL, 0, "nice value of the tick thread; below 0 (needs "

@@ -40,6 +40,7 @@ struct daemon_config {
     int    max_memory_mb;
     int    tile_size;
     int    keyframe_interval;  /* temporal layers: periodic keyframe every this many ticks (0 = none) */
+    int    ease_ticks;         /* amplitude-only changes ease in over this many ticks (0 = at once) */
     int    send_buffer_kb;     /* SO_SNDBUF per client: bounds the frames queued in the kernel */
     int    sim_nice;           /* nice value of the tick thread (< 0 needs CAP_SYS_NICE) */
     char   tls_cert[512];      /* PEM certificate (chain): "" = plain http/ws */

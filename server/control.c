@@ -701,6 +701,7 @@ cJSON *control_hello_msg(const struct hello_info *h)
     cJSON_AddItemToObject(o, "bounds", cJSON_CreateDoubleArray(bounds, CTL_BOUND_COUNT));
     cJSON_AddNumberToObject(o, "tick_rate", h->tick_rate);
     cJSON_AddNumberToObject(o, "tile_size", h->tile_size);
+    cJSON_AddNumberToObject(o, "ease_ticks", h->ease_ticks);
     cJSON_AddItemToObject(o, "subscription", control_subscription_object(h->sub));
     if (h->capacity)
         cJSON_AddItemToObject(o, "capacity", control_capacity_object(h->capacity));

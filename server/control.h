@@ -158,6 +158,7 @@ struct hello_info {
     int tile_size;
     const struct subscription *sub;
     const struct capacity_info *capacity; /* NULL = not announced */
+    int ease_ticks;                       /* amplitude-only changes ease in over this many ticks */
 };
 cJSON *control_hello_msg(const struct hello_info *h);
 

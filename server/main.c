@@ -152,6 +152,7 @@ int main(int argc, char **argv)
         .tick_rate = dc.tick_rate,
         .tile_size = dc.tile_size,
         .keyframe_interval = dc.keyframe_interval,
+        .ease_ticks = dc.ease_ticks,
         .stream_budget = (size_t)dc.max_memory_mb * 1048576 / 2, /* temporal layers: half the simulation's cap */
         .opts = { .threads = dc.fft_threads, .wisdom_path = dc.wisdom_file[0] ? dc.wisdom_file : NULL,
                   .plan_rigor = dc.plan_rigor },

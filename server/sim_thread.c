@@ -369,7 +369,13 @@ static void apply_pending(struct sim *s)
         /* O(1), and the producer is idle (our caller checked): no step or
          * field reader overlaps it, nor a prepare (ready_full is still set). */
         int n_before = ocean_resolution(s->ocean);
-        commit_rc = ocean_commit(s->ocean, b.prepared);
+        /* An amplitude-only change eases in over ease_ticks ticks of the clock
+         * (docs/simulation.md "Easing"), in sim time: from the previous tick
+         * on, so this tick's frame is 1/K of the way. Paused: at once. */
+        double dt = b.params.paused ? 0 : b.params.time_scale / s->cfg.tick_rate;
+        commit_rc = ocean_commit_eased(s->ocean, b.prepared, s->sim_time - dt, s->cfg.ease_ticks * dt);
+        if (commit_rc == 0 && b.surface && ocean_surface_ease(b.surface, s->ocean) != 0)
+            LOGW("point queries: the snapshot of version %u misses the easing", (unsigned)(s->version + 1));
         if (commit_rc != 0) {
             LOGE("a prepared parameter change no longer fits the simulation; refused");
             for (struct sim_set *set = b.sets; set; set = set->next)

@@ -61,6 +61,7 @@ struct sim_config {
     double tick_rate;
     int tile_size;              /* configured; frames use frame_tile_size(tile_size, N) */
     int keyframe_interval;      /* temporal layers: periodic keyframe every this many ticks (0 = none) */
+    int ease_ticks;             /* amplitude-only changes ease in over this many ticks (0 = at once) */
     size_t stream_budget;       /* bytes the temporal layers' encoder state may take; beyond it, intra */
     struct ocean_options opts;
     double start_time;          /* sim time to resume from */

@@ -1196,6 +1196,234 @@ static size_t heap_in_use(void)
  * hook ocean_alloc_bytes), and glibc's own mallinfo2 before and after
  * (everything: plans, pool, structs), when the allocator is glibc's
  * (not under ASan or valgrind, which bring their own). */
+/* Easing (ocean_commit_eased, docs/simulation.md "Easing"): an
+ * amplitude-only change reaches exactly the new sea after its length; at the
+ * start it is exactly the old; half way the fields are the mean of both
+ * (they are linear in the amplitudes); a change in the middle of an easing
+ * starts from where the sea is (the same bits just before and just after
+ * the commit); a query snapshot agrees with the steps during an easing; a
+ * change of seed or of choppiness alone is not eased. */
+static int prepared_commit(struct ocean *o, const struct ocean_params *q, double t0, double len)
+{
+    char err[256];
+    struct ocean_prepared *pr = ocean_prepare(o, q, err, sizeof err);
+    if (!pr)
+        return -1;
+    int rc = ocean_commit_eased(o, pr, t0, len);
+    ocean_prepared_free(pr);
+    return rc;
+}
+
+static float *step_copy(struct ocean *o, double t, unsigned fields, enum ocean_field f)
+{
+    ocean_step(o, t, fields);
+    return copy_field(o, f);
+}
+
+static void test_easing(void)
+{
+    const unsigned F = OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_DX) | OCEAN_FIELD_BIT(OCEAN_DZ);
+    struct ocean_params p, q, r;
+    params_defaults(&p);
+    p.resolution = quick ? 32 : 128;
+    p.cascades = 2;
+    q = p;
+    q.wind_speed = p.wind_speed + 3;
+    q.wind_direction = p.wind_direction + 25;
+    q.choppiness = p.choppiness + 0.5; /* changes at once, beside the eased amplitudes */
+    r = q;
+    r.wind_speed = p.wind_speed - 2;
+    r.amplitude = p.amplitude * 1.5;
+    struct ocean *o = make(&p, 2), *a = make(&p, 1), *b = make(&q, 1), *c = make(&r, 1);
+    if (!o || !a || !b || !c)
+        goto out;
+    const int n = p.resolution;
+    const size_t nn = (size_t)n * n;
+    const double t0 = 40.0, dt = 1.0 / 30, len = 8 * dt;
+    char err[256];
+    size_t alloc0 = ocean_alloc_bytes;
+    struct ocean_prepared *pr = ocean_prepare(o, &q, err, sizeof err);
+    /* What a memory cap counts for a change being built (server/control.c:
+     * a second simulation, ocean_memory_bytes per cascade) covers the
+     * prepared amplitudes and the easing buffers the first eased change makes. */
+    size_t change_bytes = ocean_alloc_bytes - alloc0, model_bytes = ocean_memory_bytes(n, 2) * (size_t)p.cascades;
+    int easable = ocean_prepared_easable(pr);
+    int rc = pr ? ocean_commit_eased(o, pr, t0, len) : -1;
+    ocean_prepared_free(pr);
+    /* At t0: the old sea, bit for bit (cascade 0's height; choppiness is
+     * new, so the displacements are compared with the new choppiness at the
+     * end only). After t0 + len: the new sea, bit for bit, on every cascade. */
+    float *h0 = step_copy(o, t0, OCEAN_FIELD_BIT(OCEAN_HEIGHT), OCEAN_HEIGHT);
+    float *ha = step_copy(a, t0, OCEAN_FIELD_BIT(OCEAN_HEIGHT), OCEAN_HEIGHT);
+    int start_old = memcmp(h0, ha, nn * sizeof(float)) == 0;
+    /* Half way: the mean of the two seas' heights (linear in the amplitudes). */
+    const double tm = t0 + 0.5 * len;
+    float *hm = step_copy(o, tm, OCEAN_FIELD_BIT(OCEAN_HEIGHT), OCEAN_HEIGHT);
+    float *hma = step_copy(a, tm, OCEAN_FIELD_BIT(OCEAN_HEIGHT), OCEAN_HEIGHT);
+    float *hmb = step_copy(b, tm, OCEAN_FIELD_BIT(OCEAN_HEIGHT), OCEAN_HEIGHT);
+    double dmid = 0, dab = 0;
+    for (size_t i = 0; i < nn; i++) {
+        dmid = fmax(dmid, fabs(hm[i] - 0.5 * ((double)hma[i] + hmb[i])));
+        dab = fmax(dab, fabs((double)hma[i] - hmb[i]));
+    }
+    ocean_step(o, t0 + len, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
+    ocean_step(b, t0 + len, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
+    int end_new = same_fields(o, b);
+    const float *o1 = ocean_cascade_field(o, 1, OCEAN_HEIGHT), *b1 = ocean_cascade_field(b, 1, OCEAN_HEIGHT);
+    end_new &= o1 && b1 && memcmp(o1, b1, nn * sizeof(float)) == 0;
+    check(easable && rc == 0 && start_old && end_new && dmid <= 1e-5 * (1 + dab) && dab > 0.1,
+          "easing.reaches_new", "wind %g -> %g m/s over %g s: old sea at t0 %s, new at t0 + len %s (both cascades), "
+          "half way the mean of both within %.1e m (the seas differ by %.2f m)", p.wind_speed, q.wind_speed, len,
+          start_old ? "bit for bit" : "NO", end_new ? "bit for bit" : "NO", dmid, dab);
+    check(change_bytes > 0 && change_bytes <= model_bytes / 2, "easing.memory",
+          "the first eased change allocates %.2f MB (new amplitudes + easing buffers), the cap counts %.2f MB "
+          "for a change being built", change_bytes / 1e6, model_bytes / 1e6);
+    free(h0);
+    free(ha);
+    free(hm);
+    free(hma);
+    free(hmb);
+
+    /* A second change 3 ticks into a new easing: the sea just after the
+     * commit is the sea just before it, bit for bit (no jump), on every field
+     * but the displacements' choppiness (unchanged here); then it goes to the
+     * third sea and gets there exactly. Each tick moves it a little. */
+    double t1 = t0 + 100;
+    rc = prepared_commit(o, &p, t1, len); /* back to p, eased */
+    double t2 = t1 + 3 * dt;
+    ocean_step(o, t2, F);
+    float *before[3] = {copy_field(o, OCEAN_HEIGHT), copy_field(o, OCEAN_DX), copy_field(o, OCEAN_DZ)};
+    struct ocean_params p2 = r;
+    p2.choppiness = p.choppiness;
+    int rc2 = prepared_commit(o, &p2, t2, len);
+    ocean_step(o, t2, F);
+    int no_jump = 1;
+    for (int f = 0; f < 3; f++) {
+        no_jump &= memcmp(before[f], ocean_field(o, (enum ocean_field)f), nn * sizeof(float)) == 0;
+        free(before[f]);
+    }
+    /* The largest change of height from one tick to the next, during the
+     * easing and in the steady new sea: no tick jumps. */
+    double worst_tick = 0, steady_tick = 0;
+    float *prev = step_copy(o, t2 - dt, OCEAN_FIELD_BIT(OCEAN_HEIGHT), OCEAN_HEIGHT);
+    for (int k = 0; k <= 12; k++) {
+        float *cur = step_copy(o, t2 + k * dt, OCEAN_FIELD_BIT(OCEAN_HEIGHT), OCEAN_HEIGHT);
+        double d = 0;
+        for (size_t i = 0; i < nn; i++)
+            d = fmax(d, fabs((double)cur[i] - prev[i]));
+        if (k <= 8)
+            worst_tick = fmax(worst_tick, d);
+        else
+            steady_tick = fmax(steady_tick, d);
+        free(prev);
+        prev = cur;
+    }
+    free(prev);
+    struct ocean *c2 = make(&p2, 1);
+    int third = 0;
+    if (c2) {
+        ocean_step(o, t2 + 20 * dt, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
+        ocean_step(c2, t2 + 20 * dt, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
+        third = same_fields(o, c2);
+        ocean_free(c2);
+    }
+    check(rc == 0 && rc2 == 0 && no_jump && third && worst_tick < 3 * steady_tick, "easing.mid_change_no_jump",
+          "a change 3 ticks into an easing: the sea after the commit = before it %s; the largest tick-to-tick "
+          "height change while easing %.3f m (steady sea: %.3f m); reaches the third sea exactly %s",
+          no_jump ? "bit for bit" : "NO", worst_tick, steady_tick, third ? "yes" : "NO");
+
+    /* Queries during an easing agree with the steps: one cascade,
+     * choppiness 0, at grid nodes (a node is its own source). The snapshot
+     * is made both ways the daemon makes them: prepared before the commit
+     * and given the easing after it, and from the live ocean. */
+    struct ocean_params s1 = p;
+    s1.cascades = 1;
+    s1.choppiness = 0;
+    struct ocean_params s2 = s1;
+    s2.wind_speed = s1.wind_speed + 4;
+    struct ocean *oq = make(&s1, 2);
+    double worst_q = 0, worst_live = 0, worst_old = 0;
+    int qok = oq != NULL;
+    if (oq) {
+        double tq0 = 5.0;
+        prepared_commit(oq, &s2, tq0 - 20, len); /* an easing before, finished */
+        ocean_step(oq, tq0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+        struct ocean_prepared *pq = ocean_prepare(oq, &s1, err, sizeof err); /* and back, eased */
+        struct ocean_surface *sp = pq ? ocean_prepared_surface(oq, pq, err, sizeof err) : NULL;
+        struct ocean_surface *splain = NULL;
+        qok = pq && sp && ocean_commit_eased(oq, pq, tq0, len) == 0 && ocean_surface_ease(sp, oq) == 0;
+        ocean_prepared_free(pq);
+        struct ocean_surface *sl = ocean_surface_new(oq, err, sizeof err);
+        {   /* what the old code had: the new amplitudes only */
+            struct ocean *plain = make(&s1, 1);
+            splain = plain ? ocean_surface_new(plain, err, sizeof err) : NULL;
+            ocean_free(plain);
+        }
+        qok &= sl && splain;
+        double xz[16][2];
+        int node[16][2];
+        for (int i = 0; i < 16; i++) {
+            node[i][0] = (i * 37 + 5) % n;
+            node[i][1] = (i * 11 + 3) % n;
+            xz[i][0] = node[i][0] * s1.patch_size / n;
+            xz[i][1] = node[i][1] * s1.patch_size / n;
+        }
+        for (int k = 1; k <= 7 && qok; k += 3) {
+            double t = tq0 + k * dt;
+            ocean_step(oq, t, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+            const float *h = ocean_field(oq, OCEAN_HEIGHT);
+            struct ocean_point pt[16], lt[16], ot[16];
+            qok &= ocean_surface_query(sp, t, (const double(*)[2])xz, 16, pt) == 0 &&
+                   ocean_surface_query(sl, t, (const double(*)[2])xz, 16, lt) == 0 &&
+                   ocean_surface_query(splain, t, (const double(*)[2])xz, 16, ot) == 0;
+            for (int i = 0; i < 16; i++) {
+                double g = h[(size_t)node[i][1] * n + node[i][0]];
+                worst_q = fmax(worst_q, fabs(pt[i].height - g));
+                worst_live = fmax(worst_live, fabs(lt[i].height - g));
+                worst_old = fmax(worst_old, fabs(ot[i].height - g));
+            }
+        }
+        ocean_surface_free(sp);
+        ocean_surface_free(sl);
+        ocean_surface_free(splain);
+        ocean_free(oq);
+    }
+    check(qok && worst_q < 1e-4 && worst_live < 1e-4 && worst_old > 1e-2, "easing.query_equals_step",
+          "grid nodes during an easing: |query - step| %.1e m (snapshot prepared, then eased), %.1e m (live "
+          "snapshot); the new amplitudes alone are %.1e m off", worst_q, worst_live, worst_old);
+
+    /* Not eased: a new seed (other phases), choppiness alone (no amplitude
+     * changes), the DFT path; such a commit is the change at once. */
+    struct ocean_params ns = p, nc = p;
+    ns.seed = p.seed + 1;
+    ns.wind_speed = p.wind_speed + 1;
+    nc.choppiness = p.choppiness + 1;
+    prepared_commit(o, &p, t0, 0);
+    struct ocean_prepared *ps = ocean_prepare(o, &ns, err, sizeof err), *pc = ocean_prepare(o, &nc, err, sizeof err);
+    int not_easable = ps && pc && !ocean_prepared_easable(ps) && !ocean_prepared_easable(pc);
+    int crc = ps ? ocean_commit_eased(o, ps, t0, len) : -1;
+    ocean_prepared_free(ps);
+    ocean_prepared_free(pc);
+    struct ocean *fs = make(&ns, 1);
+    int at_once = 0;
+    double e0, el;
+    ocean_easing(o, &e0, &el);
+    if (fs) {
+        ocean_step(o, t0 + 0.01, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
+        ocean_step(fs, t0 + 0.01, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
+        at_once = same_fields(o, fs);
+        ocean_free(fs);
+    }
+    check(not_easable && crc == 0 && at_once && el == 0, "easing.only_amplitudes",
+          "a new seed and choppiness alone are not easable; the seed change applies at once %s",
+          at_once ? "(bit for bit a fresh ocean's)" : "NO");
+out:
+    ocean_free(o);
+    ocean_free(a);
+    ocean_free(b);
+    ocean_free(c);
+}
+
 static void test_memory_bytes(void)
 {
     int sizes[] = {64, 256, 512, 1024};
@@ -1257,8 +1485,11 @@ static double seconds(void)
 }
 
 /* Run one group and say how long it took (to keep the suite's budget). */
+static const char *only; /* OCEAN_TEST_ONLY=test_easing: that group alone */
 #define RUN(fn)                                                       \
     do {                                                              \
+        if (only && strcmp(only, #fn) != 0)                           \
+            break;                                                    \
         double t0_ = seconds();                                       \
         fn();                                                         \
         printf("     (%s: %.2f s)\n", #fn, seconds() - t0_);          \
@@ -1574,6 +1805,9 @@ int main(void)
 {
     const char *qenv = getenv("OCEAN_TEST_QUICK");
     quick = qenv && *qenv && strcmp(qenv, "0") != 0;
+    only = getenv("OCEAN_TEST_ONLY");
+    if (only && !*only)
+        only = NULL;
     if (quick)
         printf("quick mode (OCEAN_TEST_QUICK): smaller grids, fewer seeds\n");
     RUN(test_params);
@@ -1592,6 +1826,7 @@ int main(void)
     RUN(test_determinism);
     RUN(test_reconfigure);
     RUN(test_prepare_commit);
+    RUN(test_easing);
     RUN(test_memory_bytes);
     RUN(test_wisdom);
     RUN(test_foam);

@@ -83,10 +83,13 @@ int net_adopt_hello(struct net *n, const char *text, size_t len)
     }
     const cJSON *rate = cJSON_GetObjectItemCaseSensitive(root, "tick_rate");
     const cJSON *ts = cJSON_GetObjectItemCaseSensitive(root, "cluster_tile_size");
+    const cJSON *ease = cJSON_GetObjectItemCaseSensitive(root, "ease_ticks");
     if (cJSON_IsNumber(rate) && rate->valuedouble >= 1 && rate->valuedouble <= 240)
         n->dc.tick_rate = n->lim.tick_rate = rate->valuedouble;
     if (cJSON_IsNumber(ts) && ts->valueint >= 1 && ts->valueint <= 4096)
         n->dc.tile_size = ts->valueint;
+    if (cJSON_IsNumber(ease) && ease->valueint >= 0 && ease->valueint <= 300) /* the sim's, told to this edge's clients */
+        n->dc.ease_ticks = ease->valueint;
     cJSON_Delete(root);
     if (n->applied_version != before || changed) {
         /* Clients that got hello from an older cache learn the sim's values now. */
@@ -133,7 +136,7 @@ char *net_hello_text(struct net *n)
     subscription_default(&sub, n->dc.tick_rate);
     struct hello_info h = {
         .client_id = "", .controller = false, .params = &n->applied, .params_version = n->applied_version,
-        .tick_rate = n->dc.tick_rate, .tile_size = net_tile_size(n), .sub = &sub,
+        .tick_rate = n->dc.tick_rate, .tile_size = net_tile_size(n), .sub = &sub, .ease_ticks = n->dc.ease_ticks,
     };
     cJSON *m = control_hello_msg(&h);
     if (m) /* the configured tile side, so that edges follow N changes like the sim */

@@ -146,7 +146,7 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
     struct hello_info h = {
         .client_id = s->client_id, .controller = s->controller, .params = &n->applied,
         .params_version = n->applied_version, .tick_rate = n->dc.tick_rate,
-        .tile_size = net_tile_size(n), .sub = &s->sub,
+        .tile_size = net_tile_size(n), .sub = &s->sub, .ease_ticks = n->dc.ease_ticks,
     };
     struct capacity_info ci;
     if (n->sim) {

@@ -253,6 +253,7 @@ static void grid_free(struct ocean_grid *g)
     fftwf_free(g->gauss);
     fftwf_free(g->ring);
     fftwf_free(g->ring_m2);
+    fftwf_free(g->ease_from);
     for (int i = 0; i < COL_COUNT; i++)
         fftwf_free(g->col[i]);
     fftwf_free(g->scratch);
@@ -691,6 +692,7 @@ struct cascade_prep {
     struct ocean_amps amps;    /* same N: the new amplitudes (after commit: the old ones) */
     float *gauss;              /* same N, new seed: its normals (after commit: the old ones) */
     uint32_t seed;             /* of `gauss` */
+    float *ease_from;          /* an easable change of a grid that has no ease_from yet: its buffer */
 };
 
 struct ocean_prepared {
@@ -698,6 +700,7 @@ struct ocean_prepared {
     int ncascades;             /* p.cascades */
     struct cascade_prep c[OCEAN_MAX_CASCADES];
     unsigned long generation;  /* o->generation prepared against */
+    bool easable;              /* only the amplitudes h~0 (and choppiness) change: ocean_commit_eased may ease */
 };
 
 void ocean_prepared_free(struct ocean_prepared *pr)
@@ -708,6 +711,7 @@ void ocean_prepared_free(struct ocean_prepared *pr)
         grid_free(pr->c[c].grid);
         amps_free(&pr->c[c].amps);
         fftwf_free(pr->c[c].gauss);
+        fftwf_free(pr->c[c].ease_from);
     }
     free(pr);
 }
@@ -766,6 +770,47 @@ oom:
     return false;
 }
 
+/* Whether a prepared change may be eased in (ocean_commit_eased): every
+ * cascade keeps its grid, normals and wavenumbers (same N, seed, patch,
+ * cascade count), the frequencies are the same (depth, loop period), the
+ * FFT path runs before and after (the DFT path recomputes the spectrum from
+ * the model), N <= OCEAN_EASE_MAX_N, and some amplitude h~0 changes (a change of choppiness alone
+ * is not eased: its factor is not an amplitude). Then a grid that has no
+ * easing buffer yet gets one here, off the tick. False: out of memory. */
+static bool prepare_ease(const struct ocean *o, struct ocean_prepared *pr)
+{
+    pr->easable = false;
+    if (!o->g || o->g->n > OCEAN_EASE_MAX_N || pr->ncascades != o->ncascades || pr->p.transform != TRANSFORM_FFT ||
+        o->p.transform != TRANSFORM_FFT || pr->p.patch_size != o->p.patch_size || pr->p.depth != o->p.depth ||
+        pr->p.loop_period != o->p.loop_period)
+        return true;
+    bool differ = false;
+    for (int c = 0; c < pr->ncascades; c++) {
+        const struct cascade_prep *cp = &pr->c[c];
+        const struct ocean_grid *g = cascade_grid(o, c);
+        if (cp->grid || cp->gauss || !g || !cp->amps.a)
+            return true;
+        if (memcmp(cp->amps.omega, g->omega, g->modes * sizeof(double)) != 0)
+            return true;
+        const float *now[] = {g->a, g->b, g->d, g->e}, *next[] = {cp->amps.a, cp->amps.b, cp->amps.d, cp->amps.e};
+        for (int k = 0; k < 4 && !differ; k++)
+            differ = memcmp(now[k], next[k], g->modes * sizeof(float)) != 0;
+    }
+    if (!differ)
+        return true;
+    for (int c = 0; c < pr->ncascades; c++) {
+        const struct ocean_grid *g = cascade_grid(o, c);
+        if (!g->ease_from) {
+            bool ok = true;
+            pr->c[c].ease_from = xalloc((size_t)(g->n / 2) * OCEAN_EASE_COL_FLOATS(g->n) * sizeof(float), &ok);
+            if (!ok)
+                return false;
+        }
+    }
+    pr->easable = true;
+    return true;
+}
+
 /* Everything new parameters need, beside the live grids (read only). */
 static struct ocean_prepared *prepare(const struct ocean *o, const struct ocean_params *p, struct ocean_pool *pool,
                                       int threads, char *err, size_t errlen)
@@ -785,6 +830,11 @@ static struct ocean_prepared *prepare(const struct ocean *o, const struct ocean_
             ocean_prepared_free(pr);
             return NULL;
         }
+    if (!prepare_ease(o, pr)) {
+        snprintf(err, errlen, "out of memory for resolution %d", p->resolution);
+        ocean_prepared_free(pr);
+        return NULL;
+    }
     return pr;
 }
 
@@ -801,10 +851,68 @@ struct ocean_prepared *ocean_prepare(struct ocean *o, const struct ocean_params 
     return prepare(o, p, o->prep_pool, o->opt.threads, err, errlen);
 }
 
+/* The start of an easing at t0 on grid g, before its amplitudes are
+ * replaced: ease_from becomes what a step at t0 reads, the amplitudes in
+ * force (or, during an easing, the mix at t0: no jump), in column blocks. */
+struct ease_ctx {
+    struct ocean_grid *g;
+    float w;                   /* the running easing's weight at t0; 1: none */
+};
+
+static void ease_columns(void *arg, int i0, int i1, int worker)
+{
+    (void)worker;
+    const struct ease_ctx *c = arg;
+    struct ocean_grid *g = c->g;
+    const int n = g->n, per = (n / 2 + 7) / 8;
+    const size_t len = OCEAN_EASE_COL_FLOATS(n);
+    for (int ix = i0 * per; ix < i1 * per && ix < n / 2; ix++) {
+        float *from = ocean_ease_col(g->ease_from, n, ix);
+        const float *to = ocean_amp_col(g->ampc, n, ix); /* a, b, d, e: its first 4 N floats */
+        if (c->w >= 1.0f)
+            memcpy(from, to, len * sizeof(float));
+        else
+            for (size_t i = 0; i < len; i++)
+                from[i] = ocean_ease_mix(from[i], to[i], c->w);
+    }
+}
+
+static void ease_start(struct ocean *o, struct ocean_grid *g, double t0)
+{
+    struct ease_ctx c = {g, g->ease_len > 0 ? ocean_ease_weight(g->ease_t0, g->ease_len, t0) : 1.0f};
+    int threads = g->n >= OCEAN_THREADS_FROM_N ? g->workers : 1;
+    ocean_parallel(o->pool, threads, 8, ease_columns, &c);
+}
+
+bool ocean_prepared_easable(const struct ocean_prepared *pr)
+{
+    return pr && pr->easable;
+}
+
 int ocean_commit(struct ocean *o, struct ocean_prepared *pr)
+{
+    return ocean_commit_eased(o, pr, 0, 0);
+}
+
+int ocean_commit_eased(struct ocean *o, struct ocean_prepared *pr, double t0, double len)
 {
     if (!o || !pr || pr->generation != o->generation)
         return -1; /* prepared against another state: nothing changes */
+    bool ease = pr->easable && isfinite(t0) && isfinite(len) && len > 0;
+    for (int c = 0; c < o->ncascades; c++) {
+        struct ocean_grid *g = cascade_grid(o, c);
+        if (ease) {
+            if (!g->ease_from) {
+                g->ease_from = pr->c[c].ease_from;
+                pr->c[c].ease_from = NULL;
+            }
+            ease_start(o, g, t0); /* before the amplitudes are swapped: it reads those in force */
+            g->ease_t0 = t0;
+            g->ease_len = len;
+        } else {
+            g->ease_len = 0; /* at once, also from the middle of an easing */
+        }
+    }
     o->p = pr->p;
     for (int c = 0; c < pr->ncascades; c++) {
         struct cascade_prep *cp = &pr->c[c];
@@ -869,7 +977,24 @@ struct ocean_surface *ocean_prepared_surface(const struct ocean *o, const struct
         view[c].omega = cp->amps.omega;
         grids[c] = &view[c];
     }
-    return ocean_surface_from(grids, pr->ncascades, &pr->p, err, errlen);
+    if (!pr->easable)
+        return ocean_surface_from(grids, pr->ncascades, &pr->p, err, errlen);
+    /* An eased commit will start from the amplitudes in force (or from an
+     * easing's mix of them with its own `from`): keep their modes too, and
+     * make room for them (ocean_surface_ease fills it after the commit). */
+    struct surface_ease ease = {.keep_stride = OCEAN_AMP_COL_FLOATS(o->g->n)};
+    for (int c = 0; c < pr->ncascades; c++) {
+        const struct ocean_grid *g = cascade_grid(o, c);
+        ease.keep[c] = g->ampc;
+        ease.from[c] = g->ease_len > 0 ? g->ease_from : NULL;
+    }
+    return ocean_surface_from_eased(grids, pr->ncascades, &pr->p, &ease, err, errlen);
+}
+
+void ocean_easing(const struct ocean *o, double *t0, double *len)
+{
+    *t0 = o && o->g ? o->g->ease_t0 : 0;
+    *len = o && o->g ? o->g->ease_len : 0;
 }
 
 /* ---- public API ------------------------------------------------------- */

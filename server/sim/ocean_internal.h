@@ -39,6 +39,27 @@ enum ocean_column { COL_H, COL_KZ, COL_INVK, COL_KZINVK, COL_KZ2INVK, COL_COUNT 
  * a column with no transposition. */
 #define OCEAN_AMP_COL_FLOATS(n) (7 * (size_t)(n)) /* 5 float + 1 double arrays of N */
 static inline float *ocean_amp_col(float *ampc, int n, int ix) { return ampc + (size_t)ix * OCEAN_AMP_COL_FLOATS(n); }
+#define OCEAN_EASE_COL_FLOATS(n) (4 * (size_t)(n)) /* a, b, d, e of a column */
+static inline float *ocean_ease_col(float *from, int n, int ix) { return from + (size_t)ix * OCEAN_EASE_COL_FLOATS(n); }
+
+/* The easing's weight at sim time t of a change eased in over [t0, t0 +
+ * len]: 0 (the old amplitudes) up to t0, 1 (the new) from t0 + len on,
+ * linear between (a temporal predictor extrapolates a linear ramp exactly
+ * but at its two ends; docs/simulation.md "Easing" has the measurement).
+ * One function for the step and the query snapshots: the same float. */
+static inline float ocean_ease_weight(double t0, double len, double t)
+{
+    if (!(len > 0))
+        return 1.0f;
+    double u = (t - t0) / len;
+#ifdef OCEAN_EASE_SMOOTH /* measurement only (docs/simulation.md "Easing"): smoothstep */
+    u = u >= 1 ? 1 : u > 0 ? u * u * (3 - 2 * u) : 0;
+#endif
+    return u >= 1 ? 1.0f : u > 0 ? (float)u : 0.0f;
+}
+/* One amplitude during an easing: from + w (to - from), in float. */
+static inline float ocean_ease_mix(float from, float to, float w) { return from + w * (to - from); }
+
 /* Within a column: a = col, b = col + N, d = col + 2N, e = col + 3N,
  * linvk = col + 4N, omega = (double *)(col + 5N). */
 
@@ -67,6 +88,15 @@ struct ocean_grid {
      * per column ix = 0 .. N/2-1 (the Nyquist column, zero, left out), see
      * ocean_amp_col. */
     float *ampc;
+    /* Easing (ocean_commit_eased, docs/simulation.md "Easing"): while
+     * ease_len > 0, a step at time t reads per mode the amplitudes
+     * ocean_ease_mix(from, to, ocean_ease_weight(ease_t0, ease_len, t)),
+     * `to` being a, b, d, e above and `from` these: OCEAN_EASE_COL_FLOATS(N)
+     * per column ix = 0 .. N/2-1 (a, b, d, e of the column, N floats each,
+     * as in ampc). Allocated by the first eased change and kept (reused by
+     * the next); NULL before. */
+    float *ease_from;
+    double ease_t0, ease_len;  /* s of sim time; ease_len 0: no easing */
     /* z-pass spectra (after the z pass), block-major: the values of rows
      * iz = b*B + r (B = OCEAN_ROW_BLOCK) are at col[k][2*((b*nh + ix)*B + r)],
      * so a block of B rows is one contiguous piece that row_plan reads as
@@ -217,5 +247,20 @@ void ocean_fftw_unlock(void);
  * grids[c] (all of one N), under parameters p: queries sum them all. */
 struct ocean_surface *ocean_surface_from(const struct ocean_grid *const *grids, int count,
                                          const struct ocean_params *p, char *err, size_t errlen);
+/* The same, with an easing (ocean_commit_eased): keep[c] (column-major a,
+ * b, d, e with `keep_stride` floats per column, or NULL) and from[c]
+ * (OCEAN_EASE_COL_FLOATS per column, or NULL) add the modes they hold to
+ * those kept; with fill, from[] are the amplitudes eased from over [t0, t0 +
+ * len], else the snapshot only makes room for them (ocean_surface_ease). */
+struct surface_ease {
+    const float *keep[OCEAN_MAX_CASCADES];
+    size_t keep_stride;
+    const float *from[OCEAN_MAX_CASCADES];
+    bool fill;
+    double t0, len;
+};
+struct ocean_surface *ocean_surface_from_eased(const struct ocean_grid *const *grids, int count,
+                                               const struct ocean_params *p, const struct surface_ease *ease,
+                                               char *err, size_t errlen);
 
 #endif

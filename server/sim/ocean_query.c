@@ -65,6 +65,11 @@ struct ocean_surface {
      * (ocean_internal.h) with the weight w_k (1 for kx = 0, else 2: the
      * mirrored half) folded in. */
     double *kx, *invk, *omega, *a, *b, *d, *e;
+    /* An easing (ocean_commit_eased): with ease_len > 0, the amplitudes at
+     * time t are ocean_ease_mix(from, a, w(t)) etc. per mode, from = fa, fb,
+     * fd, fe (same layout and weight, NULL when the snapshot has no room). */
+    double *fa, *fb, *fd, *fe;
+    double ease_t0, ease_len;
 };
 
 struct ocean_surface *ocean_surface_new(const struct ocean *o, char *err, size_t errlen)
@@ -77,19 +82,72 @@ struct ocean_surface *ocean_surface_new(const struct ocean *o, char *err, size_t
     int count = o->ncascades < 1 ? 1 : o->ncascades > MAXC ? MAXC : o->ncascades;
     for (int c = 1; c < count; c++)
         grids[c] = o->fine[c];
-    return ocean_surface_from(grids, count, &o->p, err, errlen);
+    if (!(o->g->ease_len > 0))
+        return ocean_surface_from(grids, count, &o->p, err, errlen);
+    struct surface_ease ease = {.fill = true, .t0 = o->g->ease_t0, .len = o->g->ease_len};
+    for (int c = 0; c < count; c++)
+        ease.from[c] = grids[c]->ease_from;
+    return ocean_surface_from_eased(grids, count, &o->p, &ease, err, errlen);
+}
+
+/* Amplitude k (0..3: a, b, d, e) of mode (ix, iz) in a column-major copy
+ * with `stride` floats per column (the Nyquist column ix = N/2 has none: 0). */
+static float col_amp(const float *buf, size_t stride, int n, int ix, int iz, int k)
+{
+    return ix < n / 2 ? buf[(size_t)ix * stride + (size_t)k * n + iz] : 0.0f;
+}
+
+/* The snapshot's `from` amplitudes of cascade c from a grid's ease_from. */
+static void fill_from(struct ocean_surface *s, int c, const float *from)
+{
+    const int n = s->n;
+    const size_t stride = OCEAN_EASE_COL_FLOATS(n);
+    double *dst[4] = {s->fa, s->fb, s->fd, s->fe};
+    for (int r = s->crow[c]; r < s->crow[c + 1]; r++) {
+        const int mz = s->row_mz[r], iz = mz < 0 ? mz + n : mz;
+        for (int at = s->row_start[r]; at < s->row_start[r + 1]; at++) {
+            const int ix = s->row_c0[r] + (at - s->row_start[r]);
+            const double w = ix == 0 ? 1.0 : 2.0;
+            for (int k = 0; k < 4; k++)
+                dst[k][at] = w * col_amp(from, stride, n, ix, iz, k);
+        }
+    }
+}
+
+int ocean_surface_ease(struct ocean_surface *s, const struct ocean *o)
+{
+    if (!s || !o)
+        return -1;
+    if (!(o->g->ease_len > 0)) {
+        s->ease_len = 0;
+        return 0;
+    }
+    if (!s->fa || o->ncascades != s->ncasc || o->g->n != s->n)
+        return -1; /* no room was made: not a snapshot of this easing */
+    for (int c = 0; c < s->ncasc; c++)
+        fill_from(s, c, c == 0 ? o->g->ease_from : o->fine[c]->ease_from);
+    s->ease_t0 = o->g->ease_t0;
+    s->ease_len = o->g->ease_len;
+    return 0;
 }
 
 /* Which modes of grid g to keep (non-zero amplitude: the Nyquist row and
  * column, k = 0, a calm sea and a finer cascade's modes outside its band
  * add nothing), and per row the span from its first to its last kept
  * column. Returns the spans' total length; *kept counts kept modes. */
-static size_t grid_spans(const struct ocean_grid *g, char *keep, size_t *kept, int *rows)
+static size_t grid_spans(const struct ocean_grid *g, const float *also[2], const size_t stride[2], char *keep,
+                         size_t *kept, int *rows)
 {
     const int n = g->n, nh = g->nh;
     size_t span = 0;
     for (size_t i = 0; i < g->modes; i++)
         keep[i] = g->a[i] != 0 || g->b[i] != 0 || g->d[i] != 0 || g->e[i] != 0;
+    for (int j = 0; j < 2; j++) /* an easing's other amplitudes: their modes too */
+        if (also[j])
+            for (int ix = 0; ix < n / 2; ix++)
+                for (int k = 0; k < 4; k++)
+                    for (int iz = 0; iz < n; iz++)
+                        keep[(size_t)iz * nh + ix] |= col_amp(also[j], stride[j], n, ix, iz, k) != 0;
     for (int iz = 0; iz < n; iz++) {
         int c0 = -1, c1 = -1;
         for (int ix = 0; ix < nh; ix++)
@@ -108,6 +166,13 @@ static size_t grid_spans(const struct ocean_grid *g, char *keep, size_t *kept, i
  * under parameters pp (ocean.c also calls it on a prepared state). */
 struct ocean_surface *ocean_surface_from(const struct ocean_grid *const *grids, int count,
                                          const struct ocean_params *pp, char *err, size_t errlen)
+{
+    return ocean_surface_from_eased(grids, count, pp, NULL, err, errlen);
+}
+
+struct ocean_surface *ocean_surface_from_eased(const struct ocean_grid *const *grids, int count,
+                                               const struct ocean_params *pp, const struct surface_ease *ease,
+                                               char *err, size_t errlen)
 {
     if (count < 1 || count > MAXC || !grids || !grids[0]) {
         snprintf(err, errlen, "no simulation");
@@ -136,7 +201,9 @@ struct ocean_surface *ocean_surface_from(const struct ocean_grid *const *grids, 
         keep[c] = calloc(grids[c]->modes, 1);
         if (!keep[c])
             goto nomem;
-        span += grid_spans(grids[c], keep[c], &kept, &rows);
+        const float *also[2] = {ease ? ease->keep[c] : NULL, ease ? ease->from[c] : NULL};
+        const size_t stride[2] = {ease ? ease->keep_stride : 0, OCEAN_EASE_COL_FLOATS(n)};
+        span += grid_spans(grids[c], also, stride, keep[c], &kept, &rows);
     }
     s->modes = (int)kept;
     size_t m = span ? span : 1;
@@ -151,6 +218,12 @@ struct ocean_surface *ocean_surface_from(const struct ocean_grid *const *grids, 
     if (!s->row_start || !s->row_mz || !s->row_c0 || !s->row_kz || !s->kx || !s->invk || !s->omega || !s->a ||
         !s->b || !s->d || !s->e)
         goto nomem;
+    if (ease) {
+        double **from[] = {&s->fa, &s->fb, &s->fd, &s->fe};
+        for (size_t j = 0; j < sizeof from / sizeof from[0]; j++)
+            if (!(*from[j] = calloc(m, sizeof(double))))
+                goto nomem;
+    }
     size_t at = 0;
     for (int c = 0; c < count; c++) {
         const struct ocean_grid *g = grids[c];
@@ -189,6 +262,13 @@ struct ocean_surface *ocean_surface_from(const struct ocean_grid *const *grids, 
     }
     s->crow[count] = s->rows;
     s->row_start[s->rows] = (int)at;
+    if (ease && ease->fill && ease->len > 0) {
+        for (int c = 0; c < count; c++)
+            if (ease->from[c])
+                fill_from(s, c, ease->from[c]);
+        s->ease_t0 = ease->t0;
+        s->ease_len = ease->len;
+    }
     for (int c = 0; c < count; c++)
         free(keep[c]);
     return s;
@@ -215,6 +295,10 @@ void ocean_surface_free(struct ocean_surface *s)
     free(s->b);
     free(s->d);
     free(s->e);
+    free(s->fa);
+    free(s->fb);
+    free(s->fd);
+    free(s->fe);
     free(s);
 }
 
@@ -594,12 +678,24 @@ int ocean_surface_query_from(const struct ocean_surface *s, double t, const doub
         if (tt < 0)
             tt += s->loop;
     }
+    /* During an easing, the amplitudes the step reads at t: the same float
+     * mix (the weights w_k = 1, 2 folded in scale it exactly). Time
+     * derivatives are those of the sea with the amplitudes of the instant
+     * (the easing's own rate is left out: docs/simulation.md "Easing"). */
+    const float ew = s->fa && s->ease_len > 0 ? ocean_ease_weight(s->ease_t0, s->ease_len, t) : 1.0f;
     for (int i = 0; i < s->spans; i++) {
         double om = s->omega[i], c = cos(om * tt), sn = sin(om * tt);
-        w.pr[i] = s->a[i] * c + s->b[i] * sn;
-        w.pi[i] = s->d[i] * c - s->e[i] * sn;
-        w.qr[i] = om * (s->b[i] * c - s->a[i] * sn);
-        w.qi[i] = -om * (s->d[i] * sn + s->e[i] * c);
+        double a = s->a[i], b = s->b[i], d = s->d[i], e = s->e[i];
+        if (ew < 1.0f) {
+            a = ocean_ease_mix((float)s->fa[i], (float)a, ew);
+            b = ocean_ease_mix((float)s->fb[i], (float)b, ew);
+            d = ocean_ease_mix((float)s->fd[i], (float)d, ew);
+            e = ocean_ease_mix((float)s->fe[i], (float)e, ew);
+        }
+        w.pr[i] = a * c + b * sn;
+        w.pi[i] = d * c - e * sn;
+        w.qr[i] = om * (b * c - a * sn);
+        w.qi[i] = -om * (d * sn + e * c);
     }
     for (int i = 0; i < npoints; i++) {
         const double L = s->patch[0];

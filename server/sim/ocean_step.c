@@ -70,6 +70,7 @@ struct fill_ctx {
     unsigned tm;    /* transforms (fields) */
     unsigned skip;  /* benchmark: OCEAN_SKIP_* parts of our own work left out (all: FFTW only) */
     const struct ocean_foam_update *foam; /* or NULL: no foam this step */
+    float ease_w;   /* < 1: an easing is under way, the fill mixes g->ease_from into the amplitudes */
 };
 
 /* Which z-pass spectra a set of transforms needs. */
@@ -167,6 +168,28 @@ static void fill_column(const float *restrict col, double t, int n, float *restr
     }
 }
 
+/* fill_column during an easing: the amplitudes are ocean_ease_mix(from,
+ * to, w) per mode (from: the column's OCEAN_EASE_COL_FLOATS), the rest as
+ * above. A separate function so that the usual step's loop is untouched. */
+__attribute__((target_clones("avx512f", "avx2", "default")))
+static void fill_column_eased(const float *restrict col, const float *restrict from, float w, double t, int n,
+                              float *restrict h, float *restrict s, float *restrict c)
+{
+    const float *a = col, *b = col + n, *d = col + 2 * (size_t)n, *e = col + 3 * (size_t)n;
+    const float *fa = from, *fb = from + n, *fd = from + 2 * (size_t)n, *fe = from + 3 * (size_t)n;
+    const double *omega = (const double *)(col + 5 * (size_t)n);
+    const int half = n / 2;
+    for (int i0 = 0; i0 <= half; i0 += 16)
+        sincos_row(omega + i0, t, 16, s + i0, c + i0);
+    for (int i = 0; i < n; i++) {
+        const int m = i <= half ? i : n - i; /* same |kz|, same w */
+        const float ai = ocean_ease_mix(fa[i], a[i], w), bi = ocean_ease_mix(fb[i], b[i], w);
+        const float di = ocean_ease_mix(fd[i], d[i], w), ei = ocean_ease_mix(fe[i], e[i], w);
+        h[2 * i] = ai * c[m] + bi * s[m];
+        h[2 * i + 1] = di * c[m] - ei * s[m];
+    }
+}
+
 /* Fill and z pass of tiles [t0, t1) of T kx columns, fused so that each
  * spectrum is transformed while it is in cache: h~(k,t) of the tile is
  * computed column by column (from the column-major amplitudes, a
@@ -191,8 +214,13 @@ static void fill_tiles(void *arg, int t0, int t1, int worker)
     static const enum ocean_column order[COL_COUNT] = {COL_KZ, COL_INVK, COL_KZINVK, COL_KZ2INVK, COL_H};
     for (int tl = t0; tl < t1; tl++) {
         const int c0 = tl * T;
-        for (int j = 0; j < T && !(c->skip & OCEAN_SKIP_FILL); j++)
-            fill_column(ocean_amp_col(g->ampc, n, c0 + j), c->t, n, h + 2 * j * sd, ps, pc);
+        for (int j = 0; j < T && !(c->skip & OCEAN_SKIP_FILL); j++) {
+            if (c->ease_w < 1.0f)
+                fill_column_eased(ocean_amp_col(g->ampc, n, c0 + j), ocean_ease_col(g->ease_from, n, c0 + j),
+                                  c->ease_w, c->t, n, h + 2 * j * sd, ps, pc);
+            else
+                fill_column(ocean_amp_col(g->ampc, n, c0 + j), c->t, n, h + 2 * j * sd, ps, pc);
+        }
         for (int q = 0; q < COL_COUNT; q++) {
             const enum ocean_column k = order[q];
             if (!(c->cols & (1u << k)))
@@ -334,7 +362,7 @@ static int step_threads(const struct ocean_grid *g)
 void ocean_step_parts(struct ocean *o, double t, unsigned fields, unsigned skip)
 {
     unsigned tm = ocean_transforms_for(fields);
-    struct fill_ctx c = {o, o->g, ocean_phase_time(o, t), columns_for(tm), tm, skip, NULL};
+    struct fill_ctx c = {o, o->g, ocean_phase_time(o, t), columns_for(tm), tm, skip, NULL, 1.0f};
     run_step(&c, step_threads(o->g));
 }
 
@@ -351,7 +379,10 @@ int ocean_step_fft_grid(struct ocean *o, struct ocean_grid *g, double t, unsigne
         return 0;
     if (foam && !(tm & (1u << TR_JXX)))
         return -1;
-    struct fill_ctx c = {o, g, ocean_phase_time(o, t), columns_for(tm), tm, 0, foam};
+    /* The easing's weight from t itself, not the phase time: an easing is
+     * in sim time, whether or not the sea loops. */
+    float ease_w = g->ease_from ? ocean_ease_weight(g->ease_t0, g->ease_len, t) : 1.0f;
+    struct fill_ctx c = {o, g, ocean_phase_time(o, t), columns_for(tm), tm, 0, foam, ease_w};
     run_step(&c, step_threads(g));
     return 0;
 }

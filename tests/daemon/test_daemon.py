@@ -30,6 +30,7 @@ import websockets
 ARGS = None
 BASE_N = 256          # resolution used by the tests (smaller under sanitizers)
 TICK = 30.0
+EASE_TICKS = 8        # --ease-ticks' default: an amplitude change eases in over this many ticks
 TILE = 128            # the daemon's default tile size; tiles are min(TILE, N) on a side
 
 
@@ -523,6 +524,11 @@ def test_determinism_end_to_end(d):
                                                                      "choppiness": 1.5}}))
         p = await recv_json(a, lambda m: m["type"] == "params")
         h, m = await recv_frame(a, lambda h, m: h["params_version"] == p["params_version"] and h["tile_count"] > 0)
+        # The wind change eases in over EASE_TICKS ticks (docs/simulation.md "Easing"): a frame
+        # from then on is the new parameters' sea.
+        first = h["sim_time"]
+        h, m = await recv_frame(a, lambda h, m: h["params_version"] == p["params_version"] and h["tile_count"] > 0
+                                and h["sim_time"] >= first + EASE_TICKS / TICK - 1e-9)
         res2 = frame_check(d, p["params"], [m])
         check(res2[0]["bad"] == 0 and res2[0]["max_err"] == 0, "after a set: %r" % res2)
         print("    bit-exact at t=%.3f and at t=%.3f after a set" % (res[0]["sim_time"], res2[0]["sim_time"]))

@@ -10,6 +10,8 @@ against a real oceand, reusing test_daemon.py's harness.
   and very large coordinates, with choppiness 0, 1 and 2;
 - one cascade, on grid nodes with choppiness 0: `query` heights equal the lossless
   streamed grid of the same tick (float32 FFT vs double sum: within 0.1 mm);
+- during an easing (a wind change eased in over a few ticks), a lossless frame is neither the
+  old nor the new parameters' sea, and a query at its time equals it (grid nodes, 0.1 mm);
 - with 3 cascades, a query is the sum of the streamed cascades: the lossless
   grids of every cascade's height, dx, dz and slopes of the query's tick,
   each evaluated at (x mod L_c, z mod L_c) by its exact trigonometric
@@ -146,6 +148,47 @@ def test_query_on_grid_nodes_equals_streamed_grid(d):
         worst = max(abs(p["height"] - float(grid[iz, ix])) for p, (ix, iz) in zip(r["points"], nodes))
         check(worst < 1e-4, "query vs lossless grid: %.2e m" % worst)
         print("    grid nodes: max |query - streamed| = %.2e m (seq %d)" % (worst, f.seq))
+        await ws.close()
+    asyncio.run(run())
+
+
+@test
+def test_query_during_an_easing_equals_the_stream(d):
+    """A wind change eases in over --ease-ticks ticks (docs/simulation.md
+    "Easing"): a lossless frame in the middle of it is neither the old nor the
+    new parameters' sea, and a query at its time and version answers that
+    same sea (one cascade, choppiness 0, grid nodes, as above)."""
+    async def run():
+        ws, hello = await connect(d)
+        check(hello.get("ease_ticks") == td.EASE_TICKS, "hello announces ease_ticks %r, the daemon eases over %d"
+              % (hello.get("ease_ticks"), td.EASE_TICKS))
+        p1 = await set_params(ws, {"choppiness": 0, "cascades": 1, "wind_speed": 9}, 1)
+        await ws.send(json.dumps({"type": "subscribe", "id": 2, "fields": ["height"], "lod": 0, "bound": 0}))
+        await recv_json(ws, lambda m: m.get("id") == 2)
+        h1, _ = await recv_frame(ws, lambda h, b: h["params_version"] == p1["params_version"], timeout=10)
+        await recv_frame(ws, lambda h, b: h["sim_time"] >= h1["sim_time"] + (td.EASE_TICKS + 1) / td.TICK,
+                         timeout=10)   # the easing to 9 m/s is over
+        p = await set_params(ws, {"wind_speed": 14}, 3)
+        _, msg = await recv_frame(ws, lambda h, b: h["params_version"] == p["params_version"] and
+                                  td.tiles(b) and td.tiles(b)[0]["codec"] == 0, timeout=10)
+        f, grid = frame_grid(msg)
+        n, L = f.n, f.patch_size
+        rnd = random.Random(5)
+        nodes = [(rnd.randrange(n), rnd.randrange(n)) for _ in range(24)]
+        pts = [[ix * L / n, iz * L / n] for ix, iz in nodes]
+        await ws.send(json.dumps({"type": "query", "id": 4, "points": pts, "time": f.sim_time}))
+        r = await recv_json(ws, lambda m: m.get("id") == 4, timeout=10)
+        check(r["type"] == "query_result" and r["params_version"] == f.params_version, "query: %r" % r)
+        worst = max(abs(q["height"] - float(grid[iz, ix])) for q, (ix, iz) in zip(r["points"], nodes))
+        new = query_ref(d, p["params"], f.sim_time, pts)          # the new parameters' sea at once
+        old = query_ref(d, dict(p["params"], wind_speed=9), f.sim_time, pts)
+        off_new = max(abs(q["height"] - float(grid[iz, ix])) for q, (ix, iz) in zip(new, nodes))
+        off_old = max(abs(q["height"] - float(grid[iz, ix])) for q, (ix, iz) in zip(old, nodes))
+        check(off_new > 1e-2 and off_old > 1e-2, "the frame is not in the middle of an easing: %.2e m from the new "
+              "sea, %.2e m from the old" % (off_new, off_old))
+        check(worst < 1e-4, "query vs the lossless frame during an easing: %.2e m" % worst)
+        print("    during an easing (seq %d): |query - streamed| = %.2e m; the new sea is %.2e m off, the old %.2e m"
+              % (f.seq, worst, off_new, off_old))
         await ws.close()
     asyncio.run(run())
 

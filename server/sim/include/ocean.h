@@ -96,6 +96,26 @@ struct ocean_prepared;
 struct ocean_prepared *ocean_prepare(struct ocean *o, const struct ocean_params *p, char *err, size_t errlen);
 int ocean_commit(struct ocean *o, struct ocean_prepared *pr);
 void ocean_prepared_free(struct ocean_prepared *pr);
+/* Easing (docs/simulation.md, "Easing"): ocean_commit_eased(o, pr, t0, len)
+ * commits like ocean_commit, but when the change alters only the
+ * amplitudes h~0 (ocean_prepared_easable: same N, seed, patch, depth, loop
+ * period and cascades, FFT path; wind, amplitude, spectrum, fetch, ...)
+ * N <= OCEAN_EASE_MAX_N and len > 0, the sea eases from the amplitudes in force at t0 (during
+ * another easing: its mix at t0, so there is no jump) to the new ones over
+ * sim time [t0, t0 + len]: a step at t uses from + w (to - from) per mode,
+ * w = (t - t0) / len clamped to [0, 1]. Choppiness changes at once. Any
+ * other commit ends an easing at once. ocean_commit = ocean_commit_eased
+ * with len 0. Same threads as ocean_commit; the start of an easing copies
+ * the amplitudes in force (O(N^2), on o's own workers). */
+int ocean_commit_eased(struct ocean *o, struct ocean_prepared *pr, double t0, double len);
+/* Largest N eased: the start of an easing copies 8 N^2 bytes per cascade on
+ * the committing (tick) thread, 5 ms at N = 1024 with 3 cascades, 30 ms at
+ * 2048 (a whole tick): there a change applies at once, as before. */
+#define OCEAN_EASE_MAX_N 1024
+bool ocean_prepared_easable(const struct ocean_prepared *pr);
+/* The easing in force (len 0: none), for callers that must know when the
+ * sea is exactly the parameters' (tests, frame checks). */
+void ocean_easing(const struct ocean *o, double *t0, double *len);
 /* Compute the fields in the mask (OCEAN_FIELD_BIT...) at time t seconds.
  * With OCEAN_FOAM the Jacobian is computed too, and the foam is decayed
  * for the time since the previous foam step and fed from this step's
@@ -171,6 +191,12 @@ struct ocean_surface *ocean_surface_new(const struct ocean *o, char *err, size_t
  * keeps stepping (it reads only what ocean_step does not write). */
 struct ocean_surface *ocean_prepared_surface(const struct ocean *o, const struct ocean_prepared *pr, char *err,
                                              size_t errlen);
+/* After ocean_commit_eased of pr: give s, pr's ocean_prepared_surface, the
+ * amplitudes the easing starts from (O(modes), on the committing thread),
+ * so that a query at any time agrees with the steps. A commit that did not
+ * ease leaves s as it is (the new amplitudes at every time). 0, or -1 when
+ * s was not made for this commit (then it holds the new amplitudes only). */
+int ocean_surface_ease(struct ocean_surface *s, const struct ocean *o);
 void ocean_surface_free(struct ocean_surface *s);
 /* Values at npoints world points xz[i] = {x, z} at simulation time t (s).
  * Any finite coordinates (the sea is periodic). Returns 0, or -1 (nothing
