@@ -16,7 +16,8 @@
  *   --streams      only the temporal stream rows (codec_stream: 10 s at 30 Hz, all
  *                  fields, bounds 1 mm and 1 cm); --keyframe-interval K their periodic
  *                  keyframe interval in ticks (default OC_STREAM_KEYFRAME_INTERVAL, 0 = none);
- *                  --stream-n N only that N (256 or 512).
+ *                  --stream-n N only that N (256 or 512). Their "hash" (FNV-1a 64 of every
+ *                  byte sent) tells whether two encoder builds wrote identical streams.
  *   --dump-fields N FRAMES FILE  write FRAMES ticks of all fields (raw float32) and exit. */
 #include "oc_proto.h"
 
@@ -304,6 +305,7 @@ struct stream_run {
     struct oc_decoder *dec;
     struct oc_buf buf;
     double bytes, max_err, t_enc, t_dec, t_intra, intra_bytes;
+    uint64_t hash;             /* FNV-1a of every byte sent: equal hashes = bit-identical encoder output */
     float *dec_field;
     FILE *dump;
 };
@@ -334,6 +336,7 @@ static void bench_streams(int n, int interval)
             run[f][b].st = oc_stream_new(n, tile, 0, (enum oc_field)f, bounds[b]);
             oc_stream_set_keyframe_interval(run[f][b].st, interval);
             run[f][b].dec = oc_decoder_new();
+            run[f][b].hash = 0xcbf29ce484222325ull;
             run[f][b].dec_field = malloc(sizeof(float) * n * n);
             if (frames_dir && f < 3 && b == 1) {   /* the web client's default layers, for bench_decode.mjs */
                 char path[512];
@@ -368,6 +371,7 @@ static void bench_streams(int n, int interval)
                     }
                 r->t_enc += now() - t0;
                 r->bytes += (double)r->buf.len;
+                for (size_t k = 0; k < r->buf.len; k++) r->hash = (r->hash ^ r->buf.data[k]) * 0x100000001b3ull;
                 /* The intra codec on the same fresh field, for a same-conditions speed ratio. */
                 t0 = now();
                 for (int tz = 0; tz < grid; tz++)
@@ -398,11 +402,11 @@ static void bench_streams(int n, int interval)
             struct stream_run *r = &run[f][b];
             printf("{\"bench\":\"codec_stream\",\"N\":%d,\"field\":\"%s\",\"bound\":%g,\"tile\":%d,\"bits\":%.3f,"
                    "\"max_err\":%.6g,\"keyframe_interval\":%d,\"ticks\":%d,\"enc_MBs\":%.0f,\"dec_MBs\":%.0f,"
-                   "\"intra_bits\":%.3f,\"intra_enc_MBs\":%.0f}\n",
+                   "\"intra_bits\":%.3f,\"intra_enc_MBs\":%.0f,\"hash\":\"%016llx\"}\n",
                    n, oc_field_name((enum oc_field)f), bounds[b], tile, r->bytes * 8 / ((double)n * n * STREAM_TICKS),
                    r->max_err, interval, STREAM_TICKS, mb / r->t_enc, mb / r->t_dec,
                    (r->intra_bytes + (double)OC_FRAME_HEADER_SIZE * STREAM_TICKS) * 8 / ((double)n * n * STREAM_TICKS),
-                   mb / r->t_intra);
+                   mb / r->t_intra, (unsigned long long)r->hash);
             oc_stream_free(r->st);
             oc_decoder_free(r->dec);
             oc_buf_free(&r->buf);

@@ -40,11 +40,11 @@ try {
       const skip = await page.evaluate(() => window.oceand.stats.timings.decode.length); // warm-up frames
       await page.waitForTimeout(Number(args.seconds) * 1000);
       const s = await page.evaluate(() => ({ t: window.oceand.stats.timings, f: window.oceand.framesReceived, kBps: window.oceand.stats.kBps,
-        sub: window.oceand.subscription, temporal: window.oceand.stats.temporal }));
+        sub: window.oceand.subscription, temporal: window.oceand.stats.temporal, inflater: window.oceand.stats.inflater }));
       const decode = s.t.decode.slice(skip), upload = s.t.upload.slice(skip), assemble = s.t.assemble.slice(skip);
       const total = decode.map((d, i) => d + upload[i]);
       console.log(JSON.stringify({
-        bench: 'web_decode_upload', n, codec, layers, subscription: describe(s.sub), still_temporal: s.temporal, frames: decode.length,
+        bench: 'web_decode_upload', n, codec, layers, subscription: describe(s.sub), still_temporal: s.temporal, inflater: s.inflater, frames: decode.length,
         received_per_s: +((s.f - f0) / Number(args.seconds)).toFixed(1), kB_per_s: +s.kBps.toFixed(0),
         decode_ms_median: +median(decode).toFixed(2), assemble_ms_median: +median(assemble).toFixed(2), upload_ms_median: +median(upload).toFixed(2),
         total_ms_median: +median(total).toFixed(2), loadavg_1m: +loadavg()[0].toFixed(2),

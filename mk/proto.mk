@@ -43,7 +43,7 @@ test-proto-asan: $(BUILD)/san/test_proto
 # The C tests under valgrind: zero errors, zero definite leaks (~40 s of CPU: the 60 s temporal stream).
 test-proto-valgrind: $(BUILD)/test_proto
 	valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite $(BUILD)/test_proto proto/vectors
-test-proto-js:
+test-proto-js: $(BUILD)/wasm/oc_kernels.wasm
 	node --test tests/proto_js.test.mjs tests/proto_js_inflate.test.mjs tests/proto_js_browser.test.mjs
 proto-vectors: $(BUILD)/gen_vectors
 	$(BUILD)/gen_vectors proto/vectors

@@ -1,12 +1,13 @@
 # mk/web.mk — the browser client (issue 5): bundle, playwright tests, decode+upload bench.
 # web/node_modules comes from `npm ci` (scripts/deps.sh, from web/package-lock.json).
 
-WEB_SRC := web/index.html web/build.mjs $(wildcard web/src/*.js web/src/*.css) proto/js/oc_decode.js
+WEB_SRC := web/index.html web/build.mjs $(wildcard web/src/*.js web/src/*.css) proto/js/oc_decode.js proto/js/oc_wasm.js \
+           $(BUILD)/wasm/oc_kernels.wasm
 
 BINS += $(BUILD)/web/index.html
 
 $(BUILD)/web/index.html: $(WEB_SRC) web/node_modules/.package-lock.json
-	node web/build.mjs $(BUILD)/web
+	node web/build.mjs $(BUILD)/web $(BUILD)/wasm/oc_kernels.wasm
 
 # npm ci writes node_modules/.package-lock.json; run deps.sh when it is missing.
 web/node_modules/.package-lock.json: web/package-lock.json

@@ -679,6 +679,50 @@ static void test_stream_tiny_tiles(void)
     oc_encoder_free(e);
 }
 
+/* Codes far from the usual: a large sea plus noise of thousands of metres (codes near 2^20,
+ * residuals needing 3-byte escapes in both packings, and normal-equation sums past 2^51, so
+ * the encoder's fit takes its sample-by-sample path). Every frame decodes within the bound. */
+static void test_stream_wide_codes(void)
+{
+    enum { N = 128 };
+    static float f[N * N];
+    struct oc_encoder *e = oc_encoder_new();
+    struct oc_stream *st = oc_stream_new(N, N, 0, OC_FIELD_HEIGHT, 0.01f);
+    struct oc_decoder *d = oc_decoder_new();
+    struct oc_buf buf = { 0 };
+    int predicted = 0, escaped = 0;
+    double worst = 0;
+    for (int k = 0; k < 8; k++) {
+        sea(f, N, k / 30.0, 4000.0);
+        for (int i = 0; i < N * N; i++) f[i] += (float)(4000.0 * (2.0 * urand() - 1.0));
+        CHECK(oc_stream_encode(st, e, f, 7 + (uint64_t)k) == OC_OK, "wide codes: encode");
+        struct oc_frame_header fh = { .seq = 7 + (uint64_t)k, .n = N, .tile_size = N, .patch_size = 16, .tile_count = 1 };
+        const uint8_t *p;
+        size_t len;
+        oc_stream_tile(st, 0, 0, &p, &len);
+        if (p[2] == OC_CODEC_TEMPORAL) {
+            predicted++;
+            escaped += p[OC_TILE_HEADER_SIZE + 2] >= 3;   /* esc_width: residuals of 2^16 and more */
+        }
+        buf.len = 0;
+        oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE + len);
+        oc_frame_header_write(buf.data, &fh);
+        memcpy(buf.data + OC_FRAME_HEADER_SIZE, p, len);
+        buf.len = OC_FRAME_HEADER_SIZE + len;
+        struct bound_ctx bc = { { f, f }, N, { 0.01f, 0.01f }, { 0, 0 }, 0, 0 };
+        struct oc_frame_header out;
+        int rc = oc_decode_frame(d, buf.data, buf.len, &out, bound_tile, &bc);
+        CHECK(rc == OC_OK, "wide codes tick %d: %s", k, oc_strerror(rc));
+        worst = fmax(worst, bc.maxerr[0]);
+    }
+    CHECK(worst <= 0.01 && predicted >= 6 && escaped == predicted, "wide codes: max err %g, %d predicted, %d escaped",
+          worst, predicted, escaped);
+    oc_buf_free(&buf);
+    oc_stream_free(st);
+    oc_decoder_free(d);
+    oc_encoder_free(e);
+}
+
 int main(int argc, char **argv)
 {
     if (argc != 2) { fprintf(stderr, "usage: test_proto VECTOR_DIR\n"); return 2; }
@@ -689,6 +733,7 @@ int main(int argc, char **argv)
     test_stream_vectors(argv[1]);
     test_stream_60s();
     test_stream_tiny_tiles();
+    test_stream_wide_codes();
     printf("%d checks, %d failed\n", checks, failures);
     if (failures) { printf("test_proto: FAILED\n"); return 1; }
     printf("test_proto: OK\n");

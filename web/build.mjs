@@ -1,7 +1,8 @@
 // Bundle the browser client into a static folder the daemon serves.
-//   node build.mjs [outdir]      (default ../build/web)
+//   node build.mjs [outdir] [kernels.wasm]   (defaults ../build/web, ../build/wasm/oc_kernels.wasm)
 // Output: index.html, style.css, app.js (main thread), worker.js (decoder worker).
-// Everything is bundled: no CDN, nothing is fetched at run time.
+// Everything is bundled: no CDN, nothing is fetched at run time. The worker's WebAssembly kernels
+// (built by `make`, mk/wasm.mk) are embedded as bytes: `import bytes from 'oc-kernels.wasm'`.
 import * as esbuild from 'esbuild';
 import { copyFile, mkdir } from 'node:fs/promises';
 import path from 'node:path';
@@ -9,6 +10,13 @@ import { fileURLToPath } from 'node:url';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const outdir = path.resolve(process.argv[2] || path.join(here, '..', 'build', 'web'));
+const kernels = path.resolve(process.argv[3] || path.join(here, '..', 'build', 'wasm', 'oc_kernels.wasm'));
+const kernelsPlugin = {
+  name: 'oc-kernels',
+  setup(build) {
+    build.onResolve({ filter: /^oc-kernels\.wasm$/ }, () => ({ path: kernels }));
+  },
+};
 
 await mkdir(outdir, { recursive: true });
 await esbuild.build({
@@ -23,6 +31,8 @@ await esbuild.build({
   minify: true,
   sourcemap: true,
   logLevel: 'warning',
+  loader: { '.wasm': 'binary' },
+  plugins: [kernelsPlugin],
 });
 await copyFile(path.join(here, 'src', 'style.css'), path.join(outdir, 'style.css'));
 // index.html last: it is the make target, so it is only fresh when everything else is.

@@ -128,18 +128,18 @@ done:
     return 1;
 }
 
-/* Quantise vals on a given grid (a temporal chain's): 1 if every sample meets
- * the bound with codes below 2^30 in magnitude, 0 if the grid no longer fits. */
-int oc_enc_quantise_on(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound, double offset,
-                       double scale)
+/* Quantise vals on a given grid (a temporal chain's) into q (count codes): 1 if every
+ * sample meets the bound with codes below 2^30 in magnitude, 0 if the grid no longer fits. */
+int oc_enc_quantise_on(struct oc_encoder *e, int32_t *q, size_t count, float vmin, float vmax, double bound,
+                       double offset, double scale)
 {
     if (fmax(fabs((double)vmax - offset), fabs((double)vmin - offset)) / scale > 0x1p30) return 0;
-    if (!quantise_pass(e->vals, e->q, count, offset, scale, bound)) return 1;
+    if (!quantise_pass(e->vals, q, count, offset, scale, bound)) return 1;
     for (size_t k = 0; k < count; k++) {
         const float v = e->vals[k];
-        if (fabs((double)oc_dequant(e->q[k], offset, scale) - (double)v) <= bound) continue;
-        if (fabs((double)oc_dequant(e->q[k] - 1, offset, scale) - (double)v) <= bound) e->q[k] -= 1;
-        else if (fabs((double)oc_dequant(e->q[k] + 1, offset, scale) - (double)v) <= bound) e->q[k] += 1;
+        if (fabs((double)oc_dequant(q[k], offset, scale) - (double)v) <= bound) continue;
+        if (fabs((double)oc_dequant(q[k] - 1, offset, scale) - (double)v) <= bound) q[k] -= 1;
+        else if (fabs((double)oc_dequant(q[k] + 1, offset, scale) - (double)v) <= bound) q[k] += 1;
         else return 0;
     }
     return 1;
@@ -210,11 +210,12 @@ int oc_enc_gather(struct oc_encoder *e, const float *field_data, int n, int tile
     return oc_enc_scan_range(e->vals, count, vmin, vmax) ? OC_E_ARG : OC_OK;
 }
 
-/* Append the intra (codec 1/2) tile of codes q with th's grid. allow_raw: send
- * codec 0 when the lossy payload is not smaller (never for chain keyframes,
- * whose codes the receiver must keep). */
-int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q, int allow_raw,
-                        struct oc_buf *out)
+/* Append the intra (codec 1/2) tile of codes q with th's grid. coef: the predictor
+ * coefficients to use, or NULL for the encoder's (fitted, or forced by the test hook).
+ * allow_raw: send codec 0 when the lossy payload is not smaller (never for chain
+ * keyframes, whose codes the receiver must keep). */
+int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q,
+                        const int8_t *coef_in, int allow_raw, struct oc_buf *out)
 {
     const int side = th->width;
     const size_t count = (size_t)side * side;
@@ -223,7 +224,8 @@ int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const i
     th->codec = (uint8_t)e->codec;
     int8_t coef[OC_PRED_COEFS];
     uint32_t maxabs = oc_max_abs(q, count);
-    if (e->force) memcpy(coef, e->forced, OC_PRED_COEFS);
+    if (coef_in) memcpy(coef, coef_in, OC_PRED_COEFS);
+    else if (e->force) memcpy(coef, e->forced, OC_PRED_COEFS);
     else oc_predict_fit_m(q, side, side, maxabs, coef);
     oc_predict_residuals_m(q, side, side, maxabs, coef, e->zz);
     int esc_width;
@@ -275,7 +277,7 @@ int oc_encode_tile(struct oc_encoder *e, const float *field_data, int n, int til
     };
     if (bound == 0 || !oc_enc_quantise_new(e, count, vmin, vmax, bound, 1.0, &th.offset, &th.scale))
         return oc_enc_append_raw(out, &th, e->vals, count);
-    return oc_enc_append_intra(e, &th, e->q, 1, out);
+    return oc_enc_append_intra(e, &th, e->q, NULL, 1, out);
 }
 
 int oc_encode_tile_cascade(struct oc_encoder *e, const float *field_data, int n, int tile_size,

@@ -199,16 +199,28 @@ static int cl_rle(const uint8_t *lens, int n, uint8_t *sym, uint8_t *extra)
     return m;
 }
 
-static size_t huffman_only(const struct oc_entropy *c, const uint8_t *src, size_t n, uint8_t *dst, size_t cap)
+void oc_byte_hist_add(const uint8_t *src, size_t n, uint32_t out[256])
 {
-    static const uint8_t cl_order[19] = { 16, 17, 18, 0, 8, 7, 9, 6, 10, 5, 11, 4, 12, 3, 13, 2, 14, 1, 15 };
-    static const uint8_t cl_extra[19] = { [16] = 2, [17] = 3, [18] = 7 };
-    /* Histogram with four tables: consecutive equal bytes would serialise one counter. */
-    uint32_t hist[4][256] = { { 0 } }, freq[LIT_SYMS];
+    /* Four tables: consecutive equal bytes would serialise one counter. */
+    uint32_t hist[4][256] = { { 0 } };
     size_t k = 0;
     for (; k + 4 <= n; k += 4) { hist[0][src[k]]++; hist[1][src[k + 1]]++; hist[2][src[k + 2]]++; hist[3][src[k + 3]]++; }
     for (; k < n; k++) hist[0][src[k]]++;
-    for (int s = 0; s < 256; s++) freq[s] = hist[0][s] + hist[1][s] + hist[2][s] + hist[3][s];
+    for (int s = 0; s < 256; s++) out[s] += hist[0][s] + hist[1][s] + hist[2][s] + hist[3][s];
+}
+
+/* hist: src's byte histogram, or NULL to count it here. */
+static size_t huffman_only(const struct oc_entropy *c, const uint8_t *src, size_t n, const uint32_t *hist,
+                           uint8_t *dst, size_t cap)
+{
+    static const uint8_t cl_order[19] = { 16, 17, 18, 0, 8, 7, 9, 6, 10, 5, 11, 4, 12, 3, 13, 2, 14, 1, 15 };
+    static const uint8_t cl_extra[19] = { [16] = 2, [17] = 3, [18] = 7 };
+    uint32_t freq[LIT_SYMS];
+    if (hist) memcpy(freq, hist, sizeof(uint32_t) * 256);
+    else {
+        memset(freq, 0, sizeof(uint32_t) * 256);
+        oc_byte_hist_add(src, n, freq);
+    }
     freq[256] = 1;
 
     /* Dynamic block: literal/length code + 2 one-bit distance codes (never used;
@@ -279,10 +291,17 @@ static size_t huffman_only(const struct oc_entropy *c, const uint8_t *src, size_
     return (size_t)(w.p - dst);
 }
 
+size_t oc_entropy_compress_hist(struct oc_entropy *c, int codec, int level, const uint8_t *src, size_t n,
+                                const uint32_t hist[256], uint8_t *dst, size_t cap)
+{
+    if (codec == OC_CODEC_QUANT_LORENZO && level == 1) return huffman_only(c, src, n, hist, dst, cap);
+    return oc_entropy_compress(c, codec, level, src, n, dst, cap);
+}
+
 size_t oc_entropy_compress(struct oc_entropy *c, int codec, int level, const uint8_t *src, size_t n,
                            uint8_t *dst, size_t cap)
 {
-    if (codec == OC_CODEC_QUANT_LORENZO && level == 1) return huffman_only(c, src, n, dst, cap);
+    if (codec == OC_CODEC_QUANT_LORENZO && level == 1) return huffman_only(c, src, n, NULL, dst, cap);
     if (codec == OC_CODEC_QUANT_LORENZO_ZSTD) {
         if (!c->zc && !(c->zc = ZSTD_createCCtx())) return 0;
         size_t r = ZSTD_compressCCtx(c->zc, dst, cap, src, n, level);

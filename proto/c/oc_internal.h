@@ -79,11 +79,12 @@ int oc_enc_gather(struct oc_encoder *e, const float *field_data, int n, int tile
                   int lod, float *vmin, float *vmax);
 int oc_enc_quantise_new(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound, double headroom,
                         double *offset, double *scale);
-int oc_enc_quantise_on(struct oc_encoder *e, size_t count, float vmin, float vmax, double bound, double offset,
-                       double scale);
+int oc_enc_quantise_on(struct oc_encoder *e, int32_t *q, size_t count, float vmin, float vmax, double bound,
+                       double offset, double scale);
 int oc_enc_append_raw(struct oc_buf *out, struct oc_tile_header *th, const float *vals, size_t count);
-int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q, int allow_raw,
-                        struct oc_buf *out);
+/* coef: the predictor coefficients, or NULL for the encoder's (fitted, or the test hook's). */
+int oc_enc_append_intra(struct oc_encoder *e, struct oc_tile_header *th, const int32_t *q,
+                        const int8_t *coef, int allow_raw, struct oc_buf *out);
 
 /* Temporal prediction (codec 3, oc_temporal.c), PROTOCOL.md §5.6-5.8.
  * Payload prefix, 40 bytes:
@@ -116,6 +117,11 @@ void oc_temporal_fit(const int32_t *const *refs, const int32_t *const *laps, int
  * Returns the plain length; sets the counts. */
 size_t oc_pack_pairs(const uint32_t *zz, size_t count, uint8_t *out, uint32_t *esc_scratch,
                      size_t *pair_esc_count, size_t *esc_count, int *esc_width);
+/* The same in two steps: the (count+1)/2 pair bytes (255 = escaped pair), then, with
+ * those in out, the escaped pairs' values after them. */
+void oc_pair_bytes(const uint32_t *zz, size_t count, uint8_t *out);
+size_t oc_pack_pair_escapes(const uint32_t *zz, size_t count, uint8_t *out, uint32_t *esc_scratch,
+                            size_t *pair_esc_count, size_t *esc_count, int *esc_width);
 /* Inverse; plain_len is checked against the counts. OC_E_CORRUPT on any inconsistency. */
 int oc_unpack_pairs(const uint8_t *in, size_t plain_len, size_t count, size_t pair_esc_count, size_t esc_count,
                     int esc_width, uint32_t *zz, uint32_t *scratch);
@@ -131,6 +137,11 @@ size_t oc_entropy_bound(int codec, size_t n);
 /* Returns compressed size, or 0 on failure. */
 size_t oc_entropy_compress(struct oc_entropy *c, int codec, int level, const uint8_t *src, size_t n,
                            uint8_t *dst, size_t cap);
+/* The same with the byte histogram of src already counted (hist[b] = bytes equal to b). */
+size_t oc_entropy_compress_hist(struct oc_entropy *c, int codec, int level, const uint8_t *src, size_t n,
+                                const uint32_t hist[256], uint8_t *dst, size_t cap);
+/* hist += the byte histogram of src. */
+void oc_byte_hist_add(const uint8_t *src, size_t n, uint32_t hist[256]);
 /* Decompress exactly n bytes consuming exactly srclen bytes; OC_E_CORRUPT otherwise. */
 int oc_entropy_decompress(struct oc_entropy *c, int codec, const uint8_t *src, size_t srclen,
                           uint8_t *dst, size_t n);

@@ -169,32 +169,51 @@ static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, int3
             z[i] = (r << 1) ^ (0u - (r >> 31));
         }
     }
-    /* Which packing: byte per sample or pairs, by the order-0 entropy of the bytes each gives. */
-    uint32_t h1[256] = { 0 }, h2[256] = { 0 };
-    size_t wide1 = 0, n2 = npairs, wide2 = 0;
-    for (size_t p = 0; p < npairs; p++) {
-        uint32_t z1 = e->zz[2 * p], z2 = 2 * p + 1 < count ? e->zz[2 * p + 1] : 0;
-        h1[z1 < 255 ? z1 : 255]++;
-        wide1 += z1 >= 255;
-        if (2 * p + 1 < count) { h1[z2 < 255 ? z2 : 255]++; wide1 += z2 >= 255; }
-        if (z1 < OC_PAIR_LIMIT && z2 < OC_PAIR_LIMIT) {
-            h2[OC_PAIR_LIMIT * z1 + z2]++;
-        } else {
-            h2[255]++;
+    /* Which packing: byte per sample or pairs, by the order-0 entropy of the bytes each gives.
+     * The pair bytes are written first (at packed) and histogrammed; the byte-per-sample
+     * histogram follows from theirs (a pair byte 15*z1 + z2 holds both values) plus the
+     * escaped pairs' values, so the bytes (at packed + count) are written only if chosen. */
+    uint8_t *const pb = e->packed, *const cb = e->packed + count;
+    oc_pair_bytes(e->zz, count, pb);
+    uint32_t h1[256] = { 0 }, hp[256] = { 0 }, h2[256];
+    oc_byte_hist_add(pb, npairs, hp);
+    memcpy(h2, hp, sizeof h2);
+    for (int z1 = 0; z1 < OC_PAIR_LIMIT; z1++)
+        for (int z2 = 0; z2 < OC_PAIR_LIMIT; z2++) {
+            h1[z1] += hp[OC_PAIR_LIMIT * z1 + z2];
+            h1[z2] += hp[OC_PAIR_LIMIT * z1 + z2];
+        }
+    if ((count & 1) && pb[npairs - 1] != 255) h1[0]--;     /* the odd count's padding value is no sample */
+    const size_t n2 = npairs + 2 * (size_t)hp[255];
+    size_t wide2 = 0;
+    if (hp[255])       /* the escaped pairs: their two values, each a byte in the estimate */
+        for (const uint8_t *x = pb, *end = pb + npairs; (x = memchr(x, 255, (size_t)(end - x))) != NULL; x++) {
+            const size_t p = (size_t)(x - pb);
+            const int real2 = 2 * p + 1 < count;
+            const uint32_t z1 = e->zz[2 * p], z2 = real2 ? e->zz[2 * p + 1] : 0;
             h2[z1 < 255 ? z1 : 255]++;
             h2[z2 < 255 ? z2 : 255]++;
-            n2 += 2;
             wide2 += (z1 >= 255) + (z2 >= 255);
+            h1[z1 < 255 ? z1 : 255]++;
+            if (real2) h1[z2 < 255 ? z2 : 255]++;
         }
-    }
+    const size_t wide1 = h1[255];
     const int pairs = entropy_bits(h2, n2) + 16.0 * wide2 < entropy_bits(h1, count) + 16.0 * wide1;
     int esc_width;
     size_t esc_count, pair_esc = 0, plain;
+    const uint8_t *src;
+    uint32_t *hist;
     if (pairs) {
-        plain = oc_pack_pairs(e->zz, count, e->packed, e->esc, &pair_esc, &esc_count, &esc_width);
+        plain = oc_pack_pair_escapes(e->zz, count, pb, e->esc, &pair_esc, &esc_count, &esc_width);
+        oc_byte_hist_add(pb + npairs, plain - npairs, hp);
+        src = pb;
+        hist = hp;
     } else {
-        esc_count = oc_pack_escapes(e->zz, count, e->packed, e->esc, &esc_width);
+        esc_count = oc_pack_escapes(e->zz, count, cb, e->esc, &esc_width);
         plain = count + esc_count * (size_t)esc_width;
+        oc_byte_hist_add(cb + count, plain - count, h1);
+        src = cb;
+        hist = h1;
     }
     size_t cap = OC_TEMPORAL_PREFIX + oc_entropy_bound(OC_CODEC_QUANT_LORENZO, plain);
     if ((rc = oc_buf_reserve(out, OC_TILE_HEADER_SIZE + cap))) return rc;
@@ -207,8 +226,8 @@ static int append_temporal(struct oc_encoder *e, struct oc_tile_header *th, int3
     oc_put_u32(payload + 8, (uint32_t)pair_esc);
     oc_put_u64(payload + 16, ref_seq);
     for (int k = 0; k < OC_TEMPORAL_COEFS; k++) oc_put_u16(payload + 24 + 2 * k, (uint16_t)coef[k]);
-    size_t clen = oc_entropy_compress(e->ent, OC_CODEC_QUANT_LORENZO, 1, e->packed, plain,
-                                      payload + OC_TEMPORAL_PREFIX, cap - OC_TEMPORAL_PREFIX);
+    size_t clen = oc_entropy_compress_hist(e->ent, OC_CODEC_QUANT_LORENZO, 1, src, plain, hist,
+                                           payload + OC_TEMPORAL_PREFIX, cap - OC_TEMPORAL_PREFIX);
     if (clen == 0) return OC_E_NOMEM;
     th->codec = OC_CODEC_TEMPORAL;
     th->payload_len = (uint32_t)(OC_TEMPORAL_PREFIX + clen);
@@ -242,15 +261,7 @@ static int intra_snapped(struct oc_encoder *e, struct oc_tile_header *th, int32_
             q[k] = snap(q[k], (int32_t)p, v[k], th->offset, th->scale, th->bound);
         }
     /* The residuals must use the coefficients the choice was made with. */
-    const int force = e->force;
-    int8_t forced[OC_PRED_COEFS];
-    memcpy(forced, e->forced, sizeof forced);
-    e->force = 1;
-    memcpy(e->forced, c, sizeof c);
-    int rc = oc_enc_append_intra(e, th, q, 0, out);
-    e->force = force;
-    memcpy(e->forced, forced, sizeof forced);
-    return rc;
+    return oc_enc_append_intra(e, th, q, c, 0, out);
 }
 
 /* Intra (codec 1) on the chain's grid with codes that are multiples of `refine` (the
@@ -260,7 +271,6 @@ static int intra_snapped(struct oc_encoder *e, struct oc_tile_header *th, int32_
 static int intra_coarse(struct oc_encoder *e, struct oc_tile_header *th, int refine, int32_t *q, struct oc_buf *out,
                         int *ok)
 {
-    static const int8_t lorenzo[OC_PRED_COEFS] = { 64, 64, -64, 0, 0, 0 };
     const size_t count = (size_t)th->width * th->height;
     const double coarse = th->scale * refine;
     *ok = 0;
@@ -276,14 +286,7 @@ static int intra_coarse(struct oc_encoder *e, struct oc_tile_header *th, int ref
         }
         q[k] = c;
     }
-    const int force = e->force;
-    int8_t forced[OC_PRED_COEFS];
-    memcpy(forced, e->forced, sizeof forced);
-    e->force = 1;
-    memcpy(e->forced, lorenzo, sizeof lorenzo);
-    int rc = oc_enc_append_intra(e, th, q, 0, out);
-    e->force = force;
-    memcpy(e->forced, forced, sizeof forced);
+    int rc = oc_enc_append_intra(e, th, q, oc_lorenzo_coef, 0, out);
     *ok = rc == OC_OK;
     return rc;
 }
@@ -347,12 +350,15 @@ static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *f
         .field = (uint8_t)s->field, .lod = (uint8_t)s->lod, .tile_x = (uint16_t)tx, .tile_z = (uint16_t)tz,
         .width = (uint16_t)s->side, .height = (uint16_t)s->side, .bound = s->bound,
     };
-    int32_t *cur = t->ring[s->head];
-    /* e->q: the rounded codes on the fine grid (within bound / refine, so within the bound) */
+    int32_t *cur = t->ring[s->head];   /* this tick's slot: no reference of it */
+    /* The rounded codes on the fine grid (within bound / refine, so within the bound):
+     * straight into cur, unless a changed sea's intra candidates need them after the
+     * predicted tile has moved cur's codes (then in e->q, and copied). */
+    int32_t *rounded = s->changed ? e->q : cur;
     const double fine_bound = (double)s->bound / s->refine;
     if (s->bound > 0 && consecutive && !periodic && t->hist > 0
-        && oc_enc_quantise_on(e, count, vmin, vmax, fine_bound, t->offset, t->scale)
-        && oc_max_abs(e->q, count) < (uint32_t)(OC_TEMPORAL_CODE_MAX - s->refine)) {
+        && oc_enc_quantise_on(e, rounded, count, vmin, vmax, fine_bound, t->offset, t->scale)
+        && oc_max_abs(rounded, count) < (uint32_t)(OC_TEMPORAL_CODE_MAX - s->refine)) {
         /* Predicted from the previous ticks of the chain. */
         const int32_t *refs[OC_TEMPORAL_MAX_DEPTH], *laps[OC_TEMPORAL_MAX_DEPTH];
         int depth = t->hist < OC_TEMPORAL_MAX_DEPTH ? t->hist : OC_TEMPORAL_MAX_DEPTH;
@@ -360,7 +366,7 @@ static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *f
             refs[i] = t->ring[(s->head + RING - 1 - i) % RING];
             laps[i] = t->lap[(s->head + RING - 1 - i) % RING];
         }
-        memcpy(cur, e->q, count * sizeof(int32_t));
+        if (rounded != cur) memcpy(cur, rounded, count * sizeof(int32_t));
         th.offset = t->offset;
         th.scale = t->scale;
         if ((rc = append_temporal(e, &th, cur, e->vals, refs, laps, depth, s->seq - 1, &t->shared))) return rc;
@@ -461,7 +467,7 @@ int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_
         .offset = t->offset, .scale = t->scale,
     };
     t->key.len = 0;
-    int rc = oc_enc_append_intra(e, &th, t->ring[s->head], 0, &t->key);
+    int rc = oc_enc_append_intra(e, &th, t->ring[s->head], NULL, 0, &t->key);
     if (rc) return rc;
     t->key_ready = 1;
     s->stats.demand_key_tiles++;

@@ -15,12 +15,14 @@
 //   node proto/js/bench_decode.mjs --stream FILE   (FILE from record_frames.mjs: a daemon's frames with
 // the web client's default subscription) instead: `codec_js_decode_recorded` lines, the stream decoded in
 // order the way the web worker does (fflate + streams), whole and split by layers (cascade 0's
-// height/dx/dz, foam, cascades 1-3: the same frames with only those tiles kept); cpu_ms = CPU per frame.
+// height/dx/dz, foam, cascades 1-3: the same frames with only those tiles kept); cpu_ms = CPU per frame;
+// once with the JavaScript path, once with the WebAssembly kernels (inflate: 'wasm').
 import { readFileSync, readdirSync, existsSync } from 'node:fs';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { createRequire } from 'node:module';
-import { decodeFrame, setZstdDecompressor, setInflateRaw, DecoderState } from './oc_decode.js';
+import { decodeFrame, setZstdDecompressor, setInflateRaw, setTemporalKernel, DecoderState } from './oc_decode.js';
+import { loadKernels } from './oc_wasm.js';
 
 const root = join(dirname(fileURLToPath(import.meta.url)), '../..');
 const streamArg = process.argv[2] === '--stream' ? process.argv[3] : null;
@@ -81,8 +83,15 @@ async function benchRecorded(path) {
   const sets = {
     all: () => true, 'height,dx,dz': (fl, c) => c === 0 && fl !== 6, foam: (fl) => fl === 6, 'cascades 1-3': (fl, c) => c > 0,
   };
-  setInflateRaw(fflateInflate);
-  for (const [layers, keep] of Object.entries(sets)) {
+  // The JavaScript path (fflate + streams) and the WebAssembly kernels (build/wasm/oc_kernels.wasm:
+  // inflate + codec 3 prediction), as the web worker uses them; alternated, in one run.
+  const wasmFile = join(root, 'build/wasm/oc_kernels.wasm');
+  const kernels = existsSync(wasmFile) ? await loadKernels(readFileSync(wasmFile)) : null;
+  const variants = [{ name: fflateInflate ? 'fflate+streams' : 'streams', inflate: fflateInflate, temporal: null }];
+  if (kernels) variants.push({ name: 'wasm', inflate: kernels.inflateRaw, temporal: kernels.temporal });
+  for (const [layers, keep] of Object.entries(sets)) for (const v of variants) {
+    setInflateRaw(v.inflate, { allTiles: v.name === 'wasm' });
+    setTemporalKernel(v.temporal);
     const fr = frames.map((f) => only(f, keep));
     const times = [];
     const cpu0 = process.cpuUsage();
@@ -99,11 +108,12 @@ async function benchRecorded(path) {
     console.log(JSON.stringify({
       bench: 'codec_js_decode_recorded', file: path.split('/').pop(), layers, frames: fr.length,
       kB_per_frame: +(fr.reduce((c, f) => c + f.byteLength, 0) / fr.length / 1e3).toFixed(1),
-      inflate: fflateInflate ? 'fflate+streams' : 'streams',
+      inflate: v.name,
       ms: +times[times.length >> 1].toFixed(2), cpu_ms: +((cpu.user + cpu.system) / 1e3 / (3 * fr.length)).toFixed(2),
     }));
   }
   setInflateRaw(null);
+  setTemporalKernel(null);
 }
 
 if (!existsSync(dir)) {

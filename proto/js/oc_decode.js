@@ -46,7 +46,19 @@ let inflateRawSync = null;
  * Used for tiles below STREAM_MIN_SAMPLES (all tiles where DecompressionStream is missing);
  * under node only with options.useNodeZlib = false.
  */
-export function setInflateRaw(fn) { inflateRawSync = fn; }
+export function setInflateRaw(fn, options = {}) { inflateRawSync = fn; inflateAll = !!(fn && options.allTiles); }
+// options.allTiles: the installed inflater takes every tile, large ones too (the WebAssembly one,
+// faster than a DecompressionStream at any tile size).
+let inflateAll = false;
+
+let temporalKernel = null;
+/**
+ * Install a codec 3 prediction kernel (null removes it): fn(refs, depth, zz, w, h, coef, q, dst, offset, scale, pairs)
+ * (zz: the zigzag residuals, or with pairs = true stream A of pair packing without escaped pairs) -> true when it wrote the tile's codes to q (Int32Array) and its samples to dst ({array, offset, stride,
+ * rowStride}), false to leave the tile to this module's JavaScript (bit-identical). The WebAssembly one:
+ * proto/js/oc_wasm.js's loadKernels(bytes).temporal.
+ */
+export function setTemporalKernel(fn) { temporalKernel = fn; }
 
 /** Error thrown for bad input; `code` says which kind. */
 export class FrameError extends Error {
@@ -162,7 +174,7 @@ const haveStreams = typeof DecompressionStream === 'function';
 // Codec 3 tiles inflate to half as many bytes (pair packing) from a quarter of the input, so
 // the stream's set-up dominates: they take the synchronous inflater whenever one is installed
 // (node, CPU per N=256 frame of height+dx+dz: 4.2-5.3 ms with fflate, 5.5-6.5 with streams).
-const preferStream = (t) => t.codec === CODEC_QUANT_LORENZO && t.width * t.height >= STREAM_MIN_SAMPLES;
+const preferStream = (t) => !inflateAll && t.codec === CODEC_QUANT_LORENZO && t.width * t.height >= STREAM_MIN_SAMPLES;
 
 // One DecompressionStream per tile (async; decodeFrame runs them concurrently).
 async function inflateRawStream(src, n) {
@@ -451,12 +463,18 @@ function unpackPairs(packed, count, pairEsc, escCount, escWidth) {
 let aScratch = new Float64Array(4096), bScratch = new Float64Array(4096);
 function reconstructTemporal(t, packed, l, state, dst) {
   const w = t.width, h = t.height, count = w * h;
+  if (temporalKernel && l.packing === 1 && l.pairEsc === 0) { // the kernel unpacks the pairs too
+    const q = takeCodes(state, count);
+    if (temporalKernel(l.refs.map((r) => r.codes), l.depth, packed, w, h, l.coef, q, dst, t.offset, t.scale, true)) return q;
+    if (state) state.spare.push(q);
+  }
   let zz;
   if (l.packing === 1) zz = unpackPairs(packed, count, l.pairEsc, l.escCount, l.escWidth);
   else if (l.escCount === 0) zz = packed;
   else { zz = new Int32Array(count); unpackEscapes(zz, packed, count, l.escCount, l.escWidth); }
   const q = takeCodes(state, count), out = dst.array, os = dst.stride, ors = dst.rowStride;
   const [c0, c1, c2, c3, c4, c5, c6] = l.coef, depth = l.depth;
+  if (temporalKernel && temporalKernel(l.refs.map((r) => r.codes), depth, zz, w, h, l.coef, q, dst, t.offset, t.scale)) return q;
   const a1 = c0, a2 = c1 - c0, a3 = c2 - c1, a4 = -c2, b1 = c3 + c6, b2 = c4 - c3, b3 = c5 - c4, b4 = -c5;
   // Missing references (depth < 4) stand in as q1: their coefficients are 0.
   const ref = (k) => l.refs[k < depth ? k : 0].codes;

@@ -239,6 +239,7 @@ worker.onmessage = (ev) => {
   if (st.lastSeq !== null && h.seq > st.lastSeq + 1) stats.dropped += h.seq - st.lastSeq - 1;
   st.lastSeq = h.seq;
   stats.decodeMs = msg.decodeMs;
+  stats.inflater = msg.inflater; // 'wasm' or 'fflate' (the worker's raw-DEFLATE inflater)
   if (pendingFrame) recycle(pendingFrame); // superseded before it was shown
   pendingFrame = msg;
 };
@@ -312,7 +313,7 @@ window.oceand = Object.freeze({
   get stats() {
     return Object.freeze({
       fps: stats.fps, framesPerSec: stats.framesPerSec, kBps: stats.kBps, latencyMs: stats.latencyMs,
-      dropped: stats.dropped, decodeMs: stats.decodeMs, uploadMs: stats.uploadMs, n: st.n, lod: st.lod,
+      dropped: stats.dropped, decodeMs: stats.decodeMs, uploadMs: stats.uploadMs, inflater: stats.inflater, n: st.n, lod: st.lod,
       temporal, referenceErrors: st.referenceErrors, resyncs: st.resyncs, localDrops: st.localDrops,
       fallback: snapshot(st.fallback), firstDrawnMs: st.firstDrawnMs, graceMs: GRACE_MS,
       lastError: snapshot(st.lastError), serverError: snapshot(st.serverError),

@@ -6,11 +6,22 @@
 // Output buffers are transferred to the main thread, which hands them back for
 // reuse (no 4 MB allocation per frame at N=512).
 import { inflateSync } from 'fflate';
-import { decodeFrame, setInflateRaw, DecoderState } from '../../proto/js/oc_decode.js';
+import kernelBytes from 'oc-kernels.wasm';
+import { decodeFrame, setInflateRaw, setTemporalKernel, DecoderState } from '../../proto/js/oc_decode.js';
+import { loadKernels } from '../../proto/js/oc_wasm.js';
 
-// Codec 1 (raw DEFLATE): fflate's synchronous inflate for small tiles, where one async
+// Raw DEFLATE (codecs 1 and 3): a synchronous inflater for small tiles, where one async
 // DecompressionStream per tile costs more than the inflating (the decoder picks per tile).
+// The WebAssembly one (proto/wasm/oc_inflate.c, embedded in this bundle) once it has loaded;
+// fflate until then, and for good where WebAssembly is missing or refuses the module
+// (same bytes, checked on proto/vectors/: tests/proto_js_inflate.test.mjs). The module also
+// predicts codec 3 tiles (SIMD, proto/wasm/oc_predict.c); the JavaScript predictor is its fallback.
+let inflater = 'fflate';
 setInflateRaw((src, out) => inflateSync(src, { out }));
+const kernelsReady = loadKernels(kernelBytes).then((k) => {
+  // every tile: faster than a DecompressionStream at any size (docs/web.md)
+  if (k) { setInflateRaw(k.inflateRaw, { allTiles: true }); setTemporalKernel(k.temporal); inflater = 'wasm'; }
+}, () => {});
 
 const CHANNEL = { dx: [0, 4], height: [1, 4], dz: [2, 4], jacobian: [3, 4], slope_x: [0, 2], slope_z: [1, 2] };
 const pool = { 4: [], 2: [], 1: [] }; // recycled ArrayBuffers by channel count
@@ -73,6 +84,7 @@ async function drain() {
       break;
     }
     const msg = queue.shift();
+    await kernelsReady; // resolves once, within milliseconds of start-up
     await handle(msg, queue.length > 0);
     await yieldTask();
   }
@@ -108,7 +120,7 @@ async function handle(msg, superseded) {
   for (const c of fine) transfer.push(c.disp.buffer);
   if (foam) transfer.push(foam.buffer);
   self.postMessage({
-    type: 'frame', header: frame.header, lod, m, present, disp, slope, fine, foam, foamLod, fm, decodeMs, assembleMs: layoutMs, bytes: msg.buf.byteLength,
+    type: 'frame', header: frame.header, lod, m, present, disp, slope, fine, foam, foamLod, fm, decodeMs, assembleMs: layoutMs, bytes: msg.buf.byteLength, inflater,
   }, transfer);
 }
 
