@@ -51,6 +51,56 @@ static long group_samples(const struct plan *p, int g, int n)
     return (long)popcount(p->fields[g]) * side * side;
 }
 
+static double codec_cost(const struct cost_model *m, int codec)
+{
+    if (codec == CAP_TEMPORAL)
+        return m->enc_temporal_s > 0 ? m->enc_temporal_s : CAP_TEMPORAL_PRIOR * m->enc_s_per_sample;
+    return m->enc_s_per_sample;
+}
+
+double cost_encode_codec_s(const struct cost_model *m, int codec) { return codec_cost(m, codec) * penalty(m); }
+
+double cost_ewma(double model, double measured)
+{
+    double a = measured < model ? 0.25 : 0.1;
+    return (1 - a) * model + a * measured;
+}
+
+void cost_learn_encode(struct cost_model *m, const long samples[CAP_CODECS], double seconds)
+{
+    double predicted = 0;
+    for (int c = 0; c < CAP_CODECS; c++)
+        if (samples[c] > 0)
+            predicted += (double)samples[c] * codec_cost(m, c);
+    if (!(predicted > 0) || !(seconds > 0))
+        return;
+    double ratio = fmin(seconds / predicted, 2.0);
+    double intra = codec_cost(m, CAP_INTRA), temporal = codec_cost(m, CAP_TEMPORAL);
+    if (samples[CAP_INTRA] > 0)
+        m->enc_s_per_sample = cost_ewma(intra, intra * ratio);
+    if (samples[CAP_TEMPORAL] > 0)
+        m->enc_temporal_s = cost_ewma(temporal, temporal * ratio);
+}
+
+void cost_forget_temporal(struct cost_model *m) { m->enc_temporal_s = 0; }
+
+static bool group_temporal(const struct plan *p, int g) { return p->temporal[g] && p->lod[g] == g / CTL_BOUND_COUNT; }
+
+void plan_samples(const struct plan *p, int n, const bool *due, long samples[CAP_CODECS])
+{
+    for (int c = 0; c < CAP_CODECS; c++)
+        samples[c] = 0;
+    for (int g = 0; g < PLAN_GROUPS; g++)
+        if (p->fields[g] && (!due || due[g]))
+            samples[group_temporal(p, g) ? CAP_TEMPORAL : CAP_INTRA] += group_samples(p, g, n);
+}
+
+/* Seconds to encode a group at its planned LOD (every tick). */
+static double group_time(const struct cost_model *m, const struct plan *p, int g, int n)
+{
+    return (double)group_samples(p, g, n) * cost_encode_codec_s(m, group_temporal(p, g) ? CAP_TEMPORAL : CAP_INTRA);
+}
+
 static bool can_coarsen(const struct plan *p, int g, int ts) { return p->lod[g] < CTL_MAX_LOD && (ts >> (p->lod[g] + 1)) >= 1; }
 
 /* Keep plans from changing for noise: sixths of the tick rate down to a
@@ -63,8 +113,8 @@ static float quantize_rate(double r, double period_s)
     return (float)(q > 1 ? 1 : q);
 }
 
-void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS_ALL], double budget_scale,
-                   struct plan *p)
+void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS_ALL],
+                   const int tdemand[LAYER_KEYS_ALL], double budget_scale, struct plan *p)
 {
     memset(p, 0, sizeof *p);
     unsigned all = 0;
@@ -75,6 +125,7 @@ void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[L
         if (demand[k] > 0) {
             int g = plan_group(layer_key_lod(k), layer_key_bound(k));
             p->fields[g] |= OCEAN_FIELD_BIT(layer_key_field(k));
+            p->temporal[g] |= tdemand && tdemand[k] > 0;
             all |= OCEAN_FIELD_BIT(layer_key_field(k));
         }
     for (int g = 0; g < PLAN_GROUPS; g++) {
@@ -85,19 +136,25 @@ void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[L
     double step = cost_step_s(m, n, popcount(all));
     /* What encoding may take per frame: the rest of the budget, and at least a
      * quarter of it even when the step takes it all (then frames come less
-     * often than ticks, step 3, rather than at the coarsest LOD). */
+     * often than ticks, step 3, rather than at the coarsest LOD). Each group
+     * costs what a sample of its codec costs (temporal at its own LOD, else
+     * intra: cost_encode_codec_s); --encode-budget caps the samples besides. */
     double left = fmax(budget - step, budget * 0.25);
-    long cap = left > 0 && m->enc_s_per_sample > 0 ? (long)fmin(left / enc_per_sample(m), 2e9) : 0;
-    if (m->encode_budget > 0 && m->encode_budget < cap)
-        cap = m->encode_budget;
+    double scap = m->encode_budget > 0 ? (double)m->encode_budget : 1e18;
 
-    /* 1. One LOD coarser for the largest group, again and again (a quarter
-     *    of the samples each time), while the samples do not fit. */
     long total = 0;
+    double total_t = 0;
     for (int g = 0; g < PLAN_GROUPS; g++)
-        total += group_samples(p, g, n);
+        if (p->fields[g]) {
+            total += group_samples(p, g, n);
+            total_t += group_time(m, p, g, n);
+        }
+    const long wanted = total;
+    const double wanted_t = total_t;
+    /* 1. One LOD coarser for the largest group, again and again (a quarter
+     *    of the samples each time), while the frame does not fit. */
     const char *how = NULL;
-    while (total > cap) {
+    while ((double)total > scap || total_t > left) {
         int worst = -1;
         for (int g = 0; g < PLAN_GROUPS; g++)
             if (p->fields[g] && can_coarsen(p, g, ts) && (worst < 0 || group_samples(p, g, n) > group_samples(p, worst, n)))
@@ -105,29 +162,32 @@ void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[L
         if (worst < 0)
             break;
         total -= group_samples(p, worst, n);
+        total_t -= group_time(m, p, worst, n);
         p->lod[worst]++;
         total += group_samples(p, worst, n);
+        total_t += group_time(m, p, worst, n);
         how = "coarser LOD";
     }
     /* 2. Still too much (every group as coarse as it goes): the largest
      *    groups on fewer ticks. */
-    double over = (double)(total - cap);
-    for (int pass = 0; over > 0 && pass < PLAN_GROUPS; pass++) {
+    double over_s = (double)total - scap, over_t = total_t - left;
+    for (int pass = 0; (over_s > 0 || over_t > 0) && pass < PLAN_GROUPS; pass++) {
         int worst = -1;
         for (int g = 0; g < PLAN_GROUPS; g++)
             if (p->fields[g] && p->rate[g] >= 1 && (worst < 0 || group_samples(p, g, n) > group_samples(p, worst, n)))
                 worst = g;
         if (worst < 0)
             break;
-        double s = (double)group_samples(p, worst, n);
-        double r = 1.0 - over / s;
-        p->rate[worst] = quantize_rate(r, m->period_s);
-        over -= s * (1.0 - p->rate[worst]);
+        double s = (double)group_samples(p, worst, n), st = group_time(m, p, worst, n);
+        double cut = fmax(over_s > 0 ? over_s / s : 0, over_t > 0 && st > 0 ? over_t / st : 0);
+        p->rate[worst] = quantize_rate(1.0 - cut, m->period_s);
+        over_s -= s * (1.0 - p->rate[worst]);
+        over_t -= st * (1.0 - p->rate[worst]);
         how = "lower rate";
     }
     /* 3. The step alone does not fit: every group on fewer ticks (the frame
      *    takes longer than a tick; the producer runs one behind the tick). */
-    double frame = step + cost_encode_s(m, total);
+    double frame = step + total_t;
     if (frame > budget && step > 0) {
         double r = budget / frame;
         for (int g = 0; g < PLAN_GROUPS; g++)
@@ -135,9 +195,16 @@ void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[L
                 p->rate[g] = quantize_rate(r, m->period_s);
         how = "lower rate for everyone: the step alone does not fit the tick";
     }
-    if (how)
-        snprintf(p->reason, sizeof p->reason, "%s: N=%d, %ld samples per tick wanted, budget %ld, step %.1f ms of %.1f ms",
-                 how, n, total, cap, step * 1e3, budget * 1e3);
+    /* The demand at full detail against the samples that fit the encode
+     * budget at what the demanded sizes cost (it used to print the samples
+     * left after degrading, which read as under budget). */
+    if (how) {
+        double per = wanted > 0 ? wanted_t / (double)wanted : 0;
+        double fit = per > 0 ? fmin(left / per, scap) : scap;
+        snprintf(p->reason, sizeof p->reason,
+                 "%s: N=%d, %ld samples per tick wanted, budget %.0f (encode %.1f ns/sample), step %.1f ms of %.1f ms",
+                 how, n, wanted, fmin(fit, 2e9), per * 1e9, step * 1e3, budget * 1e3);
+    }
 }
 
 bool plan_degraded(const struct plan *p, int g)
@@ -156,7 +223,8 @@ double plan_value(const struct plan *p, int n)
 bool plan_same(const struct plan *a, const struct plan *b)
 {
     for (int g = 0; g < PLAN_GROUPS; g++)
-        if (a->fields[g] != b->fields[g] || a->lod[g] != b->lod[g] || a->rate[g] != b->rate[g])
+        if (a->fields[g] != b->fields[g] || a->lod[g] != b->lod[g] || a->rate[g] != b->rate[g] ||
+            a->temporal[g] != b->temporal[g])
             return false;
     return true;
 }
@@ -184,7 +252,8 @@ void capacity_info_fill(const struct cost_model *m, int n, struct capacity_info 
         if (z->fits_memory)
             c->max_resolution = size;
         for (int f = 1; f <= 6; f++) {
-            z->est_ms[f - 1] = (cost_step_s(m, size, f) + cost_encode_s(m, (long)f * size * size)) * 1e3;
+            /* with the temporal codec: what the web client asks for (intra costs about half) */
+            z->est_ms[f - 1] = (cost_step_s(m, size, f) + (double)f * size * size * cost_encode_codec_s(m, CAP_TEMPORAL)) * 1e3;
             if (z->est_ms[f - 1] <= c->budget_ms)
                 z->full_rate_fields = f;
         }

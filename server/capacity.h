@@ -4,7 +4,8 @@
  * A cost model measured at start-up (sim_start: a few steps and encodes at
  * the starting N, on this machine) and kept current from every frame:
  *   step(N, fields)  scaled from the measured N by N^2 log2 N,
- *   encode(samples)  wall seconds per sample on the encode pool.
+ *   encode(samples)  wall seconds per sample on the encode pool, per codec
+ *                    (intra; temporal, about twice as much).
  * From it:
  *   - the encode budget: samples per tick that may be encoded at N (what a
  *     frame may take, 80 % of the tick, minus the step), or --encode-budget;
@@ -25,13 +26,25 @@
 #include "control.h"
 #include "frame.h"
 
+enum { CAP_INTRA, CAP_TEMPORAL, CAP_CODECS }; /* how a group's layers are encoded */
+#define CAP_TEMPORAL_PRIOR 2.0 /* temporal / intra cost per sample until frames tell (measured above) */
+
 struct cost_model {
     double period_s;            /* 1 / tick rate */
     double budget_s;            /* share of the period a frame may take (0.8 period) */
     int n0;                     /* N the step was measured at */
     double step1_s, step6_s;    /* step at n0: height only, all six fields */
     double step_scale;          /* live correction: measured / predicted (EWMA) */
-    double enc_s_per_sample;    /* encode wall per sample on the pool (EWMA) */
+    double enc_s_per_sample;    /* encode wall per sample on the pool, intra (codec 1): the start-up
+                                   measure (height, lod 0), then EWMA from the frames */
+    double enc_temporal_s;      /* the same for temporal layers (codec 3, each tile predicted and
+                                   intra, the smaller sent): 0 = not measured yet, taken as
+                                   CAP_TEMPORAL_PRIOR x intra. Kept apart because it is twice
+                                   the intra figure (N = 1024 h/dx/dz, two cores: 7.0 against
+                                   3.3-3.6 ns/sample) and a group degraded to a coarser LOD is
+                                   sent intra (frame.c): one figure for both measured the cheap
+                                   codec while degraded, predicted that lod 0 fit, went back, and
+                                   degraded again within 0.2 s (flapping every 3.5 s) */
     double penalty;             /* transient factor on both costs (<= 1 = none): x1.25 for each tick
                                    the producer had not even started the frame before, back
                                    toward 1 on each tick it had (sim_thread.c, tick). Kept apart
@@ -45,6 +58,19 @@ struct cost_model {
 
 double cost_step_s(const struct cost_model *m, int n, int nfields);
 double cost_encode_s(const struct cost_model *m, long samples);
+/* Encode seconds per sample with this codec (CAP_INTRA, CAP_TEMPORAL), with the penalty. */
+double cost_encode_codec_s(const struct cost_model *m, int codec);
+/* Learn from a frame: samples[c] samples with codec c took `seconds` on the
+ * pool. A frame of one codec teaches that codec's figure, a mixed one moves
+ * both by its ratio to the prediction. Up slowly enough to ride out noise,
+ * and one frame counts as at most twice the prediction: a frame's first
+ * keyframes, a chain's start and the first touch of its buffers cost 3-7
+ * times the steady figure (first frames of 1024 h/dx/dz temporal: 11-27
+ * ns/sample against 7) and used to degrade a subscription before it had
+ * been served once. Sustained slowness still raises it 10 % a frame;
+ * overruns raise the penalty at once (sim_thread.c). */
+void cost_learn_encode(struct cost_model *m, const long samples[CAP_CODECS], double seconds);
+
 /* Samples per tick the distinct layers may add up to at resolution n (the
  * admission limit): --encode-budget if set, else what fits the budget after
  * a step of all six fields, and at least six fields at full resolution. */
@@ -60,18 +86,32 @@ struct plan {
     unsigned fields[PLAN_GROUPS];   /* demanded fields per group (0 = no demand) */
     unsigned char lod[PLAN_GROUPS]; /* encoded LOD per group (>= the group's own) */
     float rate[PLAN_GROUPS];        /* share of ticks the group is encoded on, (0, 1] */
-    char reason[160];               /* why, when anything is degraded */
+    bool temporal[PLAN_GROUPS];     /* a temporal client asked for one of its layers */
+    char reason[200];               /* why, when anything is degraded: the demand at full detail
+                                       (samples per tick), the budget in samples at what those
+                                       sizes cost, the step and the frame budget */
 };
 
 /* Demand -> plan at resolution n with tile side ts (per-tick samples and
- * time from the model; budget_scale < 1 plans with headroom). */
-void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS_ALL], double budget_scale,
-                   struct plan *out);
+ * time from the model; budget_scale < 1 plans with headroom). tdemand: the
+ * temporal clients per key (NULL: none). */
+void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS_ALL],
+                   const int tdemand[LAYER_KEYS_ALL], double budget_scale, struct plan *out);
 bool plan_degraded(const struct plan *p, int group);
 /* What the plan delivers, comparable between plans of the same demand:
  * sum over groups of rate * samples encoded. */
 double plan_value(const struct plan *p, int n);
 bool plan_same(const struct plan *a, const struct plan *b);
+/* Forget the temporal figure (back to CAP_TEMPORAL_PRIOR x intra): what a
+ * degraded group's recovery probe assumes when no temporal layer has been
+ * encoded to keep it current (sim_thread.c, update_plan). */
+void cost_forget_temporal(struct cost_model *m);
+/* Samples per codec the plan encodes (only the groups with due[g] unless
+ * due is NULL): a group is temporal when it has temporal demand and is
+ * encoded at its own LOD (a coarser one goes intra). */
+void plan_samples(const struct plan *p, int n, const bool *due, long samples[CAP_CODECS]);
+/* The model's moving average: down fast (a quarter), up slowly (a tenth). */
+double cost_ewma(double model, double measured);
 
 /* The announcement (control.h) from the model, at the current resolution. */
 void capacity_info_fill(const struct cost_model *m, int n, struct capacity_info *out);

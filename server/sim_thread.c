@@ -5,6 +5,7 @@
 #include "clock.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <malloc.h>
 #include <math.h>
 #include <pthread.h>
@@ -52,8 +53,12 @@ struct sim {
     double sim_time;              /* tick only: the clock (copied to now_time) */
     uint64_t seq;                 /* tick only: ticks run (PROTOCOL.md §3.3: +1 per tick, frame or not) */
     struct plan plan;             /* tick only: the plan in force (capacity.h) */
-    struct plan plan_lower;       /* tick only: a less degraded plan seen... */
-    int lower_ticks;              /* ...for this many ticks in a row (hysteresis) */
+    int lower_ticks;              /* tick only: a less degraded plan seen for this many ticks in a row */
+    int hold_ticks;               /* tick only: ...needed before it is taken (hysteresis; doubles when a
+                                     recovery is undone soon after, update_plan) */
+    int since_change;             /* tick only: ticks since the plan in force was taken */
+    bool recovered;               /* tick only: the plan in force was a recovery (less degraded, same demand) */
+    uint64_t grace_seq;           /* tick only: jobs queued before this seq do not raise the penalty */
     double credit[PLAN_GROUPS];   /* tick only: a group is encoded when its credit reaches 1 */
     bool had_demand;              /* tick only: last tick had subscribers */
 
@@ -65,6 +70,7 @@ struct sim {
     uint64_t published;           /* encode_done only (jobs are serial): frames published, for struct frame.index */
     double job_t_tick, job_t_enc; /* producer writes before the job starts; encode_done reads */
     long job_samples;             /* same */
+    long job_codec_samples[CAP_CODECS]; /* same: the plan's samples per codec (capacity.h) */
     /* Measuring at start-up (sim_start, before the threads). */
     bool measure_done;
     struct layer_streams streams; /* the temporal layers' encoder state: used by frame_job_begin (producer)
@@ -95,6 +101,7 @@ struct sim {
         uint64_t seq;
         uint32_t version;
         float patch_size;
+        long codec_samples[CAP_CODECS]; /* the plan's samples per codec on this tick (cost model) */
         struct frame_want want;
     } pj;
     uint64_t penalized_seq;           /* tick: the queued job (seq) the penalty was last raised for... */
@@ -441,15 +448,6 @@ static void publish(struct sim *s, struct frame *f)
     frame_unref(old);
 }
 
-/* The cost model follows each frame: up slowly (one slow frame on a shared
- * machine is noise; overruns raise it at once, see tick), down quickly (an
- * overrun's raise must not keep a plan degraded for long). */
-static double ewma(double model, double measured)
-{
-    double a = measured < model ? 0.25 : 0.1;
-    return (1 - a) * model + a * measured;
-}
-
 /* ---- encode (pool threads) ---- */
 
 static void encode_item(void *ctx, int item, int worker) { frame_job_item(((struct sim *)ctx)->job, item, worker); }
@@ -471,9 +469,11 @@ static void encode_done(void *ctx)
     double enc = now - s->job_t_enc;
     histogram_observe(&g_metrics.encode_seconds, enc);
     histogram_observe(&g_metrics.tick_seconds, now - s->job_t_tick);
+    /* The cost model follows each frame (cost_learn_encode: up slowly, one
+     * frame at most twice the prediction; down quickly). */
     if (s->job_samples >= 4096) { /* tiny jobs are all overhead: they would skew the per-sample cost */
         pthread_mutex_lock(&s->lock);
-        s->model.enc_s_per_sample = ewma(s->model.enc_s_per_sample, enc / (double)s->job_samples);
+        cost_learn_encode(&s->model, s->job_codec_samples, enc);
         pthread_mutex_unlock(&s->lock);
     }
     if (s->cfg.wake)
@@ -516,7 +516,7 @@ static void produce(struct sim *s, const struct prod_job *pj)
      * (under ASan the spin-up read as an 85 ms step at N = 256: 2 frames in
      * 4 s). Sustained slowness still raises it by 10 % a frame. */
     if (predicted > 0)
-        s->model.step_scale = ewma(s->model.step_scale, fmin(t_step / predicted, 2 * s->model.step_scale));
+        s->model.step_scale = cost_ewma(s->model.step_scale, fmin(t_step / predicted, 2 * s->model.step_scale));
     pthread_mutex_unlock(&s->lock);
     /* The previous frame's encode overlapped this step; its buffers are about
      * to be reused, so it must be done (we help rather than sleep). */
@@ -532,6 +532,7 @@ static void produce(struct sim *s, const struct prod_job *pj)
     s->job_t_tick = pj->t_tick;
     s->job_t_enc = mono_now();
     s->job_samples = frame_job_samples(s->job);
+    memcpy(s->job_codec_samples, pj->codec_samples, sizeof s->job_codec_samples);
     encode_pool_start(s->pool, items, encode_item, encode_done, s);
 }
 
@@ -559,40 +560,108 @@ static void *producer_main(void *arg)
 /* ---- tick thread: the clock, the plan, and handing frames to the producer ---- */
 
 /* Re-plan from the demand: a more degraded plan at once, a less degraded
- * one only after it has held for three seconds with 20 % headroom
- * (hysteresis: clients are told every change). The headroom was 40 %: a
- * plan bound by the step (N = 2048: a step of 20-30 ms against a budget of
- * 26.7) never had it, so once degraded by a slow moment it stayed there
- * (20 frames/s where 25-30 fit). A degrade needs the value to fall under
- * 90 % of the plan in force, so the two thresholds still leave a band. */
+ * one only after it has held for hold_ticks (3 s at first) with 20 %
+ * headroom (hysteresis: clients are told every change). The headroom was
+ * 40 %: a plan bound by the step (N = 2048: a step of 20-30 ms against a
+ * budget of 26.7) never had it, so once degraded by a slow moment it stayed
+ * there (20 frames/s where 25-30 fit). A degrade needs the value to fall
+ * under 90 % of the plan in force, so the two thresholds still leave a band.
+ *
+ * Recovery probe: a group degraded to a coarser LOD is sent intra, so
+ * while no temporal layer is encoded the temporal cost figure is not
+ * measured again, and one taken under load or from a slow start would keep
+ * the group degraded for good. After hold_ticks degraded with no recovery
+ * in sight, the plan is computed again with the temporal figure forgotten
+ * (CAP_TEMPORAL_PRIOR x the intra figure, which the degraded frames keep
+ * current); if that fits with the headroom it is taken (the figure starts
+ * afresh) and its frames tell. A recovery undone within PLAN_FAILED_S (the
+ * probe, or a recovery the model predicted, did not fit) doubles
+ * hold_ticks, up to PLAN_HOLD_MAX_S, so a group that does not fit is tried
+ * less and less often; a new demand, or a recovery that holds PLAN_HELD_S,
+ * resets it. */
 #define PLAN_EASY_SCALE 0.8
-static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], int n, int ts)
+#define PLAN_HOLD_S 3
+#define PLAN_HOLD_MAX_S 60
+#define PLAN_FAILED_S 5
+#define PLAN_HELD_S 10
+static bool plan_any_degraded(const struct plan *p)
 {
+    for (int g = 0; g < PLAN_GROUPS; g++)
+        if (plan_degraded(p, g))
+            return true;
+    return false;
+}
+
+static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], const int tdemand[LAYER_KEYS_ALL], int n, int ts)
+{
+    const int rate = (int)s->cfg.tick_rate > 0 ? (int)s->cfg.tick_rate : 1;
+    if (s->hold_ticks <= 0)
+        s->hold_ticks = PLAN_HOLD_S * rate;
+    if (s->since_change < INT_MAX)
+        s->since_change++;
     pthread_mutex_lock(&s->lock);
     struct cost_model m = s->model;
     pthread_mutex_unlock(&s->lock);
     struct plan now, easy;
-    capacity_plan(&m, n, ts, demand, 1.0, &now);
+    capacity_plan(&m, n, ts, demand, tdemand, 1.0, &now);
     bool same_demand = true;
     for (int g = 0; g < PLAN_GROUPS; g++)
-        same_demand &= now.fields[g] == s->plan.fields[g];
+        same_demand &= now.fields[g] == s->plan.fields[g] && now.temporal[g] == s->plan.temporal[g];
     struct plan next = s->plan;
-    if (!same_demand || plan_value(&now, n) < 0.9 * plan_value(&s->plan, n)) {
+    bool probe = false;
+    if (!same_demand) {
         next = now;
         s->lower_ticks = 0;
+        s->hold_ticks = PLAN_HOLD_S * rate;
+    } else if (plan_value(&now, n) < 0.9 * plan_value(&s->plan, n)) {
+        next = now;
+        s->lower_ticks = 0;
+        if (s->recovered && s->since_change < PLAN_FAILED_S * rate) /* the recovery did not fit */
+            s->hold_ticks = s->hold_ticks * 2 < PLAN_HOLD_MAX_S * rate ? s->hold_ticks * 2 : PLAN_HOLD_MAX_S * rate;
     } else {
-        capacity_plan(&m, n, ts, demand, PLAN_EASY_SCALE, &easy);
+        capacity_plan(&m, n, ts, demand, tdemand, PLAN_EASY_SCALE, &easy);
         if (plan_value(&easy, n) > plan_value(&s->plan, n)) {
-            if (++s->lower_ticks >= 3 * (int)s->cfg.tick_rate) {
+            if (++s->lower_ticks >= s->hold_ticks) {
                 next = easy;
                 s->lower_ticks = 0;
             }
         } else {
             s->lower_ticks = 0;
+            long encoded[CAP_CODECS];
+            plan_samples(&s->plan, n, NULL, encoded);
+            if (s->since_change >= s->hold_ticks && plan_any_degraded(&s->plan) && encoded[CAP_TEMPORAL] == 0 &&
+                m.enc_temporal_s > 0) {
+                struct cost_model fresh = m;
+                cost_forget_temporal(&fresh);
+                capacity_plan(&fresh, n, ts, demand, tdemand, PLAN_EASY_SCALE, &easy);
+                if (plan_value(&easy, n) > plan_value(&s->plan, n)) {
+                    next = easy;
+                    probe = true;
+                } else {
+                    s->since_change = 0; /* nothing to try: look again after another hold */
+                }
+            }
         }
     }
+    if (s->recovered && s->since_change >= PLAN_HELD_S * rate && s->hold_ticks != PLAN_HOLD_S * rate)
+        s->hold_ticks = PLAN_HOLD_S * rate; /* the recovery held */
+    if (!same_demand)
+        s->grace_seq = s->seq + (uint64_t)(rate / 2 + 1);
     if (plan_same(&next, &s->plan))
         return;
+    if (probe) { /* the temporal figure starts afresh from the probe's frames */
+        pthread_mutex_lock(&s->lock);
+        cost_forget_temporal(&s->model);
+        pthread_mutex_unlock(&s->lock);
+    }
+    LOGD("plan change at seq %llu: step x%.2f, encode %.2f ns/sample intra, %.2f temporal%s, penalty x%.2f, hold %.0f s%s",
+         (unsigned long long)s->seq, m.step_scale, m.enc_s_per_sample * 1e9, cost_encode_codec_s(&m, CAP_TEMPORAL) * 1e9 / fmax(m.penalty, 1),
+         m.enc_temporal_s > 0 ? "" : " (prior)", fmax(m.penalty, 1), s->hold_ticks / (double)rate, probe ? ", recovery probe" : "");
+    s->recovered = same_demand && plan_value(&next, n) > plan_value(&s->plan, n);
+    s->since_change = 0;
+    /* New layers or LODs start with keyframes and cold buffers: their first
+     * slow frames must not raise the penalty (tick) and undo the plan */
+    s->grace_seq = s->seq + (uint64_t)(rate / 2 + 1);
     int degraded = 0;
     for (int g = 0; g < PLAN_GROUPS; g++) {
         degraded += plan_degraded(&next, g);
@@ -637,13 +706,14 @@ static void tick(struct sim *s, double t_tick)
     atomic_store(&g_metrics.params_version, s->version);
     atomic_store(&g_metrics.resolution, n);
 
-    int demand[LAYER_KEYS_ALL];
+    int demand[LAYER_KEYS_ALL], tdemand[LAYER_KEYS_ALL];
     bool any = false;
     uint8_t remote[SIM_DEMAND_BYTES] = { 0 };
     if (s->cfg.remote_demand) /* --role sim: the layer keys other daemons want */
         s->cfg.remote_demand(s->cfg.cluster_user, remote);
     for (int k = 0; k < LAYER_KEYS_ALL; k++) {
         demand[k] = atomic_load(&s->demand[k]);
+        tdemand[k] = atomic_load(&s->tdemand[k]);
         if (demand[k] <= 0 && ((remote[k >> 3] >> (k & 7)) & 1))
             demand[k] = 1;
         any |= demand[k] > 0;
@@ -657,7 +727,7 @@ static void tick(struct sim *s, double t_tick)
             return;
     } else {
         s->had_demand = true;
-        update_plan(s, demand, n, frame_tile_size(s->cfg.tile_size, n));
+        update_plan(s, demand, tdemand, n, frame_tile_size(s->cfg.tile_size, n));
     }
 
     /* The groups due this tick, at their planned LOD. */
@@ -722,7 +792,13 @@ static void tick(struct sim *s, double t_tick)
             s->penalized_seq = s->pj.seq;
             s->penalized_ticks = 0;
         }
-        if (s->penalized_ticks++ < 3)
+        /* Nor in the first half second of new demand or a new plan: its
+         * first frames (keyframes, new chains, buffers touched for the first
+         * time) cost 3-7 times what the next ones do, and raising the costs
+         * on them degraded a subscription that fits within 0.15 s (N = 1024
+         * h/dx/dz temporal); if it really does not fit, the frames' costs
+         * say so a few frames later (cost_learn_encode). */
+        if (s->penalized_ticks++ < 3 && s->seq >= s->grace_seq)
             s->model.penalty = fmin(fmax(s->model.penalty, 1) * 1.25, 64);
         pthread_mutex_unlock(&s->lock);
         return;
@@ -730,6 +806,7 @@ static void tick(struct sim *s, double t_tick)
     for (int g = 0; g < PLAN_GROUPS; g++)
         if (due[g])
             s->credit[g] -= 1;
+    plan_samples(&s->plan, n, due, pj.codec_samples);
     pj.want.reset_streams = s->reset_streams;
     pj.want.sea_changed = s->sea_changed && !s->reset_streams;
     s->reset_streams = false;

@@ -756,22 +756,22 @@ static void test_capacity_plan(void)
     const int n = 256, ts = 128, g0 = plan_group(0, 3), g2 = plan_group(2, 3);
     for (int f = 0; f < 3; f++)
         demand[layer_key(f, 0, 3)] = 1;           /* h, dx, dz at lod 0, 1 cm */
-    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    capacity_plan(&m, n, ts, demand, NULL, 1.0, &p);
     CHECK(!plan_degraded(&p, g0) && p.rate[g0] == 1 && p.lod[g0] == 0, "fits but degraded: lod %d rate %g", p.lod[g0], p.rate[g0]);
     /* a sample cap below the demand: the largest group goes one LOD coarser, the small one stays */
     demand[layer_key(0, 2, 3)] = 1;               /* height at lod 2 */
     m.encode_budget = 3L * n * n - 1;
-    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    capacity_plan(&m, n, ts, demand, NULL, 1.0, &p);
     CHECK(p.lod[g0] == 1 && p.rate[g0] == 1 && !plan_degraded(&p, g2) && p.reason[0], "cap: lod %d rate %g, small %d",
           p.lod[g0], p.rate[g0], plan_degraded(&p, g2));
     /* a cap nothing fits at any LOD: rates go down, never to zero */
     m.encode_budget = 10;
-    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    capacity_plan(&m, n, ts, demand, NULL, 1.0, &p);
     CHECK(p.rate[g0] > 0 && p.rate[g0] < 1 && p.lod[g0] > 1, "tiny cap: lod %d rate %g", p.lod[g0], p.rate[g0]);
     /* the step alone longer than the budget: every group at a lower rate, same for all */
     m.encode_budget = 0;
     m.step_scale = 20;                             /* step of 3 fields: 20 * 2 ms = 40 ms > 26.7 */
-    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    capacity_plan(&m, n, ts, demand, NULL, 1.0, &p);
     CHECK(p.rate[g0] < 1 && p.rate[g0] == p.rate[g2] && p.rate[g0] >= (float)m.period_s, "step-bound: rates %g %g",
           p.rate[g0], p.rate[g2]);
     m.step_scale = 1;
@@ -779,12 +779,12 @@ static void test_capacity_plan(void)
      * same way, but the admission budget follows the measured costs only */
     long admit_before = cost_encode_budget(&m, n);
     m.penalty = 20;
-    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    capacity_plan(&m, n, ts, demand, NULL, 1.0, &p);
     CHECK(p.rate[g0] < 1 && p.rate[g0] == p.rate[g2], "penalty: rates %g %g", p.rate[g0], p.rate[g2]);
     CHECK(cost_encode_budget(&m, n) == admit_before, "penalty changed the admission budget: %ld vs %ld",
           cost_encode_budget(&m, n), admit_before);
     m.penalty = 0; /* 0 or 1: none */
-    capacity_plan(&m, n, ts, demand, 1.0, &p);
+    capacity_plan(&m, n, ts, demand, NULL, 1.0, &p);
     CHECK(!plan_degraded(&p, g0), "no penalty, still degraded");
     /* admission budget: --encode-budget wins; else at least six fields at full N */
     CHECK(cost_encode_budget(&m, n) >= 6L * n * n, "derived admission budget %ld", cost_encode_budget(&m, n));
@@ -801,6 +801,89 @@ static void test_capacity_plan(void)
           ci.max_resolution, top);
     for (int i = 0; i < ci.nsizes; i++)
         CHECK(ci.sizes[i].fits_memory == control_fits_memory(ci.sizes[i].n, (int)param_find("cascades")->def, 256), "fits_memory of %d", ci.sizes[i].n);
+}
+
+/* capacity.c: the encode cost per codec, what a degraded message says, and
+ * learning from frames (N = 1024 h/dx/dz temporal: a group degraded to lod 1
+ * is sent intra, measured the cheap codec, predicted that lod 0 fit, went
+ * back and degraded again every 3.5 s). Fixed numbers: behaviour only. */
+static void test_capacity_codecs(void)
+{
+    struct cost_model m = {
+        .period_s = 1.0 / 30, .budget_s = 0.8 / 30, .n0 = 1024, .step1_s = 0.002, .step6_s = 0.011,
+        .step_scale = 1, .enc_s_per_sample = 3.5e-9, .max_memory_mb = 2048, .cores = 2,
+    };
+    const int n = 1024, ts = 128, g0 = plan_group(0, 3);
+    int demand[LAYER_KEYS_ALL] = { 0 }, tdemand[LAYER_KEYS_ALL] = { 0 };
+    for (int f = 0; f < 3; f++)
+        demand[layer_key(f, 0, 3)] = tdemand[layer_key(f, 0, 3)] = 1; /* h, dx, dz, lod 0, 1 cm, temporal */
+    struct plan p;
+    /* intra: 3 n^2 x 3.5 ns = 11 ms + a 5.6 ms step fits */
+    capacity_plan(&m, n, ts, demand, NULL, 1.0, &p);
+    CHECK(!plan_degraded(&p, g0) && !p.temporal[g0], "intra fits but degraded: lod %d", p.lod[g0]);
+    /* temporal, not measured yet: the prior (x2, 22 ms + 5.6) does not fit; lod 1 (intra) does */
+    capacity_plan(&m, n, ts, demand, tdemand, 1.0, &p);
+    CHECK(p.temporal[g0] && p.lod[g0] == 1 && p.rate[g0] == 1, "temporal prior: lod %d rate %g", p.lod[g0], p.rate[g0]);
+    /* the reason gives the demand at full detail, over the budget in samples at its codec's cost */
+    long wanted = -1, budget = -1;
+    const char *w = strstr(p.reason, "samples per tick wanted, budget ");
+    CHECK(w && sscanf(p.reason, "coarser LOD: N=1024, %ld samples", &wanted) == 1 &&
+          sscanf(w, "samples per tick wanted, budget %ld", &budget) == 1, "reason: %s", p.reason);
+    CHECK(wanted == 3L * n * n && budget < wanted && budget > 3L * (n / 2) * (n / 2),
+          "reason reads under budget: wanted %ld budget %ld (%s)", wanted, budget, p.reason);
+    /* the degraded group's frames are intra: only they count, and cheap intra frames do not
+     * talk lod 0 back into fitting (the old flapping) */
+    long samples[CAP_CODECS];
+    plan_samples(&p, n, NULL, samples);
+    CHECK(samples[CAP_INTRA] == 3L * 512 * 512 && samples[CAP_TEMPORAL] == 0, "plan_samples %ld %ld",
+          samples[CAP_INTRA], samples[CAP_TEMPORAL]);
+    bool due[PLAN_GROUPS] = { false };
+    plan_samples(&p, n, due, samples);
+    CHECK(samples[CAP_INTRA] == 0 && samples[CAP_TEMPORAL] == 0, "plan_samples with nothing due");
+    struct cost_model l = m;
+    long intra_frame[CAP_CODECS] = { 3L * 512 * 512, 0 };
+    for (int i = 0; i < 50; i++)
+        cost_learn_encode(&l, intra_frame, 2e-9 * (double)intra_frame[CAP_INTRA]);
+    CHECK(fabs(l.enc_s_per_sample - 2e-9) < 0.05e-9 && l.enc_temporal_s == 0, "intra frames: %g %g",
+          l.enc_s_per_sample, l.enc_temporal_s);
+    l.enc_temporal_s = 9e-9; /* measured before the degrade */
+    capacity_plan(&l, n, ts, demand, tdemand, 0.8, &p);
+    CHECK(p.lod[g0] == 1, "recovery predicted from intra frames: lod %d", p.lod[g0]);
+    /* forgetting the temporal figure (the probe): back to the prior x the current intra figure,
+     * which fits (3 n^2 x 4 ns = 12.6 ms + 5.6 < 21.3) */
+    cost_forget_temporal(&l);
+    CHECK(l.enc_temporal_s == 0 && fabs(cost_encode_codec_s(&l, CAP_TEMPORAL) - CAP_TEMPORAL_PRIOR * l.enc_s_per_sample) < 1e-15,
+          "forget: %g", cost_encode_codec_s(&l, CAP_TEMPORAL));
+    capacity_plan(&l, n, ts, demand, tdemand, 0.8, &p);
+    CHECK(!plan_degraded(&p, g0), "probe plan still degraded: lod %d", p.lod[g0]);
+    /* learning: a cold temporal frame (7x the prediction) counts as twice it at most */
+    long temporal_frame[CAP_CODECS] = { 0, 3L * n * n };
+    double prior = cost_encode_codec_s(&l, CAP_TEMPORAL);
+    cost_learn_encode(&l, temporal_frame, 7 * prior * (double)temporal_frame[CAP_TEMPORAL]);
+    CHECK(l.enc_temporal_s > prior && l.enc_temporal_s <= 1.1 * prior * (1 + 1e-9), "cold frame: %g (prior %g)",
+          l.enc_temporal_s, prior);
+    CHECK(fabs(l.enc_s_per_sample - 2e-9) < 0.05e-9, "a temporal frame moved the intra figure: %g", l.enc_s_per_sample);
+    /* steady frames: the figure converges on what they cost; faster ones come down quickly */
+    for (int i = 0; i < 100; i++)
+        cost_learn_encode(&l, temporal_frame, 7e-9 * (double)temporal_frame[CAP_TEMPORAL]);
+    CHECK(fabs(l.enc_temporal_s - 7e-9) < 0.1e-9, "steady: %g", l.enc_temporal_s);
+    cost_learn_encode(&l, temporal_frame, 3e-9 * (double)temporal_frame[CAP_TEMPORAL]);
+    CHECK(l.enc_temporal_s < 6.1e-9, "down: %g", l.enc_temporal_s);
+    /* a mixed frame: both figures by the frame's ratio to the prediction */
+    l.enc_s_per_sample = 2e-9;
+    l.enc_temporal_s = 4e-9;
+    long mixed[CAP_CODECS] = { 1000000, 1000000 };
+    cost_learn_encode(&l, mixed, 1.5 * 6e-9 * 1e6);
+    CHECK(fabs(l.enc_s_per_sample / l.enc_temporal_s - 0.5) < 1e-9 && l.enc_s_per_sample > 2e-9, "mixed: %g %g",
+          l.enc_s_per_sample, l.enc_temporal_s);
+    /* the announcement's estimate: the step and the temporal codec at lod 0 */
+    struct capacity_info ci;
+    capacity_info_fill(&l, n, &ci);
+    for (int i = 0; i < ci.nsizes; i++)
+        if (ci.sizes[i].n == 1024)
+            CHECK(fabs(ci.sizes[i].est_ms[2] - (cost_step_s(&l, 1024, 3) + l.enc_temporal_s * 3 * 1024 * 1024) * 1e3) < 1e-3,
+                  "est_ms at 1024: %g", ci.sizes[i].est_ms[2]);
+    passed++;
 }
 
 /* Display names (PROTOCOL.md §7.1 `name`): what is accepted and refused,
@@ -871,6 +954,7 @@ static void test_display_names(void)
 int main(void)
 {
     test_capacity_plan();
+    test_capacity_codecs();
     test_sets();
     test_subscribe();
     test_subscribe_field_lod();

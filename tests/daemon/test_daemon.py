@@ -1344,6 +1344,11 @@ def test_encode_budget_busy_and_degraded():
             g = await recv_json(b_ws, lambda m: m["type"] == "degraded", timeout=10)
             check(g["active"] is True and g["subscribed_lod"] == 0 and g["lod"] >= 1 and g["reason"],
                   "degraded message: %r" % g)
+            # the reason gives the demand at full detail (both groups) over the budget; it used
+            # to give the samples left after degrading, which read as under budget
+            m = re.search(r"(\d+) samples per tick wanted, budget (\d+)", g["reason"])
+            check(m and int(m.group(1)) == 3 * n * n + 3 * (n // 2) ** 2 and int(m.group(2)) < int(m.group(1))
+                  and int(m.group(2)) <= budget, "degraded reason: %r" % g["reason"])
             h, fb = await recv_frame(b_ws, lambda h, b: {t["lod"] for t in tiles(b)} != {0}, timeout=10)
             lods = {t["lod"] for t in tiles(fb)}
             check(lods == {g["lod"]}, "degraded frame tiles at lod %r, announced %r" % (lods, g["lod"]))
@@ -1362,6 +1367,36 @@ def test_encode_budget_busy_and_degraded():
 
 
 TESTS.append(test_encode_budget_busy_and_degraded)
+
+
+def test_degraded_group_recovers_with_headroom():
+    """A group degraded for a real reason comes back to full detail when the
+    headroom returns with no change of demand (the recovery rule, issue 15):
+    one client's default subscription over --encode-budget at N, then N
+    halved by `set` (same subscription, a quarter of the samples): it is told
+    `degraded` inactive, /metrics shows no degraded group, frames are lod 0.
+    Doubling N again degrades it again."""
+    n = BASE_N
+    budget = 3 * (n // 2) ** 2               # h, dx, dz fit at N/2, not at N
+    with running(Daemon, "--encode-budget", str(budget)) as d:
+        async def run():
+            a, _ = await connect(d)
+            g = await recv_json(a, lambda m: m["type"] == "degraded", timeout=10)
+            check(g["active"] is True and g["lod"] >= 1, "over budget at N: %r" % g)
+            check(metric_value(d, "oceand_degraded_groups") == 1, "degraded_groups at N")
+            await a.send(json.dumps({"type": "set", "id": 1, "params": {"resolution": n // 2}}))
+            r = await recv_json(a, lambda m: m["type"] == "degraded", timeout=20)
+            check(r["active"] is False and r["lod"] == 0, "restore at N/2: %r" % r)
+            await recv_frame(a, lambda h, b: h["n"] == n // 2 and {t["lod"] for t in tiles(b)} == {0}, timeout=10)
+            check(metric_value(d, "oceand_degraded_groups") == 0, "degraded_groups after the restore")
+            await a.send(json.dumps({"type": "set", "id": 2, "params": {"resolution": n}}))
+            g = await recv_json(a, lambda m: m["type"] == "degraded", timeout=10)
+            check(g["active"] is True and g["lod"] >= 1, "over budget at N again: %r" % g)
+            await a.close()
+        asyncio.run(run())
+
+
+TESTS.append(test_degraded_group_recovers_with_headroom)
 
 
 def test_viewers_cannot_exceed_encode_budget():
