@@ -49,7 +49,17 @@ async def collect(ws, seconds, limit=None):
         m = await asyncio.wait_for(ws.recv(), 5)
         if isinstance(m, bytes):
             out.append(m)
+        elif '"degraded"' in m:
+            print("    told:", m)
     return out
+
+
+def full_detail(m, lod=0):
+    """A frame whose tiles are all at the subscribed LOD. Short of encode time (a
+    sanitizer build on a loaded machine), the daemon serves a group at a coarser LOD,
+    and such layers go intra by design (docs/daemon.md, capacity): the checks of
+    predicted tiles judge full-detail frames only."""
+    return all(t["lod"] == lod for t in tiles(m))
 
 
 def codecs(frames):
@@ -101,10 +111,16 @@ def test_temporal_stream_within_bound_of_lossless():
         check(len(fa) >= 200, "only %d temporal frames in 15 s" % len(fa))
         # A frame skipped under load (latest-frame-wins) sends that client keyframe tiles until it
         # has references again: judge the predictor on frames with no gap among the 4 before them.
-        steady = [m for i, m in enumerate(fa) if i >= 4 and seqs[i] - seqs[i - 4] == 4]
+        # Frames served at a coarser LOD on purpose (short of encode time) are intra: left out too.
+        steady = [m for i, m in enumerate(fa) if i >= 4 and seqs[i] - seqs[i - 4] == 4 and
+                  all(full_detail(x) for x in fa[i - 4:i + 1])]
         cs = codecs(steady)
-        check(len(steady) >= 100, "only %d frames without a recent gap" % len(steady))
-        check(cs.get(CODEC_TEMPORAL, 0) > 0.8 * sum(cs.values()), "mostly predicted tiles expected: %r" % cs)
+        degraded = sum(not full_detail(m) for m in fa)
+        if degraded > len(fa) / 2:
+            print("    %d of %d frames degraded (short of encode time): predicted share not judged" % (degraded, len(fa)))
+        else:
+            check(len(steady) >= 100, "only %d frames without a recent gap" % len(steady))
+            check(cs.get(CODEC_TEMPORAL, 0) > 0.8 * sum(cs.values()), "mostly predicted tiles expected: %r" % cs)
         check(CODEC_TEMPORAL not in {t["codec"] for t in tiles(fa[0])}, "the first frame must be keyframes")
         worst = check_stream(d, hello["params"], fa, 0.01, "temporal stream")
         # The same frames through the Python decoder, against the lossless stream at equal seq.
@@ -159,7 +175,11 @@ def test_temporal_join_mid_stream(d):
     check(CODEC_TEMPORAL not in codecs(fb[:1]), "the joiner's first frame has predicted tiles")
     check_stream(d, hello["params"], fb[:1], 0.01, "first frame alone")
     check_stream(d, hello["params"], fb, 0.01, "joiner's stream")
-    check(codecs(fb[-5:]).get(CODEC_TEMPORAL, 0) > 0, "the joiner never switched to the shared predicted tiles")
+    full = [m for m in fb[1:] if full_detail(m)]
+    if len(full) < 5:
+        print("    %d of %d frames at full detail (degraded, short of encode time): switch not judged" % (len(full), len(fb)))
+    else:
+        check(codecs(full[-5:]).get(CODEC_TEMPORAL, 0) > 0, "the joiner never switched to the shared predicted tiles")
     check_stream(d, hello["params"], fa, 0.01, "first client's stream")
 
 
@@ -376,9 +396,14 @@ def test_temporal_sea_changes():
                                                             sizes[isd] / 1e3, codecs(fa[iw:iw + 1]), codecs(fa[isd:isd + 1])))
         # wind: the same grid on every tile before and after (a chain that restarted has a new grid)
         same = [k for k in at_w if before_w.get(k, (0, None, None))[1:3] == at_w[k][1:3]]
-        check(len(same) == len(at_w), "wind change: %d of %d tiles restarted their chain" % (len(at_w) - len(same), len(at_w)))
+        if not (full_detail(fa[iw - 1]) and full_detail(fa[iw])):
+            print("    the wind change fell on degraded frames (short of encode time, intra): chains not judged")
+        else:
+            check(len(same) == len(at_w), "wind change: %d of %d tiles restarted their chain"
+                  % (len(at_w) - len(same), len(at_w)))
         sw = [parse_header(m)["seq"] for m in fa]
-        if iw + 1 < len(fa) and sw[iw + 1] == sw[iw] + 1 and sw[iw] == sw[iw - 1] + 1:
+        if iw + 1 < len(fa) and sw[iw + 1] == sw[iw] + 1 and sw[iw] == sw[iw - 1] + 1 and \
+                all(full_detail(m) for m in fa[iw - 1:iw + 2]):
             depths = {v[3] for v in tile_grids(fa[iw + 1]).values()}
             check(depths == {4}, "the tick after a wind change predicts from depth %r, not 4" % depths)
         # seed: every tile a keyframe on a new grid
