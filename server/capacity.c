@@ -54,7 +54,8 @@ static long group_samples(const struct plan *p, int g, int n)
 static double codec_cost(const struct cost_model *m, int codec)
 {
     if (codec == CAP_TEMPORAL)
-        return m->enc_temporal_s > 0 ? m->enc_temporal_s : CAP_TEMPORAL_PRIOR * m->enc_s_per_sample;
+        return m->enc_temporal_s > 0 ? m->enc_temporal_s
+                                     : (m->temporal_ratio > 0 ? m->temporal_ratio : CAP_TEMPORAL_PRIOR) * m->enc_s_per_sample;
     return m->enc_s_per_sample;
 }
 

@@ -45,6 +45,11 @@ struct cost_model {
                                    sent intra (frame.c): one figure for both measured the cheap
                                    codec while degraded, predicted that lod 0 fit, went back, and
                                    degraded again within 0.2 s (flapping every 3.5 s) */
+    double temporal_ratio;      /* temporal / intra cost per sample measured at start-up (a few ticks
+                                   of one stream, sim_thread.c measure_model), 0 = not measured:
+                                   CAP_TEMPORAL_PRIOR. What enc_temporal_s starts from and goes back
+                                   to when forgotten (the prior of 2 went stale when the encoder got
+                                   1.5x faster: 2048 height stayed degraded, its probe never fitting) */
     double penalty;             /* transient factor on both costs (<= 1 = none): x1.25 for each tick
                                    the producer had not even started the frame before, back
                                    toward 1 on each tick it had (sim_thread.c, tick). Kept apart

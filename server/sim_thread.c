@@ -875,6 +875,46 @@ static void *sim_main(void *arg)
  * can do; the live model corrects it from every frame). */
 static void measure_done(void *ctx) { ((struct sim *)ctx)->measure_done = true; }
 
+/* The temporal codec's cost per sample against intra's (best_enc, the same
+ * field, pool and bound): one stream of height at 1 cm over a few ticks of a
+ * moving sea (its first frames are keyframes on cold buffers; from the fifth
+ * on, tiles predict from the full depth), best of the last three. 0 when it
+ * cannot be measured (no memory): the model keeps CAP_TEMPORAL_PRIOR. */
+#define MEASURE_TEMPORAL_TICKS 8
+static double measure_temporal_ratio(struct sim *s, double best_enc)
+{
+    struct layer_streams ls;
+    layer_streams_init(&ls, 0, SIZE_MAX);
+    frame_job_set_streams(s->job, &ls);
+    const unsigned h_only = OCEAN_FIELD_BIT(OCEAN_HEIGHT);
+    int key = layer_key(OCEAN_HEIGHT, 0, 3 /* 1 cm */);
+    struct frame_want w = { .fields = h_only, .cfields = { h_only }, .nkeys = 1 };
+    w.keys[0] = (uint16_t)key;
+    w.temporal[key] = 1;
+    w.tclients[key] = 1;
+    double best = 1e9;
+    for (int i = 0; i < MEASURE_TEMPORAL_TICKS; i++) {
+        ocean_step_cascades(s->ocean, s->sim_time + i / s->cfg.tick_rate, &h_only, 1);
+        struct oc_frame_header h = { .seq = (uint64_t)i };
+        int items = frame_job_begin(s->job, s->ocean, s->cfg.tile_size, &w, &h);
+        if (items <= 0 || !ls.st[key])
+            break;
+        s->measure_done = false;
+        double t0 = mono_now();
+        encode_pool_start(s->pool, items, encode_item, measure_done, s);
+        encode_pool_wait(s->pool);
+        double t1 = mono_now();
+        if (i >= MEASURE_TEMPORAL_TICKS - 3 && frame_job_samples(s->job) > 0)
+            best = fmin(best, (t1 - t0) / (double)frame_job_samples(s->job));
+    }
+    struct frame_want none = { 0 };
+    struct oc_frame_header h = { 0 };
+    frame_job_begin(s->job, s->ocean, s->cfg.tile_size, &none, &h); /* lets the last frame go; no stream wanted */
+    frame_job_set_streams(s->job, NULL);
+    layer_streams_free(&ls);
+    return best < 1e9 && best_enc > 0 && best_enc < 1e9 ? best / best_enc : 0;
+}
+
 static void measure_model(struct sim *s)
 {
     struct cost_model *m = &s->model;
@@ -917,6 +957,7 @@ static void measure_model(struct sim *s)
         if (frame_job_samples(s->job) > 0)
             best_enc = fmin(best_enc, (t4 - t3) / (double)frame_job_samples(s->job));
     }
+    double ratio = measure_temporal_ratio(s, best_enc);
     /* Warm every encoder (its compressor and scratch) now: one first used
      * minutes later (the producer helps only now and then) would show as
      * memory growth under load. */
@@ -924,9 +965,11 @@ static void measure_model(struct sim *s)
     m->step1_s = best1;
     m->step6_s = fmax(best6, best1);
     m->enc_s_per_sample = best_enc < 1e9 ? best_enc : 1e-8;
+    m->temporal_ratio = ratio;
     LOGI("capacity at N=%d: step %.2f ms (height) / %.2f ms (6 fields), encode %.2f ns/sample on %d threads; "
-         "encode budget %ld samples per tick", n, best1 * 1e3, best6 * 1e3, m->enc_s_per_sample * 1e9,
-         encode_pool_threads(s->pool) + 1, cost_encode_budget(m, n));
+         "temporal x%.2f (%s); encode budget %ld samples per tick", n, best1 * 1e3, best6 * 1e3,
+         m->enc_s_per_sample * 1e9, encode_pool_threads(s->pool) + 1, ratio > 0 ? ratio : CAP_TEMPORAL_PRIOR,
+         ratio > 0 ? "measured" : "prior", cost_encode_budget(m, n));
     /* The announcement's memory figures once now: every hello and params
      * carries them, on the lws thread (control_fits_memory remembers them). */
     struct capacity_info warm;
