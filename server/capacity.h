@@ -5,7 +5,7 @@
  * the starting N, on this machine) and kept current from every frame:
  *   step(N, fields)  scaled from the measured N by N^2 log2 N,
  *   encode(samples)  wall seconds per sample on the encode pool, per codec
- *                    (intra; temporal, about twice as much).
+ *                    (intra; temporal, 1.5-2x as much: the ratio measured at start-up).
  * From it:
  *   - the encode budget: samples per tick that may be encoded at N (what a
  *     frame may take, 80 % of the tick, minus the step), or --encode-budget;
@@ -27,7 +27,7 @@
 #include "frame.h"
 
 enum { CAP_INTRA, CAP_TEMPORAL, CAP_CODECS }; /* how a group's layers are encoded */
-#define CAP_TEMPORAL_PRIOR 2.0 /* temporal / intra cost per sample until frames tell (measured above) */
+#define CAP_TEMPORAL_PRIOR 2.0 /* temporal / intra cost per sample when start-up could not measure it */
 
 struct cost_model {
     double period_s;            /* 1 / tick rate */
@@ -107,7 +107,7 @@ bool plan_degraded(const struct plan *p, int group);
  * sum over groups of rate * samples encoded. */
 double plan_value(const struct plan *p, int n);
 bool plan_same(const struct plan *a, const struct plan *b);
-/* Forget the temporal figure (back to CAP_TEMPORAL_PRIOR x intra): what a
+/* Forget the temporal figure (back to temporal_ratio, or the prior, x intra): what a
  * degraded group's recovery probe assumes when no temporal layer has been
  * encoded to keep it current (sim_thread.c, update_plan). */
 void cost_forget_temporal(struct cost_model *m);

@@ -572,7 +572,7 @@ static void *producer_main(void *arg)
  * measured again, and one taken under load or from a slow start would keep
  * the group degraded for good. After hold_ticks degraded with no recovery
  * in sight, the plan is computed again with the temporal figure forgotten
- * (CAP_TEMPORAL_PRIOR x the intra figure, which the degraded frames keep
+ * (the start-up temporal_ratio x the intra figure, which the degraded frames keep
  * current); if that fits with the headroom it is taken (the figure starts
  * afresh) and its frames tell. A recovery undone within PLAN_FAILED_S (the
  * probe, or a recovery the model predicted, did not fit) doubles
