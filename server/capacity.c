@@ -255,7 +255,9 @@ void capacity_info_fill(const struct cost_model *m, int n, struct capacity_info 
         for (int f = 1; f <= 6; f++) {
             /* with the temporal codec: what the web client asks for (intra costs about half) */
             z->est_ms[f - 1] = (cost_step_s(m, size, f) + (double)f * size * size * cost_encode_codec_s(m, CAP_TEMPORAL)) * 1e3;
-            if (z->est_ms[f - 1] <= c->budget_ms)
+            /* Compared as announced (hundredths of a ms), so that a client checking
+             * full_rate_fields against est_ms and budget_ms agrees at the edge */
+            if (floor(z->est_ms[f - 1] * 100 + 0.5) <= floor(c->budget_ms * 100 + 0.5))
                 z->full_rate_fields = f;
         }
     }
