@@ -70,7 +70,16 @@ check_runtime() {
   done
   # Every shared library the shipped binaries load must come from a runtime
   # package, a dependency of one, or an essential package of Debian itself.
-  have=$(printf '%s\n' $runtime_pkgs $(deps_of $runtime_pkgs) | sort -u)
+  # dpkg-query answered nothing once in a CI run with three suites beside it (its stderr goes
+  # to /dev/null): then every library of a dependency read as missing. Ask again, and say so.
+  rt_deps=""
+  for try in 1 2 3; do
+    rt_deps=$(deps_of $runtime_pkgs)
+    [ -n "$rt_deps" ] && break
+    sleep 1
+  done
+  [ -n "$rt_deps" ] || fail "dpkg-query -W gave no Depends for the runtime packages: $(dpkg-query -W $runtime_pkgs 2>&1 | head -3)"
+  have=$(printf '%s\n' $runtime_pkgs $rt_deps | sort -u)
   checked=0
   for bin in "$BUILD/oceand" "$BUILD/ocean-tap"; do
     [ -x "$bin" ] || fail "$bin is not built"
@@ -81,7 +90,10 @@ check_runtime() {
       [ -n "$pkg" ] || fail "$bin loads $lib, which no Debian package owns"
       prio=$(dpkg-query -W -f='${Priority}' "$pkg" 2>/dev/null)
       [ "$prio" = required ] && continue
-      echo "$have" | grep -qx "$pkg" || fail "$bin needs $pkg ($lib) but the Dockerfile's runtime stage does not install it"
+      if ! echo "$have" | grep -qx "$pkg"; then  # once more before failing: see dpkg-query above
+        have=$(printf '%s\n' $runtime_pkgs $(deps_of $runtime_pkgs) | sort -u)
+        echo "$have" | grep -qx "$pkg" || fail "$bin needs $pkg ($lib) but the Dockerfile's runtime stage does not install it"
+      fi
       checked=$((checked + 1))
     done
   done
