@@ -875,6 +875,28 @@ static void *sim_main(void *arg)
  * can do; the live model corrects it from every frame). */
 static void measure_done(void *ctx) { ((struct sim *)ctx)->measure_done = true; }
 
+/* One frame of w (header seq) begun and encoded on the pool, timed: seconds
+ * per sample, TIME_ENCODE_NONE when it encoded no sample, TIME_ENCODE_STOP
+ * (nothing encoded) when the frame could not be begun or, with need given,
+ * has no item or no stream in need for key. */
+#define TIME_ENCODE_NONE (-1.0)
+#define TIME_ENCODE_STOP (-2.0)
+static double time_encode(struct sim *s, const struct frame_want *w, uint64_t seq, const struct layer_streams *need,
+                          int key)
+{
+    struct oc_frame_header h = { .seq = seq };
+    int items = frame_job_begin(s->job, s->ocean, s->cfg.tile_size, w, &h);
+    if (items < 0 || (need && (items == 0 || !need->st[key])))
+        return TIME_ENCODE_STOP;
+    s->measure_done = false;
+    double t0 = mono_now();
+    encode_pool_start(s->pool, items, encode_item, measure_done, s);
+    encode_pool_wait(s->pool);
+    double t1 = mono_now();
+    long samples = frame_job_samples(s->job);
+    return samples > 0 ? (t1 - t0) / (double)samples : TIME_ENCODE_NONE;
+}
+
 /* The temporal codec's cost per sample against intra's (best_enc, the same
  * field, pool and bound): one stream of height at 1 cm over a few ticks of a
  * moving sea (its first frames are keyframes on cold buffers; from the fifth
@@ -895,17 +917,11 @@ static double measure_temporal_ratio(struct sim *s, double best_enc)
     double best = 1e9;
     for (int i = 0; i < MEASURE_TEMPORAL_TICKS; i++) {
         ocean_step_cascades(s->ocean, s->sim_time + i / s->cfg.tick_rate, &h_only, 1);
-        struct oc_frame_header h = { .seq = (uint64_t)i };
-        int items = frame_job_begin(s->job, s->ocean, s->cfg.tile_size, &w, &h);
-        if (items <= 0 || !ls.st[key])
+        double t = time_encode(s, &w, (uint64_t)i, &ls, key);
+        if (t == TIME_ENCODE_STOP)
             break;
-        s->measure_done = false;
-        double t0 = mono_now();
-        encode_pool_start(s->pool, items, encode_item, measure_done, s);
-        encode_pool_wait(s->pool);
-        double t1 = mono_now();
-        if (i >= MEASURE_TEMPORAL_TICKS - 3 && frame_job_samples(s->job) > 0)
-            best = fmin(best, (t1 - t0) / (double)frame_job_samples(s->job));
+        if (i >= MEASURE_TEMPORAL_TICKS - 3 && t >= 0)
+            best = fmin(best, t);
     }
     struct frame_want none = { 0 };
     struct oc_frame_header h = { 0 };
@@ -945,17 +961,11 @@ static void measure_model(struct sim *s)
         best6 = fmin(best6, t2 - t1);
         struct frame_want w = { .fields = OCEAN_FIELD_BIT(OCEAN_HEIGHT), .cfields = { OCEAN_FIELD_BIT(OCEAN_HEIGHT) }, .nkeys = 1 };
         w.keys[0] = (uint16_t)layer_key(OCEAN_HEIGHT, 0, 3 /* 1 cm */);
-        struct oc_frame_header h = { 0 };
-        int items = frame_job_begin(s->job, s->ocean, s->cfg.tile_size, &w, &h);
-        if (items < 0)
+        double t = time_encode(s, &w, 0, NULL, 0);
+        if (t == TIME_ENCODE_STOP)
             break;
-        s->measure_done = false;
-        double t3 = mono_now();
-        encode_pool_start(s->pool, items, encode_item, measure_done, s);
-        encode_pool_wait(s->pool);
-        double t4 = mono_now();
-        if (frame_job_samples(s->job) > 0)
-            best_enc = fmin(best_enc, (t4 - t3) / (double)frame_job_samples(s->job));
+        if (t >= 0)
+            best_enc = fmin(best_enc, t);
     }
     double ratio = measure_temporal_ratio(s, best_enc);
     /* Warm every encoder (its compressor and scratch) now: one first used
