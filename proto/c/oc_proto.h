@@ -194,8 +194,8 @@ int oc_stream_encode(struct oc_stream *s, struct oc_encoder *e, const float *fie
  * bytes do not depend on the split or the order. A range that fails makes
  * oc_stream_end reset the stream and return an error; oc_stream_end returns
  * OC_OK otherwise. oc_stream_keyframe_tile may likewise run concurrently for
- * distinct tiles (each with its own encoder) between oc_stream_end and the
- * next oc_stream_begin. */
+ * distinct tiles (each with its own encoder), for a tile as soon as its range
+ * is encoded, until the next oc_stream_begin. */
 int oc_stream_begin(struct oc_stream *s, uint64_t seq);
 int oc_stream_encode_tiles(struct oc_stream *s, struct oc_encoder *e, const float *field_data, int first, int count);
 int oc_stream_end(struct oc_stream *s);
@@ -206,7 +206,8 @@ int oc_stream_tile_count(const struct oc_stream *s);
 int oc_stream_need(const struct oc_stream *s);
 /* This tick's shared tile (tile header + payload): a pointer into the stream, valid until the next encode. */
 int oc_stream_tile(const struct oc_stream *s, int tile_x, int tile_z, const uint8_t **data, size_t *len);
-/* This tick's keyframe tile, encoded on first request (then cached until the next encode). */
+/* This tick's keyframe tile, encoded on first request (then cached until the next encode;
+ * e may be NULL to fetch one already made: OC_E_ARG if it was not). */
 int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_x, int tile_z,
                             const uint8_t **data, size_t *len);
 /* Counters for metrics and benchmarks: shared tiles encoded as keyframes, keyframe tiles made on demand. */

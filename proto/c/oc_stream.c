@@ -34,6 +34,7 @@ struct stream_tile {
     int depth;                /* this tick: references used by the shared tile, 0 = keyframe or raw */
     int key_ready;            /* this tick's keyframe is in key (or is the shared tile) */
     int failed;               /* this tick's encode of the tile failed (oc_stream_end resets the stream) */
+    int done;                 /* this tick's shared tile is encoded (its keyframe may be asked for) */
     struct oc_buf shared, key;
     unsigned kind;            /* this tick's shared tile: TILE_KEY, TILE_PREDICTED, TILE_CHANGE_INTRA bits,
                                  counted by oc_stream_end when the whole tick encoded */
@@ -112,6 +113,7 @@ void oc_stream_reset(struct oc_stream *s)
         s->tiles[t].depth = 0;
         s->tiles[t].key_ready = 0;
         s->tiles[t].failed = 0;
+        s->tiles[t].done = 0;
         s->tiles[t].shared.len = 0;
         s->tiles[t].key.len = 0;
     }
@@ -424,6 +426,7 @@ int oc_stream_begin(struct oc_stream *s, uint64_t seq)
     s->head = (s->head + 1) % RING;
     s->need = 0;
     s->encoded = 0;
+    for (int k = 0; k < s->grid * s->grid; k++) s->tiles[k].done = 0;
     return OC_OK;
 }
 
@@ -442,6 +445,7 @@ int oc_stream_encode_tiles(struct oc_stream *s, struct oc_encoder *e, const floa
             s->tiles[k].failed = 1;
             return rc;
         }
+        s->tiles[k].done = 1;
     }
     return OC_OK;
 }
@@ -502,13 +506,17 @@ int oc_stream_tile(const struct oc_stream *s, int tile_x, int tile_z, const uint
 int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_x, int tile_z,
                             const uint8_t **data, size_t *len)
 {
-    struct stream_tile *t = tile_at(s, tile_x, tile_z);
-    if (!t || !e || !data || !len) return OC_E_ARG;
-    if (t->key_ready) {                 /* the shared tile is this tick's keyframe */
+    /* After oc_stream_end, or before it for a tile whose range is encoded (the encode pool
+     * makes a range's keyframes on the thread that encoded it) */
+    struct stream_tile *t = s && tile_x >= 0 && tile_z >= 0 && tile_x < s->grid && tile_z < s->grid
+                            && s->tiles[tile_z * s->grid + tile_x].done ? &s->tiles[tile_z * s->grid + tile_x] : NULL;
+    if (!t || !data || !len) return OC_E_ARG;
+    if (t->key_ready) {                 /* the shared tile is this tick's keyframe, or it was made already */
         *data = t->depth == 0 ? t->shared.data : t->key.data;
         *len = t->depth == 0 ? t->shared.len : t->key.len;
         return OC_OK;
     }
+    if (!e) return OC_E_ARG;            /* NULL: only one made already */
     struct oc_tile_header th = {
         .field = (uint8_t)s->field, .lod = (uint8_t)s->lod, .tile_x = (uint16_t)tile_x, .tile_z = (uint16_t)tile_z,
         .width = (uint16_t)s->side, .height = (uint16_t)s->side, .bound = s->bound,

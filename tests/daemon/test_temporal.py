@@ -155,6 +155,57 @@ def test_temporal_stream_within_bound_of_lossless():
 
 
 @test
+def test_frames_same_on_any_encode_thread_count():
+    """A layer's rows of tiles are encoded by whichever encode threads take
+    them (server/frame.c): the bytes may not depend on it. Two paused daemons
+    (t = 0, seed 1, N = 512: four rows of tiles a layer), one encode thread
+    against three: the intra frames, the temporal client's first frame (the
+    stream's keyframes) and its predicted tiles (the ref_seq in their prefix
+    masked: the daemons' seq differ) are byte for byte the same."""
+    ds = [td.Daemon("--paused", "true", "--resolution", "512", "--encode-threads", str(k)) for k in (1, 3)]
+
+    async def grab(d):
+        a, _ = await connect(d)
+        b, _ = await connect(d)
+        await subscribe(a, fields=["height", "dx", "slope_x"], bound=0.01)
+        await subscribe(b, fields=["height", "dz", "jacobian"], temporal=True, bound=0.001)
+        fa = await collect(a, 1.5, limit=3)
+        fb = await collect(b, 1.5, limit=6)
+        await a.close()
+        await b.close()
+        return fa, fb
+
+    def body(m):
+        """The tiles, without the frame header and with each predicted tile's ref_seq zeroed."""
+        b, off = bytearray(m), 48
+        for _ in range(parse_header(m)["tile_count"]):
+            f, lod, codec, fl, tx, tz, w, hh, bound, o, sc, plen, _r = td.TILE_HDR.unpack_from(b, off)
+            if codec == CODEC_TEMPORAL:
+                b[off + 40 + 16:off + 40 + 24] = bytes(8)
+            off += 40 + plen
+        return bytes(b[48:])
+    try:
+        got = [asyncio.run(grab(d)) for d in ds]
+        (ia, ta), (ib, tb) = got
+        check(len(ia) >= 2 and len(ib) >= 2 and len(ta) >= 4 and len(tb) >= 4,
+              "too few frames: %d/%d intra, %d/%d temporal" % (len(ia), len(ib), len(ta), len(tb)))
+        check(all(full_detail(m) for m in ia + ib + ta + tb), "a frame was degraded: cannot compare")
+        print("    intra %d+%d frames, temporal %d+%d frames (codecs %r)" % (len(ia), len(ib), len(ta), len(tb), codecs(ta)))
+        check(body(ia[0]) == body(ib[0]) and body(ia[-1]) == body(ib[-1]),
+              "intra frames differ between 1 and 3 encode threads")
+        check(body(ta[0]) == body(tb[0]), "the temporal stream's keyframes differ between 1 and 3 encode threads")
+        pa = [body(m) for m in ta[1:] if CODEC_TEMPORAL in codecs([m])]
+        pb = [body(m) for m in tb[1:] if CODEC_TEMPORAL in codecs([m])]
+        check(pa and pb and pa[-1] == pb[-1], "predicted frames differ between 1 and 3 encode threads")
+        for d in ds:
+            rc, _ = d.stop()
+            check(rc == 0, "exit code %r" % rc)
+    finally:
+        for d in ds:
+            d.kill()
+
+
+@test
 def test_temporal_join_mid_stream(d):
     """A client that joins a running temporal stream decodes its first frame
     alone (keyframe tiles of that tick), then takes the shared predicted tiles."""
