@@ -268,7 +268,7 @@ void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[L
         if (any_temporal && ip > 0)
             snprintf(intra, sizeof intra, ", intra %.0f (%.1f ns/sample)", fmin(fmin(left / ip, scap), 2e9), ip * 1e9);
         snprintf(p->reason, sizeof p->reason,
-                 "%s: N=%d, %ld samples per tick wanted, budget %.0f (encode %.1f ns/sample)%s, step %.1f ms of %.1f ms", how,
+                 "%.100s: N=%d, %ld samples per tick wanted, budget %.0f (encode %.1f ns/sample)%.50s, step %.1f ms of %.1f ms", how,
                  n, wanted, fmin(fit, 2e9), per * 1e9, intra, step * 1e3, budget * 1e3);
     }
 }

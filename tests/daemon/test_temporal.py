@@ -162,15 +162,18 @@ def test_frames_same_on_any_encode_thread_count():
     against three: the intra frames, the temporal client's first frame (the
     stream's keyframes) and its predicted tiles (the ref_seq in their prefix
     masked: the daemons' seq differ) are byte for byte the same."""
-    ds = [td.Daemon("--paused", "true", "--resolution", "512", "--encode-threads", str(k)) for k in (1, 3)]
+    # 5 ticks a second: a budget of 160 ms a frame, so that no frame is degraded (coarser, not
+    # comparable) even under ASan on a loaded machine.
+    ds = [td.Daemon("--paused", "true", "--resolution", "512", "--tick-rate", "5", "--encode-threads", str(k))
+          for k in (1, 3)]
 
     async def grab(d):
         a, _ = await connect(d)
         b, _ = await connect(d)
         await subscribe(a, fields=["height", "dx", "slope_x"], bound=0.01)
         await subscribe(b, fields=["height", "dz", "jacobian"], temporal=True, bound=0.001)
-        fa = await collect(a, 1.5, limit=3)
-        fb = await collect(b, 1.5, limit=6)
+        fa = await collect(a, 3, limit=3)
+        fb = await collect(b, 3, limit=6)
         await a.close()
         await b.close()
         return fa, fb
