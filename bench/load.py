@@ -120,6 +120,7 @@ def run(args, n, k, fields=None):
         esum1, ecnt1 = metric(port, "oceand_encode_duration_seconds_sum"), metric(port, "oceand_encode_duration_seconds_count")
         tb1 = hist_p50_ms(port, "oceand_tick_duration_seconds")
         degraded = metric(port, "oceand_degraded_groups")
+        intra_groups = metric(port, "oceand_intra_groups")   # the codec rung: temporal clients served intra at full detail
         out, err = lc.communicate()
         if lc.returncode != 0 or not out.strip():
             raise RuntimeError("load_client failed: %s %s" % (line, err))
@@ -136,6 +137,7 @@ def run(args, n, k, fields=None):
                "tick_ms_p50_bucket": bucket_median(tb0, tb1),
                "encode_ms_mean": round(1000 * (esum1 - esum0) / max(1, ecnt1 - ecnt0), 2),  # wall, on the encode pool   # deadline -> frame published, histogram bucket
                "degraded_groups_at_end": int(degraded) if degraded == degraded else None,  # NaN: a daemon without the metric
+               "intra_groups_at_end": int(intra_groups) if intra_groups == intra_groups else None,
                "connected": r["connected"], "frame_kb": r["frame_kb"], "mbytes_per_s": r["mbytes_per_s"],
                "mbytes_per_s_per_client": round(r["mbytes_per_s"] / max(1, r["connected"]), 3),
                "set_samples": r["set_samples"], "set_interval_s": args.set_interval, "window_s": args.window,
@@ -212,6 +214,9 @@ def capacity(args):
                     "encode_ms_mean",
                     "lat_p50_ms", "daemon_cpu", "daemon_runq_wait", "rss_mb", "degraded_groups_at_end", "loadavg_1m"):
             med[key] = statistics.median(r[key] for r in runs)
+        for key in ("intra_groups_at_end",):   # None from a daemon without the metric
+            vals = [r[key] for r in runs if r.get(key) is not None]
+            med[key] = statistics.median(vals) if vals else None
         print(json.dumps(med), flush=True)
 
 

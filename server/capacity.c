@@ -85,7 +85,8 @@ void cost_learn_encode(struct cost_model *m, const long samples[CAP_CODECS], dou
 
 void cost_forget_temporal(struct cost_model *m) { m->enc_temporal_s = 0; }
 
-static bool group_temporal(const struct plan *p, int g) { return p->temporal[g] && p->lod[g] == g / CTL_BOUND_COUNT; }
+static bool own_lod(const struct plan *p, int g) { return p->lod[g] == g / CTL_BOUND_COUNT; }
+static bool group_temporal(const struct plan *p, int g) { return p->temporal[g] && own_lod(p, g) && !p->intra[g]; }
 
 void plan_samples(const struct plan *p, int n, const bool *due, long samples[CAP_CODECS])
 {
@@ -143,32 +144,80 @@ void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[L
     double left = fmax(budget - step, budget * 0.25);
     double scap = m->encode_budget > 0 ? (double)m->encode_budget : 1e18;
 
-    long total = 0;
+    long total = 0, total_temporal = 0;
     double total_t = 0;
     for (int g = 0; g < PLAN_GROUPS; g++)
         if (p->fields[g]) {
             total += group_samples(p, g, n);
             total_t += group_time(m, p, g, n);
+            total_temporal += group_temporal(p, g) ? group_samples(p, g, n) : 0;
         }
     const long wanted = total;
     const double wanted_t = total_t;
-    /* 1. One LOD coarser for the largest group, again and again (a quarter
-     *    of the samples each time), while the frame does not fit. */
-    const char *how = NULL;
-    while ((double)total > scap || total_t > left) {
+    const double tcap = m->temporal_budget > 0 ? (double)m->temporal_budget : 1e18;
+    /* The codec rung pays only when intra is the cheaper codec (it is: x1.5-2) */
+    const bool intra_cheaper = cost_encode_codec_s(m, CAP_INTRA) < cost_encode_codec_s(m, CAP_TEMPORAL);
+    /* 1. While the frame does not fit: a group with temporal clients goes
+     *    intra at its own LOD (the codec rung: the same detail and rate,
+     *    more bytes), the largest such group first (the most expensive: a
+     *    sample of one codec costs the same in every group, so it saves the
+     *    most); when none is left, or the samples themselves are over
+     *    --encode-budget (which no codec helps), the largest group goes one
+     *    LOD coarser (a quarter of the samples each time; its layers go
+     *    intra too, frame.c). */
+    bool rung_codec = false, rung_lod = false, rung_rate = false;
+    while ((double)total > scap || (double)total_temporal > tcap || total_t > left) {
         int worst = -1;
-        for (int g = 0; g < PLAN_GROUPS; g++)
-            if (p->fields[g] && can_coarsen(p, g, ts) && (worst < 0 || group_samples(p, g, n) > group_samples(p, worst, n)))
+        bool codec = (double)total <= scap && (intra_cheaper || (double)total_temporal > tcap);
+        for (int g = 0; codec && g < PLAN_GROUPS; g++)
+            if (p->fields[g] && group_temporal(p, g) && (worst < 0 || group_samples(p, g, n) > group_samples(p, worst, n)))
                 worst = g;
+        if (worst < 0) {
+            codec = false;
+            for (int g = 0; g < PLAN_GROUPS; g++)
+                if (p->fields[g] && can_coarsen(p, g, ts) && (worst < 0 || group_samples(p, g, n) > group_samples(p, worst, n)))
+                    worst = g;
+        }
         if (worst < 0)
             break;
         total -= group_samples(p, worst, n);
         total_t -= group_time(m, p, worst, n);
-        p->lod[worst]++;
+        total_temporal -= group_temporal(p, worst) ? group_samples(p, worst, n) : 0;
+        if (codec) {
+            p->intra[worst] = true;
+            rung_codec = true;
+        } else {
+            p->lod[worst]++;
+            p->intra[worst] = false; /* a coarser LOD is intra anyway: the codec rung is for full detail */
+            rung_lod = true;
+        }
         total += group_samples(p, worst, n);
         total_t += group_time(m, p, worst, n);
-        how = "coarser LOD";
     }
+    /* A group put on the codec rung before another was coarsened may fit
+     * temporal again: back, the smallest first (the least it adds). */
+    for (bool again = rung_codec && rung_lod; again;) {
+        again = false;
+        int best = -1;
+        for (int g = 0; g < PLAN_GROUPS; g++)
+            if (p->fields[g] && p->intra[g] && (best < 0 || group_samples(p, g, n) < group_samples(p, best, n)))
+                best = g;
+        if (best < 0)
+            break;
+        double before = group_time(m, p, best, n);
+        p->intra[best] = false;
+        double t = total_t - before + group_time(m, p, best, n);
+        if ((double)(total_temporal + group_samples(p, best, n)) <= tcap && t <= left) {
+            total_t = t;
+            total_temporal += group_samples(p, best, n);
+            again = true;
+        } else {
+            p->intra[best] = true;
+        }
+    }
+    rung_codec = false;
+    for (int g = 0; g < PLAN_GROUPS; g++)
+        rung_codec |= p->fields[g] && p->intra[g];
     /* 2. Still too much (every group as coarse as it goes): the largest
      *    groups on fewer ticks. */
     double over_s = (double)total - scap, over_t = total_t - left;
@@ -184,33 +233,60 @@ void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[L
         p->rate[worst] = quantize_rate(1.0 - cut, m->period_s);
         over_s -= s * (1.0 - p->rate[worst]);
         over_t -= st * (1.0 - p->rate[worst]);
-        how = "lower rate";
+        rung_rate = true;
     }
     /* 3. The step alone does not fit: every group on fewer ticks (the frame
      *    takes longer than a tick; the producer runs one behind the tick). */
     double frame = step + total_t;
+    bool step_bound = false;
     if (frame > budget && step > 0) {
         double r = budget / frame;
         for (int g = 0; g < PLAN_GROUPS; g++)
             if (p->fields[g] && p->rate[g] > r)
                 p->rate[g] = quantize_rate(r, m->period_s);
-        how = "lower rate for everyone: the step alone does not fit the tick";
+        step_bound = true;
     }
     /* The demand at full detail against the samples that fit the encode
      * budget at what the demanded sizes cost (it used to print the samples
-     * left after degrading, which read as under budget). */
-    if (how) {
+     * left after degrading, which read as under budget); with temporal
+     * demand, also what fits intra (the codec rung). */
+    if (rung_codec || rung_lod || rung_rate || step_bound) {
+        char how[128] = "";
+        const char *rungs[] = { rung_codec ? "intra codec" : NULL, rung_lod ? "coarser LOD" : NULL,
+                                rung_rate && !step_bound ? "lower rate" : NULL,
+                                step_bound ? "lower rate for everyone: the step alone does not fit the tick" : NULL };
+        for (size_t i = 0; i < sizeof rungs / sizeof rungs[0]; i++)
+            if (rungs[i])
+                snprintf(how + strlen(how), sizeof how - strlen(how), "%s%s", how[0] ? ", " : "", rungs[i]);
         double per = wanted > 0 ? wanted_t / (double)wanted : 0;
         double fit = per > 0 ? fmin(left / per, scap) : scap;
+        bool any_temporal = false;
+        for (int g = 0; g < PLAN_GROUPS; g++)
+            any_temporal |= p->fields[g] && p->temporal[g];
+        char intra[64] = "";
+        double ip = cost_encode_codec_s(m, CAP_INTRA);
+        if (any_temporal && ip > 0)
+            snprintf(intra, sizeof intra, ", intra %.0f (%.1f ns/sample)", fmin(fmin(left / ip, scap), 2e9), ip * 1e9);
         snprintf(p->reason, sizeof p->reason,
-                 "%s: N=%d, %ld samples per tick wanted, budget %.0f (encode %.1f ns/sample), step %.1f ms of %.1f ms",
-                 how, n, wanted, fmin(fit, 2e9), per * 1e9, step * 1e3, budget * 1e3);
+                 "%.100s: N=%d, %ld samples per tick wanted, budget %.0f (encode %.1f ns/sample)%.50s, step %.1f ms of %.1f ms", how,
+                 n, wanted, fmin(fit, 2e9), per * 1e9, intra, step * 1e3, budget * 1e3);
     }
 }
 
 bool plan_degraded(const struct plan *p, int g)
 {
     return p->fields[g] && (p->lod[g] != g / CTL_BOUND_COUNT || p->rate[g] < 1);
+}
+
+bool plan_intra(const struct plan *p, int g) { return p->fields[g] && p->temporal[g] && p->intra[g] && own_lod(p, g); }
+
+double plan_intra_value(const struct plan *p, int n)
+{
+    double v = 0;
+    for (int g = 0; g < PLAN_GROUPS; g++)
+        if (plan_intra(p, g))
+            v += p->rate[g] * (double)group_samples(p, g, n);
+    return v;
 }
 
 double plan_value(const struct plan *p, int n)
@@ -225,7 +301,7 @@ bool plan_same(const struct plan *a, const struct plan *b)
 {
     for (int g = 0; g < PLAN_GROUPS; g++)
         if (a->fields[g] != b->fields[g] || a->lod[g] != b->lod[g] || a->rate[g] != b->rate[g] ||
-            a->temporal[g] != b->temporal[g])
+            a->temporal[g] != b->temporal[g] || plan_intra(a, g) != plan_intra(b, g))
             return false;
     return true;
 }
@@ -252,12 +328,25 @@ void capacity_info_fill(const struct cost_model *m, int n, struct capacity_info 
         z->fits_memory = control_fits_memory(size, cd ? (int)cd->def : 1, m->max_memory_mb);
         if (z->fits_memory)
             c->max_resolution = size;
+        /* The ladder's first rungs at lod 0 and the full rate: the temporal
+         * codec (what the web client asks for) if it fits, else intra (the
+         * codec rung: same detail, more bytes); the samples within the
+         * operator's caps (--encode-budget, --temporal-budget) if set.
+         * Compared as announced (hundredths of a ms), so that a client
+         * checking the counts against est_ms, est_intra_ms and budget_ms
+         * agrees at the edge. */
+        long budget_cs = (long)floor(c->budget_ms * 100 + 0.5);
         for (int f = 1; f <= 6; f++) {
-            /* with the temporal codec: what the web client asks for (intra costs about half) */
-            z->est_ms[f - 1] = (cost_step_s(m, size, f) + (double)f * size * size * cost_encode_codec_s(m, CAP_TEMPORAL)) * 1e3;
-            /* Compared as announced (hundredths of a ms), so that a client checking
-             * full_rate_fields against est_ms and budget_ms agrees at the edge */
-            if (floor(z->est_ms[f - 1] * 100 + 0.5) <= floor(c->budget_ms * 100 + 0.5))
+            double samples = (double)f * size * size, step = cost_step_s(m, size, f);
+            z->est_ms[f - 1] = (step + samples * cost_encode_codec_s(m, CAP_TEMPORAL)) * 1e3;
+            z->est_intra_ms[f - 1] = (step + samples * cost_encode_codec_s(m, CAP_INTRA)) * 1e3;
+            bool in_caps = m->encode_budget <= 0 || samples <= (double)m->encode_budget;
+            bool temporal = in_caps && (m->temporal_budget <= 0 || samples <= (double)m->temporal_budget) &&
+                            (long)floor(z->est_ms[f - 1] * 100 + 0.5) <= budget_cs;
+            bool intra = in_caps && (long)floor(z->est_intra_ms[f - 1] * 100 + 0.5) <= budget_cs;
+            if (temporal)
+                z->temporal_fields = f;
+            if (temporal || intra)
                 z->full_rate_fields = f;
         }
     }

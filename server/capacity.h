@@ -12,10 +12,12 @@
  *     a subscription that would push the distinct layers past it is refused
  *     with `busy` (the lws thread, capacity_admit in server/net/capacity.c);
  *   - the plan of each tick (capacity_plan): when demand does not fit, the
- *     most expensive subscription groups (same LOD and bound) are encoded one
- *     LOD coarser, then at a lower rate; only when the step alone does not
- *     fit does every group's rate go down. The clients concerned are told
- *     with a `degraded` message (PROTOCOL.md);
+ *     ladder, one rung after the other: a subscription group (same LOD and
+ *     bound) with temporal clients is encoded intra at its own LOD (same
+ *     detail and rate, more bytes; the most expensive group first), then the
+ *     largest groups one LOD coarser, then at a lower rate; only when the
+ *     step alone does not fit does every group's rate go down. The clients
+ *     concerned are told with a `degraded` message (PROTOCOL.md);
  *   - the announcement in hello and params (which N fit memory and the tick).
  * Pure functions: no threads, no clocks. */
 #ifndef OCEAND_CAPACITY_H
@@ -57,6 +59,8 @@ struct cost_model {
                                    makes frames rare, so frames alone would undo it only slowly.
                                    Not used for admission (cost_encode_budget) */
     long encode_budget;         /* --encode-budget: samples per tick at most, 0 = derived only */
+    long temporal_budget;       /* --temporal-budget: samples per tick at most with the temporal codec,
+                                   0 = derived only (groups beyond it are served intra at their LOD) */
     int max_memory_mb;
     int cores;
 };
@@ -92,7 +96,9 @@ struct plan {
     unsigned char lod[PLAN_GROUPS]; /* encoded LOD per group (>= the group's own) */
     float rate[PLAN_GROUPS];        /* share of ticks the group is encoded on, (0, 1] */
     bool temporal[PLAN_GROUPS];     /* a temporal client asked for one of its layers */
-    char reason[200];               /* why, when anything is degraded: the demand at full detail
+    bool intra[PLAN_GROUPS];        /* the codec rung: a temporal group served intra at its own LOD
+                                       because the temporal codec does not fit (plan_intra) */
+    char reason[240];               /* why, when anything is degraded: the demand at full detail
                                        (samples per tick), the budget in samples at what those
                                        sizes cost, the step and the frame budget */
 };
@@ -102,7 +108,20 @@ struct plan {
  * temporal clients per key (NULL: none). */
 void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[LAYER_KEYS_ALL],
                    const int tdemand[LAYER_KEYS_ALL], double budget_scale, struct plan *out);
+/* Served coarser or less often than asked (a loss of detail or rate). */
 bool plan_degraded(const struct plan *p, int group);
+/* A group with temporal clients served intra at its own LOD (the codec rung:
+ * same detail and rate, more bytes); only its temporal clients are told. */
+bool plan_intra(const struct plan *p, int group);
+/* What the group's temporal clients get is not what they asked for:
+ * plan_degraded, or plan_intra for a temporal client. */
+static inline bool plan_degraded_for(const struct plan *p, int group, bool temporal_client)
+{
+    return plan_degraded(p, group) || (temporal_client && plan_intra(p, group));
+}
+/* Samples (x rate) served intra by the codec rung: at equal plan_value, the
+ * plan with fewer is the better one (sim_thread.c, update_plan). */
+double plan_intra_value(const struct plan *p, int n);
 /* What the plan delivers, comparable between plans of the same demand:
  * sum over groups of rate * samples encoded. */
 double plan_value(const struct plan *p, int n);
@@ -113,7 +132,8 @@ bool plan_same(const struct plan *a, const struct plan *b);
 void cost_forget_temporal(struct cost_model *m);
 /* Samples per codec the plan encodes (only the groups with due[g] unless
  * due is NULL): a group is temporal when it has temporal demand and is
- * encoded at its own LOD (a coarser one goes intra). */
+ * encoded at its own LOD (a coarser one goes intra) and not on the codec
+ * rung (plan_intra). */
 void plan_samples(const struct plan *p, int n, const bool *due, long samples[CAP_CODECS]);
 /* The model's moving average: down fast (a quarter), up slowly (a tenth). */
 double cost_ewma(double model, double measured);

@@ -56,6 +56,9 @@ static const struct param_def opt_table[] = {
       "with the next step (0 = one per core)"),
     OPT("encode_budget", PARAM_INT, encode_budget, 0, 1 << 30, 0, NULL, 0, "samples encoded per tick at most, over "
       "all distinct layers (0 = derived from the tick time measured at start-up); a subscription beyond it gets `busy`"),
+    OPT("temporal_budget", PARAM_INT, temporal_budget, 0, 1 << 30, 0, NULL, 0, "samples encoded per tick at most "
+      "with the temporal codec (codec 3), over all subscription groups with temporal clients (0 = derived from the "
+      "measured costs only); a group beyond it is sent intra at its own LOD: the same detail, more bytes"),
     OPT("plan_rigor", PARAM_INT, plan_rigor, 0, 1, 1, NULL, 0, "1 = FFTW_MEASURE (faster steps; the first plan of "
       "each N takes a moment, then it is cached in --wisdom-file), 0 = FFTW_ESTIMATE"),
     OPT_STR("wisdom_file", wisdom_file, "auto", 0, "FFTW wisdom cache: \"auto\" = "

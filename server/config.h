@@ -35,6 +35,7 @@ struct daemon_config {
     int    fft_threads;
     int    encode_threads;     /* frame encoders (pool), 0 = one per core (resolved by config_load) */
     int    encode_budget;      /* samples encoded per tick at most; 0 = derived from the measured tick */
+    int    temporal_budget;    /* samples per tick at most with the temporal codec; 0 = derived only */
     int    plan_rigor;
     char   wisdom_file[512];
     int    max_memory_mb;

@@ -708,13 +708,14 @@ cJSON *control_hello_msg(const struct hello_info *h)
     return o;
 }
 
-cJSON *control_degraded_msg(bool active, int subscribed_lod, int lod, double rate, const char *reason)
+cJSON *control_degraded_msg(bool active, int subscribed_lod, int lod, int codec, double rate, const char *reason)
 {
     cJSON *o = cJSON_CreateObject();
     cJSON_AddStringToObject(o, "type", "degraded");
     cJSON_AddBoolToObject(o, "active", active);
     cJSON_AddNumberToObject(o, "subscribed_lod", subscribed_lod);
     cJSON_AddNumberToObject(o, "lod", lod);
+    cJSON_AddNumberToObject(o, "codec", codec);
     cJSON_AddNumberToObject(o, "rate", floor(rate * 100 + 0.5) / 100);
     cJSON_AddStringToObject(o, "reason", reason ? reason : "");
     return o;
@@ -741,7 +742,11 @@ cJSON *control_capacity_object(const struct capacity_info *c)
         for (int k = 0; k < 6; k++)
             ms[k] = round2(z->est_ms[k]);
         cJSON_AddItemToObject(e, "est_ms", cJSON_CreateDoubleArray(ms, 6));
+        for (int k = 0; k < 6; k++)
+            ms[k] = round2(z->est_intra_ms[k]);
+        cJSON_AddItemToObject(e, "est_intra_ms", cJSON_CreateDoubleArray(ms, 6));
         cJSON_AddNumberToObject(e, "full_rate_fields", z->full_rate_fields);
+        cJSON_AddNumberToObject(e, "temporal_fields", z->temporal_fields);
         cJSON_AddItemToArray(a, e);
     }
     return o;

@@ -140,14 +140,17 @@ struct capacity_info {
     struct capacity_size {
         int n;
         bool fits_memory;
-        double est_ms[6];       /* estimated frame time with 1..6 fields at LOD 0 */
-        int full_rate_fields;   /* most fields (LOD 0) that fit the budget at the tick rate */
+        double est_ms[6];       /* estimated frame time with 1..6 fields at LOD 0, temporal codec */
+        double est_intra_ms[6]; /* the same with the intra codec (the plan's codec rung) */
+        int full_rate_fields;   /* most fields (LOD 0) that fit the budget at the tick rate, either codec */
+        int temporal_fields;    /* most fields (LOD 0) that fit it with the temporal codec */
     } sizes[CAPACITY_MAX_SIZES];
 };
 cJSON *control_capacity_object(const struct capacity_info *c);
 /* `degraded`: how a client's subscription is served now (active = coarser
- * LOD or fewer frames than asked; false = as asked again). */
-cJSON *control_degraded_msg(bool active, int subscribed_lod, int lod, double rate, const char *reason);
+ * LOD, fewer frames, or the intra codec (1) where the temporal one (3) was
+ * asked; false = as asked again). */
+cJSON *control_degraded_msg(bool active, int subscribed_lod, int lod, int codec, double rate, const char *reason);
 
 struct hello_info {
     const char *client_id;

@@ -92,12 +92,17 @@ struct layer_streams;
  * of threads while the producer steps the next tick:
  *   frame_job_begin   (producer, after the step) copies the wanted fields out
  *                     of the simulation (the next step overwrites them) and
- *                     cuts the work into items: one layer each (its whole
- *                     encode is one call, so per-layer codec state needs no lock);
- *   frame_job_item    (any encode thread, items in any order, concurrently);
- *                     jobs run one at a time in seq order, so per-layer state
- *                     kept across frames (a temporal codec's stream) is used by
- *                     one thread at a time, frame after frame, without a lock;
+ *                     cuts the work into items: one row of tiles of one layer
+ *                     each, so that one layer alone keeps every thread busy
+ *                     (a temporal layer's stream is begun here: oc_stream_begin);
+ *   frame_job_item    (any encode thread, items in any order, concurrently):
+ *                     encodes its row with that thread's encoder (a temporal
+ *                     layer: its range of the stream, oc_stream_encode_tiles);
+ *                     the thread that finishes a layer's last item assembles
+ *                     the layer (rows in order; a temporal stream's end). Jobs
+ *                     run one at a time in seq order, so state kept across
+ *                     frames (the streams) needs no lock. The bytes do not
+ *                     depend on which thread took which item;
  *   frame_job_finish  (the thread that finished the last item) drops the
  *                     layers that failed and returns the frame.
  * A job is reused frame after frame (buffers keep their capacity). */

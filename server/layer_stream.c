@@ -120,13 +120,31 @@ static void clear(struct layer *l)
     l->need = 0;
 }
 
-int layer_encode_temporal(struct oc_stream *st, struct oc_encoder *enc, const float *data, uint64_t seq,
-                          bool keyframes, int tps, struct layer *l)
+int layer_temporal_begin(struct oc_stream *st, uint64_t seq, struct oc_stream_stats *before)
+{
+    oc_stream_stats(st, before);
+    return oc_stream_begin(st, seq);
+}
+
+int layer_temporal_tiles(struct oc_stream *st, struct oc_encoder *enc, const float *data, bool keyframes, int tps,
+                         int first, int count)
+{
+    int rc = oc_stream_encode_tiles(st, enc, data, first, count);
+    for (int k = first; rc == 0 && keyframes && k < first + count; k++) {
+        const uint8_t *p;   /* made now, on this thread; layer_temporal_collect takes it from the stream */
+        size_t len;
+        rc = oc_stream_keyframe_tile(st, enc, k % tps, k / tps, &p, &len);
+    }
+    return rc;
+}
+
+int layer_temporal_collect(struct oc_stream *st, int rc, bool keyframes, int tps,
+                           const struct oc_stream_stats *before, struct layer *l)
 {
     int cascade = l->cascade;
-    struct oc_stream_stats before, after;
-    oc_stream_stats(st, &before);
-    int rc = oc_stream_encode(st, enc, data, seq);
+    int end = oc_stream_end(st);    /* resets the stream when a range failed */
+    if (rc == 0)
+        rc = end;
     size_t ntiles = (size_t)tps * (size_t)tps;
     if (rc == 0 && !(l->shared_off = malloc(sizeof(uint32_t) * (ntiles + 1))))
         rc = OC_E_NOMEM;
@@ -139,7 +157,7 @@ int layer_encode_temporal(struct oc_stream *st, struct oc_encoder *enc, const fl
             rc = oc_stream_tile(st, tx, tz, &p, &len);
             if (rc == 0)
                 rc = append(&l->shared, &l->shared_off[tz * tps + tx], p, len, cascade);
-            if (rc == 0 && keyframes && (rc = oc_stream_keyframe_tile(st, enc, tx, tz, &p, &len)) == 0)
+            if (rc == 0 && keyframes && (rc = oc_stream_keyframe_tile(st, NULL, tx, tz, &p, &len)) == 0)
                 rc = append(&l->buf, &l->tile_off[tz * tps + tx], p, len, cascade);
         }
     if (rc != 0) {
@@ -151,9 +169,10 @@ int layer_encode_temporal(struct oc_stream *st, struct oc_encoder *enc, const fl
     if (keyframes)
         l->tile_off[ntiles] = (uint32_t)l->buf.len;
     l->need = (uint8_t)oc_stream_need(st);
+    struct oc_stream_stats after;
     oc_stream_stats(st, &after);
-    atomic_fetch_add(&g_metrics.stream_key_tiles, after.key_tiles - before.key_tiles);
-    atomic_fetch_add(&g_metrics.stream_predicted_tiles, after.predicted_tiles - before.predicted_tiles);
-    atomic_fetch_add(&g_metrics.stream_demand_key_tiles, after.demand_key_tiles - before.demand_key_tiles);
+    atomic_fetch_add(&g_metrics.stream_key_tiles, after.key_tiles - before->key_tiles);
+    atomic_fetch_add(&g_metrics.stream_predicted_tiles, after.predicted_tiles - before->predicted_tiles);
+    atomic_fetch_add(&g_metrics.stream_demand_key_tiles, after.demand_key_tiles - before->demand_key_tiles);
     return 0;
 }

@@ -7,9 +7,8 @@
  * tick's keyframe tiles; both go into the frame's struct layer, and the lws
  * thread picks per client which one it sends. The work per layer and tick
  * is one shared encode plus at most one keyframe encode, whatever the
- * number of clients. layer_encode_temporal is a self-contained call (the
- * stream and the encoder are passed in), so layers can be encoded on any
- * thread, one layer per thread at a time. */
+ * number of clients. A layer's tiles are encoded by ranges on any threads
+ * (layer_temporal_tiles), between one begin and one collect. */
 #ifndef OCEAND_LAYER_STREAM_H
 #define OCEAND_LAYER_STREAM_H
 
@@ -56,11 +55,24 @@ void layer_streams_free(struct layer_streams *ls);
  * new chains). */
 void layer_streams_prepare(struct layer_streams *ls, int n, int tile_size, struct frame_want *want);
 
-/* Encode one temporal layer of this tick into l (field/lod/bound_index/cascade
- * set by the caller; the tiles' headers carry l->cascade): l->shared + l->shared_off + l->need always, l->buf +
- * l->tile_off (the keyframe tiles) when `keyframes`. data = the full n*n
- * field. Returns 0 or an OC_E_* (the stream is then reset, l holds nothing). */
-int layer_encode_temporal(struct oc_stream *st, struct oc_encoder *enc, const float *data, uint64_t seq,
-                          bool keyframes, int tiles_per_side, struct layer *l);
+/* Encode one temporal layer of this tick, in three parts so that the encode
+ * pool's threads share a layer (oc_stream_begin / _encode_tiles / _end):
+ *   layer_temporal_begin    one thread, before any range (the job's start):
+ *                           the stream's counters so far go in *before;
+ *   layer_temporal_tiles    any thread, concurrently on disjoint tile ranges
+ *                           (tile k = tile_z * tiles_per_side + tile_x), each
+ *                           with its own encoder: the shared tiles and, when
+ *                           `keyframes`, this tick's keyframe tiles of the range;
+ *   layer_temporal_collect  one thread, after every range returned (rc: the
+ *                           first range's error, or 0): l->shared +
+ *                           l->shared_off + l->need always, l->buf + l->tile_off
+ *                           when `keyframes` (field/lod/bound_index/cascade set by
+ *                           the caller; the tiles' headers carry l->cascade).
+ * Returns 0 or an OC_E_* (the stream is then reset, l holds nothing). */
+int layer_temporal_begin(struct oc_stream *st, uint64_t seq, struct oc_stream_stats *before);
+int layer_temporal_tiles(struct oc_stream *st, struct oc_encoder *enc, const float *data, bool keyframes,
+                         int tiles_per_side, int first, int count);
+int layer_temporal_collect(struct oc_stream *st, int rc, bool keyframes, int tiles_per_side,
+                           const struct oc_stream_stats *before, struct layer *l);
 
 #endif

@@ -161,6 +161,7 @@ int main(int argc, char **argv)
         .start_version = res.params_version,
         .encode_threads = dc.encode_threads,
         .encode_budget = dc.encode_budget,
+        .temporal_budget = dc.temporal_budget,
         .max_memory_mb = dc.max_memory_mb,
         .cores = (int)sysconf(_SC_NPROCESSORS_ONLN),
         .wake = net_wake,

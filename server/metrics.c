@@ -79,6 +79,9 @@ size_t metrics_render(char *buf, size_t cap)
             atomic_load(&m->ticks_late));
     gauge(&o, "oceand_degraded_groups", "Subscription groups (LOD, bound) encoded at a coarser LOD or a lower "
           "rate than asked, because demand exceeds the encode budget.", atomic_load(&m->degraded_groups));
+    gauge(&o, "oceand_intra_groups", "Subscription groups with temporal clients served with the intra codec at "
+          "their own LOD (the same detail, more bytes), because the temporal codec does not fit the encode budget.",
+          atomic_load(&m->intra_groups));
     counter(&o, "oceand_subscriptions_refused_busy_total", "Subscriptions refused with `busy` (encode budget).",
             atomic_load(&m->refused_busy));
     counter(&o, "oceand_degraded_messages_total", "`degraded` messages sent to clients.", atomic_load(&m->degraded_sent));

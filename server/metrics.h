@@ -28,6 +28,7 @@ struct metrics {
     atomic_uint_least64_t closed_output_limit, closed_unmasked, refused_fd_limit;
     atomic_int clients;
     atomic_int degraded_groups;       /* subscription groups encoded coarser or less often (capacity.h) */
+    atomic_int intra_groups;          /* groups with temporal clients served intra at their LOD (capacity.h plan_intra) */
     atomic_uint_least64_t refused_busy, degraded_sent; /* subscriptions refused `busy`; `degraded` messages sent */
     atomic_uint_least32_t params_version;
     atomic_int resolution;

@@ -587,9 +587,28 @@ static void *producer_main(void *arg)
 static bool plan_any_degraded(const struct plan *p)
 {
     for (int g = 0; g < PLAN_GROUPS; g++)
-        if (plan_degraded(p, g))
+        if (plan_degraded(p, g) || plan_intra(p, g))
             return true;
     return false;
+}
+
+/* a better than b for the same demand: more detail x rate (plan_value), or
+ * as much with fewer samples on the codec rung (temporal clients served
+ * intra: same detail, more bytes). Equal values are sums of the same terms. */
+static bool plan_better(const struct plan *a, const struct plan *b, int n)
+{
+    double va = plan_value(a, n), vb = plan_value(b, n);
+    return va > vb || (va == vb && plan_intra_value(a, n) < plan_intra_value(b, n));
+}
+
+/* a worse than b, to be taken at once: under 90 % of its value (the band
+ * against noise), or no more value and more samples on the codec rung (the
+ * temporal codec no longer fits: same detail, so no band is needed; the
+ * way back still needs the headroom and the hold). */
+static bool plan_worse(const struct plan *a, const struct plan *b, int n)
+{
+    double va = plan_value(a, n), vb = plan_value(b, n);
+    return va < 0.9 * vb || (va <= vb && plan_intra_value(a, n) > plan_intra_value(b, n));
 }
 
 static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], const int tdemand[LAYER_KEYS_ALL], int n, int ts)
@@ -613,14 +632,14 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], const i
         next = now;
         s->lower_ticks = 0;
         s->hold_ticks = PLAN_HOLD_S * rate;
-    } else if (plan_value(&now, n) < 0.9 * plan_value(&s->plan, n)) {
+    } else if (plan_worse(&now, &s->plan, n)) {
         next = now;
         s->lower_ticks = 0;
         if (s->recovered && s->since_change < PLAN_FAILED_S * rate) /* the recovery did not fit */
             s->hold_ticks = s->hold_ticks * 2 < PLAN_HOLD_MAX_S * rate ? s->hold_ticks * 2 : PLAN_HOLD_MAX_S * rate;
     } else {
         capacity_plan(&m, n, ts, demand, tdemand, PLAN_EASY_SCALE, &easy);
-        if (plan_value(&easy, n) > plan_value(&s->plan, n)) {
+        if (plan_better(&easy, &s->plan, n)) {
             if (++s->lower_ticks >= s->hold_ticks) {
                 next = easy;
                 s->lower_ticks = 0;
@@ -634,7 +653,7 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], const i
                 struct cost_model fresh = m;
                 cost_forget_temporal(&fresh);
                 capacity_plan(&fresh, n, ts, demand, tdemand, PLAN_EASY_SCALE, &easy);
-                if (plan_value(&easy, n) > plan_value(&s->plan, n)) {
+                if (plan_better(&easy, &s->plan, n)) {
                     next = easy;
                     probe = true;
                 } else {
@@ -657,25 +676,28 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], const i
     LOGD("plan change at seq %llu: step x%.2f, encode %.2f ns/sample intra, %.2f temporal%s, penalty x%.2f, hold %.0f s%s",
          (unsigned long long)s->seq, m.step_scale, m.enc_s_per_sample * 1e9, cost_encode_codec_s(&m, CAP_TEMPORAL) * 1e9 / fmax(m.penalty, 1),
          m.enc_temporal_s > 0 ? "" : " (prior)", fmax(m.penalty, 1), s->hold_ticks / (double)rate, probe ? ", recovery probe" : "");
-    s->recovered = same_demand && plan_value(&next, n) > plan_value(&s->plan, n);
+    s->recovered = same_demand && plan_better(&next, &s->plan, n);
     s->since_change = 0;
     /* New layers or LODs start with keyframes and cold buffers: their first
      * slow frames must not raise the penalty (tick) and undo the plan */
     s->grace_seq = s->seq + (uint64_t)(rate / 2 + 1);
-    int degraded = 0;
+    int degraded = 0, intra = 0;
     for (int g = 0; g < PLAN_GROUPS; g++) {
         degraded += plan_degraded(&next, g);
-        if (plan_degraded(&next, g) && !plan_degraded(&s->plan, g))
-            LOGI("degrading lod %d bound %g: encoded at lod %d, %g frames/s (%s)", g / CTL_BOUND_COUNT,
-                 ctl_bounds[g % CTL_BOUND_COUNT], next.lod[g], next.rate[g] * s->cfg.tick_rate, next.reason);
+        intra += plan_intra(&next, g);
+        if ((plan_degraded(&next, g) && !plan_degraded(&s->plan, g)) || (plan_intra(&next, g) && !plan_intra(&s->plan, g)))
+            LOGI("degrading lod %d bound %g: encoded at lod %d%s, %g frames/s (%s)", g / CTL_BOUND_COUNT,
+                 ctl_bounds[g % CTL_BOUND_COUNT], next.lod[g], plan_intra(&next, g) ? " intra" : "",
+                 next.rate[g] * s->cfg.tick_rate, next.reason);
         if (s->credit[g] == 0) /* spread the groups' ticks: equal rates must not all fall on one tick */
             s->credit[g] = fmod(0.618034 * (g + 1), 1.0);
     }
     atomic_store(&g_metrics.degraded_groups, degraded);
+    atomic_store(&g_metrics.intra_groups, intra);
     for (int g = 0; g < PLAN_GROUPS; g++)
         if (next.fields[g])
-            LOGD("plan: lod %d bound %g: encoded at lod %d, %g frames/s (%s)", g / CTL_BOUND_COUNT,
-                 ctl_bounds[g % CTL_BOUND_COUNT], next.lod[g], next.rate[g] * s->cfg.tick_rate,
+            LOGD("plan: lod %d bound %g: encoded at lod %d%s, %g frames/s (%s)", g / CTL_BOUND_COUNT,
+                 ctl_bounds[g % CTL_BOUND_COUNT], next.lod[g], plan_intra(&next, g) ? " intra" : "", next.rate[g] * s->cfg.tick_rate,
                  next.reason[0] ? next.reason : "not degraded");
     s->plan = next;
     pthread_mutex_lock(&s->lock);
@@ -758,6 +780,10 @@ static void tick(struct sim *s, double t_tick)
             bool edge = (remote[k >> 3] >> (k & 7)) & 1;
             int key_want = atomic_load(&s->key_want[k]);
             pj.want.intra[k] = demand[k] > temporal || edge || key_want > 0;
+            if (plan_intra(&s->plan, g)) { /* the codec rung: intra tiles for everyone, no stream (its state is dropped) */
+                pj.want.temporal[k] = 0;
+                pj.want.intra[k] = 1;
+            }
             pj.want.kclients[k] = (uint16_t)(key_want < 0 ? 0 : key_want > 65535 ? 65535 : key_want);
             /* who takes this layer every tick: the stream's grid refinement (layer_stream.h) */
             pj.want.tclients[k] = (uint16_t)(temporal < 0 ? 0 : temporal > 65535 ? 65535 : temporal);
@@ -1048,6 +1074,7 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
         return NULL;
     }
     measure_model(s);
+    s->model.temporal_budget = s->cfg.temporal_budget;
     frame_job_set_streams(s->job, &s->streams); /* after the start-up measurement: intra only */
     atomic_store(&s->now_time, s->sim_time);
     if (cfg->queries)

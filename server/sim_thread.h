@@ -69,6 +69,7 @@ struct sim_config {
     uint32_t start_version;
     int encode_threads;         /* threads that encode (pool + the producer helping), >= 1 */
     long encode_budget;         /* --encode-budget: samples per tick at most, 0 = derived */
+    long temporal_budget;       /* --temporal-budget: samples per tick at most with the temporal codec, 0 = derived */
     int max_memory_mb;          /* for the capacity announcement */
     int cores;                  /* same */
     uint64_t start_seq;         /* seq of the tick before the first (0; --role sim: from the wall clock,

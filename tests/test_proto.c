@@ -11,6 +11,7 @@
 
 #include <cjson/cJSON.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -723,6 +724,122 @@ static void test_stream_wide_codes(void)
     oc_encoder_free(e);
 }
 
+/* One layer encoded by several threads (the daemon's encode pool): the stream
+ * split into tile ranges, each range on its own thread and encoder, gives the
+ * same bytes, need and counters as one oc_stream_encode call, through sea
+ * changes, a reset, a gap in seq, a failing tile and keyframes on demand. */
+struct range_job {
+    struct oc_stream *s;
+    struct oc_encoder *e;
+    const float *f;
+    int first, count, tick, rc;
+};
+
+/* A range, then the keyframes of a third of its tiles (before oc_stream_end, as the daemon's pool does). */
+static void *range_main(void *arg)
+{
+    struct range_job *j = arg;
+    j->rc = oc_stream_encode_tiles(j->s, j->e, j->f, j->first, j->count);
+    const int grid = (int)sqrt((double)oc_stream_tile_count(j->s));
+    for (int t = j->first; j->rc == OC_OK && t < j->first + j->count; t++) {
+        const uint8_t *p;
+        size_t len;
+        /* not on the failing tick 36: keyframes the good ranges made would count, unlike the one-call path */
+        if ((t + j->tick) % 3 == 0 && j->tick != 36 && oc_stream_keyframe_tile(j->s, j->e, t % grid, t / grid, &p, &len) != OC_OK)
+            j->rc = OC_E_ARG;
+    }
+    return NULL;
+}
+
+static void test_stream_ranges(void)
+{
+    enum { N = 256, TS = 32, GRID = N / TS, TILES = GRID * GRID, THREADS = 3, TICKS = 48 };
+    struct oc_encoder *e0 = oc_encoder_new(), *e[THREADS];
+    for (int i = 0; i < THREADS; i++) e[i] = oc_encoder_new();
+    struct oc_stream *a = oc_stream_new(N, TS, 0, OC_FIELD_HEIGHT, 0.01f);
+    struct oc_stream *b = oc_stream_new(N, TS, 0, OC_FIELD_HEIGHT, 0.01f);
+    oc_stream_set_keyframe_interval(a, 16);
+    oc_stream_set_keyframe_interval(b, 16);
+    CHECK(oc_stream_tile_count(b) == TILES, "tile count %d", oc_stream_tile_count(b));
+    CHECK(oc_stream_encode_tiles(b, e[0], NULL, 0, 1) == OC_E_ARG, "range without data accepted");
+    static float f[N * N];
+    int same = 1, predicted = 0, failed_ticks = 0;
+    uint64_t seq = 100;
+    for (int k = 0; k < TICKS; k++) {
+        sea(f, N, k / 30.0, k < 24 ? 1.5 : 2.5);
+        if (k == 24) { oc_stream_sea_changed(a); oc_stream_sea_changed(b); }
+        if (k == 32) { oc_stream_reset(a); oc_stream_reset(b); }
+        seq += k == 40 ? 3 : 1;                              /* a gap: new chains */
+        if (k == 36) f[(size_t)(N / 2) * N + 7] = NAN;        /* one tile fails: both streams reset */
+        int ra = oc_stream_encode(a, e0, f, seq);
+        /* b: ranges of random lengths in a shuffled order, THREADS at a time on real threads */
+        int starts[TILES + 1], nr = 0;
+        for (int t = 0; t < TILES; t += 1 + (int)(rnd() % 9)) starts[nr++] = t;
+        starts[nr] = TILES;
+        int order[TILES];
+        for (int i = 0; i < nr; i++) order[i] = i;
+        for (int i = nr - 1; i > 0; i--) { int j = (int)(rnd() % (uint32_t)(i + 1)), x = order[i]; order[i] = order[j]; order[j] = x; }
+        oc_stream_begin(b, seq);
+        const uint8_t *kp;
+        size_t kl;
+        CHECK(oc_stream_keyframe_tile(b, e[0], 0, 0, &kp, &kl) == OC_E_ARG, "keyframe of a tile not encoded yet");
+        int rb_tiles = OC_OK;
+        for (int i = 0; i < nr; i += THREADS) {
+            struct range_job jobs[THREADS];
+            pthread_t tid[THREADS];
+            int nj = 0;
+            for (; nj < THREADS && i + nj < nr; nj++) {
+                int r = order[i + nj];
+                jobs[nj] = (struct range_job){ b, e[nj], f, starts[r], starts[r + 1] - starts[r], k, 0 };
+                pthread_create(&tid[nj], NULL, range_main, &jobs[nj]);
+            }
+            for (int x = 0; x < nj; x++) {
+                pthread_join(tid[x], NULL);
+                if (jobs[x].rc) rb_tiles = jobs[x].rc;
+            }
+        }
+        int rb = oc_stream_end(b);
+        if (k == 36) {
+            f[(size_t)(N / 2) * N + 7] = 0;
+            CHECK(ra != OC_OK && rb_tiles != OC_OK && rb != OC_OK, "NaN tile: %d / %d / %d", ra, rb_tiles, rb);
+            failed_ticks++;
+            continue;
+        }
+        CHECK(ra == OC_OK && rb == OC_OK && rb_tiles == OC_OK, "tick %d: %d / %d / %d", k, ra, rb_tiles, rb);
+        same &= oc_stream_need(a) == oc_stream_need(b);
+        predicted += oc_stream_need(a) > 0;
+        for (int t = 0; t < TILES; t++) {
+            const uint8_t *pa, *pb;
+            size_t la, lb;
+            oc_stream_tile(a, t % GRID, t / GRID, &pa, &la);
+            oc_stream_tile(b, t % GRID, t / GRID, &pb, &lb);
+            same &= la == lb && memcmp(pa, pb, la) == 0;
+            if ((t + k) % 3 == 0) {   /* keyframes on demand: b's made by the range's thread */
+                oc_stream_keyframe_tile(a, e0, t % GRID, t / GRID, &pa, &la);
+                oc_stream_keyframe_tile(b, e[t % THREADS], t % GRID, t / GRID, &pb, &lb);
+                same &= la == lb && memcmp(pa, pb, la) == 0;
+            }
+        }
+        struct oc_stream_stats sa, sb;
+        oc_stream_stats(a, &sa);
+        oc_stream_stats(b, &sb);
+        same &= memcmp(&sa, &sb, sizeof sa) == 0;
+        if (!same) { CHECK(0, "tile ranges differ from one encode at tick %d", k); break; }
+    }
+    CHECK(same && failed_ticks == 1, "tile ranges: identical %d, failed ticks %d", same, failed_ticks);
+    struct oc_stream_stats st;
+    oc_stream_stats(b, &st);
+    CHECK(predicted > 20 && st.predicted_tiles > 0 && st.key_tiles > (uint64_t)TILES && st.change_intra_tiles > 0
+          && st.demand_key_tiles > 0,
+          "tile ranges exercised too little: %d predicted ticks, %llu predicted / %llu key / %llu change / %llu demand tiles",
+          predicted, (unsigned long long)st.predicted_tiles, (unsigned long long)st.key_tiles,
+          (unsigned long long)st.change_intra_tiles, (unsigned long long)st.demand_key_tiles);
+    oc_stream_free(a);
+    oc_stream_free(b);
+    oc_encoder_free(e0);
+    for (int i = 0; i < THREADS; i++) oc_encoder_free(e[i]);
+}
+
 int main(int argc, char **argv)
 {
     if (argc != 2) { fprintf(stderr, "usage: test_proto VECTOR_DIR\n"); return 2; }
@@ -734,6 +851,7 @@ int main(int argc, char **argv)
     test_stream_60s();
     test_stream_tiny_tiles();
     test_stream_wide_codes();
+    test_stream_ranges();
     printf("%d checks, %d failed\n", checks, failures);
     if (failures) { printf("test_proto: FAILED\n"); return 1; }
     printf("test_proto: OK\n");

@@ -23,6 +23,7 @@ void oc_encoder_free(struct oc_encoder *e)
     if (!e) return;
     oc_entropy_free(e->ent);
     free(e->vals); free(e->q); free(e->zz); free(e->esc); free(e->packed);
+    free(e->cand_q); oc_buf_free(&e->cand);
     free(e);
 }
 

@@ -71,6 +71,12 @@ struct oc_encoder {
     uint8_t *packed;   /* streams A + B, input of the entropy coder */
     int8_t forced[OC_PRED_COEFS];
     int force;         /* test hook: use forced[] instead of fitting */
+    /* A temporal stream's intra candidates (oc_stream.c): here, not in the stream, so
+     * threads encoding different tiles of one stream, each with its own encoder, share
+     * no scratch. */
+    int32_t *cand_q;   /* a candidate's codes (cand_cap samples) */
+    size_t cand_cap;
+    struct oc_buf cand; /* a candidate tile */
 };
 
 int oc_enc_reserve(struct oc_encoder *e, size_t count);

@@ -186,13 +186,28 @@ void oc_stream_sea_changed(struct oc_stream *s);
  * seq = the frame's seq. A seq that does not follow the previous call's by 1
  * starts a new chain (keyframes). Non-finite input: OC_E_ARG (stream reset). */
 int oc_stream_encode(struct oc_stream *s, struct oc_encoder *e, const float *field_data, uint64_t seq);
+/* The same in three parts, so that several threads can encode one layer:
+ * oc_stream_begin (one thread), then oc_stream_encode_tiles on ranges of tiles
+ * (tile k = tile_z * (n / tile_size) + tile_x) that together cover every tile
+ * once, concurrently on disjoint ranges, each with its own encoder, in any
+ * order, then oc_stream_end (one thread, after every range returned). The
+ * bytes do not depend on the split or the order. A range that fails makes
+ * oc_stream_end reset the stream and return an error; oc_stream_end returns
+ * OC_OK otherwise. oc_stream_keyframe_tile may likewise run concurrently for
+ * distinct tiles (each with its own encoder), for a tile as soon as its range
+ * is encoded, until the next oc_stream_begin. */
+int oc_stream_begin(struct oc_stream *s, uint64_t seq);
+int oc_stream_encode_tiles(struct oc_stream *s, struct oc_encoder *e, const float *field_data, int first, int count);
+int oc_stream_end(struct oc_stream *s);
+int oc_stream_tile_count(const struct oc_stream *s);
 /* Ticks of history a receiver needs for this tick's shared tiles: it must have
  * received this layer (the same tiles, shared or keyframe) in each of the
  * ticks seq-1 ... seq-need. 0 = the shared frame is all keyframes (or raw). */
 int oc_stream_need(const struct oc_stream *s);
 /* This tick's shared tile (tile header + payload): a pointer into the stream, valid until the next encode. */
 int oc_stream_tile(const struct oc_stream *s, int tile_x, int tile_z, const uint8_t **data, size_t *len);
-/* This tick's keyframe tile, encoded on first request (then cached until the next encode). */
+/* This tick's keyframe tile, encoded on first request (then cached until the next encode;
+ * e may be NULL to fetch one already made: OC_E_ARG if it was not). */
 int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_x, int tile_z,
                             const uint8_t **data, size_t *len);
 /* Counters for metrics and benchmarks: shared tiles encoded as keyframes, keyframe tiles made on demand. */

@@ -33,8 +33,14 @@ struct stream_tile {
     int32_t *lap[RING];       /* their Laplacians (codes stay below OC_TEMPORAL_CODE_MAX) */
     int depth;                /* this tick: references used by the shared tile, 0 = keyframe or raw */
     int key_ready;            /* this tick's keyframe is in key (or is the shared tile) */
+    int failed;               /* this tick's encode of the tile failed (oc_stream_end resets the stream) */
+    int done;                 /* this tick's shared tile is encoded (its keyframe may be asked for) */
     struct oc_buf shared, key;
+    unsigned kind;            /* this tick's shared tile: TILE_KEY, TILE_PREDICTED, TILE_CHANGE_INTRA bits,
+                                 counted by oc_stream_end when the whole tick encoded */
+    uint64_t n_demand_key;    /* keyframes made on demand (per tile: concurrent callers never share it) */
 };
+enum { TILE_KEY = 1, TILE_PREDICTED = 2, TILE_CHANGE_INTRA = 4 };
 
 struct oc_stream {
     int n, tile_size, lod, side, grid;
@@ -42,13 +48,12 @@ struct oc_stream {
     float bound;
     int interval, refine;
     int changed;              /* the sea changed since the last encode (oc_stream_sea_changed) */
-    int32_t *scratch;         /* a candidate's codes (count) */
-    struct oc_buf cand;       /* a candidate tile */
+    int consecutive;          /* this tick follows the last encoded one (oc_stream_begin) */
     uint64_t seq, ticks;
     int encoded;              /* oc_stream_encode succeeded at least once since the last reset */
     int head, need;
     struct stream_tile *tiles;
-    struct oc_stream_stats stats;
+    struct oc_stream_stats stats; /* oc_stream_end's counts; demand_key_tiles summed from the tiles */
 };
 
 static int is_pow2(int v) { return v > 0 && !(v & (v - 1)); }
@@ -79,8 +84,6 @@ void oc_stream_free(struct oc_stream *s)
         oc_buf_free(&s->tiles[t].key);
     }
     free(s->tiles);
-    free(s->scratch);
-    oc_buf_free(&s->cand);
     free(s);
 }
 
@@ -109,6 +112,8 @@ void oc_stream_reset(struct oc_stream *s)
         s->tiles[t].hist = 0;
         s->tiles[t].depth = 0;
         s->tiles[t].key_ready = 0;
+        s->tiles[t].failed = 0;
+        s->tiles[t].done = 0;
         s->tiles[t].shared.len = 0;
         s->tiles[t].key.len = 0;
     }
@@ -300,30 +305,35 @@ static int smallest_intra(struct oc_stream *s, struct oc_encoder *e, struct oc_t
 {
     const size_t count = (size_t)th->width * th->height;
     *intra = 0;
-    if (!s->scratch && !(s->scratch = malloc(sizeof(int32_t) * (size_t)s->side * s->side))) return OC_E_NOMEM;
+    if (e->cand_cap < count) {
+        free(e->cand_q);
+        e->cand_cap = 0;
+        if (!(e->cand_q = malloc(sizeof(int32_t) * count))) return OC_E_NOMEM;
+        e->cand_cap = count;
+    }
     int have = out->len > 0, rc;
     /* 1: the rounded codes snapped to the spatial prediction */
-    memcpy(s->scratch, e->q, count * sizeof(int32_t));
-    s->cand.len = 0;
-    if ((rc = intra_snapped(e, th, s->scratch, &s->cand))) return rc;
-    if (!have || s->cand.len < out->len) {
+    memcpy(e->cand_q, e->q, count * sizeof(int32_t));
+    e->cand.len = 0;
+    if ((rc = intra_snapped(e, th, e->cand_q, &e->cand))) return rc;
+    if (!have || e->cand.len < out->len) {
         out->len = 0;
-        if ((rc = oc_buf_reserve(out, s->cand.len))) return rc;
-        memcpy(out->data, s->cand.data, s->cand.len);
-        out->len = s->cand.len;
-        memcpy(cur, s->scratch, count * sizeof(int32_t));
+        if ((rc = oc_buf_reserve(out, e->cand.len))) return rc;
+        memcpy(out->data, e->cand.data, e->cand.len);
+        out->len = e->cand.len;
+        memcpy(cur, e->cand_q, count * sizeof(int32_t));
         have = 1;
         *intra = 1;
     }
     /* 2: the coarse grid's codes with Lorenzo */
     int ok;
-    s->cand.len = 0;
-    if (s->refine > 1 && (rc = intra_coarse(e, th, s->refine, s->scratch, &s->cand, &ok))) return rc;
-    if (s->refine > 1 && ok && s->cand.len < out->len) {
+    e->cand.len = 0;
+    if (s->refine > 1 && (rc = intra_coarse(e, th, s->refine, e->cand_q, &e->cand, &ok))) return rc;
+    if (s->refine > 1 && ok && e->cand.len < out->len) {
         out->len = 0;
-        memcpy(out->data, s->cand.data, s->cand.len);   /* smaller than what out holds */
-        out->len = s->cand.len;
-        memcpy(cur, s->scratch, count * sizeof(int32_t));
+        memcpy(out->data, e->cand.data, e->cand.len);   /* smaller than what out holds */
+        out->len = e->cand.len;
+        memcpy(cur, e->cand_q, count * sizeof(int32_t));
         *intra = 1;
     }
     return OC_OK;
@@ -339,6 +349,7 @@ static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *f
     t->key.len = 0;
     t->key_ready = 0;
     t->depth = 0;
+    t->kind = 0;
     float vmin, vmax;
     int rc = oc_enc_gather(e, field_data, s->n, s->tile_size, tx, tz, s->lod, &vmin, &vmax);
     if (rc) return rc;
@@ -383,15 +394,15 @@ static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *f
             if (intra) {
                 t->depth = 0;
                 t->key_ready = 1;
-                s->stats.change_intra_tiles++;
+                t->kind |= TILE_CHANGE_INTRA;
             }
         }
-        if (t->depth) s->stats.predicted_tiles++;
+        if (t->depth) t->kind |= TILE_PREDICTED;
         oc_temporal_laplacian(cur, s->side, s->side, t->lap[s->head]);
         return OC_OK;
     }
     /* Keyframe on a new grid (or raw when the tile cannot be quantised). */
-    s->stats.key_tiles++;
+    t->kind |= TILE_KEY;
     t->key_ready = 1;
     if (s->bound == 0 || !oc_enc_quantise_new(e, count, vmin, vmax, fine_bound, GRID_HEADROOM, &th.offset, &th.scale)
         || oc_max_abs(e->q, count) >= (uint32_t)(OC_TEMPORAL_CODE_MAX - s->refine)) {
@@ -407,28 +418,69 @@ static int encode_tile(struct oc_stream *s, struct oc_encoder *e, const float *f
     return OC_OK;
 }
 
-int oc_stream_encode(struct oc_stream *s, struct oc_encoder *e, const float *field_data, uint64_t seq)
+int oc_stream_begin(struct oc_stream *s, uint64_t seq)
 {
-    if (!s || !e || !field_data) return OC_E_ARG;
-    const int consecutive = s->encoded && seq == s->seq + 1;
-    const int ntiles = s->grid * s->grid;
+    if (!s) return OC_E_ARG;
+    s->consecutive = s->encoded && seq == s->seq + 1;
     s->seq = seq;
     s->head = (s->head + 1) % RING;
     s->need = 0;
     s->encoded = 0;
-    for (int k = 0; k < ntiles; k++) {
+    for (int k = 0; k < s->grid * s->grid; k++) s->tiles[k].done = 0;
+    return OC_OK;
+}
+
+int oc_stream_tile_count(const struct oc_stream *s) { return s ? s->grid * s->grid : 0; }
+
+int oc_stream_encode_tiles(struct oc_stream *s, struct oc_encoder *e, const float *field_data, int first, int count)
+{
+    const int ntiles = oc_stream_tile_count(s);
+    if (!s || !e || !field_data || first < 0 || count < 0 || first + count > ntiles) return OC_E_ARG;
+    for (int k = first; k < first + count; k++) {
         /* Periodic keyframes are staggered over the tiles, so no tick carries them all. */
         int periodic = s->interval > 0 && (s->ticks + (uint64_t)k * s->interval / ntiles) % s->interval == 0
                        && s->ticks > 0;
-        int rc = encode_tile(s, e, field_data, k % s->grid, k / s->grid, consecutive, periodic);
-        if (rc) { oc_stream_reset(s); return rc; }
+        int rc = encode_tile(s, e, field_data, k % s->grid, k / s->grid, s->consecutive, periodic);
+        if (rc) {
+            s->tiles[k].failed = 1;
+            return rc;
+        }
+        s->tiles[k].done = 1;
+    }
+    return OC_OK;
+}
+
+int oc_stream_end(struct oc_stream *s)
+{
+    if (!s) return OC_E_ARG;
+    const int ntiles = s->grid * s->grid;
+    int failed = 0;
+    for (int k = 0; k < ntiles; k++) {
+        failed |= s->tiles[k].failed;
+        s->tiles[k].failed = 0;
         if (s->tiles[k].depth > s->need) s->need = s->tiles[k].depth;
+    }
+    if (failed) { oc_stream_reset(s); return OC_E_ARG; }
+    for (int k = 0; k < ntiles; k++) {
+        const unsigned kind = s->tiles[k].kind;
+        s->stats.key_tiles += (kind & TILE_KEY) != 0;
+        s->stats.predicted_tiles += (kind & TILE_PREDICTED) != 0;
+        s->stats.change_intra_tiles += (kind & TILE_CHANGE_INTRA) != 0;
     }
     s->encoded = 1;
     s->changed = 0;
     s->ticks++;
     s->stats.ticks++;
     return OC_OK;
+}
+
+int oc_stream_encode(struct oc_stream *s, struct oc_encoder *e, const float *field_data, uint64_t seq)
+{
+    if (!s || !e || !field_data) return OC_E_ARG;
+    oc_stream_begin(s, seq);
+    int rc = oc_stream_encode_tiles(s, e, field_data, 0, oc_stream_tile_count(s));
+    int end = oc_stream_end(s);     /* resets the stream when a tile failed */
+    return rc ? rc : end;
 }
 
 int oc_stream_need(const struct oc_stream *s)
@@ -454,13 +506,17 @@ int oc_stream_tile(const struct oc_stream *s, int tile_x, int tile_z, const uint
 int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_x, int tile_z,
                             const uint8_t **data, size_t *len)
 {
-    struct stream_tile *t = tile_at(s, tile_x, tile_z);
-    if (!t || !e || !data || !len) return OC_E_ARG;
-    if (t->key_ready) {                 /* the shared tile is this tick's keyframe */
+    /* After oc_stream_end, or before it for a tile whose range is encoded (the encode pool
+     * makes a range's keyframes on the thread that encoded it) */
+    struct stream_tile *t = s && tile_x >= 0 && tile_z >= 0 && tile_x < s->grid && tile_z < s->grid
+                            && s->tiles[tile_z * s->grid + tile_x].done ? &s->tiles[tile_z * s->grid + tile_x] : NULL;
+    if (!t || !data || !len) return OC_E_ARG;
+    if (t->key_ready) {                 /* the shared tile is this tick's keyframe, or it was made already */
         *data = t->depth == 0 ? t->shared.data : t->key.data;
         *len = t->depth == 0 ? t->shared.len : t->key.len;
         return OC_OK;
     }
+    if (!e) return OC_E_ARG;            /* NULL: only one made already */
     struct oc_tile_header th = {
         .field = (uint8_t)s->field, .lod = (uint8_t)s->lod, .tile_x = (uint16_t)tile_x, .tile_z = (uint16_t)tile_z,
         .width = (uint16_t)s->side, .height = (uint16_t)s->side, .bound = s->bound,
@@ -470,7 +526,7 @@ int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_
     int rc = oc_enc_append_intra(e, &th, t->ring[s->head], NULL, 0, &t->key);
     if (rc) return rc;
     t->key_ready = 1;
-    s->stats.demand_key_tiles++;
+    t->n_demand_key++;
     *data = t->key.data;
     *len = t->key.len;
     return OC_OK;
@@ -478,5 +534,8 @@ int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_
 
 void oc_stream_stats(const struct oc_stream *s, struct oc_stream_stats *out)
 {
-    if (s && out) *out = s->stats;
+    if (!s || !out) return;
+    *out = s->stats;
+    for (int k = 0; k < s->grid * s->grid; k++)
+        out->demand_key_tiles += s->tiles[k].n_demand_key;
 }

@@ -2,7 +2,8 @@
  * defect 2): the `capacity` member of hello and params, `busy` for a
  * subscription that would push the distinct layers past the encode budget,
  * and `degraded` to the clients whose subscription group the tick serves
- * coarser or less often than asked (PROTOCOL.md §7). lws thread only. */
+ * coarser, less often, or (temporal clients) with the intra codec than asked
+ * (PROTOCOL.md §7). lws thread only. */
 #include "net_internal.h"
 
 #include <stdio.h>
@@ -35,20 +36,24 @@ bool net_capacity_admit(struct net *n, struct session *s, const struct subscript
     return false;
 }
 
-/* `degraded` for one client: how its group is served now. */
+/* `degraded` for one client: how its group is served now. A temporal
+ * client gets codec 3 tiles only from a group encoded temporal: at its own
+ * LOD and not on the codec rung (plan_intra; a coarser LOD is intra too,
+ * frame.c); it is told the codec either way. */
 static void tell(struct net *n, struct session *s, const struct plan *p)
 {
     int g = plan_group(s->sub.lod, s->sub.bound_index);
-    bool active = plan_degraded(p, g);
+    bool active = plan_degraded_for(p, g, s->sub.temporal);
     double rate = (active ? p->rate[g] : 1.0) * n->dc.tick_rate;
     int lod = active ? p->lod[g] : s->sub.lod;
-    session_queue_json(s, control_degraded_msg(active, s->sub.lod, lod, rate, active ? p->reason : ""));
+    int codec = s->sub.temporal && lod == s->sub.lod && !(active && plan_intra(p, g)) ? 3 : 1;
+    session_queue_json(s, control_degraded_msg(active, s->sub.lod, lod, codec, rate, active ? p->reason : ""));
     atomic_fetch_add(&g_metrics.degraded_sent, 1);
 }
 
 void net_capacity_tell(struct net *n, struct session *s)
 {
-    if (n->sim && n->told_gen && plan_degraded(&n->told, plan_group(s->sub.lod, s->sub.bound_index)))
+    if (n->sim && n->told_gen && plan_degraded_for(&n->told, plan_group(s->sub.lod, s->sub.bound_index), s->sub.temporal))
         tell(n, s, &n->told);
 }
 
@@ -63,8 +68,11 @@ void net_capacity_wake(struct net *n)
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
         struct session *s = session_of(d);
         int g = plan_group(s->sub.lod, s->sub.bound_index);
-        bool was = n->told_gen && plan_degraded(&n->told, g), is = plan_degraded(&p, g);
-        if (is ? !was || p.lod[g] != n->told.lod[g] || p.rate[g] != n->told.rate[g] : was)
+        bool t = s->sub.temporal;
+        bool was = n->told_gen && plan_degraded_for(&n->told, g, t), is = plan_degraded_for(&p, g, t);
+        if (is ? !was || p.lod[g] != n->told.lod[g] || p.rate[g] != n->told.rate[g] ||
+                     (t && plan_intra(&p, g) != plan_intra(&n->told, g))
+               : was)
             tell(n, s, &p);
     }
     n->told = p;

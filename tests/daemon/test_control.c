@@ -821,22 +821,57 @@ static void test_capacity_codecs(void)
     /* intra: 3 n^2 x 3.5 ns = 11 ms + a 5.6 ms step fits */
     capacity_plan(&m, n, ts, demand, NULL, 1.0, &p);
     CHECK(!plan_degraded(&p, g0) && !p.temporal[g0], "intra fits but degraded: lod %d", p.lod[g0]);
-    /* temporal, not measured yet: the prior (x2, 22 ms + 5.6) does not fit; lod 1 (intra) does */
+    /* temporal, not measured yet: the prior (x2, 22 ms + 5.6) does not fit; intra at lod 0 does:
+     * the codec rung, the same detail and rate (it used to go to lod 1) */
     capacity_plan(&m, n, ts, demand, tdemand, 1.0, &p);
-    CHECK(p.temporal[g0] && p.lod[g0] == 1 && p.rate[g0] == 1, "temporal prior: lod %d rate %g", p.lod[g0], p.rate[g0]);
-    /* the reason gives the demand at full detail, over the budget in samples at its codec's cost */
-    long wanted = -1, budget = -1;
-    const char *w = strstr(p.reason, "samples per tick wanted, budget ");
-    CHECK(w && sscanf(p.reason, "coarser LOD: N=1024, %ld samples", &wanted) == 1 &&
-          sscanf(w, "samples per tick wanted, budget %ld", &budget) == 1, "reason: %s", p.reason);
-    CHECK(wanted == 3L * n * n && budget < wanted && budget > 3L * (n / 2) * (n / 2),
-          "reason reads under budget: wanted %ld budget %ld (%s)", wanted, budget, p.reason);
-    /* the degraded group's frames are intra: only they count, and cheap intra frames do not
-     * talk lod 0 back into fitting (the old flapping) */
+    CHECK(p.temporal[g0] && p.lod[g0] == 0 && p.rate[g0] == 1 && plan_intra(&p, g0), "temporal prior: lod %d rate %g intra %d",
+          p.lod[g0], p.rate[g0], plan_intra(&p, g0));
+    CHECK(!plan_degraded(&p, g0) && plan_degraded_for(&p, g0, true) && !plan_degraded_for(&p, g0, false),
+          "codec rung: degraded %d, for temporal %d, for intra %d", plan_degraded(&p, g0), plan_degraded_for(&p, g0, true),
+          plan_degraded_for(&p, g0, false));
+    /* the reason gives the demand at full detail, over the budget in samples at its codec's cost,
+     * and what fits intra (over the demand: that is why the rung is enough) */
+    long wanted = -1, budget = -1, intra_fit = -1;
+    const char *w = strstr(p.reason, "samples per tick wanted, budget "), *wi = strstr(p.reason, "ns/sample), intra ");
+    CHECK(w && wi && sscanf(p.reason, "intra codec: N=1024, %ld samples", &wanted) == 1 &&
+          sscanf(w, "samples per tick wanted, budget %ld", &budget) == 1 &&
+          sscanf(wi, "ns/sample), intra %ld", &intra_fit) == 1, "reason: %s", p.reason);
+    CHECK(wanted == 3L * n * n && budget < wanted && budget > 3L * (n / 2) * (n / 2) && intra_fit >= wanted,
+          "reason reads under budget: wanted %ld budget %ld intra %ld (%s)", wanted, budget, intra_fit, p.reason);
+    /* the rung's frames are intra: only they count, and cheap intra frames do not
+     * talk the temporal codec back into fitting (the old flapping) */
     long samples[CAP_CODECS];
     plan_samples(&p, n, NULL, samples);
-    CHECK(samples[CAP_INTRA] == 3L * 512 * 512 && samples[CAP_TEMPORAL] == 0, "plan_samples %ld %ld",
+    CHECK(samples[CAP_INTRA] == 3L * n * n && samples[CAP_TEMPORAL] == 0, "plan_samples %ld %ld",
           samples[CAP_INTRA], samples[CAP_TEMPORAL]);
+    /* a plan of the same value with fewer samples on the rung is another plan */
+    struct plan t = p;
+    t.intra[g0] = false;
+    CHECK(!plan_same(&t, &p) && plan_value(&t, n) == plan_value(&p, n) && plan_intra_value(&t, n) == 0 &&
+          plan_intra_value(&p, n) == 3.0 * n * n, "plan_intra_value %g %g", plan_intra_value(&t, n), plan_intra_value(&p, n));
+    /* all six fields: neither codec fits at lod 0 (6 n^2 x 3.5 ns = 22 ms + an 11 ms step): one LOD
+     * coarser, intra there (no codec rung: a coarser LOD is intra anyway) */
+    for (int f = 3; f < 6; f++)
+        demand[layer_key(f, 0, 3)] = tdemand[layer_key(f, 0, 3)] = 1;
+    capacity_plan(&m, n, ts, demand, tdemand, 1.0, &p);
+    CHECK(p.lod[g0] == 1 && p.rate[g0] == 1 && !plan_intra(&p, g0) && plan_degraded(&p, g0) &&
+          strncmp(p.reason, "coarser LOD: ", 13) == 0, "six fields: lod %d rate %g intra %d (%s)", p.lod[g0], p.rate[g0],
+          plan_intra(&p, g0), p.reason);
+    for (int f = 3; f < 6; f++)
+        demand[layer_key(f, 0, 3)] = tdemand[layer_key(f, 0, 3)] = 0;
+    /* --encode-budget caps samples, which no codec changes: under it, the rung is skipped */
+    struct cost_model c = m;
+    c.encode_budget = 3L * n * n - 1;
+    capacity_plan(&c, n, ts, demand, tdemand, 1.0, &p);
+    CHECK(p.lod[g0] == 1 && !plan_intra(&p, g0), "sample cap: lod %d intra %d", p.lod[g0], plan_intra(&p, g0));
+    /* --temporal-budget caps the temporal samples: the rung, even when the time fits */
+    c.encode_budget = 0;
+    c.enc_temporal_s = c.enc_s_per_sample * 1.2; /* 13 ms + 5.6: fits */
+    capacity_plan(&c, n, ts, demand, tdemand, 1.0, &p);
+    CHECK(p.lod[g0] == 0 && !plan_intra(&p, g0) && !p.reason[0], "temporal fits: lod %d intra %d", p.lod[g0], plan_intra(&p, g0));
+    c.temporal_budget = 3L * n * n - 1;
+    capacity_plan(&c, n, ts, demand, tdemand, 1.0, &p);
+    CHECK(p.lod[g0] == 0 && p.rate[g0] == 1 && plan_intra(&p, g0), "temporal cap: lod %d intra %d", p.lod[g0], plan_intra(&p, g0));
     bool due[PLAN_GROUPS] = { false };
     plan_samples(&p, n, due, samples);
     CHECK(samples[CAP_INTRA] == 0 && samples[CAP_TEMPORAL] == 0, "plan_samples with nothing due");
@@ -848,14 +883,16 @@ static void test_capacity_codecs(void)
           l.enc_s_per_sample, l.enc_temporal_s);
     l.enc_temporal_s = 9e-9; /* measured before the degrade */
     capacity_plan(&l, n, ts, demand, tdemand, 0.8, &p);
-    CHECK(p.lod[g0] == 1, "recovery predicted from intra frames: lod %d", p.lod[g0]);
+    CHECK(p.lod[g0] == 0 && plan_intra(&p, g0), "recovery predicted from intra frames: lod %d intra %d", p.lod[g0],
+          plan_intra(&p, g0));
     /* forgetting the temporal figure (the probe): back to the prior x the current intra figure,
      * which fits (3 n^2 x 4 ns = 12.6 ms + 5.6 < 21.3) */
     cost_forget_temporal(&l);
     CHECK(l.enc_temporal_s == 0 && fabs(cost_encode_codec_s(&l, CAP_TEMPORAL) - CAP_TEMPORAL_PRIOR * l.enc_s_per_sample) < 1e-15,
           "forget: %g", cost_encode_codec_s(&l, CAP_TEMPORAL));
     capacity_plan(&l, n, ts, demand, tdemand, 0.8, &p);
-    CHECK(!plan_degraded(&p, g0), "probe plan still degraded: lod %d", p.lod[g0]);
+    CHECK(!plan_degraded(&p, g0) && !plan_intra(&p, g0), "probe plan still degraded: lod %d intra %d", p.lod[g0],
+          plan_intra(&p, g0));
     /* learning: a cold temporal frame (7x the prediction) counts as twice it at most */
     long temporal_frame[CAP_CODECS] = { 0, 3L * n * n };
     double prior = cost_encode_codec_s(&l, CAP_TEMPORAL);
@@ -883,6 +920,79 @@ static void test_capacity_codecs(void)
         if (ci.sizes[i].n == 1024)
             CHECK(fabs(ci.sizes[i].est_ms[2] - (cost_step_s(&l, 1024, 3) + l.enc_temporal_s * 3 * 1024 * 1024) * 1e3) < 1e-3,
                   "est_ms at 1024: %g", ci.sizes[i].est_ms[2]);
+    passed++;
+}
+
+/* capacity.c: the codec rung with two temporal groups, and the announcement
+ * of both codecs. A 0.1 ms step, intra 3.5 ns/sample, temporal 7: fixed
+ * numbers, behaviour only. */
+static void test_capacity_codec_rung(void)
+{
+    struct cost_model m = {
+        .period_s = 1.0 / 30, .budget_s = 0.8 / 30, .n0 = 1024, .step1_s = 0.0001, .step6_s = 0.0001,
+        .step_scale = 1, .enc_s_per_sample = 3.5e-9, .enc_temporal_s = 7e-9, .max_memory_mb = 2048, .cores = 2,
+    };
+    const int n = 1024, ts = 128, ga = plan_group(0, 3), gb = plan_group(1, 3);
+    int demand[LAYER_KEYS_ALL] = { 0 }, tdemand[LAYER_KEYS_ALL] = { 0 };
+    for (int f = 0; f < 6; f++) /* A: six fields at lod 0 (6.3 M samples); B: height at lod 1 (0.26 M) */
+        demand[layer_key(f, 0, 3)] = tdemand[layer_key(f, 0, 3)] = 1;
+    demand[layer_key(0, 1, 3)] = tdemand[layer_key(0, 1, 3)] = 1;
+    struct plan p;
+    /* all temporal: 6.55 M x 7 ns = 46 ms. A intra (the most expensive): 22 + 1.8 ms fits; B stays temporal */
+    capacity_plan(&m, n, ts, demand, tdemand, 1.0, &p);
+    CHECK(plan_intra(&p, ga) && !plan_intra(&p, gb) && p.lod[ga] == 0 && p.lod[gb] == 1 && p.rate[ga] == 1 &&
+          p.rate[gb] == 1, "two groups: intra %d %d, lod %d %d", plan_intra(&p, ga), plan_intra(&p, gb), p.lod[ga], p.lod[gb]);
+    long samples[CAP_CODECS];
+    plan_samples(&p, n, NULL, samples);
+    CHECK(samples[CAP_INTRA] == 6L * n * n && samples[CAP_TEMPORAL] == (long)(n / 2) * (n / 2), "two groups: samples %ld %ld",
+          samples[CAP_INTRA], samples[CAP_TEMPORAL]);
+    /* the temporal samples capped under B's: both intra, still at full detail */
+    m.temporal_budget = 100000;
+    capacity_plan(&m, n, ts, demand, tdemand, 1.0, &p);
+    CHECK(plan_intra(&p, ga) && plan_intra(&p, gb) && p.lod[ga] == 0 && p.lod[gb] == 1, "temporal cap: intra %d %d, lod %d %d",
+          plan_intra(&p, ga), plan_intra(&p, gb), p.lod[ga], p.lod[gb]);
+    m.temporal_budget = 0;
+    /* B with six fields too (1.6 M): neither rung of the codec is enough (A intra 22 + B 11 ms; B intra
+     * 22 + 5.5), so A goes one LOD coarser; then B fits temporal again and goes back (5.5 + 11 ms) */
+    for (int f = 1; f < 6; f++)
+        demand[layer_key(f, 1, 3)] = tdemand[layer_key(f, 1, 3)] = 1;
+    capacity_plan(&m, n, ts, demand, tdemand, 1.0, &p);
+    CHECK(p.lod[ga] == 1 && !plan_intra(&p, ga) && !plan_intra(&p, gb) && p.lod[gb] == 1 && p.rate[ga] == 1 &&
+          p.rate[gb] == 1 && plan_degraded(&p, ga) && !plan_degraded(&p, gb),
+          "coarser A, B back to temporal: lod %d %d intra %d %d (%s)", p.lod[ga], p.lod[gb], plan_intra(&p, ga),
+          plan_intra(&p, gb), p.reason);
+    for (int f = 1; f < 6; f++)
+        demand[layer_key(f, 1, 3)] = tdemand[layer_key(f, 1, 3)] = 0;
+    /* the announcement at 1024: temporal 7.3 ms a field, 3 fit; intra 3.7 ms a field, 6 fit */
+    struct capacity_info ci;
+    capacity_info_fill(&m, n, &ci);
+    int seen = 0;
+    for (int i = 0; i < ci.nsizes; i++) {
+        const struct capacity_size *z = &ci.sizes[i];
+        long b = (long)floor(ci.budget_ms * 100 + 0.5);
+        int tf = 0, ff = 0;
+        for (int f = 0; f < 6; f++) {
+            CHECK(z->est_intra_ms[f] < z->est_ms[f], "est_intra_ms %g >= est_ms %g at %d", z->est_intra_ms[f], z->est_ms[f], z->n);
+            tf += (long)floor(z->est_ms[f] * 100 + 0.5) <= b;
+            ff += (long)floor(fmin(z->est_ms[f], z->est_intra_ms[f]) * 100 + 0.5) <= b;
+        }
+        CHECK(z->temporal_fields == tf && z->full_rate_fields == ff, "N=%d: temporal_fields %d (%d) full_rate_fields %d (%d)",
+              z->n, z->temporal_fields, tf, z->full_rate_fields, ff);
+        if (z->n == 1024) {
+            seen++;
+            CHECK(z->temporal_fields == 3 && z->full_rate_fields == 6, "1024: temporal %d full %d", z->temporal_fields,
+                  z->full_rate_fields);
+        }
+    }
+    CHECK(seen == 1, "1024 not announced");
+    /* the operator's caps: --temporal-budget of two fields at 1024, --encode-budget of five */
+    m.temporal_budget = 2L * n * n;
+    m.encode_budget = 5L * n * n;
+    capacity_info_fill(&m, n, &ci);
+    for (int i = 0; i < ci.nsizes; i++)
+        if (ci.sizes[i].n == 1024)
+            CHECK(ci.sizes[i].temporal_fields == 2 && ci.sizes[i].full_rate_fields == 5, "1024 capped: temporal %d full %d",
+                  ci.sizes[i].temporal_fields, ci.sizes[i].full_rate_fields);
     passed++;
 }
 
@@ -955,6 +1065,7 @@ int main(void)
 {
     test_capacity_plan();
     test_capacity_codecs();
+    test_capacity_codec_rung();
     test_sets();
     test_subscribe();
     test_subscribe_field_lod();

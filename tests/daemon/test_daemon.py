@@ -1276,8 +1276,14 @@ def check_capacity(cap, where):
     for z in sizes:
         est = z["est_ms"]
         check(len(est) == 6 and all(est[i] <= est[i + 1] for i in range(5)), "%s: est_ms not rising with fields: %r" % (where, z))
-        check(z["full_rate_fields"] == sum(1 for e in est if e <= cap["budget_ms"]),
-              "%s: full_rate_fields %r disagrees with est_ms %r and budget %r" % (where, z["full_rate_fields"], est, cap["budget_ms"]))
+        # the plan's ladder at lod 0 (PROTOCOL.md §7.2): the temporal codec if it fits, else intra
+        ei = z["est_intra_ms"]
+        check(len(ei) == 6 and all(ei[i] <= ei[i + 1] for i in range(5)), "%s: est_intra_ms not rising: %r" % (where, z))
+        check(z["temporal_fields"] == sum(1 for e in est if e <= cap["budget_ms"]),
+              "%s: temporal_fields %r disagrees with est_ms %r and budget %r" % (where, z["temporal_fields"], est, cap["budget_ms"]))
+        check(z["full_rate_fields"] == sum(1 for e, i in zip(est, ei) if min(e, i) <= cap["budget_ms"]),
+              "%s: full_rate_fields %r disagrees with est_ms %r, est_intra_ms %r and budget %r"
+              % (where, z["full_rate_fields"], est, ei, cap["budget_ms"]))
     check(abs(cap["tick_ms"] - 1000 / TICK) < 0.01 and 0 < cap["budget_ms"] < cap["tick_ms"], "%s: tick/budget %r" % (where, cap))
     check(cap["encode_budget"] > 0 and cap["cores"] >= 1, "%s: %r" % (where, cap))
 

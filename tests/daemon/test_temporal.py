@@ -155,6 +155,60 @@ def test_temporal_stream_within_bound_of_lossless():
 
 
 @test
+def test_frames_same_on_any_encode_thread_count():
+    """A layer's rows of tiles are encoded by whichever encode threads take
+    them (server/frame.c): the bytes may not depend on it. Two paused daemons
+    (t = 0, seed 1, N = 512: four rows of tiles a layer), one encode thread
+    against three: the intra frames, the temporal client's first frame (the
+    stream's keyframes) and its predicted tiles (the ref_seq in their prefix
+    masked: the daemons' seq differ) are byte for byte the same."""
+    # 5 ticks a second: a budget of 160 ms a frame, so that no frame is degraded (coarser, not
+    # comparable) even under ASan on a loaded machine.
+    ds = [td.Daemon("--paused", "true", "--resolution", "512", "--tick-rate", "5", "--encode-threads", str(k))
+          for k in (1, 3)]
+
+    async def grab(d):
+        a, _ = await connect(d)
+        b, _ = await connect(d)
+        await subscribe(a, fields=["height", "dx", "slope_x"], bound=0.01)
+        await subscribe(b, fields=["height", "dz", "jacobian"], temporal=True, bound=0.001)
+        fa = await collect(a, 3, limit=3)
+        fb = await collect(b, 3, limit=6)
+        await a.close()
+        await b.close()
+        return fa, fb
+
+    def body(m):
+        """The tiles, without the frame header and with each predicted tile's ref_seq zeroed."""
+        b, off = bytearray(m), 48
+        for _ in range(parse_header(m)["tile_count"]):
+            f, lod, codec, fl, tx, tz, w, hh, bound, o, sc, plen, _r = td.TILE_HDR.unpack_from(b, off)
+            if codec == CODEC_TEMPORAL:
+                b[off + 40 + 16:off + 40 + 24] = bytes(8)
+            off += 40 + plen
+        return bytes(b[48:])
+    try:
+        got = [asyncio.run(grab(d)) for d in ds]
+        (ia, ta), (ib, tb) = got
+        check(len(ia) >= 2 and len(ib) >= 2 and len(ta) >= 4 and len(tb) >= 4,
+              "too few frames: %d/%d intra, %d/%d temporal" % (len(ia), len(ib), len(ta), len(tb)))
+        check(all(full_detail(m) for m in ia + ib + ta + tb), "a frame was degraded: cannot compare")
+        print("    intra %d+%d frames, temporal %d+%d frames (codecs %r)" % (len(ia), len(ib), len(ta), len(tb), codecs(ta)))
+        check(body(ia[0]) == body(ib[0]) and body(ia[-1]) == body(ib[-1]),
+              "intra frames differ between 1 and 3 encode threads")
+        check(body(ta[0]) == body(tb[0]), "the temporal stream's keyframes differ between 1 and 3 encode threads")
+        pa = [body(m) for m in ta[1:] if CODEC_TEMPORAL in codecs([m])]
+        pb = [body(m) for m in tb[1:] if CODEC_TEMPORAL in codecs([m])]
+        check(pa and pb and pa[-1] == pb[-1], "predicted frames differ between 1 and 3 encode threads")
+        for d in ds:
+            rc, _ = d.stop()
+            check(rc == 0, "exit code %r" % rc)
+    finally:
+        for d in ds:
+            d.kill()
+
+
+@test
 def test_temporal_join_mid_stream(d):
     """A client that joins a running temporal stream decodes its first frame
     alone (keyframe tiles of that tick), then takes the shared predicted tiles."""
@@ -427,6 +481,71 @@ def test_temporal_sea_changes():
         print("    max error %.5f against the lossless stream (%d frames at equal seq)" % (err, compared))
         check(compared >= 20, "only %d frames at equal seq with the lossless stream" % compared)
         check(err <= 0.01 * (1 + 1e-6), "temporal frames differ from the lossless ones by %g > bound" % err)
+        rc, _ = d.stop()
+        check(rc == 0, "exit code %r" % rc)
+    finally:
+        d.kill()
+
+
+@test
+def test_temporal_group_served_intra_at_full_detail():
+    """The plan's codec rung (issue 15): a temporal group whose temporal encode
+    does not fit, but whose intra encode does, is served intra at its own LOD
+    and full rate, never coarser. Forced without timing by --temporal-budget
+    (the temporal samples per tick; the default subscription, 3 n^2, over it
+    at N, within it at N/2). The client is told (`degraded`, codec 1, its own
+    lod, the full rate), gets decodable codec 1 tiles at lod 0 (a layer with no
+    stream this tick: fanout.c sends the intra tiles), /metrics counts the
+    group in oceand_intra_groups, not in oceand_degraded_groups. At N/2 the
+    group goes back to the temporal codec (told, codec 3) and the frames decode
+    in order across the switch; at N again, intra again."""
+    n = td.BASE_N
+    cap = 3 * (n // 2) ** 2
+    d = td.Daemon("--temporal-budget", str(cap))
+
+    async def run():
+        a, hello = await connect(d)
+        z = [z for z in hello["capacity"]["resolutions"] if z["n"] == n]
+        check(z and z[0]["temporal_fields"] <= 2 and z[0]["temporal_fields"] <= z[0]["full_rate_fields"],
+              "announced at N=%d with %d temporal samples at most: %r" % (n, cap, z))
+        await subscribe(a, temporal=True, bound=0.01)
+        g = await recv_json(a, lambda m: m["type"] == "degraded", timeout=10)
+        rate = hello["tick_rate"]
+        check(g["active"] is True and g["lod"] == 0 and g["subscribed_lod"] == 0 and g["codec"] == 1
+              and g["rate"] == rate and g["reason"].startswith("intra codec"), "degraded message: %r" % g)
+        fa = await collect(a, 1.5)
+        c = codecs(fa)
+        check(len(fa) >= 5 and set(c) == {1} and all(full_detail(m) for m in fa),
+              "frames of the intra-served group: %d, codecs %r, lods %r" % (len(fa), c, {t["lod"] for m in fa for t in tiles(m)}))
+        check(d.metric("oceand_intra_groups") == 1 and d.metric("oceand_degraded_groups") == 0,
+              "metrics: intra_groups %r degraded_groups %r" % (d.metric("oceand_intra_groups"), d.metric("oceand_degraded_groups")))
+        # N/2: the temporal samples fit; back to the temporal codec after the plan's hold (3 s)
+        await a.send(json.dumps({"type": "set", "id": 1, "params": {"resolution": n // 2}}))
+        p = await recv_json(a, lambda m: m["type"] == "params", timeout=10)
+        half, told = [], None
+        t0 = time.time()
+        while time.time() - t0 < 25 and not (told and sum(1 for m in half if CODEC_TEMPORAL in codecs([m])) >= 10):
+            m = await asyncio.wait_for(a.recv(), 5)
+            if isinstance(m, bytes):
+                if parse_header(m)["n"] == n // 2:
+                    half.append(m)
+            elif '"degraded"' in m:
+                told = json.loads(m)
+        check(told and told["active"] is False and told["codec"] == CODEC_TEMPORAL and told["lod"] == 0,
+              "restore message at N/2: %r" % told)
+        check(d.metric("oceand_intra_groups") == 0, "intra_groups after the restore")
+        # N again: intra again
+        await a.send(json.dumps({"type": "set", "id": 2, "params": {"resolution": n}}))
+        g2 = await recv_json(a, lambda m: m["type"] == "degraded", timeout=10)
+        check(g2["active"] is True and g2["codec"] == 1 and g2["lod"] == 0, "degraded at N again: %r" % g2)
+        await a.close()
+        return hello, p, fa, half
+    try:
+        hello, p, fa, half = asyncio.run(run())
+        print("    N=%d: %d intra frames; N/2: %d frames, codecs %r" % (n, len(fa), len(half), codecs(half)))
+        check_stream(d, hello["params"], fa, 0.01, "intra-served stream")
+        check(CODEC_TEMPORAL in codecs(half), "no temporal tiles after the restore")
+        check_stream(d, p["params"], half, 0.01, "stream across the switch back to temporal")
         rc, _ = d.stop()
         check(rc == 0, "exit code %r" % rc)
     finally:

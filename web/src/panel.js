@@ -67,22 +67,30 @@ function buttonRow(folder, kind, items, onClick) {
 
 // hello/params.capacity (PROTOCOL.md §7.2): resolutions the server would refuse
 // (over its memory cap) are shown disabled with the reason, so the panel cannot
-// pick them; those that would stream degraded with the subscribed fields say so.
-export function showCapacity(ctrl, capacity, nfields) {
+// pick them; those that would stream degraded with the subscribed fields say so,
+// and, for a temporal subscription, those streamed at full detail only with the
+// intra codec (more bytes) say that (the server's ladder, `degraded` with codec 1).
+export function showCapacity(ctrl, capacity, nfields, temporal = true) {
   const select = ctrl?.$select, values = ctrl?._values;
   if (!select || !values || !capacity) return;
   const sizes = new Map((capacity.resolutions || []).map((z) => [z.n, z]));
+  const k = Math.min(Math.max(nfields, 1), 6) - 1;
   values.forEach((n, i) => {
     const opt = select.options[i], z = sizes.get(Number(n));
     if (!opt) return;
     const over = Number(n) > capacity.max_resolution;
+    const tf = z ? (z.temporal_fields ?? z.full_rate_fields) : 6; // a server before the codec rung: no difference
     opt.disabled = over;
-    opt.dataset.capacity = over ? 'memory' : (z && z.full_rate_fields < nfields ? 'degraded' : 'ok');
-    opt.textContent = String(n) + (over ? ' (over memory cap)' : opt.dataset.capacity === 'degraded' ? ' (degraded)' : '');
+    opt.dataset.capacity = over ? 'memory' : !z ? 'ok' : z.full_rate_fields < nfields ? 'degraded' : temporal && tf < nfields ? 'intra' : 'ok';
+    const label = { memory: ' (over memory cap)', degraded: ' (degraded)', intra: ' (intra codec)' }[opt.dataset.capacity] || '';
+    opt.textContent = String(n) + label;
+    const intraMs = z?.est_intra_ms ? z.est_intra_ms[k] : undefined;
     opt.title = over ? `the server's memory cap of ${capacity.memory_cap_mb} MB allows N ≤ ${capacity.max_resolution}`
       : opt.dataset.capacity === 'degraded'
-        ? `about ${z.est_ms[Math.min(nfields, 6) - 1]} ms per frame with ${nfields} fields, the tick allows ${capacity.budget_ms} ms: served at a coarser LOD or lower rate`
-        : '';
+        ? `about ${intraMs ?? z.est_ms[k]} ms per frame with ${nfields} fields even with the intra codec, the tick allows ${capacity.budget_ms} ms: served at a coarser LOD or lower rate`
+        : opt.dataset.capacity === 'intra'
+          ? `about ${z.est_ms[k]} ms per frame with ${nfields} fields with the temporal codec, ${intraMs} ms intra; the tick allows ${capacity.budget_ms} ms: full detail and rate with the intra codec (more bytes)`
+          : '';
   });
 }
 
@@ -262,7 +270,7 @@ export class Panel {
 
   refreshCapacity() {
     const nfields = (this.lastFields || ['height', 'dx', 'dz']).length;
-    showCapacity(this.ctrls.resolution, this.capacity, nfields);
+    showCapacity(this.ctrls.resolution, this.capacity, nfields, this.lastTemporal !== false);
   }
 
   // Connection lost: the values shown are the last known ones.
@@ -278,7 +286,11 @@ export class Panel {
     if (s.bound !== undefined) this.subValues.bound = s.bound;
     if (s.fields) for (const k of Object.keys(this.subValues)) if (k in this.subCtrls && k !== 'lod' && k !== 'bound') this.subValues[k] = s.fields.includes(k);
     for (const c of Object.values(this.subCtrls)) c.updateDisplay();
-    if (s.fields) { this.lastFields = s.fields; this.refreshCapacity(); }
+    if (s.fields || s.temporal !== undefined) {
+      if (s.fields) this.lastFields = s.fields;
+      this.lastTemporal = s.temporal === true;
+      this.refreshCapacity();
+    }
   }
 
   // Who a change came from: "you", the changer's display name, or its id.
