@@ -5,7 +5,8 @@
  * the starting N, on this machine) and kept current from every frame:
  *   step(N, fields)  scaled from the measured N by N^2 log2 N,
  *   encode(samples)  wall seconds per sample on the encode pool, per codec
- *                    (intra; temporal, 1.5-2x as much: the ratio measured at start-up).
+ *                    (intra; temporal, 1.5-2x as much: the ratio measured at start-up),
+ *                    at LOD 0; a sample at LOD L costs 2^L of them (capacity.c, group_work).
  * From it:
  *   - the encode budget: samples per tick that may be encoded at N (what a
  *     frame may take, 80 % of the tick, minus the step), or --encode-budget;
@@ -130,10 +131,11 @@ bool plan_same(const struct plan *a, const struct plan *b);
  * degraded group's recovery probe assumes when no temporal layer has been
  * encoded to keep it current (sim_thread.c, update_plan). */
 void cost_forget_temporal(struct cost_model *m);
-/* Samples per codec the plan encodes (only the groups with due[g] unless
- * due is NULL): a group is temporal when it has temporal demand and is
- * encoded at its own LOD (a coarser one goes intra) and not on the codec
- * rung (plan_intra). */
+/* Encode work per codec the plan asks for, in LOD-0 samples (a sample at LOD
+ * L counts 2^L: what the per-sample figures are learned and priced in; only
+ * the groups with due[g] unless due is NULL): a group is temporal when it has
+ * temporal demand and is encoded at its own LOD (a coarser one goes intra)
+ * and not on the codec rung (plan_intra). */
 void plan_samples(const struct plan *p, int n, const bool *due, long samples[CAP_CODECS]);
 /* The model's moving average: down fast (a quarter), up slowly (a tenth). */
 double cost_ewma(double model, double measured);

@@ -105,8 +105,9 @@ struct work_item {
 struct frame_job {
     int nenc;
     struct oc_encoder **enc;    /* one per encode thread + the caller */
-    float *snap[OCEAN_MAX_CASCADES][OCEAN_FIELD_COUNT]; /* the step's fields per cascade, copied:
-                                                           the next step overwrites them */
+    float *snap[OCEAN_MAX_CASCADES][OCEAN_FIELD_COUNT]; /* the step's fields per cascade, exchanged
+                                                           with the library's arrays (foam: copied, it is
+                                                           the foam's state): the next step writes elsewhere */
     size_t snap_cap[OCEAN_MAX_CASCADES][OCEAN_FIELD_COUNT];
     struct frame *f;            /* being built: one layer per struct layer_work (frame_job_finish hands it over) */
     int nlayers;
@@ -170,7 +171,7 @@ void frame_job_free(struct frame_job *j)
     free(j->items);
     for (int c = 0; c < OCEAN_MAX_CASCADES; c++)
         for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
-            free(j->snap[c][f]);
+            ocean_field_buffer_free(j->snap[c][f]);
     free(j);
 }
 
@@ -178,7 +179,7 @@ long frame_job_samples(const struct frame_job *j) { return j->samples; }
 
 void frame_job_set_streams(struct frame_job *j, struct layer_streams *streams) { j->streams = streams; }
 
-int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, const struct frame_want *want,
+int frame_job_begin(struct frame_job *j, struct ocean *o, int tile_size, const struct frame_want *want,
                     const struct oc_frame_header *hdr)
 {
     int n = ocean_resolution(o);
@@ -213,14 +214,16 @@ int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, c
             const float *src = (want->cfields[c] & OCEAN_FIELD_BIT(f)) ? ocean_cascade_field(o, c, (enum ocean_field)f) : NULL;
             if (!src)
                 continue;
-            if (j->snap_cap[c][f] < nn) {
-                free(j->snap[c][f]);
+            if (j->snap_cap[c][f] != nn) { /* exchanged arrays must be the library's size */
+                ocean_field_buffer_free(j->snap[c][f]);
                 j->snap_cap[c][f] = 0;
-                if (!(j->snap[c][f] = malloc(nn * sizeof(float))))
+                if (!(j->snap[c][f] = ocean_field_buffer_new(n)))
                     return -1;
                 j->snap_cap[c][f] = nn;
             }
-            memcpy(j->snap[c][f], src, nn * sizeof(float));
+            /* An exchange instead of a copy: 2.5 ms of one core at N = 1024 with six fields. */
+            if (f == OCEAN_FOAM || ocean_exchange_cascade_field(o, c, (enum ocean_field)f, &j->snap[c][f]) != 0)
+                memcpy(j->snap[c][f], src, nn * sizeof(float));
         }
     if (!(j->f = frame_new(want->nkeys)))
         return -1;

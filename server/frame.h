@@ -90,8 +90,10 @@ struct layer_streams;
 
 /* One frame being encoded, in three steps, so that the encode runs on a pool
  * of threads while the producer steps the next tick:
- *   frame_job_begin   (producer, after the step) copies the wanted fields out
- *                     of the simulation (the next step overwrites them) and
+ *   frame_job_begin   (producer, after the step) takes the wanted fields out
+ *                     of the simulation (ocean_exchange_cascade_field: the next
+ *                     step writes into the arrays of the frame before; foam,
+ *                     the foam's state, is copied) and
  *                     cuts the work into items: one row of tiles of one layer
  *                     each, so that one layer alone keeps every thread busy
  *                     (a temporal layer's stream is begun here: oc_stream_begin);
@@ -112,7 +114,7 @@ void frame_job_free(struct frame_job *j);
 /* hdr gives seq, sim_time, params_version, patch_size; n and tile_size are
  * filled in here (server_time_us at finish). Returns the number of items
  * (0 = nothing to encode), or -1 when out of memory. */
-int frame_job_begin(struct frame_job *j, const struct ocean *o, int tile_size, const struct frame_want *want,
+int frame_job_begin(struct frame_job *j, struct ocean *o, int tile_size, const struct frame_want *want,
                     const struct oc_frame_header *hdr);
 /* The temporal layers' streams (layer_stream.h) the jobs use, NULL = none: owned by
  * whoever runs frame_job_begin; frame_job_begin prepares them (the previous job must be

@@ -686,7 +686,8 @@ static void on_binary(struct session *s, const uint8_t *data, size_t len)
         fail(s, EXIT_PROTOCOL, "bad binary frame (%zu bytes): %s", len, tap_frame_strerror(r));
         return;
     }
-    if (!tap_frame_complete(s->grid)) return; /* waiting for the first tiles of some field */
+    if (!tap_frame_complete(s->grid)) return; /* not every tile of every field at our LOD (degraded, or before
+                                                  the subscription took effect): nothing new to write */
     s->frames_done++;
     s->st.bytes += len;
     if (s->st.nlat == s->st.caplat) {

@@ -8,6 +8,7 @@ struct field_grid {
     float *data;          /* side*side */
     unsigned char *seen;  /* tiles_per_side^2 flags: tile arrived at least once */
     int missing;          /* tiles not seen yet */
+    int fresh;            /* tiles the current message carried */
     float bound;          /* of the latest tile */
 };
 
@@ -96,12 +97,15 @@ static int on_tile(void *user, const struct oc_frame_header *fh, const struct oc
     g->bound = th->bound;
     unsigned char *seen = &g->seen[th->tile_z * a->tiles + th->tile_x];
     if (!*seen) { *seen = 1; g->missing--; }
+    g->fresh++;
     return 0;
 }
 
 int tap_frame_add(struct tap_frame *a, const uint8_t *data, size_t len, struct oc_frame_header *fh)
 {
     a->err = 0;
+    for (int f = 0; f < OC_FIELD_COUNT; f++)
+        a->grid[f].fresh = 0;
     int r = oc_decode_frame(a->dec, data, len, fh, on_tile, a);
     if (a->err) return a->err;
     return r < 0 ? r : 0;
@@ -111,7 +115,7 @@ int tap_frame_complete(const struct tap_frame *a)
 {
     if (!a->n) return 0;
     for (int f = 0; f < OC_FIELD_COUNT; f++)
-        if ((a->fields & (1u << f)) && a->grid[f].missing > 0) return 0;
+        if ((a->fields & (1u << f)) && (a->grid[f].missing > 0 || a->grid[f].fresh < a->tiles * a->tiles)) return 0;
     return 1;
 }
 

@@ -24,7 +24,10 @@ void tap_frame_free(struct tap_frame *a);
 /* Decode one binary message into the grids. Returns 0, a negative
  * enum oc_error, or TAP_E_GEOMETRY. fh receives the frame header. */
 int tap_frame_add(struct tap_frame *a, const uint8_t *data, size_t len, struct oc_frame_header *fh);
-/* 1 when every requested field is complete. */
+/* 1 when the last message carried every tile of every requested field at the
+ * subscribed LOD. A frame the server sends at a coarser LOD while it is
+ * degraded (PROTOCOL.md §7.2) does not: the grids would still hold the
+ * previous frame's samples, which must not be written under this frame's seq. */
 int tap_frame_complete(const struct tap_frame *a);
 /* Grid of one field (side*side floats, row-major, row = z), NULL if not
  * requested; *bound = the error bound of its latest tile (0 = lossless). */

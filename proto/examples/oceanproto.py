@@ -366,8 +366,10 @@ def decode_frame(data, state=None):
 
 
 class Assembler:
-    """Puts tiles together into whole (N >> lod)^2 fields. A field is complete
-    once every tile of its grid has arrived (later tiles overwrite)."""
+    """Puts tiles together into whole (N >> lod)^2 fields. complete() is true
+    when the last frame added carried every tile of every wanted field at this
+    LOD: a frame the server sends at a coarser LOD while it is degraded (§7.2)
+    does not, and the fields then still hold an earlier frame's samples."""
 
     def __init__(self, fields, lod):
         self.wanted, self.lod = set(fields), lod
@@ -378,11 +380,12 @@ class Assembler:
             self._shape = (frame.n, frame.tile_size)
             side, tiles = frame.n >> self.lod, frame.n // frame.tile_size
             self.fields = {f: np.zeros((side, side), np.float32) for f in self.wanted}
-            self._seen = {f: np.zeros((tiles, tiles), bool) for f in self.wanted}
+        tiles = frame.n // frame.tile_size
+        self._seen = {f: np.zeros((tiles, tiles), bool) for f in self.wanted}   # this frame's tiles
         step = frame.tile_size >> self.lod
         for t in frame.tiles:
             if t.field not in self.wanted or t.lod != self.lod:
-                continue   # sent before our subscription took effect
+                continue   # sent before our subscription took effect, or at a coarser LOD (degraded)
             h, w = t.samples.shape
             self.fields[t.field][t.z * step:t.z * step + h, t.x * step:t.x * step + w] = t.samples
             self._seen[t.field][t.z, t.x] = True

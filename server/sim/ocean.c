@@ -1104,6 +1104,26 @@ const float *ocean_cascade_field(const struct ocean *o, int cascade, enum ocean_
     return f == OCEAN_FOAM ? NULL : o->fine[cascade]->out[f];
 }
 
+int ocean_exchange_cascade_field(struct ocean *o, int cascade, enum ocean_field f, float **buf)
+{
+    if (!o || !buf || !*buf || (unsigned)f >= OCEAN_FIELD_COUNT || f == OCEAN_FOAM || cascade < 0 ||
+        cascade >= o->ncascades)
+        return -1;
+    struct ocean_grid *g = cascade == 0 ? o->g : o->fine[cascade];
+    float *mine = g->out[f];
+    g->out[f] = *buf;
+    *buf = mine;
+    return 0;
+}
+
+float *ocean_field_buffer_new(int n)
+{
+    bool ok = true;
+    return n > 0 ? zalloc((size_t)n * n * sizeof(float), &ok) : NULL;
+}
+
+void ocean_field_buffer_free(float *buf) { fftwf_free(buf); }
+
 int ocean_cascades(const struct ocean *o)
 {
     return o ? o->ncascades : 0;

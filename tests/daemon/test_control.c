@@ -803,6 +803,46 @@ static void test_capacity_plan(void)
         CHECK(ci.sizes[i].fits_memory == control_fits_memory(ci.sizes[i].n, (int)param_find("cascades")->def, 256), "fits_memory of %d", ci.sizes[i].n);
 }
 
+/* capacity.c: a sample at LOD L is priced and learned as 2^L samples of LOD 0
+ * (group_work). One figure per sample at every LOD learned 4.4 ns at LOD 1
+ * against 1.86 at LOD 0 (N = 1024, six fields, intra), priced LOD 0 from it,
+ * and a group degraded once never came back. Fixed numbers: behaviour only. */
+static void test_capacity_lod_work(void)
+{
+    struct cost_model m = {
+        .period_s = 1.0 / 30, .budget_s = 0.8 / 30, .n0 = 1024, .step1_s = 0.002, .step6_s = 0.012,
+        .step_scale = 1, .enc_s_per_sample = 2e-9, .max_memory_mb = 2048, .cores = 2,
+    };
+    const int n = 1024, ts = 128, g0 = plan_group(0, 3);
+    int demand[LAYER_KEYS_ALL] = { 0 };
+    for (int f = 0; f < 6; f++)
+        demand[layer_key(f, 0, 3)] = 1; /* six fields, lod 0, 1 cm, intra */
+    struct plan p;
+    /* 6 n^2 x 2 ns = 12.6 ms + a 12 ms step: fits at full detail */
+    capacity_plan(&m, n, ts, demand, NULL, 1.0, &p);
+    CHECK(!plan_degraded(&p, g0), "six fields at 2 ns/sample: lod %d rate %g (%s)", p.lod[g0], p.rate[g0], p.reason);
+    /* served at lod 1 (say it was degraded under load): its frames count twice their samples */
+    p.lod[g0] = 1;
+    long samples[CAP_CODECS];
+    plan_samples(&p, n, NULL, samples);
+    CHECK(samples[CAP_INTRA] == 2L * 6 * (n / 2) * (n / 2) && samples[CAP_TEMPORAL] == 0, "lod 1 work %ld, want %ld",
+          samples[CAP_INTRA], 2L * 6 * (n / 2) * (n / 2));
+    /* lod 1 frames that take 2^1 x samples x the figure leave it as it is, so lod 0 still fits
+     * (with samples counted once they read as 4 ns: 25 ms at lod 0, never back) */
+    struct cost_model l = m;
+    for (int i = 0; i < 50; i++)
+        cost_learn_encode(&l, samples, 2.0 * 6 * (n / 2) * (n / 2) * 2e-9);
+    CHECK(fabs(l.enc_s_per_sample - 2e-9) < 1e-12, "lod 1 frames moved the lod 0 figure: %g", l.enc_s_per_sample);
+    capacity_plan(&l, n, ts, demand, NULL, 1.0, &p);
+    CHECK(!plan_degraded(&p, g0), "back at full detail after lod 1 frames: lod %d (%s)", p.lod[g0], p.reason);
+    /* and a real slowdown at lod 1 still teaches it: 1.5x there is 1.5x at lod 0 */
+    for (int i = 0; i < 50; i++)
+        cost_learn_encode(&l, samples, 1.5 * 2.0 * 6 * (n / 2) * (n / 2) * 2e-9);
+    CHECK(fabs(l.enc_s_per_sample - 3e-9) < 0.05e-9, "1.5x slower at lod 1: %g, want 3e-9", l.enc_s_per_sample);
+    capacity_plan(&l, n, ts, demand, NULL, 1.0, &p);
+    CHECK(p.lod[g0] == 1, "six fields at 3 ns/sample (19 + 12 ms): lod %d (%s)", p.lod[g0], p.reason);
+}
+
 /* capacity.c: the encode cost per codec, what a degraded message says, and
  * learning from frames (N = 1024 h/dx/dz temporal: a group degraded to lod 1
  * is sent intra, measured the cheap codec, predicted that lod 0 fit, went
@@ -944,7 +984,7 @@ static void test_capacity_codec_rung(void)
           p.rate[gb] == 1, "two groups: intra %d %d, lod %d %d", plan_intra(&p, ga), plan_intra(&p, gb), p.lod[ga], p.lod[gb]);
     long samples[CAP_CODECS];
     plan_samples(&p, n, NULL, samples);
-    CHECK(samples[CAP_INTRA] == 6L * n * n && samples[CAP_TEMPORAL] == (long)(n / 2) * (n / 2), "two groups: samples %ld %ld",
+    CHECK(samples[CAP_INTRA] == 6L * n * n && samples[CAP_TEMPORAL] == 2L * (n / 2) * (n / 2), "two groups: work %ld %ld",
           samples[CAP_INTRA], samples[CAP_TEMPORAL]);
     /* the temporal samples capped under B's: both intra, still at full detail */
     m.temporal_budget = 100000;
@@ -952,16 +992,17 @@ static void test_capacity_codec_rung(void)
     CHECK(plan_intra(&p, ga) && plan_intra(&p, gb) && p.lod[ga] == 0 && p.lod[gb] == 1, "temporal cap: intra %d %d, lod %d %d",
           plan_intra(&p, ga), plan_intra(&p, gb), p.lod[ga], p.lod[gb]);
     m.temporal_budget = 0;
-    /* B with six fields too (1.6 M): neither rung of the codec is enough (A intra 22 + B 11 ms; B intra
-     * 22 + 5.5), so A goes one LOD coarser; then B fits temporal again and goes back (5.5 + 11 ms) */
-    for (int f = 1; f < 6; f++)
+    /* B with h, dx, dz (0.79 M samples at lod 1, priced as 1.6 M of lod 0): neither rung of the codec
+     * is enough (A intra 22 + B 11 ms; B intra 22 + 5.5), so A goes one LOD coarser (3.1 M: 11 ms);
+     * then B fits temporal again and goes back (11 + 11 ms) */
+    for (int f = 1; f < 3; f++)
         demand[layer_key(f, 1, 3)] = tdemand[layer_key(f, 1, 3)] = 1;
     capacity_plan(&m, n, ts, demand, tdemand, 1.0, &p);
     CHECK(p.lod[ga] == 1 && !plan_intra(&p, ga) && !plan_intra(&p, gb) && p.lod[gb] == 1 && p.rate[ga] == 1 &&
           p.rate[gb] == 1 && plan_degraded(&p, ga) && !plan_degraded(&p, gb),
           "coarser A, B back to temporal: lod %d %d intra %d %d (%s)", p.lod[ga], p.lod[gb], plan_intra(&p, ga),
           plan_intra(&p, gb), p.reason);
-    for (int f = 1; f < 6; f++)
+    for (int f = 1; f < 3; f++)
         demand[layer_key(f, 1, 3)] = tdemand[layer_key(f, 1, 3)] = 0;
     /* the announcement at 1024: temporal 7.3 ms a field, 3 fit; intra 3.7 ms a field, 6 fit */
     struct capacity_info ci;
@@ -1065,6 +1106,7 @@ int main(void)
 {
     test_capacity_plan();
     test_capacity_codecs();
+    test_capacity_lod_work();
     test_capacity_codec_rung();
     test_sets();
     test_subscribe();

@@ -205,7 +205,9 @@ compare() {
   wait $pp; local prc=$?
   [ $trc -eq 0 ] || fail "ocean-tap (lod $lod, bound $bound) exited $trc: $(cat "$tmp/tap.out")"
   [ $prc -eq 0 ] || fail "$EXAMPLE (lod $lod, bound $bound) exited $prc: $(cat "$tmp/py.out")"
-  $PY - "$a" "$b" <<'EOF' || fail "Python and C decoders disagree (lod $lod, bound $bound)"
+  $PY - "$a" "$b" <<'EOF' || fail "Python and C decoders disagree (lod $lod, bound $bound)
+  ocean-tap: $(tail -n 4 "$tmp/tap.out")
+  Python: $(grep -v '^seq ' "$tmp/py.out" | tail -n 4)"
 import glob, os, sys
 import numpy as np
 a, b = sys.argv[1], sys.argv[2]
@@ -223,7 +225,15 @@ for na, nb in pairs:
     assert x.dtype == y.dtype == np.float32 and x.shape == y.shape, (na, x.dtype, x.shape, y.dtype, y.shape)
     if not np.array_equal(x.view(np.uint32), y.view(np.uint32)):
         diff = np.abs(x.astype(np.float64) - y)
-        sys.exit(f"{na}: {np.count_nonzero(diff)} samples differ, max {diff.max()}")
+        # Which rows and columns differ (tiles are square blocks of the grid), and every
+        # field of that seq: a decoder bug shows in one codec path, a stream bug in tiles.
+        rows, cols = np.nonzero(diff)
+        others = [f"{f}: {np.count_nonzero(np.load(os.path.join(a, f + na[na.index('-'):])) != np.load(os.path.join(b, f + nb[nb.index('-'):])))}"
+                  for f in ("height", "dx", "dz", "jacobian")
+                  if os.path.exists(os.path.join(a, f + na[na.index('-'):])) and os.path.exists(os.path.join(b, f + nb[nb.index('-'):]))]
+        sys.exit(f"{na}: {np.count_nonzero(diff)} samples differ, max {diff.max()}; rows {rows.min()}-{rows.max()}, "
+                 f"columns {cols.min()}-{cols.max()} of {x.shape}; samples differing per field at this seq: {', '.join(others)}; "
+                 f"seqs compared: {[p[0] for p in pairs]}")
 print(f"  {len(pairs)} field arrays bit-identical ({len(pairs) // 4} frames with the same seq)" if common
       else f"  {len(pairs)} field arrays bit-identical (no common seq; same paused sea)")
 EOF

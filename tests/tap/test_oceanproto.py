@@ -71,6 +71,34 @@ for st in manifest.get("streams", []):
             print(f"FAIL {st['name']} frame {i}: samples differ")
             failures += 1
     streams += 1
+# Assembler: a frame is complete only when it carries every tile of the wanted fields at
+# the wanted LOD. A frame served at a coarser LOD (the server degraded it, §7.2) is not,
+# though the grid still holds the frame before (which used to be saved under the new seq).
+from types import SimpleNamespace as NS  # noqa: E402
+
+
+def synth(seq, lod, value, n=64, ts=32):
+    side = ts >> lod
+    return NS(seq=seq, n=n, tile_size=ts, tiles=[NS(field="height", lod=lod, x=x, z=z,
+                                                   samples=np.full((side, side), value, np.float32))
+                                                for z in range(n // ts) for x in range(n // ts)])
+
+
+asm = oceanproto.Assembler(["height"], 1)
+asm.add(synth(1, 1, 1.0))
+first = asm.complete() and (asm.fields["height"] == 1.0).all()
+asm.add(synth(2, 2, 2.0))                 # degraded: coarser tiles only
+degraded = asm.complete()
+part = synth(3, 1, 3.0)
+part.tiles = part.tiles[1:]               # one tile missing
+asm.add(part)
+partial = asm.complete()
+asm.add(synth(4, 1, 4.0))
+if not first or degraded or partial or not asm.complete():
+    print(f"FAIL Assembler: complete after a full frame {first}, after a coarser one {degraded} (want False), "
+          f"after a partial one {partial} (want False), after the next full one {asm.complete()}")
+    failures += 1
+
 if failures or not good or not bad:
     print(f"FAIL: {failures} failures ({good} good vectors decoded, {bad} bad vectors rejected)")
     sys.exit(1)

@@ -134,6 +134,18 @@ const float *ocean_field(const struct ocean *o, enum ocean_field f);
 /* Output of cascade c (0 .. ocean_cascades - 1), or NULL (also for
  * OCEAN_FOAM of c >= 1: foam lives on cascade 0). */
 const float *ocean_cascade_field(const struct ocean *o, int cascade, enum ocean_field f);
+/* Zero-copy hand-off of a step's output (the daemon encodes tick t while
+ * tick t+1 is stepped): exchange cascade c's output array of field f with
+ * *buf, an array from ocean_field_buffer_new at this resolution (or from an
+ * earlier exchange at it). The caller then owns the samples just stepped,
+ * and the library the old *buf, which the next step of f overwrites whole;
+ * until then ocean_cascade_field(o, c, f) reads the old contents. Not for
+ * OCEAN_FOAM: its array is the foam's state. Returns 0, or -1 (nothing
+ * exchanged: bad argument). */
+int ocean_exchange_cascade_field(struct ocean *o, int cascade, enum ocean_field f, float **buf);
+/* An output-sized array (N x N floats, aligned as FFTW's plans need), zeroed; NULL if out of memory. */
+float *ocean_field_buffer_new(int n);
+void ocean_field_buffer_free(float *buf);
 /* Cascades in force (p.cascades). */
 int ocean_cascades(const struct ocean *o);
 const struct ocean_params *ocean_get_params(const struct ocean *o);
