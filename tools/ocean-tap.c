@@ -559,6 +559,17 @@ static void on_text(struct session *s, const char *text, size_t len)
             else
                 advance(s);
         }
+    } else if (!strcmp(t, "degraded") && s->want_frames) {
+        /* Say why frames stop being written: at a coarser LOD they do not fill our grids. */
+        cJSON *active = cJSON_GetObjectItemCaseSensitive(msg, "active"), *lod = cJSON_GetObjectItemCaseSensitive(msg, "lod");
+        cJSON *reason = cJSON_GetObjectItemCaseSensitive(msg, "reason");
+        if (cJSON_IsTrue(active))
+            fprintf(stderr, "ocean-tap: the server serves this subscription degraded (lod %d%s): %s\n",
+                    cJSON_IsNumber(lod) ? lod->valueint : -1,
+                    cJSON_IsNumber(lod) && lod->valueint != s->o->lod ? ", frames not written until it is back" : "",
+                    cJSON_IsString(reason) ? reason->valuestring : "no reason given");
+        else
+            fprintf(stderr, "ocean-tap: the server serves this subscription in full again\n");
     } else if (!strcmp(t, "query_result") && s->stage == ST_QUERY && id_is(msg, ID_QUERY)) {
         printf("%.*s\n", (int)len, text);
         fflush(stdout);
