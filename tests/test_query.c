@@ -393,6 +393,64 @@ static void test_derivatives(int n, double chop)
     ocean_free(o);
 }
 
+
+/* During an easing's ramp (ocean_commit_eased: the amplitudes move from the
+ * old sea's to the new one's over len seconds) the time derivatives include
+ * the amplitudes' own rate: they match finite differences of the query's own
+ * heights at a fixed world point (the heights equal the stepped sea's during
+ * an easing: easing.query_equals_step in test_ocean). Without the rate the
+ * velocity misses (to - from)/len, as large as the swell's own rate here. */
+static void test_derivatives_easing(void)
+{
+    struct ocean *o = make(64, 1.0, SPECTRUM_JONSWAP);
+    if (!o)
+        return;
+    struct ocean_params q = *ocean_get_params(o);
+    q.wind_speed = 20; /* a new sea's worth of amplitude over 8 ticks */
+    char err[256];
+    const double t0 = 30.0, len = 8.0 / 30, dt = 4e-3, L = q.patch_size;
+    struct ocean_prepared *pr = ocean_prepare(o, &q, err, sizeof err);
+    int rc = pr && ocean_prepared_easable(pr) ? ocean_commit_eased(o, pr, t0, len) : -1;
+    ocean_prepared_free(pr);
+    struct ocean_surface *sf = rc == 0 ? ocean_surface_new(o, err, sizeof err) : NULL;
+    enum { COUNT = 8 };
+    double xz[COUNT][2];
+    random_points(xz, COUNT, L);
+    double ev = 0, ea = 0, vmax = 0, amax = 0;
+    int used = 0;
+    const double ts[] = {t0 + 0.3 * len, t0 + 0.7 * len};
+    for (int k = 0; sf && k < 2; k++) {
+        struct ocean_point pm[COUNT], p0[COUNT], pp[COUNT];
+        if (ocean_surface_query(sf, ts[k] - dt, (const double(*)[2])xz, COUNT, pm) ||
+            ocean_surface_query(sf, ts[k], (const double(*)[2])xz, COUNT, p0) ||
+            ocean_surface_query(sf, ts[k] + dt, (const double(*)[2])xz, COUNT, pp)) {
+            rc = -1;
+            break;
+        }
+        for (int i = 0; i < COUNT; i++) {
+            if (p0[i].jacobian < 0.2 || !p0[i].converged)
+                continue; /* near a fold the source jumps: no smooth height(t) */
+            double fv = (pp[i].height - pm[i].height) / (2 * dt);
+            double fa = (pp[i].height - 2 * p0[i].height + pm[i].height) / (dt * dt);
+            ev = fmax(ev, fabs(p0[i].vertical_velocity - fv));
+            ea = fmax(ea, fabs(p0[i].vertical_acceleration - fa));
+            vmax = fmax(vmax, fabs(fv));
+            amax = fmax(amax, fabs(fa));
+            used++;
+        }
+    }
+    /* dt = 4 ms: the heights come from float amplitudes (the step's mix), whose
+     * rounding a 1 ms second difference would amplify to 0.06 m/s^2; the
+     * truncation at 4 ms is ~5e-4 m/s and ~5e-3 m/s^2. Without the ramp's rate
+     * the errors are 1.5 m/s and 3.7 m/s^2. */
+    check(rc == 0 && sf && used >= COUNT && ev <= 1e-3 + 1e-3 * vmax && ea <= 1e-2 + 2e-3 * amax,
+          "query.time_derivatives.easing",
+          "%d points inside the ramp: d(height)/dt err %.1e m/s (max %.2f), d2/dt2 err %.1e m/s^2 (max %.2f)", used, ev,
+          vmax, ea, amax);
+    ocean_surface_free(sf);
+    ocean_free(o);
+}
+
 /* ---- properties ---------------------------------------------------------- */
 
 /* One cascade: periodic in L, and the FFT grid at its samples. */
@@ -641,6 +699,7 @@ int main(void)
         if (!quick)
             test_derivatives(64, chops[c]);
     }
+    test_derivatives_easing();
     if (!quick)
         test_accuracy(512, 1.0, SPECTRUM_JONSWAP, 4);
     printf("%d passed, %d failed\n", passed, failed);

@@ -59,6 +59,22 @@ static inline float ocean_ease_weight(double t0, double len, double t)
 }
 /* One amplitude during an easing: from + w (to - from), in float. */
 static inline float ocean_ease_mix(float from, float to, float w) { return from + w * (to - from); }
+/* d(weight)/dt at t: 1/len inside the ramp, 0 outside (the query's time
+ * derivatives include it: an amplitude changing by half over 8 ticks moves
+ * the heave rate of an 8 s swell by more than its own oscillation does). */
+static inline double ocean_ease_rate(double t0, double len, double t)
+{
+    if (!(len > 0))
+        return 0;
+    double u = (t - t0) / len;
+    if (!(u > 0 && u < 1))
+        return 0;
+#ifdef OCEAN_EASE_SMOOTH
+    return 6 * u * (1 - u) / len;
+#else
+    return 1 / len;
+#endif
+}
 
 /* Within a column: a = col, b = col + N, d = col + 2N, e = col + 3N,
  * linvk = col + 4N, omega = (double *)(col + 5N). */

@@ -314,10 +314,11 @@ const struct ocean_params *ocean_surface_params(const struct ocean_surface *s)
 
 /* ---- evaluation ------------------------------------------------------------ */
 
-/* Per query call: the time-dependent part of every kept mode, P = w h~(k,t)
- * and Q = w dh~/dt (complex), and per point the x phase table. */
+/* Per query call: the time-dependent part of every kept mode, P = w h~(k,t),
+ * Q = w dh~/dt and R = w d2h~/dt2 (complex; R = -omega^2 P but during an
+ * easing's ramp), and per point the x phase table. */
 struct work {
-    double *pr, *pi, *qr, *qi;
+    double *pr, *pi, *qr, *qi, *rr, *ri;
     double *cx, *sx;       /* cos, sin(2 pi mx x / L), mx = 0 .. N/2 */
     double *cz, *sz;       /* cos, sin(2 pi mz z / L), mz = 0 .. N/2 */
 };
@@ -447,7 +448,8 @@ static void eval_all(const struct ocean_surface *s, struct work *w, const struct
                 double er = cx * cz - sx * sz, ei = cx * sz + sx * cz;
                 double pr = w->pr[m] * er - w->pi[m] * ei, pi = w->pr[m] * ei + w->pi[m] * er;
                 double qr = w->qr[m] * er - w->qi[m] * ei, qi = w->qr[m] * ei + w->qi[m] * er;
-                double g = s->invk[m], kx = s->kx[m], kx2 = kx * kx, om2 = s->omega[m] * s->omega[m];
+                double rr = w->rr[m] * er - w->ri[m] * ei, ri = w->rr[m] * ei + w->ri[m] * er;
+                double g = s->invk[m], kx = s->kx[m], kx2 = kx * kx;
                 double gpi = g * pi, gpr = g * pr, gqi = g * qi, gqr = g * qr;
                 h += pr;
                 hx += kx * pi;
@@ -457,7 +459,7 @@ static void eval_all(const struct ocean_surface *s, struct work *w, const struct
                 ht += qr;
                 htx += kx * qi;
                 sqi += qi;
-                htt += om2 * pr;
+                htt += rr;
                 dx += kx * gpi;
                 dz += gpi;
                 dxx += kx2 * gpr;
@@ -465,8 +467,8 @@ static void eval_all(const struct ocean_surface *s, struct work *w, const struct
                 dzz += gpr;
                 dtx += kx * gqi;
                 dtz += gqi;
-                dttx += om2 * kx * gpi;
-                dttz += om2 * gpi;
+                dttx += kx * g * ri;
+                dttz += g * ri;
                 dtxx += kx2 * gqr;
                 dtxz += kx * gqr;
                 dtzz += gqr;
@@ -482,7 +484,7 @@ static void eval_all(const struct ocean_surface *s, struct work *w, const struct
             o->ht += ht;
             o->htx -= htx;
             o->htz -= kz * sqi;
-            o->htt -= htt;
+            o->htt += htt;
             o->dx -= dx;
             o->dz -= kz * dz;
             o->dxx -= dxx;
@@ -490,8 +492,8 @@ static void eval_all(const struct ocean_surface *s, struct work *w, const struct
             o->dzz -= kz2 * dzz;
             o->dtx -= dtx;
             o->dtz -= kz * dtz;
-            o->dttx += dttx;
-            o->dttz += kz * dttz;
+            o->dttx -= dttx;
+            o->dttz -= kz * dttz;
             o->dtxx -= dtxx;
             o->dtxz -= kz * dtxz;
             o->dtzz -= kz2 * dtzz;
@@ -659,14 +661,16 @@ int ocean_surface_query_from(const struct ocean_surface *s, double t, const doub
         return 0;
     size_t m = s->spans ? (size_t)s->spans : 1;
     struct work w;
-    double *buf = malloc((4 * m + 4 * (size_t)s->nh) * sizeof *buf);
+    double *buf = malloc((6 * m + 4 * (size_t)s->nh) * sizeof *buf);
     if (!buf)
         return -1;
     w.pr = buf;
     w.pi = w.pr + m;
     w.qr = w.pi + m;
     w.qi = w.qr + m;
-    w.cx = w.qi + m;
+    w.rr = w.qi + m;
+    w.ri = w.rr + m;
+    w.cx = w.ri + m;
     w.sx = w.cx + s->nh;
     w.cz = w.sx + s->nh;
     w.sz = w.cz + s->nh;
@@ -679,14 +683,25 @@ int ocean_surface_query_from(const struct ocean_surface *s, double t, const doub
             tt += s->loop;
     }
     /* During an easing, the amplitudes the step reads at t: the same float
-     * mix (the weights w_k = 1, 2 folded in scale it exactly). Time
-     * derivatives are those of the sea with the amplitudes of the instant
-     * (the easing's own rate is left out: docs/simulation.md "Easing"). */
-    const float ew = s->fa && s->ease_len > 0 ? ocean_ease_weight(s->ease_t0, s->ease_len, t) : 1.0f;
+     * mix (the weights w_k = 1, 2 folded in scale it exactly). Inside the
+     * ramp the amplitudes move at rw (to - from) per second, rw the weight's
+     * rate, which the time derivatives include (docs/simulation.md "Easing"):
+     * with P = a cos + b sin, P' = om (b cos - a sin) + a' cos + b' sin and
+     * P'' = -om^2 P + 2 om (b' cos - a' sin) (a'' = 0 on a linear ramp). */
+    const bool easing = s->fa && s->ease_len > 0;
+    const float ew = easing ? ocean_ease_weight(s->ease_t0, s->ease_len, t) : 1.0f;
+    const double rw = easing ? ocean_ease_rate(s->ease_t0, s->ease_len, t) : 0;
     for (int i = 0; i < s->spans; i++) {
         double om = s->omega[i], c = cos(om * tt), sn = sin(om * tt);
         double a = s->a[i], b = s->b[i], d = s->d[i], e = s->e[i];
+        double at = 0, bt = 0, dt = 0, et = 0; /* the amplitudes' rates */
         if (ew < 1.0f) {
+            if (rw > 0) {
+                at = rw * (a - s->fa[i]);
+                bt = rw * (b - s->fb[i]);
+                dt = rw * (d - s->fd[i]);
+                et = rw * (e - s->fe[i]);
+            }
             a = ocean_ease_mix((float)s->fa[i], (float)a, ew);
             b = ocean_ease_mix((float)s->fb[i], (float)b, ew);
             d = ocean_ease_mix((float)s->fd[i], (float)d, ew);
@@ -694,8 +709,10 @@ int ocean_surface_query_from(const struct ocean_surface *s, double t, const doub
         }
         w.pr[i] = a * c + b * sn;
         w.pi[i] = d * c - e * sn;
-        w.qr[i] = om * (b * c - a * sn);
-        w.qi[i] = -om * (d * sn + e * c);
+        w.qr[i] = om * (b * c - a * sn) + at * c + bt * sn;
+        w.qi[i] = -om * (d * sn + e * c) + dt * c - et * sn;
+        w.rr[i] = -om * om * w.pr[i] + 2 * om * (bt * c - at * sn);
+        w.ri[i] = -om * om * w.pi[i] - 2 * om * (dt * sn + et * c);
     }
     for (int i = 0; i < npoints; i++) {
         const double L = s->patch[0];
