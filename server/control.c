@@ -246,10 +246,13 @@ static size_t memory_bytes(int n)
 bool control_fits_memory(int n, int cascades, int max_memory_mb)
 {
     /* While a new N is being built the old simulation still runs, so two
-     * exist at once (one grid per cascade); plus up to three frames in flight of one raw field, and
-     * the encoder's copy of the six fields (frame.c: the next step overwrites
-     * the library's while the last one is encoded). */
-    double bytes = 2.0 * (cascades > 1 ? cascades : 1) * (double)memory_bytes(n) + (3.0 + 6.0) * 4.0 * (double)n * (double)n;
+     * exist at once (one grid per cascade, and from its first eased change on
+     * each cascade's easing buffer); plus up to three frames in flight of one raw field, and
+     * the encoder's six fields (frame.c: the arrays it took from the library
+     * while the next step writes into the library's). */
+    const double c = cascades > 1 ? cascades : 1;
+    double bytes = 2.0 * c * (double)memory_bytes(n) + c * (double)ocean_ease_memory_bytes(n) +
+                   (3.0 + 6.0) * 4.0 * (double)n * (double)n;
     return bytes <= (double)max_memory_mb * 1048576.0;
 }
 

@@ -1250,6 +1250,15 @@ static void test_easing(void)
     int easable = ocean_prepared_easable(pr);
     int rc = pr ? ocean_commit_eased(o, pr, t0, len) : -1;
     ocean_prepared_free(pr);
+    /* The easing buffers are made once and kept: a second eased change (prepared, not
+     * committed) allocates exactly ocean_ease_memory_bytes per cascade less, which is
+     * what the memory cap (control_fits_memory) adds to a simulation at this N. */
+    size_t alloc1 = ocean_alloc_bytes;
+    struct ocean_prepared *pr2 = ocean_prepare(o, &r, err, sizeof err);
+    size_t second_bytes = ocean_alloc_bytes - alloc1, ease_bytes = ocean_ease_memory_bytes(n) * (size_t)p.cascades;
+    int ease_kept = pr2 && ocean_prepared_easable(pr2) && change_bytes - second_bytes == ease_bytes &&
+                    ease_bytes == 8 * nn * (size_t)p.cascades && ocean_ease_memory_bytes(OCEAN_EASE_MAX_N * 2) == 0;
+    ocean_prepared_free(pr2);
     /* At t0: the old sea, bit for bit (cascade 0's height; choppiness is
      * new, so the displacements are compared with the new choppiness at the
      * end only). After t0 + len: the new sea, bit for bit, on every cascade. */
@@ -1275,9 +1284,11 @@ static void test_easing(void)
           "easing.reaches_new", "wind %g -> %g m/s over %g s: old sea at t0 %s, new at t0 + len %s (both cascades), "
           "half way the mean of both within %.1e m (the seas differ by %.2f m)", p.wind_speed, q.wind_speed, len,
           start_old ? "bit for bit" : "NO", end_new ? "bit for bit" : "NO", dmid, dab);
-    check(change_bytes > 0 && change_bytes <= model_bytes / 2, "easing.memory",
+    check(change_bytes > 0 && change_bytes <= model_bytes / 2 && ease_kept, "easing.memory",
           "the first eased change allocates %.2f MB (new amplitudes + easing buffers), the cap counts %.2f MB "
-          "for a change being built", change_bytes / 1e6, model_bytes / 1e6);
+          "for a change being built; a second one %.2f MB less (ocean_ease_memory_bytes x cascades = %.2f MB): %s",
+          change_bytes / 1e6, model_bytes / 1e6, (double)(change_bytes - second_bytes) / 1e6, ease_bytes / 1e6,
+          ease_kept ? "yes" : "NO");
     free(h0);
     free(ha);
     free(hm);

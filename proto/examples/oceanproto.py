@@ -197,7 +197,7 @@ class DecoderState:
     One per stream; decode its frames in order. A frame that fails changes nothing."""
 
     def __init__(self):
-        self.tiles = {}   # (field, lod, x, z, n, tile_size) -> list of (seq, offset, scale, bound, codes)
+        self.tiles = {}   # (field, lod, cascade, x, z, n, tile_size) -> list of (seq, offset, scale, bound, codes)
 
     def reset(self):
         self.tiles.clear()

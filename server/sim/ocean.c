@@ -416,6 +416,11 @@ size_t ocean_memory_bytes(int n, int threads)
          + OCEAN_FIELD_COUNT * nn * sizeof(float);                        /* out */
 }
 
+size_t ocean_ease_memory_bytes(int n)
+{
+    return n >= 2 && n <= OCEAN_EASE_MAX_N ? (size_t)(n / 2) * OCEAN_EASE_COL_FLOATS(n) * sizeof(float) : 0;
+}
+
 static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char *err, size_t errlen)
 {
     struct ocean_grid *g = calloc(1, sizeof *g);

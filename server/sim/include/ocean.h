@@ -159,6 +159,10 @@ int ocean_threads(int requested);
  * its grids (spectra, FFT work arrays, output fields): what a memory cap
  * should count. FFTW's plans are not included (small beside the arrays). */
 size_t ocean_memory_bytes(int n, int threads);
+/* Bytes one cascade adds, from its first eased change on, for the amplitudes an
+ * easing starts from (8 N^2 at N <= OCEAN_EASE_MAX_N, kept and reused; 0 above,
+ * where changes are not eased): a memory cap counts them too. */
+size_t ocean_ease_memory_bytes(int n);
 void ocean_free(struct ocean *o);
 
 /* Stable lowercase names: "height", "dx", "dz", "slope_x", "slope_z", "jacobian", "foam". */
