@@ -1114,7 +1114,7 @@ int ocean_exchange_cascade_field(struct ocean *o, int cascade, enum ocean_field 
     if (!o || !buf || !*buf || (unsigned)f >= OCEAN_FIELD_COUNT || f == OCEAN_FOAM || cascade < 0 ||
         cascade >= o->ncascades)
         return -1;
-    struct ocean_grid *g = cascade == 0 ? o->g : o->fine[cascade];
+    struct ocean_grid *g = cascade_grid(o, cascade);
     float *mine = g->out[f];
     g->out[f] = *buf;
     *buf = mine;
