@@ -550,10 +550,12 @@ def burst(d, count, max_accept):
 
 @case(args=("--max-clients", "100"), rss_slack_kb=8192)
 def connections_500(d, fig):
-    """500 connections at once against --max-clients 100 (the observer holds one slot), twice:
-    the first burst warms lws and the allocator up, the second must not grow RSS."""
+    """500 connections at once against --max-clients 100 (the observer holds one slot), four times.
+    A leak grows RSS on every burst; the allocator's warm-up grows it once, in whichever burst
+    first needs it (seen: +1.3 MB in burst 1 on some runs, in burst 2 on a loaded CI machine).
+    So the check is on the median growth between bursts, and a bound on the total."""
     rss = []
-    for rnd in range(2):
+    for rnd in range(4):
         socks, f = burst(d, 500, 99)
         gauge = d.metric("oceand_clients")
         log("    burst %d: 500 at once: %d accepted, %d refused, %d unanswered; clients gauge %g"
@@ -571,9 +573,13 @@ def connections_500(d, fig):
               "clients not cleaned up: %g" % d.metric("oceand_clients"))
         time.sleep(0.3)
         rss.append(d.rss_kb())
-    fig["rss_growth_second_burst_kb"] = rss[1] - rss[0]
-    log("    RSS after burst 1: %d kB, after burst 2: %d kB" % (rss[0], rss[1]))
-    check(rss[1] - rss[0] < 1024, "RSS grew %d kB from the first burst to the second" % (rss[1] - rss[0]))
+    growth = [b - a for a, b in zip(rss, rss[1:])]
+    fig["rss_growth_second_burst_kb"] = growth[0]
+    fig["rss_growth_median_kb"] = sorted(growth)[1]
+    log("    RSS after each burst: %s kB; growth between bursts %s kB" % (rss, growth))
+    check(sorted(growth)[1] < 512,
+          "RSS grew on most bursts (%s kB): a leak per connection, not the allocator's warm-up" % growth)
+    check(rss[-1] - rss[0] < 2048, "RSS grew %d kB from the first burst to the fourth" % (rss[-1] - rss[0]))
     s, r = attacker(d)   # room again
     s.close()
 
