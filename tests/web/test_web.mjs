@@ -16,7 +16,7 @@ const args = parseArgs(process.argv, { oceand: 'build/oceand', webRoot: 'build/w
 fs.mkdirSync(args.out, { recursive: true });
 const VIEW = { width: 800, height: 500 };
 // test: keep the drawing buffer; aa=0: no MSAA; detail: a lighter mesh (software GL is slow)
-const QUERY = '?test=1&aa=0&detail=0.25';
+const QUERY = '?test=1&aa=0&detail=0.25&scale=0.5';
 
 let passed = 0, failed = 0;
 async function check(name, fn) {

@@ -14,7 +14,10 @@ const query = new URLSearchParams(location.search);
 const canvas = document.getElementById('ocean');
 // ?aa=0 turns off multisampling (software GL in tests); ?detail=x scales mesh density.
 const renderer = new THREE.WebGLRenderer({ canvas, antialias: query.get('aa') !== '0', preserveDrawingBuffer: query.has('test') });
-renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
+// ?scale=x (0.25..1): draw at x times the screen's resolution, then let the browser stretch
+// it: fewer pixels to shade, for slow GPUs (and software GL in tests).
+const renderScale = Math.min(1, Math.max(0.25, Number(query.get('scale')) || 1));
+renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2) * renderScale);
 renderer.outputColorSpace = THREE.LinearSRGBColorSpace; // shaders write display-ready colour
 const camera = new THREE.PerspectiveCamera(55, 1, 0.5, 120000);
 camera.position.set(0, 14, 48);
