@@ -18,9 +18,7 @@ import os
 import re
 import socket
 import subprocess
-import sys
 import tempfile
-import threading
 import time
 import urllib.request
 
@@ -168,6 +166,10 @@ def main():
     ap.add_argument("--capacity", action="store_true", help="issue 15's capacity rows, --repeat times each, "
                     "then one median line per row")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--base", default="",
+                    help="--capacity: another oceand build to compare with; the two alternate run by run "
+                         "(base first), each row gets a median line per build and a capacity_ab line (new/base)")
+    ap.add_argument("--rows", default="", help="--capacity: only these rows, by name (e.g. 1024six,2048hdz)")
     ap.add_argument("--set-interval", type=float, default=None,
                     help="seconds between client 0's wind sets (default 0.3; --capacity: 0, the sea left alone)")
     args = ap.parse_args()
@@ -195,29 +197,69 @@ CAPACITY_ROWS = [
 ]
 
 
-def capacity(args):
-    import contextlib
-    import io
+def row_name(n, k, fields):
+    """Stable short names: 512six, 1024hdz, 1024six, 2048h, 2048hdz, 256x200."""
+    if k > 1:
+        return "%dx%d" % (n, k)
+    return "%d%s" % (n, {6: "six", 3: "hdz", 1: "h"}[len(fields)])
+
+
+def capacity_median(runs, args, n, k):
     import statistics
+    med = {"bench": "capacity", "N": n, "clients": k, "fields": runs[0]["fields"], "runs": len(runs),
+           "set_interval_s": args.set_interval}
+    for key in ("fps_median", "fps_min", "delivered", "overruns", "overruns_clock_late", "tick_ms_mean", "tick_ms_p50_bucket",
+                "encode_ms_mean",
+                "lat_p50_ms", "daemon_cpu", "daemon_runq_wait", "rss_mb", "degraded_groups_at_end", "loadavg_1m"):
+        med[key] = round(statistics.median(r[key] for r in runs), 3)
+    for key in ("intra_groups_at_end",):   # None from a daemon without the metric
+        vals = [r[key] for r in runs if r.get(key) is not None]
+        med[key] = statistics.median(vals) if vals else None
+    return med
+
+
+def capacity(args):
+    """Each row --repeat times and its median line. With --base, the base build and
+    this one alternate run by run, so that both see the same moments of a shared
+    machine (its speed drifts by tens of per cent over minutes): the ratio of their
+    medians is the comparison, not either figure alone."""
+    import contextlib
+    import copy
+    import io
+    builds = [("new", args)]
+    if args.base:
+        base = copy.copy(args)
+        base.oceand = args.base
+        builds.insert(0, ("base", base))
+    wanted = set(filter(None, args.rows.split(",")))
     for n, k, fields in CAPACITY_ROWS:
-        runs = []
+        name = row_name(n, k, fields or ["height", "dx", "dz"])
+        if wanted and name not in wanted:
+            continue
+        runs = {label: [] for label, _ in builds}
         for _ in range(args.repeat):
-            buf = io.StringIO()
-            with contextlib.redirect_stdout(buf):
-                run(args, n, k, fields)
-            line = buf.getvalue().strip()
-            print(line, flush=True)
-            runs.append(json.loads(line))
-        med = {"bench": "capacity", "N": n, "clients": k, "fields": runs[0]["fields"], "runs": len(runs),
-               "set_interval_s": args.set_interval}
-        for key in ("fps_median", "fps_min", "delivered", "overruns", "overruns_clock_late", "tick_ms_mean", "tick_ms_p50_bucket",
-                    "encode_ms_mean",
-                    "lat_p50_ms", "daemon_cpu", "daemon_runq_wait", "rss_mb", "degraded_groups_at_end", "loadavg_1m"):
-            med[key] = statistics.median(r[key] for r in runs)
-        for key in ("intra_groups_at_end",):   # None from a daemon without the metric
-            vals = [r[key] for r in runs if r.get(key) is not None]
-            med[key] = statistics.median(vals) if vals else None
-        print(json.dumps(med), flush=True)
+            for label, a in builds:
+                buf = io.StringIO()
+                with contextlib.redirect_stdout(buf):
+                    run(a, n, k, fields)
+                line = buf.getvalue().strip()
+                print(line, flush=True)
+                runs[label].append(json.loads(line))
+        meds = {}
+        for label, a in builds:
+            meds[label] = capacity_median(runs[label], args, n, k)
+            meds[label]["row"] = name
+            if args.base:
+                meds[label]["build"] = label
+                meds[label]["oceand"] = a.oceand
+            print(json.dumps(meds[label]), flush=True)
+        if args.base:
+            ab = {"bench": "capacity_ab", "row": name, "runs": args.repeat}
+            for key in ("tick_ms_mean", "encode_ms_mean", "fps_median", "daemon_cpu"):
+                b, v = meds["base"][key], meds["new"][key]
+                ab[key + "_base"], ab[key + "_new"] = b, v
+                ab[key + "_ratio"] = round(v / b, 3) if b else None
+            print(json.dumps(ab), flush=True)
 
 
 if __name__ == "__main__":
