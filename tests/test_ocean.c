@@ -9,6 +9,7 @@
 #include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -1863,6 +1864,67 @@ static void test_exchange_field(void)
     ocean_free(b);
 }
 
+/* The VmFlags of the mapping that holds addr ("hg": MADV_HUGEPAGE asked for) and
+ * the huge pages it got, from /proc/self/smaps; 0 if not found. */
+static int mapping_flags(const void *addr, char *flags, size_t flags_size, long *huge_kb)
+{
+    FILE *f = fopen("/proc/self/smaps", "r");
+    if (!f)
+        return 0;
+    char line[512];
+    int in = 0, found = 0;
+    uintptr_t a = (uintptr_t)addr;
+    while (fgets(line, sizeof line, f)) {
+        unsigned long lo, hi;
+        if (sscanf(line, "%lx-%lx ", &lo, &hi) == 2 && strchr(line, '-') < strchr(line, ' ')) {
+            in = a >= lo && a < hi;
+            continue;
+        }
+        if (in && sscanf(line, "AnonHugePages: %ld kB", huge_kb) == 1)
+            continue;
+        if (in && strncmp(line, "VmFlags:", 8) == 0) {
+            size_t len = strlen(line + 8);
+            len = len < flags_size ? len : flags_size - 1;
+            memcpy(flags, line + 8, len);
+            flags[len] = '\0';
+            found = 1;
+            break;
+        }
+    }
+    fclose(f);
+    return found;
+}
+
+static void test_huge_pages(void)
+{
+    if (quick) /* N = 1024 under valgrind: minutes */
+        return;
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = 1024;
+    p.cascades = 1;
+    struct ocean *o = make(&p, 2);
+    if (!o)
+        return;
+    ocean_step(o, 1.0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+    const float *h = ocean_cascade_field(o, 0, OCEAN_HEIGHT);
+    float *spare = ocean_field_buffer_new(1024);
+    char flags[256] = "", spare_flags[256] = "";
+    long huge_kb = -1, spare_kb = -1;
+    int found = mapping_flags(h, flags, sizeof flags, &huge_kb) && spare &&
+                mapping_flags(spare, spare_flags, sizeof spare_flags, &spare_kb);
+    int aligned = h && spare && (uintptr_t)h % (2u << 20) == 0 && (uintptr_t)spare % (2u << 20) == 0;
+    /* A kernel without THP has no such file and refuses the hint: only the alignment is checked. */
+    int thp = access("/sys/kernel/mm/transparent_hugepage/enabled", F_OK) == 0;
+    int asked = !thp || (found && strstr(flags, " hg") && strstr(spare_flags, " hg"));
+    check(aligned && asked, "memory.huge_pages",
+          "a 4 MB field (N = 1024) and a spare field buffer are 2 MB aligned (%s) and asked for as huge pages "
+          "(VmFlags%s hg: %s); the field got %ld kB of them (up to the kernel's THP setting and free memory)",
+          aligned ? "yes" : "no", found ? "" : " not found,", asked ? "yes" : "no", huge_kb);
+    ocean_field_buffer_free(spare);
+    ocean_free(o);
+}
+
 int main(void)
 {
     const char *qenv = getenv("OCEAN_TEST_QUICK");
@@ -1896,6 +1958,7 @@ int main(void)
     RUN(test_cascades_hs);
     RUN(test_cascades_structure);
     RUN(test_exchange_field);
+    RUN(test_huge_pages);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }

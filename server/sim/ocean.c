@@ -15,6 +15,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include "ocean_internal.h"
@@ -215,9 +216,9 @@ static void amps_free(struct ocean_amps *s)
 {
     float *floats[] = {s->a, s->b, s->d, s->e};
     for (size_t i = 0; i < sizeof floats / sizeof floats[0]; i++)
-        fftwf_free(floats[i]);
-    fftwf_free(s->omega);
-    fftwf_free(s->ampc);
+        free(floats[i]);
+    free(s->omega);
+    free(s->ampc);
     memset(s, 0, sizeof *s);
 }
 
@@ -248,27 +249,47 @@ static void grid_free(struct ocean_grid *g)
     ocean_fftw_unlock();
     struct ocean_amps amps = {g->a, g->b, g->d, g->e, g->omega, g->ampc};
     amps_free(&amps);
-    fftwf_free(g->kx);
-    fftwf_free(g->kz);
-    fftwf_free(g->gauss);
-    fftwf_free(g->ring);
-    fftwf_free(g->ring_m2);
-    fftwf_free(g->ease_from);
+    free(g->kx);
+    free(g->kz);
+    free(g->gauss);
+    free(g->ring);
+    free(g->ring_m2);
+    free(g->ease_from);
     for (int i = 0; i < COL_COUNT; i++)
-        fftwf_free(g->col[i]);
-    fftwf_free(g->scratch);
+        free(g->col[i]);
+    free(g->scratch);
     for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
-        fftwf_free(g->out[i]);
+        free(g->out[i]);
     for (int i = 0; i < 3; i++)
-        fftwf_free(g->jac[i]);
+        free(g->jac[i]);
     free(g);
 }
 
 _Atomic size_t ocean_alloc_bytes;
 
+/* Every array of the library comes from here and goes back with free(). Arrays
+ * of 2 MB and more are aligned to 2 MB and asked for as transparent huge pages
+ * (Debian's default is THP on madvise only): at N >= 1024 the step and the
+ * encode stream through 50-200 MB, and with 4 kB pages they miss the TLB on
+ * nearly every new page (in a VM each miss walks two page tables). Alternated
+ * daemons, make bench-capacity --base: tick 0.92-0.96x at 1024 six fields and
+ * 0.90-0.96x at 2048 height; bench-step 0.79-0.97x at N >= 1024 (docs/simulation.md).
+ * 64-byte alignment otherwise: FFTW's new-array execute needs SIMD alignment. */
+#define HUGE_PAGE ((size_t)2 << 20)
+static void *array_alloc(size_t bytes)
+{
+    size_t align = bytes >= HUGE_PAGE ? HUGE_PAGE : 64;
+    void *p = NULL;
+    if (posix_memalign(&p, align, bytes) != 0)
+        return NULL;
+    if (align == HUGE_PAGE)
+        (void)madvise(p, bytes & ~(HUGE_PAGE - 1), MADV_HUGEPAGE); /* a hint: without THP, plain pages */
+    return p;
+}
+
 static void *zalloc(size_t bytes, bool *ok)
 {
-    void *p = fftwf_malloc(bytes); /* SIMD-aligned, as FFTW's new-array execute needs */
+    void *p = array_alloc(bytes);
     if (p) {
         memset(p, 0, bytes);
         atomic_fetch_add_explicit(&ocean_alloc_bytes, bytes, memory_order_relaxed);
@@ -282,7 +303,7 @@ static void *zalloc(size_t bytes, bool *ok)
  * column of the copy), so a parameter change does not write them twice. */
 static void *xalloc(size_t bytes, bool *ok)
 {
-    void *p = fftwf_malloc(bytes);
+    void *p = array_alloc(bytes);
     if (p)
         atomic_fetch_add_explicit(&ocean_alloc_bytes, bytes, memory_order_relaxed);
     else
@@ -715,8 +736,8 @@ void ocean_prepared_free(struct ocean_prepared *pr)
     for (int c = 0; c < OCEAN_MAX_CASCADES; c++) {
         grid_free(pr->c[c].grid);
         amps_free(&pr->c[c].amps);
-        fftwf_free(pr->c[c].gauss);
-        fftwf_free(pr->c[c].ease_from);
+        free(pr->c[c].gauss);
+        free(pr->c[c].ease_from);
     }
     free(pr);
 }
@@ -1127,7 +1148,7 @@ float *ocean_field_buffer_new(int n)
     return n > 0 ? zalloc((size_t)n * n * sizeof(float), &ok) : NULL;
 }
 
-void ocean_field_buffer_free(float *buf) { fftwf_free(buf); }
+void ocean_field_buffer_free(float *buf) { free(buf); }
 
 int ocean_cascades(const struct ocean *o)
 {
