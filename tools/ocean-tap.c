@@ -91,7 +91,8 @@ static void usage(FILE *to)
         "                      dx,dz,nx,ny,nz,vertical_velocity,vertical_acceleration\n"
         "  --ticks N           stop after N probe ticks (default: until Ctrl-C)\n"
         "Other:\n"
-        "  --timeout S         give up after S seconds without an expected answer (default 10)\n"
+        "  --timeout S         give up after S seconds without an expected answer or, with\n"
+        "                      --frames N, a complete frame at the asked LOD (default 10)\n"
         "  -v, --verbose       libwebsockets notices on stderr\n"
         "  -h, --help          this text\n"
         "Without --frames/--out/--stats/--set/--watch, prints the server's hello as JSON.\n"
@@ -284,6 +285,10 @@ struct session {
     double resync_t;      /* when we last resubscribed after a missing reference */
     long ticks_done;      /* probe_data lines printed */
     double last_activity;
+    double last_frame;    /* when the last complete frame (or the subscription's answer) came:
+                             messages alone do not count, or a subscription served at a
+                             coarser LOD, whose frames we cannot write, would wait for ever */
+    int degraded_lod;     /* the LOD the server serves us at while degraded, else -1 */
     struct stats st;
     struct lws *wsi;
 };
@@ -478,7 +483,7 @@ static void advance(struct session *s)
     if (s->stage <= ST_SET && s->want_frames) { s->stage = ST_SUBSCRIBE; send_subscribe(s); return; }
     if (s->stage <= ST_SUBSCRIBE && (s->want_frames || s->o->watch)) {
         s->stage = ST_RUN;
-        s->st.t0 = s->st.last_report = now_s();
+        s->st.t0 = s->st.last_report = s->last_frame = now_s();
         if (!s->want_frames) send_quiet_subscribe(s);
         return;
     }
@@ -563,6 +568,7 @@ static void on_text(struct session *s, const char *text, size_t len)
         /* Say why frames stop being written: at a coarser LOD they do not fill our grids. */
         cJSON *active = cJSON_GetObjectItemCaseSensitive(msg, "active"), *lod = cJSON_GetObjectItemCaseSensitive(msg, "lod");
         cJSON *reason = cJSON_GetObjectItemCaseSensitive(msg, "reason");
+        s->degraded_lod = cJSON_IsTrue(active) && cJSON_IsNumber(lod) ? lod->valueint : -1;
         if (cJSON_IsTrue(active))
             fprintf(stderr, "ocean-tap: the server serves this subscription degraded (lod %d%s): %s\n",
                     cJSON_IsNumber(lod) ? lod->valueint : -1,
@@ -700,6 +706,7 @@ static void on_binary(struct session *s, const uint8_t *data, size_t len)
     if (!tap_frame_complete(s->grid)) return; /* not every tile of every field at our LOD (degraded, or before
                                                   the subscription took effect): nothing new to write */
     s->frames_done++;
+    s->last_frame = now_s();
     s->st.bytes += len;
     if (s->st.nlat == s->st.caplat) {
         size_t cap = s->st.caplat ? 2 * s->st.caplat : 256;
@@ -813,7 +820,7 @@ int main(int argc, char **argv)
     struct opts o;
     int r = parse_args(argc, argv, &o);
     if (r >= 0) return r;
-    struct session s = {.o = &o};
+    struct session s = {.o = &o, .degraded_lod = -1};
     s.want_frames = o.frames >= 0 || o.out_dir || o.stats;
     if (o.frames < 0) o.frames = 0;
     if (o.out_dir) {
@@ -858,14 +865,23 @@ int main(int argc, char **argv)
         if (o.stats && s.stage == ST_RUN && t - s.st.last_report >= 1.0) report_stats(&s, t, 0);
         /* A pure watch may be silent for ever; everything else expects traffic. */
         int expecting = s.stage != ST_RUN || s.want_frames || o.probe;
-        if (expecting && t - s.last_activity > o.timeout) {
+        /* With --frames N, receiving frames we cannot write (a coarser LOD while degraded)
+         * is no progress; an open-ended recording waits for the server to serve it again. */
+        int counting = s.stage == ST_RUN && s.want_frames && o.frames > 0;
+        double since = counting ? t - s.last_frame : t - s.last_activity;
+        if (expecting && since > o.timeout) {
             const char *what = s.stage == ST_HELLO ? "the server's hello"
                              : s.stage == ST_SET ? "the answer to set"
                              : s.stage == ST_SUBSCRIBE ? "the answer to subscribe"
                              : s.stage == ST_QUERY ? "the answer to query"
                              : s.stage == ST_PROBE ? "the answer to probe"
-                             : o.probe ? "the next probe tick" : "the next frame";
-            fail(&s, EXIT_TIMEOUT, "timed out after %.1f s waiting for %s", o.timeout, what);
+                             : o.probe ? "the next probe tick" : "the next complete frame";
+            if (counting && s.degraded_lod >= 0 && s.degraded_lod != o.lod)
+                fail(&s, EXIT_TIMEOUT, "timed out after %.1f s waiting for %s: the server serves this "
+                     "subscription at lod %d, not the lod %d asked for (--timeout for longer, or ask for lod %d)",
+                     o.timeout, what, s.degraded_lod, o.lod, s.degraded_lod);
+            else
+                fail(&s, EXIT_TIMEOUT, "timed out after %.1f s waiting for %s", o.timeout, what);
         }
     }
     if (r < 0) r = s.exit_code;

@@ -327,4 +327,40 @@ wait $stream_pid; rc=$?
 [ $rc -eq 7 ] || fail "stream from a daemon that stopped: exit $rc, expected 7: $(cat "$tmp/err")"
 ok "control token: without -> 4 forbidden, with --token -> 0; no answer -> 6, server gone mid-stream -> 7"
 
+section "--frames N while the server serves the subscription at a coarser LOD"
+# An encode budget of 4.5 N^2 samples: ocean-tap's 4 fields at lod 0 (4 N^2) are admitted;
+# a second client's default subscription (3 fields, another bound: 3 N^2) is over it, and
+# the plan serves the largest group, ocean-tap's, at lod 1. Its frames are incomplete at
+# lod 0, so --frames 1000 gets nowhere: it must give up after --timeout and say why
+# (it used to count any message as progress and wait until the server served it again).
+port3=$(free_port)
+start_daemon "$port3" --port "$port3" --bind 127.0.0.1 --state-file none --resolution 64 \
+  --encode-budget $((64 * 64 * 9 / 2)) || fail "third oceand did not start"
+"$TAP" "ws://127.0.0.1:$port3" --frames 1000 --fields height,dx,dz,slope_x --bound 0.001 --timeout 3 --stats \
+  >"$tmp/out" 2>"$tmp/err" &
+tap_pid=$!
+# ocean-tap subscribed and writing frames (--stats reports each second) before the second client
+for _ in $(seq 100); do grep -q ' frames, ' "$tmp/err" && break; sleep 0.1; done
+grep -q ' frames, ' "$tmp/err" || fail "ocean-tap got no frames before the second client: $(cat "$tmp/err")"
+$PY - "ws://127.0.0.1:$port3" <<'EOF2' &
+import asyncio, sys, websockets
+async def hold():   # the default subscription, held for 60 s (ocean-tap gives up long before)
+    async with websockets.connect(sys.argv[1], subprotocols=["oceand.v1"], max_size=None) as ws:
+        end = asyncio.get_running_loop().time() + 60
+        while asyncio.get_running_loop().time() < end:
+            try:
+                await asyncio.wait_for(ws.recv(), 0.5)
+            except asyncio.TimeoutError:
+                pass
+asyncio.run(hold())
+EOF2
+hold_pid=$!
+wait $tap_pid; rc=$?
+kill $hold_pid 2>/dev/null; wait $hold_pid 2>/dev/null
+[ $rc -eq 6 ] || fail "--frames while degraded: exit $rc, expected 6 (timeout): $(cat "$tmp/err")"
+grep -q 'degraded (lod 1' "$tmp/err" || fail "no degraded notice: $(cat "$tmp/err")"
+grep -q 'waiting for the next complete frame: the server serves this subscription at lod 1, not the lod 0' "$tmp/err" \
+  || fail "the timeout does not say why: $(cat "$tmp/err")"
+ok "--frames N at a coarser LOD: exit 6 after --timeout, naming the LOD served"
+
 finish_ok
