@@ -607,6 +607,10 @@ static void bench_rows(const char *wisdom)
 
 int main(int argc, char **argv)
 {
+    if (argc > 1 && argv[1][0] == '-') { /* it is a path: "--help" once became a wisdom file of that name */
+        fprintf(stderr, "usage: bench_step [WISDOM_FILE|\"\"] [step|parts|pack|layout|reconfigure|dft|cascades]\n");
+        return argv[1][1] == 'h' || !strcmp(argv[1], "--help") ? 0 : 2;
+    }
     const char *wisdom = argc > 1 && *argv[1] ? argv[1] : NULL;
     const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, parts, pack, layout, reconfigure, dft, cascades */
 #define WANT(name) (!only || strcmp(only, name) == 0)

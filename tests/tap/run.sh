@@ -342,10 +342,10 @@ tap_pid=$!
 # ocean-tap subscribed and writing frames (--stats reports each second) before the second client
 for _ in $(seq 100); do grep -q ' frames, ' "$tmp/err" && break; sleep 0.1; done
 grep -q ' frames, ' "$tmp/err" || fail "ocean-tap got no frames before the second client: $(cat "$tmp/err")"
-$PY - "ws://127.0.0.1:$port3" <<'EOF2' &
-import asyncio, sys, websockets
+PYTHONPATH=proto/examples $PY - "ws://127.0.0.1:$port3" <<'EOF2' &
+import asyncio, sys, websockets, oceanproto
 async def hold():   # the default subscription, held for 60 s (ocean-tap gives up long before)
-    async with websockets.connect(sys.argv[1], subprotocols=["oceand.v1"], max_size=None) as ws:
+    async with websockets.connect(sys.argv[1], subprotocols=[oceanproto.SUBPROTOCOL], max_size=None) as ws:
         end = asyncio.get_running_loop().time() + 60
         while asyncio.get_running_loop().time() < end:
             try:
