@@ -124,6 +124,45 @@ static void bench_step(int n, int threads, const char *wisdom)
     ocean_free(o);
 }
 
+/* The z pass's store two ways, alternated step by step on one ocean (the
+ * order swapped every repetition), so that both see the same moments of a
+ * shared machine: FFTW's copy plan (OCEAN_STORE_FFTW) against our
+ * streaming copy (OCEAN_STORE_STREAMING), six fields, wall time, medians;
+ * pair_ratio: the median of the per-repetition ratios. The step streams
+ * from OCEAN_STREAM_STORE_FROM_N ("used"). */
+static void bench_store(int n, int threads, const char *wisdom)
+{
+    struct ocean *o = make(n, threads, wisdom, 1);
+    if (!o)
+        return;
+    const unsigned six = OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM);
+    const unsigned how[2] = {OCEAN_STORE_FFTW, OCEAN_STORE_STREAMING};
+    int reps = 4 * reps_for(n) + 1;
+    double *t[2], *ratio = malloc(reps * sizeof *ratio);
+    for (int k = 0; k < 2; k++)
+        t[k] = malloc(reps * sizeof *t[k]);
+    ocean_step_parts(o, 0.5, six, how[0]);
+    ocean_step_parts(o, 0.6, six, how[1]);
+    for (int r = 0; r < reps; r++) {
+        for (int i = 0; i < 2; i++) {
+            int k = i ^ (r & 1);
+            double t0 = now_ms();
+            ocean_step_parts(o, 1.0 + r * 0.033, six, how[k]);
+            t[k][r] = now_ms() - t0;
+        }
+        ratio[r] = t[1][r] / t[0][r];
+    }
+    double f = median(t[0], reps), st = median(t[1], reps), pr = median(ratio, reps);
+    printf("{\"bench\":\"store\",\"N\":%d,\"threads\":%d,\"fields\":\"six\",\"fftw_copy_ms\":%.3f,"
+           "\"streaming_ms\":%.3f,\"ratio\":%.3f,\"pair_ratio\":%.3f,\"used\":%s,\"reps\":%d}\n",
+           n, threads, f, st, st / f, pr, n >= OCEAN_STREAM_STORE_FROM_N ? "true" : "false", reps);
+    fflush(stdout);
+    for (int k = 0; k < 2; k++)
+        free(t[k]);
+    free(ratio);
+    ocean_free(o);
+}
+
 /* The transforms of a full step, three ways, same FFTW_MEASURE rigor:
  *  - ours: 5 z passes + 8 row c2r, tiled (ocean_fft_only, see ocean_step.c);
  *  - 8 plain 2-D c2r of N x N, one per real field;
@@ -608,11 +647,11 @@ static void bench_rows(const char *wisdom)
 int main(int argc, char **argv)
 {
     if (argc > 1 && argv[1][0] == '-') { /* it is a path: "--help" once became a wisdom file of that name */
-        fprintf(stderr, "usage: bench_step [WISDOM_FILE|\"\"] [step|parts|pack|layout|reconfigure|dft|cascades]\n");
+        fprintf(stderr, "usage: bench_step [WISDOM_FILE|\"\"] [step|parts|store|pack|layout|reconfigure|dft|cascades]\n");
         return argv[1][1] == 'h' || !strcmp(argv[1], "--help") ? 0 : 2;
     }
     const char *wisdom = argc > 1 && *argv[1] ? argv[1] : NULL;
-    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, parts, pack, layout, reconfigure, dft, cascades */
+    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, parts, store, pack, layout, reconfigure, dft, cascades */
 #define WANT(name) (!only || strcmp(only, name) == 0)
     /* The machine is shared: say how busy it was. */
     double load[3] = {0, 0, 0};
@@ -632,6 +671,9 @@ int main(int argc, char **argv)
             bench_step(n, threads, wisdom);
     for (int n = 256; n <= 2048 && WANT("parts"); n *= 2)
         bench_parts(n, wisdom);
+    for (int n = 256; n <= 2048 && WANT("store"); n *= 2)
+        for (int threads = 1; threads <= 2; threads++)
+            bench_store(n, threads, wisdom);
     for (int n = 256; n <= 1024 && WANT("pack"); n *= 4)
         for (int threads = 1; threads <= 2; threads++)
             bench_pack(n, threads, wisdom);

@@ -502,7 +502,8 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
      * dist, out: B), N/B blocks (in: B, out: nh*B), B rows (1, 1). The same
      * copy as a hand-written loop (measured equal: docs/simulation.md), but
      * part of the FFTW plan set, like the transposition inside FFTW's 2-D
-     * transforms. */
+     * transforms. From OCEAN_STREAM_STORE_FROM_N the step copies with
+     * streaming stores instead (ocean_step.c, store_tile_streaming). */
     fftwf_complex *tile = (fftwf_complex *)ocean_tile_spectrum(g->scratch, n, g->tile);
     int dist = ocean_tile_dist(n);
     const int B = OCEAN_ROW_BLOCK;

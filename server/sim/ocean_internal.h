@@ -30,6 +30,12 @@ enum ocean_column { COL_H, COL_KZ, COL_INVK, COL_KZINVK, COL_KZ2INVK, COL_COUNT 
 #define OCEAN_COL_TILE 16    /* kx columns per fill + z-pass tile (fewer if N/2 < 16) */
 #define OCEAN_MAX_THREADS 64
 #define OCEAN_THREADS_FROM_N 256 /* smaller grids run on one thread (at 128 a second thread did not pay, measured) */
+/* From this N the z pass stores its tiles with non-temporal stores
+ * (store_tile_streaming: the five spectra, 5 MB at 512 and 21 MB at 1024,
+ * are read back by the row pass only after the whole z pass): a six-field
+ * step x0.91-0.96 at 512-2048; at 256, where they stay in cache, x1.02-1.08,
+ * so FFTW's copy stays there (make bench-step, "store" rows). */
+#define OCEAN_STREAM_STORE_FROM_N 512
 
 /* The fill's copy of the amplitudes, one kx column (ix < N/2) after the
  * other, each column-major along kz: a, b, d, e (as below), linvk =
@@ -133,7 +139,8 @@ struct ocean_grid {
     size_t scratch_floats;
     int workers;               /* scratch slots */
     fftwf_plan col_plan;       /* in place, `tile` contiguous N-point c2c (one thread each) */
-    fftwf_plan store_plan;     /* rank 0 (a copy): a transformed tile -> its columns of col[k] */
+    fftwf_plan store_plan;     /* rank 0 (a copy): a transformed tile -> its columns of col[k]
+                                * (below OCEAN_STREAM_STORE_FROM_N; the reference's at every N) */
     fftwf_plan row_plan;       /* OCEAN_ROW_BLOCK N-point c2r along x, input interleaved
                                 * (stride ROW_BLOCK), rows out contiguous (one thread each) */
 };
@@ -217,9 +224,12 @@ void ocean_fft_only(struct ocean *o, unsigned fields);
 /* Benchmark: a step (no foam) without some of our own parts, to see what
  * each costs: the fill (h~(k,t): phases, amplitudes), the z-pass spectra
  * (kz and 1/k factors), the kx factors of the row pass (and the Nyquist
- * clear), the Jacobian. All of them: ocean_fft_only. */
+ * clear), the Jacobian. OCEAN_STORE_FFTW: the z pass stores its tiles with
+ * FFTW's copy plan at every N (the streaming store is ours too). All of
+ * them: ocean_fft_only, FFTW alone. OCEAN_STORE_STREAMING (benchmark,
+ * tests): the streaming store at every N. */
 enum { OCEAN_SKIP_FILL = 1, OCEAN_SKIP_SPECTRA = 2, OCEAN_SKIP_FACTORS = 4, OCEAN_SKIP_JACOBIAN = 8,
-       OCEAN_SKIP_ALL = 15 };
+       OCEAN_STORE_FFTW = 16, OCEAN_SKIP_ALL = 31, OCEAN_STORE_STREAMING = 32 };
 void ocean_step_parts(struct ocean *o, double t, unsigned fields, unsigned skip);
 
 /* Reference spectrum of transform tr at time t over the full N x N grid,
