@@ -124,19 +124,23 @@ static void bench_step(int n, int threads, const char *wisdom)
     ocean_free(o);
 }
 
-/* The z pass's store two ways, alternated step by step on one ocean (the
- * order swapped every repetition), so that both see the same moments of a
- * shared machine: FFTW's copy plan (OCEAN_STORE_FFTW) against our
- * streaming copy (OCEAN_STORE_STREAMING), six fields, wall time, medians;
- * pair_ratio: the median of the per-repetition ratios. The step streams
- * from OCEAN_STREAM_STORE_FROM_N ("used"). */
-static void bench_store(int n, int threads, const char *wisdom)
+/* Two ways of one part of the step, alternated step by step on one ocean
+ * (the order swapped every repetition), so that both see the same moments
+ * of a shared machine; six fields, wall time, medians. `ratio`: ours / the
+ * other way, `pair_ratio`: the median of the per-repetition ratios.
+ *   store: the z pass's copy, FFTW's copy plan (OCEAN_STORE_FFTW) against
+ *     our streaming stores (OCEAN_STORE_STREAMING; the step uses them from
+ *     OCEAN_STREAM_STORE_FROM_N: "used");
+ *   rows: the row pass, FFTW's c2r (OCEAN_ROWS_C2R) against our
+ *     half-length split (row_pretwiddle + row_half_plan; used at every N). */
+static void bench_two_ways(int n, int threads, const char *wisdom, const char *name, unsigned fftw_way,
+                           unsigned our_way, bool used)
 {
     struct ocean *o = make(n, threads, wisdom, 1);
     if (!o)
         return;
     const unsigned six = OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM);
-    const unsigned how[2] = {OCEAN_STORE_FFTW, OCEAN_STORE_STREAMING};
+    const unsigned how[2] = {fftw_way, our_way};
     int reps = 4 * reps_for(n) + 1;
     double *t[2], *ratio = malloc(reps * sizeof *ratio);
     for (int k = 0; k < 2; k++)
@@ -152,10 +156,10 @@ static void bench_store(int n, int threads, const char *wisdom)
         }
         ratio[r] = t[1][r] / t[0][r];
     }
-    double f = median(t[0], reps), st = median(t[1], reps), pr = median(ratio, reps);
-    printf("{\"bench\":\"store\",\"N\":%d,\"threads\":%d,\"fields\":\"six\",\"fftw_copy_ms\":%.3f,"
-           "\"streaming_ms\":%.3f,\"ratio\":%.3f,\"pair_ratio\":%.3f,\"used\":%s,\"reps\":%d}\n",
-           n, threads, f, st, st / f, pr, n >= OCEAN_STREAM_STORE_FROM_N ? "true" : "false", reps);
+    double f = median(t[0], reps), ours = median(t[1], reps), pr = median(ratio, reps);
+    printf("{\"bench\":\"%s\",\"N\":%d,\"threads\":%d,\"fields\":\"six\",\"fftw_way_ms\":%.3f,"
+           "\"our_way_ms\":%.3f,\"ratio\":%.3f,\"pair_ratio\":%.3f,\"used\":%s,\"reps\":%d}\n",
+           name, n, threads, f, ours, ours / f, pr, used ? "true" : "false", reps);
     fflush(stdout);
     for (int k = 0; k < 2; k++)
         free(t[k]);
@@ -647,11 +651,11 @@ static void bench_rows(const char *wisdom)
 int main(int argc, char **argv)
 {
     if (argc > 1 && argv[1][0] == '-') { /* it is a path: "--help" once became a wisdom file of that name */
-        fprintf(stderr, "usage: bench_step [WISDOM_FILE|\"\"] [step|parts|store|pack|layout|reconfigure|dft|cascades]\n");
+        fprintf(stderr, "usage: bench_step [WISDOM_FILE|\"\"] [step|parts|store|rows_half|pack|layout|reconfigure|dft|cascades]\n");
         return argv[1][1] == 'h' || !strcmp(argv[1], "--help") ? 0 : 2;
     }
     const char *wisdom = argc > 1 && *argv[1] ? argv[1] : NULL;
-    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, parts, store, pack, layout, reconfigure, dft, cascades */
+    const char *only = argc > 2 ? argv[2] : NULL; /* one group: step, parts, store, rows_half, pack, layout, reconfigure, dft, cascades */
 #define WANT(name) (!only || strcmp(only, name) == 0)
     /* The machine is shared: say how busy it was. */
     double load[3] = {0, 0, 0};
@@ -673,7 +677,11 @@ int main(int argc, char **argv)
         bench_parts(n, wisdom);
     for (int n = 256; n <= 2048 && WANT("store"); n *= 2)
         for (int threads = 1; threads <= 2; threads++)
-            bench_store(n, threads, wisdom);
+            bench_two_ways(n, threads, wisdom, "store", OCEAN_STORE_FFTW, OCEAN_STORE_STREAMING,
+                           n >= OCEAN_STREAM_STORE_FROM_N);
+    for (int n = 64; n <= 2048 && WANT("rows_half"); n *= 2)
+        for (int threads = 1; threads <= 2; threads++)
+            bench_two_ways(n, threads, wisdom, "rows_half", OCEAN_ROWS_C2R, 0, true);
     for (int n = 256; n <= 1024 && WANT("pack"); n *= 4)
         for (int threads = 1; threads <= 2; threads++)
             bench_pack(n, threads, wisdom);

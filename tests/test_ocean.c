@@ -1925,45 +1925,92 @@ static void test_huge_pages(void)
     ocean_free(o);
 }
 
+/* One step of the six fields at N two ways (ocean_step_parts flags): the
+ * first way's fields are returned in *first (6 N^2 floats, the caller
+ * frees), the second's are left in o->g->out. NULL if out of memory. */
+static struct ocean *six_fields_two_ways(int n, unsigned way_a, unsigned way_b, float **first)
+{
+    const unsigned six = OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM);
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = n;
+    p.cascades = 1;
+    struct ocean *o = make(&p, 2);
+    size_t nn = (size_t)n * n;
+    *first = o ? malloc(6 * nn * sizeof(float)) : NULL;
+    if (!*first) {
+        ocean_free(o);
+        return NULL;
+    }
+    ocean_step_parts(o, 7.25, six, way_a);
+    for (int f = 0; f < 6; f++)
+        memcpy(*first + f * nn, o->g->out[f], nn * sizeof(float));
+    ocean_step_parts(o, 7.25, six, way_b);
+    return o;
+}
+
 /* The z pass's streaming store (N >= OCEAN_STREAM_STORE_FROM_N) moves the
  * same values as FFTW's copy plan, which the FFT-vs-DFT tests cover at
  * smaller N: the six fields must come out bit for bit the same both ways,
  * at N = 512 where the step streams and at N = 64 forced to. */
 static void test_streaming_store(void)
 {
-    const unsigned six = OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM);
     int sizes[2] = {64, OCEAN_STREAM_STORE_FROM_N};
     for (int i = 0; i < (quick ? 1 : 2); i++) { /* N = 512 under valgrind: a minute */
         int n = sizes[i];
-        struct ocean_params p;
-        params_defaults(&p);
-        p.resolution = n;
-        p.cascades = 1;
-        struct ocean *o = make(&p, 2);
+        float *streamed;
+        struct ocean *o = six_fields_two_ways(
+            n, n >= OCEAN_STREAM_STORE_FROM_N ? 0 : OCEAN_STORE_STREAMING, OCEAN_STORE_FFTW, &streamed);
         if (!o)
             return;
         size_t nn = (size_t)n * n;
-        float *copy = malloc(6 * nn * sizeof(float));
-        if (!copy) {
-            ocean_free(o);
-            return;
-        }
-        unsigned streaming = n >= OCEAN_STREAM_STORE_FROM_N ? 0 : OCEAN_STORE_STREAMING;
-        ocean_step_parts(o, 7.25, six, streaming);
-        for (int f = 0; f < 6; f++)
-            memcpy(copy + f * nn, o->g->out[f], nn * sizeof(float));
-        ocean_step_parts(o, 7.25, six, OCEAN_STORE_FFTW);
         int differ = -1;
         double hmax = 0;
         for (int f = 0; f < 6 && differ < 0; f++)
-            if (memcmp(copy + f * nn, o->g->out[f], nn * sizeof(float)) != 0)
+            if (memcmp(streamed + f * nn, o->g->out[f], nn * sizeof(float)) != 0)
                 differ = f;
         for (size_t j = 0; j < nn; j++)
-            hmax = fmax(hmax, fabs(copy[j]));
+            hmax = fmax(hmax, fabs(streamed[j]));
         check(differ < 0 && hmax > 0, "step.streaming_store",
               "N = %d: the six fields with the streaming store equal those with FFTW's copy bit for bit (%s); "
               "max |height| %.3f m", n, differ < 0 ? "yes" : ocean_field_name((enum ocean_field)differ), hmax);
-        free(copy);
+        free(streamed);
+        ocean_free(o);
+    }
+}
+
+/* The row pass's half-length split (row_pretwiddle + row_half_plan)
+ * against FFTW's own real transform of the same rows (OCEAN_ROWS_C2R): the
+ * six fields agree to float rounding (a few 1e-7 of the largest value;
+ * a wrong twiddle, sign or fold is off by the field's own size). The
+ * FFT-vs-DFT checks cover the whole step at small N besides. */
+static void test_rows_half_length(void)
+{
+    int sizes[3] = {16, 64, 512};
+    for (int i = 0; i < (quick ? 2 : 3); i++) {
+        int n = sizes[i];
+        float *ours;
+        struct ocean *o = six_fields_two_ways(n, 0, OCEAN_ROWS_C2R, &ours);
+        if (!o)
+            return;
+        size_t nn = (size_t)n * n;
+        double worst = 0;
+        int worst_f = 0;
+        for (int f = 0; f < 6; f++) {
+            double d = 0, m = 0;
+            for (size_t j = 0; j < nn; j++) {
+                d = fmax(d, fabs((double)ours[f * nn + j] - o->g->out[f][j]));
+                m = fmax(m, fabs((double)o->g->out[f][j]));
+            }
+            if (m > 0 && d / m > worst) {
+                worst = d / m;
+                worst_f = f;
+            }
+        }
+        check(worst < 1e-5, "step.rows_half_length",
+              "N = %d: six fields, half-length split vs FFTW's c2r: largest difference %.2g of the field's "
+              "largest value (%s; limit 1e-5)", n, worst, ocean_field_name((enum ocean_field)worst_f));
+        free(ours);
         ocean_free(o);
     }
 }
@@ -2003,6 +2050,7 @@ int main(void)
     RUN(test_exchange_field);
     RUN(test_huge_pages);
     RUN(test_streaming_store);
+    RUN(test_rows_half_length);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }

@@ -244,6 +244,8 @@ static void grid_free(struct ocean_grid *g)
         fftwf_destroy_plan(g->col_plan);
     if (g->row_plan)
         fftwf_destroy_plan(g->row_plan);
+    if (g->row_half_plan)
+        fftwf_destroy_plan(g->row_half_plan);
     if (g->store_plan)
         fftwf_destroy_plan(g->store_plan);
     ocean_fftw_unlock();
@@ -251,6 +253,7 @@ static void grid_free(struct ocean_grid *g)
     amps_free(&amps);
     free(g->kx);
     free(g->kz);
+    free(g->row_twiddle);
     free(g->gauss);
     free(g->ring);
     free(g->ring_m2);
@@ -430,6 +433,7 @@ size_t ocean_memory_bytes(int n, int threads)
     return modes * (4 * sizeof(float) + sizeof(double))                   /* a, b, d, e, omega */
          + (size_t)(n / 2) * OCEAN_AMP_COL_FLOATS(n) * sizeof(float)      /* ampc */
          + (nh + (size_t)n) * sizeof(float)                               /* kx, kz */
+         + (size_t)n * sizeof(float)                                      /* row_twiddle */
          + modes * (4 * sizeof(float) + sizeof(uint32_t))                 /* gauss, ring */
          + ring_count(n) * sizeof(uint32_t)                               /* ring_m2 */
          + COL_COUNT * modes * 2 * sizeof(float)                          /* col */
@@ -460,6 +464,7 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
     amps_swap(g, &amps);
     g->kx = zalloc((size_t)g->nh * sizeof(float), &ok);
     g->kz = zalloc((size_t)n * sizeof(float), &ok);
+    g->row_twiddle = zalloc((size_t)n * sizeof(float), &ok);
     g->gauss = zalloc(g->modes * 4 * sizeof(float), &ok);
     g->ring = zalloc(g->modes * sizeof(uint32_t), &ok);
     for (int i = 0; i < COL_COUNT; i++)
@@ -482,6 +487,11 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
     }
     for (size_t j = 0; j < nn; j++) /* a flat sea until the first step: J = 1 */
         g->out[OCEAN_JACOBIAN][j] = 1.0f;
+    for (int k = 0; k < n / 2; k++) { /* the row pass's e^{2 pi i k / N} (ocean_step.c, row_pretwiddle) */
+        double a = 2.0 * M_PI * k / n;
+        g->row_twiddle[2 * k] = (float)cos(a);
+        g->row_twiddle[2 * k + 1] = (float)sin(a);
+    }
 
     ocean_fftw_init();
     ocean_fftw_lock();
@@ -495,7 +505,9 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
      * the plans do not depend on the thread count (same bits on 1 or 2).
      * Columns: `tile` in-place N-point c2c over the contiguous columns of
      * a worker's fill tile (ocean_step.c).
-     * Rows: a block of N-point c2r from a worker's scratch to the output.
+     * Rows: a block of N/2-point c2c from a worker's scratch to the output
+     * (row_half_plan: each real row as a half-length complex transform, see
+     * ocean_step.c); row_plan, a block of N-point c2r, is the reference's.
      * Between them, the transposition: a tile's transformed columns into
      * the block-major half spectrum (see ocean_grid.col), as FFTW's own
      * rank-0 (copy-only) guru plan over three loops: T columns (in: stride
@@ -513,10 +525,14 @@ static struct ocean_grid *grid_new(int n, const struct ocean_options *opt, char 
     g->row_plan = fftwf_plan_many_dft_c2r(1, &n, B, (fftwf_complex *)g->scratch, NULL,
                                           B, 1, g->out[0], NULL, 1, n, flags);
     g->store_plan = fftwf_plan_guru_dft(0, NULL, 3, store_dims, tile, (fftwf_complex *)g->col[0], FFTW_BACKWARD, flags);
-    if (g->col_plan && g->row_plan && g->store_plan && opt->plan_rigor && opt->wisdom_path && *opt->wisdom_path)
+    int half = n / 2;
+    g->row_half_plan = fftwf_plan_many_dft(1, &half, B, (fftwf_complex *)g->scratch, NULL, B, 1,
+                                           (fftwf_complex *)g->out[0], NULL, 1, half, FFTW_BACKWARD, flags);
+    bool planned = g->col_plan && g->row_plan && g->row_half_plan && g->store_plan;
+    if (planned && opt->plan_rigor && opt->wisdom_path && *opt->wisdom_path)
         export_wisdom(opt->wisdom_path);
     ocean_fftw_unlock();
-    if (!g->col_plan || !g->row_plan || !g->store_plan) {
+    if (!planned) {
         snprintf(err, errlen, "FFTW could not plan a %dx%d transform", n, n);
         grid_free(g);
         return NULL;

@@ -141,8 +141,12 @@ struct ocean_grid {
     fftwf_plan col_plan;       /* in place, `tile` contiguous N-point c2c (one thread each) */
     fftwf_plan store_plan;     /* rank 0 (a copy): a transformed tile -> its columns of col[k]
                                 * (below OCEAN_STREAM_STORE_FROM_N; the reference's at every N) */
-    fftwf_plan row_plan;       /* OCEAN_ROW_BLOCK N-point c2r along x, input interleaved
-                                * (stride ROW_BLOCK), rows out contiguous (one thread each) */
+    fftwf_plan row_half_plan;  /* OCEAN_ROW_BLOCK N/2-point c2c along x, input interleaved (stride
+                                * ROW_BLOCK), rows out contiguous: each real row of N as N/2
+                                * complex (ocean_step.c, row_pretwiddle; one thread each) */
+    float *row_twiddle;        /* cos, sin of 2 pi k / N for k < N/2 (row_pretwiddle) */
+    fftwf_plan row_plan;       /* OCEAN_ROW_BLOCK N-point c2r, same layouts: FFTW's own real
+                                * transform, the reference's (OCEAN_ROWS_C2R) */
 };
 
 /* A small persistent thread pool (ocean.c): threads - 1 sleeping workers
@@ -225,11 +229,13 @@ void ocean_fft_only(struct ocean *o, unsigned fields);
  * each costs: the fill (h~(k,t): phases, amplitudes), the z-pass spectra
  * (kz and 1/k factors), the kx factors of the row pass (and the Nyquist
  * clear), the Jacobian. OCEAN_STORE_FFTW: the z pass stores its tiles with
- * FFTW's copy plan at every N (the streaming store is ours too). All of
- * them: ocean_fft_only, FFTW alone. OCEAN_STORE_STREAMING (benchmark,
- * tests): the streaming store at every N. */
+ * FFTW's copy plan at every N (the streaming store is ours too).
+ * OCEAN_ROWS_C2R: the row pass with FFTW's real transform (row_plan)
+ * instead of our half-length split (row_pretwiddle + row_half_plan). All
+ * of them: ocean_fft_only, FFTW alone doing the same transforms.
+ * OCEAN_STORE_STREAMING (benchmark, tests): the streaming store at every N. */
 enum { OCEAN_SKIP_FILL = 1, OCEAN_SKIP_SPECTRA = 2, OCEAN_SKIP_FACTORS = 4, OCEAN_SKIP_JACOBIAN = 8,
-       OCEAN_STORE_FFTW = 16, OCEAN_SKIP_ALL = 31, OCEAN_STORE_STREAMING = 32 };
+       OCEAN_STORE_FFTW = 16, OCEAN_ROWS_C2R = 32, OCEAN_SKIP_ALL = 63, OCEAN_STORE_STREAMING = 64 };
 void ocean_step_parts(struct ocean *o, double t, unsigned fields, unsigned skip);
 
 /* Reference spectrum of transform tr at time t over the full N x N grid,

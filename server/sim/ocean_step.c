@@ -13,13 +13,14 @@
  * the same with D = -i k/k h~ and a negative lambda.)
  *
  * The 2-D inverse transform is split (see enum ocean_column): five z passes
- * over the kz-dependent parts, then eight row c2r with the kx factors.
- * Stage 1 (fill_tiles), per tile of OCEAN_COL_TILE kx columns: fill, z
- * pass on contiguous columns while they are in cache, store block-major.
- * Stage 2 (row_blocks), per block of OCEAN_ROW_BLOCK rows: kx factor where
- * needed, c2r straight into the output arrays, Jacobian. Tiles and blocks
- * are shared among the pool's threads. Real-to-complex (c2r) measured
- * faster than packing two real fields per c2c: docs/simulation.md.
+ * over the kz-dependent parts, then eight real row transforms with the kx
+ * factors. Stage 1 (fill_tiles), per tile of OCEAN_COL_TILE kx columns:
+ * fill, z pass on contiguous columns while they are in cache, store
+ * block-major. Stage 2 (row_blocks), per block of OCEAN_ROW_BLOCK rows: kx
+ * factor and the real transform's split in one pass (row_pretwiddle), a
+ * half-length c2c straight into the output arrays, Jacobian. Tiles and
+ * blocks are shared among the pool's threads. One real transform per field
+ * measured faster than packing two real fields per c2c: docs/simulation.md.
  *
  * Speed: the phase w t is reduced to a quadrant in double precision (so a
  * sea that has run for days does not jitter), then sin and cos come from
@@ -295,6 +296,61 @@ static void block_factor(float *restrict out, const float *restrict in, enum kx_
     }
 }
 
+/* The row pass's real transforms as half-length complex ones. A row's
+ * N-point c2r (FFTW's backward real transform of the half spectrum X[0 ..
+ * N/2]) equals one N/2-point c2c of
+ *   Z[k] = E[k] + i O[k],  E[k] = X[k] + conj(X[N/2-k]),
+ *   O[k] = (X[k] - conj(X[N/2-k])) e^{2 pi i k/N},  k = 0 .. N/2-1,
+ * whose output, read as N floats, is the row itself (re = even samples, im
+ * = odd ones): the even and odd outputs are the two half-length transforms
+ * of the spectrum folded at N/2 (Cooley-Tukey's first split, with X's
+ * symmetry X[N-k] = conj(X[k])). This pass writes Z for one block of B
+ * rows (interleaved, as the input) with the field's kx factor folded in
+ * (X[k] times i kx, -kx^2 or 1); row_half_plan does the rest. Hand-written
+ * because FFTW's batched c2r of interleaved rows runs scalar codelets
+ * (r2cb) where the c2c runs AVX ones: a six-field step x0.90-0.95 at 256 to
+ * 2048 (make bench-step, "rows" rows); the input is left as it was. The
+ * kx factor is a template argument (always_inline) so each loop vectorises. */
+static inline __attribute__((always_inline)) void pretwiddle_rows(float *restrict z, const float *restrict in,
+                                                                  enum kx_factor how, const float *restrict kx,
+                                                                  const float *restrict tw, int half)
+{
+    enum { B = OCEAN_ROW_BLOCK };
+    for (int k = 0; k < half; k++) {
+        const float *a = in + 2 * (size_t)k * B, *b = in + 2 * (size_t)(half - k) * B; /* X[k], X[N/2-k] */
+        const float c = tw[2 * k], s = tw[2 * k + 1];
+        const float ma = how == KX_I ? kx[k] : -kx[k] * kx[k];
+        const float mb = how == KX_I ? kx[half - k] : -kx[half - k] * kx[half - k];
+        float *o = z + 2 * (size_t)k * B;
+        for (int r = 0; r < B; r++) {
+            float ar, ai, br, bi; /* X[k] and conj(X[N/2-k]), factors applied */
+            if (how == KX_NONE) {
+                ar = a[2 * r], ai = a[2 * r + 1], br = b[2 * r], bi = -b[2 * r + 1];
+            } else if (how == KX_I) {
+                ar = -ma * a[2 * r + 1], ai = ma * a[2 * r], br = -mb * b[2 * r + 1], bi = -mb * b[2 * r];
+            } else {
+                ar = ma * a[2 * r], ai = ma * a[2 * r + 1], br = mb * b[2 * r], bi = -mb * b[2 * r + 1];
+            }
+            const float er = ar + br, ei = ai + bi, dr = ar - br, di = ai - bi;
+            const float orr = dr * c - di * s, oi = dr * s + di * c; /* O[k] */
+            o[2 * r] = er - oi; /* E + i O */
+            o[2 * r + 1] = ei + orr;
+        }
+    }
+}
+
+__attribute__((target_clones("avx2", "default")))
+static void row_pretwiddle(float *restrict z, const float *restrict in, enum kx_factor how, const float *restrict kx,
+                           const float *restrict tw, int half)
+{
+    if (how == KX_NONE)
+        pretwiddle_rows(z, in, KX_NONE, kx, tw, half);
+    else if (how == KX_I)
+        pretwiddle_rows(z, in, KX_I, kx, tw, half);
+    else
+        pretwiddle_rows(z, in, KX_NEG2, kx, tw, half);
+}
+
 /* A row block's Jacobian from its three terms, and with u the foam
  * update (ocean_foam_samples) in the same pass, while J is in a register:
  * the same float operations as ocean_combine_jacobian and
@@ -321,13 +377,14 @@ static void jacobian_foam(float *restrict J, float *restrict foam, const float *
 }
 
 /* Row stage over blocks [b0, b1) of OCEAN_ROW_BLOCK rows. A block of a
- * z-pass spectrum is contiguous and already in row_plan's input layout:
- * fields without a kx factor are transformed straight from it, last,
- * since c2r destroys its input; the others (slope_x, Dx, dDx/dz: i kx;
- * dDx/dx: -kx^2) get their factor into the worker's buffer first. The c2r
- * writes the rows straight into the output, except the Jacobian's three
- * terms: they go into the worker's scratch, and the block's Jacobian (and
- * foam, if asked for) is made from them while they are in cache. */
+ * z-pass spectrum is contiguous, B rows interleaved: row_pretwiddle reads
+ * it with the field's kx factor (slope_x, Dx, dDx/dz: i kx; dDx/dx: -kx^2)
+ * into the worker's buffer, and row_half_plan writes the rows straight
+ * into the output, except the Jacobian's three terms: they go into the
+ * worker's scratch, and the block's Jacobian (and foam, if asked for) is
+ * made from them while they are in cache. The reference (OCEAN_ROWS_C2R):
+ * FFTW's c2r, fields without a kx factor straight from the spectrum, last,
+ * since c2r destroys its input, the others after block_factor. */
 static void row_blocks(void *arg, int b0, int b1, int worker)
 {
     const struct fill_ctx *c = arg;
@@ -362,7 +419,11 @@ static void row_blocks(void *arg, int b0, int b1, int worker)
                 continue;
             float *in = g->col[order[q].col] + 2 * (size_t)blk * nh * B;
             float *out = tr >= TR_JXX ? jac[tr - TR_JXX] : ocean_transform_dest(g, tr) + at;
-            if (order[q].f != KX_NONE) {
+            if (!(c->skip & OCEAN_ROWS_C2R)) {
+                row_pretwiddle(buf, in, c->skip & OCEAN_SKIP_FACTORS ? KX_NONE : order[q].f, g->kx, g->row_twiddle,
+                               n / 2);
+                fftwf_execute_dft(g->row_half_plan, (fftwf_complex *)buf, (fftwf_complex *)out);
+            } else if (order[q].f != KX_NONE) {
                 if (!(c->skip & OCEAN_SKIP_FACTORS))
                     block_factor(buf, in, order[q].f, g->kx, nh);
                 fftwf_execute_dft_c2r(g->row_plan, (fftwf_complex *)buf, out);
