@@ -308,9 +308,10 @@ static void block_factor(float *restrict out, const float *restrict in, enum kx_
  * rows (interleaved, as the input) with the field's kx factor folded in
  * (X[k] times i kx, -kx^2 or 1); row_half_plan does the rest. Hand-written
  * because FFTW's batched c2r of interleaved rows runs scalar codelets
- * (r2cb) where the c2c runs AVX ones: a six-field step x0.90-0.95 at 256 to
- * 2048 (make bench-step, "rows" rows); the input is left as it was. The
- * kx factor is a template argument (always_inline) so each loop vectorises. */
+ * (r2cb) where the c2c runs AVX ones: a six-field step x0.57-0.94 at 64 to
+ * 2048, a draw at 1024 (make bench-step, "rows_half" rows); the input is
+ * left as it was. The kx factor is a constant argument of an always_inline
+ * function, so each of the three loops is compiled and vectorised apart. */
 static inline __attribute__((always_inline)) void pretwiddle_rows(float *restrict z, const float *restrict in,
                                                                   enum kx_factor how, const float *restrict kx,
                                                                   const float *restrict tw, int half)
@@ -407,9 +408,10 @@ static void row_blocks(void *arg, int b0, int b1, int worker)
         float *jac[3]; /* this block's Jacobian terms */
         for (int k = 0; k < 3; k++)
             jac[k] = g->jac[k] ? g->jac[k] + at : terms + k * count;
-        /* The Nyquist column is zero and the fill never writes it, but the
-         * previous step's direct c2r may have scribbled on it (c2r destroys
-         * its input): clear it before any field of this block reads it. */
+        /* The Nyquist column is zero and the fill never writes it, but a
+         * reference step's direct c2r (OCEAN_ROWS_C2R: benchmark, tests) may
+         * have scribbled on it (c2r destroys its input): clear it before any
+         * field of this block reads it. */
         for (int k = 0; k < COL_COUNT && !(c->skip & OCEAN_SKIP_FACTORS); k++)
             if (c->cols & (1u << k))
                 memset(g->col[k] + 2 * ((size_t)blk * nh + nh - 1) * B, 0, 2 * B * sizeof(float));
