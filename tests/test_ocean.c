@@ -46,6 +46,16 @@ static struct ocean *make(const struct ocean_params *p, int threads)
     return o;
 }
 
+/* The default sea at resolution n, one cascade, on two threads. */
+static struct ocean *make_default(int n)
+{
+    struct ocean_params p;
+    params_defaults(&p);
+    p.resolution = n;
+    p.cascades = 1;
+    return make(&p, 2);
+}
+
 static float *copy_field(const struct ocean *o, enum ocean_field f)
 {
     size_t nn = (size_t)ocean_resolution(o) * ocean_resolution(o);
@@ -1899,11 +1909,7 @@ static void test_huge_pages(void)
 {
     if (quick) /* N = 1024 under valgrind: minutes */
         return;
-    struct ocean_params p;
-    params_defaults(&p);
-    p.resolution = 1024;
-    p.cascades = 1;
-    struct ocean *o = make(&p, 2);
+    struct ocean *o = make_default(1024);
     if (!o)
         return;
     ocean_step(o, 1.0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
@@ -1931,11 +1937,7 @@ static void test_huge_pages(void)
 static struct ocean *six_fields_two_ways(int n, unsigned way_a, unsigned way_b, float **first)
 {
     const unsigned six = OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM);
-    struct ocean_params p;
-    params_defaults(&p);
-    p.resolution = n;
-    p.cascades = 1;
-    struct ocean *o = make(&p, 2);
+    struct ocean *o = make_default(n);
     size_t nn = (size_t)n * n;
     *first = o ? malloc(6 * nn * sizeof(float)) : NULL;
     if (!*first) {
