@@ -6,7 +6,10 @@
  * 3. header round trips; 4. random smooth/noisy fields at several bounds,
  *    LODs and both lossy codecs stay within the bound; 5. edge cases (NaN,
  *    huge range, constant, float32 resolution); 6. random truncations and bit
- *    flips never crash (run under ASan by test-proto-asan). */
+ *    flips never crash (run under ASan by test-proto-asan); 7. the codec-1
+ *    Huffman-only DEFLATE writer, read back by zlib, never writes past its
+ *    buffer and fails cleanly when the buffer is one byte short. */
+#include "oc_internal.h"   /* the entropy writer's own entry points (test 7) */
 #include "oc_proto.h"
 
 #include <cjson/cJSON.h>
@@ -16,6 +19,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <zlib.h>
 
 static int failures, checks;
 static void fail(const char *fmt, ...)
@@ -840,6 +844,92 @@ static void test_stream_ranges(void)
     for (int i = 0; i < THREADS; i++) oc_encoder_free(e[i]);
 }
 
+/* ---- 7. the Huffman-only DEFLATE writer (codec 1, level 1) ---- */
+
+/* Raw inflate by zlib, a decoder independent of ours and of libdeflate:
+ * 0 when src is one complete DEFLATE stream that inflates to exactly n bytes. */
+static int zlib_inflate_exact(const uint8_t *src, size_t len, uint8_t *dst, size_t n)
+{
+    z_stream z;
+    memset(&z, 0, sizeof z);
+    if (inflateInit2(&z, -15) != Z_OK) return -1;
+    uint8_t extra;
+    z.next_in = (Bytef *)(uintptr_t)src;
+    z.avail_in = (uInt)len;
+    z.next_out = n ? dst : &extra;
+    z.avail_out = n ? (uInt)n : 1;
+    int rc = inflate(&z, Z_FINISH);
+    int ok = rc == Z_STREAM_END && z.total_in == len && z.total_out == n;
+    inflateEnd(&z);
+    return ok ? 0 : -1;
+}
+
+/* Inputs of every shape the writer meets: residual-like (geometric), noise
+ * (stored), one symbol, and Fibonacci frequencies whose optimal code is deeper
+ * than DEFLATE's 15 bits (the length limit acts). Sizes around the writer's
+ * three-literal groups and its 8-byte stores near the end of the buffer. */
+static void fill_entropy_input(uint8_t *b, size_t n, int kind)
+{
+    static const uint32_t fib[24] = { 1, 1, 2, 3, 5, 8, 13, 21, 34, 55, 89, 144, 233, 377, 610, 987, 1597,
+                                      2584, 4181, 6765, 10946, 17711, 28657, 46368 };
+    for (size_t k = 0; k < n; k++) {
+        if (kind == 0) { uint32_t g = 0; while (g < 254 && (rnd() & 3) == 0) g++; b[k] = (uint8_t)g; }
+        else if (kind == 1) b[k] = (uint8_t)rnd();
+        else if (kind == 2) b[k] = 7;
+        else {
+            uint32_t r = rnd() % 121392, s = 0;     /* 121392 = the sum of fib[0..23] */
+            while (r >= fib[s]) r -= fib[s++];
+            b[k] = (uint8_t)(s * 10);
+        }
+    }
+}
+
+static void test_entropy_writer(void)
+{
+    static const size_t sizes[] = { 0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 17, 31, 100, 1000, 4095, 16384, 70001 };
+    struct oc_entropy *c = oc_entropy_new();
+    int types[4] = { 0 }, cases = 0;
+    for (int kind = 0; kind < 4; kind++)
+        for (size_t si = 0; si < sizeof sizes / sizeof sizes[0]; si++) {
+            size_t n = sizes[si], cap = oc_entropy_bound(OC_CODEC_QUANT_LORENZO, n);
+            uint8_t *src = malloc(n + 1), *big = malloc(cap), *back = malloc(n + 1);
+            fill_entropy_input(src, n, kind);
+            size_t len = oc_entropy_compress(c, OC_CODEC_QUANT_LORENZO, 1, src, n, big, cap);
+            CHECK(len > 0 && len <= cap, "entropy kind %d n %zu: compressed to %zu of %zu", kind, n, len, cap);
+            if (len == 0 || len > cap) goto next;
+            types[(big[0] >> 1) & 3]++;
+            CHECK(zlib_inflate_exact(big, len, back, n) == 0 && memcmp(back, src, n) == 0,
+                  "entropy kind %d n %zu: zlib does not inflate the block to the input", kind, n);
+            CHECK(oc_entropy_decompress(c, OC_CODEC_QUANT_LORENZO, big, len, back, n) == OC_OK && memcmp(back, src, n) == 0,
+                  "entropy kind %d n %zu: our decoder does not read the block back", kind, n);
+            /* Exactly enough room: the same bytes, and the 16 guard bytes after it untouched. */
+            uint8_t *exact = malloc(len + 16);
+            memset(exact, 0xa5, len + 16);
+            size_t again = oc_entropy_compress(c, OC_CODEC_QUANT_LORENZO, 1, src, n, exact, len);
+            int guard = 1;
+            for (size_t k = len; k < len + 16; k++) guard &= exact[k] == 0xa5;
+            CHECK(again == len && memcmp(exact, big, len) == 0 && guard,
+                  "entropy kind %d n %zu: with a buffer of exactly %zu bytes got %zu (same bytes %d, guard intact %d)",
+                  kind, n, len, again, again == len && memcmp(exact, big, len) == 0, guard);
+            /* One byte short: no output, and nothing written past the buffer. */
+            memset(exact, 0xa5, len + 16);
+            size_t shorter = oc_entropy_compress(c, OC_CODEC_QUANT_LORENZO, 1, src, n, exact, len - 1);
+            guard = 1;
+            for (size_t k = len - 1; k < len + 16; k++) guard &= exact[k] == 0xa5;
+            CHECK(shorter == 0 && guard, "entropy kind %d n %zu: a buffer one byte short gave %zu (guard intact %d)",
+                  kind, n, shorter, guard);
+            free(exact);
+            cases++;
+        next:
+            free(src); free(big); free(back);
+        }
+    CHECK(types[0] > 0 && types[1] > 0 && types[2] > 0, "entropy writer: stored %d, fixed %d, dynamic %d blocks",
+          types[0], types[1], types[2]);
+    printf("entropy writer: %d inputs read back by zlib (%d stored, %d fixed, %d dynamic blocks), exact and short buffers respected\n",
+           cases, types[0], types[1], types[2]);
+    oc_entropy_free(c);
+}
+
 int main(int argc, char **argv)
 {
     if (argc != 2) { fprintf(stderr, "usage: test_proto VECTOR_DIR\n"); return 2; }
@@ -852,6 +942,7 @@ int main(int argc, char **argv)
     test_stream_tiny_tiles();
     test_stream_wide_codes();
     test_stream_ranges();
+    test_entropy_writer();
     printf("%d checks, %d failed\n", checks, failures);
     if (failures) { printf("test_proto: FAILED\n"); return 1; }
     printf("test_proto: OK\n");

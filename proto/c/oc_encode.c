@@ -72,22 +72,24 @@ static inline double round_d(double x)
 
 /* One quantisation pass; returns nonzero if some sample misses the bound.
  * Cloned for AVX2 where the compiler supports it: the SSE2 baseline cannot
- * vectorise the double -> int32 conversion, AVX2 runs the loop ~3x faster. */
+ * vectorise the double -> int32 conversion, AVX2 runs the loop ~3x faster.
+ * The miss flag is 64 bits wide, as wide as a double's compare mask: an int
+ * flag made GCC narrow every mask to int lanes (four shuffles per 8 samples). */
 OC_VECTOR_CLONES
 static int quantise_pass(const float *restrict v, int32_t *restrict q, size_t count, double offset,
                          double scale, double bound)
 {
     const double inv = 1.0 / scale;
-    int bad = 0;
+    int64_t bad = 0;
     for (size_t k = 0; k < count; k++) {
         /* r is the code as a double (|r| < 2^31): the same value oc_dequant would
          * convert back from the int32, without the extra conversion. */
         double r = round_d(((double)v[k] - offset) * inv);
         double err = fabs((double)(float)(offset + r * scale) - (double)v[k]);
         q[k] = (int32_t)r;
-        bad |= err > bound;
+        bad |= -(int64_t)(err > bound);
     }
-    return bad;
+    return bad != 0;
 }
 
 /* Quantise vals to codes whose reconstruction float32(offset + q*scale) is

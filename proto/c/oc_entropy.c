@@ -160,23 +160,35 @@ static inline void bw_flush(struct bitw *w)
     w->n = 0;
 }
 
-/* The literals, two per flush check (2 x 15 bits + < 32 pending < 64). */
-static void put_literals(struct bitw *w, const uint8_t *src, size_t n, const uint16_t *code, const uint8_t *len)
+/* The literals. After a flush fewer than 8 bits are pending, so three codes
+ * (3 x 15 bits) always fit the 64-bit buffer: the loop stores all 8 bytes and
+ * keeps the whole ones, with no branch on the bit count (a data-dependent
+ * branch there mispredicted on these short, noise-like codes). Each symbol's
+ * code and length come from one table entry. The 8-byte store needs 8 bytes
+ * of room in [p, end); the last few literals go through bw_put, which stores
+ * only completed bytes. */
+static void put_literals(struct bitw *w, const uint8_t *src, size_t n, const uint16_t *code, const uint8_t *len,
+                         const uint8_t *end)
 {
+    uint32_t entry[256];
+    for (int s = 0; s < 256; s++) entry[s] = code[s] | (uint32_t)len[s] << 16;
     uint64_t buf = w->buf;
     int nb = w->n;
     uint8_t *p = w->p;
+    for (; nb >= 8; nb -= 8) { *p++ = (uint8_t)buf; buf >>= 8; }
     size_t k = 0;
-    for (; k + 2 <= n; k += 2) {
-        buf |= (uint64_t)code[src[k]] << nb; nb += len[src[k]];
-        buf |= (uint64_t)code[src[k + 1]] << nb; nb += len[src[k + 1]];
-        if (nb >= 32) {
-            p[0] = (uint8_t)buf; p[1] = (uint8_t)(buf >> 8); p[2] = (uint8_t)(buf >> 16); p[3] = (uint8_t)(buf >> 24);
-            p += 4; buf >>= 32; nb -= 32;
-        }
+    for (; k + 3 <= n && end - p >= 8; k += 3) {
+        uint32_t a = entry[src[k]], b = entry[src[k + 1]], c = entry[src[k + 2]];
+        buf |= (uint64_t)(a & 0xffff) << nb; nb += (int)(a >> 16);
+        buf |= (uint64_t)(b & 0xffff) << nb; nb += (int)(b >> 16);
+        buf |= (uint64_t)(c & 0xffff) << nb; nb += (int)(c >> 16);
+        for (int i = 0; i < 8; i++) p[i] = (uint8_t)(buf >> (8 * i));   /* one 8-byte store */
+        p += nb >> 3;
+        buf >>= nb & ~7;
+        nb &= 7;
     }
     w->buf = buf; w->n = nb; w->p = p;
-    if (k < n) bw_put(w, code[src[k]], len[src[k]]);
+    for (; k < n; k++) bw_put(w, code[src[k]], len[src[k]]);
 }
 
 /* Run-length code the code lengths (symbols 16, 17, 18 of RFC 1951 §3.2.7). */
@@ -268,7 +280,7 @@ static size_t huffman_only(const struct oc_entropy *c, const uint8_t *src, size_
         if (fix > cap) return 0;
         bw_put(&w, 1, 1);              /* BFINAL */
         bw_put(&w, 1, 2);              /* BTYPE 01: fixed Huffman */
-        put_literals(&w, src, n, c->fixed_code, c->fixed_len);
+        put_literals(&w, src, n, c->fixed_code, c->fixed_len, dst + cap);
         bw_put(&w, c->fixed_code[256], c->fixed_len[256]);
         bw_flush(&w);
         return (size_t)(w.p - dst);
@@ -285,7 +297,7 @@ static size_t huffman_only(const struct oc_entropy *c, const uint8_t *src, size_
         bw_put(&w, cl_code[rle_sym[i]], cl_len[rle_sym[i]]);
         if (cl_extra[rle_sym[i]]) bw_put(&w, rle_extra[i], cl_extra[rle_sym[i]]);
     }
-    put_literals(&w, src, n, code, lens);
+    put_literals(&w, src, n, code, lens, dst + cap);
     bw_put(&w, code[256], lens[256]);
     bw_flush(&w);
     return (size_t)(w.p - dst);
