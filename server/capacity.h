@@ -104,6 +104,19 @@ struct plan {
                                        sizes cost, the step and the frame budget */
 };
 
+/* The re-plan's hysteresis (sim_thread.c, update_plan), as budget scales:
+ * a less degraded plan is taken only when it fits CAP_RECOVER_SCALE of the
+ * budget; the plan in force is dropped only when it no longer fits
+ * CAP_KEEP_SCALE of it. A new demand is planned at 1. Without the upper band
+ * a plan costing the budget give or take the noise was dropped on its first
+ * slow frames and could only come back under 80 %: N = 1024 six fields
+ * (step 11-12 ms + encode 13-15 ms, budget 26.7 ms) went to LOD 1 two
+ * seconds after it was planned at full detail and flapped every 5-12 s.
+ * 1.05 x 0.8 of a tick is 28 ms at 30 Hz, 16 % short of the period; frames
+ * that really do not fit make overruns, whose penalty degrades at once. */
+#define CAP_RECOVER_SCALE 0.8
+#define CAP_KEEP_SCALE 1.05
+
 /* Demand -> plan at resolution n with tile side ts (per-tick samples and
  * time from the model; budget_scale < 1 plans with headroom). tdemand: the
  * temporal clients per key (NULL: none). */

@@ -58,7 +58,8 @@ struct sim {
                                      recovery is undone soon after, update_plan) */
     int since_change;             /* tick only: ticks since the plan in force was taken */
     bool recovered;               /* tick only: the plan in force was a recovery (less degraded, same demand) */
-    uint64_t grace_seq;           /* tick only: jobs queued before this seq do not raise the penalty */
+    uint64_t grace_seq;           /* tick only: jobs queued before this seq (a new demand's or plan's
+                                     first half second) neither raise the penalty nor teach the model */
     double credit[PLAN_GROUPS];   /* tick only: a group is encoded when its credit reaches 1 */
     bool had_demand;              /* tick only: last tick had subscribers */
 
@@ -71,6 +72,7 @@ struct sim {
     double job_t_tick, job_t_enc; /* producer writes before the job starts; encode_done reads */
     long job_samples;             /* same */
     long job_codec_samples[CAP_CODECS]; /* same: the plan's samples per codec (capacity.h) */
+    bool job_cold;                /* same: queued within the grace (prod_job.cold) */
     /* Measuring at start-up (sim_start, before the threads). */
     bool measure_done;
     struct layer_streams streams; /* the temporal layers' encoder state: used by frame_job_begin (producer)
@@ -102,6 +104,7 @@ struct sim {
         uint32_t version;
         float patch_size;
         long codec_samples[CAP_CODECS]; /* the plan's samples per codec on this tick (cost model) */
+        bool cold;                      /* queued before grace_seq: its costs are not learned */
         struct frame_want want;
     } pj;
     uint64_t penalized_seq;           /* tick: the queued job (seq) the penalty was last raised for... */
@@ -471,7 +474,12 @@ static void encode_done(void *ctx)
     histogram_observe(&g_metrics.tick_seconds, now - s->job_t_tick);
     /* The cost model follows each frame (cost_learn_encode: up slowly, one
      * frame at most twice the prediction; down quickly). */
-    if (s->job_samples >= 4096) { /* tiny jobs are all overhead: they would skew the per-sample cost */
+    /* Tiny jobs are all overhead: they would skew the per-sample cost. Cold
+     * ones (a new plan's or demand's first half second: keyframes, new
+     * chains, buffers touched for the first time) cost more than the next
+     * ones do: learned from, six of them took N = 1024 six fields from full
+     * detail to LOD 1 0.2 s after it was planned, for good. */
+    if (s->job_samples >= 4096 && !s->job_cold) {
         pthread_mutex_lock(&s->lock);
         cost_learn_encode(&s->model, s->job_codec_samples, enc);
         pthread_mutex_unlock(&s->lock);
@@ -514,8 +522,9 @@ static void produce(struct sim *s, const struct prod_job *pj)
      * N or a first foam subscription; a page-fault storm) must not make the
      * plan step-bound for everyone and then, with frames made rare, stay so
      * (under ASan the spin-up read as an 85 ms step at N = 256: 2 frames in
-     * 4 s). Sustained slowness still raises it by 10 % a frame. */
-    if (predicted > 0)
+     * 4 s). Sustained slowness still raises it by 10 % a frame. Cold
+     * jobs (a new demand's first half second) are not learned from at all. */
+    if (predicted > 0 && !pj->cold)
         s->model.step_scale = cost_ewma(s->model.step_scale, fmin(t_step / predicted, 2 * s->model.step_scale));
     pthread_mutex_unlock(&s->lock);
     /* The previous frame's encode overlapped this step; its buffers are about
@@ -533,6 +542,7 @@ static void produce(struct sim *s, const struct prod_job *pj)
     s->job_t_enc = mono_now();
     s->job_samples = frame_job_samples(s->job);
     memcpy(s->job_codec_samples, pj->codec_samples, sizeof s->job_codec_samples);
+    s->job_cold = pj->cold;
     encode_pool_start(s->pool, items, encode_item, encode_done, s);
 }
 
@@ -559,13 +569,14 @@ static void *producer_main(void *arg)
 
 /* ---- tick thread: the clock, the plan, and handing frames to the producer ---- */
 
-/* Re-plan from the demand: a more degraded plan at once, a less degraded
- * one only after it has held for hold_ticks (3 s at first) with 20 %
- * headroom (hysteresis: clients are told every change). The headroom was
- * 40 %: a plan bound by the step (N = 2048: a step of 20-30 ms against a
- * budget of 26.7) never had it, so once degraded by a slow moment it stayed
- * there (20 frames/s where 25-30 fit). A degrade needs the value to fall
- * under 90 % of the plan in force, so the two thresholds still leave a band.
+/* Re-plan from the demand: a more degraded plan as soon as the plan in
+ * force no longer fits CAP_KEEP_SCALE of the budget, a less degraded one
+ * only after it has held for hold_ticks (3 s at first) with 20 % headroom
+ * (CAP_RECOVER_SCALE; hysteresis: clients are told every change). The
+ * headroom was 40 %: a plan bound by the step (N = 2048: a step of 20-30 ms
+ * against a budget of 26.7) never had it, so once degraded by a slow moment
+ * it stayed there (20 frames/s where 25-30 fit). A degrade also needs the
+ * value to fall under 90 % of the plan in force.
  *
  * Recovery probe: a group degraded to a coarser LOD is sent intra, so
  * while no temporal layer is encoded the temporal cost figure is not
@@ -579,7 +590,6 @@ static void *producer_main(void *arg)
  * hold_ticks, up to PLAN_HOLD_MAX_S, so a group that does not fit is tried
  * less and less often; a new demand, or a recovery that holds PLAN_HELD_S,
  * resets it. */
-#define PLAN_EASY_SCALE 0.8
 #define PLAN_HOLD_S 3
 #define PLAN_HOLD_MAX_S 60
 #define PLAN_FAILED_S 5
@@ -622,10 +632,14 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], const i
     struct cost_model m = s->model;
     pthread_mutex_unlock(&s->lock);
     struct plan now, easy;
-    capacity_plan(&m, n, ts, demand, tdemand, 1.0, &now);
+    /* The plan in force keeps its place up to CAP_KEEP_SCALE of the budget;
+     * a new demand is planned at the budget itself. */
+    capacity_plan(&m, n, ts, demand, tdemand, CAP_KEEP_SCALE, &now);
     bool same_demand = true;
     for (int g = 0; g < PLAN_GROUPS; g++)
         same_demand &= now.fields[g] == s->plan.fields[g] && now.temporal[g] == s->plan.temporal[g];
+    if (!same_demand)
+        capacity_plan(&m, n, ts, demand, tdemand, 1.0, &now);
     struct plan next = s->plan;
     bool probe = false;
     if (!same_demand) {
@@ -633,12 +647,12 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], const i
         s->lower_ticks = 0;
         s->hold_ticks = PLAN_HOLD_S * rate;
     } else if (plan_worse(&now, &s->plan, n)) {
-        next = now;
+        capacity_plan(&m, n, ts, demand, tdemand, 1.0, &next); /* out of the band: what fits the budget */
         s->lower_ticks = 0;
         if (s->recovered && s->since_change < PLAN_FAILED_S * rate) /* the recovery did not fit */
             s->hold_ticks = s->hold_ticks * 2 < PLAN_HOLD_MAX_S * rate ? s->hold_ticks * 2 : PLAN_HOLD_MAX_S * rate;
     } else {
-        capacity_plan(&m, n, ts, demand, tdemand, PLAN_EASY_SCALE, &easy);
+        capacity_plan(&m, n, ts, demand, tdemand, CAP_RECOVER_SCALE, &easy);
         if (plan_better(&easy, &s->plan, n)) {
             if (++s->lower_ticks >= s->hold_ticks) {
                 next = easy;
@@ -652,7 +666,7 @@ static void update_plan(struct sim *s, const int demand[LAYER_KEYS_ALL], const i
                 m.enc_temporal_s > 0) {
                 struct cost_model fresh = m;
                 cost_forget_temporal(&fresh);
-                capacity_plan(&fresh, n, ts, demand, tdemand, PLAN_EASY_SCALE, &easy);
+                capacity_plan(&fresh, n, ts, demand, tdemand, CAP_RECOVER_SCALE, &easy);
                 if (plan_better(&easy, &s->plan, n)) {
                     next = easy;
                     probe = true;
@@ -833,6 +847,7 @@ static void tick(struct sim *s, double t_tick)
         if (due[g])
             s->credit[g] -= 1;
     plan_samples(&s->plan, n, due, pj.codec_samples);
+    pj.cold = s->seq < s->grace_seq;
     pj.want.reset_streams = s->reset_streams;
     pj.want.sea_changed = s->sea_changed && !s->reset_streams;
     s->reset_streams = false;

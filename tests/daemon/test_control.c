@@ -843,6 +843,40 @@ static void test_capacity_lod_work(void)
     CHECK(p.lod[g0] == 1, "six fields at 3 ns/sample (19 + 12 ms): lod %d (%s)", p.lod[g0], p.reason);
 }
 
+/* The re-plan's band (capacity.h): the plan in force is dropped only past
+ * CAP_KEEP_SCALE of the budget, a better one is taken only under
+ * CAP_RECOVER_SCALE. N = 1024 six fields whose frame costs 2 % over the
+ * budget stays at full detail; 10 % over degrades; coming back needs 20 %
+ * headroom. Fixed numbers: behaviour only. */
+static void test_capacity_band(void)
+{
+    const int n = 1024, ts = 128, g0 = plan_group(0, 3);
+    const double budget = 0.8 / 30, step = 0.012, samples = 6.0 * n * n;
+    struct cost_model m = {
+        .period_s = 1.0 / 30, .budget_s = budget, .n0 = 1024, .step1_s = 0.002, .step6_s = step,
+        .step_scale = 1, .max_memory_mb = 2048, .cores = 2,
+    };
+    int demand[LAYER_KEYS_ALL] = { 0 };
+    for (int f = 0; f < 6; f++)
+        demand[layer_key(f, 0, 3)] = 1;
+    struct plan p;
+    CHECK(CAP_RECOVER_SCALE < 1 && CAP_KEEP_SCALE > 1, "band %g..%g", CAP_RECOVER_SCALE, CAP_KEEP_SCALE);
+    m.enc_s_per_sample = (1.02 * budget - step) / samples; /* 2 % over */
+    capacity_plan(&m, n, ts, demand, NULL, 1.0, &p);
+    CHECK(p.lod[g0] == 1, "2 %% over the budget, planned afresh: lod %d", p.lod[g0]);
+    capacity_plan(&m, n, ts, demand, NULL, CAP_KEEP_SCALE, &p);
+    CHECK(!plan_degraded(&p, g0), "2 %% over the budget, in force: lod %d rate %g (%s)", p.lod[g0], p.rate[g0], p.reason);
+    m.enc_s_per_sample = (1.10 * budget - step) / samples; /* 10 % over */
+    capacity_plan(&m, n, ts, demand, NULL, CAP_KEEP_SCALE, &p);
+    CHECK(p.lod[g0] == 1, "10 %% over the budget, in force: lod %d", p.lod[g0]);
+    m.enc_s_per_sample = (0.90 * budget - step) / samples; /* 10 % under: fits, but no recovery */
+    capacity_plan(&m, n, ts, demand, NULL, CAP_RECOVER_SCALE, &p);
+    CHECK(p.lod[g0] == 1, "10 %% under the budget, recovering: lod %d", p.lod[g0]);
+    m.enc_s_per_sample = (0.78 * budget - step) / samples; /* 22 % under */
+    capacity_plan(&m, n, ts, demand, NULL, CAP_RECOVER_SCALE, &p);
+    CHECK(!plan_degraded(&p, g0), "22 %% under the budget, recovering: lod %d (%s)", p.lod[g0], p.reason);
+}
+
 /* capacity.c: the encode cost per codec, what a degraded message says, and
  * learning from frames (N = 1024 h/dx/dz temporal: a group degraded to lod 1
  * is sent intra, measured the cheap codec, predicted that lod 0 fit, went
@@ -1107,6 +1141,7 @@ int main(void)
     test_capacity_plan();
     test_capacity_codecs();
     test_capacity_lod_work();
+    test_capacity_band();
     test_capacity_codec_rung();
     test_sets();
     test_subscribe();
