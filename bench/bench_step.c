@@ -128,9 +128,11 @@ static void bench_step(int n, int threads, const char *wisdom)
  * (the order swapped every repetition), so that both see the same moments
  * of a shared machine; six fields, wall time, medians. `ratio`: ours / the
  * other way, `pair_ratio`: the median of the per-repetition ratios.
- *   store: the z pass's copy, FFTW's copy plan (OCEAN_STORE_FFTW) against
- *     our streaming stores (OCEAN_STORE_STREAMING; the step uses them from
- *     OCEAN_STREAM_STORE_FROM_N: "used");
+ *   store: the z pass's copy and the row pass's output, ordinary stores
+ *     (FFTW's copy plan, FFTW writing the rows: OCEAN_STORE_FFTW) against
+ *     our streaming stores (OCEAN_STORE_STREAMING; the step streams the
+ *     copy from OCEAN_STREAM_STORE_FROM_N, "used", and the output from
+ *     OCEAN_STREAM_OUT_FROM_N: at 512 this group overstates the step's gain);
  *   rows: the row pass, FFTW's c2r (OCEAN_ROWS_C2R) against our
  *     half-length split (row_pretwiddle + row_half_plan; used at every N). */
 static void bench_two_ways(int n, int threads, const char *wisdom, const char *name, unsigned fftw_way,

@@ -1951,10 +1951,12 @@ static struct ocean *six_fields_two_ways(int n, unsigned way_a, unsigned way_b, 
     return o;
 }
 
-/* The z pass's streaming store (N >= OCEAN_STREAM_STORE_FROM_N) moves the
- * same values as FFTW's copy plan, which the FFT-vs-DFT tests cover at
- * smaller N: the six fields must come out bit for bit the same both ways,
- * at N = 512 where the step streams and at N = 64 forced to. */
+/* The streaming stores (the z pass's copy from OCEAN_STREAM_STORE_FROM_N,
+ * the row pass's output through the worker's scratch from
+ * OCEAN_STREAM_OUT_FROM_N) move the same values as FFTW's copy plan and
+ * FFTW's own output, which the FFT-vs-DFT tests cover at smaller N: the six
+ * fields must come out bit for bit the same both ways, at N = 512 as the
+ * step does (the z pass streams) and at N = 64 with both forced to. */
 static void test_streaming_store(void)
 {
     int sizes[2] = {64, OCEAN_STREAM_STORE_FROM_N};

@@ -36,6 +36,13 @@ enum ocean_column { COL_H, COL_KZ, COL_INVK, COL_KZINVK, COL_KZ2INVK, COL_COUNT 
  * step x0.91-0.96 at 512-2048; at 256, where they stay in cache, x1.02-1.08,
  * so FFTW's copy stays there (make bench-step, "store" rows). */
 #define OCEAN_STREAM_STORE_FROM_N 512
+/* From this N the row pass writes the fields with non-temporal stores too
+ * (store_rows_streaming): six fields are 24 MB at 1024, most of the cache,
+ * and the reads before each write went to memory. In the daemon, alternated
+ * run by run (make bench-capacity --base): tick x0.93 at 1024 h/dx/dz and
+ * x0.96 at 2048 h/dx/dz; at 512 (6 MB, still in cache when the encode reads
+ * it) x1.04 with the encode x1.04 slower, so 512 keeps ordinary stores. */
+#define OCEAN_STREAM_OUT_FROM_N 1024
 
 /* The fill's copy of the amplitudes, one kx column (ix < N/2) after the
  * other, each column-major along kz: a, b, d, e (as below), linvk =
@@ -134,7 +141,8 @@ struct ocean_grid {
     /* Per worker, scratch_floats each (64-byte aligned): stage 1, a fill
      * tile (ocean_tile_floats); stage 2, one row block of kx-factored
      * input (ROW_BLOCK x nh complex), then the block's three Jacobian
-     * terms (ROW_BLOCK x N floats each): ocean_row_scratch_floats. */
+     * terms and a field's block of rows before its streaming store
+     * (ROW_BLOCK x N floats each): ocean_row_scratch_floats. */
     float *scratch;
     size_t scratch_floats;
     int workers;               /* scratch slots */
@@ -228,12 +236,13 @@ void ocean_fft_only(struct ocean *o, unsigned fields);
 /* Benchmark: a step (no foam) without some of our own parts, to see what
  * each costs: the fill (h~(k,t): phases, amplitudes), the z-pass spectra
  * (kz and 1/k factors), the kx factors of the row pass (and the Nyquist
- * clear), the Jacobian. OCEAN_STORE_FFTW: the z pass stores its tiles with
- * FFTW's copy plan at every N (the streaming store is ours too).
+ * clear), the Jacobian. OCEAN_STORE_FFTW: ordinary stores at every N, the
+ * z pass's tiles with FFTW's copy plan and the row pass's output written by
+ * FFTW itself (the streaming stores are ours too).
  * OCEAN_ROWS_C2R: the row pass with FFTW's real transform (row_plan)
  * instead of our half-length split (row_pretwiddle + row_half_plan). All
  * of them: ocean_fft_only, FFTW alone doing the same transforms.
- * OCEAN_STORE_STREAMING (benchmark, tests): the streaming store at every N. */
+ * OCEAN_STORE_STREAMING (benchmark, tests): the streaming stores at every N. */
 enum { OCEAN_SKIP_FILL = 1, OCEAN_SKIP_SPECTRA = 2, OCEAN_SKIP_FACTORS = 4, OCEAN_SKIP_JACOBIAN = 8,
        OCEAN_STORE_FFTW = 16, OCEAN_ROWS_C2R = 32, OCEAN_SKIP_ALL = 63, OCEAN_STORE_STREAMING = 64 };
 void ocean_step_parts(struct ocean *o, double t, unsigned fields, unsigned skip);

@@ -140,9 +140,10 @@ size_t ocean_tile_floats(int n, int tile) { return (size_t)4 * tile * tile_sd(n)
 float *ocean_tile_spectrum(float *scratch, int n, int tile) { return scratch + (size_t)2 * tile * tile_sd(n); }
 int ocean_tile_dist(int n) { return (int)tile_sd(n); }
 /* Stage 2's scratch: one block of kx-factored input (B x nh complex), then
- * the block's three Jacobian terms (B x N floats each); 64-byte aligned. */
+ * the block's three Jacobian terms and a field's block of rows on its way
+ * to the output (B x N floats each); 64-byte aligned. */
 static size_t row_buf_floats(int n) { return ((size_t)2 * OCEAN_ROW_BLOCK * (n / 2 + 1) + 15) & ~(size_t)15; }
-size_t ocean_row_scratch_floats(int n) { return row_buf_floats(n) + (size_t)3 * OCEAN_ROW_BLOCK * n; }
+size_t ocean_row_scratch_floats(int n) { return row_buf_floats(n) + (size_t)4 * OCEAN_ROW_BLOCK * n; }
 float *ocean_row_jacobian_terms(float *scratch, int n) { return scratch + row_buf_floats(n); }
 
 /* h~(k, t) down one kx column (N modes, N a multiple of 16), interleaved
@@ -220,6 +221,22 @@ static void store_tile_streaming(float *restrict dst, const float *restrict src,
     }
 #if defined(__SSE__)
     _mm_sfence(); /* streaming stores are weakly ordered: done before the row pass reads them */
+#endif
+}
+
+/* A block of output rows (count floats, contiguous, 64-byte aligned) from
+ * the worker's scratch to a field with non-temporal stores (N >=
+ * OCEAN_STREAM_OUT_FROM_N): the field is written whole, so reading each
+ * line first (24 MB a step at N = 1024 with six fields) is wasted, as in
+ * store_tile_streaming. Hand-written because FFTW writes with ordinary stores. */
+static void store_rows_streaming(float *restrict dst, const float *restrict src, size_t count)
+{
+#if defined(__SSE__)
+    for (size_t i = 0; i < count; i += 4)
+        _mm_stream_ps(dst + i, _mm_load_ps(src + i));
+    _mm_sfence();
+#else
+    memcpy(dst, src, count * sizeof(float));
 #endif
 }
 
@@ -380,10 +397,11 @@ static void jacobian_foam(float *restrict J, float *restrict foam, const float *
 /* Row stage over blocks [b0, b1) of OCEAN_ROW_BLOCK rows. A block of a
  * z-pass spectrum is contiguous, B rows interleaved: row_pretwiddle reads
  * it with the field's kx factor (slope_x, Dx, dDx/dz: i kx; dDx/dx: -kx^2)
- * into the worker's buffer, and row_half_plan writes the rows straight
- * into the output, except the Jacobian's three terms: they go into the
- * worker's scratch, and the block's Jacobian (and foam, if asked for) is
- * made from them while they are in cache. The reference (OCEAN_ROWS_C2R):
+ * into the worker's buffer, and row_half_plan writes the rows into the
+ * output: straight below OCEAN_STREAM_OUT_FROM_N, from there through the
+ * worker's scratch and store_rows_streaming. The Jacobian's three terms go
+ * into the worker's scratch, and the block's Jacobian (and foam, if asked
+ * for) is made from them while they are in cache. The reference (OCEAN_ROWS_C2R):
  * FFTW's c2r, fields without a kx factor straight from the spectrum, last,
  * since c2r destroys its input, the others after block_factor. */
 static void row_blocks(void *arg, int b0, int b1, int worker)
@@ -394,6 +412,8 @@ static void row_blocks(void *arg, int b0, int b1, int worker)
     const unsigned tm = c->tm;
     float *buf = g->scratch + (size_t)worker * g->scratch_floats;
     float *terms = ocean_row_jacobian_terms(buf, n);
+    float *rows = terms + (size_t)3 * B * n; /* a block of output rows before its streaming store */
+    const bool stream = (n >= OCEAN_STREAM_OUT_FROM_N || (c->skip & OCEAN_STORE_STREAMING)) && !(c->skip & OCEAN_STORE_FFTW);
     static const struct {
         enum ocean_transform tr;
         enum ocean_column col;
@@ -424,7 +444,12 @@ static void row_blocks(void *arg, int b0, int b1, int worker)
             if (!(c->skip & OCEAN_ROWS_C2R)) {
                 row_pretwiddle(buf, in, c->skip & OCEAN_SKIP_FACTORS ? KX_NONE : order[q].f, g->kx, g->row_twiddle,
                                n / 2);
-                fftwf_execute_dft(g->row_half_plan, (fftwf_complex *)buf, (fftwf_complex *)out);
+                if (stream && tr < TR_JXX) {
+                    fftwf_execute_dft(g->row_half_plan, (fftwf_complex *)buf, (fftwf_complex *)rows);
+                    store_rows_streaming(out, rows, count);
+                } else {
+                    fftwf_execute_dft(g->row_half_plan, (fftwf_complex *)buf, (fftwf_complex *)out);
+                }
             } else if (order[q].f != KX_NONE) {
                 if (!(c->skip & OCEAN_SKIP_FACTORS))
                     block_factor(buf, in, order[q].f, g->kx, nh);
