@@ -154,7 +154,9 @@ struct ocean_grid {
                                 * complex (ocean_step.c, row_pretwiddle; one thread each) */
     float *row_twiddle;        /* cos, sin of 2 pi k / N for k < N/2 (row_pretwiddle) */
     fftwf_plan row_plan;       /* OCEAN_ROW_BLOCK N-point c2r, same layouts: FFTW's own real
-                                * transform, the reference's (OCEAN_ROWS_C2R) */
+                                * transform, the reference's (OCEAN_ROWS_C2R); NULL until
+                                * ocean_reference_row_plan */
+    unsigned plan_flags;       /* FFTW_MEASURE or FFTW_ESTIMATE, as the grid's plans were made */
 };
 
 /* A small persistent thread pool (ocean.c): threads - 1 sleeping workers
@@ -246,6 +248,9 @@ void ocean_fft_only(struct ocean *o, unsigned fields);
 enum { OCEAN_SKIP_FILL = 1, OCEAN_SKIP_SPECTRA = 2, OCEAN_SKIP_FACTORS = 4, OCEAN_SKIP_JACOBIAN = 8,
        OCEAN_STORE_FFTW = 16, OCEAN_ROWS_C2R = 32, OCEAN_SKIP_ALL = 63, OCEAN_STORE_STREAMING = 64 };
 void ocean_step_parts(struct ocean *o, double t, unsigned fields, unsigned skip);
+/* Plans g->row_plan (the reference's c2r) if it is not there yet: 0, or -1
+ * if FFTW cannot. Benchmark and tests only; not while g is being stepped. */
+int ocean_reference_row_plan(struct ocean_grid *g);
 
 /* Reference spectrum of transform tr at time t over the full N x N grid,
  * out[iz*N + ix] for k = (kx(ix), kz(iz)), computed in double from the

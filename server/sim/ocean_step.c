@@ -195,6 +195,34 @@ static void fill_column_eased(const float *restrict col, const float *restrict f
     }
 }
 
+/* Whether this step writes with non-temporal stores where they pay from
+ * from_n on (OCEAN_STREAM_STORE_FROM_N, OCEAN_STREAM_OUT_FROM_N), or as the
+ * benchmark's and tests' flags force. */
+static bool streams(const struct fill_ctx *c, int from_n)
+{
+    return (c->g->n >= from_n || (c->skip & OCEAN_STORE_STREAMING)) && !(c->skip & OCEAN_STORE_FFTW);
+}
+
+/* count floats (a multiple of 4, both ends 16-byte aligned) with
+ * non-temporal stores. They are weakly ordered: the caller fences
+ * (stream_fence) before anyone reads them. */
+static inline void stream_floats(float *restrict dst, const float *restrict src, size_t count)
+{
+#if defined(__SSE__)
+    for (size_t i = 0; i < count; i += 4)
+        _mm_stream_ps(dst + i, _mm_load_ps(src + i));
+#else
+    memcpy(dst, src, count * sizeof(float));
+#endif
+}
+
+static inline void stream_fence(void)
+{
+#if defined(__SSE__)
+    _mm_sfence();
+#endif
+}
+
 /* store_plan's copy with non-temporal stores (N >= OCEAN_STREAM_STORE_FROM_N):
  * a transformed tile (T columns of N complex, stride sd) into its columns
  * of the block-major spectrum. Per block of B rows the tile's T x B
@@ -210,18 +238,10 @@ static void store_tile_streaming(float *restrict dst, const float *restrict src,
     for (int b = 0; b < n / B; b++) {
         float *d = dst + 2 * ((size_t)b * nh + c0) * B;
         const float *s = src + 2 * (size_t)b * B;
-        for (int j = 0; j < T; j++, d += 2 * B, s += 2 * sd) {
-#if defined(__SSE__)
-            for (int q = 0; q < 2 * B; q += 4)
-                _mm_stream_ps(d + q, _mm_load_ps(s + q));
-#else
-            memcpy(d, s, 2 * B * sizeof(float));
-#endif
-        }
+        for (int j = 0; j < T; j++, d += 2 * B, s += 2 * sd)
+            stream_floats(d, s, 2 * B);
     }
-#if defined(__SSE__)
-    _mm_sfence(); /* streaming stores are weakly ordered: done before the row pass reads them */
-#endif
+    stream_fence(); /* done before the row pass reads them */
 }
 
 /* A block of output rows (count floats, contiguous, 64-byte aligned) from
@@ -231,13 +251,8 @@ static void store_tile_streaming(float *restrict dst, const float *restrict src,
  * store_tile_streaming. Hand-written because FFTW writes with ordinary stores. */
 static void store_rows_streaming(float *restrict dst, const float *restrict src, size_t count)
 {
-#if defined(__SSE__)
-    for (size_t i = 0; i < count; i += 4)
-        _mm_stream_ps(dst + i, _mm_load_ps(src + i));
-    _mm_sfence();
-#else
-    memcpy(dst, src, count * sizeof(float));
-#endif
+    stream_floats(dst, src, count);
+    stream_fence();
 }
 
 /* Fill and z pass of tiles [t0, t1) of T kx columns, fused so that each
@@ -281,7 +296,7 @@ static void fill_tiles(void *arg, int t0, int t1, int worker)
                 column_spectrum(spec + 2 * j * sd, h + 2 * j * sd,
                                 ocean_amp_col(g->ampc, n, c0 + j) + 4 * (size_t)n, kz, k, n);
             fftwf_execute_dft(g->col_plan, (fftwf_complex *)z, (fftwf_complex *)z);
-            if ((n >= OCEAN_STREAM_STORE_FROM_N || (c->skip & OCEAN_STORE_STREAMING)) && !(c->skip & OCEAN_STORE_FFTW))
+            if (streams(c, OCEAN_STREAM_STORE_FROM_N))
                 store_tile_streaming(g->col[k], z, n, g->nh, T, sd, c0);
             else
                 fftwf_execute_dft(g->store_plan, (fftwf_complex *)z,
@@ -413,7 +428,7 @@ static void row_blocks(void *arg, int b0, int b1, int worker)
     float *buf = g->scratch + (size_t)worker * g->scratch_floats;
     float *terms = ocean_row_jacobian_terms(buf, n);
     float *rows = terms + (size_t)3 * B * n; /* a block of output rows before its streaming store */
-    const bool stream = (n >= OCEAN_STREAM_OUT_FROM_N || (c->skip & OCEAN_STORE_STREAMING)) && !(c->skip & OCEAN_STORE_FFTW);
+    const bool stream = streams(c, OCEAN_STREAM_OUT_FROM_N);
     static const struct {
         enum ocean_transform tr;
         enum ocean_column col;
@@ -485,6 +500,8 @@ static int step_threads(const struct ocean_grid *g)
 
 void ocean_step_parts(struct ocean *o, double t, unsigned fields, unsigned skip)
 {
+    if ((skip & OCEAN_ROWS_C2R) && ocean_reference_row_plan(o->g) != 0)
+        return;
     unsigned tm = ocean_transforms_for(fields);
     struct fill_ctx c = {o, o->g, ocean_phase_time(o, t), columns_for(tm), tm, skip, NULL, 1.0f};
     run_step(&c, step_threads(o->g));
