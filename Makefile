@@ -12,14 +12,27 @@ PKGS    := fftw3f libwebsockets libcjson libzstd zlib
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wno-unused-parameter
 CFLAGS  ?= -O2 -g
 CFLAGS  += -std=c11 -D_GNU_SOURCE $(WARN) -pthread
-# Include paths are per target so that dependencies run one way:
-#   server/sim/ (the simulation library) sees only its own headers;
+# Include paths are per folder so that dependencies run one way: a file
+# that includes a header from a folder it may not depend on does not compile.
+#   server/sim/ (the simulation library) sees only its own headers and common/;
 #   proto/c/ (protocol + codec) sees only its own;
-#   everything else (daemon, tools, tests) sees the library's public header
-#   folder server/sim/include and proto/c, never server/sim's internals.
-# Tests and benchmarks of the library itself add server/sim (mk/sim.mk).
-INC     := -Iserver -Iserver/sim/include -Iproto/c
-$(BUILD)/obj/server/sim/%.o $(BUILD)/san/server/sim/%.o: INC := -Iserver/sim/include -Iserver/sim
+#   server/<folder>/ sees its own folder and those below it, in this order:
+#   base (log, clock, metrics, files) and control (messages) -> config, query
+#   -> tick -> net -> roles (+ cluster) -> main.c.
+# Tools, tests and benchmarks see the daemon's folders and the library's
+# public header folder server/sim/include; the library's own tests add
+# server/sim (mk/sim.mk).
+INC_base    := -Iserver/base
+INC_control := -Iserver/control -Iserver/sim/include -Iproto/c
+INC_config  := -Iserver/config $(INC_base) $(INC_control)
+INC_query   := -Iserver/query $(INC_base) $(INC_control) -Iserver/common
+INC_tick    := -Iserver/tick $(INC_query)
+INC_net     := -Iserver/net $(INC_tick) -Iserver/config
+INC_roles   := -Iserver/roles $(INC_net) -Iserver/cluster
+INC         := $(INC_roles)
+$(foreach d,base control config query tick net roles,\
+  $(eval $(BUILD)/obj/server/$(d)/%.o $(BUILD)/san/server/$(d)/%.o: INC := $$(INC_$(d))))
+$(BUILD)/obj/server/sim/%.o $(BUILD)/san/server/sim/%.o: INC := -Iserver/sim/include -Iserver/sim -Iserver/common
 $(BUILD)/obj/proto/c/%.o $(BUILD)/san/proto/c/%.o: INC := -Iproto/c
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lfftw3f_threads -lm

@@ -9,7 +9,7 @@
 #                                WebSocket clients; kill/restart cycles), and the same against
 #                                the ASan+UBSan daemon (fewer cycles)
 # oceand links the module for --role sim|edge (mk/daemon.mk); only the role
-# glue (server/role_*.c) sees server/cluster/.
+# glue (server/roles/) sees server/cluster/.
 
 CLUSTER_SRCS    := $(sort $(wildcard server/cluster/*.c))
 CLUSTER_LIB     := $(BUILD)/libcluster.a
@@ -25,8 +25,6 @@ TESTS += test-cluster test-cluster-valgrind test-cluster-roles
 # internals, no daemon headers, no libwebsockets.
 $(patsubst %.c,$(BUILD)/obj/%.o,$(CLUSTER_SRCS)) $(patsubst %.c,$(BUILD)/san/%.o,$(CLUSTER_SRCS)): \
   INC := -Iserver/cluster -Iproto/c
-
-$(BUILD)/obj/server/role_%.o $(BUILD)/san/server/role_%.o: INC += -Iserver/cluster
 
 $(CLUSTER_LIB): $(patsubst %.c,$(BUILD)/obj/%.o,$(CLUSTER_SRCS))
 	@mkdir -p $(dir $@)

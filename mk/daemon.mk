@@ -1,12 +1,13 @@
 # mk/daemon.mk — the oceand daemon (issue 4): binary, integration tests, load bench, `make run`.
 
-DAEMON_SRC := server/main.c server/config.c server/control.c server/sim_thread.c server/frame.c server/layer_stream.c \
-              server/encode_pool.c server/capacity.c server/net/capacity.c \
-              server/net/context.c server/net/upgrade.c server/net/session.c server/net/dispatch.c \
-              server/net/fanout.c server/net/http.c server/net/cluster.c server/net/rx_guard.c \
-              server/role_sim.c server/role_edge.c server/role_link.c \
-              server/metrics.c server/state.c server/state_saver.c server/log.c \
-              server/query_msg.c server/query_worker.c server/probe.c
+# Every .c file of the daemon's folders (the simulation library and the
+# cluster transport are libraries of their own: mk/sim.mk, mk/cluster.mk).
+DAEMON_DIRS := base control config query tick net roles
+DAEMON_SRC  := server/main.c $(sort $(foreach d,$(DAEMON_DIRS),$(wildcard server/$(d)/*.c)))
+# The parts that tests and fuzzers link on their own.
+BASE_OBJ    := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard server/base/*.c))
+CONTROL_OBJ := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard server/control/*.c))
+CONFIG_OBJ  := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard server/config/*.c))
 DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o)
 DAEMON_SAN_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/san/%.o)
 OCEAN_LIB ?= $(BUILD)/libocean.a
@@ -27,13 +28,13 @@ $(BUILD)/san/oceand: $(DAEMON_SAN_OBJ) $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB) $(CLUST
 
 # Unit test of the pure control module (parse/validate), and the frame checker
 # the integration tests use to decode frames and compare with the library.
-$(BUILD)/test_control: $(BUILD)/obj/tests/daemon/test_control.o $(BUILD)/obj/server/control.o \
-                       $(BUILD)/obj/server/capacity.o $(BUILD)/obj/server/config.o $(BUILD)/obj/server/state.o $(BUILD)/obj/server/log.o $(OCEAN_LIB) $(PROTO_LIB)
+$(BUILD)/test_control: $(BUILD)/obj/tests/daemon/test_control.o $(CONTROL_OBJ) \
+                       $(BUILD)/obj/server/tick/capacity.o $(CONFIG_OBJ) $(BASE_OBJ) $(OCEAN_LIB) $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
-$(BUILD)/san/test_control: $(BUILD)/san/tests/daemon/test_control.o $(BUILD)/san/server/control.o \
-                       $(BUILD)/san/server/capacity.o $(BUILD)/san/server/config.o $(BUILD)/san/server/state.o $(BUILD)/san/server/log.o $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB)
+$(BUILD)/san/test_control: $(BUILD)/san/tests/daemon/test_control.o $(CONTROL_OBJ:$(BUILD)/obj/%=$(BUILD)/san/%) \
+                       $(BUILD)/san/server/tick/capacity.o $(CONFIG_OBJ:$(BUILD)/obj/%=$(BUILD)/san/%) $(BASE_OBJ:$(BUILD)/obj/%=$(BUILD)/san/%) $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB)
 	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
-$(BUILD)/frame_check: $(BUILD)/obj/tests/daemon/frame_check.o $(BUILD)/obj/server/control.o $(OCEAN_LIB) $(PROTO_LIB)
+$(BUILD)/frame_check: $(BUILD)/obj/tests/daemon/frame_check.o $(CONTROL_OBJ) $(OCEAN_LIB) $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 
 # (prerequisites are expanded where a rule is read: the whole list comes first)
@@ -88,8 +89,15 @@ $(BUILD)/load_client: $(BUILD)/obj/bench/load_client.o
 
 # Point queries and probes (issue 14): the probe accuracy test and the exact
 # reference the daemon tests compare `query_result` with.
-$(BUILD)/test_probe: $(BUILD)/obj/tests/daemon/test_probe.o $(BUILD)/obj/server/probe.o $(BUILD)/obj/server/query_msg.o \
-                     $(BUILD)/obj/server/control.o $(OCEAN_LIB)
+$(BUILD)/test_probe: $(BUILD)/obj/tests/daemon/test_probe.o $(BUILD)/obj/server/query/probe.o $(CONTROL_OBJ) $(OCEAN_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
-$(BUILD)/query_ref: $(BUILD)/obj/tests/daemon/query_ref.o $(BUILD)/obj/server/query_msg.o $(BUILD)/obj/server/control.o $(OCEAN_LIB)
+$(BUILD)/query_ref: $(BUILD)/obj/tests/daemon/query_ref.o $(CONTROL_OBJ) $(OCEAN_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+
+# The tree's shape (tests/layout/test_layout.py): main.c and folders in
+# server/, no daemon file over 800 lines, no two files of one name, internal
+# headers kept inside their folder, no parameter looked up by name.
+TESTS += test-layout
+.PHONY: test-layout
+test-layout:
+	/usr/bin/python3 tests/layout/test_layout.py .

@@ -9,7 +9,7 @@
 
 FUZZ_CC      := clang
 FUZZ_FLAGS   := -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=fuzzer,address,undefined \
-                -fno-sanitize-recover=all -Iserver -Iserver/sim/include -Iserver/sim -Iproto/c $(WARN)
+                -fno-sanitize-recover=all $(INC) -Iserver/sim $(WARN)
 FUZZ_SECONDS ?= 60
 FUZZ_CI_SECONDS ?= 10
 FUZZ_TARGETS := control frame config
@@ -26,21 +26,21 @@ FUZZ_TARGETS += inflate
 FUZZ_FLAGS_config := -fno-sanitize-coverage=trace-cmp
 
 SIM_SRCS_FOR_FUZZ = $(wildcard server/sim/*.c)
-FUZZ_SRCS_control = fuzz/fuzz_control.c server/control.c $(SIM_SRCS_FOR_FUZZ)
+FUZZ_SRCS_control = fuzz/fuzz_control.c $(wildcard server/control/*.c) $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_frame   = fuzz/fuzz_frame.c $(wildcard proto/c/*.c)
-FUZZ_SRCS_config  = fuzz/fuzz_config.c server/config.c server/control.c server/state.c server/log.c \
+FUZZ_SRCS_config  = fuzz/fuzz_config.c $(wildcard server/config/*.c server/control/*.c server/base/*.c) \
                     $(SIM_SRCS_FOR_FUZZ)
-FUZZ_SRCS_query   = fuzz/fuzz_query.c server/query_msg.c server/probe.c server/control.c $(SIM_SRCS_FOR_FUZZ)
+FUZZ_SRCS_query   = fuzz/fuzz_query.c server/query/probe.c $(wildcard server/control/*.c) $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_cluster = fuzz/fuzz_cluster.c $(wildcard server/cluster/cluster_*.c) proto/c/oc_header.c
 $(BUILD)/fuzz/fuzz_cluster: $(wildcard server/cluster/*.[ch])
-FUZZ_SRCS_netwire = fuzz/fuzz_netwire.c server/net/upgrade.c server/metrics.c server/log.c
+FUZZ_SRCS_netwire = fuzz/fuzz_netwire.c server/net/upgrade.c server/base/metrics.c server/base/log.c
 $(BUILD)/fuzz/fuzz_netwire: $(wildcard server/net/*.[ch])
 # The web client's WebAssembly inflater (mk/wasm.mk), natively, against zlib.
 FUZZ_SRCS_inflate = fuzz/fuzz_inflate.c proto/wasm/oc_inflate.c
 FUZZ_FLAGS_inflate := -Iproto/wasm
 $(BUILD)/fuzz/fuzz_inflate: $(wildcard proto/wasm/*.[ch])
 
-$(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*.c server/*.h server/sim/*.[ch] server/sim/include/*.h proto/c/*.c proto/c/*.h)
+$(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*/*.[ch] server/sim/*.[ch] server/sim/include/*.h proto/c/*.c proto/c/*.h)
 	@mkdir -p $(dir $@)
 	$(FUZZ_CC) $(FUZZ_FLAGS) $(FUZZ_FLAGS_$*) $(PKG_CFLAGS) $(FUZZ_SRCS_$*) -o $@ $(PKG_LIBS) $(FUZZ_EXTRA_LIBS)
 

@@ -83,7 +83,7 @@ static void install_signals(void)
 }
 
 /* --role edge: no simulation here; frames, hello and answers come from the
- * sim over NATS (server/role_edge.c). Nothing to save: an edge is stateless. */
+ * sim over NATS (server/roles/role_edge.c). Nothing to save: an edge is stateless. */
 static int run_edge(const struct daemon_config *dc, struct net *net)
 {
     char err[512];

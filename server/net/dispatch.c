@@ -25,21 +25,18 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
 {
     if (!n->sim && !n->cluster.demand)
         return;
-    for (int c = 0; c < CTL_MAX_CASCADES; c++) {
-        int lod, bound_index;
-        unsigned fields = subscription_cascade(sub, c, &lod, &bound_index);
-        for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
-            if (fields & OCEAN_FIELD_BIT(f)) {
-                int key = layer_key_cascade(c, f, c == 0 ? subscription_lod(sub, f) : lod, bound_index);
-                if (n->cluster.demand) /* edge: the sim is elsewhere */
-                    n->cluster.demand(n->cluster.user, key, delta);
-                else {
-                    sim_demand(n->sim, key, delta);
-                    if (sub->temporal) /* the temporal codec: every cascade's layers */
-                        sim_demand_temporal(n->sim, key, delta);
-                }
+    int keys[LAYER_KEYS_ALL] = { 0 };
+    subscription_layer_keys(sub, keys, 1);
+    for (int key = 0; key < LAYER_KEYS_ALL; key++)
+        if (keys[key]) {
+            if (n->cluster.demand) /* edge: the sim is elsewhere */
+                n->cluster.demand(n->cluster.user, key, delta);
+            else {
+                sim_demand(n->sim, key, delta);
+                if (sub->temporal) /* the temporal codec: every cascade's layers */
+                    sim_demand_temporal(n->sim, key, delta);
             }
-    }
+        }
 }
 
 /* ---- sets in flight ---- */
@@ -130,16 +127,10 @@ static cJSON *with_name(cJSON *m, const char *name)
 }
 
 /* name: the message's own checked "name" (applied with the set), or NULL. */
-static void submit_set(struct net *n, struct session *s, const struct remote *rm, const cJSON *params,
-                       const char *name, const cJSON *id)
+/* A checked change: out is the view after it, changed the rows it changes. */
+static void submit_change(struct net *n, struct session *s, const struct remote *rm, const struct ocean_params *out,
+                          uint64_t changed, const char *name, const cJSON *id)
 {
-    struct ctl_error e;
-    struct ocean_params out;
-    uint64_t changed;
-    if (control_apply_params(params, &n->view, &n->lim, &out, &changed, &e) != 0) {
-        respond_error(s, rm, &e, id);
-        return;
-    }
     if (name && s)
         snprintf(s->name, sizeof s->name, "%s", name);
     const char *by_name = name ? name : s ? s->name : "";
@@ -171,20 +162,14 @@ static void submit_set(struct net *n, struct session *s, const struct remote *rm
     }
     snprintf(r->by_name, sizeof r->by_name, "%s", by_name);
     r->id = idc;
-    r->values = set->values = out;
+    r->values = set->values = *out;
     r->mask = set->mask = changed;
     lws_dll2_add_tail(&r->list, &n->requests);
-    n->view = out;
+    n->view = *out;
     sim_submit(n->sim, set);
 }
 
 /* ---- answers from the sim ---- */
-
-static uint64_t resolution_bit(void)
-{
-    const struct param_def *d = param_find("resolution");
-    return d ? 1ull << (d - param_table) : 0;
-}
 
 /* `params` for one applied set; with tile_size when N changed, since the
  * tile side follows N below the configured size (hello has it too). */
@@ -192,7 +177,7 @@ static cJSON *params_msg(struct net *n, const struct ocean_params *p, uint32_t v
                          const char *by, const char *by_name, const cJSON *id)
 {
     cJSON *m = with_name(control_params_msg(p, version, changed, by, id), by_name);
-    if (m && (changed & resolution_bit())) {
+    if (m && (changed & params_mask(PARAM_REPLAN))) {
         cJSON_AddNumberToObject(m, "tile_size", net_tile_size(n));
         net_capacity_add(n, m); /* the encode budget follows N; ~1.5 kB, so only then */
     }
@@ -231,7 +216,7 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
     struct session *origin = r->reply ? NULL : session_find(n, r->serial);
     struct remote rm = { .origin = r->origin, .by = r->by, .reply = r->reply, .ctx = r->reply_ctx };
     if (a->status == SIM_SET_APPLIED) {
-        if (a->changed & resolution_bit())
+        if (a->changed & params_mask(PARAM_REPLAN))
             n->trim_due = mono_now() + TRIM_DELAY_S;
         if (n->on_params)
             n->on_params(n->on_params_user, &n->applied, n->applied_version);
@@ -547,16 +532,22 @@ void dispatch_query_results(struct net *n)
     }
 }
 
-/* set / pause / resume (pause and resume are sets of `paused`). */
+/* set / pause / resume: a set is checked against the view; pause and
+ * resume change the playback flag and nothing else. */
 static void submit_control(struct net *n, struct session *s, const struct remote *rm, const struct ctl_msg *m)
 {
+    struct ocean_params out = n->view;
     if (m->type == CTL_SET) {
-        submit_set(n, s, rm, m->params, m->name, m->id);
+        struct ctl_error e;
+        uint64_t changed;
+        if (control_apply_params(m->params, &n->view, &n->lim, &out, &changed, &e) != 0) {
+            respond_error(s, rm, &e, m->id);
+            return;
+        }
+        submit_change(n, s, rm, &out, changed, m->name, m->id);
     } else {
-        cJSON *p = cJSON_CreateObject();
-        cJSON_AddBoolToObject(p, "paused", m->type == CTL_PAUSE);
-        submit_set(n, s, rm, p, m->name, m->id);
-        cJSON_Delete(p);
+        out.paused = m->type == CTL_PAUSE;
+        submit_change(n, s, rm, &out, params_diff(&n->view, &out), m->name, m->id);
     }
 }
 

@@ -4,7 +4,7 @@
  * Every function and field here belongs to the lws service thread (the one
  * that calls net_service), unless its comment says otherwise; nothing here is
  * locked. Data from the simulation arrives only through sim_latest,
- * sim_take_answers and sim_seq (server/sim_thread.h), on that thread, after
+ * sim_take_answers and sim_seq (server/tick/sim_thread.h), on that thread, after
  * lws_cancel_service woke it (LWS_CALLBACK_EVENT_WAIT_CANCELLED in
  * session.c). docs/threads.md has the whole contract.
  *
@@ -217,7 +217,7 @@ void fanout_session_free(struct session *s);
 void fanout_subscribed(struct net *n, struct session *s);
 void fanout_want_keyframes(struct net *n, struct session *s, bool want);
 
-/* capacity.c: capacity in hello/params, `busy`, `degraded` (server/capacity.h) */
+/* capacity.c: capacity in hello/params, `busy`, `degraded` (server/tick/capacity.h) */
 void net_capacity_add(struct net *n, cJSON *msg);            /* "capacity" member into msg */
 bool net_capacity_admit(struct net *n, struct session *s, const struct subscription *want, struct ctl_error *e);
 void net_capacity_tell(struct net *n, struct session *s);    /* `degraded` if s's group is degraded now */

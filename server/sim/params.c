@@ -33,9 +33,9 @@ static const char *const transform_names[] = {"fft", "dft", NULL};
 const struct param_def param_table[] = {
     P("resolution", PARAM_INT, "", 16, 2048, 256, NULL,
      "grid samples per side N (power of two); changing it re-plans the FFT", resolution,
-     PARAM_POW2 | PARAM_REPLAN),
+     PARAM_POW2 | PARAM_REPLAN | PARAM_PHASE),
     P("patch_size", PARAM_FLOAT, "m", 1, 10000, 256, NULL,
-     "side L of the periodic square patch", patch_size, 0),
+     "side L of the periodic square patch", patch_size, PARAM_PHASE),
     P("cascades", PARAM_INT, "", 1, 4, CASCADES_DEFAULT, NULL,
      "periodic patches summed: cascade c has side L / 3.543^c and adds the wavenumbers the coarser ones "
      "cannot hold (docs/simulation.md, Cascades)", cascades, 0),
@@ -54,7 +54,7 @@ const struct param_def param_table[] = {
      fetch, 0),
     P("depth", PARAM_FLOAT, "m", 0.5, 10000, 1000, NULL,
      "water depth: dispersion w^2 = g k tanh(k d) and horizontal displacement coth(k d) for all spectra, plus the TMA attenuation",
-     depth, 0),
+     depth, PARAM_PHASE),
     P("gamma", PARAM_FLOAT, "", 1, 10, 3.3, NULL,
      "JONSWAP peak enhancement (1 = Pierson-Moskowitz shape)", gamma, 0),
     P("directional_spread", PARAM_FLOAT, "", 0, 1, 1, NULL,
@@ -71,9 +71,9 @@ const struct param_def param_table[] = {
      small_wave_cutoff, 0),
     P("loop_period", PARAM_FLOAT, "s", 0, 3600, 0, NULL,
      "the sea repeats exactly after this time (wave frequencies quantised); 0 = never",
-     loop_period, 0),
+     loop_period, PARAM_PHASE),
     P("seed", PARAM_INT, "", 0, 2147483647, 1, NULL,
-     "random seed; the same seed gives the same waves at any resolution", seed, 0),
+     "random seed; the same seed gives the same waves at any resolution", seed, PARAM_PHASE),
     P("transform", PARAM_ENUM, "", 0, 1, TRANSFORM_FFT, transform_names,
      "fft (FFTW) or dft (the brute-force O(N^4) sum, N <= 64 only)", transform, 0),
     P("time_scale", PARAM_FLOAT, "", 0, 16, 1, NULL,
@@ -387,4 +387,47 @@ int params_validate(const struct ocean_params *p, char *err, size_t errlen)
         return -1;
     }
     return 0;
+}
+
+/* ---- whole parameter sets, as masks of param_table rows ---- */
+
+uint64_t params_mask(unsigned flags)
+{
+    uint64_t m = 0;
+    for (size_t i = 0; i < param_count && i < 64; i++)
+        if (param_table[i].flags & flags)
+            m |= 1ull << i;
+    return m;
+}
+
+const struct param_def *param_with_flag(unsigned flag)
+{
+    for (size_t i = 0; i < param_count; i++)
+        if (param_table[i].flags & flag)
+            return &param_table[i];
+    return NULL;
+}
+
+struct ocean_params params_with(const struct ocean_params *base, const struct ocean_params *values, uint64_t mask)
+{
+    struct ocean_params p = *base;
+    char err[64];
+    for (size_t i = 0; i < param_count && i < 64; i++)
+        if (mask & (1ull << i))
+            param_set(&p, &param_table[i], param_get(values, &param_table[i]), err, sizeof err);
+    return p;
+}
+
+uint64_t params_diff(const struct ocean_params *a, const struct ocean_params *b)
+{
+    uint64_t m = 0;
+    for (size_t i = 0; i < param_count && i < 64; i++)
+        if (param_get(a, &param_table[i]) != param_get(b, &param_table[i]))
+            m |= 1ull << i;
+    return m;
+}
+
+bool params_physics_differ(const struct ocean_params *a, const struct ocean_params *b)
+{
+    return (params_diff(a, b) & ~params_mask(PARAM_PLAYBACK)) != 0;
 }

@@ -15,6 +15,7 @@
 #include "capacity.h"
 #include "config.h"
 #include "control.h"
+#include "fileio.h"
 #include "log.h"
 #include "oc_proto.h"
 #include "ocean.h"
@@ -531,7 +532,7 @@ static void test_hello_matches_vector(void)
 {
     char *text, err[256];
     size_t len;
-    if (config_read_file("proto/vectors/control/01_hello.json", 1 << 20, &text, &len, err, sizeof err) != 0) {
+    if (file_read_all("proto/vectors/control/01_hello.json", 1 << 20, &text, &len, err, sizeof err) != 0) {
         CHECK(0, "vector: %s (run from the repository root)", err);
         return;
     }

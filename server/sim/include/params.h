@@ -40,7 +40,7 @@ struct ocean_params {
 
 /* One settings-table shape for everything configurable: the sea parameters
  * below (param_table, offsets into struct ocean_params) and the daemon's own
- * options (server/config.c, offsets into its struct daemon_config) are rows
+ * options (server/config/config.c, offsets into its struct daemon_config) are rows
  * of struct param_def, and both are checked by the same setters here. */
 enum param_type { PARAM_INT, PARAM_FLOAT, PARAM_ENUM, PARAM_BOOL, PARAM_STRING };
 
@@ -51,6 +51,8 @@ enum param_flags {
     PARAM_LIVE      = 1u << 3, /* may change while running (a JSON `set`) */
     PARAM_RESTART   = 1u << 4, /* read at start-up only (daemon options) */
     PARAM_SECRET    = 1u << 5, /* value never printed (help, errors, logs) */
+    PARAM_PHASE     = 1u << 6, /* changing it gives the sea other phases (or another grid):
+                                  the frames before do not predict the new ones */
 };
 
 struct param_def {
@@ -68,7 +70,7 @@ struct param_def {
 };
 
 /* Why a value was refused. The daemon maps these to its wire error codes
- * (server/control.c), so every path (config file, flags, JSON `set`, state
+ * (server/control/control.c), so every path (config file, flags, JSON `set`, state
  * file) reports the same fault the same way. */
 enum param_error {
     PARAM_OK = 0,
@@ -125,6 +127,16 @@ int param_set_text(struct ocean_params *p, const struct param_def *d, const char
 const char *param_enum_name(const struct param_def *d, int index);
 /* Index of an ENUM name, or -1. */
 int param_enum_index(const struct param_def *d, const char *name);
+/* Bit i set for every row i of param_table whose flags include any of flags. */
+uint64_t params_mask(unsigned flags);
+/* The first row of param_table with flag (PARAM_REPLAN: the resolution), or NULL. */
+const struct param_def *param_with_flag(unsigned flag);
+/* base with the parameters in mask (bits of param_table rows) taken from values. */
+struct ocean_params params_with(const struct ocean_params *base, const struct ocean_params *values, uint64_t mask);
+/* The rows whose values differ between a and b, as a mask. */
+uint64_t params_diff(const struct ocean_params *a, const struct ocean_params *b);
+/* Whether a and b give different seas (anything but playback differs). */
+bool params_physics_differ(const struct ocean_params *a, const struct ocean_params *b);
 /* Whole-set checks that no single range can express (e.g. DFT only for
  * small N). Returns 0, or -1 with a message in err. */
 int params_validate(const struct ocean_params *p, char *err, size_t errlen);

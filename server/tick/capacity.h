@@ -11,7 +11,7 @@
  *   - the encode budget: samples per tick that may be encoded at N (what a
  *     frame may take, 80 % of the tick, minus the step), or --encode-budget;
  *     a subscription that would push the distinct layers past it is refused
- *     with `busy` (the lws thread, capacity_admit in server/net/capacity.c);
+ *     with `busy` (the lws thread, capacity_admit in server/net/degraded.c);
  *   - the plan of each tick (capacity_plan): when demand does not fit, the
  *     ladder, one rung after the other: a subscription group (same LOD and
  *     bound) with temporal clients is encoded intra at its own LOD (same
@@ -45,17 +45,17 @@ struct cost_model {
                                    CAP_TEMPORAL_PRIOR x intra. Kept apart because it is twice
                                    the intra figure (N = 1024 h/dx/dz, two cores: 7.0 against
                                    3.3-3.6 ns/sample) and a group degraded to a coarser LOD is
-                                   sent intra (frame.c): one figure for both measured the cheap
+                                   sent intra (frame_job.c): one figure for both measured the cheap
                                    codec while degraded, predicted that lod 0 fit, went back, and
                                    degraded again within 0.2 s (flapping every 3.5 s) */
     double temporal_ratio;      /* temporal / intra cost per sample measured at start-up (a few ticks
-                                   of one stream, sim_thread.c measure_model), 0 = not measured:
+                                   of one stream, calibrate.c), 0 = not measured:
                                    CAP_TEMPORAL_PRIOR. What enc_temporal_s starts from and goes back
                                    to when forgotten (the prior of 2 went stale when the encoder got
                                    1.5x faster: 2048 height stayed degraded, its probe never fitting) */
     double penalty;             /* transient factor on both costs (<= 1 = none): x1.25 for each tick
                                    the producer had not even started the frame before, back
-                                   toward 1 on each tick it had (sim_thread.c, tick). Kept apart
+                                   toward 1 on each tick it had (tick.c). Kept apart
                                    from the EWMAs, which frames update: a plan degraded by it
                                    makes frames rare, so frames alone would undo it only slowly.
                                    Not used for admission (cost_encode_budget) */
@@ -78,7 +78,7 @@ double cost_encode_codec_s(const struct cost_model *m, int codec);
  * times the steady figure (first frames of 1024 h/dx/dz temporal: 11-27
  * ns/sample against 7) and used to degrade a subscription before it had
  * been served once. Sustained slowness still raises it 10 % a frame;
- * overruns raise the penalty at once (sim_thread.c). */
+ * overruns raise the penalty at once (tick.c, penalize_overrun). */
 void cost_learn_encode(struct cost_model *m, const long samples[CAP_CODECS], double seconds);
 
 /* Samples per tick the distinct layers may add up to at resolution n (the
@@ -104,7 +104,7 @@ struct plan {
                                        sizes cost, the step and the frame budget */
 };
 
-/* The re-plan's hysteresis (sim_thread.c, update_plan), as budget scales:
+/* The re-plan's hysteresis (plan_governor.c), as budget scales:
  * a less degraded plan is taken only when it fits CAP_RECOVER_SCALE of the
  * budget; the plan in force is dropped only when it no longer fits
  * CAP_KEEP_SCALE of it. A new demand is planned at 1. Without the upper band
@@ -134,7 +134,7 @@ static inline bool plan_degraded_for(const struct plan *p, int group, bool tempo
     return plan_degraded(p, group) || (temporal_client && plan_intra(p, group));
 }
 /* Samples (x rate) served intra by the codec rung: at equal plan_value, the
- * plan with fewer is the better one (sim_thread.c, update_plan). */
+ * plan with fewer is the better one (plan_governor.c). */
 double plan_intra_value(const struct plan *p, int n);
 /* What the plan delivers, comparable between plans of the same demand:
  * sum over groups of rate * samples encoded. */
@@ -142,7 +142,7 @@ double plan_value(const struct plan *p, int n);
 bool plan_same(const struct plan *a, const struct plan *b);
 /* Forget the temporal figure (back to temporal_ratio, or the prior, x intra): what a
  * degraded group's recovery probe assumes when no temporal layer has been
- * encoded to keep it current (sim_thread.c, update_plan). */
+ * encoded to keep it current (plan_governor.c). */
 void cost_forget_temporal(struct cost_model *m);
 /* Encode work per codec the plan asks for, in LOD-0 samples (a sample at LOD
  * L counts 2^L: what the per-sample figures are learned and priced in; only

@@ -1,4 +1,4 @@
-/* capacity.c — the network side of server/capacity.h (issue 15, issue 16
+/* capacity.c — the network side of server/tick/capacity.h (issue 15, issue 16
  * defect 2): the `capacity` member of hello and params, `busy` for a
  * subscription that would push the distinct layers past the encode budget,
  * and `degraded` to the clients whose subscription group the tick serves
@@ -39,7 +39,7 @@ bool net_capacity_admit(struct net *n, struct session *s, const struct subscript
 /* `degraded` for one client: how its group is served now. A temporal
  * client gets codec 3 tiles only from a group encoded temporal: at its own
  * LOD and not on the codec rung (plan_intra; a coarser LOD is intra too,
- * frame.c); it is told the codec either way. */
+ * frame_job.c); it is told the codec either way. */
 static void tell(struct net *n, struct session *s, const struct plan *p)
 {
     int g = plan_group(s->sub.lod, s->sub.bound_index);

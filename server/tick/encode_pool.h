@@ -1,7 +1,7 @@
 /* encode_pool.h — the daemon's frame-encoding threads.
  *
  * A persistent pool that runs one job at a time, asynchronously: the
- * producer (sim_thread.c) starts the encode of tick t and goes on to step
+ * producer (producer.c) starts the encode of tick t and goes on to step
  * tick t+1 while the pool works. Items are handed out one at a time from a
  * shared counter (a descheduled worker on a shared machine does not hold the
  * others up); which worker encodes an item never changes the bytes.

@@ -173,7 +173,7 @@ void capacity_plan(const struct cost_model *m, int n, int ts, const int demand[L
      *    most); when none is left, or the samples themselves are over
      *    --encode-budget (which no codec helps), the largest group goes one
      *    LOD coarser (a quarter of the samples each time; its layers go
-     *    intra too, frame.c). */
+     *    intra too, frame_job.c). */
     bool rung_codec = false, rung_lod = false, rung_rate = false;
     while ((double)total > scap || (double)total_temporal > tcap || total_t > left) {
         int worst = -1;
@@ -323,7 +323,9 @@ void capacity_info_fill(const struct cost_model *m, int n, struct capacity_info 
     c->tick_ms = m->period_s * 1e3;
     c->budget_ms = m->budget_s * 1e3;
     c->encode_budget = cost_encode_budget(m, n);
-    const struct param_def *d = param_find("resolution");
+    const struct param_def *d = param_with_flag(PARAM_REPLAN); /* N */
+    struct ocean_params defaults;
+    params_defaults(&defaults);
     int lo = d ? (int)d->min : 16, hi = d ? (int)d->max : 2048;
     int first = lo;
     while (hi / first >= (1 << CAPACITY_MAX_SIZES)) /* the largest sizes, if the range is wide */
@@ -333,8 +335,7 @@ void capacity_info_fill(const struct cost_model *m, int n, struct capacity_info 
         z->n = size;
         /* Memory at the default cascade count (one grid each): the announcement
          * does not follow later changes of `cascades` (set checks them itself). */
-        const struct param_def *cd = param_find("cascades");
-        z->fits_memory = control_fits_memory(size, cd ? (int)cd->def : 1, m->max_memory_mb);
+        z->fits_memory = control_fits_memory(size, defaults.cascades, m->max_memory_mb);
         if (z->fits_memory)
             c->max_resolution = size;
         /* The ladder's first rungs at lod 0 and the full rate: the temporal

@@ -1,7 +1,7 @@
 /* cluster.c — the network side of --role sim|edge (net.h, docs/scaling.md):
  * frames, hello and params events that come from a simulation in another
  * process, the cluster status banner, and the sim's hello for edges. The
- * role logic itself (NATS) is in server/role_sim.c and server/role_edge.c;
+ * role logic itself (NATS) is in server/roles/role_sim.c and server/roles/role_edge.c;
  * everything here runs on the lws service thread. */
 #include "net_internal.h"
 

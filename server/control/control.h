@@ -100,7 +100,7 @@ int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const
                          struct ocean_params *out, uint64_t *changed, struct ctl_error *e);
 
 /* One JSON value onto one setting of either table (a sea parameter, or a
- * daemon option of server/config.c), base being the struct the table's
+ * daemon option of server/config/config.c), base being the struct the table's
  * offsets point into. Only the JSON type is checked here (numbers for int
  * and float, strings for enum and string, booleans for bool); the value is
  * checked by params.c's setters. Returns 0, or -1 with e filled and *base
@@ -127,7 +127,7 @@ cJSON *control_params_msg(const struct ocean_params *p, uint32_t version, uint64
                           const char *by, const cJSON *id);
 cJSON *control_subscribed_msg(const struct subscription *s, const cJSON *id);
 cJSON *control_pong_msg(const cJSON *id, bool has_t, double t, uint64_t server_time_us);
-/* What this daemon can do (server/capacity.h): announced in hello and
+/* What this daemon can do (server/tick/capacity.h): announced in hello and
  * params as "capacity" (PROTOCOL.md). */
 #define CAPACITY_MAX_SIZES 8
 struct capacity_info {

@@ -11,8 +11,8 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "config.h"
 #include "control.h"
+#include "fileio.h"
 #include "log.h"
 #include "ocean.h"
 
@@ -79,7 +79,7 @@ int state_load(const char *path, struct ocean_params *p, uint32_t *version, doub
 {
     char *buf;
     size_t len;
-    int rc = config_read_file(path, STATE_MAX_BYTES, &buf, &len, err, errlen);
+    int rc = file_read_all(path, STATE_MAX_BYTES, &buf, &len, err, errlen);
     if (rc == -1 && errno == ENOENT)
         return 0;
     if (rc != 0)

@@ -86,11 +86,5 @@ void config_usage(FILE *out, const char *argv0);
 /* The default --max-memory-mb: a quarter of MemTotal or of the cgroup's
  * memory limit, whichever is lower, at least 256. */
 int config_default_memory_mb(void);
-/* Read a whole regular file of at most max bytes into a malloc'd,
- * NUL-terminated *text (free()). Returns 0; -1 with a message in err (errno
- * kept: ENOENT for a missing file; a larger file is refused, never cut);
- * -2 when path is not a regular file (a FIFO, directory, device), refused
- * at once without reading or blocking. Used for the config and state files. */
-int config_read_file(const char *path, size_t max, char **text, size_t *len, char *err, size_t errlen);
 
 #endif

@@ -6,7 +6,7 @@
  * parameters the builder prepared -> plan which subscription groups are due
  * and at which LOD (capacity.h) -> hand the frame to the producer thread,
  * which steps the ocean for those fields, copies them out and starts their
- * encode on the encode pool (frame.c, encode_pool.h) -> the pool's last
+ * encode on the encode pool (frame_job.c, encode_pool.h) -> the pool's last
  * thread publishes the frame and wakes the network thread. The encode of
  * tick t runs while the producer steps tick t+1.
  * Parameter sets are built off the tick path by the builder (a new ocean
@@ -54,8 +54,6 @@ struct sim_set {
 };
 void sim_set_free(struct sim_set *set);
 
-/* base with the parameters in mask taken from values. */
-struct ocean_params params_with(const struct ocean_params *base, const struct ocean_params *values, uint64_t mask);
 
 struct sim_config {
     double tick_rate;
@@ -77,7 +75,7 @@ struct sim_config {
     void (*wake)(void *user);   /* called after every tick and every frame (lws_cancel_service) */
     void *wake_user;
     struct query_service *queries; /* point queries and probes (query_worker.h), NULL = none */
-    /* --role sim (server/role_sim.c); NULL otherwise. remote_demand runs on
+    /* --role sim (server/roles/role_sim.c); NULL otherwise. remote_demand runs on
      * the tick thread, on_frame on the encode thread that publishes the
      * frame (one at a time, in seq order); neither may block: remote_demand ORs the layer keys other
      * daemons want into bits (SIM_DEMAND_BYTES, bit k = layer key k) before

@@ -1,0 +1,192 @@
+/* builder.c — the builder thread: parameter sets checked and prepared off
+ * the tick path (ocean_prepare), and their application at a tick boundary
+ * (apply_prepared, on the tick thread while the producer is idle). */
+#include "tick_internal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+#include "log.h"
+#include "metrics.h"
+
+static void set_failed(struct sim_set *set, enum sim_set_status status, const char *msg)
+{
+    set->status = status;
+    snprintf(set->message, sizeof set->message, "%s", msg);
+}
+
+/* ocean_prepare against the ocean in force, or the test hook's simulated
+ * out-of-memory (see sim_thread.h). ocean_prepare only reads what the
+ * producer's ocean_step does not change, so it runs while frames are made;
+ * it never overlaps a commit (the tick commits before it clears ready_full,
+ * and the builder prepares only while ready_full is clear). */
+static struct ocean_prepared *build_state(struct sim *s, const struct ocean_params *p, enum sim_set_status *why,
+                                          char *err, size_t errlen)
+{
+    if (s->test_fail_seed >= 0 && p->seed == s->test_fail_seed) {
+        usleep(500 * 1000); /* long enough for a test to queue another set behind this one */
+        snprintf(err, errlen, "out of memory (test hook OCEAND_TEST_FAIL_BUILD_SEED)");
+        *why = SIM_SET_NO_MEMORY;
+        return NULL;
+    }
+    *why = SIM_SET_INVALID;
+    return ocean_prepare(s->ocean, p, err, errlen);
+}
+
+/* Check each set of a batch on top of the previous one (all or nothing per
+ * set) and prepare ONE new state for the whole batch if any physics changed.
+ * Allocates nothing but that state: whatever fails, every set is answered
+ * and build_base moves only to what was really prepared. */
+static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
+{
+    struct ocean_params cur = s->build_base;
+    char err[200];
+    for (struct sim_set *set = sets; set; set = set->next) {
+        struct ocean_params next = params_with(&cur, &set->values, set->mask);
+        if (params_validate(&next, err, sizeof err) != 0) {
+            set_failed(set, SIM_SET_INVALID, err);
+            continue;
+        }
+        set->prev = cur;
+        cur = next;
+    }
+    out->prepared = NULL;
+    out->surface = NULL;
+    if (params_physics_differ(&s->build_base, &cur)) {
+        enum sim_set_status why;
+        out->prepared = build_state(s, &cur, &why, err, sizeof err);
+        if (!out->prepared) {
+            LOGW("applying parameters failed: %s", err);
+            for (struct sim_set *set = sets; set; set = set->next)
+                if (set->status == SIM_SET_QUEUED)
+                    set_failed(set, why, err);
+            cur = s->build_base;
+        }
+        if (out->prepared && s->cfg.queries) /* the query snapshot, here rather than on the tick (1-8 ms) */
+            out->surface = query_snapshot_prepared(s->cfg.queries, s->ocean, out->prepared);
+    }
+    s->build_base = cur;
+    out->params = cur;
+    out->sets = sets;
+}
+
+void *builder_main(void *arg)
+{
+    struct sim *s = arg;
+    pthread_mutex_lock(&s->lock);
+    while (!atomic_load(&s->stop)) {
+        if (s->to_free) {
+            struct ocean_prepared *old = s->to_free;
+            s->to_free = NULL;
+            pthread_mutex_unlock(&s->lock);
+            ocean_prepared_free(old);
+            pthread_mutex_lock(&s->lock);
+            continue;
+        }
+        if (!s->pending || s->ready_full) {
+            pthread_cond_wait(&s->cond, &s->lock);
+            continue;
+        }
+        struct sim_set *sets = s->pending;
+        s->pending = NULL;
+        s->pending_tail = &s->pending;
+        s->builder_busy = true;
+        pthread_mutex_unlock(&s->lock);
+
+        struct built b;
+        build_batch(s, sets, &b);
+
+        pthread_mutex_lock(&s->lock);
+        s->builder_busy = false;
+        s->ready = b;
+        s->ready_full = true;
+    }
+    pthread_mutex_unlock(&s->lock);
+    return NULL;
+}
+
+/* At a tick boundary: swap in what the builder prepared, one version per
+ * applied set, and hand every set back to the network thread answered. */
+void apply_prepared(struct sim *s)
+{
+    pthread_mutex_lock(&s->lock);
+    bool have = s->ready_full;
+    struct built b = s->ready;
+    pthread_mutex_unlock(&s->lock);
+    if (!have)
+        return;
+    int commit_rc = 0;
+    if (b.prepared) {
+        /* O(1), and the producer is idle (our caller checked): no step or
+         * field reader overlaps it, nor a prepare (ready_full is still set). */
+        int n_before = ocean_resolution(s->ocean);
+        /* An amplitude-only change eases in over ease_ticks ticks of the clock
+         * (docs/simulation.md "Easing"), in sim time: from the previous tick
+         * on, so this tick's frame is 1/K of the way. Paused: at once. */
+        double dt = b.params.paused ? 0 : b.params.time_scale / s->cfg.tick_rate;
+        commit_rc = ocean_commit_eased(s->ocean, b.prepared, s->sim_time - dt, s->cfg.ease_ticks * dt);
+        if (commit_rc == 0 && b.surface && ocean_surface_ease(b.surface, s->ocean) != 0)
+            LOGW("point queries: the snapshot of version %u misses the easing", (unsigned)(s->version + 1));
+        if (commit_rc != 0) {
+            LOGE("a prepared parameter change no longer fits the simulation; refused");
+            for (struct sim_set *set = b.sets; set; set = set->next)
+                if (set->status == SIM_SET_QUEUED)
+                    set_failed(set, SIM_SET_INVALID, "internal: prepared against another state");
+            b.params = s->params;
+            ocean_surface_free(b.surface); /* a snapshot of what was not committed */
+            b.surface = NULL;
+        } else {
+            /* A sea with other phases (seed, patch size, depth, loop period) or a new N:
+             * the previous frames do not predict it, so every temporal layer starts new
+             * chains (keyframes) with the next job. Any other change (wind, amplitude,
+             * choppiness, spectrum shape, ...) keeps the phases: the chains go on and each
+             * tile of the next frame is predicted or intra on its chain's grid, whichever
+             * is smaller (docs/codec.md, "Changes of the sea"). Either way every frame
+             * decodes; the split only decides bytes. */
+            if (params_diff(&s->params, ocean_get_params(s->ocean)) & params_mask(PARAM_PHASE))
+                s->reset_streams = true;
+            else
+                s->sea_changed = true;
+            if (n_before != ocean_resolution(s->ocean)) {
+                atomic_fetch_add(&g_metrics.replans, 1);
+                LOGI("resolution now %d", ocean_resolution(s->ocean));
+            }
+        }
+    }
+    pthread_mutex_lock(&s->lock);
+    s->ready_full = false;
+    pthread_cond_signal(&s->cond);
+    bool slot_free = b.prepared && s->to_free == NULL;
+    if (slot_free)
+        s->to_free = b.prepared; /* the old state: freeing 10-100 MB is the builder's job, not the tick's */
+    pthread_mutex_unlock(&s->lock);
+    if (b.prepared && !slot_free)
+        ocean_prepared_free(b.prepared);
+    struct sim_set *last = NULL;
+    uint32_t version_before = s->version;
+    for (struct sim_set *set = b.sets; set; set = set->next) {
+        if (set->status == SIM_SET_QUEUED) {
+            struct ocean_params before = s->params;
+            s->params = params_with(&set->prev, &set->values, set->mask);
+            s->version++;
+            atomic_fetch_add(&g_metrics.param_changes, 1);
+            set->status = SIM_SET_APPLIED;
+            set->changed = params_diff(&before, &s->params);
+        }
+        set->params = s->params;
+        set->version = s->version;
+        last = set;
+    }
+    s->params = b.params;
+    if (s->version != version_before || b.surface) /* point queries: this version from now on */
+        query_version(s->cfg.queries, s->version, s->sim_time, b.surface != NULL || (b.prepared && commit_rc == 0),
+                      b.surface);
+    if (last) {
+        pthread_mutex_lock(&s->lock);
+        *s->answers_tail = b.sets;
+        s->answers_tail = &last->next;
+        pthread_mutex_unlock(&s->lock);
+    }
+}
+
