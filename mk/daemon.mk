@@ -34,11 +34,13 @@ $(BUILD)/test_control: $(BUILD)/obj/tests/daemon/test_control.o $(CONTROL_OBJ) \
 $(BUILD)/san/test_control: $(BUILD)/san/tests/daemon/test_control.o $(CONTROL_OBJ:$(BUILD)/obj/%=$(BUILD)/san/%) \
                        $(BUILD)/san/server/tick/capacity.o $(CONFIG_OBJ:$(BUILD)/obj/%=$(BUILD)/san/%) $(BASE_OBJ:$(BUILD)/obj/%=$(BUILD)/san/%) $(OCEAN_SAN_LIB) $(PROTO_SAN_LIB)
 	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/test_seq_guard: $(BUILD)/obj/tests/daemon/test_seq_guard.o $(BUILD)/obj/server/roles/seq_guard.o
+	$(CC) $(CFLAGS) -o $@ $^
 $(BUILD)/frame_check: $(BUILD)/obj/tests/daemon/frame_check.o $(CONTROL_OBJ) $(OCEAN_LIB) $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 
 # (prerequisites are expanded where a rule is read: the whole list comes first)
-DAEMON_TEST_DEPS := $(BUILD)/test_control $(BUILD)/frame_check $(BUILD)/test_probe $(BUILD)/query_ref
+DAEMON_TEST_DEPS := $(BUILD)/test_control $(BUILD)/frame_check $(BUILD)/test_probe $(BUILD)/query_ref $(BUILD)/test_seq_guard
 
 # Valgrind for the unit test: zero errors and zero definite leaks (~5 s).
 VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite
@@ -46,6 +48,7 @@ VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-k
 .PHONY: test-daemon test-daemon-asan test-daemon-valgrind bench-load bench-capacity bench-layer-flood run
 test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	$(BUILD)/test_control
+	$(BUILD)/test_seq_guard
 	/usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
 	/usr/bin/python3 tests/daemon/test_temporal.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
 	$(BUILD)/test_probe

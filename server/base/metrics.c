@@ -136,11 +136,15 @@ size_t metrics_render(char *buf, size_t cap)
             "oceand_http_refused_total{reason=\"symlink\"} %llu\n",
         (unsigned long long)atomic_load(&m->http_refused_host), (unsigned long long)atomic_load(&m->http_refused_symlink));
     put(&o, "# HELP oceand_clients_closed_total Clients closed by the daemon: reply queue over --output-limit-kb (1008), "
-            "unmasked frame (1002).\n"
+            "unmasked frame (1002), no byte of its frame taken for --idle-timeout (stalled, 1008), holding the "
+            "oldest frame when the frames held by slow clients pass their budget (pinned, 1008).\n"
             "# TYPE oceand_clients_closed_total counter\n"
             "oceand_clients_closed_total{reason=\"output_limit\"} %llu\n"
-            "oceand_clients_closed_total{reason=\"unmasked\"} %llu\n",
-        (unsigned long long)atomic_load(&m->closed_output_limit), (unsigned long long)atomic_load(&m->closed_unmasked));
+            "oceand_clients_closed_total{reason=\"unmasked\"} %llu\n"
+            "oceand_clients_closed_total{reason=\"stalled\"} %llu\n"
+            "oceand_clients_closed_total{reason=\"pinned\"} %llu\n",
+        (unsigned long long)atomic_load(&m->closed_output_limit), (unsigned long long)atomic_load(&m->closed_unmasked),
+        (unsigned long long)atomic_load(&m->closed_stalled), (unsigned long long)atomic_load(&m->closed_pinned));
     counter(&o, "oceand_connections_refused_total", "TCP connections closed at accept to keep a reserve of file "
             "descriptors (RLIMIT_NOFILE).", atomic_load(&m->refused_fd_limit));
     put(&o, "# HELP oceand_stream_tiles_total Tiles encoded by the temporal layers (codec 3): shared tiles "

@@ -25,7 +25,7 @@ struct metrics {
     atomic_uint_least64_t rejected_full, rejected_origin, closed_too_large;
     /* issue 16: refusals and closes of hostile peers (server/net/) */
     atomic_uint_least64_t rejected_host, rejected_handshake, http_refused_host, http_refused_symlink;
-    atomic_uint_least64_t closed_output_limit, closed_unmasked, refused_fd_limit;
+    atomic_uint_least64_t closed_output_limit, closed_unmasked, closed_stalled, closed_pinned, refused_fd_limit;
     atomic_int clients;
     atomic_int degraded_groups;       /* subscription groups encoded coarser or less often (capacity.h) */
     atomic_int intra_groups;          /* groups with temporal clients served intra at their LOD (capacity.h plan_intra) */

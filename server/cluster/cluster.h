@@ -253,6 +253,8 @@ int cl_collector_add(struct cl_collector *c, struct cl_layer *l, const uint8_t w
 struct cl_frame_set *cl_collector_check(struct cl_collector *c, const uint8_t want[CL_KEY_BYTES]);
 struct cl_collector_stats { uint64_t frames, partial, stale, mismatched; };
 void cl_collector_stats(const struct cl_collector *c, struct cl_collector_stats *out);
+/* Drop the frame being collected (the stream restarted under another seq). */
+void cl_collector_reset(struct cl_collector *c);
 /* Whether the fields of one layer are consistent (what cl_layer_part_write checks). */
 bool cl_layer_info_valid(const struct cl_layer_info *info);
 

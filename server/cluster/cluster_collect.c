@@ -32,6 +32,14 @@ void cl_collector_free(struct cl_collector *c)
 
 void cl_collector_stats(const struct cl_collector *c, struct cl_collector_stats *out) { *out = c->st; }
 
+void cl_collector_reset(struct cl_collector *c)
+{
+    if (!c)
+        return;
+    cl_frame_set_free(c->pending);
+    c->pending = NULL;
+}
+
 /* Same frame: every field of the WebSocket frame header, and the encoded set. */
 static bool same_frame(const struct cl_layer_info *a, const struct cl_layer_info *b)
 {

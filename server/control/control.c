@@ -351,6 +351,30 @@ static bool name_char_refused(uint32_t c)
            (c >= 0xfdd0 && c <= 0xfdef) || c >= 0xf0000;
 }
 
+bool control_valid_utf8(const char *s, size_t len)
+{
+    const unsigned char *p = (const unsigned char *)s, *end = p + len;
+    uint32_t c;
+    while (p < end) {
+        if (*p == 0)
+            return false; /* a NUL would cut the text where it is copied as a C string */
+        if (*p < 0x80) {
+            p++;
+            continue;
+        }
+        /* s need not be NUL-terminated: a sequence cut by its end is refused
+         * before utf8_next reads past it. */
+        int need = (*p & 0xe0) == 0xc0 ? 2 : (*p & 0xf0) == 0xe0 ? 3 : (*p & 0xf8) == 0xf0 ? 4 : 0;
+        if (!need || end - p < need)
+            return false;
+        int n = utf8_next(p, &c);
+        if (!n)
+            return false;
+        p += n;
+    }
+    return true;
+}
+
 int control_check_name(const char *s, struct ctl_error *e)
 {
     const unsigned char *p = (const unsigned char *)s;

@@ -175,6 +175,9 @@ bool control_token_equal(const char *given, const char *secret);
  * markup (< > & " '), no space at either end; "" (no name) is allowed.
  * Returns 0, or -1 with e filled (code "bad_name"). */
 int control_check_name(const char *s, struct ctl_error *e);
+/* Whether s[0..len) is strict UTF-8 with no NUL: what a WebSocket text
+ * frame may carry (RFC 6455 §8.1). */
+bool control_valid_utf8(const char *s, size_t len);
 /* {"type":"named","id":...,"name":"..."}: the display name now in force. */
 cJSON *control_named_msg(const char *name, const cJSON *id);
 

@@ -590,6 +590,14 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
             break;
         }
         if (n->cluster.forward) { /* edge: the sim validates and applies it */
+            /* Checked here first against the sim's parameters as this edge
+             * knows them: a set refused here never reaches the sim, and its
+             * `name` is not taken (neither changes when a set is refused). */
+            struct ocean_params out;
+            if (m.type == CTL_SET && control_apply_params(m.params, &n->view, NULL, &out, NULL, &e) != 0) {
+                session_send_error(s, &e, m.id);
+                break;
+            }
             /* The sim knows this client only by its id: carry its display
              * name in the message (`name` on the set) unless it has one. */
             char *named = NULL;

@@ -14,6 +14,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "log.h"
 #include "metrics.h"
 #include "sim_thread.h"
 
@@ -48,14 +49,11 @@ void fanout_want_keyframes(struct net *n, struct session *s, bool want)
     want = want && s->sub.temporal && n->sim; /* edge: its sim sends intra tiles only */
     if (want == s->key_wanted)
         return;
-    for (int c = 0; c < CTL_MAX_CASCADES; c++) { /* the keys dispatch_demand counts as temporal */
-        int lod, bound_index;
-        unsigned fields = subscription_cascade(&s->sub, c, &lod, &bound_index);
-        for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++)
-            if (fields & OCEAN_FIELD_BIT(fi))
-                sim_want_keyframes(n->sim, layer_key_cascade(c, fi, c == 0 ? subscription_lod(&s->sub, fi) : lod, bound_index),
-                                   want ? 1 : -1);
-    }
+    int keys[LAYER_KEYS_ALL] = { 0 }; /* the keys dispatch_demand counts as temporal */
+    subscription_layer_keys(&s->sub, keys, 1);
+    for (int key = 0; key < LAYER_KEYS_ALL; key++)
+        if (keys[key])
+            sim_want_keyframes(n->sim, key, want ? 1 : -1);
     s->key_wanted = want;
 }
 
@@ -98,6 +96,20 @@ void fanout_set_latest(struct net *n, struct frame *f)
     }
     frame_unref(n->latest);
     n->latest = f; /* NULL after a tick that built no frame: nothing stale is kept */
+}
+
+void net_stream_restart(struct net *n)
+{
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
+        struct session *s = session_of(d);
+        s->last_seq = 0;   /* the next frame is new whatever its seq */
+        s->first_seq = 0;
+        s->hist = 0;       /* no references across the restart */
+        s->hist_seq = 0;
+    }
+    n->seen_any = false;
+    frame_unref(n->latest);
+    n->latest = NULL;
 }
 
 bool fanout_want_write(const struct net *n, const struct session *s)
@@ -225,6 +237,7 @@ static int send_chunk(struct session *s)
     if (lws_write(s->wsi, s->chunk + LWS_PRE, len, (enum lws_write_protocol)flags) < (int)len)
         return -1;
     s->sent += len;
+    s->progress_t = mono_now();
     if (last) {
         atomic_fetch_add(&g_metrics.frames_sent, 1);
         atomic_fetch_add(&g_metrics.bytes_sent, s->total);
@@ -250,9 +263,73 @@ int fanout_write(struct net *n, struct session *s)
         if (!begin_frame(n, s, f))
             return 0;
         s->last_seq = f->hdr.seq;
-        s->last_frame_t = now;
+        s->last_frame_t = s->progress_t = now;
     }
     return send_chunk(s) == 0 ? 1 : -1;
+}
+
+/* ---- clients that do not read ----
+ *
+ * A client holds one reference to the frame it is sending; one that stops
+ * reading would hold it for ever, and each such client a different frame
+ * (4.9 MB at N = 256 with every field and cascade). Two rules bound that,
+ * whatever the client sends (pings and pongs do not count as reading):
+ *   stalled: no byte of its frame taken for --idle-timeout seconds;
+ *   pinned:  the frames held by clients, the latest excepted, counted once
+ *            each, pass NET_PINNED_MAX bytes: the clients holding the
+ *            oldest are closed until they fit.
+ * Either closes the client with 1008 and lets its frame go at once. */
+#define NET_PINNED_MAX ((size_t)48 << 20)
+#define POLICE_PERIOD_S 0.1
+
+static void let_go(struct session *s, atomic_uint_least64_t *counter, const char *why)
+{
+    atomic_fetch_add(counter, 1);
+    LOGW("client %s: %s: closing it (1008)", s->client_id, why);
+    frame_unref(s->cur); /* nothing more of it will be sent */
+    s->cur = NULL;
+    session_cut_off(s, LWS_CLOSE_STATUS_POLICY_VIOLATION, "not reading");
+}
+
+void fanout_police(struct net *n)
+{
+    double now = mono_now();
+    if (now - n->police_t < POLICE_PERIOD_S)
+        return;
+    n->police_t = now;
+    size_t pinned = 0;
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
+        struct session *s = session_of(d);
+        if (!s->cur || s->closing)
+            continue;
+        if (now - s->progress_t > n->dc.idle_timeout) {
+            let_go(s, &g_metrics.closed_stalled, "no byte of its frame taken for --idle-timeout");
+            continue;
+        }
+        if (s->cur == n->latest)
+            continue;
+        bool counted = false; /* once per frame: clients on the same frame share it */
+        for (lws_dll2_t *e = lws_dll2_get_head(&n->sessions); e != d && !counted; e = e->next)
+            counted = session_of(e)->cur == s->cur;
+        if (!counted)
+            pinned += frame_bytes(s->cur);
+    }
+    while (pinned > NET_PINNED_MAX) {
+        struct frame *oldest = NULL;
+        for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
+            struct session *s = session_of(d);
+            if (s->cur && s->cur != n->latest && (!oldest || s->cur->hdr.seq < oldest->hdr.seq))
+                oldest = s->cur;
+        }
+        if (!oldest)
+            break;
+        pinned -= frame_bytes(oldest);
+        for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
+            struct session *s = session_of(d);
+            if (s->cur == oldest)
+                let_go(s, &g_metrics.closed_pinned, "the frames held by clients that do not read are over their budget");
+        }
+    }
 }
 
 void fanout_session_free(struct session *s)

@@ -8,6 +8,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include <cjson/cJSON.h>
+
 #include "config.h"
 #include "params.h"
 
@@ -68,6 +70,23 @@ struct net_cluster_hooks {
 void net_set_cluster(struct net *n, const struct net_cluster_hooks *h);
 /* edge: frame f (a new reference is taken) replaces the newest one (latest wins). */
 void net_publish_frame(struct net *n, struct frame *f);
+/* edge: the sim's frames now count from another seq (a restarted or standby
+ * sim, seq_guard.h): every client takes the next frame, whatever its seq,
+ * and starts its temporal history again. */
+void net_stream_restart(struct net *n);
+/* A message from a sim in another process, before an edge uses or relays
+ * it: at most cap bytes, strict UTF-8 without NUL (a browser must fail a
+ * socket that receives anything else), a JSON object whose "type" is one
+ * of types (NULL-terminated). The parsed object, or NULL: then it is
+ * dropped. Anyone on the NATS prefix can publish, so nothing from there
+ * goes to a client unchecked. */
+cJSON *net_sim_message(const char *text, size_t len, size_t cap, const char *const types[]);
+#define NET_SIM_PARAMS_MAX (16u << 10)   /* a params event is ~2 kB */
+#define NET_SIM_HELLO_MAX (64u << 10)    /* hello with the schema and capacity is ~12 kB */
+#define NET_SIM_REPLY_MAX (1u << 20)     /* a query_result of the most points a query may ask */
+
+/* The tick rate in force (the sim's, adopted from its hello on an edge). */
+double net_tick_rate(const struct net *n);
 /* edge: one JSON text to the client with this serial (if still connected). */
 void net_send_text(struct net *n, uint64_t serial, const char *text);
 /* edge: adopt the sim's hello (params, params_version, tick_rate, tile_size)

@@ -87,6 +87,7 @@ struct session {
     uint64_t first_seq;           /* frames older than this are never sent (tick at join) */
     uint64_t last_seq;            /* seq of the last frame started, 0 = none yet */
     double last_frame_t;          /* when it started (max_rate) */
+    double progress_t;            /* when a byte of the frame in progress was last written (stall rule) */
     /* temporal layers (codec 3, PROTOCOL.md §5.9; fanout.c) */
     uint64_t hist_seq;            /* seq of the last frame started under this subscription, 0 = none */
     int hist;                     /* consecutive ticks received, up to hist_seq */
@@ -151,6 +152,7 @@ struct net {
     net_params_fn on_params;      /* main writes (net_on_params) before the loop: applied-change listener */
     void *on_params_user;         /* its argument (main's state saver, used on this thread) */
     double trim_due;              /* mono time to malloc_trim after a change of N, 0 = none */
+    double police_t;              /* when fanout_police last ran */
     double budget, budget_t;      /* --control-budget: units left for all clients together, last refill (lws thread) */
     bool placeholder;             /* no index.html in the web root */
     int port;                     /* the port really listened on (--port 0) */
@@ -211,6 +213,10 @@ void fanout_set_latest(struct net *n, struct frame *f);      /* takes f's refere
 bool fanout_want_write(const struct net *n, const struct session *s); /* a frame is ready for s */
 int fanout_write(struct net *n, struct session *s);          /* one lws_write of a frame */
 void fanout_session_free(struct session *s);
+void fanout_police(struct net *n);
+/* Close s with status (1008) after dropping its queued replies; a client
+ * that never reads is hung up by a timeout (session.c). */
+void session_cut_off(struct session *s, int status, const char *reason);                           /* close clients that do not read (stalled, pinned) */
 /* Temporal clients: the subscription in s->sub is new (join, subscribe):
  * no history, keyframes wanted. fanout_want_keyframes(false) before the
  * subscription changes or the session goes, so the counts stay balanced. */

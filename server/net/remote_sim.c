@@ -28,8 +28,11 @@ void net_publish_frame(struct net *n, struct frame *f)
 {
     frame_ref(f);
     fanout_set_latest(n, f);
+    fanout_police(n);
     wake_writers(n);
 }
+
+double net_tick_rate(const struct net *n) { return n->dc.tick_rate; }
 
 void net_send_text(struct net *n, uint64_t serial, const char *text)
 {
@@ -74,7 +77,8 @@ static int adopt_params(struct net *n, const cJSON *root, uint64_t *changed)
 
 int net_adopt_hello(struct net *n, const char *text, size_t len)
 {
-    cJSON *root = cJSON_ParseWithLength(text, len);
+    static const char *const types[] = { "hello", NULL };
+    cJSON *root = net_sim_message(text, len, NET_SIM_HELLO_MAX, types);
     uint32_t before = n->applied_version;
     uint64_t changed = 0;
     if (!root || adopt_params(n, root, &changed) != 0) {
@@ -104,9 +108,30 @@ int net_adopt_hello(struct net *n, const char *text, size_t len)
     return 0;
 }
 
+cJSON *net_sim_message(const char *text, size_t len, size_t cap, const char *const types[])
+{
+    if (!text || len > cap || !control_valid_utf8(text, len))
+        return NULL;
+    cJSON *root = cJSON_ParseWithLength(text, len);
+    const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "type");
+    for (int i = 0; cJSON_IsString(t) && types[i]; i++)
+        if (strcmp(t->valuestring, types[i]) == 0)
+            return root;
+    cJSON_Delete(root);
+    return NULL;
+}
+
 int net_broadcast_params(struct net *n, const char *text, size_t len, const char *skip_client)
 {
-    cJSON *root = cJSON_ParseWithLength(text, len);
+    static const char *const types[] = { "params", NULL };
+    cJSON *root = net_sim_message(text, len, NET_SIM_PARAMS_MAX, types);
+    /* by_name is shown to people: it must pass the rules a local name does */
+    const cJSON *bn = cJSON_GetObjectItemCaseSensitive(root, "by_name");
+    struct ctl_error e;
+    if (bn && (!cJSON_IsString(bn) || control_check_name(bn->valuestring, &e) != 0)) {
+        cJSON_Delete(root);
+        return -1;
+    }
     uint64_t changed = 0;
     int rc = root ? adopt_params(n, root, &changed) : -1;
     cJSON_Delete(root);

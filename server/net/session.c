@@ -32,7 +32,7 @@ static size_t text_cost(size_t len) { return sizeof(struct text) + LWS_PRE + len
 /* Stop serving a client and close it with `status`: its queue is freed now
  * (the memory is the point), the close frame goes out when the socket takes
  * it, and a backstop timeout hangs up a client that never reads. */
-static void session_cut_off(struct session *s, int status, const char *reason)
+void session_cut_off(struct session *s, int status, const char *reason)
 {
     while (s->tq.head) {
         struct text *t = lws_container_of(s->tq.head, struct text, list);
@@ -284,6 +284,8 @@ static void on_sim_wakeup(struct net *n)
 {
     if (n && n->cluster.on_wake)
         n->cluster.on_wake(n->cluster.user); /* cluster messages (NATS link) */
+    if (n)
+        fanout_police(n);
     if (!n || !n->sim)
         return;
     fanout_take_latest(n);

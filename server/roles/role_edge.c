@@ -20,6 +20,7 @@
 #include "control.h"
 #include "log.h"
 #include "role_link.h"
+#include "seq_guard.h"
 
 enum edge_state { EDGE_UNKNOWN, EDGE_OK, EDGE_SIM_DOWN, EDGE_NATS_DOWN };
 static const char *const state_name[] = { "unknown", "ok", "sim_unavailable", "nats_unavailable" };
@@ -54,6 +55,8 @@ struct role_edge {
     struct net *net;
     struct cl_link *link;
     struct cl_collector *collector;
+    struct seq_guard seq;         /* which layers' seqs follow the sim's stream */
+    double refused_log_t;         /* when a refused layer was last logged */
     int count[CL_KEYS];           /* clients' subscriptions per layer key */
     uint8_t want[CL_KEY_BYTES];   /* keys with count > 0: what we subscribe to */
     uint64_t frames;              /* frames handed to the fan-out (frame.index) */
@@ -105,6 +108,26 @@ static void publish_set(struct role_edge *r, struct cl_frame_set *set)
 static void edge_on_layer(void *user, struct cl_layer *layer)
 {
     struct role_edge *r = user;
+    double now = mono_now();
+    switch (seq_guard_check(&r->seq, layer->info.seq, now, net_tick_rate(r->net))) {
+    case SEQ_REFUSE:
+        if (now - r->refused_log_t >= 10) {
+            r->refused_log_t = now;
+            LOGW("cluster: a layer of seq %llu is outside the sim's stream (at seq %llu): refused (%llu so far)",
+                 (unsigned long long)layer->info.seq, (unsigned long long)r->seq.last,
+                 (unsigned long long)r->seq.refused);
+        }
+        cl_layer_free(layer);
+        return;
+    case SEQ_RESTART:
+        LOGW("cluster: the sim's frames count from seq %llu now (a restarted or another sim): the stream restarts",
+             (unsigned long long)layer->info.seq);
+        cl_collector_reset(r->collector);
+        net_stream_restart(r->net);
+        break;
+    case SEQ_ACCEPT:
+        break;
+    }
     struct cl_frame_set *out[2];
     int k = cl_collector_add(r->collector, layer, r->want, out);
     for (int i = 0; i < k; i++) {
@@ -215,8 +238,19 @@ static void reply_type(const char *text, size_t len, char *type, size_t cap, cha
     cJSON_Delete(root);
 }
 
-static void relay(struct role_edge *r, uint64_t serial, const char *text, size_t len)
+/* The sim's answer to a client's request, to that client: only a message of
+ * a type such a request is answered with, checked as net_sim_message does;
+ * anything else is answered `unavailable` (a rogue or broken answerer). */
+static void relay(struct role_edge *r, uint64_t serial, const cJSON *id, const char *text, size_t len)
 {
+    static const char *const types[] = { "params", "error", "query_result", "probing", "probe_data", NULL };
+    cJSON *ok = net_sim_message(text, len, NET_SIM_REPLY_MAX, types);
+    if (!ok) {
+        LOGW("cluster: an answer from the simulation is not a valid message (%zu bytes); not relayed", len);
+        send_unavailable(r, serial, id, CL_E_CORRUPT);
+        return;
+    }
+    cJSON_Delete(ok);
     char *copy = malloc(len + 1);
     if (copy) {
         memcpy(copy, text, len);
@@ -244,7 +278,7 @@ static void on_probe_reply(struct role_edge *r, struct forward *fw, int status, 
             if (strcmp(type, "probing") == 0 && points)
                 send_probe_request(r, FW_END, fw->serial, fw->client, NULL, 0);
         } else {
-            relay(r, fw->serial, text, len);
+            relay(r, fw->serial, fw->id, text, len);
             if (strcmp(type, "probing") == 0 && !points) {
                 eprobe_drop(r, fw->serial);
             } else if (strcmp(type, "probing") == 0) {
@@ -268,13 +302,13 @@ static void on_probe_reply(struct role_edge *r, struct forward *fw, int status, 
             p->in_flight = true;
             send_probe_request(r, FW_RESEND, p->serial, p->client, p->text, p->len);
         } else if (status == 0 && p && strcmp(type, "error") == 0) {
-            relay(r, p->serial, text, len);
+            relay(r, p->serial, NULL, text, len);
             eprobe_drop(r, p->serial);
         }
         break;
     case FW_RESEND:
         if (status == 0 && p && strcmp(type, "error") == 0) { /* e.g. busy on the new sim: the probe has ended */
-            relay(r, p->serial, text, len);
+            relay(r, p->serial, NULL, text, len);
             eprobe_drop(r, p->serial);
         }
         break;
@@ -298,7 +332,7 @@ static void on_reply(void *ctx, int status, const char *text, size_t len)
             LOGD("cluster: no hello from the sim: %s (asking again)", status ? cl_strerror(status) : "bad hello");
         }
     } else if (status == 0) {
-        relay(r, fw->serial, text, len);
+        relay(r, fw->serial, fw->id, text, len);
     } else {
         send_unavailable(r, fw->serial, fw->id, status);
     }
@@ -458,6 +492,11 @@ static void probe_keepalives(struct role_edge *r, double now)
 static void edge_on_probe_data(void *user, const char *by, const char *text, size_t len)
 {
     struct role_edge *r = user;
+    static const char *const types[] = { "probe_data", NULL };
+    cJSON *ok = net_sim_message(text, len, NET_SIM_REPLY_MAX, types);
+    if (!ok)
+        return; /* not a probe_data the sim would send: never relayed */
+    cJSON_Delete(ok);
     for (struct eprobe *p = r->probes; p; p = p->next)
         if (strcmp(p->client, by) == 0) {
             net_send_probe_data(r->net, p->serial, text);

@@ -20,6 +20,14 @@ struct frame *frame_new(int nlayers)
     return f;
 }
 
+size_t frame_bytes(const struct frame *f)
+{
+    size_t b = 0;
+    for (int i = 0; f && i < f->nlayers; i++)
+        b += f->layers[i].buf.len + f->layers[i].shared.len;
+    return b;
+}
+
 void frame_ref(struct frame *f) { atomic_fetch_add(&f->refs, 1); }
 
 void frame_unref(struct frame *f)

@@ -73,6 +73,9 @@ struct frame_want {
  * must be malloc'd: frame_unref frees them. NULL when out of memory. */
 struct frame *frame_new(int nlayers);
 
+/* Bytes of encoded tiles the frame holds (every layer's buffers). */
+size_t frame_bytes(const struct frame *f);
+
 void frame_ref(struct frame *f);
 void frame_unref(struct frame *f);     /* NULL is fine */
 /* The layer for (field, lod, bound) of cascade 0, or NULL if nobody asked for it this tick. */
