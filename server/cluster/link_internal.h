@@ -66,7 +66,9 @@ struct pending {
 };
 
 /* What a subscription delivers: on_msg (link.c) routes by it. */
-enum sub_kind { SUB_CTL, SUB_HELLO, SUB_DEMAND, SUB_PARAMS, SUB_STATUS, SUB_INBOX, SUB_LAYER, SUB_QUERY, SUB_PROBE, SUB_KINDS };
+enum sub_kind {
+    SUB_CTL, SUB_HELLO, SUB_DEMAND, SUB_PARAMS, SUB_STATUS, SUB_INBOX, SUB_LAYER, SUB_QUERY, SUB_PROBE, SUB_KINDS
+};
 struct sub_ctx {
     struct cl_link *l;
     enum sub_kind kind;
@@ -105,14 +107,14 @@ struct cl_link {
     pthread_mutex_t in_lock;
     struct in_event *in_head, **in_tail; /* NATS, pump (and caller) threads append, dispatch drains */
     int in_count;
-    struct in_event *layer_ev[CL_KEYS]; /* edge: the queued layer event of each key; NATS delivery sets, dispatch clears */
+    struct in_event *layer_ev[CL_KEYS]; /* edge: each key's queued layer; NATS delivery sets, dispatch clears */
     struct cl_assembler *assembler; /* edge: NATS delivery thread; cl_link_stats reads its drop count */
     bool sim_up;                    /* edge: NATS delivery sets (status), pump clears (timeout) */
     double sim_last_seen;           /* edge: NATS delivery writes, pump reads */
 
     struct cl_demand *demand;       /* sim: its own mutex; NATS delivery updates, tick thread reads the union */
     atomic_bool connected;          /* NATS connection callbacks (and open) write, any thread reads */
-    atomic_bool sim_up_flag;        /* edge: sim_up for readers without in_lock */
+    atomic_bool sim_up_flag;        /* edge: sim_up without in_lock: NATS delivery sets, pump clears, any reads */
 
     /* close_lock: close waits until NATS has finished calling us. */
     pthread_mutex_t close_lock;
@@ -142,7 +144,7 @@ static inline bool link_msg_envelope(natsMsg *msg, enum cl_kind kind, struct cl_
 /* ---- link.c: lifecycle and subscriptions ---- */
 /* open or pump: subscribes subject, delivering to on_msg as `kind`; NULL on failure. */
 natsSubscription *link_subscribe(struct cl_link *l, const char *subject, enum sub_kind kind);
-void link_unsubscribe(natsSubscription **sub);
+void link_unsubscribe(natsSubscription **sub);                 /* pump */
 
 /* ---- link_inbox.c (any thread unless said) ---- */
 void link_event_free(struct in_event *e);
@@ -163,7 +165,7 @@ bool link_inbox_put_layer(struct cl_link *l, struct cl_layer *layer);
 /* ---- link_pump.c: the outbox and the pump thread ---- */
 int link_pump_start(struct cl_link *l);   /* open: 0 or an errno */
 void link_pump_stop(struct cl_link *l);   /* close: returns once the pump has ended */
-void link_item_free(struct out_item *it);
+void link_item_free(struct out_item *it);  /* any thread: releases a layer's bytes to the daemon */
 /* caller threads: appends to the outbox, dropping the oldest layers beyond outbox_max_bytes. */
 void link_push_out(struct cl_link *l, struct out_item *it);
 /* caller threads: queues an envelope from `origin` (reply NULL: none). 0 or a negative CL_E_*. */
