@@ -41,7 +41,7 @@ void link_push_event(struct cl_link *l, struct in_event *e)
 {
     bool woke = false, dropped = false;
     pthread_mutex_lock(&l->in_lock);
-    /* state changes and replies are never shed: a caller waits for each */
+    /* never shed state changes (the daemon's view would stay wrong) or replies (promised exactly once) */
     if (l->in_count >= CL_INBOX_MAX && e->type != IN_STATE && e->type != IN_REPLY)
         dropped = true; /* the dispatching thread is this far behind: shed load */
     else
