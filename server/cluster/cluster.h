@@ -1,4 +1,5 @@
-/* cluster.h — one simulation, many edge daemons, over NATS (issue 12).
+/* cluster.h — one simulation, many edge daemons, over NATS, so that the
+ * viewers a sea can serve are not bounded by one daemon's network and CPU.
  *
  * The transport between `oceand --role sim` and `oceand --role edge`: the
  * subject scheme, the binary message formats, the demand table, and a NATS
@@ -23,7 +24,7 @@
  *                         dead NATS server blocks at most this thread (write
  *                         deadline 2 s), never the tick or the lws thread.
  *   the caller's threads  the tick thread calls cl_sim_publish_layer and
- *                         cl_sim_demand (a mutex held for a copy of 32 bytes
+ *                         cl_sim_demand (a mutex held for a copy of 128 bytes
  *                         per edge: no I/O, no waiting on the network); the
  *                         lws thread calls everything else, including
  *                         cl_link_dispatch.
@@ -39,6 +40,9 @@
  * outbox_max_bytes (latest wins), the inbox keeps only the newest complete
  * layer of each (field, LOD, bound) and at most CL_INBOX_MAX other events;
  * every drop is counted in struct cl_stats.
+ * Which thread writes and which reads each field of a link, and under which
+ * lock, is in link_internal.h; the link's files are link*.c, one concern
+ * each (lifecycle, inbox, pump, stream, requests, heartbeats).
  *
  * ---- Subjects (PREFIX is --nats-prefix, default "oceand") ----------------
  *   PREFIX.frame.<c>.<field>.<lod>.<bound>  sim -> edges: layer parts (OCNL) of cascade c,

@@ -1,6 +1,6 @@
-/* cluster_msg.c — subjects and the two binary message formats of the
- * cluster (layer parts "OCNL", envelopes "OCNE"), and the edge's layer
- * assembler. Pure: no NATS, no threads, no globals; fuzzed by
+/* cluster_msg.c — the two binary message formats of the cluster (layer
+ * parts "OCNL", envelopes "OCNE" and the demand body they carry) and the
+ * module's error texts. Pure: no NATS, no threads, no globals; fuzzed by
  * fuzz/fuzz_cluster.c. Formats are described in cluster.h and
  * docs/scaling.md. Hand-written because they are two fixed little-endian
  * headers, like proto/c's frame header (a schema library would add a
@@ -8,7 +8,6 @@
 #include "cluster.h"
 
 #include <math.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -52,96 +51,6 @@ static uint32_t get32(const uint8_t *p)
 static uint64_t get64(const uint8_t *p) { return (uint64_t)get32(p) | (uint64_t)get32(p + 4) << 32; }
 static float getf32(const uint8_t *p) { uint32_t u = get32(p); float v; memcpy(&v, &u, 4); return v; }
 static double getf64(const uint8_t *p) { uint64_t u = get64(p); double v; memcpy(&v, &u, 8); return v; }
-
-/* ---- subjects ---- */
-
-static bool token_char(char c)
-{
-    return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' || c == '-';
-}
-
-bool cl_prefix_valid(const char *prefix)
-{
-    if (!prefix)
-        return false;
-    size_t len = strlen(prefix);
-    if (len == 0 || len > CL_PREFIX_MAX)
-        return false;
-    bool token_start = true;
-    for (size_t i = 0; i < len; i++) {
-        if (prefix[i] == '.') {
-            if (token_start)
-                return false; /* empty token: leading or double dot */
-            token_start = true;
-        } else if (token_char(prefix[i])) {
-            token_start = false;
-        } else {
-            return false;
-        }
-    }
-    return !token_start; /* no trailing dot */
-}
-
-static const char *const subject_names[] = {
-    [CL_SUBJ_PARAMS] = "params", [CL_SUBJ_STATUS] = "status", [CL_SUBJ_CTL] = "ctl",
-    [CL_SUBJ_HELLO] = "hello", [CL_SUBJ_DEMAND] = "demand", [CL_SUBJ_QUERY] = "query",
-    [CL_SUBJ_PROBE] = "probe",
-};
-
-int cl_subject(char *out, size_t cap, const char *prefix, enum cl_subject which)
-{
-    if (!cl_prefix_valid(prefix) || (unsigned)which > CL_SUBJ_PROBE)
-        return CL_E_ARG;
-    int n = snprintf(out, cap, "%s.%s", prefix, subject_names[which]);
-    return n < 0 || (size_t)n >= cap ? CL_E_TOO_LARGE : CL_OK;
-}
-
-int cl_subject_layer(char *out, size_t cap, const char *prefix, int key)
-{
-    if (!cl_prefix_valid(prefix) || key < 0 || key >= CL_KEYS)
-        return CL_E_ARG;
-    int n = snprintf(out, cap, "%s.frame.%d.%s.%d.%d", prefix, cl_key_which_cascade(key),
-                     oc_field_name((enum oc_field)cl_key_field(key)), cl_key_lod(key), cl_key_bound(key));
-    return n < 0 || (size_t)n >= cap ? CL_E_TOO_LARGE : CL_OK;
-}
-
-int cl_subject_layer_parse(const char *subject, const char *prefix)
-{
-    if (!subject || !cl_prefix_valid(prefix))
-        return CL_E_ARG;
-    size_t pl = strlen(prefix);
-    if (strncmp(subject, prefix, pl) != 0 || strncmp(subject + pl, ".frame.", 7) != 0)
-        return CL_E_CORRUPT;
-    const char *f = subject + pl + 7;
-    /* "<cascade digit>." first */
-    if (f[0] < '0' || f[0] >= '0' + CL_CASCADES || f[1] != '.')
-        return CL_E_CORRUPT;
-    int cascade = f[0] - '0';
-    f += 2;
-    const char *dot = strchr(f, '.');
-    if (!dot || dot - f >= 16)
-        return CL_E_CORRUPT;
-    char name[16];
-    memcpy(name, f, (size_t)(dot - f));
-    name[dot - f] = 0;
-    int field = oc_field_from_name(name);
-    /* exactly "<digit>.<digit>" after the field name */
-    if (field < 0 || dot[1] < '0' || dot[1] > '9' || dot[2] != '.' || dot[3] < '0' || dot[3] > '9' || dot[4])
-        return CL_E_CORRUPT;
-    int lod = dot[1] - '0', bi = dot[3] - '0';
-    if (lod >= CL_LODS || bi >= CL_BOUNDS)
-        return CL_E_CORRUPT;
-    return cl_key_cascade(cascade, field, lod, bi);
-}
-
-int cl_probe_stream_subject(const char *reply_to, char *out, size_t cap)
-{
-    const char *dot = reply_to ? strrchr(reply_to, '.') : NULL;
-    if (!dot || dot == reply_to)
-        return CL_E_ARG;
-    int n = snprintf(out, cap, "%.*s.p", (int)(dot - reply_to), reply_to);
-    return n < 0 || (size_t)n >= cap ? CL_E_TOO_LARGE : CL_OK;
-}
 
 /* ---- layer parts ---- */
 
@@ -327,162 +236,6 @@ void cl_layer_free(struct cl_layer *l)
     free(l->data);
     free(l->tile_off);
     free(l);
-}
-
-/* ---- assembler ---- */
-
-struct slot {
-    bool active;
-    struct cl_layer_info info;
-    int next_tile, total;
-    uint8_t *data;
-    size_t len, cap;
-    uint32_t *off;
-};
-
-struct cl_assembler {
-    struct slot slots[CL_KEYS];
-    uint64_t dropped;
-    size_t held, budget;      /* bytes of every slot's data and offsets; its cap */
-};
-
-struct cl_assembler *cl_assembler_new(void)
-{
-    struct cl_assembler *a = calloc(1, sizeof(struct cl_assembler));
-    if (a)
-        a->budget = CL_MAX_ASSEMBLY_BYTES;
-    return a;
-}
-
-void cl_assembler_set_budget(struct cl_assembler *a, size_t bytes) { a->budget = bytes; }
-size_t cl_assembler_held(const struct cl_assembler *a) { return a->held; }
-
-static size_t slot_bytes(const struct slot *s)
-{
-    return s->cap + (s->off ? sizeof(uint32_t) * ((size_t)s->total + 1) : 0);
-}
-
-static void slot_reset(struct cl_assembler *a, struct slot *s)
-{
-    a->held -= slot_bytes(s);
-    free(s->data);
-    free(s->off);
-    memset(s, 0, sizeof *s);
-}
-
-void cl_assembler_free(struct cl_assembler *a)
-{
-    if (!a)
-        return;
-    for (int k = 0; k < CL_KEYS; k++)
-        slot_reset(a, &a->slots[k]);
-    free(a);
-}
-
-uint64_t cl_assembler_dropped(const struct cl_assembler *a) { return a->dropped; }
-
-/* Room for `more` bytes in slot s: drop other incomplete layers of older
- * seqs first (left behind by lost parts), then give up. */
-static bool make_room(struct cl_assembler *a, const struct slot *s, size_t more)
-{
-    for (int k = 0; k < CL_KEYS && a->held + more > a->budget; k++) {
-        struct slot *o = &a->slots[k];
-        if (o != s && o->active && o->info.seq < s->info.seq) {
-            a->dropped++;
-            slot_reset(a, o);
-        }
-    }
-    return a->held + more <= a->budget;
-}
-
-static bool info_same(const struct cl_layer_info *a, const struct cl_layer_info *b)
-{
-    return a->seq == b->seq && memcmp(&a->sim_time, &b->sim_time, sizeof a->sim_time) == 0 &&
-           a->params_version == b->params_version && a->n == b->n && a->tile_size == b->tile_size &&
-           memcmp(&a->patch_size, &b->patch_size, sizeof a->patch_size) == 0 && a->frame_flags == b->frame_flags &&
-           a->server_time_us == b->server_time_us && a->field == b->field && a->lod == b->lod &&
-           a->bound_index == b->bound_index && a->layer_flags == b->layer_flags && a->cascade == b->cascade &&
-           a->ncascades == b->ncascades && a->encoded_lod == b->encoded_lod &&
-           a->tiles_per_side == b->tiles_per_side && memcmp(a->encoded, b->encoded, CL_KEY_BYTES) == 0;
-}
-
-int cl_assembler_add(struct cl_assembler *a, const struct cl_layer_part *p, struct cl_layer **out)
-{
-    if (!a || !p || !out)
-        return CL_E_ARG;
-    *out = NULL;
-    struct slot *s = &a->slots[cl_info_key(&p->info)];
-    if (p->tile_first == 0) {
-        if (s->active)
-            a->dropped++; /* a new layer began before the old one was complete */
-        slot_reset(a, s);
-        s->info = p->info;
-        s->total = p->info.tiles_per_side * p->info.tiles_per_side;
-        size_t off_bytes = sizeof(uint32_t) * ((size_t)s->total + 1);
-        if (!make_room(a, s, off_bytes)) {
-            a->dropped++;
-            memset(s, 0, sizeof *s);
-            return CL_E_TOO_LARGE;
-        }
-        s->off = malloc(off_bytes);
-        if (!s->off)
-            return CL_E_NOMEM;
-        a->held += off_bytes;
-        s->active = true;
-    } else if (!s->active || p->tile_first != s->next_tile || !info_same(&s->info, &p->info)) {
-        if (s->active)
-            a->dropped++; /* a part went missing: the layer cannot be completed */
-        slot_reset(a, s);
-        return CL_E_CORRUPT;
-    }
-    if (p->data_len > CL_MAX_LAYER_BYTES - s->len) {
-        a->dropped++;
-        slot_reset(a, s);
-        return CL_E_TOO_LARGE;
-    }
-    if (s->len + p->data_len > s->cap) {
-        size_t cap = s->next_tile + p->tile_count == s->total ? s->len + p->data_len : 2 * (s->len + p->data_len);
-        if (cap > CL_MAX_LAYER_BYTES)
-            cap = CL_MAX_LAYER_BYTES;
-        if (!make_room(a, s, cap - s->cap)) {
-            a->dropped++;
-            slot_reset(a, s);
-            return CL_E_TOO_LARGE;
-        }
-        uint8_t *d = realloc(s->data, cap ? cap : 1);
-        if (!d) {
-            slot_reset(a, s);
-            return CL_E_NOMEM;
-        }
-        a->held += cap - s->cap;
-        s->data = d;
-        s->cap = cap;
-    }
-    for (int i = 0; i < p->tile_count; i++)
-        s->off[s->next_tile + i] = (uint32_t)s->len + cl_part_off(p, i);
-    if (p->data_len)
-        memcpy(s->data + s->len, p->data, p->data_len);
-    s->len += p->data_len;
-    s->next_tile += p->tile_count;
-    if (s->next_tile < s->total)
-        return 0;
-    s->off[s->total] = (uint32_t)s->len;
-    struct cl_layer *l = malloc(sizeof *l);
-    if (!l) {
-        slot_reset(a, s);
-        return CL_E_NOMEM;
-    }
-    l->info = s->info;
-    l->data = s->data;
-    l->len = s->len;
-    l->tile_off = s->off;
-    a->held -= slot_bytes(s); /* handed over: no longer the assembler's */
-    s->data = NULL;
-    s->off = NULL;
-    s->cap = 0;
-    slot_reset(a, s);
-    *out = l;
-    return 1;
 }
 
 /* ---- envelopes ---- */

@@ -648,8 +648,11 @@ int main(void)
 
     current = "sim down and back";
     {
+        /* counted from here: a slow NATS restart above may have shown edge-a a
+         * sim_down and sim_up already */
+        int downs = ea.ev[CL_EV_SIM_DOWN], ups = ea.ev[CL_EV_SIM_UP];
         close_link(&sim);
-        struct evwant wa = { &ea, CL_EV_SIM_DOWN, 1 };
+        struct evwant wa = { &ea, CL_EV_SIM_DOWN, downs + 1 };
         CHECK(spin_until(5, p_event, &wa) && !cl_link_sim_up(ea.link), "edge-a never saw the sim go");
         struct reply_box r = { 0 };
         cl_edge_request(ea.link, CL_KIND_CTL, "c7", "{}", 2, h_reply, &r);
@@ -657,7 +660,7 @@ int main(void)
               r.status, cl_strerror(r.status));
         memset(sim.ev, 0, sizeof sim.ev);
         if (open_link(&sim, CL_ROLE_SIM, "sim-2", prefix)) {
-            struct evwant up = { &ea, CL_EV_SIM_UP, 2 };
+            struct evwant up = { &ea, CL_EV_SIM_UP, ups + 1 };
             CHECK(spin_until(5, p_event, &up), "edge-a never saw the new sim");
             /* the edges repeat their demand at once for a new sim */
             struct demwant w = { &sim, K1, K2, 2, -1 };
