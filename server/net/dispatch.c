@@ -127,10 +127,37 @@ static cJSON *with_name(cJSON *m, const char *name)
 }
 
 /* name: the message's own checked "name" (applied with the set), or NULL. */
+/* A change of N rebuilds the grids and FFT plans (seconds at N = 2048) and
+ * costs every viewer frames while it lasts: one at a time for the whole
+ * daemon, and after one is applied the next waits as long as that one took
+ * to build, so that a controller flipping N keeps the sea rebuilding at most
+ * half of the time (a small N builds in milliseconds and waits as little);
+ * the others get `busy` at once, with the wait. */
+static bool replan_allowed(struct net *n, struct session *s, const struct remote *rm, uint64_t changed,
+                           const cJSON *id)
+{
+    if (!(changed & params_mask(PARAM_REPLAN)))
+        return true;
+    double wait = n->replan_t > 0 ? n->replan_t + n->replan_hold - mono_now() : 0;
+    if (n->replans_in_flight <= 0 && wait <= 0)
+        return true;
+    struct ctl_error e = { .code = "busy" };
+    snprintf(e.param, sizeof e.param, "resolution");
+    if (n->replans_in_flight > 0)
+        snprintf(e.message, sizeof e.message, "the grid is being rebuilt for another resolution; try again when it is applied");
+    else
+        snprintf(e.message, sizeof e.message, "the grid was just rebuilt for a new resolution; try again in %.1f s",
+                 wait);
+    respond_error(s, rm, &e, id);
+    return false;
+}
+
 /* A checked change: out is the view after it, changed the rows it changes. */
 static void submit_change(struct net *n, struct session *s, const struct remote *rm, const struct ocean_params *out,
                           uint64_t changed, const char *name, const cJSON *id)
 {
+    if (!replan_allowed(n, s, rm, changed, id))
+        return;
     if (name && s)
         snprintf(s->name, sizeof s->name, "%s", name);
     const char *by_name = name ? name : s ? s->name : "";
@@ -165,6 +192,8 @@ static void submit_change(struct net *n, struct session *s, const struct remote 
     r->values = set->values = *out;
     r->mask = set->mask = changed;
     lws_dll2_add_tail(&r->list, &n->requests);
+    if (changed & params_mask(PARAM_REPLAN))
+        n->replans_in_flight++;
     n->view = *out;
     sim_submit(n->sim, set);
 }
@@ -215,9 +244,14 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
     }
     struct session *origin = r->reply ? NULL : session_find(n, r->serial);
     struct remote rm = { .origin = r->origin, .by = r->by, .reply = r->reply, .ctx = r->reply_ctx };
+    if (r->mask & params_mask(PARAM_REPLAN))
+        n->replans_in_flight--;
     if (a->status == SIM_SET_APPLIED) {
-        if (a->changed & params_mask(PARAM_REPLAN))
+        if (a->changed & params_mask(PARAM_REPLAN)) {
             n->trim_due = mono_now() + TRIM_DELAY_S;
+            n->replan_t = mono_now();
+            n->replan_hold = a->build_s;
+        }
         if (n->on_params)
             n->on_params(n->on_params_user, &n->applied, n->applied_version);
         fp->any = true;

@@ -153,6 +153,9 @@ struct net {
     void *on_params_user;         /* its argument (main's state saver, used on this thread) */
     double trim_due;              /* mono time to malloc_trim after a change of N, 0 = none */
     double police_t;              /* when fanout_police last ran */
+    int replans_in_flight;        /* sets that change N submitted and not answered yet */
+    double replan_t;              /* mono time the last change of N was applied, 0 = never */
+    double replan_hold;           /* ...and how long it took to build: the next waits as long */
     double budget, budget_t;      /* --control-budget: units left for all clients together, last refill (lws thread) */
     bool placeholder;             /* no index.html in the web root */
     int port;                     /* the port really listened on (--port 0) */

@@ -289,6 +289,8 @@ static void on_sim_wakeup(struct net *n)
     if (!n || !n->sim)
         return;
     fanout_take_latest(n);
+    if (sim_take_trim(n->sim) && n->trim_due == 0)
+        n->trim_due = mono_now(); /* temporal streams were freed: give their pages back */
     dispatch_answers(n);
     dispatch_query_results(n);
     net_capacity_wake(n);

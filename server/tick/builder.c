@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+#include "clock.h"
 #include "log.h"
 #include "metrics.h"
 
@@ -55,7 +56,10 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
     out->surface = NULL;
     if (params_physics_differ(&s->build_base, &cur)) {
         enum sim_set_status why;
+        double t0 = mono_now();
         out->prepared = build_state(s, &cur, &why, err, sizeof err);
+        for (struct sim_set *set = sets; set; set = set->next)
+            set->build_s = mono_now() - t0;
         if (!out->prepared) {
             LOGW("applying parameters failed: %s", err);
             for (struct sim_set *set = sets; set; set = set->next)

@@ -66,8 +66,24 @@ static int popcount_u(unsigned v)
     return c;
 }
 
+/* Streams freed (their encoder state: megabytes each): the lws thread
+ * hands the pages back to the system (malloc_trim is not the producer's job). */
+#define TRIM_AFTER_BYTES ((size_t)1 << 20)
+static void streams_freed(struct sim *s, size_t before)
+{
+    if (before >= s->streams.used + TRIM_AFTER_BYTES)
+        atomic_store(&s->trim_wanted, true);
+}
+
 static void produce(struct sim *s, const struct prod_job *pj)
 {
+    if (pj->release_streams) {
+        encode_pool_wait(s->pool); /* the frame before may still use them */
+        size_t before = s->streams.used;
+        layer_streams_free(&s->streams);
+        streams_freed(s, before);
+        return;
+    }
     double t0 = mono_now();
     /* Each cascade is stepped for the fields asked of it (probes read every cascade). */
     if (ocean_step_cascades(s->ocean, pj->sim_time, pj->want.cfields, OCEAN_MAX_CASCADES) != 0) {
@@ -101,7 +117,9 @@ static void produce(struct sim *s, const struct prod_job *pj)
     struct oc_frame_header h = {
         .seq = pj->seq, .sim_time = pj->sim_time, .params_version = pj->version, .patch_size = pj->patch_size,
     };
+    size_t streams_before = s->streams.used;
     int items = frame_job_begin(s->job, s->ocean, s->cfg.tile_size, &pj->want, &h);
+    streams_freed(s, streams_before);
     if (items < 0) {
         LOGE("out of memory preparing frame %llu", (unsigned long long)pj->seq);
         return;

@@ -53,6 +53,7 @@ void sim_demand(struct sim *s, int key, int delta) { atomic_fetch_add(&s->demand
 void sim_demand_temporal(struct sim *s, int key, int delta) { atomic_fetch_add(&s->tdemand[key], delta); }
 void sim_want_keyframes(struct sim *s, int key, int delta) { atomic_fetch_add(&s->key_want[key], delta); }
 double sim_time_now(struct sim *s) { return atomic_load(&s->now_time); }
+bool sim_take_trim(struct sim *s) { return atomic_exchange(&s->trim_wanted, false); }
 
 void sim_capacity(struct sim *s, struct capacity_info *out)
 {

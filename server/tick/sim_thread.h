@@ -49,6 +49,7 @@ struct sim_set {
     struct ocean_params params; /* in force after this set (applied or not) */
     uint32_t version;           /* params_version in force after it */
     uint64_t changed;           /* param_table bits that differ from before it */
+    double build_s;             /* seconds the builder took to prepare its batch (0 = nothing built) */
     /* Builder and tick threads only. */
     struct ocean_params prev;   /* the params this set was checked on top of */
 };
@@ -114,6 +115,9 @@ void sim_demand(struct sim *s, int layer_key, int delta);   /* subscriptions in 
 void sim_demand_temporal(struct sim *s, int layer_key, int delta);
 void sim_want_keyframes(struct sim *s, int layer_key, int delta);
 double sim_time_now(struct sim *s);
+/* Whether the pipeline freed memory (temporal streams) since the last call:
+ * the lws thread then returns the free pages to the system (malloc_trim). */
+bool sim_take_trim(struct sim *s);
 /* What this daemon can do at the N in force (capacity.h), for hello/params. */
 void sim_capacity(struct sim *s, struct capacity_info *out);
 /* The plan in force (which subscription groups are degraded, and how) and

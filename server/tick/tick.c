@@ -127,6 +127,18 @@ static void queue_job(struct sim *s, struct prod_job *pj, const bool due[PLAN_GR
     pthread_mutex_unlock(&s->lock);
 }
 
+/* Nobody is subscribed: the producer frees the temporal streams (tens of
+ * MB with many layers), which would otherwise wait for the next frame. */
+static void queue_release(struct sim *s)
+{
+    s->release_due = false;
+    pthread_mutex_lock(&s->lock);
+    s->pj = (struct prod_job){ .seq = s->seq, .release_streams = true };
+    s->prod_has_job = true;
+    pthread_cond_signal(&s->prod_cond);
+    pthread_mutex_unlock(&s->lock);
+}
+
 static void tick(struct sim *s, double t_tick)
 {
     pthread_mutex_lock(&s->lock);
@@ -140,9 +152,15 @@ static void tick(struct sim *s, double t_tick)
     gather_demand(s, &d);
     unsigned probe_fields = query_probe_fields(s->cfg.queries); /* probes need height, dx, dz */
     if (!d.any) {
-        if (s->had_demand)
+        if (s->had_demand) {
             publish(s, NULL); /* nobody is ever handed a frame from before an idle period */
+            s->release_due = true;
+        }
         s->had_demand = false;
+        if (s->release_due && idle) {
+            queue_release(s);
+            return;
+        }
         if (!probe_fields)
             return;
     } else {

@@ -81,6 +81,7 @@ struct sim {
     struct layer_streams streams; /* the temporal layers' encoder state: used by frame_job_begin (producer)
                                      and one encode thread per layer, one job at a time (encode_pool) */
     bool reset_streams;           /* tick only: a new sea (seed, patch, depth, loop, N): the next job resets the streams */
+    bool release_due;             /* tick only: nobody is subscribed any more: the streams' memory should go */
     bool sea_changed;             /* tick only: same phases, new amplitudes: the next job keeps the chains (codec.md) */
 
     /* builder only: the params of the newest state built (applied, or
@@ -108,6 +109,7 @@ struct sim {
         float patch_size;
         long codec_samples[CAP_CODECS]; /* the plan's samples per codec on this tick (cost model) */
         bool cold;                      /* queued before grace_seq: its costs are not learned */
+        bool release_streams;           /* no frame: free every temporal stream (nobody is subscribed) */
         struct frame_want want;
     } pj;
     uint64_t penalized_seq;           /* tick: the queued job (seq) the penalty was last raised for... */
@@ -122,6 +124,7 @@ struct sim {
     _Atomic double now_time;          /* atomic: tick writes; lws reads (state file) */
     atomic_uint_least64_t now_seq;    /* atomic: tick writes; lws reads (a new client's first frame) */
     atomic_int now_n;                 /* atomic: tick writes; lws reads (capacity at the N in force) */
+    atomic_bool trim_wanted;          /* atomic: producer sets after freeing streams; lws takes (sim_take_trim) */
 };
 
 /* What the tick reads of the demand at one moment: local subscriptions
