@@ -29,8 +29,11 @@ TESTS += test-hostile
 BENCHES += bench-hostile bench-control-budget
 
 .PHONY: test-hostile bench-hostile bench-control-budget
+# The cluster's hostile cases (a rogue publisher on the NATS prefix) run after
+# the battery, with a nats-server, a sim and an edge of their own.
 test-hostile: $(BUILD)/oceand
 	/usr/bin/python3 tests/hostile/test_hostile.py --oceand $(BUILD)/oceand --jobs $(HOSTILE_JOBS) $(HOSTILE_ARGS)
+	/usr/bin/python3 tests/cluster/test_cluster_hostile.py --oceand $(BUILD)/oceand
 
 bench-hostile: $(BUILD)/oceand
 	@/usr/bin/python3 tests/hostile/test_hostile.py --oceand $(BUILD)/oceand --bench $(HOSTILE_ARGS)

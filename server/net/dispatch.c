@@ -129,10 +129,12 @@ static cJSON *with_name(cJSON *m, const char *name)
 /* name: the message's own checked "name" (applied with the set), or NULL. */
 /* A change of N rebuilds the grids and FFT plans (seconds at N = 2048) and
  * costs every viewer frames while it lasts: one at a time for the whole
- * daemon, and after one is applied the next waits as long as that one took
- * to build, so that a controller flipping N keeps the sea rebuilding at most
- * half of the time (a small N builds in milliseconds and waits as little);
- * the others get `busy` at once, with the wait. */
+ * daemon, and after a slow one (over REPLAN_SLOW_S to build) the next waits
+ * as long as it took, so that a controller flipping N keeps the sea
+ * rebuilding at most half of the time; the others get `busy` at once, with
+ * the wait. A quick rebuild (small N) is not held: a person stepping
+ * through sizes never waits. */
+#define REPLAN_SLOW_S 1.0
 static bool replan_allowed(struct net *n, struct session *s, const struct remote *rm, uint64_t changed,
                            const cJSON *id)
 {
@@ -250,7 +252,7 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
         if (a->changed & params_mask(PARAM_REPLAN)) {
             n->trim_due = mono_now() + TRIM_DELAY_S;
             n->replan_t = mono_now();
-            n->replan_hold = a->build_s;
+            n->replan_hold = a->build_s > REPLAN_SLOW_S ? a->build_s : 0;
         }
         if (n->on_params)
             n->on_params(n->on_params_user, &n->applied, n->applied_version);

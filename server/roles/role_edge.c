@@ -589,9 +589,12 @@ static size_t edge_metrics(void *user, char *buf, size_t cap)
         off += (size_t)snprintf(buf + off, cap - off,
                                 "# TYPE oceand_cluster_frames_total counter\noceand_cluster_frames_total %llu\n"
                                 "# TYPE oceand_cluster_frames_partial_total counter\noceand_cluster_frames_partial_total %llu\n"
-                                "# TYPE oceand_cluster_sim_up gauge\noceand_cluster_sim_up %d\n",
+                                "# TYPE oceand_cluster_sim_up gauge\noceand_cluster_sim_up %d\n"
+                                "# HELP oceand_cluster_layers_refused_total layers whose seq does not follow the sim's "
+                                "stream (seq_guard.h)\n"
+                                "# TYPE oceand_cluster_layers_refused_total counter\noceand_cluster_layers_refused_total %llu\n",
                                 (unsigned long long)cs.frames, (unsigned long long)cs.partial,
-                                r->state == EDGE_OK ? 1 : 0);
+                                r->state == EDGE_OK ? 1 : 0, (unsigned long long)r->seq.refused);
     return off < cap ? off : (cap ? cap - 1 : 0);
 }
 

@@ -1701,6 +1701,128 @@ def name_abuse(d, fig):
     check(not leaked, "renames reached a bystander: %r" % leaked[:5])
 
 
+# ---------------------------------------------------------------- clients that do not read, memory given back
+
+ALL_FIELDS = ["height", "dx", "dz", "slope_x", "slope_z", "jacobian", "foam"]
+FINE_FIELDS = ALL_FIELDS[:6]     # foam lives on cascade 0 only
+HEAVY_SUB = json.dumps({"type": "subscribe", "id": "s", "fields": ALL_FIELDS, "lod": 0, "bound": 0,
+                        "cascades": [{"fields": FINE_FIELDS, "lod": 0, "bound": 0}] * 2})
+
+
+@case(resolution=256, rss_slack_kb=80 * 1024)
+def stalled_pinned_frames(d, fig):
+    """60 clients with a 1 KiB receive window that never read, each subscribed
+    to every field of three cascades at LOD 0, lossless (MBs a frame): each
+    pinned a whole frame of its own (about 1 frame per client, RSS +300 MB).
+    The frames held by clients that do not read are bounded now (48 MB, the
+    oldest holders closed with 1008), and RSS stays within 64 MB of the start."""
+    rss0 = d.rss_kb()
+    socks = []
+    for _ in range(60):
+        s, _ = raw_ws(d.port, rcvbuf=1024)
+        send_quiet(s, ws_frame(OP_TEXT, HEAVY_SUB))
+        socks.append(s)
+        time.sleep(0.05)       # one by one, so that each pins a different frame
+    peak = rss0
+    for _ in range(20):
+        time.sleep(0.2)
+        peak = max(peak, d.rss_kb())
+    closed = d.metric('oceand_clients_closed_total{reason="pinned"}')
+    fig.update(stalled=60, rss_start_kb=rss0, rss_peak_kb=peak, closed_pinned=closed)
+    log("    60 stalled heavy clients: RSS %d -> peak %d kB (%+d MB), %d closed for pinning frames"
+        % (rss0, peak, (peak - rss0) >> 10, closed))
+    for s in socks:
+        s.close()
+    check(peak - rss0 <= 64 * 1024, "RSS grew %d MB with 60 stalled clients (at most 64)" % ((peak - rss0) >> 10))
+    check(closed > 0, "no client was closed for pinning frames")
+
+
+@case(resolution=128, args=("--ping-interval", "1", "--idle-timeout", "3"))
+def pong_without_reading(d, fig):
+    """A client that never reads but sends an unsolicited pong every second
+    was never timed out (it looked alive). Reading is what counts now: no
+    byte of its frame taken for --idle-timeout, and it is closed (1008)."""
+    s, _ = raw_ws(d.port, rcvbuf=1024)
+    send_quiet(s, ws_frame(OP_TEXT, HEAVY_SUB))
+    t0 = time.time()
+    closed_s = None
+    while time.time() - t0 < 12:
+        if not send_quiet(s, ws_frame(OP_PONG, b"alive")):
+            closed_s = time.time() - t0
+            break
+        if d.metric('oceand_clients_closed_total{reason="stalled"}') >= 1:
+            closed_s = time.time() - t0
+            break
+        time.sleep(1.0)
+    s.close()
+    fig.update(closed_after_s=None if closed_s is None else round(closed_s, 1))
+    log("    a pong-sending client that never reads: closed after %s s" % fig["closed_after_s"])
+    check(closed_s is not None and closed_s <= 8, "a client that never reads, sending pongs, held %s s" % closed_s)
+
+
+@case(resolution=256, rss_slack_kb=20 * 1024)
+def temporal_memory_returned(d, fig):
+    """25 temporal viewers with distinct layers (each stream keeps ~40 bytes
+    a sample) took RSS up by hundreds of MB, and it was never given back
+    after they left. Within 5 s of the last one leaving, RSS is back within
+    16 MB of the start."""
+    rss0 = d.rss_kb()
+    combos = [(f, lod, b) for f in ALL_FIELDS[:6] for lod in (0, 1) for b in (0.001, 0.005, 0.01)][:25]
+    socks = []
+    for f, lod, b in combos:
+        s, _ = raw_ws(d.port)
+        r = Reader(s)
+        send_quiet(s, ws_frame(OP_TEXT, json.dumps({"type": "subscribe", "fields": [f], "lod": lod, "bound": b,
+                                                     "temporal": True})))
+        socks.append((s, r))
+    t_end = time.time() + 4
+    peak = rss0
+    while time.time() < t_end:
+        for s, r in socks:
+            r.pump(0)
+        peak = max(peak, d.rss_kb())
+        time.sleep(0.05)
+    for s, _ in socks:
+        s.close()
+    after = []
+    for _ in range(10):
+        time.sleep(0.5)
+        after.append(d.rss_kb())
+    fig.update(rss_start_kb=rss0, rss_peak_kb=peak, rss_after_kb=after[-1])
+    log("    25 temporal viewers: RSS %d -> peak %d -> %d kB 5 s after they left" % (rss0, peak, after[-1]))
+    check(peak - rss0 > 16 * 1024, "the viewers' streams took only %d kB: the case measures nothing" % (peak - rss0))
+    check(after[-1] - rss0 <= 16 * 1024, "RSS %d MB above the start 5 s after the temporal viewers left"
+          % ((after[-1] - rss0) >> 10))
+
+
+@case(resolution=64, changes_params=True, rss_slack_kb=16 * 1024)
+def resolution_flip_busy(d, fig):
+    """One controller flips N between 64 and 512 as fast as its rate limit
+    lets it, for 4 s. Each change of N rebuilt the grids while the next was
+    queued behind it: the sea kept rebuilding and answers came late. Now a
+    change of N while another is being built, or sooner after it than that
+    one took to build, is answered `busy` at once; every set is answered."""
+    s, r = attacker(d)
+    sent = {}
+    t_end = time.time() + 4
+    i = 0
+    while time.time() < t_end:
+        i += 1
+        n = 512 if i % 2 else 64
+        send_quiet(s, ws_frame(OP_TEXT, '{"type":"set","id":%d,"params":{"resolution":%d}}' % (i, n)))
+        sent[i] = time.time()
+        r.pump(0.05)
+    r.until(lambda r: {t.get("id") for t in r.texts if t.get("type") in ("params", "error")} >= set(sent), 10)
+    answers = {t.get("id"): t for t in r.texts if t.get("type") in ("params", "error") and t.get("id") in sent}
+    busy = sum(1 for t in answers.values() if t.get("code") == "busy")
+    applied = sum(1 for t in answers.values() if t.get("type") == "params")
+    s.close()
+    fig.update(sets=len(sent), answered=len(answers), busy=busy, applied=applied)
+    log("    %d sets flipping N: %d answered, %d applied, %d busy" % (len(sent), len(answers), applied, busy))
+    check(len(answers) == len(sent), "%d of %d sets answered" % (len(answers), len(sent)))
+    check(busy > 0, "no change of N was refused while another was being built")
+
+
 # ---------------------------------------------------------------- runner
 
 BUDGET = 300        # --control-budget of the control_budget case (units a second, all clients)

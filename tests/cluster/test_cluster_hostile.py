@@ -1,0 +1,277 @@
+#!/usr/bin/python3
+"""What a hostile publisher on the NATS prefix can do to an edge, and what it
+must not: a sim and an edge on a nats-server of their own (test_cluster_roles'
+Cluster), a viewer at the edge, and a rogue client speaking NATS's text
+protocol by hand (no NATS package for Python here; the protocol is a few
+lines) that republishes captured layers with other seqs, or publishes params
+events and answers the viewers' sets itself.
+
+    /usr/bin/python3 tests/cluster/test_cluster_hostile.py --oceand build/oceand [-k NAME]
+
+Each case fails on a daemon without the defence it names. Prints
+"N passed, M failed" last. Part of `make test-hostile`."""
+import argparse
+import asyncio
+import json
+import os
+import socket
+import struct
+import sys
+import time
+import traceback
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import test_cluster_roles as tcr  # noqa: E402
+from test_cluster_roles import Cluster, check, connect, recv_frame, recv_json, wait_for  # noqa: E402
+
+PREFIX = "oceand"
+
+
+class RawNats:
+    """NATS's client protocol over a plain socket: CONNECT, SUB, PUB, MSG."""
+
+    def __init__(self, url):
+        host, port = url.replace("nats://", "").split(":")
+        self.s = socket.create_connection((host, int(port)), timeout=5)
+        self.buf = b""
+        self._line()                                   # INFO {...}
+        self.s.sendall(b'CONNECT {"verbose":false,"pedantic":false,"name":"rogue"}\r\nPING\r\n')
+        while self._line() != b"PONG":
+            pass
+        self.sid = 0
+
+    def _line(self):
+        while b"\r\n" not in self.buf:
+            chunk = self.s.recv(65536)
+            if not chunk:
+                raise ConnectionError("nats closed")
+            self.buf += chunk
+        line, self.buf = self.buf.split(b"\r\n", 1)
+        return line
+
+    def _take(self, n):
+        while len(self.buf) < n + 2:
+            chunk = self.s.recv(65536)
+            if not chunk:
+                raise ConnectionError("nats closed")
+            self.buf += chunk
+        data, self.buf = self.buf[:n], self.buf[n + 2:]
+        return data
+
+    def sub(self, subject):
+        self.sid += 1
+        self.s.sendall(b"SUB %s %d\r\n" % (subject.encode(), self.sid))
+        return self.sid
+
+    def pub(self, subject, payload, reply=None):
+        r = b" " + reply.encode() if reply else b""
+        self.s.sendall(b"PUB %s%s %d\r\n%s\r\n" % (subject.encode(), r, len(payload), payload))
+
+    def next_msg(self, timeout=5):
+        """(subject, reply or None, payload); PINGs from the server are answered."""
+        self.s.settimeout(timeout)
+        while True:
+            line = self._line()
+            if line == b"PING":
+                self.s.sendall(b"PONG\r\n")
+                continue
+            if not line.startswith(b"MSG "):
+                continue
+            parts = line.split()
+            subject, n = parts[1].decode(), int(parts[-1])
+            reply = parts[3].decode() if len(parts) == 5 else None
+            return subject, reply, self._take(n)
+
+    def close(self):
+        self.s.close()
+
+
+def envelope(kind, body, origin="rogue", by=""):
+    """An OCNE envelope (server/cluster/cluster.h), version 2."""
+    return (b"OCNE" + struct.pack("<BBBBI", 2, kind, len(origin), len(by), len(body)) + origin.encode()
+            + by.encode() + body)
+
+
+KIND_REPLY, KIND_PARAMS = 3, 4
+
+
+def with_seq(part, seq):
+    """A captured layer part (OCNL) with another seq (u64 at byte 8)."""
+    return part[:8] + struct.pack("<Q", seq) + part[16:]
+
+
+def seq_of(part):
+    return struct.unpack_from("<Q", part, 8)[0]
+
+
+def capture_frame(rogue, layers, timeout=5):
+    """The parts of one complete tick of the given layer subjects: {subject: payload}."""
+    got = {}
+    t_end = time.time() + timeout
+    while time.time() < t_end:
+        subject, _, payload = rogue.next_msg(timeout)
+        if subject not in layers or payload[:4] != b"OCNL":
+            continue
+        if got and seq_of(payload) != seq_of(next(iter(got.values()))):
+            got = {}
+        got[subject] = payload
+        if len(got) == len(layers):
+            return got
+    raise tcr.TestFailure("no complete frame of %r captured" % layers)
+
+
+async def frames_for(ws, seconds):
+    """Headers of the frames a viewer gets for a while."""
+    out = []
+    t_end = time.time() + seconds
+    while time.time() < t_end:
+        try:
+            h, _ = await recv_frame(ws, timeout=max(0.1, t_end - time.time()))
+            out.append(h)
+        except (asyncio.TimeoutError, tcr.TestFailure):
+            break
+    return out
+
+
+WEB_LAYERS = ["%s.frame.0.%s.0.3" % (PREFIX, f) for f in ("height", "dx", "dz")]   # the default subscription
+
+
+def check_stream_goes_on(frames, real_seq, what):
+    check(len(frames) >= 20, "%s: the viewer got %d frames in 2 s" % (what, len(frames)))
+    future = [h["seq"] for h in frames if h["seq"] > real_seq + 10 ** 6]
+    check(not future, "%s: the viewer got frames from the future: %r" % (what, future[:3]))
+    seqs = [h["seq"] for h in frames]
+    check(seqs == sorted(seqs), "%s: seq went back at the viewer" % what)
+
+
+TESTS = []
+
+
+def test(fn):
+    TESTS.append(fn)
+    return fn
+
+
+@test
+@tcr.with_cluster(edges=1)
+def rogue_future_layer(c):
+    """One layer part republished with seq + 2e9 used to become the frame the
+    edge collected: every real layer behind it was dropped as stale and no
+    viewer got another frame. Then three complete future frames: every
+    viewer that got one never took another (seq must grow)."""
+    rogue = RawNats(c.nats.url)
+    try:
+        async def run():
+            ws, _ = await connect(c.edges[0])
+            await recv_frame(ws, timeout=10)
+            rogue.sub("%s.frame.>" % PREFIX)
+            parts = capture_frame(rogue, WEB_LAYERS)
+            real = seq_of(next(iter(parts.values())))
+            rogue.pub(WEB_LAYERS[0], with_seq(parts[WEB_LAYERS[0]], real + 2 * 10 ** 9))
+            frames = await frames_for(ws, 2.0)
+            check_stream_goes_on(frames, real, "one future layer")
+            for k in range(3):                  # three complete future frames
+                for subj in WEB_LAYERS:
+                    rogue.pub(subj, with_seq(parts[subj], real + 2 * 10 ** 9 + 10 + k))
+            frames = await frames_for(ws, 2.0)
+            check_stream_goes_on(frames, real, "three complete future frames")
+            ws2, _ = await connect(c.edges[0])      # and a viewer who joins afterwards
+            h, _ = await recv_frame(ws2, timeout=5)
+            check(h["seq"] < real + 10 ** 6, "a new viewer got a future frame: %r" % h["seq"])
+            await ws.close()
+            await ws2.close()
+        asyncio.run(run())
+        refused = c.edges[0].metric("oceand_cluster_layers_refused_total")
+        check(refused >= 1, "the edge counted no refused layer (%r)" % refused)
+    finally:
+        rogue.close()
+
+
+@test
+@tcr.with_cluster(edges=1)
+def rogue_text_to_viewers(c):
+    """Text from NATS went to viewers unchecked: a params event whose by_name
+    holds the bytes FF FE (a browser must fail a socket that receives a text
+    frame that is not UTF-8), a rogue's answer to a viewer's set, and 600 KB
+    params events that closed every viewer (1008). None reaches a viewer now;
+    the viewer stays connected and gets `unavailable` for its set instead."""
+    rogue = RawNats(c.nats.url)
+    try:
+        async def run():
+            ws, _ = await connect(c.edges[0])
+            await recv_frame(ws, timeout=10)
+            bad = (b'{"type":"params","params_version":99,"params":{"wind_speed":12},"changed":["wind_speed"],'
+                   b'"by":"c9","by_name":"\xff\xfe"}')
+            rogue.pub("%s.params" % PREFIX, envelope(KIND_PARAMS, bad))
+            big = json.dumps({"type": "params", "params_version": 98, "params": {"wind_speed": 11},
+                              "changed": ["wind_speed"], "by": "c9", "pad": "x" * 600000}).encode()
+            for _ in range(3):
+                rogue.pub("%s.params" % PREFIX, envelope(KIND_PARAMS, big))
+            # A rogue that answers every set (the sim answers too: the first answer wins).
+            rogue.sub("%s.ctl" % PREFIX)
+            await ws.send(json.dumps({"type": "set", "id": 7, "params": {"wind_speed": 9}}))
+            t_end = time.time() + 5
+            while time.time() < t_end:
+                subject, reply, payload = rogue.next_msg(5)
+                if subject == "%s.ctl" % PREFIX and reply:
+                    rogue.pub(reply, envelope(KIND_REPLY, b"\xff\xfe not json <script>"))
+                    break
+            ans = await recv_json(ws, lambda m: m.get("id") == 7, timeout=10)
+            check(ans["type"] in ("params", "error"), "answer to the set: %r" % ans)
+            if ans["type"] == "error":
+                check(ans["code"] == "unavailable", "a bad answer relayed as %r" % ans)
+            frames = await frames_for(ws, 1.5)
+            check(len(frames) >= 10, "the viewer got %d frames after the rogue's messages" % len(frames))
+            check(ws.close_code is None, "the viewer was closed (%r)" % ws.close_code)
+            await ws.close()
+        asyncio.run(run())
+    finally:
+        rogue.close()
+
+
+@test
+@tcr.with_cluster(edges=1)
+def edge_refused_set_keeps_no_name(c):
+    """A set refused at the edge ({wind_speed: 99, name: "Refused"}, out of
+    range) used to leave its name on the client, and the next valid set
+    carried by_name "Refused". Neither changes when a set is refused."""
+    async def run():
+        ws, _ = await connect(c.edges[0])
+        await ws.send(json.dumps({"type": "set", "id": 1, "params": {"wind_speed": 99}, "name": "Refused"}))
+        e = await recv_json(ws, lambda m: m.get("id") == 1, timeout=10)
+        check(e["type"] == "error" and e["code"] == "out_of_range", "refused set: %r" % e)
+        await ws.send(json.dumps({"type": "set", "id": 2, "params": {"wind_speed": 11}}))
+        p = await recv_json(ws, lambda m: m.get("id") == 2, timeout=10)
+        check(p["type"] == "params", "valid set: %r" % p)
+        check(p.get("by_name", "") != "Refused", "the refused set's name was kept: %r" % p.get("by_name"))
+        await ws.close()
+    asyncio.run(run())
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--oceand", required=True)
+    ap.add_argument("-k", default="")
+    args = ap.parse_args()
+    tcr.ARGS = args
+    tcr.td.ARGS = args
+    passed = failed = 0
+    for fn in TESTS:
+        if args.k and args.k not in fn.__name__:
+            continue
+        t0 = time.time()
+        try:
+            fn()
+            passed += 1
+            print("PASS %s (%.1f s)" % (fn.__name__, time.time() - t0))
+        except Exception:
+            failed += 1
+            print("FAIL %s" % fn.__name__)
+            traceback.print_exc()
+        sys.stdout.flush()
+    print("%d passed, %d failed" % (passed, failed))
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
