@@ -1727,7 +1727,7 @@ def stalled_pinned_frames(d, fig):
     for _ in range(20):
         time.sleep(0.2)
         peak = max(peak, d.rss_kb())
-    closed = d.metric('oceand_clients_closed_total{reason="pinned"}')
+    closed = d.metrics().get('oceand_clients_closed_total{reason="pinned"}', 0)
     fig.update(stalled=60, rss_start_kb=rss0, rss_peak_kb=peak, closed_pinned=closed)
     log("    60 stalled heavy clients: RSS %d -> peak %d kB (%+d MB), %d closed for pinning frames"
         % (rss0, peak, (peak - rss0) >> 10, closed))
@@ -1737,7 +1737,7 @@ def stalled_pinned_frames(d, fig):
     check(closed > 0, "no client was closed for pinning frames")
 
 
-@case(resolution=128, args=("--ping-interval", "1", "--idle-timeout", "3"))
+@case(resolution=128, args=("--ping-interval", "1", "--idle-timeout", "3"), rss_slack_kb=8192)
 def pong_without_reading(d, fig):
     """A client that never reads but sends an unsolicited pong every second
     was never timed out (it looked alive). Reading is what counts now: no
@@ -1747,10 +1747,10 @@ def pong_without_reading(d, fig):
     t0 = time.time()
     closed_s = None
     while time.time() - t0 < 12:
-        if not send_quiet(s, ws_frame(OP_PONG, b"alive")):
+        if not send_quiet(s, ws_frame(10, b"alive")):     # an unsolicited pong (opcode 10)
             closed_s = time.time() - t0
             break
-        if d.metric('oceand_clients_closed_total{reason="stalled"}') >= 1:
+        if d.metrics().get('oceand_clients_closed_total{reason="stalled"}', 0) >= 1:
             closed_s = time.time() - t0
             break
         time.sleep(1.0)
@@ -1811,11 +1811,17 @@ def resolution_flip_busy(d, fig):
         n = 512 if i % 2 else 64
         send_quiet(s, ws_frame(OP_TEXT, '{"type":"set","id":%d,"params":{"resolution":%d}}' % (i, n)))
         sent[i] = time.time()
-        r.pump(0.05)
+        r.pump(0)
+        time.sleep(0.05)              # 20 a second: the client's rate limit
     r.until(lambda r: {t.get("id") for t in r.texts if t.get("type") in ("params", "error")} >= set(sent), 10)
     answers = {t.get("id"): t for t in r.texts if t.get("type") in ("params", "error") and t.get("id") in sent}
     busy = sum(1 for t in answers.values() if t.get("code") == "busy")
     applied = sum(1 for t in answers.values() if t.get("type") == "params")
+    for k in range(50):               # back to N = 64 (the RSS check compares with the start)
+        m = ask(s, r, '{"type":"set","id":"end%d","params":{"resolution":64}}' % k, timeout=10)
+        if m and m.get("type") == "params":
+            break
+        time.sleep(0.2)
     s.close()
     fig.update(sets=len(sent), answered=len(answers), busy=busy, applied=applied)
     log("    %d sets flipping N: %d answered, %d applied, %d busy" % (len(sent), len(answers), applied, busy))
