@@ -215,7 +215,7 @@ static size_t memory_bytes(int n)
     return b;
 }
 
-bool control_fits_memory(int n, int cascades, int max_memory_mb)
+double control_memory_mb(int n, int cascades)
 {
     /* While a new N is being built the old simulation still runs, so two
      * exist at once (one grid per cascade, and from its first eased change on
@@ -225,7 +225,12 @@ bool control_fits_memory(int n, int cascades, int max_memory_mb)
     const double c = cascades > 1 ? cascades : 1;
     double bytes = 2.0 * c * (double)memory_bytes(n) + c * (double)ocean_ease_memory_bytes(n) +
                    (3.0 + 6.0) * 4.0 * (double)n * (double)n;
-    return bytes <= (double)max_memory_mb * 1048576.0;
+    return bytes / 1048576.0;
+}
+
+bool control_fits_memory(int n, int cascades, int max_memory_mb)
+{
+    return control_memory_mb(n, cascades) <= (double)max_memory_mb;
 }
 
 const char *control_error_code(enum param_error r)
