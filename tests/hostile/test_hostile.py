@@ -2338,5 +2338,10 @@ def healthz_many_layers(d, fig):
         nats.wait()
 
 
+# Both start daemons of their own (an N = 512 start-up with 3 cascades; a sim, an edge and a
+# nats-server): alone, like the other cases that load the machine.
+SOLO.update({"state_over_memory_cap", "healthz_many_layers"})
+
+
 if __name__ == "__main__":
     main()
