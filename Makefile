@@ -29,7 +29,7 @@ INC_query   := -Iserver/query $(INC_base) $(INC_control) -Iserver/common
 INC_tick    := -Iserver/tick $(INC_query)
 INC_net     := -Iserver/net $(INC_tick) -Iserver/config
 INC_roles   := -Iserver/roles $(INC_net) -Iserver/cluster
-INC         := $(INC_roles)
+INC         := $(INC_roles) -Iserver
 $(foreach d,base control config query tick net roles,\
   $(eval $(BUILD)/obj/server/$(d)/%.o $(BUILD)/san/server/$(d)/%.o: INC := $$(INC_$(d))))
 $(BUILD)/obj/server/sim/%.o $(BUILD)/san/server/sim/%.o: INC := -Iserver/sim/include -Iserver/sim -Iserver/common

@@ -10,7 +10,7 @@
 # fragment floods, query/probe abuse; layer floods (every field x LOD x bound at
 # N = 512 against the encode budget, issue 16 defect 2); the control budget (50
 # clients of max-size subscribes, a controller's sets).
-# Budget: < 5 min on 2 cores (43 cases). Each case has its own daemon and
+# Budget: < 5 min on 2 cores (49 cases). Each case has its own daemon and
 # observer, and most of the battery's wall time is observer windows (a daemon
 # at N = 64 uses ~0.1 core): the light cases run HOSTILE_JOBS (2) processes at
 # once, then the ones that load the daemon (N > 64, floods of clients or sets;

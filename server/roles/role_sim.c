@@ -13,6 +13,7 @@
 
 #include "clock.h"
 
+#include <cjson/cJSON.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -265,7 +266,7 @@ static void sim_on_wake(void *user)
     }
 }
 
-static const char *sim_health(void *user, char *extra, size_t cap)
+static const char *sim_health(void *user, cJSON *obj)
 {
     struct role_sim *r = user;
     struct cl_stats st;
@@ -276,10 +277,10 @@ static const char *sim_health(void *user, char *extra, size_t cap)
         uint64_t w = atomic_load(&r->demand[i]);
         memcpy(bits + 8 * i, &w, 8);
     }
-    size_t off = (size_t)snprintf(extra, cap, ",\"role\":\"sim\",\"cluster\":\"%s\",\"edges\":%d",
-                                  up ? "ok" : "nats_unavailable", st.demand_edges);
-    if (off < cap)
-        role_keys_json(bits, extra + off, cap - off);
+    cJSON_AddStringToObject(obj, "role", "sim");
+    cJSON_AddStringToObject(obj, "cluster", up ? "ok" : "nats_unavailable");
+    cJSON_AddNumberToObject(obj, "edges", st.demand_edges);
+    role_keys_json(bits, obj);
     return up ? "ok" : "degraded";
 }
 
