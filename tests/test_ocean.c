@@ -467,8 +467,7 @@ static void test_periodic(void)
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
         free(a[f]);
     CHECK(e <= 1e-5 && e_ref <= 1e-5 && e_half > 0.1, "periodic.loop_period: T = 20 s, all fields: field(t + 1000 "
-          "T) vs field(t) %.1e, vs unwrapped reference %.1e; "
-          "at t + T/2: %.2f (must differ)", e, e_ref, e_half);
+          "T) vs field(t) %.1e, vs unwrapped reference %.1e; at t + T/2: %.2f (must differ)", e, e_ref, e_half);
 
     /* No loop: phases in double precision, so day-long runs stay exact: the
      * step at t = 10 days must match the double-precision reference. */
@@ -523,8 +522,7 @@ static void test_time_max(void)
         char name[64];
         snprintf(name, sizeof name, "time.max.%s", cases[c].what);
         CHECK(err[1] <= 1e-5 && err[0] <= 1e-5, "%s: N=%d L=%g m loop %g s: FFT vs double reference, all fields, "
-              "at t = %.0e s %.1e, at t = %.2f s %.1e "
-              "(limit 1e-5 for "
+              "at t = %.0e s %.1e, at t = %.2f s %.1e (limit 1e-5 for "
               "both)", name, p.resolution, p.patch_size, p.loop_period, times[1], err[1], times[0], err[0]);
         ocean_free(o);
     }
@@ -1635,8 +1633,7 @@ static void test_foam(void)
     fmaxv = max_abs(ocean_field(a, OCEAN_FOAM), nn);
     CHECK(same == 0 && c0 > 0 && foam_covered(a) == 0 && fmaxv <= exp(-4.0 / 3.0) + 1e-6,
           "foam.deterministic_and_fades: two oceans (1 and 2 threads, different pasts) after the same steps: "
-          "max diff %.1e; covered %.4f, "
-          "4 s after the wind stops: covered %.4f, max foam %.3f (<= exp(-4/3))",
+          "max diff %.1e; covered %.4f, 4 s after the wind stops: covered %.4f, max foam %.3f (<= exp(-4/3))",
           same, c0, foam_covered(a), fmaxv);
     ocean_free(a);
     ocean_free(b);
@@ -1711,8 +1708,8 @@ static void test_cascades_hs(void)
         snprintf(name, sizeof name, "cascades.hs.%s", spec_name(spectra[si]));
         double tol = quick ? 0.10 : 0.05;
         CHECK(fabs(hs / hs_ref - 1) <= tol && fine > 0.2, "%s: 3 cascades (L %.0f / %.1f / %.1f m): Hs of the sum "
-              "%.4f m (mean of %d seeds; variance shares "
-              "%.0f / %.0f / %.0f %%) vs spectrum over the combined band %.4f m, %+.1f%% (limit %.0f%%)", name,
+              "%.4f m (mean of %d seeds; variance shares %.0f / %.0f / %.0f %%) vs spectrum over the combined "
+              "band %.4f m, %+.1f%% (limit %.0f%%)", name,
               p.patch_size, ocean_cascade_patch(p.patch_size, 1), L2, hs, seeds, 100 * m0[0] / sum,
               100 * m0[1] / sum, 100 * m0[2] / sum, hs_ref, 100 * (hs / hs_ref - 1), 100 * tol);
         ocean_free(o);
@@ -1915,8 +1912,8 @@ static void test_huge_pages(void)
     int thp = access("/sys/kernel/mm/transparent_hugepage/enabled", F_OK) == 0;
     int asked = !thp || (found && strstr(flags, " hg") && strstr(spare_flags, " hg"));
     CHECK(aligned && asked, "memory.huge_pages: a 4 MB field (N = 1024) and a spare field buffer are 2 MB aligned "
-          "(%s) and asked for as huge pages "
-          "(VmFlags%s hg: %s); the field got %ld kB of them (up to the kernel's THP setting and free memory)",
+          "(%s) and asked for as huge pages (VmFlags%s hg: %s); the field got %ld kB of them (up to the kernel's "
+          "THP setting and free memory)",
           aligned ? "yes" : "no", found ? "" : " not found,", asked ? "yes" : "no", huge_kb);
     ocean_field_buffer_free(spare);
     ocean_free(o);
@@ -1967,8 +1964,8 @@ static void test_streaming_store(void)
         for (size_t j = 0; j < nn; j++)
             hmax = fmax(hmax, fabs(streamed[j]));
         CHECK(differ < 0 && hmax > 0, "step.streaming_store: N = %d: the six fields with the streaming store "
-              "equal those with FFTW's copy bit for bit (%s); "
-              "max |height| %.3f m", n, differ < 0 ? "yes" : ocean_field_name((enum ocean_field)differ), hmax);
+              "equal those with FFTW's copy bit for bit (%s); max |height| %.3f "
+              "m", n, differ < 0 ? "yes" : ocean_field_name((enum ocean_field)differ), hmax);
         free(streamed);
         ocean_free(o);
     }
@@ -2003,8 +2000,8 @@ static void test_rows_half_length(void)
             }
         }
         CHECK(worst < 1e-5, "step.rows_half_length: N = %d: six fields, half-length split vs FFTW's c2r: largest "
-              "difference %.2g of the field's "
-              "largest value (%s; limit 1e-5)", n, worst, ocean_field_name((enum ocean_field)worst_f));
+              "difference %.2g of the field's largest value (%s; limit "
+              "1e-5)", n, worst, ocean_field_name((enum ocean_field)worst_f));
         free(ours);
         ocean_free(o);
     }

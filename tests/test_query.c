@@ -505,8 +505,7 @@ static void test_cascade_grid(void)
     double es = fmax(fabs(-q.normal[0] / q.normal[1] - sx), fabs(-q.normal[2] / q.normal[1] - sz));
     CHECK(rc == 0 && ocean_cascades(o) == 3 && e < 1e-5 && es < 1e-4 && fabs(q.height - h0) > 1e-4,
           "query.cascade_grid: chop 0, 3 cascades, origin: height %.1e m and slopes %.1e off the sum of the "
-          "cascades' FFT samples "
-          "(cascade 0 alone: %.1e m off)", e, es, fabs(q.height - h0));
+          "cascades' FFT samples (cascade 0 alone: %.1e m off)", e, es, fabs(q.height - h0));
     ocean_free(o);
 }
 
