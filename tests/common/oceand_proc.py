@@ -299,3 +299,11 @@ class Nats(_Proc):
 
     def stop(self, sig=signal.SIGKILL, timeout=5, while_waiting=None):
         return super().stop(sig, timeout, while_waiting)
+
+
+if __name__ == "__main__":
+    # For shell scripts: `python3 tests/common/oceand_proc.py free-port` prints one.
+    import sys
+    if sys.argv[1:] != ["free-port"]:
+        sys.exit("usage: oceand_proc.py free-port")
+    print(free_port())
