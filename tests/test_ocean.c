@@ -2000,8 +2000,8 @@ static void test_rows_half_length(void)
             }
         }
         CHECK(worst < 1e-5, "step.rows_half_length: N = %d: six fields, half-length split vs FFTW's c2r: largest "
-              "difference %.2g of the field's largest value (%s; limit "
-              "1e-5)", n, worst, ocean_field_name((enum ocean_field)worst_f));
+              "difference %.2g of the field's largest value (%s; limit 1e-5)",
+              n, worst, ocean_field_name((enum ocean_field)worst_f));
         free(ours);
         ocean_free(o);
     }
@@ -2010,8 +2010,7 @@ static void test_rows_half_length(void)
 int main(void)
 {
     check_verbose = 1; /* the passing lines carry the measured values */
-    const char *qenv = getenv("OCEAN_TEST_QUICK");
-    quick = qenv && *qenv && strcmp(qenv, "0") != 0;
+    quick = check_quick();
     only = getenv("OCEAN_TEST_ONLY");
     if (only && !*only)
         only = NULL;

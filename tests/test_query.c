@@ -659,8 +659,7 @@ static void test_threads_and_snapshot(void)
 int main(void)
 {
     check_verbose = 1; /* the passing lines carry the measured values */
-    const char *q = getenv("OCEAN_TEST_QUICK");
-    quick = q && *q && strcmp(q, "0") != 0;
+    quick = check_quick();
     test_bad_input();
     test_periodic_and_grid();
     test_cascade_grid();

@@ -10,6 +10,8 @@
  *   return check_done();    prints the closing line "N passed, N failed",
  *                           alone on its line (CI reads it); returns the exit
  *                           status, 1 on any failure
+ *   check_quick()           OCEAN_TEST_QUICK is set and not "0": the reduced
+ *                           run (smaller N, fewer seeds) valgrind and TSan get
  *
  * Everything goes to stdout, flushed per line, so that a crash or a sanitizer
  * report lands after the last check it followed. */
@@ -18,6 +20,8 @@
 
 #include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 
 static int check_passed, check_failed;
 static int check_verbose;
@@ -53,6 +57,13 @@ static int check_done(void)
     printf("%d passed, %d failed\n", check_passed, check_failed);
     fflush(stdout);
     return check_failed ? 1 : 0;
+}
+
+__attribute__((unused))
+static int check_quick(void)
+{
+    const char *q = getenv("OCEAN_TEST_QUICK");
+    return q && *q && strcmp(q, "0") != 0;
 }
 
 #endif
