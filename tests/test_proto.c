@@ -23,7 +23,6 @@
 #include "common/check.h"
 #include "common/slurp.h"
 
-
 static unsigned long long rng = 0x2545F4914F6CDD1Dull;
 static uint32_t rnd(void) { rng ^= rng << 13; rng ^= rng >> 7; rng ^= rng << 17; return (uint32_t)(rng >> 32); }
 static double urand(void) { return rnd() * 0x1p-32; }

@@ -11,7 +11,6 @@
 
 #include "../common/check.h"
 
-
 /* ---- subjects ---- */
 
 static void test_subjects(void)

@@ -31,7 +31,6 @@
 
 #include "../common/check.h"
 
-
 static double now_s(void)
 {
     struct timespec ts;

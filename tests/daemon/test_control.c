@@ -22,7 +22,6 @@
 
 #include "../common/check.h"
 
-
 static const struct ctl_limits lim = { .tick_rate = 30, .max_memory_mb = 256 };
 
 /* Parse a set and apply it to defaults; returns the error code or "ok". */

@@ -16,7 +16,6 @@
 
 #include "../common/check.h"
 
-
 #define NPTS 200
 #define DT (1.0 / 30.0)
 
