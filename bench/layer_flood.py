@@ -72,6 +72,7 @@ def main():
         if obs:
             obs.close()
         d.stop()
+        d.close()
 
 
 if __name__ == "__main__":

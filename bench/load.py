@@ -16,17 +16,14 @@ import argparse
 import json
 import os
 import re
-import socket
 import subprocess
+import sys
 import tempfile
 import time
 import urllib.request
 
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "common"))
+import oceand_proc  # noqa: E402
 
 
 def metric(port, name):
@@ -80,19 +77,12 @@ def bucket_median(b0, b1):
 
 def run(args, n, k, fields=None):
     tmp = tempfile.mkdtemp(prefix="oceand-bench-")
-    port = free_port()
-    log = open(os.path.join(tmp, "oceand.log"), "wb")
-    d = subprocess.Popen([args.oceand, "--port", str(port), "--resolution", str(n), "--state-file", "none",
-                          "--web-root", tmp, "--max-clients", str(k + 16), "--log-level", "warn"]
-                         + args.oceand_args.split(),
-                         stdout=log, stderr=log)
+    # up to 2 min to be ready: the first start at a new N plans FFTW (then cached)
+    d = oceand_proc.Oceand(args.oceand, "--resolution", str(n), "--state-file", "none",
+                           "--web-root", tmp, "--max-clients", str(k + 16), "--log-level", "warn",
+                           *args.oceand_args.split(), tmp=tmp, own_tmp=True, ready_timeout=120)
+    port = d.port
     try:
-        for _ in range(2400):             # up to 2 min: the first start at a new N plans FFTW (then cached)
-            try:
-                urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=1).read()
-                break
-            except OSError:
-                time.sleep(0.05)
         sub = {"type": "subscribe", "temporal": not args.intra}   # temporal: as the web client does
         if fields:
             sub["fields"] = fields
@@ -142,12 +132,8 @@ def run(args, n, k, fields=None):
                "loadavg_1m": round(os.getloadavg()[0], 2)}   # this machine is shared: context for the numbers
         print(json.dumps(res), flush=True)
     finally:
-        d.terminate()
-        try:
-            d.wait(5)
-        except subprocess.TimeoutExpired:
-            d.kill()
-        log.close()
+        d.stop(timeout=5)
+        d.close()
 
 
 def main():

@@ -21,18 +21,7 @@
 #include "ocean.h"
 #include "state.h"
 
-static int passed, failed;
-#define CHECK(cond, ...)                                                  \
-    do {                                                                  \
-        if (cond) {                                                       \
-            passed++;                                                     \
-        } else {                                                          \
-            failed++;                                                     \
-            printf("FAIL %s:%d: ", __FILE__, __LINE__);                   \
-            printf(__VA_ARGS__);                                          \
-            printf("\n");                                                 \
-        }                                                                 \
-    } while (0)
+#include "../common/check.h"
 
 static const struct ctl_limits lim = { .tick_rate = 30, .max_memory_mb = 256 };
 
@@ -741,7 +730,6 @@ static void fuzz(void)
         ctl_msg_free(&m);
     }
     CHECK(accepted > 0, "fuzz never produced a valid set");
-    passed++;
 }
 
 /* capacity.c: the plan of a tick (issue 15 / 16 defect 2), from a model
@@ -995,7 +983,6 @@ static void test_capacity_codecs(void)
         if (ci.sizes[i].n == 1024)
             CHECK(fabs(ci.sizes[i].est_ms[2] - (cost_step_s(&l, 1024, 3) + l.enc_temporal_s * 3 * 1024 * 1024) * 1e3) < 1e-3,
                   "est_ms at 1024: %g", ci.sizes[i].est_ms[2]);
-    passed++;
 }
 
 /* capacity.c: the codec rung with two temporal groups, and the announcement
@@ -1069,7 +1056,6 @@ static void test_capacity_codec_rung(void)
         if (ci.sizes[i].n == 1024)
             CHECK(ci.sizes[i].temporal_fields == 2 && ci.sizes[i].full_rate_fields == 5, "1024 capped: temporal %d full %d",
                   ci.sizes[i].temporal_fields, ci.sizes[i].full_rate_fields);
-    passed++;
 }
 
 /* Display names (PROTOCOL.md §7.1 `name`): what is accepted and refused,
@@ -1162,6 +1148,5 @@ int main(void)
     test_state_values();
     test_display_names();
     fuzz();
-    printf("test_control: %d passed, %d failed\n", passed, failed);
-    return failed != 0;
+    return check_done();
 }

@@ -43,57 +43,24 @@ TILE_HDR = struct.Struct("<BBBBHHHHfddII")       # 40 bytes
 
 from harness import TestFailure, check, running, run_tests  # noqa: E402,F401 (re-exported to the other suites)
 
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
+import oceand_proc  # noqa: E402
 
 
-class Daemon:
-    """One oceand process with its own port, state file and log."""
+class Daemon(oceand_proc.Oceand):
+    """One oceand with its own port, state file and log, at the suite's settings."""
 
     def __init__(self, *extra, state_file=None, tmpdir=None, tls_ctx=None, env=None):
-        self.tmp = tmpdir or tempfile.mkdtemp(prefix="oceand-test-")
-        self.tls_ctx = tls_ctx           # client SSL context when the daemon serves https/wss
-        self.port = free_port()
-        self.state_file = state_file or os.path.join(self.tmp, "state.json")
-        self.log_path = os.path.join(self.tmp, "oceand.log")
-        args = [ARGS.oceand, "--port", str(self.port), "--state-file", self.state_file,
-                "--web-root", os.path.join(self.tmp, "web"), "--resolution", str(BASE_N),
-                "--tick-rate", str(int(TICK)),
-                # ESTIMATE plans, like frame_check's reference: bit-exact comparisons
-                "--plan-rigor", "0", "--wisdom-file", "none",
-                # the old fixed cap, so that the tests do not depend on this machine's memory
-                "--max-memory-mb", "256"] + list(extra)
-        self.log = open(self.log_path, "ab")
-        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log,
-                                     env=dict(os.environ, **env) if env else None)
-        scheme = "s" if tls_ctx else ""
-        self.url = "ws%s://127.0.0.1:%d/" % (scheme, self.port)
-        self.http = "http%s://127.0.0.1:%d" % (scheme, self.port)
-        deadline = time.time() + 20
-        while True:
-            if self.proc.poll() is not None:
-                raise TestFailure("oceand exited at start with %s; log:\n%s" % (self.proc.returncode, self.read_log()))
-            try:
-                urllib.request.urlopen(self.http + "/healthz", timeout=1, context=self.tls_ctx).read()
-                break
-            except (urllib.error.URLError, ConnectionError, OSError):
-                if time.time() > deadline:
-                    raise TestFailure("oceand did not answer /healthz")
-                time.sleep(0.05)
-
-    def read_log(self):
-        with open(self.log_path, "rb") as f:
-            return f.read().decode(errors="replace")[-4000:]
-
-    def rss_kb(self):
-        with open("/proc/%d/status" % self.proc.pid) as f:
-            for line in f:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1])
-        return 0
+        tmp = tmpdir or tempfile.mkdtemp(prefix="oceand-test-")
+        self.state_file = state_file or os.path.join(tmp, "state.json")
+        super().__init__(ARGS.oceand, "--state-file", self.state_file,
+                         "--web-root", os.path.join(tmp, "web"), "--resolution", str(BASE_N),
+                         "--tick-rate", str(int(TICK)),
+                         # ESTIMATE plans, like frame_check's reference: bit-exact comparisons
+                         "--plan-rigor", "0", "--wisdom-file", "none",
+                         # the old fixed cap, so that the tests do not depend on this machine's memory
+                         "--max-memory-mb", "256", *extra,
+                         tmp=tmp, own_tmp=tmpdir is None, env=env, tls_ctx=tls_ctx, error=TestFailure)
 
     def get(self, path):
         with urllib.request.urlopen(self.http + path, timeout=5, context=self.tls_ctx) as r:
@@ -104,28 +71,6 @@ class Daemon:
         m = re.search(r"^%s (\S+)$" % re.escape(name), text, re.M)
         check(m, "metric %s missing" % name)
         return float(m.group(1))
-
-    def stop(self, sig=signal.SIGTERM, timeout=10):
-        """Signal and wait; returns (exit code, seconds)."""
-        if self.proc.poll() is not None:
-            return self.proc.returncode, 0.0
-        t0 = time.time()
-        self.proc.send_signal(sig)
-        try:
-            rc = self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            if os.environ.get("OCEAND_TEST_GDB"):
-                subprocess.run(["gdb", "-p", str(self.proc.pid), "-batch", "-ex", "thread apply all bt"])
-            self.proc.kill()
-            self.proc.wait()
-            rc = None
-        return rc, time.time() - t0
-
-    def kill(self):
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait()
-        self.log.close()
 
 
 async def connect(d, **kw):
@@ -1218,29 +1163,12 @@ def test_bad_state_files_do_not_stop_the_daemon():
         # the saved N=2048 is the one in force: the daemon must start at the default.
         with open(state, "w") as f:
             json.dump({"params": {"resolution": 2048}, "params_version": 5}, f)
-        port = free_port()
-        proc = subprocess.Popen([ARGS.oceand, "--port", str(port), "--state-file", state, "--max-memory-mb", "64",
-                                 "--wisdom-file", "none", "--plan-rigor", "0", "--web-root", tmp],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-        try:
-            deadline = time.time() + 20
-            while True:
-                if proc.poll() is not None:
-                    raise TestFailure("saved N=2048 over --max-memory-mb 64 stopped the daemon: exit %r, %s"
-                                      % (proc.returncode, proc.stderr.read()))
-                try:
-                    body = urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=1).read()
-                    break
-                except (urllib.error.URLError, ConnectionError, OSError):
-                    check(time.time() < deadline, "no /healthz")
-                    time.sleep(0.05)
-            proc.send_signal(signal.SIGTERM)
-            _, err = proc.communicate(timeout=10)
-            check(proc.returncode == 0 and "resolution 2048" in err, "exit %r, log %r" % (proc.returncode, err))
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+        with running(oceand_proc.Oceand, ARGS.oceand, "--state-file", state, "--max-memory-mb", "64",
+                     "--wisdom-file", "none", "--plan-rigor", "0", "--web-root", tmp,
+                     tmp=tmp, name="oceand-no-resolution", error=TestFailure, stop=False, remove=False) as d:
+            rc, _ = d.stop()
+            log = d.read_log()
+            check(rc == 0 and "resolution 2048" in log, "exit %r, log %r" % (rc, log))
         fifo = os.path.join(tmp, "fifo")
         os.mkfifo(fifo)
         for flag in ("--state-file", "--config"):

@@ -21,7 +21,6 @@ import math
 import os
 import re
 import select
-import shutil
 import signal
 import socket
 import struct
@@ -2025,10 +2024,7 @@ def run_case(fn, fig):
     finally:
         if obs:
             obs.close()
-        if d.alive():
-            d.proc.kill()
-            d.proc.wait()
-        shutil.rmtree(d.tmp, ignore_errors=True)
+        d.close()
 
 
 # Cases that load the daemon (N > 64, hundreds of clients or sets, 10 MB messages) run alone
