@@ -36,11 +36,17 @@ $(BUILD)/san/test_control: $(BUILD)/san/tests/daemon/test_control.o $(CONTROL_OB
 	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
 $(BUILD)/test_seq_guard: $(BUILD)/obj/tests/daemon/test_seq_guard.o $(BUILD)/obj/server/roles/seq_guard.o
 	$(CC) $(CFLAGS) -o $@ $^
+# The tick's pure steps may be tested from inside the folder (its internal header).
+$(BUILD)/obj/tests/daemon/test_frame_want.o: INC += -Iserver/tick
+$(BUILD)/test_frame_want: $(BUILD)/obj/tests/daemon/test_frame_want.o $(BUILD)/obj/server/tick/frame_want.o $(BUILD)/obj/server/tick/capacity.o \
+                        $(CONTROL_OBJ) $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 $(BUILD)/frame_check: $(BUILD)/obj/tests/daemon/frame_check.o $(CONTROL_OBJ) $(OCEAN_LIB) $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 
 # (prerequisites are expanded where a rule is read: the whole list comes first)
-DAEMON_TEST_DEPS := $(BUILD)/test_control $(BUILD)/frame_check $(BUILD)/test_probe $(BUILD)/query_ref $(BUILD)/test_seq_guard
+DAEMON_TEST_DEPS := $(BUILD)/test_control $(BUILD)/frame_check $(BUILD)/test_probe $(BUILD)/query_ref $(BUILD)/test_seq_guard \
+                    $(BUILD)/test_frame_want
 
 # Valgrind for the unit test: zero errors and zero definite leaks (~5 s).
 VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite
@@ -49,6 +55,7 @@ VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-k
 test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	$(BUILD)/test_control
 	$(BUILD)/test_seq_guard
+	$(BUILD)/test_frame_want
 	/usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
 	/usr/bin/python3 tests/daemon/test_temporal.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
 	$(BUILD)/test_probe
