@@ -111,3 +111,12 @@ TESTS += test-layout
 .PHONY: test-layout
 test-layout:
 	/usr/bin/python3 tests/layout/test_layout.py .
+
+# The docs and the code say what is true now: no work-session diary ("the
+# tenth session", "session 9") and no issue-tracker numbers ("issue 12"),
+# in docs, comments, strings, test names and make targets
+# (tests/layout/test_wording.py; it also proves it can fail).
+TESTS += test-wording
+.PHONY: test-wording
+test-wording:
+	/usr/bin/python3 tests/layout/test_wording.py .
