@@ -226,7 +226,7 @@ static void bench_pack(int n, int threads, const char *wisdom)
  *              block-major spectrum (FFTW rank-0 guru plan), then the row
  *              c2r reading blocks of 8 interleaved rows;
  *   ours with the copy as our own loop (memcpy of 8 complex per column),
- *              as before this round; copy_only_* time the copy alone;
+ *              the alternative to the FFTW copy plan; copy_only_* time the copy alone;
  *   colmajor:  FFTW's z pass out of place straight into a column-major
  *              spectrum, row c2r reading it with input stride N;
  *   rowmajor:  FFTW's z pass out of place into a row-major spectrum (output
@@ -456,7 +456,7 @@ static void bench_cascades(int n, const char *wisdom)
  *   without that part of our own work (ocean_step_parts); foam: the step
  *   minus the six-field step; terms_whole: the step with the Jacobian's
  *   three terms written as whole N x N fields and combined afterwards (the
- *   layout before this round) instead of in the worker's cache-sized
+ *   simple layout) instead of in the worker's cache-sized
  *   scratch. The parts are differences of two timings: on a shared machine
  *   the fastest repetition of each variant (min) is the least noisy, so
  *   the parts use that; step/fftw also give medians. own_sum: the parts'

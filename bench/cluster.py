@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Cluster benchmark (issue 12, docs/scaling.md): one `oceand --role sim` and 1, 2, 3
+"""Cluster benchmark (docs/scaling.md): one `oceand --role sim` and 1, 2, 3
 `--role edge` daemons with a nats-server, all on this machine, K clients per edge
 (build/load_client, one per edge), against `--role all` with the same K. One JSON line per run:
   {"bench":"cluster","mode":"cluster","edges":E,"clients_per_edge":K,"delivered_min":..,

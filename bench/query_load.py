@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Point query and probe benchmark for oceand (issue 14), part of `make bench-load`.
+"""Point query and probe benchmark for oceand (docs/query.md), part of `make bench-load`.
 One JSON line per run:
 
   {"bench":"query","N":256,"points":16,"p50_ms":..,"p99_ms":..,"samples":..}

@@ -1,4 +1,4 @@
-# mk/daemon.mk — the oceand daemon (issue 4): binary, integration tests, load bench, `make run`.
+# mk/daemon.mk — the oceand daemon: binary, integration tests, load bench, `make run`.
 
 # Every .c file of the daemon's folders (the simulation library and the
 # cluster transport are libraries of their own: mk/sim.mk, mk/cluster.mk).
@@ -78,12 +78,12 @@ test-daemon-valgrind: $(BUILD)/test_control
 bench-load: $(BUILD)/oceand $(BUILD)/load_client
 	/usr/bin/python3 bench/load.py --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_LOAD_ARGS)
 
-# Issue 15's capacity table (README): N = 1024 six fields, 2048 h/dx/dz, 2048 height,
+# The capacity rows (docs/daemon.md, "Capacity figures"): N = 512 and 1024 six fields, 1024 and 2048 h/dx/dz, 2048 height,
 # 256 with 200 clients; three runs each, then a median line per row (~4 min).
 bench-capacity: $(BUILD)/oceand $(BUILD)/load_client
 	/usr/bin/python3 bench/load.py --capacity --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_CAPACITY_ARGS)
 
-# Issue 16 defect 2's repro (N = 512, 25 viewers asking for every field x LOD x bound):
+# Many distinct layers against the encode budget (N = 512, 25 viewers asking for every field x LOD x bound):
 # admitted/refused, observer frames/s, overruns, encode/tick time, RSS; one JSON line (~15 s).
 bench-layer-flood: $(BUILD)/oceand
 	/usr/bin/python3 bench/layer_flood.py --oceand $(BUILD)/oceand
@@ -97,7 +97,7 @@ run: deps
 $(BUILD)/load_client: $(BUILD)/obj/bench/load_client.o
 	$(CC) $(CFLAGS) -o $@ $^
 
-# Point queries and probes (issue 14): the probe accuracy test and the exact
+# Point queries and probes (docs/query.md): the probe accuracy test and the exact
 # reference the daemon tests compare `query_result` with.
 $(BUILD)/test_probe: $(BUILD)/obj/tests/daemon/test_probe.o $(BUILD)/obj/server/query/probe.o $(CONTROL_OBJ) $(OCEAN_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
@@ -112,10 +112,10 @@ TESTS += test-layout
 test-layout:
 	/usr/bin/python3 tests/layout/test_layout.py .
 
-# The docs and the code say what is true now: no work-session diary ("the
-# tenth session", "session 9") and no issue-tracker numbers ("issue 12"),
-# in docs, comments, strings, test names and make targets
-# (tests/layout/test_wording.py; it also proves it can fail).
+# The docs and the code say what is true now: no diary of numbered work
+# sessions and no issue-tracker numbers in docs, comments, strings, test
+# names and make targets (tests/layout/test_wording.py has the patterns;
+# it also proves it can fail).
 TESTS += test-wording
 .PHONY: test-wording
 test-wording:

@@ -1465,7 +1465,7 @@ static void test_memory_bytes(void)
         snprintf(line + len, sizeof line - len, "%sN=%d: %.2f MB said, arrays %.2f, heap %s%.2f", i > first ? "; " : "",
                  n, want / 1e6, hook / 1e6, glibc ? "" : "(n/a) ", heap / 1e6);
     }
-    /* threads = 0 means every online core, uncapped below 64 (issue 15). */
+    /* threads = 0 means every online core, up to 64: a big machine's cores all help the step. */
     long cores = sysconf(_SC_NPROCESSORS_ONLN);
     int want_threads = cores < 1 ? 1 : cores > OCEAN_MAX_THREADS ? OCEAN_MAX_THREADS : (int)cores;
     struct ocean_params p0;

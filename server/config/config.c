@@ -450,7 +450,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
     }
     resolve_wisdom_path(dc);
     long cores = sysconf(_SC_NPROCESSORS_ONLN);
-    if (dc->fft_threads == 0) /* every core: the step scales to 16 threads (issue 15) */
+    if (dc->fft_threads == 0) /* every core (docs/simulation.md, "Threads") */
         dc->fft_threads = cores < 1 ? 1 : cores > 64 ? 64 : (int)cores;
     if (dc->encode_threads == 0)
         dc->encode_threads = cores < 1 ? 1 : cores > 64 ? 64 : (int)cores;

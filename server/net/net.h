@@ -36,7 +36,7 @@ int net_service(struct net *n);
 int net_port(const struct net *n);
 void net_destroy(struct net *n);
 
-/* ---- cluster roles (issue 12; server/roles/role_sim.c, server/roles/role_edge.c) ----
+/* ---- cluster roles (docs/scaling.md; server/roles/role_sim.c, server/roles/role_edge.c) ----
  * Hooks for daemons whose simulation is elsewhere (edge) or whose clients
  * are elsewhere (sim). All run on the service thread. --role all sets none. */
 struct frame;

@@ -355,7 +355,7 @@ static void write_text(const char *path, const char *text)
     }
 }
 
-/* Issue 10: one validation path. The same fault gets the same reason from
+/* One validation path. The same fault gets the same reason from
  * the JSON `set`, the config file and the command line, and each reason maps
  * to one documented wire code. */
 static void test_one_validation_path(void)
@@ -430,7 +430,7 @@ static void test_one_validation_path(void)
     rmdir(dir);
 }
 
-/* Issue 16 (3): an echoed id is capped at CTL_MAX_ID_BYTES of JSON. */
+/* An echoed id is capped at CTL_MAX_ID_BYTES of JSON. */
 static void test_id_cap(void)
 {
     char id[CTL_MAX_ID_BYTES + 64], text[CTL_MAX_ID_BYTES + 128];
@@ -564,8 +564,7 @@ static void test_short_frames(void)
     CHECK(oc_frame_header_read(ocn, 8, &h) == OC_E_TRUNCATED, "8 bytes of a header: not truncated");
 }
 
-/* Issue 10 (3): a config file over 16 MiB is refused, not cut; issue 16 (6):
- * a FIFO as the config or state file is refused at once (it used to block
+/* A config file over 16 MiB is refused, not cut; a FIFO as the config or state file is refused at once (it used to block
  * start-up forever: the alarm turns a hang into a failure). */
 static void test_config_file_limits(void)
 {
@@ -619,7 +618,7 @@ static void test_config_file_limits(void)
     rmdir(dir);
 }
 
-/* Issue 16 (4, 5, minor): bad saved values are warned about and fall back;
+/* Bad saved values are warned about and fall back;
  * none stops the daemon. */
 static void test_state_values(void)
 {
@@ -732,7 +731,7 @@ static void fuzz(void)
     CHECK(accepted > 0, "fuzz never produced a valid set");
 }
 
-/* capacity.c: the plan of a tick (issue 15 / 16 defect 2), from a model
+/* capacity.c: the plan of a tick (docs/daemon.md, "Capacity"), from a model
  * with fixed numbers: behaviour only, no clock. */
 static void test_capacity_plan(void)
 {

@@ -872,7 +872,7 @@ def test_config_precedence():
 TESTS.append(test_config_precedence)
 
 
-# ------------------------------------------------ defects of issue 10 (each failed before its fix)
+# ------------------------------------------------ regressions (each failed before its fix)
 
 # Test-only hook of the daemon (server/sim_thread.h): a build whose parameters
 # have this seed takes 0.5 s and then fails as if out of memory.
@@ -880,7 +880,7 @@ FAIL_SEED = 4242
 
 
 def test_failed_set_keeps_pending_sets_in_view():
-    """Issue 10 defect 1: a set that fails at apply time must not drop the
+    """A set that fails at apply time must not drop the
     sets accepted after it from the view the next set is checked against."""
     with running(Daemon, env={"OCEAND_TEST_FAIL_BUILD_SEED": str(FAIL_SEED)}) as d:
         async def run():
@@ -907,7 +907,7 @@ TESTS.append(test_failed_set_keeps_pending_sets_in_view)
 
 
 def test_build_out_of_memory_answers_and_keeps_base():
-    """Issue 10 defect 2: a batch whose build runs out of memory gets a coded
+    """A batch whose build runs out of memory gets a coded
     error for every sender, and the base of later sets does not move."""
     with running(Daemon, env={"OCEAND_TEST_FAIL_BUILD_SEED": str(FAIL_SEED)}) as d:
         async def run():
@@ -937,7 +937,7 @@ TESTS.append(test_build_out_of_memory_answers_and_keeps_base)
 
 @test
 def test_join_after_idle_gets_a_current_frame(d):
-    """Issue 10 defect 4: after a period with no client, a new client's first
+    """After a period with no client, a new client's first
     frame is from the current tick, and seq counts the idle ticks (§3.1)."""
     async def run():
         a, _ = await connect(d)
@@ -959,7 +959,7 @@ def test_join_after_idle_gets_a_current_frame(d):
 
 
 def test_tile_size_follows_resolution():
-    """Issue 10 defect 5: hello and params announce the tile size frames use."""
+    """Hello and params announce the tile size frames use."""
     with running(Daemon, "--resolution", "64", stop=False) as d:
         async def run():
             a, h = await connect(d)
@@ -986,7 +986,7 @@ TESTS.append(test_tile_size_follows_resolution)
 
 @test
 def test_rate_limited_error_has_id(d):
-    """Issue 10 defect 6: rate_limited errors echo the request id (§7)."""
+    """`rate_limited` errors echo the request id (§7)."""
     async def run():
         a, _ = await connect(d)
         sent = ["r%d" % i for i in range(100)]
@@ -1005,7 +1005,7 @@ def test_rate_limited_error_has_id(d):
         check(sorted(answered) == sorted(sent), "ids answered do not match the ids sent")
 
 
-# ------------------------------------------- spec gaps and hardening (issues 10, 16)
+# ------------------------------------------- spec gaps and hardening
 
 @test
 def test_spec_gaps_codec_tiles_id_pong(d):
@@ -1107,7 +1107,7 @@ def test_refused_upgrade_is_closed_without_response(d):
 
 
 def test_sighup_saves_state():
-    """Issue 16 (7): SIGHUP saves the state (a set acknowledged just before is
+    """SIGHUP saves the state (a set acknowledged just before is
     kept) and the daemon keeps running; the configuration is not reloaded."""
     tmp = tempfile.mkdtemp(prefix="oceand-test-")
     state = os.path.join(tmp, "state.json")
@@ -1141,7 +1141,7 @@ TESTS.append(test_sighup_saves_state)
 
 
 def test_bad_state_files_do_not_stop_the_daemon():
-    """Issue 16 (4, 5, 6): a saved N over the memory cap and a sim_time out of
+    """A saved N over the memory cap and a sim_time out of
     range are warned about and replaced; a FIFO as the state file is refused
     at once (exit 2), not waited on."""
     tmp = tempfile.mkdtemp(prefix="oceand-test-")
@@ -1185,7 +1185,7 @@ def test_bad_state_files_do_not_stop_the_daemon():
 TESTS.append(test_bad_state_files_do_not_stop_the_daemon)
 
 
-# ------------------------------------------- capacity (issue 15, issue 16 defect 2)
+# ------------------------------------------- capacity (docs/daemon.md, "Capacity")
 
 def metric_value(d, name):
     text = urllib.request.urlopen(d.http + "/metrics", timeout=5).read().decode()
@@ -1253,7 +1253,7 @@ TESTS.append(test_capacity_announced_matches_refusals)
 
 
 def test_encode_budget_busy_and_degraded():
-    """Issue 16 defect 2 / issue 15: a subscription that would push the encode
+    """A subscription that would push the encode
     work past the budget gets `busy` and changes nothing; demand that exceeds it
     anyway (a new client's default subscription) degrades only the most
     expensive group, its clients are told with `degraded`, frames carry the
@@ -1305,7 +1305,7 @@ TESTS.append(test_encode_budget_busy_and_degraded)
 
 def test_degraded_group_recovers_with_headroom():
     """A group degraded for a real reason comes back to full detail when the
-    headroom returns with no change of demand (the recovery rule, issue 15):
+    headroom returns with no change of demand (the recovery rule):
     one client's default subscription over --encode-budget at N, then N
     halved by `set` (same subscription, a quarter of the samples): it is told
     `degraded` inactive, /metrics shows no degraded group, frames are lod 0.
@@ -1334,7 +1334,7 @@ TESTS.append(test_degraded_group_recovers_with_headroom)
 
 
 def test_viewers_cannot_exceed_encode_budget():
-    """Issue 16 defect 2: viewers each asking for a different field x LOD x bound
+    """Viewers each asking for a different field x LOD x bound
     get `busy` once the distinct layers reach the budget; what they admitted
     adds up to no more than it; a layer someone already gets is always free."""
     n = BASE_N
@@ -1384,7 +1384,7 @@ TESTS.append(test_viewers_cannot_exceed_encode_budget)
 
 
 # ---------------------------------------------------------------- runner
-# ---------------------------------------------------------------- display names, foam (issue 13)
+# ---------------------------------------------------------------- display names, foam
 
 BAD_NAMES = ["<b>Ana</b>", "Ana & Bo", 'say "hi"', "it's", "x" * 33, "\u202eanA", "tab\there", " Ana", "Ana ",
              "zero\u200bwidth", "\ue000"]

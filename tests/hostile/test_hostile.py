@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Hostile-client battery and churn test for oceand (issue 7), against a real
+"""Hostile-client battery and churn test for oceand (docs/reliability.md), against a real
 daemon on 127.0.0.1.
 
     /usr/bin/python3 tests/hostile/test_hostile.py --oceand build/oceand [-k NAME] [--json]
@@ -813,7 +813,7 @@ def churn(d, fig):
     check(fds_b - fds_a <= 0, "%d file descriptors leaked" % (fds_b - fds_a))
 
 
-# ---------------------------------------------------------------- issue 16: defects 1, 3, 8, 9 and minors
+# ---------------------------------------------------------------- Host, handshake, reply bytes, descriptors, masking, web root
 
 def http_status(port, request, timeout=5):
     """The status line's code of the answer to one raw request ('' if closed first)."""
@@ -926,7 +926,7 @@ def handshake_rules(d, fig):
 @case(resolution=64, rss_slack_kb=16384)
 def reply_queue_bytes(d, fig):
     """Defect 3: 16 clients that never read, each sending 300 pings with a
-    60 kB id (the issue's repro, default limits): the replies they do not
+    60 kB id (default limits): the replies they do not
     read are bounded in bytes per client (--output-limit-kb, 1 MiB)."""
     rss0 = d.rss_kb()
     big = '{"type":"ping","id":"%s"}' % ("i" * 60000)
@@ -956,7 +956,7 @@ def reply_queue_bytes(d, fig):
                closed_output_limit=d.metrics().get('oceand_clients_closed_total{reason="output_limit"}', 0))
     log("    16 non-reading clients x 300 pings with 60 kB ids: RSS %+d kB, %d closed at the output limit"
         % (rss1 - rss0, fig["closed_output_limit"]))
-    # 16 x (1 MiB queue + 64 KiB message being read) plus slack; the issue measured +80 MB
+    # 16 x (1 MiB queue + 64 KiB message being read) plus slack; without the byte cap it grew by about +100 MB
     check(rss1 - rss0 < 16 * 1088 + 6144, "RSS grew %d kB with 16 non-reading clients" % (rss1 - rss0))
 
 
@@ -1093,7 +1093,7 @@ def symlink_web_root(d, fig):
     check(d.metric('oceand_http_refused_total{reason="symlink"}') >= 3, "symlink refusals not counted")
 
 
-# ---------------------------------------------------------------- issue 16: new attacks (second battery)
+# ---------------------------------------------------------------- pings, control frames, churn, pipelining, flapping
 
 @case(args=LIBERAL)
 def ws_ping_flood(d, fig):
@@ -1238,7 +1238,7 @@ LAYER_FLOOD_BUDGET = 2000000
 @case(args=LIBERAL + ("--max-clients", "64", "--encode-budget", str(LAYER_FLOOD_BUDGET)),
       resolution=512, rss_slack_kb=65536)
 def layer_flood(d, fig):
-    """Issue 16 defect 2 at its repro's size: 25 viewers together ask for every
+    """Many distinct layers against the encode budget: 25 viewers together ask for every
     field x LOD x bound (25 groups of six fields, 150 layers, 10.5 M samples per
     tick) at N = 512. The subscriptions that would push the encode work past the
     budget the daemon announces (capacity.encode_budget) are refused with `busy`
@@ -1333,7 +1333,7 @@ def resolution_flapping(d, fig):
     check(rss[-1] - rss[0] < 8192, "RSS settles %d kB above the start after flapping" % (rss[-1] - rss[0]))
 
 
-# ---------------------------------------------------------------- issue 16: third battery (attacker's second round)
+# ---------------------------------------------------------------- logs, fan-out, state file, signals, paths, fragments, queries, names
 
 def refusals(d, count, deadline_s=15):
     """`count` upgrades that the daemon refuses and logs: a foreign Origin
