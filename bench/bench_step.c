@@ -568,7 +568,7 @@ static void bench_set(int n, int cascades, const char *wisdom)
     ocean_free(o);
 }
 
-/* The capacity rows (bench/load.py --capacity, README): the step exactly as
+/* The capacity rows (bench/load.py --capacity, docs/daemon.md): the step exactly as
  * the daemon's producer runs it for one client's fields (cascade 0 only,
  * ocean_step_cascades, no foam unless asked; default parameters, so three
  * cascades exist but only cascade 0 is stepped), against the bare FFTW

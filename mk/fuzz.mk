@@ -22,7 +22,7 @@ FUZZ_TARGETS += inflate
 # (trace-cmp) are parsed binary values that libFuzzer cannot splice back into
 # text, while the key names still come from its strcmp hooks. Without
 # trace-cmp an execution costs ~20 % less CPU and same-seed runs reach the
-# same edges (README, fuzzing row).
+# same edges (docs/reliability.md, "Fuzzing").
 FUZZ_FLAGS_config := -fno-sanitize-coverage=trace-cmp
 
 SIM_SRCS_FOR_FUZZ = $(wildcard server/sim/*.c)
