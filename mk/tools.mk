@@ -2,7 +2,7 @@
 #   build/ocean-tap           command-line client (tools/)
 #   build/gen-config-doc      prints the configuration reference from the params table
 #   make install              PREFIX (default /usr/local) and DESTDIR honoured
-#   make config-doc           rewrite the reference in README.md
+#   make config-doc           rewrite the configuration reference (docs/configuration.md)
 #   test-tap                  ocean-tap + the Python example against a real daemon
 #   test-ops                  docker/ <-> apt list, install, configuration reference
 
