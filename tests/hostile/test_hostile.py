@@ -21,6 +21,7 @@ import math
 import os
 import re
 import select
+import shutil
 import signal
 import socket
 import struct
