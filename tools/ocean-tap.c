@@ -14,6 +14,7 @@
  * exit codes a script can rely on. */
 #include <cjson/cJSON.h>
 #include <errno.h>
+#include <math.h>
 #include <getopt.h>
 #include <libwebsockets.h>
 #include <signal.h>
@@ -27,6 +28,7 @@
 #include "oc_proto.h"
 #include "tap_exr.h"
 #include "tap_frame.h"
+#include "tap_surface.h"
 #include "tap_write.h"
 
 enum exit_code {
@@ -73,6 +75,20 @@ static void usage(FILE *to)
         "                      exr: a Blender ocean-modifier bake, DIR/disp_NNNN.exr,\n"
         "                      normal_NNNN.exr, foam_NNNN.exr (+ frame_NNNN.json), frames\n"
         "                      numbered 1, 2, ...; subscribes to all six fields\n"
+        "Cascades (PROTOCOL.md §4.1; the default sea has 3, and the whole sea is their sum):\n"
+        "  --cascades K|all    also receive the finer cascades 1..K-1 (all: every one the\n"
+        "                      server runs) with the same fields, at lod max(--lod, 1) (a finer\n"
+        "                      cascade loses nothing at lod 1) and bound 0.001 (0 with --bound 0);\n"
+        "                      files DIR/<field>-c<k>-<seq>.<ext>, sidecar patch_size = its L_k.\n"
+        "                      Without it: cascade 0 only, 1-3 cm of height off the sea\n"
+        "  --sum M             also write the sum of the cascades of height, dx, dz, slope_x,\n"
+        "                      slope_z on an M x M grid: DIR/<field>-sum-<seq>.<ext>; with\n"
+        "                      --format exr the bake is that sum (default M: N >> lod)\n"
+        "  --sum-area X,Z,S    the grid's square: origin (X, Z), side S metres (default\n"
+        "                      0,0,patch_size); point [j][i] at (X + i*S/M, Z + j*S/M)\n"
+        "  --interp I          between grid nodes: spectral (default; exact signal on a 4x\n"
+        "                      finer grid, then cubic: ~0.1 mm from query) or bilinear (on\n"
+        "                      the streamed grids: ~14 mm rms off; docs/query.md)\n"
         "  --stats             print frames/s, bytes and latency (each second to stderr,\n"
         "                      summary on stdout at exit)\n"
         "Control:\n"
@@ -87,7 +103,8 @@ static void usage(FILE *to)
         "  --time T            ... at sim time T (within the server's window; default now)\n"
         "  --probe \"X,Z;X,Z...\"  the probe values of these points with every tick: one\n"
         "                      JSON line (probe_data) per tick, or CSV with --csv\n"
-        "  --csv               --probe as CSV: seq,sim_time,params_version,point,x,z,height,\n"
+        "  --csv               --probe as CSV, a header row then one row per point and tick:\n"
+        "                      seq,sim_time,params_version,point,x,z,height,\n"
         "                      dx,dz,nx,ny,nz,vertical_velocity,vertical_acceleration\n"
         "  --ticks N           stop after N probe ticks (default: until Ctrl-C)\n"
         "Other:\n"
@@ -125,6 +142,11 @@ struct opts {
     int has_time;
     double time;          /* --time */
     long ticks;           /* --ticks, 0 = until Ctrl-C */
+    int cascades;         /* --cascades: 1 = cascade 0 only, -1 = all the server runs */
+    int sum_m;            /* --sum M, 0 = not given, -1 = the default (N >> lod) */
+    int has_area;
+    double area[3];       /* --sum-area X,Z,S */
+    int bilinear;         /* --interp bilinear */
 };
 
 /* "x,z;x,z;..." -> o->points. */
@@ -185,8 +207,10 @@ static int parse_args(int argc, char **argv, struct opts *o)
         {"query", required_argument, 0, 'Q'}, {"probe", required_argument, 0, 'P'},
         {"time", required_argument, 0, 'I'},  {"ticks", required_argument, 0, 'K'},
         {"csv", no_argument, 0, 'C'},         {"intra", no_argument, 0, 'A'},
+        {"cascades", required_argument, 0, 'c'}, {"sum", required_argument, 0, 'M'},
+        {"sum-area", required_argument, 0, 'a'}, {"interp", required_argument, 0, 'i'},
         {0, 0, 0, 0}};
-    *o = (struct opts){.frames = -1, .fields = 7u, .bound = -1, .format = TAP_NPY, .timeout = 10};
+    *o = (struct opts){.frames = -1, .fields = 7u, .bound = -1, .format = TAP_NPY, .timeout = 10, .cascades = 1};
     int c;
     char *end;
     while ((c = getopt_long(argc, argv, "vh", longs, NULL)) != -1) {
@@ -244,11 +268,35 @@ static int parse_args(int argc, char **argv, struct opts *o)
             if (*end || o->ticks < 0) return usage_error("--ticks needs a count >= 0");
             break;
         case 'C': o->csv = 1; break;
+        case 'c':
+            if (!strcmp(optarg, "all")) { o->cascades = -1; break; }
+            o->cascades = (int)strtol(optarg, &end, 10);
+            if (*end || o->cascades < 1 || o->cascades > OC_MAX_CASCADES)
+                return usage_error("--cascades needs all or a count 1..%d", OC_MAX_CASCADES);
+            break;
+        case 'M':
+            o->sum_m = (int)strtol(optarg, &end, 10);
+            if (*end || o->sum_m < 1 || o->sum_m > 8192) return usage_error("--sum needs a grid side 1..8192");
+            break;
+        case 'a':
+            if (sscanf(optarg, "%lf,%lf,%lf", &o->area[0], &o->area[1], &o->area[2]) != 3 || !(o->area[2] > 0) ||
+                !isfinite(o->area[0]) || !isfinite(o->area[1]) || !isfinite(o->area[2]))
+                return usage_error("--sum-area needs X,Z,SIZE (metres, SIZE > 0)");
+            o->has_area = 1;
+            break;
+        case 'i':
+            if (!strcmp(optarg, "bilinear")) o->bilinear = 1;
+            else if (strcmp(optarg, "spectral")) return usage_error("--interp must be spectral or bilinear");
+            break;
         case 'h': usage(stdout); return EXIT_OK;
         default: return usage_error("unknown option");
         }
     }
     if (o->format == TAP_EXR) o->fields = (1u << OC_FIELD_COUNT) - 1u; /* the bake needs all six */
+    if ((o->sum_m || o->has_area) && o->cascades == 1)
+        return usage_error("--sum/--sum-area add up cascades: give --cascades too");
+    if (o->has_area && !o->sum_m) o->sum_m = -1;
+    if (o->format == TAP_EXR && o->cascades != 1 && !o->sum_m) o->sum_m = -1; /* a bake of the whole sea */
     if (o->query && o->probe) return usage_error("--query and --probe: one at a time");
     if ((o->query || o->probe) && (o->frames >= 0 || o->out_dir || o->stats || o->watch))
         return usage_error("--query/--probe do not mix with frames (--frames/--out/--stats) or --watch");
@@ -289,6 +337,11 @@ struct session {
                              messages alone do not count, or a subscription served at a
                              coarser LOD, whose frames we cannot write, would wait for ever */
     int degraded_lod;     /* the LOD the server serves us at while degraded, else -1 */
+    int ncasc;            /* cascades received: 1 + finer ones (from --cascades and the hello) */
+    double patch[OC_MAX_CASCADES]; /* L_c from hello/params cascade_patch_sizes */
+    struct tap_surface *surface;
+    float *sum_buf;       /* --sum: one field on the sum grid */
+    int csv_header_done;
     struct stats st;
     struct lws *wsi;
 };
@@ -394,6 +447,25 @@ static void send_set(struct session *s)
     send_json(s, j);
 }
 
+/* Fields of the finer cascades: foam is cascade 0's only; a bake sums the
+ * finer cascades and takes the Jacobian (which does not add) from cascade 0. */
+static unsigned fine_fields(const struct opts *o)
+{
+    return o->fields & ~(1u << OC_FIELD_FOAM) & (o->format == TAP_EXR ? ~(1u << OC_FIELD_JACOBIAN) : ~0u);
+}
+static int fine_lod(const struct opts *o) { return o->lod > 1 ? o->lod : 1; }
+
+/* cascade_patch_sizes of a hello or params message into s->patch. */
+static void read_patch_sizes(struct session *s, cJSON *msg)
+{
+    cJSON *ps = cJSON_GetObjectItemCaseSensitive(msg, "cascade_patch_sizes"), *v;
+    int c = 0;
+    cJSON_ArrayForEach(v, ps) {
+        if (c < OC_MAX_CASCADES && cJSON_IsNumber(v)) s->patch[c] = v->valuedouble;
+        c++;
+    }
+}
+
 static void send_subscribe(struct session *s)
 {
     cJSON *j = cJSON_CreateObject(), *fields = cJSON_CreateArray();
@@ -407,6 +479,18 @@ static void send_subscribe(struct session *s)
     if (s->o->bound >= 0) cJSON_AddNumberToObject(j, "bound", s->o->bound);
     if (s->o->max_rate > 0) cJSON_AddNumberToObject(j, "max_rate", s->o->max_rate);
     cJSON_AddBoolToObject(j, "temporal", !s->o->intra); /* PROTOCOL.md §5.9 */
+    /* The finer cascades (§4.1): same fields but foam (cascade 0's only), at LOD
+     * 1 or coarser (they hold nothing LOD 1 drops) and 1 mm, their heights being
+     * centimetres; lossless stays lossless. */
+    cJSON *casc = s->ncasc > 1 ? cJSON_AddArrayToObject(j, "cascades") : NULL;
+    for (int c = 1; c < s->ncasc; c++) {
+        cJSON *e = cJSON_CreateObject(), *ef = cJSON_AddArrayToObject(e, "fields");
+        for (int f = 0; f < OC_FIELD_COUNT; f++)
+            if (fine_fields(s->o) & (1u << f)) cJSON_AddItemToArray(ef, cJSON_CreateString(oc_field_name(f)));
+        cJSON_AddNumberToObject(e, "lod", fine_lod(s->o));
+        cJSON_AddNumberToObject(e, "bound", s->o->bound == 0 ? 0 : 0.001);
+        cJSON_AddItemToArray(casc, e);
+    }
     send_json(s, j);
 }
 
@@ -451,6 +535,10 @@ static void print_probe(struct session *s, cJSON *msg, const char *text, size_t 
     if (!s->o->csv) {
         printf("%.*s\n", (int)len, text);
     } else {
+        if (!s->csv_header_done) {
+            puts("seq,sim_time,params_version,point,x,z,height,dx,dz,nx,ny,nz,vertical_velocity,vertical_acceleration");
+            s->csv_header_done = 1;
+        }
         cJSON *seq = cJSON_GetObjectItemCaseSensitive(msg, "seq"), *t = cJSON_GetObjectItemCaseSensitive(msg, "sim_time");
         cJSON *v = cJSON_GetObjectItemCaseSensitive(msg, "params_version"), *pts = cJSON_GetObjectItemCaseSensitive(msg, "points");
         int i = 0;
@@ -526,6 +614,14 @@ static void on_text(struct session *s, const char *text, size_t len)
                  cJSON_IsNumber(proto) ? proto->valueint : -1, OC_PROTO_VERSION);
         } else {
             s->schema = cJSON_DetachItemFromObjectCaseSensitive(msg, "schema");
+            read_patch_sizes(s, msg);
+            cJSON *np = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(msg, "params"), "cascades");
+            int have = cJSON_IsNumber(np) && np->valueint >= 1 && np->valueint <= OC_MAX_CASCADES ? np->valueint : 1;
+            s->ncasc = s->o->cascades < 0 || s->o->cascades > have ? have : s->o->cascades;
+            if (s->o->cascades > have)
+                fprintf(stderr, "ocean-tap: the server runs %d cascade%s: receiving %d\n", have, have > 1 ? "s" : "", have);
+            for (int c = 1; s->grid && c < s->ncasc; c++)
+                tap_frame_want_cascade(s->grid, c, fine_fields(s->o), fine_lod(s->o));
             if (!s->o->nsets && !s->want_frames && !s->o->watch && !s->o->query && !s->o->probe) {
                 /* Info mode: the hello without the long schema, one line. */
                 char *out = cJSON_PrintUnformatted(msg);
@@ -535,6 +631,7 @@ static void on_text(struct session *s, const char *text, size_t len)
             advance(s);
         }
     } else if (!strcmp(t, "params")) {
+        read_patch_sizes(s, msg);
         if (s->o->watch) {
             char *out = cJSON_PrintUnformatted(msg);
             if (out) { puts(out); fflush(stdout); }
@@ -602,24 +699,108 @@ static void on_text(struct session *s, const char *text, size_t len)
     cJSON_Delete(msg);
 }
 
-/* --format exr: one Blender bake frame (tap_exr.h) from the six fields. */
+/* The --sum grid: side, origin and extent (default: cascade 0's patch). */
+struct sum_grid { int m; double x0, z0, size; };
+
+static struct sum_grid sum_geometry(const struct session *s, const struct oc_frame_header *fh)
+{
+    int side = 0;
+    float b;
+    tap_frame_field(s->grid, OC_FIELD_HEIGHT, &side, &b);
+    if (!side) side = fh->n >> s->o->lod;
+    struct sum_grid g = {s->o->sum_m > 0 ? s->o->sum_m : side, 0, 0, fh->patch_size};
+    if (s->o->has_area) { g.x0 = s->o->area[0]; g.z0 = s->o->area[1]; g.size = s->o->area[2]; }
+    return g;
+}
+
+/* Field f summed over the received cascades (or cascade 0 alone: only0) on
+ * the sum grid, into out (m*m floats). Returns 0, 1 when a cascade lacks the
+ * field, -1 on failure. */
+static int sum_field(struct session *s, const struct oc_frame_header *fh, const struct sum_grid *sg, enum oc_field f,
+                     int only0, float *out, float *bound)
+{
+    struct tap_cascade_grid g[OC_MAX_CASCADES];
+    int nc = only0 ? 1 : s->ncasc;
+    *bound = 0;
+    for (int c = 0; c < nc; c++) {
+        float b = 0;
+        g[c].data = tap_frame_cascade_field(s->grid, c, f, &g[c].side, &b);
+        g[c].period = c == 0 ? fh->patch_size : s->patch[c];
+        if (!g[c].data) return 1;
+        if (!(g[c].period > 0)) {
+            fail(s, EXIT_PROTOCOL, "the server did not say the patch size of cascade %d", c);
+            return -1;
+        }
+        *bound += b;
+    }
+    if (!s->surface && !(s->surface = tap_surface_new())) { fail(s, EXIT_OUTPUT, "out of memory"); return -1; }
+    if (tap_surface_grid(s->surface, g, nc, sg->m, sg->x0, sg->z0, sg->size, s->o->bilinear, out) != 0) {
+        fail(s, EXIT_OUTPUT, "out of memory for the %dx%d sum", sg->m, sg->m);
+        return -1;
+    }
+    return 0;
+}
+
+static float *sum_buffers(struct session *s, int m, int count)
+{
+    free(s->sum_buf);
+    s->sum_buf = malloc((size_t)count * m * m * sizeof(float));
+    if (!s->sum_buf) fail(s, EXIT_OUTPUT, "out of memory for the %dx%d sum", m, m);
+    return s->sum_buf;
+}
+
+/* --format exr: one Blender bake frame (tap_exr.h) from the six fields: cascade
+ * 0's grids, or with --cascades the sum of the cascades on the --sum grid. */
 static int write_bake(struct session *s, const struct oc_frame_header *fh)
 {
     const float *f[OC_FIELD_COUNT];
     int side = 0;
     float bound = 0, b;
-    for (int i = 0; i < OC_FIELD_COUNT; i++) {
-        f[i] = tap_frame_field(s->grid, i, &side, &b);
-        bound = b > bound ? b : bound;
+    double x0 = 0, z0 = 0, size = fh->patch_size;
+    if (s->o->sum_m) {
+        struct sum_grid sg = sum_geometry(s, fh);
+        float *buf = sum_buffers(s, sg.m, 6);
+        if (!buf) return -1;
+        static const enum oc_field order[6] = {OC_FIELD_HEIGHT, OC_FIELD_DX, OC_FIELD_DZ, OC_FIELD_SLOPE_X,
+                                               OC_FIELD_SLOPE_Z, OC_FIELD_JACOBIAN};
+        for (int k = 0; k < 6; k++) {
+            float *out = buf + (size_t)k * sg.m * sg.m;
+            /* The Jacobian does not add across cascades (§4.1): cascade 0's, for the foam. */
+            if (sum_field(s, fh, &sg, order[k], order[k] == OC_FIELD_JACOBIAN, out, &b) != 0) {
+                fail(s, EXIT_PROTOCOL, "the frame lacks %s", oc_field_name(order[k]));
+                return -1;
+            }
+            f[order[k]] = out;
+            bound = b > bound ? b : bound;
+        }
+        side = sg.m;
+        x0 = sg.x0;
+        z0 = sg.z0;
+        size = sg.size;
+    } else {
+        for (int i = 0; i < OC_FIELD_COUNT; i++) {
+            f[i] = tap_frame_field(s->grid, i, &side, &b);
+            bound = b > bound ? b : bound;
+        }
     }
     struct tap_exr_fields ef = {f[OC_FIELD_HEIGHT], f[OC_FIELD_DX], f[OC_FIELD_DZ],
                                 f[OC_FIELD_SLOPE_X], f[OC_FIELD_SLOPE_Z], f[OC_FIELD_JACOBIAN]};
     struct tap_meta m = {.field = "bake", .seq = fh->seq, .sim_time = fh->sim_time,
                          .params_version = fh->params_version, .n = fh->n, .lod = s->o->lod,
-                         .patch_size = fh->patch_size, .bound = bound, .server_time_us = fh->server_time_us};
+                         .patch_size = (float)size, .bound = bound, .server_time_us = fh->server_time_us,
+                         .cascade = s->o->sum_m ? TAP_CASCADE_SUM : 0, .origin_x = x0, .origin_z = z0};
     char err[512];
-    if (tap_exr_bake(s->o->out_dir, (int)s->frames_done, side, &ef, &m, err, sizeof err) != 0) {
+    if (tap_exr_bake(s->o->out_dir, (int)s->frames_done, side, &ef, &m, s->ncasc, err, sizeof err) != 0) {
         fail(s, EXIT_OUTPUT, "cannot write the bake: %s", err);
+        return -1;
+    }
+    return 0;
+}
+
+static int write_one(struct session *s, const char *path, const float *data, int side, const struct tap_meta *m)
+{
+    if (tap_write_field(s->o->format, path, data, side, m) != 0) {
+        fail(s, EXIT_OUTPUT, "cannot write %s: %s", path, strerror(errno));
         return -1;
     }
     return 0;
@@ -628,23 +809,47 @@ static int write_bake(struct session *s, const struct oc_frame_header *fh)
 static int write_frame(struct session *s, const struct oc_frame_header *fh)
 {
     if (s->o->format == TAP_EXR) return write_bake(s, fh);
-    for (int f = 0; f < OC_FIELD_COUNT; f++) {
-        int side;
-        float bound;
-        const float *data = tap_frame_field(s->grid, f, &side, &bound);
-        if (!data) continue;
-        char path[4096];
-        snprintf(path, sizeof path, "%s/%s-%08llu.%s", s->o->out_dir, oc_field_name(f),
-                 (unsigned long long)fh->seq, tap_format_ext(s->o->format));
-        struct tap_meta m = {.field = oc_field_name(f), .seq = fh->seq, .sim_time = fh->sim_time,
-                             .params_version = fh->params_version, .n = fh->n, .lod = s->o->lod,
-                             .patch_size = fh->patch_size,
-                             .bound = bound,
-                             .server_time_us = fh->server_time_us};
-        if (tap_write_field(s->o->format, path, data, side, &m) != 0) {
-            fail(s, EXIT_OUTPUT, "cannot write %s: %s", path, strerror(errno));
-            return -1;
+    unsigned long long seq = (unsigned long long)fh->seq;
+    for (int c = 0; c < (s->ncasc > 0 ? s->ncasc : 1); c++)
+        for (int f = 0; f < OC_FIELD_COUNT; f++) {
+            int side;
+            float bound;
+            const float *data = tap_frame_cascade_field(s->grid, c, f, &side, &bound);
+            if (!data) continue;
+            char path[4096];
+            /* Cascade 0 keeps the names of a one-cascade sea. */
+            if (c == 0)
+                snprintf(path, sizeof path, "%s/%s-%08llu.%s", s->o->out_dir, oc_field_name(f), seq,
+                         tap_format_ext(s->o->format));
+            else
+                snprintf(path, sizeof path, "%s/%s-c%d-%08llu.%s", s->o->out_dir, oc_field_name(f), c, seq,
+                         tap_format_ext(s->o->format));
+            struct tap_meta m = {.field = oc_field_name(f), .seq = fh->seq, .sim_time = fh->sim_time,
+                                 .params_version = fh->params_version, .n = fh->n,
+                                 .lod = c == 0 ? s->o->lod : fine_lod(s->o),
+                                 .patch_size = (float)(c == 0 ? fh->patch_size : s->patch[c]), .bound = bound,
+                                 .server_time_us = fh->server_time_us, .cascade = c};
+            if (write_one(s, path, data, side, &m) != 0) return -1;
         }
+    if (!s->o->sum_m) return 0;
+    struct sum_grid sg = sum_geometry(s, fh);
+    float *buf = sum_buffers(s, sg.m, 1);
+    if (!buf) return -1;
+    static const enum oc_field summed[5] = {OC_FIELD_HEIGHT, OC_FIELD_DX, OC_FIELD_DZ, OC_FIELD_SLOPE_X,
+                                            OC_FIELD_SLOPE_Z};
+    for (int k = 0; k < 5; k++) {
+        float bound;
+        int r = sum_field(s, fh, &sg, summed[k], 0, buf, &bound);
+        if (r < 0) return -1;
+        if (r > 0) continue; /* not subscribed */
+        char path[4096];
+        snprintf(path, sizeof path, "%s/%s-sum-%08llu.%s", s->o->out_dir, oc_field_name(summed[k]), seq,
+                 tap_format_ext(s->o->format));
+        struct tap_meta m = {.field = oc_field_name(summed[k]), .seq = fh->seq, .sim_time = fh->sim_time,
+                             .params_version = fh->params_version, .n = fh->n, .lod = 0,
+                             .patch_size = (float)sg.size, .bound = bound, .server_time_us = fh->server_time_us,
+                             .cascade = TAP_CASCADE_SUM, .origin_x = sg.x0, .origin_z = sg.z0};
+        if (write_one(s, path, buf, sg.m, &m) != 0) return -1;
     }
     return 0;
 }
@@ -894,6 +1099,8 @@ int main(int argc, char **argv)
     cJSON_Delete(s.schema);
     oc_buf_free(&s.msg);
     tap_frame_free(s.grid);
+    tap_surface_free(s.surface);
+    free(s.sum_buf);
     free(s.st.lat_ms);
     return r;
 }

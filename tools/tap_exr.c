@@ -105,7 +105,7 @@ out:
 }
 
 int tap_exr_bake(const char *dir, int frame, int side, const struct tap_exr_fields *fl, const struct tap_meta *m,
-                 char *err, size_t errlen)
+                 int cascades, char *err, size_t errlen)
 {
     size_t count = (size_t)side * side;
     float *buf = malloc(4 * count * sizeof *buf);
@@ -128,14 +128,23 @@ int tap_exr_bake(const char *dir, int frame, int side, const struct tap_exr_fiel
     snprintf(t, sizeof t, "%.17g", m->sim_time);
     snprintf(pv, sizeof pv, "%u", (unsigned)m->params_version);
     snprintf(L, sizeof L, "%.9g", (double)m->patch_size);
-    static const char *const kinds[3] = {"disp", "normal", "foam"};
-    const float *const chans[3][4] = {
-        {fl->dx, fl->height, fl->dz, NULL}, {nx, ny, nz, NULL}, {foam, foam, foam, NULL}};
+    /* vdisp: the displacement in Blender's axes (X = x, Y = z, Z = height) for
+     * a Displace modifier in RGB to XYZ mode (tools/blender/oceand_bake.py). */
+    static const char *const kinds[4] = {"disp", "normal", "foam", "vdisp"};
+    const float *const chans[4][4] = {{fl->dx, fl->height, fl->dz, NULL},
+                                      {nx, ny, nz, NULL},
+                                      {foam, foam, foam, NULL},
+                                      {fl->dx, fl->dz, fl->height, NULL}};
+    char ox[40], oz[40], nc[8];
+    snprintf(ox, sizeof ox, "%.17g", m->origin_x);
+    snprintf(oz, sizeof oz, "%.17g", m->origin_z);
+    snprintf(nc, sizeof nc, "%d", cascades);
     int r = 0;
     char path[4096];
-    for (int k = 0; k < 3 && r == 0; k++) {
+    for (int k = 0; k < 4 && r == 0; k++) {
         const char *attrs[] = {"oceand_field", kinds[k], "oceand_seq", seq, "oceand_sim_time", t,
-                               "oceand_params_version", pv, "oceand_patch_size", L, NULL};
+                               "oceand_params_version", pv, "oceand_patch_size", L, "oceand_origin_x", ox,
+                               "oceand_origin_z", oz, "oceand_cascades", nc, NULL};
         if (snprintf(path, sizeof path, "%s/%s_%04d.exr", dir, kinds[k], frame) >= (int)sizeof path) {
             snprintf(err, errlen, "path too long");
             r = -1;
@@ -153,11 +162,14 @@ int tap_exr_bake(const char *dir, int frame, int side, const struct tap_exr_fiel
         return -1;
     }
     int ok = fprintf(f,
-                     "{\n  \"frame\": %d,\n  \"files\": [\"disp_%04d.exr\", \"normal_%04d.exr\", \"foam_%04d.exr\"],\n"
+                     "{\n  \"frame\": %d,\n  \"files\": [\"disp_%04d.exr\", \"normal_%04d.exr\", \"foam_%04d.exr\", "
+                     "\"vdisp_%04d.exr\"],\n"
                      "  \"seq\": %s,\n  \"sim_time\": %s,\n  \"params_version\": %s,\n  \"n\": %d,\n  \"lod\": %d,\n"
-                     "  \"side\": %d,\n  \"patch_size\": %s,\n  \"bound\": %.9g,\n  \"server_time_us\": %llu,\n"
+                     "  \"side\": %d,\n  \"patch_size\": %s,\n  \"origin\": [%s, %s],\n  \"cascades\": %d,\n"
+                     "  \"bound\": %.9g,\n  \"server_time_us\": %llu,\n"
                      "  \"layout\": \"blender ocean bake: half RGBA, ZIP, first scanline = last row (z = side-1)\"\n}\n",
-                     frame, frame, frame, frame, seq, t, pv, m->n, m->lod, side, L, (double)m->bound,
+                     frame, frame, frame, frame, frame, seq, t, pv, m->n, m->lod, side, L, ox, oz, cascades,
+                     (double)m->bound,
                      (unsigned long long)m->server_time_us) > 0;
     if (fclose(f) != 0 || !ok) {
         snprintf(err, errlen, "%s: write failed", path);

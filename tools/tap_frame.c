@@ -12,34 +12,52 @@ struct field_grid {
     float bound;          /* of the latest tile */
 };
 
-struct tap_frame {
-    unsigned fields;
+/* One cascade's grids (PROTOCOL.md §4.1): its own fields and LOD. */
+struct cascade_grids {
+    unsigned fields;      /* 0 = cascade not wanted */
     int lod;
-    int n, tile_size;     /* geometry the grids were made for; 0 = none yet */
-    int side, tiles;      /* samples per side at lod, tiles per side */
+    int side;             /* samples per side at lod */
     struct field_grid grid[OC_FIELD_COUNT];
+};
+
+struct tap_frame {
+    int n, tile_size;     /* geometry the grids were made for; 0 = none yet */
+    int tiles;            /* tiles per side */
+    struct cascade_grids cg[OC_MAX_CASCADES];
     struct oc_decoder *dec;
     int err;              /* first geometry error in the current message */
 };
+
+static void drop_grids(struct tap_frame *a);
 
 struct tap_frame *tap_frame_new(unsigned fields, int lod)
 {
     struct tap_frame *a = calloc(1, sizeof *a);
     if (!a) return NULL;
-    a->fields = fields;
-    a->lod = lod;
+    a->cg[0].fields = fields;
+    a->cg[0].lod = lod;
     a->dec = oc_decoder_new();
     if (!a->dec) { free(a); return NULL; }
     return a;
 }
 
+int tap_frame_want_cascade(struct tap_frame *a, int cascade, unsigned fields, int lod)
+{
+    if (cascade < 0 || cascade >= OC_MAX_CASCADES || lod < 0 || lod > OC_MAX_LOD) return -1;
+    drop_grids(a);
+    a->cg[cascade].fields = fields;
+    a->cg[cascade].lod = lod;
+    return 0;
+}
+
 static void drop_grids(struct tap_frame *a)
 {
-    for (int f = 0; f < OC_FIELD_COUNT; f++) {
-        free(a->grid[f].data);
-        free(a->grid[f].seen);
-        memset(&a->grid[f], 0, sizeof a->grid[f]);
-    }
+    for (int c = 0; c < OC_MAX_CASCADES; c++)
+        for (int f = 0; f < OC_FIELD_COUNT; f++) {
+            free(a->cg[c].grid[f].data);
+            free(a->cg[c].grid[f].seen);
+            memset(&a->cg[c].grid[f], 0, sizeof a->cg[c].grid[f]);
+        }
     a->n = a->tile_size = 0;
 }
 
@@ -57,18 +75,23 @@ static int shape_grids(struct tap_frame *a, int n, int tile_size)
 {
     if (n == a->n && tile_size == a->tile_size) return 0;
     drop_grids(a);
-    if (n <= 0 || tile_size <= 0 || (n >> a->lod) <= 0) return OC_E_CORRUPT;
+    if (n <= 0 || tile_size <= 0) return OC_E_CORRUPT;
+    for (int c = 0; c < OC_MAX_CASCADES; c++)
+        if (a->cg[c].fields && (n >> a->cg[c].lod) <= 0) return OC_E_CORRUPT;
     a->n = n;
     a->tile_size = tile_size;
-    a->side = n >> a->lod;
     a->tiles = (n + tile_size - 1) / tile_size;
-    for (int f = 0; f < OC_FIELD_COUNT; f++) {
-        if (!(a->fields & (1u << f))) continue;
-        struct field_grid *g = &a->grid[f];
-        g->data = calloc((size_t)a->side * (size_t)a->side, sizeof(float));
-        g->seen = calloc((size_t)a->tiles * (size_t)a->tiles, 1);
-        if (!g->data || !g->seen) { drop_grids(a); return OC_E_NOMEM; }
-        g->missing = a->tiles * a->tiles;
+    for (int c = 0; c < OC_MAX_CASCADES; c++) {
+        struct cascade_grids *cg = &a->cg[c];
+        cg->side = n >> cg->lod;
+        for (int f = 0; f < OC_FIELD_COUNT; f++) {
+            if (!(cg->fields & (1u << f))) continue;
+            struct field_grid *g = &cg->grid[f];
+            g->data = calloc((size_t)cg->side * (size_t)cg->side, sizeof(float));
+            g->seen = calloc((size_t)a->tiles * (size_t)a->tiles, 1);
+            if (!g->data || !g->seen) { drop_grids(a); return OC_E_NOMEM; }
+            g->missing = a->tiles * a->tiles;
+        }
     }
     return 0;
 }
@@ -77,22 +100,23 @@ static int on_tile(void *user, const struct oc_frame_header *fh, const struct oc
                    const float *samples)
 {
     struct tap_frame *a = user;
-    if (th->field >= OC_FIELD_COUNT || !(a->fields & (1u << th->field)) || th->lod != a->lod)
+    struct cascade_grids *cg = &a->cg[oc_tile_cascade(th)];
+    if (th->field >= OC_FIELD_COUNT || !(cg->fields & (1u << th->field)) || th->lod != cg->lod)
         return 0;
     int r = shape_grids(a, fh->n, fh->tile_size);
     if (r) return r;
-    struct field_grid *g = &a->grid[th->field];
+    struct field_grid *g = &cg->grid[th->field];
     /* Tile (tx, tz) starts at sample tx*tile_size of the full grid, i.e. at
      * tx*(tile_size >> lod) of the LOD grid. */
-    int step = a->tile_size >> a->lod;
+    int step = a->tile_size >> cg->lod;
     long x0 = (long)th->tile_x * step, z0 = (long)th->tile_z * step;
     if (th->tile_x >= a->tiles || th->tile_z >= a->tiles ||
-        x0 + th->width > a->side || z0 + th->height > a->side) {
+        x0 + th->width > cg->side || z0 + th->height > cg->side) {
         a->err = TAP_E_GEOMETRY;
         return TAP_E_GEOMETRY;
     }
     for (int j = 0; j < th->height; j++)
-        memcpy(g->data + (size_t)(z0 + j) * a->side + x0, samples + (size_t)j * th->width,
+        memcpy(g->data + (size_t)(z0 + j) * cg->side + x0, samples + (size_t)j * th->width,
                th->width * sizeof(float));
     g->bound = th->bound;
     unsigned char *seen = &g->seen[th->tile_z * a->tiles + th->tile_x];
@@ -104,8 +128,9 @@ static int on_tile(void *user, const struct oc_frame_header *fh, const struct oc
 int tap_frame_add(struct tap_frame *a, const uint8_t *data, size_t len, struct oc_frame_header *fh)
 {
     a->err = 0;
-    for (int f = 0; f < OC_FIELD_COUNT; f++)
-        a->grid[f].fresh = 0;
+    for (int c = 0; c < OC_MAX_CASCADES; c++)
+        for (int f = 0; f < OC_FIELD_COUNT; f++)
+            a->cg[c].grid[f].fresh = 0;
     int r = oc_decode_frame(a->dec, data, len, fh, on_tile, a);
     if (a->err) return a->err;
     return r < 0 ? r : 0;
@@ -114,17 +139,27 @@ int tap_frame_add(struct tap_frame *a, const uint8_t *data, size_t len, struct o
 int tap_frame_complete(const struct tap_frame *a)
 {
     if (!a->n) return 0;
-    for (int f = 0; f < OC_FIELD_COUNT; f++)
-        if ((a->fields & (1u << f)) && (a->grid[f].missing > 0 || a->grid[f].fresh < a->tiles * a->tiles)) return 0;
+    for (int c = 0; c < OC_MAX_CASCADES; c++)
+        for (int f = 0; f < OC_FIELD_COUNT; f++) {
+            const struct field_grid *g = &a->cg[c].grid[f];
+            if ((a->cg[c].fields & (1u << f)) && (g->missing > 0 || g->fresh < a->tiles * a->tiles)) return 0;
+        }
     return 1;
+}
+
+const float *tap_frame_cascade_field(const struct tap_frame *a, int cascade, enum oc_field f, int *side, float *bound)
+{
+    if (cascade < 0 || cascade >= OC_MAX_CASCADES || (unsigned)f >= OC_FIELD_COUNT) return NULL;
+    const struct cascade_grids *cg = &a->cg[cascade];
+    if (!cg->grid[f].data) return NULL;
+    *side = cg->side;
+    *bound = cg->grid[f].bound;
+    return cg->grid[f].data;
 }
 
 const float *tap_frame_field(const struct tap_frame *a, enum oc_field f, int *side, float *bound)
 {
-    if ((unsigned)f >= OC_FIELD_COUNT || !a->grid[f].data) return NULL;
-    *side = a->side;
-    *bound = a->grid[f].bound;
-    return a->grid[f].data;
+    return tap_frame_cascade_field(a, 0, f, side, bound);
 }
 
 const char *tap_frame_strerror(int err)

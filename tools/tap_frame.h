@@ -18,8 +18,12 @@
 
 struct tap_frame;
 
-/* fields: bit mask of enum oc_field; lod: the subscribed LOD. */
+/* fields: bit mask of enum oc_field; lod: the subscribed LOD (cascade 0). */
 struct tap_frame *tap_frame_new(unsigned fields, int lod);
+/* Also assemble cascade `cascade` (1..3, PROTOCOL.md §4.1): its own fields and
+ * LOD; fields 0 = not wanted. Tiles of a cascade not wanted are skipped; a
+ * frame is complete when every wanted cascade is. Returns 0 or -1. */
+int tap_frame_want_cascade(struct tap_frame *a, int cascade, unsigned fields, int lod);
 void tap_frame_free(struct tap_frame *a);
 /* Decode one binary message into the grids. Returns 0, a negative
  * enum oc_error, or TAP_E_GEOMETRY. fh receives the frame header. */
@@ -30,8 +34,10 @@ int tap_frame_add(struct tap_frame *a, const uint8_t *data, size_t len, struct o
  * previous frame's samples, which must not be written under this frame's seq. */
 int tap_frame_complete(const struct tap_frame *a);
 /* Grid of one field (side*side floats, row-major, row = z), NULL if not
- * requested; *bound = the error bound of its latest tile (0 = lossless). */
+ * requested; *bound = the error bound of its latest tile (0 = lossless).
+ * tap_frame_field is cascade 0's. */
 const float *tap_frame_field(const struct tap_frame *a, enum oc_field f, int *side, float *bound);
+const float *tap_frame_cascade_field(const struct tap_frame *a, int cascade, enum oc_field f, int *side, float *bound);
 /* Message for tap_frame_add's error codes. */
 const char *tap_frame_strerror(int err);
 

@@ -59,17 +59,22 @@ for fj in frames:
     disp = read_exr(os.path.join(exr_dir, f"disp_{fr:04d}.exr"))
     normal = read_exr(os.path.join(exr_dir, f"normal_{fr:04d}.exr"))
     foam = read_exr(os.path.join(exr_dir, f"foam_{fr:04d}.exr"))
+    vdisp = read_exr(os.path.join(exr_dir, f"vdisp_{fr:04d}.exr"))
     assert disp.shape == (meta["side"], meta["side"], 4), disp.shape
     worst = max(worst, close("disp R = dx", disp[..., 0], fields["dx"]),
                 close("disp G = height", disp[..., 1], fields["height"]),
                 close("disp B = dz", disp[..., 2], fields["dz"]))
+    # vdisp: Blender's axes for a Displace modifier (RGB to XYZ): X = dx, Y = dz, Z = height
+    close("vdisp R = dx", vdisp[..., 0], fields["dx"])
+    close("vdisp G = dz", vdisp[..., 1], fields["dz"])
+    close("vdisp B = height", vdisp[..., 2], fields["height"])
     sx, sz = fields["slope_x"].astype(np.float64), fields["slope_z"].astype(np.float64)
     length = np.sqrt(sx * sx + 1 + sz * sz)
     close("normal R", normal[..., 0], -sx / length)
     close("normal G", normal[..., 1], 1 / length)
     close("normal B", normal[..., 2], -sz / length)
     close("foam", foam[..., 0], np.clip(np.float32(1) - fields["jacobian"], 0, 1))
-    for img in (disp, normal, foam):
+    for img in (disp, normal, foam, vdisp):
         assert (img[..., 3] == 1).all(), "alpha is not 1"
     assert (foam[..., 0] == foam[..., 1]).all() and (foam[..., 0] == foam[..., 2]).all()
     compared += 1

@@ -256,6 +256,27 @@ err = np.abs(x - y).max()
 assert err <= float(sys.argv[3]) * (1 + 1e-6) + np.abs(x).max() * 2**-23, err
 print(f"  max |lossy - lossless| = {err:.6f} <= 0.005")
 EOF
+# The finer cascades: per-cascade files, and their sum against the exact surface (query).
+# This daemon runs N = 128 and the default 3 cascades; the sea is still paused.
+run 0 "cascades + sum" "$TAP" "$URL" --frames 1 --bound 0 --cascades all --sum $N --fields height,dx,dz --out "$tmp/sum"
+for f in height dx dz; do
+  ls "$tmp"/sum/$f-c1-*.npy "$tmp"/sum/$f-c2-*.npy "$tmp"/sum/$f-sum-*.npy >/dev/null || fail "no $f cascade/sum files: $(ls "$tmp/sum")"
+done
+[ "$(json_get "$(ls "$tmp"/sum/height-c1-*.json)" 'j["cascade"]')" = 1 ] || fail "cascade 1's sidecar does not say cascade 1"
+$PY tests/tap/check_sum.py "$URL" "$tmp/sum" 0.001 || fail "the summed grid is off query at its nodes"
+run 0 "sum anywhere" "$TAP" "$URL" --frames 1 --bound 0 --cascades all --sum 150 --sum-area -37.3,12.1,100 \
+  --fields height,dx,dz --out "$tmp/sum-area"
+$PY tests/tap/check_sum.py "$URL" "$tmp/sum-area" 0.005 || fail "the summed grid is off query between nodes"
+run 0 "sum bilinear" "$TAP" "$URL" --frames 1 --bound 0 --cascades all --sum 150 --sum-area -37.3,12.1,100 \
+  --fields height,dx,dz --interp bilinear --out "$tmp/sum-bil"
+$PY tests/tap/check_sum.py "$URL" "$tmp/sum-bil" 1 0.002 || fail "bilinear is not measurably off: the check is blind"
+run 1 "--sum without --cascades" "$TAP" "$URL" --frames 1 --sum 64
+ok "--cascades all: c1/c2 files; --sum on cascade 0's nodes and on another grid within 1 and 5 mm of query"
+# ocean_stats.py --save writes ocean-tap's sidecar beside each .npy
+f=$(ls "$tmp"/lossy/height-*.npy | head -n 1)
+[ "$(json_get "${f%.npy}.json" 'j["seq"]')" = "$((10#$(basename "$f" .npy | cut -d- -f2)))" ] \
+  || fail "ocean_stats.py --save: no sidecar with the seq of $f"
+ok "ocean_stats.py --save writes the sidecar"
 run 0 "resume" "$TAP" "$URL" --set paused=false
 ok "lossless and lossy (LOD 0/1/2) frames identical in both decoders; bound honoured"
 
@@ -284,7 +305,9 @@ assert all(b > a for a, b in zip(seqs, seqs[1:])), seqs
 assert all(l["type"] == "probe_data" and len(l["points"]) == 2 and len(l["points"][0]) == 8 for l in lines)
 EOF
 run 0 "probe csv" "$TAP" "$URL" --probe "1.5,-2;40,7" --ticks 3 --csv
-[ "$(wc -l <"$tmp/out")" -eq 6 ] || fail "--csv: expected 3 ticks x 2 points rows: $(cat "$tmp/out")"
+[ "$(head -n 1 "$tmp/out")" = "seq,sim_time,params_version,point,x,z,height,dx,dz,nx,ny,nz,vertical_velocity,vertical_acceleration" ] \
+  || fail "--csv: no header row: $(head -n 1 "$tmp/out")"
+[ "$(wc -l <"$tmp/out")" -eq 7 ] || fail "--csv: expected a header and 3 ticks x 2 points rows: $(cat "$tmp/out")"
 [ "$(awk -F, '{print NF}' "$tmp/out" | sort -u)" = 14 ] || fail "--csv rows do not have 14 columns"
 run 4 "probe over the limit" "$TAP" "$URL" --probe "$(for i in $(seq 1 17); do printf '%d,0;' $i; done | sed 's/;$//')"
 grep -q 'too_many_points' "$tmp/err" || fail "no too_many_points in: $(cat "$tmp/err")"
@@ -298,6 +321,8 @@ j = json.loads(open(sys.argv[1]).read().strip().splitlines()[-1])
 assert j["points"] == 9 and j["samples"] >= 60 and j["frames"] >= 5, j
 assert 0.5 < j["ratio"] < 2 and j["hs_sea_m"] > 0, j
 EOF
+run 0 "ship --help" $PY proto/examples/ship.py --help
+grep -q 'probes are moved once a second' "$tmp/out" || fail "ship.py --help is cut short: $(cat "$tmp/out")"
 run 0 "ship" timeout 30 $PY proto/examples/ship.py "$URL" --ticks 6 --speed 5 --heading 45
 [ "$(grep -c '^ *[0-9]' "$tmp/out")" -eq 6 ] || fail "ship.py: expected 6 motion lines: $(cat "$tmp/out")"
 ok "buoy.py compares its Hs with the sea's; ship.py prints heave, pitch and roll per tick"
