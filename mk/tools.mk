@@ -32,6 +32,15 @@ TESTS += test-tap test-ops test-python test-blender
 $(BUILD)/ocean-tap: $(TAP_OBJS) $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $(TAP_OBJS) $(PROTO_LIB) $(PKG_LIBS) $(EXR_LIBS)
 
+# Cost and accuracy of the summed surface (tools/tap_surface.c) on synthetic cascades.
+BINS += $(BUILD)/bench-surface
+BENCHES += bench-tap-surface
+$(BUILD)/bench-surface: $(BUILD)/obj/tools/bench_surface.o $(BUILD)/obj/tools/tap_surface.o
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+.PHONY: bench-tap-surface
+bench-tap-surface: $(BUILD)/bench-surface
+	@$(BUILD)/bench-surface 256
+
 # Test helper: reads an EXR back with the OpenEXR library (tests/tap/run.sh).
 BINS += $(BUILD)/exr-read
 $(BUILD)/exr-read: $(BUILD)/obj/tests/tap/exr_read.o
