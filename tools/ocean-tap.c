@@ -49,6 +49,11 @@ enum exit_code {
 #define ID_QUIET 3     /* watch only: the smallest subscription there is */
 #define ID_QUERY 4
 #define ID_PROBE 5
+#define ID_RENDER 6
+/* Draft, not yet served by oceand: the `render` request (exact-time frames for
+ * bakes). Its frames carry this bit in the frame header's flags and their
+ * index k in seq; sim_time = start + k / fps. */
+#define RENDER_FRAME_FLAG 1u
 #define MAX_POINTS 256 /* of --query / --probe (the server caps probes lower) */
 
 static void usage(FILE *to)
@@ -89,6 +94,11 @@ static void usage(FILE *to)
         "  --interp I          between grid nodes: spectral (default; exact signal on a 4x\n"
         "                      finer grid, then cubic: ~0.1 mm from query) or bilinear (on\n"
         "                      the streamed grids: ~14 mm rms off; docs/query.md)\n"
+        "Exact-time bakes (needs a daemon with the render request; today's answers\n"
+        "unknown_type, exit 4):\n"
+        "  --bake --fps F --start T --frames K   frames at sim times T + k/F, k = 0..K-1,\n"
+        "                      rendered by the server for the parameters in force, every\n"
+        "                      one, in order; written like --out/--format (EXR frame k+1)\n"
         "  --stats             print frames/s, bytes and latency (each second to stderr,\n"
         "                      summary on stdout at exit)\n"
         "Control:\n"
@@ -147,6 +157,9 @@ struct opts {
     int has_area;
     double area[3];       /* --sum-area X,Z,S */
     int bilinear;         /* --interp bilinear */
+    int bake;             /* --bake: exact-time frames through the render request */
+    double fps, start;    /* --fps, --start */
+    int has_start;
 };
 
 /* "x,z;x,z;..." -> o->points. */
@@ -209,6 +222,8 @@ static int parse_args(int argc, char **argv, struct opts *o)
         {"csv", no_argument, 0, 'C'},         {"intra", no_argument, 0, 'A'},
         {"cascades", required_argument, 0, 'c'}, {"sum", required_argument, 0, 'M'},
         {"sum-area", required_argument, 0, 'a'}, {"interp", required_argument, 0, 'i'},
+        {"bake", no_argument, 0, 'B'},        {"fps", required_argument, 0, 'p'},
+        {"start", required_argument, 0, 'z'},
         {0, 0, 0, 0}};
     *o = (struct opts){.frames = -1, .fields = 7u, .bound = -1, .format = TAP_NPY, .timeout = 10, .cascades = 1};
     int c;
@@ -284,6 +299,17 @@ static int parse_args(int argc, char **argv, struct opts *o)
                 return usage_error("--sum-area needs X,Z,SIZE (metres, SIZE > 0)");
             o->has_area = 1;
             break;
+        case 'B': o->bake = 1; break;
+        case 'p':
+            o->fps = strtod(optarg, &end);
+            if (*end || !(o->fps > 0 && o->fps <= 1000)) return usage_error("--fps needs frames per second in (0, 1000]");
+            break;
+        case 'z':
+            o->start = strtod(optarg, &end);
+            if (*end || !*optarg || !isfinite(o->start) || o->start < 0)
+                return usage_error("--start needs a sim time in seconds >= 0");
+            o->has_start = 1;
+            break;
         case 'i':
             if (!strcmp(optarg, "bilinear")) o->bilinear = 1;
             else if (strcmp(optarg, "spectral")) return usage_error("--interp must be spectral or bilinear");
@@ -293,6 +319,11 @@ static int parse_args(int argc, char **argv, struct opts *o)
         }
     }
     if (o->format == TAP_EXR) o->fields = (1u << OC_FIELD_COUNT) - 1u; /* the bake needs all six */
+    if (o->bake && !(o->fps > 0 && o->has_start && o->frames > 0 && o->out_dir))
+        return usage_error("--bake needs --fps F, --start T, --frames K and --out DIR");
+    if (!o->bake && (o->fps > 0 || o->has_start)) return usage_error("--fps and --start are for --bake");
+    if (o->bake && (o->max_rate || o->stats || o->watch))
+        return usage_error("--bake does not mix with --max-rate, --stats or --watch");
     if ((o->sum_m || o->has_area) && o->cascades == 1)
         return usage_error("--sum/--sum-area add up cascades: give --cascades too");
     if (o->has_area && !o->sum_m) o->sum_m = -1;
@@ -309,7 +340,7 @@ static int parse_args(int argc, char **argv, struct opts *o)
 
 /* ---- session state ------------------------------------------------------ */
 
-enum stage { ST_HELLO, ST_SET, ST_SUBSCRIBE, ST_QUERY, ST_PROBE, ST_RUN, ST_DONE };
+enum stage { ST_HELLO, ST_SET, ST_SUBSCRIBE, ST_QUERY, ST_PROBE, ST_RENDER, ST_RUN, ST_DONE };
 
 struct stats {
     double t0, last_report;
@@ -469,16 +500,24 @@ static void read_patch_sizes(struct session *s, cJSON *msg)
 static void send_subscribe(struct session *s)
 {
     cJSON *j = cJSON_CreateObject(), *fields = cJSON_CreateArray();
-    cJSON_AddStringToObject(j, "type", "subscribe");
-    cJSON_AddNumberToObject(j, "id", ID_SUBSCRIBE);
+    int render = s->stage == ST_RENDER;
+    cJSON_AddStringToObject(j, "type", render ? "render" : "subscribe");
+    cJSON_AddNumberToObject(j, "id", render ? ID_RENDER : ID_SUBSCRIBE);
+    if (render) {
+        cJSON_AddNumberToObject(j, "start", s->o->start);
+        cJSON_AddNumberToObject(j, "fps", s->o->fps);
+        cJSON_AddNumberToObject(j, "frames", (double)s->o->frames);
+    }
     for (int f = 0; f < OC_FIELD_COUNT; f++)
         if (s->o->fields & (1u << f)) cJSON_AddItemToArray(fields, cJSON_CreateString(oc_field_name(f)));
     cJSON_AddItemToObject(j, "fields", fields);
     cJSON_AddNumberToObject(j, "lod", s->o->lod);
-    cJSON_AddStringToObject(j, "tiles", "all");
     if (s->o->bound >= 0) cJSON_AddNumberToObject(j, "bound", s->o->bound);
-    if (s->o->max_rate > 0) cJSON_AddNumberToObject(j, "max_rate", s->o->max_rate);
-    cJSON_AddBoolToObject(j, "temporal", !s->o->intra); /* PROTOCOL.md §5.9 */
+    if (!render) {
+        cJSON_AddStringToObject(j, "tiles", "all");
+        if (s->o->max_rate > 0) cJSON_AddNumberToObject(j, "max_rate", s->o->max_rate);
+        cJSON_AddBoolToObject(j, "temporal", !s->o->intra); /* PROTOCOL.md §5.9 */
+    }
     /* The finer cascades (§4.1): same fields but foam (cascade 0's only), at LOD
      * 1 or coarser (they hold nothing LOD 1 drops) and 1 mm, their heights being
      * centimetres; lossless stays lossless. */
@@ -568,6 +607,13 @@ static void advance(struct session *s)
     }
     if (s->stage == ST_PROBE) { s->stage = ST_RUN; s->st.t0 = s->st.last_report = now_s(); return; }
     if (s->stage == ST_HELLO && s->o->nsets) { s->stage = ST_SET; send_set(s); return; }
+    if (s->stage <= ST_SET && s->o->bake) {
+        s->stage = ST_RENDER;
+        send_quiet_subscribe(s); /* live frames are not wanted while the server renders ours */
+        send_subscribe(s);
+        return;
+    }
+    if (s->stage == ST_RENDER) { s->stage = ST_RUN; s->st.t0 = s->st.last_report = s->last_frame = now_s(); return; }
     if (s->stage <= ST_SET && s->want_frames) { s->stage = ST_SUBSCRIBE; send_subscribe(s); return; }
     if (s->stage <= ST_SUBSCRIBE && (s->want_frames || s->o->watch)) {
         s->stage = ST_RUN;
@@ -677,12 +723,24 @@ static void on_text(struct session *s, const char *text, size_t len)
         printf("%.*s\n", (int)len, text);
         fflush(stdout);
         finish(s, EXIT_OK);
+    } else if (!strcmp(t, "rendering") && s->stage == ST_RENDER && id_is(msg, ID_RENDER)) {
+        advance(s);
+    } else if (!strcmp(t, "rendered") && s->o->bake && id_is(msg, ID_RENDER)) {
+        if (s->frames_done < s->o->frames)
+            fail(s, EXIT_PROTOCOL, "the server ended the render after %ld of %ld frames", s->frames_done, s->o->frames);
     } else if (!strcmp(t, "probing") && s->stage == ST_PROBE && id_is(msg, ID_PROBE)) {
         advance(s);
     } else if (!strcmp(t, "probe_data") && s->stage == ST_RUN && s->o->probe) {
         print_probe(s, msg, text, len);
     } else if (!strcmp(t, "error")) {
-        if ((s->stage == ST_QUERY && id_is(msg, ID_QUERY)) || (s->stage == ST_PROBE && id_is(msg, ID_PROBE))) {
+        if (s->o->bake && id_is(msg, ID_RENDER)) {
+            cJSON *code = cJSON_GetObjectItemCaseSensitive(msg, "code");
+            print_error(msg, "render rejected");
+            if (cJSON_IsString(code) && !strcmp(code->valuestring, "unknown_type"))
+                fprintf(stderr, "ocean-tap: this server has no render request (exact-time frames); "
+                                "bake from the stream instead: --format exr without --bake\n");
+            finish(s, EXIT_REJECTED);
+        } else if ((s->stage == ST_QUERY && id_is(msg, ID_QUERY)) || (s->stage == ST_PROBE && id_is(msg, ID_PROBE))) {
             print_error(msg, s->stage == ST_QUERY ? "query rejected" : "probe rejected");
             finish(s, EXIT_REJECTED);
         } else if (s->stage == ST_SET && (id_is(msg, ID_SET) || !cJSON_GetObjectItem(msg, "id"))) {
@@ -890,6 +948,10 @@ static void on_binary(struct session *s, const uint8_t *data, size_t len)
 {
     if (s->stage != ST_RUN || !s->want_frames) return; /* frames of the default subscription */
     struct oc_frame_header fh;
+    if (s->o->bake) {
+        /* Only the rendered frames, every one, in order, at exactly start + k/fps. */
+        if (len < 40 || !((data[38] | data[39] << 8) & RENDER_FRAME_FLAG)) return;
+    }
     int r = tap_frame_add(s->grid, data, len, &fh);
     if (r == OC_E_REFERENCE) {
         /* A predicted frame whose references we lack (we missed one): subscribing
@@ -907,6 +969,14 @@ static void on_binary(struct session *s, const uint8_t *data, size_t len)
     if (r) {
         fail(s, EXIT_PROTOCOL, "bad binary frame (%zu bytes): %s", len, tap_frame_strerror(r));
         return;
+    }
+    if (s->o->bake) {
+        double want = s->o->start + (double)s->frames_done / s->o->fps;
+        if (fh.seq != (uint64_t)s->frames_done || !tap_frame_complete(s->grid) || fabs(fh.sim_time - want) > 1e-6) {
+            fail(s, EXIT_PROTOCOL, "render frame %llu at sim time %.9f: expected frame %ld, complete, at %.9f",
+                 (unsigned long long)fh.seq, fh.sim_time, s->frames_done, want);
+            return;
+        }
     }
     if (!tap_frame_complete(s->grid)) return; /* not every tile of every field at our LOD (degraded, or before
                                                   the subscription took effect): nothing new to write */
@@ -1080,6 +1150,7 @@ int main(int argc, char **argv)
                              : s.stage == ST_SUBSCRIBE ? "the answer to subscribe"
                              : s.stage == ST_QUERY ? "the answer to query"
                              : s.stage == ST_PROBE ? "the answer to probe"
+                             : s.stage == ST_RENDER ? "the answer to render"
                              : o.probe ? "the next probe tick" : "the next complete frame";
             if (counting && s.degraded_lod >= 0 && s.degraded_lod != o.lod)
                 fail(&s, EXIT_TIMEOUT, "timed out after %.1f s waiting for %s: the server serves this "

@@ -136,7 +136,9 @@ if command -v valgrind >/dev/null; then
   run 0 "ocean-tap under valgrind" $VG "$TAP" "$URL" --set amplitude=1 --frames 2 --fields height,jacobian \
     --lod 1 --bound 0.001 --out "$tmp/vg" --format raw --stats
   run 0 "ocean-tap --format exr under valgrind" $VG "$TAP" "$URL" --frames 2 --lod 2 --out "$tmp/vg-exr" --format exr
-  ok "no memory errors or leaks in ocean-tap (set, frames, stats, raw output, EXR bake)"
+  run 0 "ocean-tap --cascades --sum under valgrind" $VG "$TAP" "$URL" --frames 1 --fields height,dx --lod 2 \
+    --cascades all --sum 48 --sum-area 3,4,50 --out "$tmp/vg-sum"
+  ok "no memory errors or leaks in ocean-tap (set, frames, stats, raw output, EXR bake, cascades and their sum)"
 else
   echo "  skip: valgrind not installed"
 fi
@@ -326,6 +328,31 @@ grep -q 'probes are moved once a second' "$tmp/out" || fail "ship.py --help is c
 run 0 "ship" timeout 30 $PY proto/examples/ship.py "$URL" --ticks 6 --speed 5 --heading 45
 [ "$(grep -c '^ *[0-9]' "$tmp/out")" -eq 6 ] || fail "ship.py: expected 6 motion lines: $(cat "$tmp/out")"
 ok "buoy.py compares its Hs with the sea's; ship.py prints heave, pitch and roll per tick"
+
+section "--bake: exact-time frames through the render request (draft; a stand-in server)"
+run 1 "--bake without --fps" "$TAP" "$URL" --bake --start 0 --frames 2 --out "$tmp/bk"
+run 4 "--bake against oceand" "$TAP" "$URL" --bake --fps 24 --start 1 --frames 2 --out "$tmp/bk"
+grep -q 'no render request' "$tmp/err" || fail "--bake against a daemon without render: $(cat "$tmp/err")"
+fport=$(free_port)
+$PY tests/tap/fake_render.py "$fport" "$tmp/render.json" &
+fake_pid=$!
+for _ in $(seq 50); do (exec 3<>/dev/tcp/127.0.0.1/$fport) 2>/dev/null && break; sleep 0.1; done
+run 0 "--bake" "$TAP" "ws://127.0.0.1:$fport" --bake --fps 24 --start 100.5 --frames 5 --bound 0 \
+  --cascades all --format exr --out "$tmp/bake-exact"
+wait $fake_pid || fail "the stand-in server failed"
+$PY - "$tmp/render.json" "$tmp/bake-exact" <<'EOF2' || fail "--bake output"
+import json, os, sys
+req, d = json.load(open(sys.argv[1])), sys.argv[2]
+assert req["type"] == "render" and (req["start"], req["fps"], req["frames"]) == (100.5, 24, 5), req
+assert len(req["cascades"]) == 2 and req["bound"] == 0 and "temporal" not in req, req
+for k in range(5):
+    m = json.load(open(os.path.join(d, f"frame_{k + 1:04d}.json")))
+    assert m["seq"] == k and abs(m["sim_time"] - (100.5 + k / 24)) < 1e-9 and m["cascades"] == 3, m
+    assert os.path.exists(os.path.join(d, f"vdisp_{k + 1:04d}.exr"))
+assert not os.path.exists(os.path.join(d, "frame_0006.json")), "the live frame was written"
+print("  5 frames at 100.5 + k/24 s, numbered 1..5; the live frame between them left out")
+EOF2
+ok "--bake sends render (start, fps, frames, fields, cascades), writes every rendered frame at its exact time"
 
 section "control token, timeouts and a server that goes away"
 silent=$(free_port)
