@@ -27,7 +27,6 @@
 
 #include "oc_proto.h"
 #include "tap_exr.h"
-#include "tap_frame.h"
 #include "tap_surface.h"
 #include "tap_write.h"
 
@@ -359,7 +358,7 @@ struct session {
     struct oc_buf msg;    /* the message being reassembled */
     char *outq[4];        /* text messages waiting for WRITEABLE */
     int noutq;
-    struct tap_frame *grid; /* the subscribed fields, assembled from tiles */
+    struct oc_grid *grid;   /* the subscribed fields, assembled from tiles */
     long frames_done;
     double resync_t;      /* when we last resubscribed after a missing reference */
     long ticks_done;      /* probe_data lines printed */
@@ -667,7 +666,7 @@ static void on_text(struct session *s, const char *text, size_t len)
             if (s->o->cascades > have)
                 fprintf(stderr, "ocean-tap: the server runs %d cascade%s: receiving %d\n", have, have > 1 ? "s" : "", have);
             for (int c = 1; s->grid && c < s->ncasc; c++)
-                tap_frame_want_cascade(s->grid, c, fine_fields(s->o), fine_lod(s->o));
+                oc_grid_want(s->grid, c, fine_fields(s->o), fine_lod(s->o));
             if (!s->o->nsets && !s->want_frames && !s->o->watch && !s->o->query && !s->o->probe) {
                 /* Info mode: the hello without the long schema, one line. */
                 char *out = cJSON_PrintUnformatted(msg);
@@ -764,7 +763,7 @@ static struct sum_grid sum_geometry(const struct session *s, const struct oc_fra
 {
     int side = 0;
     float b;
-    tap_frame_field(s->grid, OC_FIELD_HEIGHT, &side, &b);
+    oc_grid_field(s->grid, 0, OC_FIELD_HEIGHT, &side, &b);
     if (!side) side = fh->n >> s->o->lod;
     struct sum_grid g = {s->o->sum_m > 0 ? s->o->sum_m : side, 0, 0, fh->patch_size};
     if (s->o->has_area) { g.x0 = s->o->area[0]; g.z0 = s->o->area[1]; g.size = s->o->area[2]; }
@@ -782,7 +781,7 @@ static int sum_field(struct session *s, const struct oc_frame_header *fh, const 
     *bound = 0;
     for (int c = 0; c < nc; c++) {
         float b = 0;
-        g[c].data = tap_frame_cascade_field(s->grid, c, f, &g[c].side, &b);
+        g[c].data = oc_grid_field(s->grid, c, f, &g[c].side, &b);
         g[c].period = c == 0 ? fh->patch_size : s->patch[c];
         if (!g[c].data) return 1;
         if (!(g[c].period > 0)) {
@@ -837,7 +836,7 @@ static int write_bake(struct session *s, const struct oc_frame_header *fh)
         size = sg.size;
     } else {
         for (int i = 0; i < OC_FIELD_COUNT; i++) {
-            f[i] = tap_frame_field(s->grid, i, &side, &b);
+            f[i] = oc_grid_field(s->grid, 0, i, &side, &b);
             bound = b > bound ? b : bound;
         }
     }
@@ -872,7 +871,7 @@ static int write_frame(struct session *s, const struct oc_frame_header *fh)
         for (int f = 0; f < OC_FIELD_COUNT; f++) {
             int side;
             float bound;
-            const float *data = tap_frame_cascade_field(s->grid, c, f, &side, &bound);
+            const float *data = oc_grid_field(s->grid, c, f, &side, &bound);
             if (!data) continue;
             char path[4096];
             /* Cascade 0 keeps the names of a one-cascade sea. */
@@ -952,7 +951,7 @@ static void on_binary(struct session *s, const uint8_t *data, size_t len)
         /* Only the rendered frames, every one, in order, at exactly start + k/fps. */
         if (len < 40 || !((data[38] | data[39] << 8) & RENDER_FRAME_FLAG)) return;
     }
-    int r = tap_frame_add(s->grid, data, len, &fh);
+    int r = oc_grid_add(s->grid, data, len, &fh);
     if (r == OC_E_REFERENCE) {
         /* A predicted frame whose references we lack (we missed one): subscribing
          * again makes the server send keyframes next (PROTOCOL.md §5.9). Once a
@@ -967,18 +966,18 @@ static void on_binary(struct session *s, const uint8_t *data, size_t len)
         return;
     }
     if (r) {
-        fail(s, EXIT_PROTOCOL, "bad binary frame (%zu bytes): %s", len, tap_frame_strerror(r));
+        fail(s, EXIT_PROTOCOL, "bad binary frame (%zu bytes): %s", len, oc_strerror(r));
         return;
     }
     if (s->o->bake) {
         double want = s->o->start + (double)s->frames_done / s->o->fps;
-        if (fh.seq != (uint64_t)s->frames_done || !tap_frame_complete(s->grid) || fabs(fh.sim_time - want) > 1e-6) {
+        if (fh.seq != (uint64_t)s->frames_done || !oc_grid_complete(s->grid) || fabs(fh.sim_time - want) > 1e-6) {
             fail(s, EXIT_PROTOCOL, "render frame %llu at sim time %.9f: expected frame %ld, complete, at %.9f",
                  (unsigned long long)fh.seq, fh.sim_time, s->frames_done, want);
             return;
         }
     }
-    if (!tap_frame_complete(s->grid)) return; /* not every tile of every field at our LOD (degraded, or before
+    if (!oc_grid_complete(s->grid)) return; /* not every tile of every field at our LOD (degraded, or before
                                                   the subscription took effect): nothing new to write */
     s->frames_done++;
     s->last_frame = now_s();
@@ -1104,7 +1103,7 @@ int main(int argc, char **argv)
             return EXIT_OUTPUT;
         }
     }
-    if (s.want_frames && !(s.grid = tap_frame_new(o.fields, o.lod))) {
+    if (s.want_frames && !(s.grid = oc_grid_new(o.fields, o.lod))) {
         fprintf(stderr, "ocean-tap: out of memory\n");
         return EXIT_PROTOCOL;
     }
@@ -1169,7 +1168,7 @@ int main(int argc, char **argv)
     for (int i = 0; i < s.noutq; i++) free(s.outq[i]);
     cJSON_Delete(s.schema);
     oc_buf_free(&s.msg);
-    tap_frame_free(s.grid);
+    oc_grid_free(s.grid);
     tap_surface_free(s.surface);
     free(s.sum_buf);
     free(s.st.lat_ms);

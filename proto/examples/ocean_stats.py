@@ -56,6 +56,8 @@ async def consume(args):
                "temporal": not args.intra}
         if args.bound is not None:
             sub["bound"] = args.bound
+        if args.max_rate:
+            sub["max_rate"] = args.max_rate
         await ws.send(json.dumps(sub))
         while True:
             msg = await asyncio.wait_for(ws.recv(), args.timeout)
@@ -117,6 +119,7 @@ def main():
     ap.add_argument("--save", metavar="DIR", help="write DIR/<field>-<seq>.npy and its .json sidecar for each frame")
     ap.add_argument("--timeout", type=float, default=10, help="seconds to wait for any message")
     ap.add_argument("--intra", action="store_true", help="intra-only frames (default: the temporal codec)")
+    ap.add_argument("--max-rate", type=float, help="at most this many frames per second (default: every tick)")
     args = ap.parse_args()
     args.fields = args.fields.split(",")
     unknown = set(args.fields) - set(oceanproto.FIELDS)

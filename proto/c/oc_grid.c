@@ -1,5 +1,5 @@
-/* tap_frame.c — see tap_frame.h. */
-#include "tap_frame.h"
+/* oc_grid.c — whole fields from the tiles of frames, per cascade (oc_proto.h, "Grids"). */
+#include "oc_proto.h"
 
 #include <stdlib.h>
 #include <string.h>
@@ -20,7 +20,7 @@ struct cascade_grids {
     struct field_grid grid[OC_FIELD_COUNT];
 };
 
-struct tap_frame {
+struct oc_grid {
     int n, tile_size;     /* geometry the grids were made for; 0 = none yet */
     int tiles;            /* tiles per side */
     struct cascade_grids cg[OC_MAX_CASCADES];
@@ -28,11 +28,11 @@ struct tap_frame {
     int err;              /* first geometry error in the current message */
 };
 
-static void drop_grids(struct tap_frame *a);
+static void drop_grids(struct oc_grid *a);
 
-struct tap_frame *tap_frame_new(unsigned fields, int lod)
+struct oc_grid *oc_grid_new(unsigned fields, int lod)
 {
-    struct tap_frame *a = calloc(1, sizeof *a);
+    struct oc_grid *a = calloc(1, sizeof *a);
     if (!a) return NULL;
     a->cg[0].fields = fields;
     a->cg[0].lod = lod;
@@ -41,7 +41,7 @@ struct tap_frame *tap_frame_new(unsigned fields, int lod)
     return a;
 }
 
-int tap_frame_want_cascade(struct tap_frame *a, int cascade, unsigned fields, int lod)
+int oc_grid_want(struct oc_grid *a, int cascade, unsigned fields, int lod)
 {
     if (cascade < 0 || cascade >= OC_MAX_CASCADES || lod < 0 || lod > OC_MAX_LOD) return -1;
     drop_grids(a);
@@ -50,7 +50,7 @@ int tap_frame_want_cascade(struct tap_frame *a, int cascade, unsigned fields, in
     return 0;
 }
 
-static void drop_grids(struct tap_frame *a)
+static void drop_grids(struct oc_grid *a)
 {
     for (int c = 0; c < OC_MAX_CASCADES; c++)
         for (int f = 0; f < OC_FIELD_COUNT; f++) {
@@ -61,7 +61,7 @@ static void drop_grids(struct tap_frame *a)
     a->n = a->tile_size = 0;
 }
 
-void tap_frame_free(struct tap_frame *a)
+void oc_grid_free(struct oc_grid *a)
 {
     if (!a) return;
     drop_grids(a);
@@ -71,7 +71,7 @@ void tap_frame_free(struct tap_frame *a)
 
 /* (Re)build the grids when the resolution or tile size changes (a resolution
  * change on the server starts a new, empty picture). */
-static int shape_grids(struct tap_frame *a, int n, int tile_size)
+static int shape_grids(struct oc_grid *a, int n, int tile_size)
 {
     if (n == a->n && tile_size == a->tile_size) return 0;
     drop_grids(a);
@@ -99,7 +99,7 @@ static int shape_grids(struct tap_frame *a, int n, int tile_size)
 static int on_tile(void *user, const struct oc_frame_header *fh, const struct oc_tile_header *th,
                    const float *samples)
 {
-    struct tap_frame *a = user;
+    struct oc_grid *a = user;
     struct cascade_grids *cg = &a->cg[oc_tile_cascade(th)];
     if (th->field >= OC_FIELD_COUNT || !(cg->fields & (1u << th->field)) || th->lod != cg->lod)
         return 0;
@@ -112,8 +112,8 @@ static int on_tile(void *user, const struct oc_frame_header *fh, const struct oc
     long x0 = (long)th->tile_x * step, z0 = (long)th->tile_z * step;
     if (th->tile_x >= a->tiles || th->tile_z >= a->tiles ||
         x0 + th->width > cg->side || z0 + th->height > cg->side) {
-        a->err = TAP_E_GEOMETRY;
-        return TAP_E_GEOMETRY;
+        a->err = OC_E_CORRUPT;
+        return OC_E_CORRUPT;
     }
     for (int j = 0; j < th->height; j++)
         memcpy(g->data + (size_t)(z0 + j) * cg->side + x0, samples + (size_t)j * th->width,
@@ -125,7 +125,7 @@ static int on_tile(void *user, const struct oc_frame_header *fh, const struct oc
     return 0;
 }
 
-int tap_frame_add(struct tap_frame *a, const uint8_t *data, size_t len, struct oc_frame_header *fh)
+int oc_grid_add(struct oc_grid *a, const uint8_t *data, size_t len, struct oc_frame_header *fh)
 {
     a->err = 0;
     for (int c = 0; c < OC_MAX_CASCADES; c++)
@@ -136,7 +136,7 @@ int tap_frame_add(struct tap_frame *a, const uint8_t *data, size_t len, struct o
     return r < 0 ? r : 0;
 }
 
-int tap_frame_complete(const struct tap_frame *a)
+int oc_grid_complete(const struct oc_grid *a)
 {
     if (!a->n) return 0;
     for (int c = 0; c < OC_MAX_CASCADES; c++)
@@ -147,7 +147,7 @@ int tap_frame_complete(const struct tap_frame *a)
     return 1;
 }
 
-const float *tap_frame_cascade_field(const struct tap_frame *a, int cascade, enum oc_field f, int *side, float *bound)
+const float *oc_grid_field(const struct oc_grid *a, int cascade, enum oc_field f, int *side, float *bound)
 {
     if (cascade < 0 || cascade >= OC_MAX_CASCADES || (unsigned)f >= OC_FIELD_COUNT) return NULL;
     const struct cascade_grids *cg = &a->cg[cascade];
@@ -155,15 +155,4 @@ const float *tap_frame_cascade_field(const struct tap_frame *a, int cascade, enu
     *side = cg->side;
     *bound = cg->grid[f].bound;
     return cg->grid[f].data;
-}
-
-const float *tap_frame_field(const struct tap_frame *a, enum oc_field f, int *side, float *bound)
-{
-    return tap_frame_cascade_field(a, 0, f, side, bound);
-}
-
-const char *tap_frame_strerror(int err)
-{
-    if (err == TAP_E_GEOMETRY) return "tile outside the frame's grid";
-    return oc_strerror(err);
 }
