@@ -41,6 +41,12 @@ $(BUILD)/bench-surface: $(BUILD)/obj/tools/bench_surface.o $(BUILD)/obj/tools/ta
 bench-tap-surface: $(BUILD)/bench-surface
 	@$(BUILD)/bench-surface 256
 
+# ocean-tap baking from the live stream: frames/s, CPU per frame, skipped ticks.
+BENCHES += bench-tap-bake
+.PHONY: bench-tap-bake
+bench-tap-bake: $(BUILD)/oceand $(BUILD)/ocean-tap
+	@tests/tap/bench_bake.sh $(BUILD) 240
+
 # Test helper: reads an EXR back with the OpenEXR library (tests/tap/run.sh).
 BINS += $(BUILD)/exr-read
 $(BUILD)/exr-read: $(BUILD)/obj/tests/tap/exr_read.o

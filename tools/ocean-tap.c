@@ -317,7 +317,8 @@ static int parse_args(int argc, char **argv, struct opts *o)
         default: return usage_error("unknown option");
         }
     }
-    if (o->format == TAP_EXR) o->fields = (1u << OC_FIELD_COUNT) - 1u; /* the bake needs all six */
+    /* The bake needs the six fields it writes from; not foam (its foam is 1 - jacobian). */
+    if (o->format == TAP_EXR) o->fields = ((1u << OC_FIELD_COUNT) - 1u) & ~(1u << OC_FIELD_FOAM);
     if (o->bake && !(o->fps > 0 && o->has_start && o->frames > 0 && o->out_dir))
         return usage_error("--bake needs --fps F, --start T, --frames K and --out DIR");
     if (!o->bake && (o->fps > 0 || o->has_start)) return usage_error("--fps and --start are for --bake");
