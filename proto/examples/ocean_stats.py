@@ -58,6 +58,11 @@ async def consume(args):
             sub["bound"] = args.bound
         if args.max_rate:
             sub["max_rate"] = args.max_rate
+        # --cascades: the finer cascades' heights too (LOD 1 of a finer cascade loses nothing,
+        # PROTOCOL.md §4.1), summed with cascade 0's on its grid: the whole sea.
+        ncasc = min(int(p.get("cascades", 1)), 4) if args.cascades else 1
+        if ncasc > 1:
+            sub["cascades"] = [{"fields": ["height"], "lod": 1, "bound": 0 if args.bound == 0 else 0.001}] * (ncasc - 1)
         await ws.send(json.dumps(sub))
         while True:
             msg = await asyncio.wait_for(ws.recv(), args.timeout)
@@ -70,6 +75,7 @@ async def consume(args):
                 break
 
         grid = oceanproto.Assembler(args.fields, args.lod)
+        finer = [oceanproto.Assembler(["height"], 1, c) for c in range(1, ncasc)]
         state = oceanproto.DecoderState()
         resynced = -1.0
         done, nbytes, t0 = 0, 0, time.monotonic()
@@ -89,7 +95,9 @@ async def consume(args):
                     await ws.send(json.dumps(sub))
                 continue
             grid.add(frame)
-            if not grid.complete():
+            for a in finer:
+                a.add(frame)
+            if not grid.complete() or not all(a.complete() for a in finer):
                 continue
             done += 1
             nbytes += len(msg)
@@ -102,6 +110,14 @@ async def consume(args):
                     base = os.path.join(args.save, f"{name}-{frame.seq:08d}")
                     np.save(base + ".npy", a)
                     write_sidecar(base + ".json", name, frame, args, a)
+            if finer and "height" in args.fields:
+                grids = {0: {"height": grid.fields["height"]}}
+                grids.update({a.cascade: {"height": a.fields["height"]} for a in finer})
+                surface = oceanproto.Surface(frame.sim_time, frame.seq, frame.params_version,
+                                             hello["cascade_patch_sizes"], grids)
+                h = surface.grid("height", grid.fields["height"].shape[0])
+                parts.append(f"sum of {ncasc} cascades: height std {h.std():.3f} "
+                             f"(cascade 0 off it by {np.sqrt(np.mean((h - grid.fields['height']) ** 2)) * 1e3:.1f} mm rms)")
             print(f"seq {frame.seq}  t={frame.sim_time:.2f} s  " + "  ".join(parts) +
                   f"  {len(msg) / 1024:.1f} KiB  latency {latency_ms:.1f} ms", flush=True)
         dt = time.monotonic() - t0
@@ -120,6 +136,8 @@ def main():
     ap.add_argument("--timeout", type=float, default=10, help="seconds to wait for any message")
     ap.add_argument("--intra", action="store_true", help="intra-only frames (default: the temporal codec)")
     ap.add_argument("--max-rate", type=float, help="at most this many frames per second (default: every tick)")
+    ap.add_argument("--cascades", action="store_true",
+                    help="also the finer cascades' heights, summed with cascade 0's: the whole sea")
     args = ap.parse_args()
     args.fields = args.fields.split(",")
     unknown = set(args.fields) - set(oceanproto.FIELDS)

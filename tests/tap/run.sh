@@ -280,7 +280,10 @@ ok "--cascades all: c1/c2 files; --sum on cascade 0's nodes and on another grid 
 f=$(ls "$tmp"/lossy/height-*.npy | head -n 1)
 [ "$(json_get "${f%.npy}.json" 'j["seq"]')" = "$((10#$(basename "$f" .npy | cut -d- -f2)))" ] \
   || fail "ocean_stats.py --save: no sidecar with the seq of $f"
-ok "ocean_stats.py --save writes the sidecar"
+run 0 "ocean_stats.py --cascades" $PY "$EXAMPLE" "$URL" --frames 1 --fields height --lod 1 --bound 0.001 --cascades
+grep -Eq 'sum of 3 cascades: height std [0-9.]+ \(cascade 0 off it by [0-9.]+ mm rms\)' "$tmp/out" \
+  || fail "ocean_stats.py --cascades prints no summed sea: $(cat "$tmp/out")"
+ok "ocean_stats.py --save writes the sidecar; --cascades sums the finer cascades"
 run 0 "resume" "$TAP" "$URL" --set paused=false
 ok "lossless and lossy (LOD 0/1/2) frames identical in both decoders; bound honoured"
 
