@@ -327,6 +327,11 @@ static int parse_args(int argc, char **argv, struct opts *o)
     if ((o->sum_m || o->has_area) && o->cascades == 1)
         return usage_error("--sum/--sum-area add up cascades: give --cascades too");
     if (o->has_area && !o->sum_m) o->sum_m = -1;
+    /* Cascade 0 holds waves up to its Nyquist: its LOD 1+ grids alias them, and no
+     * interpolation between their nodes can give them back. */
+    if (o->sum_m && o->lod > 0 && (o->has_area || o->sum_m > 0))
+        fprintf(stderr, "ocean-tap: warning: with --lod %d cascade 0's short waves are aliased: the sum is "
+                        "right only at the nodes of its LOD grid (use --lod 0 for other grids)\n", o->lod);
     if (o->format == TAP_EXR && o->cascades != 1 && !o->sum_m) o->sum_m = -1; /* a bake of the whole sea */
     if (o->query && o->probe) return usage_error("--query and --probe: one at a time");
     if ((o->query || o->probe) && (o->frames >= 0 || o->out_dir || o->stats || o->watch))

@@ -17,7 +17,8 @@ between those nodes a Catmull-Rom cubic reads it. At a node of a cascade's own
 grid its samples are used as they are. Measured against `query` (docs/query.md):
 within 0.1 mm at N = 256, 3 cascades. "bilinear" on the streamed grids is ~14 mm
 rms off there (the short waves of cascade 0 have 2-4 samples per wavelength) and
-is offered only to compare.
+is offered only to compare. Cascade 0 at LOD 1 or coarser has lost (aliased) its
+shortest waves: off its nodes, read it at LOD 0. The finer cascades lose nothing at LOD 1.
 """
 import numpy as np
 
