@@ -93,7 +93,7 @@ static void usage(FILE *to)
         "  --interp I          between grid nodes: spectral (default; exact signal on a 4x\n"
         "                      finer grid, then cubic: ~0.1 mm from query) or bilinear (on\n"
         "                      the streamed grids: ~14 mm rms off; docs/query.md)\n"
-        "Exact-time bakes (needs a daemon with the render request; today's answers\n"
+        "Exact-time bakes (needs a daemon with the render request; one without it answers\n"
         "unknown_type, exit 4):\n"
         "  --bake --fps F --start T --frames K   frames at sim times T + k/F, k = 0..K-1,\n"
         "                      rendered by the server for the parameters in force, every\n"
