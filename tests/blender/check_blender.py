@@ -15,7 +15,8 @@ import numpy as np
 
 addon, bake, url, out = sys.argv[sys.argv.index("--") + 1:][:4]
 here = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(here, "..", "..", "proto", "python"))
+pkg_dir = os.path.normpath(os.path.join(here, "..", "..", "proto", "python"))
+sys.path.insert(0, pkg_dir)
 import oceand  # noqa: E402
 
 RMS_MAX_M = 0.025   # the target: vertex displacement within 25 mm rms of query
@@ -80,8 +81,16 @@ try:
             result["frame_1_against_last_time"] = e
             check(e["height_rms_mm"] > 2 * RMS_MAX_M * 1e3 or e["source_rms_mm"] > 2 * RMS_MAX_M * 1e3,
                   "frame 1 matches the last frame's time: the comparison cannot tell frames apart")
-    # Live: one step (a timer needs the UI's event loop, absent with -b).
-    mod = sys.modules[os.path.splitext(os.path.basename(addon))[0]]
+    # Live: one step (a timer needs the UI's event loop, absent with -b), with the package
+    # found through the add-on's preference, as a user of the installed add-on would.
+    name = os.path.splitext(os.path.basename(addon))[0]
+    mod = sys.modules[name]
+    sys.path.remove(pkg_dir)
+    for k in [k for k in sys.modules if k == "oceand" or k.startswith("oceand.")]:
+        del sys.modules[k]
+    bpy.context.preferences.addons[name].preferences.package_folder = pkg_dir
+    oceand = mod._client_module()
+    check(os.path.dirname(oceand.__file__) == os.path.join(pkg_dir, "oceand"), f"Live found {oceand.__file__}")
     live = mod.Live(url, 64)
     try:
         lobj = live.make_object(bpy.context)

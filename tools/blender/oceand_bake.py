@@ -14,10 +14,12 @@ Install: Edit > Preferences > Add-ons > Install..., pick this file, tick
   object's property "oceand_sim_time" is keyed at each frame with the frame's
   sim time. The modifier samples the bake at its own nodes, so the mesh is the
   sea at the samples (half-float precision) - not a filtered version of it.
-* View3D > Sidebar > oceand > Live: connects to a daemon (the oceand Python
-  package: proto/python, or pip install ./proto/python) and rewrites the
-  object's vertices with the summed sea a few times a second while Blender's UI
-  runs (a timer; the network runs in a thread of the client).
+* View3D > Sidebar > oceand > Live: connects to a daemon with the oceand Python
+  package and rewrites the object's vertices with the summed sea a few times a
+  second while Blender's UI runs (a timer; the network runs in a thread of the
+  client). Debian's Blender runs the system Python, which finds the package when
+  it is installed for it, or through the add-on's preference "oceand package
+  folder" (the checkout's proto/python).
 
 Blender's own Ocean modifier reads bakes only after a bake made in a GUI
 session (its is_cached flag cannot be set from Python, and `blender -b` never
@@ -159,13 +161,24 @@ class OCEAND_OT_import_bake(bpy.types.Operator, ImportHelper):
 # ---- live -----------------------------------------------------------------------
 
 def _client_module():
-    """The oceand package: installed, or proto/python beside this file's checkout."""
+    """The oceand package: installed, in the folder of the add-on's preferences,
+    or in proto/python of the checkout this file sits in (not when Blender
+    installed a copy of it)."""
     try:
         import oceand
+        return oceand
     except ImportError:
-        here = os.path.dirname(os.path.realpath(__file__))
-        sys.path.insert(0, os.path.normpath(os.path.join(here, "..", "..", "proto", "python")))
-        import oceand
+        pass
+    folders = []
+    addon = bpy.context.preferences.addons.get(__name__)
+    if addon and addon.preferences.package_folder:
+        folders.append(bpy.path.abspath(addon.preferences.package_folder))
+    here = os.path.dirname(os.path.realpath(__file__))
+    folders.append(os.path.normpath(os.path.join(here, "..", "..", "proto", "python")))
+    for f in folders:
+        if os.path.isfile(os.path.join(f, "oceand", "__init__.py")) and f not in sys.path:
+            sys.path.insert(0, f)
+    import oceand
     return oceand
 
 
@@ -263,7 +276,17 @@ def _menu_import(self, context):
     self.layout.operator(OCEAND_OT_import_bake.bl_idname, text="oceand bake (folder)")
 
 
-_classes = (OCEAND_OT_import_bake, OCEAND_OT_live, OCEAND_PT_panel)
+class OCEAND_AP_preferences(bpy.types.AddonPreferences):
+    bl_idname = __name__
+    package_folder: StringProperty(
+        name="oceand package folder", subtype="DIR_PATH", default="",
+        description="folder holding the oceand Python package (a checkout's proto/python), for Live")
+
+    def draw(self, context):
+        self.layout.prop(self, "package_folder")
+
+
+_classes = (OCEAND_AP_preferences, OCEAND_OT_import_bake, OCEAND_OT_live, OCEAND_PT_panel)
 
 
 def register():
