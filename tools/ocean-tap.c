@@ -15,6 +15,7 @@
 #include <cjson/cJSON.h>
 #include <errno.h>
 #include <math.h>
+#include <pthread.h>
 #include <getopt.h>
 #include <libwebsockets.h>
 #include <signal.h>
@@ -53,6 +54,8 @@ enum exit_code {
  * bakes). Its frames carry this bit in the frame header's flags and their
  * index k in seq; sim_time = start + k / fps. */
 #define RENDER_FRAME_FLAG 1u
+#define WRITER_QUEUE 4                      /* complete frames waiting for the file writer, at most */
+#define WRITER_BYTES ((size_t)256 << 20)    /* ... and their copies' bytes, at most (one frame always) */
 #define MAX_POINTS 256 /* of --query / --probe (the server caps probes lower) */
 
 static void usage(FILE *to)
@@ -345,6 +348,8 @@ static int parse_args(int argc, char **argv, struct opts *o)
 
 /* ---- session state ------------------------------------------------------ */
 
+struct job;
+
 enum stage { ST_HELLO, ST_SET, ST_SUBSCRIBE, ST_QUERY, ST_PROBE, ST_RENDER, ST_RUN, ST_DONE };
 
 struct stats {
@@ -375,8 +380,18 @@ struct session {
     int degraded_lod;     /* the LOD the server serves us at while degraded, else -1 */
     int ncasc;            /* cascades received: 1 + finer ones (from --cascades and the hello) */
     double patch[OC_MAX_CASCADES]; /* L_c from hello/params cascade_patch_sizes */
-    struct tap_surface *surface;
-    float *sum_buf;       /* --sum: one field on the sum grid */
+    struct writer {       /* the file writer (below) */
+        pthread_t th;
+        int started, closing;
+        pthread_mutex_t mu;
+        pthread_cond_t cv_put, cv_get;
+        struct job *q[WRITER_QUEUE];
+        int head, count;
+        int err_code;
+        char err[600];
+        struct tap_surface *surface; /* the writer's own: */
+        float *sum_buf;               /* --sum: fields on the sum grid */
+    } wr;
     int csv_header_done;
     struct stats st;
     struct lws *wsi;
@@ -762,16 +777,149 @@ static void on_text(struct session *s, const char *text, size_t len)
     cJSON_Delete(msg);
 }
 
+/* ---- the writer thread ----------------------------------------------------
+ * Files are written by a thread of their own, from copies of complete frames,
+ * so that the connection is read while a frame is being written: a client that
+ * stops reading misses ticks (the server sends the latest frame only). */
+
+struct job {
+    struct oc_frame_header fh;
+    long number;                  /* 1, 2, ...: the bake's frame number */
+    int ncasc;
+    double patch[OC_MAX_CASCADES];
+    float *data[OC_MAX_CASCADES][OC_FIELD_COUNT];
+    int side[OC_MAX_CASCADES][OC_FIELD_COUNT];
+    float bound[OC_MAX_CASCADES][OC_FIELD_COUNT];
+};
+
+static const float *job_field(const struct job *j, int c, int f, int *side, float *bound)
+{
+    if (c < 0 || c >= OC_MAX_CASCADES || f < 0 || f >= OC_FIELD_COUNT || !j->data[c][f]) return NULL;
+    *side = j->side[c][f];
+    *bound = j->bound[c][f];
+    return j->data[c][f];
+}
+
+static void job_free(struct job *j)
+{
+    if (!j) return;
+    for (int c = 0; c < OC_MAX_CASCADES; c++)
+        for (int f = 0; f < OC_FIELD_COUNT; f++) free(j->data[c][f]);
+    free(j);
+}
+
+/* The writer's first failure: kept for the main thread, which reports it. */
+static void wfail(struct session *s, int code, const char *fmt, ...)
+{
+    pthread_mutex_lock(&s->wr.mu);
+    if (!s->wr.err_code) {
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(s->wr.err, sizeof s->wr.err, fmt, ap);
+        va_end(ap);
+        s->wr.err_code = code;
+    }
+    pthread_mutex_unlock(&s->wr.mu);
+}
+
+static int write_frame(struct session *s, const struct job *j);
+
+static void *writer_main(void *arg)
+{
+    struct session *s = arg;
+    pthread_mutex_lock(&s->wr.mu);
+    for (;;) {
+        while (!s->wr.count && !s->wr.closing) pthread_cond_wait(&s->wr.cv_get, &s->wr.mu);
+        if (!s->wr.count) break;
+        struct job *j = s->wr.q[s->wr.head];
+        s->wr.head = (s->wr.head + 1) % WRITER_QUEUE;
+        s->wr.count--;
+        int failed = s->wr.err_code != 0;
+        pthread_cond_signal(&s->wr.cv_put);
+        pthread_mutex_unlock(&s->wr.mu);
+        if (!failed) write_frame(s, j); /* after a failure: drain, write nothing more */
+        job_free(j);
+        pthread_mutex_lock(&s->wr.mu);
+    }
+    pthread_mutex_unlock(&s->wr.mu);
+    return NULL;
+}
+
+/* Copy the complete frame in the grids and queue it; waits while the queue is
+ * full (its depth keeps the copies under WRITER_BYTES). */
+static int writer_put(struct session *s, const struct oc_frame_header *fh)
+{
+    struct job *j = calloc(1, sizeof *j);
+    if (!j) return -1;
+    j->fh = *fh;
+    j->number = s->frames_done;
+    j->ncasc = s->ncasc > 0 ? s->ncasc : 1;
+    memcpy(j->patch, s->patch, sizeof j->patch);
+    size_t bytes = 0;
+    for (int c = 0; c < j->ncasc; c++)
+        for (int f = 0; f < OC_FIELD_COUNT; f++) {
+            int side;
+            float bound;
+            const float *d = oc_grid_field(s->grid, c, f, &side, &bound);
+            if (!d) continue;
+            size_t n = (size_t)side * side * sizeof(float);
+            if (!(j->data[c][f] = malloc(n))) { job_free(j); return -1; }
+            memcpy(j->data[c][f], d, n);
+            j->side[c][f] = side;
+            j->bound[c][f] = bound;
+            bytes += n;
+        }
+    int depth = bytes ? (int)(WRITER_BYTES / bytes) : WRITER_QUEUE;
+    depth = depth < 1 ? 1 : depth > WRITER_QUEUE ? WRITER_QUEUE : depth;
+    pthread_mutex_lock(&s->wr.mu);
+    if (!s->wr.started) {
+        if (pthread_create(&s->wr.th, NULL, writer_main, s) != 0) {
+            pthread_mutex_unlock(&s->wr.mu);
+            job_free(j);
+            return -1;
+        }
+        s->wr.started = 1;
+    }
+    while (s->wr.count >= depth) pthread_cond_wait(&s->wr.cv_put, &s->wr.mu);
+    s->wr.q[(s->wr.head + s->wr.count) % WRITER_QUEUE] = j;
+    s->wr.count++;
+    pthread_cond_signal(&s->wr.cv_get);
+    pthread_mutex_unlock(&s->wr.mu);
+    return 0;
+}
+
+/* The writer's failure, if any: code (0 = none) and message. */
+static int writer_error(struct session *s, char *msg, size_t len)
+{
+    pthread_mutex_lock(&s->wr.mu);
+    int code = s->wr.err_code;
+    if (code) snprintf(msg, len, "%s", s->wr.err);
+    pthread_mutex_unlock(&s->wr.mu);
+    return code;
+}
+
+/* Write what is queued, then stop the thread. */
+static void writer_close(struct session *s)
+{
+    pthread_mutex_lock(&s->wr.mu);
+    s->wr.closing = 1;
+    pthread_cond_signal(&s->wr.cv_get);
+    int started = s->wr.started;
+    pthread_mutex_unlock(&s->wr.mu);
+    if (started) pthread_join(s->wr.th, NULL);
+    s->wr.started = 0;
+}
+
 /* The --sum grid: side, origin and extent (default: cascade 0's patch). */
 struct sum_grid { int m; double x0, z0, size; };
 
-static struct sum_grid sum_geometry(const struct session *s, const struct oc_frame_header *fh)
+static struct sum_grid sum_geometry(const struct session *s, const struct job *j)
 {
     int side = 0;
     float b;
-    oc_grid_field(s->grid, 0, OC_FIELD_HEIGHT, &side, &b);
-    if (!side) side = fh->n >> s->o->lod;
-    struct sum_grid g = {s->o->sum_m > 0 ? s->o->sum_m : side, 0, 0, fh->patch_size};
+    job_field(j, 0, OC_FIELD_HEIGHT, &side, &b);
+    if (!side) side = j->fh.n >> s->o->lod;
+    struct sum_grid g = {s->o->sum_m > 0 ? s->o->sum_m : side, 0, 0, j->fh.patch_size};
     if (s->o->has_area) { g.x0 = s->o->area[0]; g.z0 = s->o->area[1]; g.size = s->o->area[2]; }
     return g;
 }
@@ -779,26 +927,26 @@ static struct sum_grid sum_geometry(const struct session *s, const struct oc_fra
 /* Field f summed over the received cascades (or cascade 0 alone: only0) on
  * the sum grid, into out (m*m floats). Returns 0, 1 when a cascade lacks the
  * field, -1 on failure. */
-static int sum_field(struct session *s, const struct oc_frame_header *fh, const struct sum_grid *sg, enum oc_field f,
+static int sum_field(struct session *s, const struct job *j, const struct sum_grid *sg, enum oc_field f,
                      int only0, float *out, float *bound)
 {
     struct tap_cascade_grid g[OC_MAX_CASCADES];
-    int nc = only0 ? 1 : s->ncasc;
+    int nc = only0 ? 1 : j->ncasc;
     *bound = 0;
     for (int c = 0; c < nc; c++) {
         float b = 0;
-        g[c].data = oc_grid_field(s->grid, c, f, &g[c].side, &b);
-        g[c].period = c == 0 ? fh->patch_size : s->patch[c];
+        g[c].data = job_field(j, c, f, &g[c].side, &b);
+        g[c].period = c == 0 ? j->fh.patch_size : j->patch[c];
         if (!g[c].data) return 1;
         if (!(g[c].period > 0)) {
-            fail(s, EXIT_PROTOCOL, "the server did not say the patch size of cascade %d", c);
+            wfail(s, EXIT_PROTOCOL, "the server did not say the patch size of cascade %d", c);
             return -1;
         }
         *bound += b;
     }
-    if (!s->surface && !(s->surface = tap_surface_new())) { fail(s, EXIT_OUTPUT, "out of memory"); return -1; }
-    if (tap_surface_grid(s->surface, g, nc, sg->m, sg->x0, sg->z0, sg->size, s->o->bilinear, out) != 0) {
-        fail(s, EXIT_OUTPUT, "out of memory for the %dx%d sum", sg->m, sg->m);
+    if (!s->wr.surface && !(s->wr.surface = tap_surface_new())) { wfail(s, EXIT_OUTPUT, "out of memory"); return -1; }
+    if (tap_surface_grid(s->wr.surface, g, nc, sg->m, sg->x0, sg->z0, sg->size, s->o->bilinear, out) != 0) {
+        wfail(s, EXIT_OUTPUT, "out of memory for the %dx%d sum", sg->m, sg->m);
         return -1;
     }
     return 0;
@@ -806,22 +954,23 @@ static int sum_field(struct session *s, const struct oc_frame_header *fh, const 
 
 static float *sum_buffers(struct session *s, int m, int count)
 {
-    free(s->sum_buf);
-    s->sum_buf = malloc((size_t)count * m * m * sizeof(float));
-    if (!s->sum_buf) fail(s, EXIT_OUTPUT, "out of memory for the %dx%d sum", m, m);
-    return s->sum_buf;
+    free(s->wr.sum_buf);
+    s->wr.sum_buf = malloc((size_t)count * m * m * sizeof(float));
+    if (!s->wr.sum_buf) wfail(s, EXIT_OUTPUT, "out of memory for the %dx%d sum", m, m);
+    return s->wr.sum_buf;
 }
 
 /* --format exr: one Blender bake frame (tap_exr.h) from the six fields: cascade
  * 0's grids, or with --cascades the sum of the cascades on the --sum grid. */
-static int write_bake(struct session *s, const struct oc_frame_header *fh)
+static int write_bake(struct session *s, const struct job *j)
 {
+    const struct oc_frame_header *fh = &j->fh;
     const float *f[OC_FIELD_COUNT];
     int side = 0;
     float bound = 0, b;
     double x0 = 0, z0 = 0, size = fh->patch_size;
     if (s->o->sum_m) {
-        struct sum_grid sg = sum_geometry(s, fh);
+        struct sum_grid sg = sum_geometry(s, j);
         float *buf = sum_buffers(s, sg.m, 6);
         if (!buf) return -1;
         static const enum oc_field order[6] = {OC_FIELD_HEIGHT, OC_FIELD_DX, OC_FIELD_DZ, OC_FIELD_SLOPE_X,
@@ -829,8 +978,8 @@ static int write_bake(struct session *s, const struct oc_frame_header *fh)
         for (int k = 0; k < 6; k++) {
             float *out = buf + (size_t)k * sg.m * sg.m;
             /* The Jacobian does not add across cascades (§4.1): cascade 0's, for the foam. */
-            if (sum_field(s, fh, &sg, order[k], order[k] == OC_FIELD_JACOBIAN, out, &b) != 0) {
-                fail(s, EXIT_PROTOCOL, "the frame lacks %s", oc_field_name(order[k]));
+            if (sum_field(s, j, &sg, order[k], order[k] == OC_FIELD_JACOBIAN, out, &b) != 0) {
+                wfail(s, EXIT_PROTOCOL, "the frame lacks %s", oc_field_name(order[k]));
                 return -1;
             }
             f[order[k]] = out;
@@ -842,7 +991,7 @@ static int write_bake(struct session *s, const struct oc_frame_header *fh)
         size = sg.size;
     } else {
         for (int i = 0; i < OC_FIELD_COUNT; i++) {
-            f[i] = oc_grid_field(s->grid, 0, i, &side, &b);
+            f[i] = job_field(j, 0, i, &side, &b);
             bound = b > bound ? b : bound;
         }
     }
@@ -853,8 +1002,8 @@ static int write_bake(struct session *s, const struct oc_frame_header *fh)
                          .patch_size = (float)size, .bound = bound, .server_time_us = fh->server_time_us,
                          .cascade = s->o->sum_m ? TAP_CASCADE_SUM : 0, .origin_x = x0, .origin_z = z0};
     char err[512];
-    if (tap_exr_bake(s->o->out_dir, (int)s->frames_done, side, &ef, &m, s->ncasc, err, sizeof err) != 0) {
-        fail(s, EXIT_OUTPUT, "cannot write the bake: %s", err);
+    if (tap_exr_bake(s->o->out_dir, (int)j->number, side, &ef, &m, j->ncasc, err, sizeof err) != 0) {
+        wfail(s, EXIT_OUTPUT, "cannot write the bake: %s", err);
         return -1;
     }
     return 0;
@@ -863,21 +1012,22 @@ static int write_bake(struct session *s, const struct oc_frame_header *fh)
 static int write_one(struct session *s, const char *path, const float *data, int side, const struct tap_meta *m)
 {
     if (tap_write_field(s->o->format, path, data, side, m) != 0) {
-        fail(s, EXIT_OUTPUT, "cannot write %s: %s", path, strerror(errno));
+        wfail(s, EXIT_OUTPUT, "cannot write %s: %s", path, strerror(errno));
         return -1;
     }
     return 0;
 }
 
-static int write_frame(struct session *s, const struct oc_frame_header *fh)
+static int write_frame(struct session *s, const struct job *j)
 {
-    if (s->o->format == TAP_EXR) return write_bake(s, fh);
+    const struct oc_frame_header *fh = &j->fh;
+    if (s->o->format == TAP_EXR) return write_bake(s, j);
     unsigned long long seq = (unsigned long long)fh->seq;
-    for (int c = 0; c < (s->ncasc > 0 ? s->ncasc : 1); c++)
+    for (int c = 0; c < j->ncasc; c++)
         for (int f = 0; f < OC_FIELD_COUNT; f++) {
             int side;
             float bound;
-            const float *data = oc_grid_field(s->grid, c, f, &side, &bound);
+            const float *data = job_field(j, c, f, &side, &bound);
             if (!data) continue;
             char path[4096];
             /* Cascade 0 keeps the names of a one-cascade sea. */
@@ -890,19 +1040,19 @@ static int write_frame(struct session *s, const struct oc_frame_header *fh)
             struct tap_meta m = {.field = oc_field_name(f), .seq = fh->seq, .sim_time = fh->sim_time,
                                  .params_version = fh->params_version, .n = fh->n,
                                  .lod = c == 0 ? s->o->lod : fine_lod(s->o),
-                                 .patch_size = (float)(c == 0 ? fh->patch_size : s->patch[c]), .bound = bound,
+                                 .patch_size = (float)(c == 0 ? fh->patch_size : j->patch[c]), .bound = bound,
                                  .server_time_us = fh->server_time_us, .cascade = c};
             if (write_one(s, path, data, side, &m) != 0) return -1;
         }
     if (!s->o->sum_m) return 0;
-    struct sum_grid sg = sum_geometry(s, fh);
+    struct sum_grid sg = sum_geometry(s, j);
     float *buf = sum_buffers(s, sg.m, 1);
     if (!buf) return -1;
     static const enum oc_field summed[5] = {OC_FIELD_HEIGHT, OC_FIELD_DX, OC_FIELD_DZ, OC_FIELD_SLOPE_X,
                                             OC_FIELD_SLOPE_Z};
     for (int k = 0; k < 5; k++) {
         float bound;
-        int r = sum_field(s, fh, &sg, summed[k], 0, buf, &bound);
+        int r = sum_field(s, j, &sg, summed[k], 0, buf, &bound);
         if (r < 0) return -1;
         if (r > 0) continue; /* not subscribed */
         char path[4096];
@@ -994,7 +1144,10 @@ static void on_binary(struct session *s, const uint8_t *data, size_t len)
         if (p) { s->st.lat_ms = p; s->st.caplat = cap; }
     }
     if (s->st.nlat < s->st.caplat) s->st.lat_ms[s->st.nlat++] = (wall_us() - (double)fh.server_time_us) / 1e3;
-    if (s->o->out_dir && write_frame(s, &fh) != 0) return;
+    if (s->o->out_dir && writer_put(s, &fh) != 0) {
+        fail(s, EXIT_OUTPUT, "out of memory for a frame's copy");
+        return;
+    }
     if (s->o->frames > 0 && s->frames_done >= s->o->frames) finish(s, EXIT_OK);
 }
 
@@ -1101,6 +1254,9 @@ int main(int argc, char **argv)
     int r = parse_args(argc, argv, &o);
     if (r >= 0) return r;
     struct session s = {.o = &o, .degraded_lod = -1};
+    pthread_mutex_init(&s.wr.mu, NULL);
+    pthread_cond_init(&s.wr.cv_put, NULL);
+    pthread_cond_init(&s.wr.cv_get, NULL);
     s.want_frames = o.frames >= 0 || o.out_dir || o.stats;
     if (o.frames < 0) o.frames = 0;
     if (o.out_dir) {
@@ -1137,6 +1293,12 @@ int main(int argc, char **argv)
     while (r < 0 && s.stage != ST_DONE) {
         lws_service(ctx, 100);
         double t = now_s();
+        char werr[600];
+        int wcode = writer_error(&s, werr, sizeof werr);
+        if (wcode) {
+            fail(&s, wcode, "%s", werr);
+            break;
+        }
         if (interrupted) {
             /* Ctrl-C ends a stream or watch normally; anything else is cut short. */
             finish(&s, s.stage == ST_RUN ? EXIT_OK : EXIT_INTERRUPTED);
@@ -1166,6 +1328,14 @@ int main(int argc, char **argv)
         }
     }
     if (r < 0) r = s.exit_code;
+    /* The frames still queued are written before the exit code is known. */
+    writer_close(&s);
+    char werr[600];
+    int wcode = writer_error(&s, werr, sizeof werr);
+    if (wcode && (r == EXIT_OK || r == EXIT_INTERRUPTED)) {
+        fprintf(stderr, "ocean-tap: %s\n", werr);
+        r = wcode;
+    }
     if (o.stats && s.want_frames && s.st.t0 > 0) report_stats(&s, now_s(), 1);
 
     lws_sul_cancel(&tick_sul);
@@ -1175,8 +1345,11 @@ int main(int argc, char **argv)
     cJSON_Delete(s.schema);
     oc_buf_free(&s.msg);
     oc_grid_free(s.grid);
-    tap_surface_free(s.surface);
-    free(s.sum_buf);
+    tap_surface_free(s.wr.surface);
+    free(s.wr.sum_buf);
+    pthread_mutex_destroy(&s.wr.mu);
+    pthread_cond_destroy(&s.wr.cv_put);
+    pthread_cond_destroy(&s.wr.cv_get);
     free(s.st.lat_ms);
     return r;
 }
