@@ -10,7 +10,7 @@ if compgen -G "fuzz/regressions/$t/*" >/dev/null; then
   "$bin" fuzz/regressions/$t/* 2>"$build/fuzz/regress-$t.log" \
     || { tail -30 "$build/fuzz/regress-$t.log"; echo "fuzz $t: a regression input fails again"; exit 1; }
 fi
-maxlen=16384; [ "$t" = frame ] && maxlen=65536
+maxlen=16384; { [ "$t" = frame ] || [ "$t" = grid ]; } && maxlen=65536
 # The config loader: an execution costs in proportion to its input (a JSON
 # document), and libFuzzer's length control lets inputs grow to max_len.
 # All 56 keys of the settings tables set at once (20-character strings) take
