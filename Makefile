@@ -16,10 +16,12 @@ CFLAGS  += -std=c11 -D_GNU_SOURCE $(WARN) -pthread
 #   server/sim/ (the simulation library) sees only its own headers;
 #   proto/c/ (protocol + codec) sees only its own;
 #   everything else (daemon, tools, tests) sees the library's public header
-#   folder server/sim/include and proto/c, never server/sim's internals.
+#   folder server/sim/include and proto/c, never server/sim's internals;
+#   server/common/ (the work pool, pool.h) is seen by the library and the
+#   daemon alike and sees nothing of either.
 # Tests and benchmarks of the library itself add server/sim (mk/sim.mk).
-INC     := -Iserver -Iserver/sim/include -Iproto/c
-$(BUILD)/obj/server/sim/%.o $(BUILD)/san/server/sim/%.o: INC := -Iserver/sim/include -Iserver/sim
+INC     := -Iserver -Iserver/common -Iserver/sim/include -Iproto/c
+$(BUILD)/obj/server/sim/%.o $(BUILD)/san/server/sim/%.o: INC := -Iserver/sim/include -Iserver/sim -Iserver/common
 $(BUILD)/obj/proto/c/%.o $(BUILD)/san/proto/c/%.o: INC := -Iproto/c
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null) -lfftw3f_threads -lm

@@ -9,7 +9,7 @@
 
 FUZZ_CC      := clang
 FUZZ_FLAGS   := -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=fuzzer,address,undefined \
-                -fno-sanitize-recover=all -Iserver -Iserver/sim/include -Iserver/sim -Iproto/c $(WARN)
+                -fno-sanitize-recover=all -Iserver -Iserver/common -Iserver/sim/include -Iserver/sim -Iproto/c $(WARN)
 FUZZ_SECONDS ?= 60
 FUZZ_CI_SECONDS ?= 10
 FUZZ_TARGETS := control frame config
@@ -25,7 +25,7 @@ FUZZ_TARGETS += inflate
 # same edges (README, fuzzing row).
 FUZZ_FLAGS_config := -fno-sanitize-coverage=trace-cmp
 
-SIM_SRCS_FOR_FUZZ = $(wildcard server/sim/*.c)
+SIM_SRCS_FOR_FUZZ = $(wildcard server/sim/*.c) server/common/pool.c
 FUZZ_SRCS_control = fuzz/fuzz_control.c server/control.c $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_frame   = fuzz/fuzz_frame.c $(wildcard proto/c/*.c)
 FUZZ_SRCS_config  = fuzz/fuzz_config.c server/config.c server/control.c server/state.c server/log.c \
@@ -40,7 +40,7 @@ FUZZ_SRCS_inflate = fuzz/fuzz_inflate.c proto/wasm/oc_inflate.c
 FUZZ_FLAGS_inflate := -Iproto/wasm
 $(BUILD)/fuzz/fuzz_inflate: $(wildcard proto/wasm/*.[ch])
 
-$(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*.c server/*.h server/sim/*.[ch] server/sim/include/*.h proto/c/*.c proto/c/*.h)
+$(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*.c server/*.h server/common/*.[ch] server/sim/*.[ch] server/sim/include/*.h proto/c/*.c proto/c/*.h)
 	@mkdir -p $(dir $@)
 	$(FUZZ_CC) $(FUZZ_FLAGS) $(FUZZ_FLAGS_$*) $(PKG_CFLAGS) $(FUZZ_SRCS_$*) -o $@ $(PKG_LIBS) $(FUZZ_EXTRA_LIBS)
 
