@@ -46,13 +46,16 @@ static void unqueue(struct pool *p, struct pool_job *j)
     j->queued = false;
 }
 
-/* Take and run items until none is left. True on the thread that finished
- * the last one (its acquire sees every other item's writes: done may read them). */
+/* Take and run items until none is left. With a done callback: true on the
+ * thread that finished the last one (its acquire sees every other item's
+ * writes: done may read them). Without one nobody needs to know (pool_for:
+ * the last thread out finishes the job), so no counter is touched per item. */
 static bool run_items(struct pool_job *j, int worker)
 {
+    const bool counted = j->done != NULL;
     for (int i; (i = atomic_fetch_add_explicit(&j->next, 1, memory_order_relaxed)) < j->items;) {
         j->fn(j->ctx, i, i + 1, worker);
-        if (atomic_fetch_sub_explicit(&j->left, 1, memory_order_acq_rel) == 1)
+        if (counted && atomic_fetch_sub_explicit(&j->left, 1, memory_order_acq_rel) == 1)
             return true;
     }
     return false;
@@ -60,7 +63,10 @@ static bool run_items(struct pool_job *j, int worker)
 
 /* After run_items on a joined job: done (on the thread that finished the last
  * item, without the lock: it may be long), then leave. The last thread out
- * of a completed job finishes it. Called without the lock, returns with it. */
+ * of a completed job finishes it; without done, the last thread out (every
+ * item is handed out, and each thread out has finished those it took). The
+ * lock orders the items' writes before the finish. Called without the
+ * lock, returns with it. */
 static void depart(struct pool *p, struct pool_job *j, bool last)
 {
     if (last && j->done)
@@ -69,7 +75,7 @@ static void depart(struct pool *p, struct pool_job *j, bool last)
     if (last)
         j->completed = true;
     unqueue(p, j); /* run_items returned: every item is handed out */
-    if (--j->active == 0 && j->completed) {
+    if (--j->active == 0 && (j->completed || !j->done)) {
         j->busy = false; /* from here on the pool does not touch j */
         pthread_cond_broadcast(&p->finished);
     }

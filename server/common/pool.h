@@ -51,7 +51,7 @@ struct pool_job {
     int items;
     int limit;                 /* only workers below this number join (pool_for's `threads`) */
     atomic_int next;           /* next item to hand out */
-    atomic_int left;           /* items not finished: who brings it to 0 runs done */
+    atomic_int left;           /* items not finished (only with done): who brings it to 0 runs done */
     struct pool_job *queued_next;
     bool queued;               /* in the queue: threads may still join it */
     bool busy;                 /* started and not finished */
@@ -77,8 +77,9 @@ int pool_threads(const struct pool *p);
 void pool_for(struct pool *p, int threads, int items, pool_fn *fn, void *ctx);
 
 /* Queue job j (not busy: never started, or finished; if it is still busy
- * this waits until it is finished). done may be NULL. items <= 0: done runs
- * at once, on the caller, and j stays not busy. */
+ * this waits until it is finished). done may be NULL. items <= 0, or p
+ * NULL: the items (if any) and done run at once, on the caller, and j
+ * stays not busy. */
 void pool_start(struct pool *p, struct pool_job *j, int items, pool_fn *fn, void (*done)(void *ctx), void *ctx);
 /* Until j is finished: the caller takes j's items left (as worker 0), then
  * sleeps until the threads inside have left. At once if j is not busy. */

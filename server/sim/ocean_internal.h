@@ -93,7 +93,21 @@ static inline double ocean_ease_rate(double t0, double len, double t)
 /* Within a column: a = col, b = col + N, d = col + 2N, e = col + 3N,
  * linvk = col + 4N, omega = (double *)(col + 5N). */
 
-/* Everything whose size depends on N: made together, swapped together. */
+/* Everything whose size depends on N: made together, swapped together.
+ * Who writes and who reads (ocean.h: one thread steps and commits, the
+ * stepping thread; another may prepare meanwhile, the preparing thread):
+ *   n, nh, tile, modes, ring*, rings, workers, scratch_floats, row_twiddle,
+ *     the plans, plan_flags: ocean_grid_new (ocean_grid.c), once; read by all.
+ *   a, b, d, e, omega, ampc, gauss, seed, kx, kz: a new grid's filled by the
+ *     preparing thread (ocean_prepare.c, ocean_amplitudes.c) before anyone
+ *     else sees it; a live grid's swapped in by ocean_commit (stepping
+ *     thread); read by the step, the DFT path and the preparing thread
+ *     (the next change, query snapshots), which never overlaps a commit.
+ *   ease_*: ocean_commit_eased (stepping thread); read by the step and by
+ *     ocean_prepared_surface (preparing thread, not during a commit).
+ *   col, scratch, jac: the step's own (each worker its items' parts).
+ *   out: written by the step; read by the caller between steps, swapped by
+ *     ocean_exchange_cascade_field (stepping thread). */
 struct ocean_grid {
     int n, nh;                 /* N, N/2 + 1 (columns of the half spectrum) */
     int tile;                  /* OCEAN_COL_TILE, or N/2 if smaller */
@@ -172,15 +186,22 @@ static inline struct pool *ocean_pool_new(int threads)
     return threads > 1 ? pool_new((threads < OCEAN_MAX_THREADS ? threads : OCEAN_MAX_THREADS) - 1) : NULL;
 }
 
+/* Who writes and who reads: opt, wisdom_path, pool: ocean_create, then
+ * read only. p, model, g, ncascades, fine*, generation: written only by
+ * ocean_create and the commit (stepping thread); read by the step and by
+ * the preparing thread (ocean_prepare, never during a commit). prep_pool:
+ * the preparing thread's alone. foam_*: the step's (ocean_foam.c); the
+ * commit clears foam_warm with a new grid. */
 struct ocean {
     struct ocean_params p;
     struct ocean_options opt;  /* opt.wisdom_path points at our own copy */
     char *wisdom_path;
     struct spectrum_model model;
     struct ocean_grid *g;      /* cascade 0; ocean_step_fft/_dft step g under `model` */
-    /* Cascades 1 .. ncascades-1 ([0] unused): their grids and models. To step
-     * cascade c, ocean.c puts them in g and model for the duration of the
-     * call (step_cascade), so the step code knows nothing of cascades. */
+    /* Cascades 1 .. ncascades-1 ([0] unused): their grids and models. A
+     * cascade is stepped on its own grid and model (ocean.c, step_cascade:
+     * ocean_step_fft_grid / ocean_step_dft_grid), so stepping writes
+     * nothing of struct ocean but the foam's fields. */
     int ncascades;
     struct ocean_grid *fine[OCEAN_MAX_CASCADES];
     struct spectrum_model fine_model[OCEAN_MAX_CASCADES];
