@@ -19,6 +19,8 @@ CFLAGS  += -std=c11 -D_GNU_SOURCE $(WARN) -pthread
 #   server/<folder>/ sees its own folder and those below it, in this order:
 #   base (log, clock, metrics, files) and control (messages) -> config, query
 #   -> tick -> net -> roles (+ cluster) -> main.c.
+# server/common/ (the work pool, pool.h) is seen by the library and the
+# daemon alike and sees nothing of either.
 # Tools, tests and benchmarks see the daemon's folders and the library's
 # public header folder server/sim/include; the library's own tests add
 # server/sim (mk/sim.mk).

@@ -219,7 +219,7 @@ static void bench_pack(int n, int threads, const char *wisdom)
 }
 
 /* Why the transposition between the z and the row pass is an FFTW rank-0
- * plan (ocean.c, store_plan), and why the spectrum between the passes is
+ * plan (ocean_grid.c, store_plan), and why the spectrum between the passes is
  * block-major. One spectrum's two passes (N/2 columns, N rows), one
  * thread, process CPU time, four ways:
  *   ours:      z pass in place on a contiguous tile, then the copy into the

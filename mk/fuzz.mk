@@ -27,7 +27,7 @@ FUZZ_TARGETS += grid
 # same edges (docs/reliability.md, "Fuzzing").
 FUZZ_FLAGS_config := -fno-sanitize-coverage=trace-cmp
 
-SIM_SRCS_FOR_FUZZ = $(wildcard server/sim/*.c)
+SIM_SRCS_FOR_FUZZ = $(wildcard server/sim/*.c) server/common/pool.c
 FUZZ_SRCS_control = fuzz/fuzz_control.c $(wildcard server/control/*.c) $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_frame   = fuzz/fuzz_frame.c $(wildcard proto/c/*.c)
 FUZZ_SRCS_grid    = fuzz/fuzz_grid.c $(wildcard proto/c/*.c)
@@ -43,7 +43,7 @@ FUZZ_SRCS_inflate = fuzz/fuzz_inflate.c proto/wasm/oc_inflate.c
 FUZZ_FLAGS_inflate := -Iproto/wasm
 $(BUILD)/fuzz/fuzz_inflate: $(wildcard proto/wasm/*.[ch])
 
-$(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*/*.[ch] server/sim/*.[ch] server/sim/include/*.h proto/c/*.c proto/c/*.h)
+$(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*/*.[ch] server/sim/include/*.h proto/c/*.c proto/c/*.h)
 	@mkdir -p $(dir $@)
 	$(FUZZ_CC) $(FUZZ_FLAGS) $(FUZZ_FLAGS_$*) $(PKG_CFLAGS) $(FUZZ_SRCS_$*) -o $@ $(PKG_LIBS) $(FUZZ_EXTRA_LIBS)
 

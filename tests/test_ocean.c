@@ -8,6 +8,8 @@
 #include <malloc.h>
 #include <math.h>
 #include <pthread.h>
+#include <sched.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -2007,6 +2009,86 @@ static void test_rows_half_length(void)
     }
 }
 
+/* The work pool (server/common/pool.c) on its own: a parallel-for covers
+ * every item once with distinct worker numbers, and asynchronous jobs run
+ * done once, on the thread that finished the last item, after every item,
+ * whether a caller helps (pool_wait) or not, back to back on one job. */
+struct pool_probe {
+    atomic_int hits[64];
+    atomic_int busy[4];        /* per worker number: items running now */
+    atomic_int overlap, done, items_at_done;
+    int items;
+};
+
+static void pool_probe_item(void *arg, int i0, int i1, int worker)
+{
+    struct pool_probe *c = arg;
+    if (worker < 0 || worker >= 4 || atomic_fetch_add(&c->busy[worker], 1) != 0)
+        atomic_fetch_add(&c->overlap, 1);
+    for (int i = i0; i < i1; i++)
+        atomic_fetch_add(&c->hits[i], 1);
+    if (worker >= 0 && worker < 4)
+        atomic_fetch_sub(&c->busy[worker], 1);
+}
+
+static void pool_probe_done(void *arg)
+{
+    struct pool_probe *c = arg;
+    int sum = 0;
+    for (int i = 0; i < c->items; i++)
+        sum += atomic_load(&c->hits[i]);
+    atomic_store(&c->items_at_done, sum);
+    atomic_fetch_add(&c->done, 1);
+}
+
+static void pool_probe_reset(struct pool_probe *c, int items)
+{
+    memset(c, 0, sizeof *c); /* no thread touches it between jobs */
+    c->items = items;
+}
+
+static bool pool_probe_once(struct pool_probe *c)
+{
+    for (int i = 0; i < c->items; i++)
+        if (atomic_load(&c->hits[i]) != 1)
+            return false;
+    return atomic_load(&c->overlap) == 0;
+}
+
+static void test_pool(void)
+{
+    struct pool *p = pool_new(3);
+    struct pool_probe c;
+    int rounds = quick ? 20 : 200, bad_for = 0, bad_async = 0, bad_done = 0;
+    for (int r = 0; r < rounds && p; r++) {
+        pool_probe_reset(&c, 1 + r % 64);
+        pool_for(p, 4, c.items, pool_probe_item, &c);
+        bad_for += !pool_probe_once(&c);
+    }
+    struct pool_job job = {0};
+    for (int r = 0; r < rounds && p; r++) {
+        pool_probe_reset(&c, 1 + r % 64);
+        pool_start(p, &job, c.items, pool_probe_item, pool_probe_done, &c);
+        if (r % 2)
+            pool_wait(p, &job); /* helping */
+        else
+            while (pool_busy(p, &job))
+                sched_yield(); /* not helping: the pool's threads alone */
+        bad_async += !pool_probe_once(&c);
+        bad_done += atomic_load(&c.done) != 1 || atomic_load(&c.items_at_done) != c.items;
+    }
+    CHECK(p && pool_threads(p) == 3 && !bad_for && !bad_async && !bad_done, "pool.items_once: "
+          "%d rounds each: parallel-for %d bad, async %d bad (items not run exactly once or a worker number "
+          "used twice at a time), done %d bad (not once, or before an item)", rounds, bad_for, bad_async, bad_done);
+    pool_free(p);
+    pool_probe_reset(&c, 5);
+    pool_for(NULL, 4, c.items, pool_probe_item, &c);
+    pool_start(NULL, &job, c.items, pool_probe_item, pool_probe_done, &c); /* no pool: on the caller */
+    CHECK(atomic_load(&c.hits[4]) == 2 && atomic_load(&c.done) == 1, "pool.none: "
+          "without a pool the caller runs every item (item 4 ran %d times of 2) and done (%d times of 1)",
+          atomic_load(&c.hits[4]), atomic_load(&c.done));
+}
+
 int main(void)
 {
     check_verbose = 1; /* the passing lines carry the measured values */
@@ -2043,5 +2125,6 @@ int main(void)
     RUN(test_huge_pages);
     RUN(test_streaming_store);
     RUN(test_rows_half_length);
+    RUN(test_pool);
     return check_done();
 }
