@@ -290,7 +290,7 @@ ok "ocean_stats.py --save writes the sidecar; --cascades sums the finer cascades
 run 0 "resume" "$TAP" "$URL" --set paused=false
 ok "lossless and lossy (LOD 0/1/2) frames identical in both decoders; bound honoured"
 
-section "--query and --probe (issue 14)"
+section "--query and --probe"
 run 1 "bad --query points" "$TAP" "$URL" --query "1;2"
 run 1 "--query with frames" "$TAP" "$URL" --query "1,2" --frames 1
 run 0 "query" "$TAP" "$URL" --query "1.5,-2;1e6,-3e6"
