@@ -75,6 +75,52 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
     out->sets = sets;
 }
 
+/* What build_base and build_version stand for, with the clock now: a
+ * SIGHUP save. The state in force or the one waiting in `ready` (persisted
+ * when it was built): either way nothing older than what anyone was told. */
+static void persist_now(struct sim *s)
+{
+    char err[300];
+    if (s->cfg.persist &&
+        s->cfg.persist(s->cfg.persist_user, &s->build_base, s->build_version, atomic_load(&s->now_time), err,
+                       sizeof err) != 0)
+        LOGW("saving the state: %s", err);
+}
+
+/* Durability before the ack: the batch's outcome is persisted (write +
+ * fsync + rename, or a JetStream put: sim_config.persist) before the tick
+ * may apply it, so a version is durable before any frame carries it and a
+ * set before its `params` goes out; many sets share one save (group
+ * commit). A batch that cannot be saved is refused as a whole and the
+ * prepared state dropped: the builder's base goes back to `base`. */
+static void persist_batch(struct sim *s, struct built *b, const struct ocean_params *base)
+{
+    int applying = 0;
+    for (struct sim_set *set = b->sets; set; set = set->next)
+        applying += set->status == SIM_SET_QUEUED;
+    if (!applying || !s->cfg.persist)
+        return;
+    uint32_t v = s->build_version + (uint32_t)applying;
+    char err[300];
+    if (s->cfg.persist(s->cfg.persist_user, &b->params, v, atomic_load(&s->now_time), err, sizeof err) == 0) {
+        s->build_version = v;
+        return;
+    }
+    LOGW("a parameter change could not be saved, so it is refused: %s", err);
+    char msg[200];
+    snprintf(msg, sizeof msg, "not saved, nothing changed: %.150s", err);
+    for (struct sim_set *set = b->sets; set; set = set->next)
+        if (set->status == SIM_SET_QUEUED)
+            set_failed(set, SIM_SET_NOT_SAVED, msg);
+    if (b->prepared)
+        ocean_prepared_free(b->prepared);
+    ocean_surface_free(b->surface);
+    b->prepared = NULL;
+    b->surface = NULL;
+    b->params = *base;
+    s->build_base = *base;
+}
+
 void *builder_main(void *arg)
 {
     struct sim *s = arg;
@@ -88,6 +134,13 @@ void *builder_main(void *arg)
             pthread_mutex_lock(&s->lock);
             continue;
         }
+        if (s->save_wanted && (!s->pending || s->ready_full)) {
+            s->save_wanted = false;
+            pthread_mutex_unlock(&s->lock);
+            persist_now(s);
+            pthread_mutex_lock(&s->lock);
+            continue;
+        }
         if (!s->pending || s->ready_full) {
             pthread_cond_wait(&s->cond, &s->lock);
             continue;
@@ -96,10 +149,13 @@ void *builder_main(void *arg)
         s->pending = NULL;
         s->pending_tail = &s->pending;
         s->builder_busy = true;
+        s->save_wanted = false; /* the batch's save below carries the clock too */
         pthread_mutex_unlock(&s->lock);
 
         struct built b;
+        struct ocean_params base = s->build_base;
         build_batch(s, sets, &b);
+        persist_batch(s, &b, &base);
 
         pthread_mutex_lock(&s->lock);
         s->builder_busy = false;

@@ -55,6 +55,14 @@ void sim_want_keyframes(struct sim *s, int key, int delta) { atomic_fetch_add(&s
 double sim_time_now(struct sim *s) { return atomic_load(&s->now_time); }
 bool sim_take_trim(struct sim *s) { return atomic_exchange(&s->trim_wanted, false); }
 
+void sim_save_now(struct sim *s)
+{
+    pthread_mutex_lock(&s->lock);
+    s->save_wanted = true;
+    pthread_cond_signal(&s->cond);
+    pthread_mutex_unlock(&s->lock);
+}
+
 void sim_capacity(struct sim *s, struct capacity_info *out)
 {
     pthread_mutex_lock(&s->lock);
@@ -144,6 +152,7 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     pthread_cond_init(&s->cond, NULL);
     pthread_cond_init(&s->prod_cond, NULL);
     s->build_base = *p;
+    s->build_version = cfg->start_version;
     s->ocean = ocean_create(p, &cfg->opts, err, errlen);
     if (!s->ocean) {
         sim_free_parts(s);
