@@ -48,7 +48,8 @@
  *   PREFIX.frame.<c>.<field>.<lod>.<bound>  sim -> edges: layer parts (OCNL) of cascade c,
  *                                       e.g. oceand.frame.0.height.0.2
  *   PREFIX.params                       sim -> edges: params events (OCNE kind PARAMS)
- *   PREFIX.status                       sim -> edges: sim heartbeat (OCNE kind STATUS)
+ *   PREFIX.status                       sim -> edges: sim heartbeat (OCNE kind STATUS; by = the sim
+ *                                       process's instance id, cl_link_instance)
  *   PREFIX.ctl                          edge -> sim request/reply: set, pause, resume (OCNE CTL -> REPLY)
  *   PREFIX.hello                        edge -> sim request/reply: current params + schema (OCNE HELLO -> REPLY)
  *   PREFIX.demand                       edges -> sim: demand heartbeats with expiry (OCNE DEMAND)
@@ -323,6 +324,8 @@ enum cl_event {
     CL_EV_CLOSED,        /* gave up or closed: final */
     CL_EV_SIM_UP,        /* edge: sim heartbeats arrive (again) */
     CL_EV_SIM_DOWN,      /* edge: none for sim_timeout_s */
+    CL_EV_SIM_NEW,       /* edge: heartbeats from another sim process than before (a restart shorter
+                            than sim_timeout_s, or a standby that took over): ask hello again */
 };
 const char *cl_event_name(enum cl_event ev);
 
@@ -413,6 +416,9 @@ int cl_link_dispatch(struct cl_link *l);
 bool cl_link_connected(struct cl_link *l);
 bool cl_link_sim_up(struct cl_link *l);   /* edge */
 const char *cl_link_name(const struct cl_link *l);
+/* Sim: this process's random id (16 hex digits), sent as `by` of every
+ * STATUS heartbeat: edges tell a new sim process from the old one by it. */
+const char *cl_link_instance(const struct cl_link *l);
 void cl_link_stats(struct cl_link *l, struct cl_stats *out);
 /* After every link is closed, at exit: lets the NATS library free its globals. */
 void cl_library_shutdown(void);

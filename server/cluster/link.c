@@ -7,6 +7,7 @@
 #include "link_internal.h"
 
 #include <errno.h>
+#include <sys/random.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -23,11 +24,13 @@ const char *cl_event_name(enum cl_event ev)
     case CL_EV_CLOSED: return "closed";
     case CL_EV_SIM_UP: return "sim_up";
     case CL_EV_SIM_DOWN: return "sim_down";
+    case CL_EV_SIM_NEW: return "sim_new";
     }
     return "unknown";
 }
 
 const char *cl_link_name(const struct cl_link *l) { return l->name; }
+const char *cl_link_instance(const struct cl_link *l) { return l->instance; }
 bool cl_link_connected(struct cl_link *l) { return atomic_load(&l->connected); }
 bool cl_link_sim_up(struct cl_link *l) { return atomic_load(&l->sim_up_flag); }
 
@@ -317,6 +320,11 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
     c->name = l->name;
     c->url = c->creds_file = c->tls_ca = c->tls_cert = c->tls_key = NULL; /* not kept: used below only */
     l->rng = (unsigned)getpid() ^ (unsigned)(uintptr_t)l;
+    /* Random, not the pid or the name: a restarted sim may get both again. */
+    uint64_t id = 0;
+    if (getrandom(&id, sizeof id, GRND_NONBLOCK) != (ssize_t)sizeof id)
+        id = ((uint64_t)time(NULL) << 32) ^ (uint64_t)getpid() ^ (uint64_t)(uintptr_t)l;
+    snprintf(l->instance, sizeof l->instance, "%016llx", (unsigned long long)id);
     pthread_mutex_init(&l->out_lock, NULL);
     /* the pump waits with deadlines on the monotonic clock */
     pthread_condattr_t ca;

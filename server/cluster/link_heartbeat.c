@@ -88,6 +88,10 @@ void link_on_status(struct cl_link *l, natsMsg *msg)
         STAT_ADD(l, bad_messages, 1);
         return;
     }
+    /* Another sim process (restarted within sim_timeout_s, or a standby
+     * that took over) may hold another sea than our hello says. */
+    bool fresh = l->sim_instance[0] && strcmp(l->sim_instance, env.by) != 0;
+    snprintf(l->sim_instance, sizeof l->sim_instance, "%s", env.by);
     pthread_mutex_lock(&l->in_lock);
     l->sim_last_seen = link_now();
     bool up = !l->sim_up;
@@ -96,8 +100,11 @@ void link_on_status(struct cl_link *l, natsMsg *msg)
     if (up) {
         atomic_store(&l->sim_up_flag, true);
         link_push_state(l, CL_EV_SIM_UP);
-        link_kick_demand(l); /* a restarted sim knows no demand yet */
+    } else if (fresh) {
+        link_push_state(l, CL_EV_SIM_NEW);
     }
+    if (up || fresh)
+        link_kick_demand(l); /* a restarted sim knows no demand yet */
 }
 
 /* pump: make the layer subscriptions match want. */
@@ -163,7 +170,7 @@ void link_beat_send(struct cl_link *l, struct link_beat *b, double now)
     if (l->cfg.role == CL_ROLE_EDGE) {
         edge_beat(l, b, now);
     } else if (now >= b->next) {
-        link_send_envelope(l, l->subj[SUB_STATUS], CL_KIND_STATUS, "", b->status ? b->status : "{}",
+        link_send_envelope(l, l->subj[SUB_STATUS], CL_KIND_STATUS, l->instance, b->status ? b->status : "{}",
                            b->status ? b->status_len : 2);
         b->next = now + l->cfg.heartbeat_s;
     }

@@ -78,6 +78,7 @@ struct cl_link {
     /* Set by open, read-only until close: every thread reads them. */
     struct cl_config cfg;           /* defaults filled in; url and credentials not kept */
     char prefix[CL_PREFIX_MAX + 1], name[CL_NAME_MAX];
+    char instance[CL_NAME_MAX];     /* this process's random id (sim: in every STATUS) */
     char subj[SUB_KINDS][CL_SUBJECT_MAX];
     char inbox[CL_SUBJECT_MAX];     /* edge: replies come to inbox.<id>, probe data to inbox.p */
     struct sub_ctx sctx[SUB_KINDS];
@@ -111,6 +112,7 @@ struct cl_link {
     struct cl_assembler *assembler; /* edge: NATS delivery thread; cl_link_stats reads its drop count */
     bool sim_up;                    /* edge: NATS delivery sets (status), pump clears (timeout) */
     double sim_last_seen;           /* edge: NATS delivery writes, pump reads */
+    char sim_instance[CL_NAME_MAX]; /* edge: NATS delivery only: the instance of the last STATUS */
 
     struct cl_demand *demand;       /* sim: its own mutex; NATS delivery updates, tick thread reads the union */
     atomic_bool connected;          /* NATS connection callbacks (and open) write, any thread reads */

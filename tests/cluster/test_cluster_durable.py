@@ -136,6 +136,92 @@ def test_a_set_that_cannot_be_saved_is_refused():
     check(rc == 0, "daemon exited %r" % rc)
 
 
+async def set_stream_then_kill(c, ws, watcher, kill_after):
+    """Sets one after another (each waits for its ack) while the sim is killed
+    (-9) after kill_after s and restarted at once. Returns (last acknowledged
+    (wind, version), winds sent, versions of the watcher's frames)."""
+    acked, sent, versions = None, [], []
+    stop = asyncio.Event()
+
+    async def watch():
+        while not stop.is_set():
+            try:
+                h, _ = await recv_frame(watcher, timeout=0.5)
+                versions.append(h["params_version"])
+            except (TestFailure, asyncio.TimeoutError):
+                pass
+
+    async def sets():
+        nonlocal acked
+        i = 0
+        while not stop.is_set():
+            i += 1
+            wind = 5 + 0.125 * (i % 100)
+            sent.append(wind)
+            m = await set_and_ack(ws, i, wind)
+            if m["type"] == "params":
+                acked = (wind, m["params_version"])
+            else:
+                check(m["code"] == "unavailable", "set during the kill: %r" % m)
+                await asyncio.sleep(0.05)
+
+    w, t = asyncio.ensure_future(watch()), asyncio.ensure_future(sets())
+    await asyncio.sleep(kill_after)
+    c.sim.kill()            # kill -9, then at once again (within the edges' 2 s detection)
+    c.sim.start()
+    await asyncio.sleep(1.0)
+    stop.set()
+    await asyncio.gather(w, t)
+    return acked, sent, versions
+
+
+@test
+@with_cluster(edges=1)
+def test_sim_kill9_during_sets_keeps_the_last_acknowledged(c):
+    """A stream of sets through an edge; kill -9 of the sim and an immediate restart
+    (shorter than the edge's 2 s detection: it sees a new sim instance in the
+    heartbeat and asks hello again). The restarted sim has the last acknowledged set in
+    force (or a later one it saved but could not answer); the edge's hello says so; the
+    frames' params_version never goes back; a new set gets a version never used."""
+    async def run():
+        ws, h = await connect(c.edges[0])
+        check(isinstance(h.get("capacity"), dict) and h["capacity"].get("max_resolution"),
+              "an edge's hello without the sim's capacity: %r" % h.get("capacity"))
+        watcher, _ = await connect(c.edges[0])
+        for cycle in range(ARGS.cycles):
+            acked, sent, versions = await set_stream_then_kill(c, ws, watcher, 0.6 + 0.3 * cycle)
+            check(acked is not None, "no set was acknowledged before the kill")
+            wind, v = acked
+            later = sent[sent.index(wind):] if wind in sent else [wind]
+            st = read_state(c.sim.state_file)
+            check(st["params_version"] >= v, "state file at version %r, %d acknowledged" % (st["params_version"], v))
+            # The edge learns the new sim's sea (hello again) without a sim_down.
+            def edge_hello():
+                async def one():
+                    x, hx = await connect(c.edges[0])
+                    await x.close()
+                    return hx
+                return one()
+            deadline = time.time() + 10
+            while True:
+                hx = await edge_hello()
+                if hx["params_version"] == st["params_version"]:
+                    break
+                check(time.time() < deadline, "edge hello at version %r, the sim at %r"
+                      % (hx["params_version"], st["params_version"]))
+                await asyncio.sleep(0.2)
+            check(hx["params"]["wind_speed"] in later, "after kill -9 wind %r; acknowledged %r (version %d)"
+                  % (hx["params"]["wind_speed"], wind, v))
+            check(hx["params_version"] >= v, "version %r < acknowledged %d" % (hx["params_version"], v))
+            check(versions == sorted(versions), "frame versions went back: %r" % versions[-40:])
+            m = await set_and_ack(ws, 10000 + cycle, 21.5 + cycle)
+            check(m["type"] == "params" and m["params_version"] == hx["params_version"] + 1,
+                  "set after the restart: %r (hello at %d)" % (m, hx["params_version"]))
+        await ws.close()
+        await watcher.close()
+    asyncio.run(run())
+
+
 def main():
     global ARGS
     ap = argparse.ArgumentParser()
