@@ -195,6 +195,8 @@ int main(int argc, char **argv)
     }
     net_attach_sim(net, sim);
     net_attach_queries(net, queries);
+    if (role_sim_attach(cluster, sim, &params, res.params_version) != 0)
+        LOGW("cluster: no lease thread: this simulation stays a standby");
 
     LOGI("oceand listening on %s://%s:%d/ (N=%d, %g Hz, web root %s)", dc.tls_cert[0] ? "https" : "http", dc.bind, net_port(net),
          params.resolution, dc.tick_rate, dc.web_root);
@@ -209,6 +211,7 @@ int main(int argc, char **argv)
     }
 
     LOGI("stopping");
+    role_sim_detach(cluster); /* releases the lease: a standby takes over at once */
     state_saver_final(&saver, sim_time_now(sim));
     sim_stop(sim);
     net_attach_queries(net, NULL);

@@ -13,6 +13,8 @@
 
 /* ---- sim side ---- */
 
+void cl_sim_set_standby(struct cl_link *l, bool standby) { atomic_store(&l->standby, standby); }
+
 void cl_sim_set_status(struct cl_link *l, const char *text, size_t len)
 {
     char *copy = malloc(len + 1);
@@ -169,7 +171,7 @@ void link_beat_send(struct cl_link *l, struct link_beat *b, double now)
 {
     if (l->cfg.role == CL_ROLE_EDGE) {
         edge_beat(l, b, now);
-    } else if (now >= b->next) {
+    } else if (now >= b->next && !atomic_load(&l->standby)) {
         link_send_envelope(l, l->subj[SUB_STATUS], CL_KIND_STATUS, l->instance, b->status ? b->status : "{}",
                            b->status ? b->status_len : 2);
         b->next = now + l->cfg.heartbeat_s;

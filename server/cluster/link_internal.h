@@ -117,6 +117,7 @@ struct cl_link {
     struct cl_demand *demand;       /* sim: its own mutex; NATS delivery updates, tick thread reads the union */
     atomic_bool connected;          /* NATS connection callbacks (and open) write, any thread reads */
     atomic_bool sim_up_flag;        /* edge: sim_up without in_lock: NATS delivery sets, pump clears, any reads */
+    atomic_bool standby;            /* sim: the caller sets (cl_sim_set_standby), pump reads: no STATUS */
 
     /* close_lock: close waits until NATS has finished calling us. */
     pthread_mutex_t close_lock;

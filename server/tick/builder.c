@@ -95,12 +95,22 @@ static void persist_now(struct sim *s)
  * prepared state dropped: the builder's base goes back to `base`. */
 static void persist_batch(struct sim *s, struct built *b, const struct ocean_params *base)
 {
+    uint32_t v = s->build_version;
     int applying = 0;
-    for (struct sim_set *set = b->sets; set; set = set->next)
-        applying += set->status == SIM_SET_QUEUED;
-    if (!applying || !s->cfg.persist)
+    for (struct sim_set *set = b->sets; set; set = set->next) {
+        if (set->status != SIM_SET_QUEUED)
+            continue;
+        if (set->adopt) {
+            v = set->adopt_version; /* already durable: the record it came from */
+        } else {
+            v++;
+            applying++;
+        }
+    }
+    if (!applying || !s->cfg.persist) {
+        s->build_version = v;
         return;
-    uint32_t v = s->build_version + (uint32_t)applying;
+    }
     char err[300];
     if (s->cfg.persist(s->cfg.persist_user, &b->params, v, atomic_load(&s->now_time), err, sizeof err) == 0) {
         s->build_version = v;
@@ -166,6 +176,26 @@ void *builder_main(void *arg)
     return NULL;
 }
 
+/* A take-over (sim_adopt): the other sim's version, and its clock carried
+ * on by the wall-clock time since it was written, so the sea goes on where
+ * it was; seq never goes back (edges keep their streams). */
+static void adopt_clock(struct sim *s, const struct sim_set *set)
+{
+    s->version = set->adopt_version;
+    double since = ((double)unix_us() - (double)set->adopt_wall_us) * 1e-6;
+    if (since < 0)
+        since = 0;
+    double t = set->adopt_time + (s->params.paused ? 0 : s->params.time_scale * since);
+    if (t >= 0 && t <= OCEAN_TIME_MAX)
+        s->sim_time = t;
+    uint64_t seq = set->adopt_seq + (uint64_t)(since * s->cfg.tick_rate);
+    if (seq > s->seq)
+        s->seq = seq;
+    atomic_store(&s->now_time, s->sim_time);
+    atomic_store(&s->now_seq, s->seq);
+    s->reset_streams = true;
+}
+
 /* At a tick boundary: swap in what the builder prepared, one version per
  * applied set, and hand every set back to the network thread answered. */
 void apply_prepared(struct sim *s)
@@ -229,7 +259,10 @@ void apply_prepared(struct sim *s)
         if (set->status == SIM_SET_QUEUED) {
             struct ocean_params before = s->params;
             s->params = params_with(&set->prev, &set->values, set->mask);
-            s->version++;
+            if (set->adopt)
+                adopt_clock(s, set);
+            else
+                s->version++;
             atomic_fetch_add(&g_metrics.param_changes, 1);
             set->status = SIM_SET_APPLIED;
             set->changed = params_diff(&before, &s->params);

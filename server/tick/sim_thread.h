@@ -53,6 +53,13 @@ struct sim_set {
     double build_s;             /* seconds the builder took to prepare its batch (0 = nothing built) */
     /* Builder and tick threads only. */
     struct ocean_params prev;   /* the params this set was checked on top of */
+    /* sim_adopt (tag 0): the state another sim left. values are whole
+     * parameters; the version and clock replace this sim's own. */
+    bool adopt;
+    uint32_t adopt_version;
+    double adopt_time;          /* sim time at adopt_wall_us (Unix µs) */
+    uint64_t adopt_wall_us;
+    uint64_t adopt_seq;         /* seq at adopt_wall_us: seq goes on from at least there */
 };
 void sim_set_free(struct sim_set *set);
 
@@ -130,6 +137,13 @@ double sim_time_now(struct sim *s);
 /* Ask the builder to persist the state in force with the current clock
  * (SIGHUP); returns at once. */
 void sim_save_now(struct sim *s);
+/* Take over the state another sim left (a hot standby, server/roles/):
+ * these parameters (built off the tick like a set), this version, and the
+ * clock extrapolated from (sim_time, seq) at wall_us; seq never goes back.
+ * Not persisted (it comes from the durable record). Answered with tag 0
+ * (sim_take_answers). Any thread; returns at once; -1 out of memory. */
+int sim_adopt(struct sim *s, const struct ocean_params *p, uint32_t version, double sim_time, uint64_t wall_us,
+              uint64_t seq);
 /* Whether the pipeline freed memory (temporal streams) since the last call:
  * the lws thread then returns the free pages to the system (malloc_trim). */
 bool sim_take_trim(struct sim *s);

@@ -60,6 +60,75 @@ async def set_and_ack(ws, i, wind):
     return await recv_json(ws, lambda m: m["type"] in ("params", "error") and m.get("id") == i, timeout=10)
 
 
+class JsNats(cr.Nats):
+    """nats-server with JetStream, its file store in a folder of the test's: kept
+    across stop()/start(), as on a real server."""
+
+    def __init__(self, tmp):
+        self.store = os.path.join(tmp, "js")
+        super().__init__(tmp)
+
+    def start(self):
+        self.proc = None
+        args = [cr.NATS_BIN, "-a", "127.0.0.1", "-p", str(self.port), "-js", "-sd", self.store]
+        self.proc = cr.subprocess.Popen(args, stdout=self.log, stderr=self.log, preexec_fn=cr._die_with_parent)
+        deadline = time.time() + 10
+        while True:
+            try:
+                cr.socket.create_connection(("127.0.0.1", self.port), timeout=0.5).close()
+                return
+            except OSError:
+                check(self.proc.poll() is None, "nats-server exited at start")
+                check(time.time() < deadline, "nats-server did not listen")
+                time.sleep(0.05)
+
+
+class JsCluster(Cluster):
+    """JetStream, sims sims (the first active, the others standbys) and edges edges."""
+
+    def __init__(self, sims=2, edges=1, sim_extra=()):
+        self.tmp = tempfile.mkdtemp(prefix="oceand-durable-")
+        self.nodes = []
+        self.nats = JsNats(self.tmp)
+        try:
+            self.sims = []
+            for i in range(sims):
+                n = self.node("sim%d" % i, "--role", "sim", "--nats", self.nats.url, *sim_extra)
+                self.sims.append(n)
+                wait_for(lambda n=n: n.health()["lease"] in ("active", "standby"), "sim%d has a lease state" % i)
+                if i == 0:
+                    wait_for(lambda n=n: n.health()["lease"] == "active", "the first sim holds the lease")
+            self.sim = self.sims[0]
+            self.edges = [self.node("edge%d" % i, "--role", "edge", "--nats", self.nats.url, "--state-file", "none")
+                          for i in range(edges)]
+            for e in self.edges:
+                wait_for(lambda e=e: e.health()["cluster"] == "ok", "edge sees the sim")
+        except BaseException:
+            self.close()
+            raise
+
+    def active(self):
+        for n in self.sims:
+            if n.proc.poll() is None and n.health()["lease"] == "active":
+                return n
+        return None
+
+
+def with_js_cluster(**kw):
+    def deco(fn):
+        def run():
+            c = JsCluster(**kw)
+            ok = False
+            try:
+                fn(c)
+                ok = True
+            finally:
+                c.close(failed=not ok)
+        run.__name__ = fn.__name__
+        return run
+    return deco
+
+
 # ---------------------------------------------------------------- tests
 
 @test
