@@ -205,10 +205,15 @@ def test_a_set_that_cannot_be_saved_is_refused():
     check(rc == 0, "daemon exited %r" % rc)
 
 
-async def set_stream_then_kill(c, ws, watcher, kill_after):
-    """Sets one after another (each waits for its ack) while the sim is killed
-    (-9) after kill_after s and restarted at once. Returns (last acknowledged
-    (wind, version), winds sent, versions of the watcher's frames)."""
+def kill_and_restart(c):
+    c.sim.kill()            # kill -9, then at once again (within the edges' 2 s detection)
+    c.sim.start()
+
+
+async def set_stream_then_kill(c, ws, watcher, kill_after, kill=kill_and_restart, settle=1.0):
+    """Sets one after another (each waits for its ack) while kill(c) kills the
+    sim after kill_after s. Returns (last acknowledged (wind, version), winds
+    sent, (seq, sim_time, params_version) of the watcher's frames)."""
     acked, sent, versions = None, [], []
     stop = asyncio.Event()
 
@@ -216,7 +221,7 @@ async def set_stream_then_kill(c, ws, watcher, kill_after):
         while not stop.is_set():
             try:
                 h, _ = await recv_frame(watcher, timeout=0.5)
-                versions.append(h["params_version"])
+                versions.append((h["seq"], h["sim_time"], h["params_version"]))
             except (TestFailure, asyncio.TimeoutError):
                 pass
 
@@ -236,9 +241,8 @@ async def set_stream_then_kill(c, ws, watcher, kill_after):
 
     w, t = asyncio.ensure_future(watch()), asyncio.ensure_future(sets())
     await asyncio.sleep(kill_after)
-    c.sim.kill()            # kill -9, then at once again (within the edges' 2 s detection)
-    c.sim.start()
-    await asyncio.sleep(1.0)
+    kill(c)   # on this thread: a daemon started from another one dies with it (PR_SET_PDEATHSIG)
+    await asyncio.sleep(settle)
     stop.set()
     await asyncio.gather(w, t)
     return acked, sent, versions
@@ -282,12 +286,185 @@ def test_sim_kill9_during_sets_keeps_the_last_acknowledged(c):
             check(hx["params"]["wind_speed"] in later, "after kill -9 wind %r; acknowledged %r (version %d)"
                   % (hx["params"]["wind_speed"], wind, v))
             check(hx["params_version"] >= v, "version %r < acknowledged %d" % (hx["params_version"], v))
-            check(versions == sorted(versions), "frame versions went back: %r" % versions[-40:])
+            pv = [v[2] for v in versions]
+            check(pv == sorted(pv), "frame versions went back: %r" % pv[-40:])
             m = await set_and_ack(ws, 10000 + cycle, 21.5 + cycle)
             check(m["type"] == "params" and m["params_version"] == hx["params_version"] + 1,
                   "set after the restart: %r (hello at %d)" % (m, hx["params_version"]))
         await ws.close()
         await watcher.close()
+    asyncio.run(run())
+
+
+async def edge_hello(edge):
+    ws, h = await connect(edge)
+    await ws.close()
+    return h
+
+
+async def hello_at(edge, version, what, timeout=10.0):
+    """The edge's hello once it reached version (its cache follows the sim)."""
+    deadline = time.time() + timeout
+    while True:
+        h = await edge_hello(edge)
+        if h["params_version"] >= version:
+            return h
+        check(time.time() < deadline, "%s: edge hello at version %r, want %d" % (what, h["params_version"], version))
+        await asyncio.sleep(0.1)
+
+
+def one_active(c):
+    """Exactly one live sim holds the lease; returns it."""
+    leases = [(n.name, n.health()["lease"]) for n in c.sims if n.proc.poll() is None]
+    act = [n for n in c.sims if n.proc.poll() is None and n.health()["lease"] == "active"]
+    check(len(act) == 1, "leases: %r" % leases)
+    return act[0]
+
+
+def kill_active(c):
+    act = c.active()
+    check(act is not None, "no active sim to kill")
+    act.kill()
+    c.killed = act
+
+
+@test
+@with_js_cluster(sims=2, edges=1)
+def test_standby_takes_over_during_sets(c):
+    """Two sims on JetStream: kill -9 of the active one during a stream of sets through
+    an edge. The standby takes over with the same sea: the last acknowledged set (or a
+    later one that was saved) is in force at the same version, sim time and seq go on
+    forward, the edge's clients keep their sockets and get frames again; the killed sim
+    comes back as the standby, and the next kill hands the lease back."""
+    async def run():
+        ws, h = await connect(c.edges[0])
+        watcher, _ = await connect(c.edges[0])
+        for cycle in range(ARGS.cycles):
+            first = one_active(c)
+            acked, sent, frames = await set_stream_then_kill(c, ws, watcher, 0.7 + 0.2 * cycle, kill=kill_active,
+                                                             settle=0.5)
+            check(acked is not None, "no set was acknowledged before the kill")
+            wind, v = acked
+            later = sent[sent.index(wind):]
+            wait_for(lambda: c.active() not in (None, first), "the standby holds the lease", timeout=10)
+            hx = await hello_at(c.edges[0], v, "after the take-over")
+            check(hx["params"]["wind_speed"] in later and hx["params_version"] >= v,
+                  "after the take-over: wind %r version %r; acknowledged %r at version %d"
+                  % (hx["params"]["wind_speed"], hx["params_version"], wind, v))
+            # Frames again on the same socket, continuing the sea forward.
+            fh, _ = await recv_frame(watcher, pred=lambda h, b: h["params_version"] >= hx["params_version"], timeout=10)
+            last = max(frames) if frames else None
+            if last:
+                check(fh["seq"] > last[0], "seq after the take-over %d, before %d" % (fh["seq"], last[0]))
+                check(fh["sim_time"] >= last[1], "sim time went back: %r -> %r" % (last[1], fh["sim_time"]))
+            pv = [f[2] for f in frames] + [fh["params_version"]]
+            check(pv == sorted(pv), "frame versions went back: %r" % pv[-40:])
+            m = await set_and_ack(ws, 20000 + cycle, 22.5 + cycle)
+            check(m["type"] == "params" and m["params_version"] == hx["params_version"] + 1,
+                  "a set after the take-over: %r (hello at %d)" % (m, hx["params_version"]))
+            c.killed.start()   # back as the standby
+            wait_for(lambda: c.killed.health()["lease"] == "standby", "the killed sim is a standby again")
+            one_active(c)
+        check(ws.open and watcher.open, "a client of the edge was disconnected")
+        await ws.close()
+        await watcher.close()
+    asyncio.run(run())
+
+
+@test
+@with_js_cluster(sims=2, edges=1)
+def test_stalled_holder_steps_down(c):
+    """The active sim stops (SIGSTOP) past its lease: the standby takes over; when the
+    old one runs again its next write finds the record taken, and it steps down
+    without answering or publishing: one active sim at a time, no version reused."""
+    async def run():
+        ws, h = await connect(c.edges[0])
+        m = await set_and_ack(ws, 1, 14.5)
+        check(m["type"] == "params", "set: %r" % m)
+        old = one_active(c)
+        old.proc.send_signal(signal.SIGSTOP)
+        try:
+            wait_for(lambda: any(n is not old and n.health()["lease"] == "active" for n in c.sims),
+                     "the standby took over", timeout=10)
+            m2 = await set_and_ack(ws, 2, 15.5)
+            check(m2["type"] == "params" and m2["params_version"] == m["params_version"] + 1, "set: %r" % m2)
+        finally:
+            old.proc.send_signal(signal.SIGCONT)
+        wait_for(lambda: old.health()["lease"] == "standby", "the stalled holder stepped down")
+        one_active(c)
+        m3 = await set_and_ack(ws, 3, 16.5)
+        check(m3["type"] == "params" and m3["params_version"] == m2["params_version"] + 1, "set: %r" % m3)
+        hx = await hello_at(c.edges[0], m3["params_version"], "after the step-down")
+        check(hx["params"]["wind_speed"] == 16.5, "hello %r" % hx["params"])
+        await ws.close()
+    asyncio.run(run())
+
+
+@test
+@with_js_cluster(sims=1, edges=1)
+def test_older_state_file_cannot_push_the_version_back(c):
+    """The sim restarts with a state file older than what it acknowledged (a copy from
+    before the last sets): the record in JetStream is newer and wins, so the version
+    and the parameters are the last acknowledged ones, never the file's."""
+    async def run():
+        ws, h = await connect(c.edges[0])
+        m = await set_and_ack(ws, 1, 8.5)
+        check(m["type"] == "params", "set: %r" % m)
+        shutil.copy(c.sim.state_file, c.sim.state_file + ".old")
+        for i in range(3):
+            m = await set_and_ack(ws, 2 + i, 9.5 + i)
+            check(m["type"] == "params", "set: %r" % m)
+        v = m["params_version"]
+        c.sim.kill()
+        shutil.copy(c.sim.state_file + ".old", c.sim.state_file)
+        check(read_state(c.sim.state_file)["params_version"] == v - 3, "the old file")
+        c.sim.start()
+        wait_for(lambda: c.sim.health()["lease"] == "active", "the restarted sim holds the lease")
+        hx = await hello_at(c.edges[0], v, "after the restart with an old file")
+        check(hx["params_version"] == v and hx["params"]["wind_speed"] == 11.5,
+              "restarted with an old state file: version %r wind %r, acknowledged %d wind 11.5"
+              % (hx["params_version"], hx["params"]["wind_speed"], v))
+        fh, _ = await recv_frame(ws, timeout=10)
+        check(fh["params_version"] >= v, "a frame of version %r after the restart" % fh["params_version"])
+        m = await set_and_ack(ws, 9, 12.5)
+        check(m["type"] == "params" and m["params_version"] == v + 1, "next set: %r" % m)
+        await ws.close()
+    asyncio.run(run())
+
+
+@test
+@with_js_cluster(sims=2, edges=2)
+def test_nats_and_edge_kill9_lose_no_acknowledged_set(c):
+    """kill -9 of nats-server right after an acknowledged set, restart on the same port
+    and store: the set is in force, one sim holds the lease, the next set gets the next
+    version. Then kill -9 of an edge right after a set: the other edge's clients have
+    it, and the restarted edge's hello too."""
+    async def run():
+        ws, h = await connect(c.edges[0])
+        m = await set_and_ack(ws, 1, 17.25)
+        check(m["type"] == "params", "set: %r" % m)
+        await ws.close()
+        c.nats.stop()
+        time.sleep(0.5)
+        c.nats.start()
+        for e in c.edges:
+            wait_for(lambda e=e: e.health()["cluster"] == "ok", "edge back after NATS", timeout=20)
+        wait_for(lambda: c.active() is not None, "a sim holds the lease after NATS came back", timeout=20)
+        one_active(c)
+        hx = await hello_at(c.edges[0], m["params_version"], "after NATS")
+        check(hx["params_version"] == m["params_version"] and hx["params"]["wind_speed"] == 17.25,
+              "after kill -9 of NATS: %r at %r" % (hx["params"]["wind_speed"], hx["params_version"]))
+        ws, _ = await connect(c.edges[0])
+        other, _ = await connect(c.edges[1])
+        m2 = await set_and_ack(ws, 2, 18.25)
+        check(m2["type"] == "params" and m2["params_version"] == m["params_version"] + 1, "set: %r" % m2)
+        c.edges[0].kill()
+        p = await recv_json(other, lambda j: j["type"] == "params" and j["params_version"] == m2["params_version"])
+        check(p["params"]["wind_speed"] == 18.25, "the other edge's params %r" % p)
+        c.edges[0].start()
+        hx = await hello_at(c.edges[0], m2["params_version"], "restarted edge")
+        check(hx["params"]["wind_speed"] == 18.25, "restarted edge's hello %r" % hx["params"])
+        await other.close()
     asyncio.run(run())
 
 
