@@ -77,7 +77,13 @@ BENCHES += bench-cluster
 bench-cluster: $(BUILD)/oceand $(BUILD)/load_client
 	/usr/bin/python3 bench/cluster.py --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_CLUSTER_ARGS)
 
-# nats-server (installed by make deps if missing) + one sim + two edges on loopback.
+# Standby take-over gap (median of 5 kill -9 of the active sim) and acknowledged sets lost.
+BENCHES += bench-cluster-failover
+.PHONY: bench-cluster-failover
+bench-cluster-failover: $(BUILD)/oceand
+	/usr/bin/python3 bench/cluster_failover.py --oceand $(BUILD)/oceand $(BENCH_FAILOVER_ARGS)
+
+# nats-server (installed by make deps if missing) + two sims + two edges on loopback.
 .PHONY: run-cluster
 run-cluster: deps
 	@$(MAKE) --no-print-directory build-all
