@@ -171,9 +171,10 @@ void link_beat_send(struct cl_link *l, struct link_beat *b, double now)
 {
     if (l->cfg.role == CL_ROLE_EDGE) {
         edge_beat(l, b, now);
-    } else if (now >= b->next && !atomic_load(&l->standby)) {
-        link_send_envelope(l, l->subj[SUB_STATUS], CL_KIND_STATUS, l->instance, b->status ? b->status : "{}",
-                           b->status ? b->status_len : 2);
+    } else if (now >= b->next) {
+        if (!atomic_load(&l->standby)) /* the deadline moves on either way: the pump sleeps until it */
+            link_send_envelope(l, l->subj[SUB_STATUS], CL_KIND_STATUS, l->instance, b->status ? b->status : "{}",
+                               b->status ? b->status_len : 2);
         b->next = now + l->cfg.heartbeat_s;
     }
     free(b->status);

@@ -234,9 +234,10 @@ static void standby_round(struct role_lease *ls, double now)
         if (rev != ls->seen_rev) {
             ls->seen_rev = rev;
             ls->seen_t = now;
-            /* Hot: follow the holder's sea, so a take-over builds nothing. */
-            if (ok && (rec.version != mine || params_diff(&rec.params, &base)) &&
-                strcmp(rec.holder, cl_link_instance(ls->link)) != 0)
+            /* Hot: follow the holder's sea, so a take-over builds nothing. A
+             * version names one sea (durable before use, never reused), so
+             * the renewals (same version, new clock) cost nothing here. */
+            if (ok && rec.version != mine && strcmp(rec.holder, cl_link_instance(ls->link)) != 0)
                 adopt(ls, &rec);
         }
         if (!ok) {
