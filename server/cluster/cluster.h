@@ -384,6 +384,7 @@ struct cl_config {
     double query_timeout_s;     /* edge: for QUERY requests (the sim's workers may queue them); 0 = 5 */
     double reconnect_min_s, reconnect_max_s; /* backoff; 0 = 0.1, 2 */
     size_t outbox_max_bytes;    /* 0 = 64 MiB */
+    bool standby;               /* sim: start silent (no STATUS) until cl_sim_set_standby(l, false) */
     void (*wake)(void *user);   /* called from NATS/pump threads when there is something to dispatch */
     void *wake_user;
     struct cl_handlers h;

@@ -320,6 +320,7 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
     c->name = l->name;
     c->url = c->creds_file = c->tls_ca = c->tls_cert = c->tls_key = NULL; /* not kept: used below only */
     l->rng = (unsigned)getpid() ^ (unsigned)(uintptr_t)l;
+    atomic_store(&l->standby, cfg->standby); /* before the pump's first heartbeat */
     /* Random, not the pid or the name: a restarted sim may get both again. */
     uint64_t id = 0;
     if (getrandom(&id, sizeof id, GRND_NONBLOCK) != (ssize_t)sizeof id)

@@ -345,6 +345,7 @@ struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, st
     cfg.user = r;
     cfg.h.on_state = sim_on_state;
     cfg.h.on_request = sim_on_request;
+    cfg.standby = true; /* silent until the lease says this sim acts (role_lease.c) */
     char lerr[256];
     r->link = cl_link_open(&cfg, lerr, sizeof lerr);
     if (!r->link) {

@@ -219,6 +219,8 @@ void apply_prepared(struct sim *s)
         if (commit_rc == 0 && b.surface && ocean_surface_ease(b.surface, s->ocean) != 0)
             LOGW("point queries: the snapshot of version %u misses the easing", (unsigned)(s->version + 1));
         if (commit_rc != 0) {
+            /* The builder saved this batch's versions already: they stay unused and
+             * the saved version runs ahead of the tick's (skipped, never reused). */
             LOGE("a prepared parameter change no longer fits the simulation; refused");
             for (struct sim_set *set = b.sets; set; set = set->next)
                 if (set->status == SIM_SET_QUEUED)

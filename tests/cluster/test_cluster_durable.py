@@ -214,8 +214,9 @@ async def set_stream_then_kill(c, ws, watcher, kill_after, kill=kill_and_restart
     """Sets one after another (each waits for its ack) while kill(c) kills the
     sim after kill_after s. Returns (last acknowledged (wind, version), winds
     sent, (seq, sim_time, params_version) of the watcher's frames)."""
-    acked, sent, versions = None, [], []
+    acked, sent, versions, replies = None, [], [], []
     stop = asyncio.Event()
+    t0 = time.time()
 
     async def watch():
         while not stop.is_set():
@@ -233,6 +234,7 @@ async def set_stream_then_kill(c, ws, watcher, kill_after, kill=kill_and_restart
             wind = 5 + 0.125 * (i % 100)
             sent.append(wind)
             m = await set_and_ack(ws, i, wind)
+            replies.append((round(time.time() - t0, 2), m["type"], m.get("code")))
             if m["type"] == "params":
                 acked = (wind, m["params_version"])
             else:
@@ -241,10 +243,14 @@ async def set_stream_then_kill(c, ws, watcher, kill_after, kill=kill_and_restart
 
     w, t = asyncio.ensure_future(watch()), asyncio.ensure_future(sets())
     await asyncio.sleep(kill_after)
+    # at least one set acknowledged first (a loaded machine may answer the first one late)
+    await cr.await_for(lambda: acked is not None, "a set acknowledged before the kill (replies %r)" % replies)
     kill(c)   # on this thread: a daemon started from another one dies with it (PR_SET_PDEATHSIG)
     await asyncio.sleep(settle)
     stop.set()
     await asyncio.gather(w, t)
+    check(acked is not None, "no set was acknowledged before the kill (at %.2f s): replies %r"
+          % (kill_after, replies[:8]))
     return acked, sent, versions
 
 
