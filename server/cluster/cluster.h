@@ -433,7 +433,9 @@ int cl_sim_publish_layer(struct cl_link *l, const struct cl_layer_info *info, co
                          const uint32_t *tile_off, void (*release)(void *ctx), void *ctx);
 int cl_sim_publish_params(struct cl_link *l, const char *origin, const char *by, const char *text, size_t len);
 void cl_sim_set_status(struct cl_link *l, const char *text, size_t len);  /* body of the next heartbeats */
-/* A standby sim sends no STATUS (edges must not take it for the active one). */
+/* A standby sim sends no STATUS (edges must not take it for the active one)
+ * and is not subscribed to the request subjects (ctl, hello, query, probe):
+ * with no sim acting, requests get "no responders" at once. */
 void cl_sim_set_standby(struct cl_link *l, bool standby);
 int cl_sim_demand(struct cl_link *l, uint8_t out[CL_KEY_BYTES]);          /* tick thread; returns live edges */
 /* text NULL: drop without answering. */

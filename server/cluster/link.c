@@ -169,11 +169,12 @@ void link_unsubscribe(natsSubscription **sub)
  * <inbox>.*); false when one fails. */
 static bool subscribe_role(struct cl_link *l)
 {
-    static const enum sub_kind sim[] = { SUB_CTL, SUB_HELLO, SUB_QUERY, SUB_PROBE, SUB_DEMAND };
+    static const enum sub_kind sim[] = { SUB_DEMAND, SUB_CTL, SUB_HELLO, SUB_QUERY, SUB_PROBE };
     static const enum sub_kind edge[] = { SUB_PARAMS, SUB_STATUS, SUB_INBOX };
     bool is_sim = l->cfg.role == CL_ROLE_SIM;
     const enum sub_kind *kinds = is_sim ? sim : edge;
-    size_t n = is_sim ? sizeof sim / sizeof *sim : sizeof edge / sizeof *edge;
+    /* A silent sim takes requests only once it acts (the pump subscribes them then). */
+    size_t n = is_sim ? (l->cfg.standby ? 1 : sizeof sim / sizeof *sim) : sizeof edge / sizeof *edge;
     char wild[CL_SUBJECT_MAX + 4];
     snprintf(wild, sizeof wild, "%s.*", l->inbox);
     for (size_t i = 0; i < n; i++) {

@@ -13,7 +13,29 @@
 
 /* ---- sim side ---- */
 
-void cl_sim_set_standby(struct cl_link *l, bool standby) { atomic_store(&l->standby, standby); }
+void cl_sim_set_standby(struct cl_link *l, bool standby)
+{
+    atomic_store(&l->standby, standby);
+    pthread_mutex_lock(&l->out_lock);
+    pthread_cond_signal(&l->out_cond); /* the pump (un)subscribes the requests now */
+    pthread_mutex_unlock(&l->out_lock);
+}
+
+/* pump: a standby is not subscribed to the request subjects, so while no
+ * sim acts an edge's request gets "no responders" at once instead of
+ * waiting for its timeout, and a standby never sees them. */
+static void sync_request_subs(struct cl_link *l)
+{
+    static const enum sub_kind req[] = { SUB_CTL, SUB_HELLO, SUB_QUERY, SUB_PROBE };
+    bool on = !atomic_load(&l->standby);
+    for (size_t i = 0; i < sizeof req / sizeof *req; i++) {
+        natsSubscription **sub = &l->subs[req[i]];
+        if (on && !*sub)
+            *sub = link_subscribe(l, l->subj[req[i]], req[i]); /* NULL: tried again next round */
+        else if (!on && *sub)
+            link_unsubscribe(sub);
+    }
+}
 
 void cl_sim_set_status(struct cl_link *l, const char *text, size_t len)
 {
@@ -171,7 +193,12 @@ void link_beat_send(struct cl_link *l, struct link_beat *b, double now)
 {
     if (l->cfg.role == CL_ROLE_EDGE) {
         edge_beat(l, b, now);
-    } else if (now >= b->next) {
+        free(b->status);
+        b->status = NULL;
+        return;
+    }
+    sync_request_subs(l);
+    if (now >= b->next) {
         if (!atomic_load(&l->standby)) /* the deadline moves on either way: the pump sleeps until it */
             link_send_envelope(l, l->subj[SUB_STATUS], CL_KIND_STATUS, l->instance, b->status ? b->status : "{}",
                                b->status ? b->status_len : 2);

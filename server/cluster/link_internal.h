@@ -84,7 +84,8 @@ struct cl_link {
     struct sub_ctx sctx[SUB_KINDS];
     natsOptions *opts;
     natsConnection *nc;             /* the library locks it: the pump publishes, open/pump subscribe */
-    natsSubscription *subs[SUB_KINDS]; /* open subscribes, close destroys */
+    natsSubscription *subs[SUB_KINDS]; /* open subscribes, close destroys; a sim's request subjects
+                                          (CTL, HELLO, QUERY, PROBE): the pump (un)subscribes them */
 
     natsSubscription *layer_subs[CL_KEYS]; /* edge: pump only (close after the pump has ended) */
     unsigned rng;                   /* reconnect jitter: NATS reconnect thread only */
