@@ -680,6 +680,11 @@ int main(void)
                 cl_sim_set_standby(sim.link, true);
                 struct evwant dw = { &ea, CL_EV_SIM_DOWN, downs2 + 1 };
                 CHECK(spin_until(5, p_event, &dw), "a standby's heartbeats kept the sim up at edge-a");
+                /* ...and takes no request: nobody answers, at once */
+                struct reply_box rs = { 0 };
+                cl_edge_request(ea.link, CL_KIND_CTL, "c8", "{}", 2, h_reply, &rs);
+                CHECK(spin_until(5, p_reply, &rs) && rs.status == CL_E_NO_RESPONDERS,
+                      "request to a standby: status %d (%s)", rs.status, cl_strerror(rs.status));
                 int ups2 = ea.ev[CL_EV_SIM_UP];
                 cl_sim_set_standby(sim.link, false);
                 struct evwant uw = { &ea, CL_EV_SIM_UP, ups2 + 1 };
