@@ -130,11 +130,23 @@ int cl_kv_read(struct cl_kv *kv, char **text, size_t *len, uint64_t *rev)
 }
 
 /* A failed compare-and-set: lost when the record's revision is not the one
- * we expected (the library reports "wrong last sequence" as a plain error). */
-static int failed_cas(struct cl_kv *kv, natsStatus s, uint64_t expected)
+ * we expected (the library reports "wrong last sequence" as a plain error),
+ * unless the record is exactly what we wrote: the write went through and
+ * only its acknowledgement was lost (a timeout), so it is ours at that
+ * revision (*rev). */
+static int failed_cas(struct cl_kv *kv, natsStatus s, uint64_t expected, const char *text, size_t len,
+                      uint64_t *rev)
 {
     uint64_t now = 0;
-    int rc = read_locked(kv, NULL, NULL, &now);
+    char *cur = NULL;
+    size_t clen = 0;
+    int rc = read_locked(kv, &cur, &clen, &now);
+    bool mine = rc == 1 && clen == len && memcmp(cur, text, len) == 0;
+    free(cur);
+    if (mine) {
+        *rev = now;
+        return CL_OK;
+    }
     if (rc == 1 && now != expected)
         return CL_E_LOST;
     if (rc == 0 && expected != 0)
@@ -148,11 +160,9 @@ int cl_kv_claim(struct cl_kv *kv, uint64_t seen, const char *text, size_t len)
     uint64_t rev = 0;
     natsStatus s = seen ? kvStore_Update(&rev, kv->store, KV_KEY, text, (int)len, seen)
                         : kvStore_Create(&rev, kv->store, KV_KEY, text, (int)len);
-    int rc = CL_OK;
-    if (s == NATS_OK)
+    int rc = s == NATS_OK ? CL_OK : failed_cas(kv, s, seen, text, len, &rev);
+    if (rc == CL_OK)
         kv->rev = rev;
-    else
-        rc = failed_cas(kv, s, seen);
     pthread_mutex_unlock(&kv->lock);
     return rc;
 }
@@ -166,9 +176,10 @@ int cl_kv_write(struct cl_kv *kv, const char *text, size_t len)
     } else {
         uint64_t rev = 0;
         natsStatus s = kvStore_Update(&rev, kv->store, KV_KEY, text, (int)len, kv->rev);
-        if (s == NATS_OK)
+        rc = s == NATS_OK ? CL_OK : failed_cas(kv, s, kv->rev, text, len, &rev);
+        if (rc == CL_OK)
             kv->rev = rev;
-        else if ((rc = failed_cas(kv, s, kv->rev)) == CL_E_LOST)
+        else if (rc == CL_E_LOST)
             kv->rev = 0; /* we hold nothing any more */
     }
     pthread_mutex_unlock(&kv->lock);

@@ -27,14 +27,16 @@ void cl_sim_set_standby(struct cl_link *l, bool standby)
 static void sync_request_subs(struct cl_link *l)
 {
     static const enum sub_kind req[] = { SUB_CTL, SUB_HELLO, SUB_QUERY, SUB_PROBE };
-    bool on = !atomic_load(&l->standby);
+    bool on = !atomic_load(&l->standby), added = false;
     for (size_t i = 0; i < sizeof req / sizeof *req; i++) {
         natsSubscription **sub = &l->subs[req[i]];
         if (on && !*sub)
-            *sub = link_subscribe(l, l->subj[req[i]], req[i]); /* NULL: tried again next round */
+            added |= (*sub = link_subscribe(l, l->subj[req[i]], req[i])) != NULL; /* NULL: again next round */
         else if (!on && *sub)
             link_unsubscribe(sub);
     }
+    if (added) /* the server has them before the first heartbeat tells the edges we act */
+        natsConnection_FlushTimeout(l->nc, 1000);
 }
 
 void cl_sim_set_status(struct cl_link *l, const char *text, size_t len)

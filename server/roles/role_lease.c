@@ -32,6 +32,7 @@ struct role_lease {
     pthread_mutex_t wlock;         /* one record write at a time: a renewal never writes an older state
                                       over the builder's newer one */
     _Atomic int state;             /* enum lease_state: the lease thread and persist write, any thread reads */
+    _Atomic double written_t;      /* mono time of our last successful claim or write (the lease's start) */
     /* lease thread only */
     uint64_t seen_rev;             /* the record's revision last read... */
     double seen_t;                 /* ...and when it was first seen (mono) */
@@ -59,7 +60,10 @@ enum lease_state role_lease_state(struct role_lease *ls) { return (enum lease_st
 bool role_lease_acting(struct role_lease *ls)
 {
     enum lease_state s = role_lease_state(ls);
-    return s == LEASE_ACTIVE || s == LEASE_SOLO;
+    /* Active only while the lease is surely ours: a holder stalled (SIGSTOP,
+     * starved) past LEASE_SAFE_S stops answering and publishing at once when
+     * it runs again, before its next write finds out whether it lost it. */
+    return s == LEASE_SOLO || (s == LEASE_ACTIVE && mono_now() - atomic_load(&ls->written_t) < LEASE_SAFE_S);
 }
 
 /* {"holder":..,"name":..,"released":..,"params":{..},"params_version":V,
@@ -147,9 +151,12 @@ int role_lease_persist(struct role_lease *ls, const struct ocean_params *p, uint
         struct cl_kv *kv = ls->kv;
         pthread_mutex_unlock(&ls->lock);
         char *text = record_text(ls, p, version, sim_time, sim_seq(ls->sim), false);
+        double t0 = mono_now();
         rc = text ? cl_kv_write(kv, text, strlen(text)) : CL_E_NOMEM;
         free(text);
-        if (rc == CL_E_LOST)
+        if (rc == CL_OK)
+            atomic_store(&ls->written_t, t0);
+        else if (rc == CL_E_LOST)
             step_down(ls, "another simulation took the lease");
     }
     if (rc == CL_OK) {
@@ -201,9 +208,11 @@ static void take_over(struct role_lease *ls, const struct record *rec, uint64_t 
         now.seq = their_seq > seq ? their_seq : seq;
     }
     char *text = record_text(ls, &p, v, now.sim_time, now.seq, false);
+    double t0 = mono_now();
     int rc = text ? cl_kv_claim(ls->kv, rev, text, strlen(text)) : CL_E_NOMEM;
     free(text);
     if (rc == CL_OK) {
+        atomic_store(&ls->written_t, t0);
         if (rec)
             adopt(ls, &now);
         set_state(ls, LEASE_ACTIVE);
@@ -289,13 +298,19 @@ static void *lease_main(void *arg)
                 LOGW("cluster: JetStream: %s (trying again)", err);
             }
         } else if (st == LEASE_ACTIVE && now - ls->renew_t >= LEASE_RENEW_S) {
+            /* Silent while the lease may have run out (role_lease_acting); the
+             * renewal below tells whether it is still ours. */
+            cl_sim_set_standby(ls->link, now - atomic_load(&ls->written_t) >= LEASE_SAFE_S);
             pthread_mutex_lock(&ls->wlock);
             int rc = role_lease_state(ls) == LEASE_ACTIVE ? write_record(ls, false) : CL_OK;
             pthread_mutex_unlock(&ls->wlock);
-            if (rc == CL_OK)
+            if (rc == CL_OK) {
                 ls->renew_t = now;
-            else if (rc == CL_E_LOST)
+                atomic_store(&ls->written_t, now);
+                cl_sim_set_standby(ls->link, false);
+            } else if (rc == CL_E_LOST) {
                 step_down(ls, "another simulation took the lease");
+            }
         } else if (st == LEASE_STANDBY) {
             standby_round(ls, now);
         }

@@ -24,6 +24,8 @@
 
 #define LEASE_RENEW_S 0.25  /* the holder rewrites the record this often */
 #define LEASE_EXPIRE_S 1.0  /* a record unchanged this long (by the standby's clock): its holder is gone */
+#define LEASE_SAFE_S 0.75   /* the holder acts only this long after its last successful write (by its own
+                               clock): a holder that was stalled goes silent before a standby may take over */
 
 enum lease_state { LEASE_STARTING, LEASE_SOLO, LEASE_STANDBY, LEASE_ACTIVE };
 
