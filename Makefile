@@ -19,6 +19,8 @@ CFLAGS  += -std=c11 -D_GNU_SOURCE $(WARN) -pthread
 #   server/<folder>/ sees its own folder and those below it, in this order:
 #   base (log, clock, metrics, files) and control (messages) -> config, query
 #   -> tick -> net -> roles (+ cluster) -> main.c.
+# server/common/ (the work pool, pool.h) is seen by the library and the
+# daemon alike and sees nothing of either.
 # Tools, tests and benchmarks see the daemon's folders and the library's
 # public header folder server/sim/include; the library's own tests add
 # server/sim (mk/sim.mk).
@@ -29,7 +31,7 @@ INC_query   := -Iserver/query $(INC_base) $(INC_control) -Iserver/common
 INC_tick    := -Iserver/tick $(INC_query)
 INC_net     := -Iserver/net $(INC_tick) -Iserver/config
 INC_roles   := -Iserver/roles $(INC_net) -Iserver/cluster
-INC         := $(INC_roles)
+INC         := $(INC_roles) -Iserver
 $(foreach d,base control config query tick net roles,\
   $(eval $(BUILD)/obj/server/$(d)/%.o $(BUILD)/san/server/$(d)/%.o: INC := $$(INC_$(d))))
 $(BUILD)/obj/server/sim/%.o $(BUILD)/san/server/sim/%.o: INC := -Iserver/sim/include -Iserver/sim -Iserver/common
@@ -64,7 +66,7 @@ deps:
 # then the others one at a time, alone on the machine: CPU-heavy ones (ASan,
 # valgrind, TSan, fuzz, SwiftShader) and the hostile battery (it measures
 # the observer's share of frames; it runs its light cases 2 at a time itself).
-TESTS_CONCURRENT := test-cluster-roles test-daemon test-tap test-ops
+TESTS_CONCURRENT := test-cluster-roles test-daemon test-tap test-ops test-python test-blender
 TEST_LOGS        := $(BUILD)/test-logs
 test: deps
 	@$(MAKE) --no-print-directory -j$$(nproc) build-all

@@ -33,25 +33,14 @@
 #include "ocean.h"
 #endif
 
+#include "bench_time.h"
+
 /* Tile side of the tiled runs: the daemon's default (128) unless --tile-size T. */
 static int tile_size = 128;
 
-/* Thread CPU time: "MB/s per core" on a shared machine, where wall time would
- * also count the time other processes hold the core. */
-static double now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-    return ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-static double median(double *v, int n) { qsort(v, n, sizeof *v, cmp_d); return v[n / 2]; }
-
+/* Timings are thread CPU time (thread_cpu_s): "MB/s per core" on a shared
+ * machine, where wall time would also count the time other processes hold
+ * the core. */
 /* ---- synthetic sea: Phillips spectrum, wind 12 m/s along x, L = 256 m ---- */
 static unsigned long long rng_state = 0x9e3779b97f4a7c15ull;
 static double urand(void)
@@ -163,18 +152,18 @@ static struct stats bench_oceand(const float *f, int n, int tile, int field, flo
         oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE);
         struct oc_frame_header fh = { .seq = 1, .n = (uint16_t)n, .tile_size = (uint16_t)tile, .patch_size = 256,
                                       .tile_count = (uint16_t)(grid * grid) };
-        double t0 = now();
+        double t0 = thread_cpu_s();
         oc_frame_header_write(buf.data, &fh);
         buf.len = OC_FRAME_HEADER_SIZE;
         for (int tz = 0; tz < grid; tz++)
             for (int tx = 0; tx < grid; tx++)
                 if (oc_encode_tile(e, f, n, tile, tx, tz, 0, (enum oc_field)field, bound, &buf)) abort();
-        te[r] = now() - t0;
+        te[r] = thread_cpu_s() - t0;
         float *ctx[1] = { dec };
         struct oc_frame_header out;
-        t0 = now();
+        t0 = thread_cpu_s();
         if (oc_decode_frame(d, buf.data, buf.len, &out, check_tile, ctx)) abort();
-        td[r] = now() - t0;
+        td[r] = thread_cpu_s() - t0;
     }
     struct stats s = { .bits = buf.len * 8.0 / ((double)n * n) };
     if (frames_dir) {
@@ -202,12 +191,12 @@ static struct stats bench_zstd_raw(const float *f, int n, int reps)
     ZSTD_DCtx *dc = ZSTD_createDCtx();
     size_t clen = 0;
     for (int r = 0; r < reps; r++) {
-        double t0 = now();
+        double t0 = thread_cpu_s();
         clen = ZSTD_compressCCtx(cc, c, cap, f, sz, 1);
-        te[r] = now() - t0;
-        t0 = now();
+        te[r] = thread_cpu_s() - t0;
+        t0 = thread_cpu_s();
         if (ZSTD_decompressDCtx(dc, dec, sz, c, clen) != sz) abort();
-        td[r] = now() - t0;
+        td[r] = thread_cpu_s() - t0;
     }
     struct stats s = { .bits = clen * 8.0 / ((double)n * n), .max_err = memcmp(dec, f, sz) ? NAN : 0 };
     s.enc = sz / 1e6 / median(te, reps);
@@ -226,15 +215,15 @@ static size_t zfp_run(const float *f, int n, double tol, float *dec, void *buf, 
     zfp_stream_set_accuracy(zs, tol);
     bitstream *bs = stream_open(buf, cap);
     zfp_stream_set_bit_stream(zs, bs);
-    double t0 = now();
+    double t0 = thread_cpu_s();
     zfp_stream_rewind(zs);
     size_t len = zfp_compress(zs, field);
-    *t_enc = now() - t0;
+    *t_enc = thread_cpu_s() - t0;
     zfp_field *out = zfp_field_2d(dec, zfp_type_float, n, n);
-    t0 = now();
+    t0 = thread_cpu_s();
     zfp_stream_rewind(zs);
     if (!zfp_decompress(zs, out)) len = 0;
-    *t_dec = now() - t0;
+    *t_dec = thread_cpu_s() - t0;
     zfp_field_free(out); zfp_field_free(field);
     stream_close(bs); zfp_stream_close(zs);
     return len;
@@ -354,7 +343,7 @@ static void bench_streams(int n, int interval)
                 struct oc_frame_header fh = { .seq = 1000 + (uint64_t)tick, .sim_time = tick / 30.0, .n = (uint16_t)n,
                                               .tile_size = (uint16_t)tile, .patch_size = 256,
                                               .tile_count = (uint16_t)(grid * grid) };
-                double t0 = now();
+                double t0 = thread_cpu_s();
                 if (oc_stream_encode(r->st, e, field, fh.seq)) abort();
                 r->buf.len = 0;
                 oc_buf_reserve(&r->buf, OC_FRAME_HEADER_SIZE);
@@ -369,23 +358,23 @@ static void bench_streams(int n, int interval)
                         memcpy(r->buf.data + r->buf.len, p, len);
                         r->buf.len += len;
                     }
-                r->t_enc += now() - t0;
+                r->t_enc += thread_cpu_s() - t0;
                 r->bytes += (double)r->buf.len;
                 for (size_t k = 0; k < r->buf.len; k++) r->hash = (r->hash ^ r->buf.data[k]) * 0x100000001b3ull;
                 /* The intra codec on the same fresh field, for a same-conditions speed ratio. */
-                t0 = now();
+                t0 = thread_cpu_s();
                 for (int tz = 0; tz < grid; tz++)
                     for (int tx = 0; tx < grid; tx++) {
                         intra.len = 0;
                         if (oc_encode_tile(e_intra, field, n, tile, tx, tz, 0, (enum oc_field)f, bounds[b], &intra)) abort();
                         r->intra_bytes += (double)intra.len;
                     }
-                r->t_intra += now() - t0;
+                r->t_intra += thread_cpu_s() - t0;
                 float *ctx[1] = { r->dec_field };
                 struct oc_frame_header out;
-                t0 = now();
+                t0 = thread_cpu_s();
                 int rc = oc_decode_frame(r->dec, r->buf.data, r->buf.len, &out, stream_tile_cb, ctx);
-                r->t_dec += now() - t0;
+                r->t_dec += thread_cpu_s() - t0;
                 if (rc) { fprintf(stderr, "bench_codec: stream decode: %s\n", oc_strerror(rc)); abort(); }
                 r->max_err = fmax(r->max_err, max_err(field, r->dec_field, (size_t)n * n));
                 if (r->dump) {

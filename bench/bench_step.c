@@ -35,33 +35,7 @@
 
 #include "ocean_internal.h"
 
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-/* CPU time of all threads of the process: on a shared machine it tells
- * how much of the wall time was ours. */
-static double cpu_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(double *v, int n)
-{
-    qsort(v, n, sizeof *v, cmp_double);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
+#include "bench_time.h"
 
 static int reps_for(int n)
 {
@@ -245,14 +219,14 @@ static void bench_pack(int n, int threads, const char *wisdom)
 }
 
 /* Why the transposition between the z and the row pass is an FFTW rank-0
- * plan (ocean.c, store_plan), and why the spectrum between the passes is
+ * plan (ocean_grid.c, store_plan), and why the spectrum between the passes is
  * block-major. One spectrum's two passes (N/2 columns, N rows), one
  * thread, process CPU time, four ways:
  *   ours:      z pass in place on a contiguous tile, then the copy into the
  *              block-major spectrum (FFTW rank-0 guru plan), then the row
  *              c2r reading blocks of 8 interleaved rows;
  *   ours with the copy as our own loop (memcpy of 8 complex per column),
- *              as before this round; copy_only_* time the copy alone;
+ *              the alternative to the FFTW copy plan; copy_only_* time the copy alone;
  *   colmajor:  FFTW's z pass out of place straight into a column-major
  *              spectrum, row c2r reading it with input stride N;
  *   rowmajor:  FFTW's z pass out of place into a row-major spectrum (output
@@ -482,7 +456,7 @@ static void bench_cascades(int n, const char *wisdom)
  *   without that part of our own work (ocean_step_parts); foam: the step
  *   minus the six-field step; terms_whole: the step with the Jacobian's
  *   three terms written as whole N x N fields and combined afterwards (the
- *   layout before this round) instead of in the worker's cache-sized
+ *   simple layout) instead of in the worker's cache-sized
  *   scratch. The parts are differences of two timings: on a shared machine
  *   the fastest repetition of each variant (min) is the least noisy, so
  *   the parts use that; step/fftw also give medians. own_sum: the parts'
@@ -594,7 +568,7 @@ static void bench_set(int n, int cascades, const char *wisdom)
     ocean_free(o);
 }
 
-/* The capacity rows (bench/load.py --capacity, README): the step exactly as
+/* The capacity rows (bench/load.py --capacity, docs/daemon.md): the step exactly as
  * the daemon's producer runs it for one client's fields (cascade 0 only,
  * ocean_step_cascades, no foam unless asked; default parameters, so three
  * cascades exist but only cascade 0 is stepped), against the bare FFTW

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Cluster benchmark (issue 12, docs/scaling.md): one `oceand --role sim` and 1, 2, 3
+"""Cluster benchmark (docs/scaling.md): one `oceand --role sim` and 1, 2, 3
 `--role edge` daemons with a nats-server, all on this machine, K clients per edge
 (build/load_client, one per edge), against `--role all` with the same K. One JSON line per run:
   {"bench":"cluster","mode":"cluster","edges":E,"clients_per_edge":K,"delivered_min":..,
@@ -15,47 +15,24 @@ import argparse
 import json
 import os
 import shutil
-import socket
+import signal
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from load import cpu_seconds, free_port, metric  # noqa: E402
-
-NATS_BIN = shutil.which("nats-server") or "/usr/sbin/nats-server"
-
-
-def wait_http(port, pred=lambda j: True, timeout=20):
-    deadline = time.time() + timeout
-    while time.time() < deadline:
-        try:
-            j = json.loads(urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=1).read())
-            if pred(j):
-                return
-        except (OSError, ValueError):
-            pass
-        time.sleep(0.05)
-    raise RuntimeError("port %d not ready" % port)
-
-
-def start(cmd, log):
-    return subprocess.Popen(cmd, stdout=log, stderr=log)
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "common"))
+from load import cpu_seconds, metric  # noqa: E402
+import oceand_proc  # noqa: E402
 
 
 def stop(procs):
+    """SIGTERM each (5 s each, then SIGKILL) and remove what they leave."""
     for p in procs:
-        if p.poll() is None:
-            p.terminate()
-    for p in procs:
-        try:
-            p.wait(5)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
+        p.stop(signal.SIGTERM, 5)
+        p.close()
 
 
 def measure(args, ports, pids, k, sim_port):
@@ -87,13 +64,10 @@ def measure(args, ports, pids, k, sim_port):
 
 def run_all(args, k):
     tmp = tempfile.mkdtemp(prefix="oceand-bench-cluster-")
-    log = open(os.path.join(tmp, "all.log"), "wb")
-    port = free_port()
-    d = start([args.oceand, "--port", str(port), "--state-file", "none", "--web-root", tmp, "--max-clients", str(k + 16),
-               "--log-level", "warn", "--resolution", str(args.n)], log)
+    d = oceand_proc.Oceand(args.oceand, "--state-file", "none", "--web-root", tmp, "--max-clients", str(k + 16),
+                           "--log-level", "warn", "--resolution", str(args.n), tmp=tmp, own_tmp=True, name="all")
     try:
-        wait_http(port)
-        res, cpu, _ = measure(args, [port], {"daemon": d.pid}, k, None)
+        res, cpu, _ = measure(args, [d.port], {"daemon": d.pid}, k, None)
         r = res[0]
         print(json.dumps({"bench": "cluster", "mode": "all", "edges": 0, "clients_per_edge": k, "N": args.n,
                           "delivered_min": r["delivered"], "lat_p50_ms": r["lat_p50_ms"], "lat_p99_ms": r["lat_p99_ms"],
@@ -101,41 +75,28 @@ def run_all(args, k):
                           "loadavg_1m": round(os.getloadavg()[0], 2)}), flush=True)
     finally:
         stop([d])
-        log.close()
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def run_cluster(args, edges, k):
     tmp = tempfile.mkdtemp(prefix="oceand-bench-cluster-")
-    log = open(os.path.join(tmp, "cluster.log"), "wb")
-    nport = free_port()
-    url = "nats://127.0.0.1:%d" % nport
-    procs = [start([NATS_BIN, "-a", "127.0.0.1", "-p", str(nport)], log)]
+    procs = []
     try:
-        for _ in range(200):
-            try:
-                socket.create_connection(("127.0.0.1", nport), timeout=0.5).close()
-                break
-            except OSError:
-                time.sleep(0.05)
-        sport = free_port()
-        sim = start([args.oceand, "--role", "sim", "--nats", url, "--port", str(sport), "--state-file", "none",
-                     "--web-root", tmp, "--log-level", "warn", "--resolution", str(args.n)], log)
+        nats = oceand_proc.Nats(tmp)
+        procs.append(nats)
+        sim = oceand_proc.Oceand(args.oceand, "--role", "sim", "--nats", nats.url, "--state-file", "none",
+                                 "--web-root", tmp, "--log-level", "warn", "--resolution", str(args.n),
+                                 tmp=tmp, name="sim")
         procs.append(sim)
-        wait_http(sport)
-        eports, eprocs = [], []
-        for _ in range(edges):
-            p = free_port()
-            e = start([args.oceand, "--role", "edge", "--nats", url, "--port", str(p), "--state-file", "none",
-                       "--web-root", tmp, "--max-clients", str(k + 16), "--log-level", "warn"], log)
+        eprocs = []
+        for i in range(edges):
+            e = oceand_proc.Oceand(args.oceand, "--role", "edge", "--nats", nats.url, "--state-file", "none",
+                                   "--web-root", tmp, "--max-clients", str(k + 16), "--log-level", "warn",
+                                   tmp=tmp, name="edge%d" % i, ready=lambda j: j.get("cluster") == "ok")
             procs.append(e)
-            eports.append(p)
             eprocs.append(e)
-        for p in eports:
-            wait_http(p, lambda j: j.get("cluster") == "ok")
-        pids = {"sim": sim.pid, "nats": procs[0].pid}
+        pids = {"sim": sim.pid, "nats": nats.pid}
         pids.update({"edge%d" % i: e.pid for i, e in enumerate(eprocs)})
-        res, cpu, nat = measure(args, eports, pids, k, sport)
+        res, cpu, nat = measure(args, [e.port for e in eprocs], pids, k, sim.port)
         out = {"bench": "cluster", "mode": "cluster", "edges": edges, "clients_per_edge": k, "N": args.n,
                "delivered_min": min(r["delivered"] for r in res),
                "lat_p50_ms": round(statistics.median(r["lat_p50_ms"] for r in res), 2),
@@ -148,7 +109,6 @@ def run_cluster(args, edges, k):
         print(json.dumps(out), flush=True)
     finally:
         stop(procs[::-1])
-        log.close()
         shutil.rmtree(tmp, ignore_errors=True)
 
 

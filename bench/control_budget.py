@@ -15,7 +15,6 @@ defaults; the others with theirs (budget 2000) and with --control-budget 300.
 import argparse
 import json
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -67,7 +66,7 @@ def run(oceand, label, extra):
     finally:
         obs.close()
         d.stop()
-        shutil.rmtree(d.tmp, ignore_errors=True)
+        d.close()
 
 
 def main():

@@ -10,26 +10,21 @@ One oceand on loopback, one WebSocket client; for each wind speed, the default f
 import argparse
 import asyncio
 import json
-import shutil
-import socket
-import subprocess
+import os
+import sys
 import tempfile
 import time
-import urllib.request
 
 import websockets
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "common"))
+import oceand_proc  # noqa: E402
 
 CASES = [
     ("default", {"fields": ["height", "dx", "dz"], "field_lod": {}}),
     ("foam_lod0", {"fields": ["height", "dx", "dz", "foam"], "field_lod": {}}),
     ("foam_lod2", {"fields": ["height", "dx", "dz", "foam"], "field_lod": {"foam": 2}}),
 ]
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 async def measure(port, wind, sub, seconds):
@@ -56,24 +51,19 @@ async def main():
     ap.add_argument("--seconds", type=float, default=4)
     ap.add_argument("--winds", default="8,16,25")
     a = ap.parse_args()
-    port, d = free_port(), tempfile.mkdtemp()
-    p = subprocess.Popen([a.oceand, "--port", str(port), "--state-file", d + "/state.json", "--log-level", "warn"])
+    tmp = tempfile.mkdtemp(prefix="oceand-foam-")
+    p = oceand_proc.Oceand(a.oceand, "--state-file", os.path.join(tmp, "state.json"), "--log-level", "warn",
+                           tmp=tmp, own_tmp=True)
+    port = p.port
     try:
-        for _ in range(100):
-            try:
-                urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=1)
-                break
-            except OSError:
-                await asyncio.sleep(0.1)
         for wind in [float(w) for w in a.winds.split(",")]:
             for name, sub in CASES:
                 kbps, fps = await measure(port, wind, sub, a.seconds)
                 print(json.dumps({"bench": "foam_bytes", "wind": wind, "case": name,
                                   "kBps": round(kbps, 1), "frames_per_s": round(fps, 1)}), flush=True)
     finally:
-        p.terminate()
-        p.wait()
-        shutil.rmtree(d, ignore_errors=True)
+        p.stop()
+        p.close()
 
 
 asyncio.run(main())

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Issue 16 defect 2's repro as a benchmark: N = 512, an observer, then 25
+"""Many distinct layers against the encode budget, as a benchmark: N = 512, an observer, then 25
 viewers asking together for every field x LOD x bound (25 subscription groups
 of six fields, 150 layers). Prints one JSON line: what was admitted/refused,
 and over a 5 s window the observer's frames/s, tick overruns, mean encode and
@@ -72,6 +72,7 @@ def main():
         if obs:
             obs.close()
         d.stop()
+        d.close()
 
 
 if __name__ == "__main__":

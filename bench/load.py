@@ -8,25 +8,22 @@ Clients subscribe with "temporal": true (codec 3, as the web client does) unless
 mbytes_per_s is all clients together, mbytes_per_s_per_client the mean per client.
 
     /usr/bin/python3 bench/load.py [--runs 256:200,512:100] [--window 10]
-    /usr/bin/python3 bench/load.py --capacity      # the issue-15 capacity table (make bench-capacity)
+    /usr/bin/python3 bench/load.py --capacity      # the capacity rows (make bench-capacity)
 Client 0 sets the wind (11 <-> 12 m/s) every --set-interval s: 0.3 by default (someone
-steering); 0 under --capacity (issue 15's one viewer; pass --set-interval 0.3 to add steering).
+steering); 0 under --capacity (one viewer watching; pass --set-interval 0.3 to add steering).
 """
 import argparse
 import json
 import os
 import re
-import socket
 import subprocess
+import sys
 import tempfile
 import time
 import urllib.request
 
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "common"))
+import oceand_proc  # noqa: E402
 
 
 def metric(port, name):
@@ -80,19 +77,12 @@ def bucket_median(b0, b1):
 
 def run(args, n, k, fields=None):
     tmp = tempfile.mkdtemp(prefix="oceand-bench-")
-    port = free_port()
-    log = open(os.path.join(tmp, "oceand.log"), "wb")
-    d = subprocess.Popen([args.oceand, "--port", str(port), "--resolution", str(n), "--state-file", "none",
-                          "--web-root", tmp, "--max-clients", str(k + 16), "--log-level", "warn"]
-                         + args.oceand_args.split(),
-                         stdout=log, stderr=log)
+    # up to 2 min to be ready: the first start at a new N plans FFTW (then cached)
+    d = oceand_proc.Oceand(args.oceand, "--resolution", str(n), "--state-file", "none",
+                           "--web-root", tmp, "--max-clients", str(k + 16), "--log-level", "warn",
+                           *args.oceand_args.split(), tmp=tmp, own_tmp=True, ready_timeout=120)
+    port = d.port
     try:
-        for _ in range(2400):             # up to 2 min: the first start at a new N plans FFTW (then cached)
-            try:
-                urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=1).read()
-                break
-            except OSError:
-                time.sleep(0.05)
         sub = {"type": "subscribe", "temporal": not args.intra}   # temporal: as the web client does
         if fields:
             sub["fields"] = fields
@@ -142,12 +132,8 @@ def run(args, n, k, fields=None):
                "loadavg_1m": round(os.getloadavg()[0], 2)}   # this machine is shared: context for the numbers
         print(json.dumps(res), flush=True)
     finally:
-        d.terminate()
-        try:
-            d.wait(5)
-        except subprocess.TimeoutExpired:
-            d.kill()
-        log.close()
+        d.stop(timeout=5)
+        d.close()
 
 
 def main():
@@ -163,7 +149,7 @@ def main():
     ap.add_argument("--no-query", action="store_true", help="skip the point query / probe runs (query_load.py)")
     import query_load
     query_load.add_args(ap)
-    ap.add_argument("--capacity", action="store_true", help="issue 15's capacity rows, --repeat times each, "
+    ap.add_argument("--capacity", action="store_true", help="the capacity rows (one viewer each: how far N and fields go), --repeat times each, "
                     "then one median line per row")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--base", default="",
@@ -173,7 +159,7 @@ def main():
     ap.add_argument("--set-interval", type=float, default=None,
                     help="seconds between client 0's wind sets (default 0.3; --capacity: 0, the sea left alone)")
     args = ap.parse_args()
-    if args.set_interval is None:   # capacity is issue 15's one viewer watching; load has someone steering
+    if args.set_interval is None:   # capacity is one viewer watching; load has someone steering
         args.set_interval = 0.0 if args.capacity else 0.3
     if args.capacity:
         capacity(args)
@@ -185,7 +171,7 @@ def main():
         query_load.bench(args)   # query latency for 1/16/256 points, tick time with 100 probe clients
 
 
-# Issue 15's targets: (N, clients, fields subscribed at 1 cm, LOD 0).
+# The capacity rows and their targets: (N, clients, fields subscribed at 1 cm, LOD 0).
 SIX = ["height", "dx", "dz", "slope_x", "slope_z", "jacobian"]
 CAPACITY_ROWS = [
     (512, 1, SIX),

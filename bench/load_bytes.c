@@ -16,10 +16,11 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-static double cpu(void){struct timespec t; clock_gettime(CLOCK_THREAD_CPUTIME_ID,&t); return t.tv_sec+t.tv_nsec*1e-9;}
 #include "oc_proto.h"
 #include "ocean.h"
 #include "params.h"
+
+#include "bench_time.h"
 static int cb(void *user, const struct oc_frame_header *fh, const struct oc_tile_header *th, const float *s)
 {
     float *d = user; int n = fh->n;
@@ -60,7 +61,7 @@ int main(int argc, char **argv)
             if (change && policy == 3) oc_stream_sea_changed(st[f]);
             const float *field = ocean_field(o, f);
             struct oc_frame_header fh = { .seq = 1000 + (uint64_t)tick, .n = n, .tile_size = tile, .patch_size = 256, .tile_count = (uint16_t)(grid * grid) };
-            double t0 = cpu(); if (oc_stream_encode(st[f], e, field, fh.seq)) abort(); tenc += cpu() - t0; if (change) tchg += cpu() - t0;
+            double t0 = thread_cpu_s(); if (oc_stream_encode(st[f], e, field, fh.seq)) abort(); tenc += thread_cpu_s() - t0; if (change) tchg += thread_cpu_s() - t0;
             buf.len = 0; oc_buf_reserve(&buf, 48); oc_frame_header_write(buf.data, &fh); buf.len = 48;
             for (int tz = 0; tz < grid; tz++) for (int tx = 0; tx < grid; tx++) {
                 const uint8_t *p; size_t len; oc_stream_tile(st[f], tx, tz, &p, &len);

@@ -30,6 +30,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "bench_time.h"
+
 struct client {
     int fd, idx;
     bool open;
@@ -60,13 +62,6 @@ static uint64_t set_seq;
 static uint32_t set_version;
 static double set_samples[4096];
 static int nset, set_value;
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
 
 static uint64_t unix_us(void)
 {
@@ -219,17 +214,13 @@ static int open_client(struct client *c, int port)
     return 0;
 }
 
-static int cmp(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
+/* Nearest-rank percentile (p50 included: the rank's value, as the JSON
+ * figures always were), not bench_time.h's median. */
 static double pct(double *v, size_t n, double p)
 {
     if (!n)
         return -1;
-    qsort(v, n, sizeof *v, cmp);
+    qsort(v, n, sizeof *v, bench_cmp_double);
     return v[(size_t)(p * (double)(n - 1) + 0.5)];
 }
 

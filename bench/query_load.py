@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Point query and probe benchmark for oceand (issue 14), part of `make bench-load`.
+"""Point query and probe benchmark for oceand (docs/query.md), part of `make bench-load`.
 One JSON line per run:
 
   {"bench":"query","N":256,"points":16,"p50_ms":..,"p99_ms":..,"samples":..}
@@ -19,41 +19,28 @@ import asyncio
 import json
 import os
 import random
-import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 
 import websockets
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from load import free_port, metric  # noqa: E402
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "common"))
+from load import metric  # noqa: E402
+import oceand_proc  # noqa: E402
 
 
 def start(args, n, extra=()):
     tmp = tempfile.mkdtemp(prefix="oceand-qbench-")
-    port = free_port()
-    log = open(os.path.join(tmp, "oceand.log"), "wb")
-    d = subprocess.Popen([args.oceand, "--port", str(port), "--resolution", str(n), "--state-file", "none",
-                          "--web-root", tmp, "--max-clients", "1000", "--log-level", "warn"] + list(extra),
-                         stdout=log, stderr=log)
-    for _ in range(400):
-        try:
-            urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=1).read()
-            break
-        except OSError:
-            time.sleep(0.05)
-    return d, port, log
+    return oceand_proc.Oceand(args.oceand, "--resolution", str(n), "--state-file", "none",
+                              "--web-root", tmp, "--max-clients", "1000", "--log-level", "warn", *extra,
+                              tmp=tmp, own_tmp=True)
 
 
-def stop(d, log):
-    d.terminate()
-    try:
-        d.wait(5)
-    except subprocess.TimeoutExpired:
-        d.kill()
-    log.close()
+def stop(d):
+    d.stop(timeout=5)
+    d.close()
 
 
 QUIET = {"type": "subscribe", "fields": ["height"], "lod": 4, "tiles": [[0, 0]], "max_rate": 1}
@@ -135,8 +122,9 @@ def snapshot(port):
 
 def bench(args):
     for n in (int(x) for x in args.ns.split(",")):
-        d, port, log = start(args, n, ["--query-budget", "1000000", "--control-rate", "1000", "--control-budget", "1e7",
-                                       "--control-burst", "1000"] + args.oceand_args.split())
+        d = start(args, n, ["--query-budget", "1000000", "--control-rate", "1000", "--control-budget", "1e7",
+                            "--control-burst", "1000"] + args.oceand_args.split())
+        port = d.port
         try:
             for pts in (1, 16, 256):
                 samples = args.samples if pts < 256 else max(10, args.samples // 4)
@@ -146,10 +134,11 @@ def bench(args):
                                   "ms_per_point_p50": round(pct(lat, 0.5) / pts, 3),
                                   "loadavg_1m": round(os.getloadavg()[0], 2)}), flush=True)
         finally:
-            stop(d, log)
+            stop(d)
         if args.probe_clients:
-            d, port, log = start(args, n, ["--probe-max-total", str(args.probe_clients * args.probe_points)]
-                                 + args.oceand_args.split())
+            d = start(args, n, ["--probe-max-total", str(args.probe_clients * args.probe_points)]
+                      + args.oceand_args.split())
+            port = d.port
             try:
                 # Baseline: the same clients connected, no probes; then with probes.
                 _, b0, b1 = asyncio.run(probe_clients(port, args.probe_clients, 0, args.window, args.warmup))
@@ -174,7 +163,7 @@ def bench(args):
                     "probe_msgs_per_s_median": round(sorted(rates)[len(rates) // 2], 1),
                     "window_s": args.window, "loadavg_1m": round(os.getloadavg()[0], 2)}), flush=True)
             finally:
-                stop(d, log)
+                stop(d)
 
 
 def add_args(ap):

@@ -10,13 +10,13 @@ if compgen -G "fuzz/regressions/$t/*" >/dev/null; then
   "$bin" fuzz/regressions/$t/* 2>"$build/fuzz/regress-$t.log" \
     || { tail -30 "$build/fuzz/regress-$t.log"; echo "fuzz $t: a regression input fails again"; exit 1; }
 fi
-maxlen=16384; [ "$t" = frame ] && maxlen=65536
+maxlen=16384; { [ "$t" = frame ] || [ "$t" = grid ]; } && maxlen=65536
 # The config loader: an execution costs in proportion to its input (a JSON
 # document), and libFuzzer's length control lets inputs grow to max_len.
 # All 56 keys of the settings tables set at once (20-character strings) take
 # 1.9 KiB, the longest string a setting refuses is 512 bytes and cJSON's
 # nesting limit (1000) is hit within 1001 bytes, so 4 KiB loses no path of
-# the loader; with 16 KiB inputs grew and the rate halved (README, fuzzing).
+# the loader; with 16 KiB inputs grew and the rate halved (docs/reliability.md, "Fuzzing").
 [ "$t" = config ] && maxlen=4096
 # Shallow allocation stacks: most of the time in JSON targets went to
 # recording them; a crash report still has the full stack of the fault.

@@ -29,9 +29,6 @@ TESTS += test-cluster test-cluster-valgrind test-cluster-roles test-cluster-dura
 $(patsubst %.c,$(BUILD)/obj/%.o,$(CLUSTER_SRCS)) $(patsubst %.c,$(BUILD)/san/%.o,$(CLUSTER_SRCS)): \
   INC := -Iserver/cluster -Iproto/c
 
-# Its tests include "cluster/cluster.h" (and layer_gen.h beside them).
-$(BUILD)/obj/tests/cluster/%.o $(BUILD)/san/tests/cluster/%.o: INC := -Iserver -Iserver/cluster -Iproto/c
-
 $(CLUSTER_LIB): $(patsubst %.c,$(BUILD)/obj/%.o,$(CLUSTER_SRCS))
 	@mkdir -p $(dir $@)
 	rm -f $@ && ar rcs $@ $^

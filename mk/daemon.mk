@@ -1,4 +1,4 @@
-# mk/daemon.mk — the oceand daemon (issue 4): binary, integration tests, load bench, `make run`.
+# mk/daemon.mk — the oceand daemon: binary, integration tests, load bench, `make run`.
 
 # Every .c file of the daemon's folders (the simulation library and the
 # cluster transport are libraries of their own: mk/sim.mk, mk/cluster.mk).
@@ -36,11 +36,17 @@ $(BUILD)/san/test_control: $(BUILD)/san/tests/daemon/test_control.o $(CONTROL_OB
 	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
 $(BUILD)/test_seq_guard: $(BUILD)/obj/tests/daemon/test_seq_guard.o $(BUILD)/obj/server/roles/seq_guard.o
 	$(CC) $(CFLAGS) -o $@ $^
+# The tick's pure steps may be tested from inside the folder (its internal header).
+$(BUILD)/obj/tests/daemon/test_frame_want.o: INC += -Iserver/tick
+$(BUILD)/test_frame_want: $(BUILD)/obj/tests/daemon/test_frame_want.o $(BUILD)/obj/server/tick/frame_want.o $(BUILD)/obj/server/tick/capacity.o \
+                        $(CONTROL_OBJ) $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 $(BUILD)/frame_check: $(BUILD)/obj/tests/daemon/frame_check.o $(CONTROL_OBJ) $(OCEAN_LIB) $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 
 # (prerequisites are expanded where a rule is read: the whole list comes first)
-DAEMON_TEST_DEPS := $(BUILD)/test_control $(BUILD)/frame_check $(BUILD)/test_probe $(BUILD)/query_ref $(BUILD)/test_seq_guard
+DAEMON_TEST_DEPS := $(BUILD)/test_control $(BUILD)/frame_check $(BUILD)/test_probe $(BUILD)/query_ref $(BUILD)/test_seq_guard \
+                    $(BUILD)/test_frame_want
 
 # Valgrind for the unit test: zero errors and zero definite leaks (~5 s).
 VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite
@@ -49,6 +55,7 @@ VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-k
 test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	$(BUILD)/test_control
 	$(BUILD)/test_seq_guard
+	$(BUILD)/test_frame_want
 	/usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
 	/usr/bin/python3 tests/daemon/test_temporal.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
 	$(BUILD)/test_probe
@@ -71,12 +78,12 @@ test-daemon-valgrind: $(BUILD)/test_control
 bench-load: $(BUILD)/oceand $(BUILD)/load_client
 	/usr/bin/python3 bench/load.py --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_LOAD_ARGS)
 
-# Issue 15's capacity table (README): N = 1024 six fields, 2048 h/dx/dz, 2048 height,
+# The capacity rows (docs/daemon.md, "Capacity figures"): N = 512 and 1024 six fields, 1024 and 2048 h/dx/dz, 2048 height,
 # 256 with 200 clients; three runs each, then a median line per row (~4 min).
 bench-capacity: $(BUILD)/oceand $(BUILD)/load_client
 	/usr/bin/python3 bench/load.py --capacity --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_CAPACITY_ARGS)
 
-# Issue 16 defect 2's repro (N = 512, 25 viewers asking for every field x LOD x bound):
+# Many distinct layers against the encode budget (N = 512, 25 viewers asking for every field x LOD x bound):
 # admitted/refused, observer frames/s, overruns, encode/tick time, RSS; one JSON line (~15 s).
 bench-layer-flood: $(BUILD)/oceand
 	/usr/bin/python3 bench/layer_flood.py --oceand $(BUILD)/oceand
@@ -90,7 +97,7 @@ run: deps
 $(BUILD)/load_client: $(BUILD)/obj/bench/load_client.o
 	$(CC) $(CFLAGS) -o $@ $^
 
-# Point queries and probes (issue 14): the probe accuracy test and the exact
+# Point queries and probes (docs/query.md): the probe accuracy test and the exact
 # reference the daemon tests compare `query_result` with.
 $(BUILD)/test_probe: $(BUILD)/obj/tests/daemon/test_probe.o $(BUILD)/obj/server/query/probe.o $(CONTROL_OBJ) $(OCEAN_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
@@ -104,3 +111,12 @@ TESTS += test-layout
 .PHONY: test-layout
 test-layout:
 	/usr/bin/python3 tests/layout/test_layout.py .
+
+# The docs and the code say what is true now: no diary of numbered work
+# sessions and no issue-tracker numbers in docs, comments, strings, test
+# names and make targets (tests/layout/test_wording.py has the patterns;
+# it also proves it can fail).
+TESTS += test-wording
+.PHONY: test-wording
+test-wording:
+	/usr/bin/python3 tests/layout/test_wording.py .

@@ -1,16 +1,16 @@
-# mk/hostile.mk — hostile-client battery and churn test (issue 7) against a real
+# mk/hostile.mk — hostile-client battery and churn test (docs/reliability.md) against a real
 # oceand on 127.0.0.1: malformed / nested / huge / compressed / binary messages,
-# set floods, connection storms, stalled, half-open and vanishing clients, and
-# 1000 connect/subscribe/disconnect cycles; since issue 16 also foreign Host
-# headers (DNS rebinding), bad handshakes, unread replies, descriptor exhaustion
-# (ulimit -n), unmasked frames, web-root symlinks, ping floods, illegal control
-# frames, subscription churn, pipelined HTTP, resolution flapping; third
-# battery: log floods on a slow stderr pipe, params fan-out from many
-# controllers, state-file symlink, ulimit -f, SIGUSR1/2, over-long paths,
-# fragment floods, query/probe abuse; layer floods (every field x LOD x bound at
-# N = 512 against the encode budget, issue 16 defect 2); the control budget (50
-# clients of max-size subscribes, a controller's sets).
-# Budget: < 5 min on 2 cores (43 cases). Each case has its own daemon and
+# set floods, connection storms, stalled, half-open and vanishing clients,
+# 1000 connect/subscribe/disconnect cycles, foreign Host headers (DNS
+# rebinding), bad handshakes, unread replies, descriptor exhaustion (ulimit -n),
+# unmasked frames, web-root symlinks, ping floods, illegal control frames,
+# subscription churn, pipelined HTTP, resolution flapping, log floods on a slow
+# stderr pipe, params fan-out from many controllers, state-file symlink,
+# ulimit -f, SIGUSR1/2, over-long paths, fragment floods, query/probe abuse,
+# layer floods (every field x LOD x bound at N = 512 against the encode
+# budget) and the control budget (50 clients of max-size subscribes, a
+# controller's sets).
+# Budget: < 5 min on 2 cores (49 cases). Each case has its own daemon and
 # observer, and most of the battery's wall time is observer windows (a daemon
 # at N = 64 uses ~0.1 core): the light cases run HOSTILE_JOBS (2) processes at
 # once, then the ones that load the daemon (N > 64, floods of clients or sets;

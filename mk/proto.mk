@@ -51,9 +51,9 @@ proto-vectors: $(BUILD)/gen_vectors
 # The benchmark uses the real simulation when its library exists, else a
 # synthetic Phillips-like field; zfp is a benchmark-only peer.
 BENCH_OCEAN := $(if $(wildcard server/sim/ocean.c),1,)
-$(BUILD)/bench_codec: bench/bench_codec.c $(PROTO_LIB) $(if $(BENCH_OCEAN),$(BUILD)/libocean.a)
+$(BUILD)/bench_codec: bench/bench_codec.c bench/bench_time.h $(PROTO_LIB) $(if $(BENCH_OCEAN),$(BUILD)/libocean.a)
 	@mkdir -p $(dir $@)
-	$(CC) $(CFLAGS) $(INC) $(PKG_CFLAGS) $(if $(BENCH_OCEAN),-DHAVE_OCEAN) -o $@ $^ -lzfp -lfftw3f $(PKG_LIBS)
+	$(CC) $(CFLAGS) $(INC) $(PKG_CFLAGS) $(if $(BENCH_OCEAN),-DHAVE_OCEAN) -o $@ $(filter-out %.h,$^) -lzfp -lfftw3f $(PKG_LIBS)
 bench-codec: $(BUILD)/bench_codec
 	@mkdir -p $(BUILD)/bench_frames
 	@$(BUILD)/bench_codec --frames $(BUILD)/bench_frames

@@ -8,7 +8,9 @@
 #   make bench-step             step / FFTW / DFT timings, JSON lines
 # See docs/simulation.md.
 
-SIM_SRCS      := $(wildcard server/sim/*.c)
+# The library's archive carries the program's work pool (server/common/pool.c):
+# the library runs on it, and the daemon links it from here.
+SIM_SRCS      := $(wildcard server/sim/*.c) server/common/pool.c
 OCEAN_LIB     := $(BUILD)/libocean.a
 OCEAN_SAN_LIB := $(BUILD)/san/libocean.a
 SIM_WISDOM    := $(BUILD)/fftw-wisdom
@@ -30,7 +32,7 @@ $(patsubst %.c,$(BUILD)/obj/%.o,$(SIM_SRCS)): CFLAGS += -O3
 
 # The library's own tests and benchmark may look inside (ocean_internal.h).
 $(BUILD)/obj/tests/test_ocean.o $(BUILD)/san/tests/test_ocean.o $(BUILD)/obj/bench/bench_step.o: \
-  INC := -Iserver/sim/include -Iserver/sim
+  INC := -Iserver/sim/include -Iserver/sim -Iserver/common
 
 $(BUILD)/test_ocean: $(BUILD)/obj/tests/test_ocean.o $(OCEAN_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
@@ -39,13 +41,13 @@ $(BUILD)/san/test_ocean: $(BUILD)/san/tests/test_ocean.o $(OCEAN_SAN_LIB)
 $(BUILD)/bench_step: $(BUILD)/obj/bench/bench_step.o $(OCEAN_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 
-# ThreadSanitizer build: clang, the whole library compiled in. target_clones
+# ThreadSanitizer build: clang, the whole library (with the work pool) compiled in. target_clones
 # is compiled out (TSan crashes inside the ifunc resolvers, which run before
 # it is initialised); FFTW itself is not instrumented (one thread per plan).
-$(BUILD)/tsan/test_ocean: tests/test_ocean.c $(SIM_SRCS) $(wildcard server/sim/*.h server/sim/include/*.h)
+$(BUILD)/tsan/test_ocean: tests/test_ocean.c $(SIM_SRCS) $(wildcard server/sim/*.h server/sim/include/*.h server/common/*.h)
 	@mkdir -p $(dir $@)
 	clang -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=thread $(WARN) '-Dtarget_clones(...)=unused' \
-	  -Iserver/sim/include -Iserver/sim tests/test_ocean.c $(SIM_SRCS) -o $@ -lfftw3f -lfftw3f_threads -lm -pthread
+	  -Iserver/sim/include -Iserver/sim -Iserver/common tests/test_ocean.c $(SIM_SRCS) -o $@ -lfftw3f -lfftw3f_threads -lm -pthread
 
 .PHONY: test-sim test-sim-asan test-sim-valgrind test-sim-tsan bench-step
 # Tests plan with FFTW_ESTIMATE and no wisdom file: deterministic and quick.
@@ -71,7 +73,7 @@ BINS    += $(BUILD)/test_query $(BUILD)/bench_query
 TESTS   += test-query test-query-asan test-query-valgrind
 BENCHES += bench-query
 $(BUILD)/obj/tests/test_query.o $(BUILD)/san/tests/test_query.o $(BUILD)/obj/bench/bench_query.o: \
-  INC := -Iserver/sim/include -Iserver/sim
+  INC := -Iserver/sim/include -Iserver/sim -Iserver/common
 $(BUILD)/test_query: $(BUILD)/obj/tests/test_query.o $(OCEAN_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 $(BUILD)/san/test_query: $(BUILD)/san/tests/test_query.o $(OCEAN_SAN_LIB)

@@ -2,9 +2,11 @@
 #   build/ocean-tap           command-line client (tools/)
 #   build/gen-config-doc      prints the configuration reference from the params table
 #   make install              PREFIX (default /usr/local) and DESTDIR honoured
-#   make config-doc           rewrite the reference in README.md
+#   make config-doc           rewrite the configuration reference (docs/configuration.md)
 #   test-tap                  ocean-tap + the Python example against a real daemon
 #   test-ops                  docker/ <-> apt list, install, configuration reference
+#   test-python               the Python package proto/python (pip install, cascades vs query)
+#   test-blender              the Blender add-on tools/blender/ in Debian's Blender, headless
 
 PROTO_LIB  ?= $(BUILD)/liboc_proto.a
 OCEAN_LIB  ?= $(BUILD)/libocean.a
@@ -17,7 +19,7 @@ WEBDIR     = $(PREFIX)/share/oceand/web
 UNITDIR    = $(PREFIX)/lib/systemd/system
 WEB_BUILD  := $(BUILD)/web
 
-TAP_OBJS := $(addprefix $(BUILD)/obj/tools/,ocean-tap.o tap_frame.o tap_write.o tap_exr.o)
+TAP_OBJS := $(addprefix $(BUILD)/obj/tools/,ocean-tap.o tap_write.o tap_exr.o tap_surface.o)
 # OpenEXR 3.1 (Debian libopenexr-dev) for --format exr: its C API
 # (OpenEXRCore) and Imath's half floats; --as-needed drops its C++ libraries.
 EXR_CFLAGS = $(shell pkg-config --cflags OpenEXR 2>/dev/null)
@@ -25,10 +27,25 @@ EXR_LIBS   = -Wl,--as-needed $(shell pkg-config --libs OpenEXR 2>/dev/null) -Wl,
 $(BUILD)/obj/tools/tap_exr.o $(BUILD)/obj/tests/tap/exr_read.o: PKG_CFLAGS += $(EXR_CFLAGS)
 
 BINS  += $(BUILD)/ocean-tap $(BUILD)/gen-config-doc
-TESTS += test-tap test-ops
+TESTS += test-tap test-ops test-python test-blender
 
 $(BUILD)/ocean-tap: $(TAP_OBJS) $(PROTO_LIB)
 	$(CC) $(CFLAGS) -o $@ $(TAP_OBJS) $(PROTO_LIB) $(PKG_LIBS) $(EXR_LIBS)
+
+# Cost and accuracy of the summed surface (tools/tap_surface.c) on synthetic cascades.
+BINS += $(BUILD)/bench-surface
+BENCHES += bench-tap-surface
+$(BUILD)/bench-surface: $(BUILD)/obj/tools/bench_surface.o $(BUILD)/obj/tools/tap_surface.o
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+.PHONY: bench-tap-surface
+bench-tap-surface: $(BUILD)/bench-surface
+	@$(BUILD)/bench-surface 256
+
+# ocean-tap baking from the live stream: frames/s, CPU per frame, skipped ticks.
+BENCHES += bench-tap-bake
+.PHONY: bench-tap-bake
+bench-tap-bake: $(BUILD)/oceand $(BUILD)/ocean-tap
+	@tests/tap/bench_bake.sh $(BUILD) 240
 
 # Test helper: reads an EXR back with the OpenEXR library (tests/tap/run.sh).
 BINS += $(BUILD)/exr-read
@@ -39,7 +56,14 @@ $(BUILD)/gen-config-doc: $(BUILD)/obj/scripts/gen-config-doc.o $(OCEAN_LIB)
 	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
 
 # ---- tests (budget: < 90 s together) -------------------------------------
-.PHONY: test-tap test-ops config-doc install uninstall
+.PHONY: test-tap test-ops test-python test-blender config-doc install uninstall
+# budget: < 60 s (Blender starts in ~1 s; the daemon's start and the queries take the rest)
+test-blender: $(BUILD)/oceand $(BUILD)/ocean-tap
+	@tests/blender/run.sh $(BUILD)
+
+test-python: $(BUILD)/oceand
+	@tests/tap/package.sh $(BUILD)
+
 test-tap: $(BUILD)/ocean-tap $(BUILD)/oceand $(BUILD)/exr-read
 	@tests/tap/run.sh $(BUILD)
 

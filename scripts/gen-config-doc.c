@@ -1,7 +1,7 @@
 /* gen-config-doc — print the configuration reference (Markdown) from the one
  * parameter table, server/sim/params.c. scripts/gen-config-doc.sh splices it
- * between the <!-- config-reference --> markers of README.md (or
- * README.md) and tests/tap/ops.sh fails when they disagree. */
+ * between the <!-- config-reference --> markers of docs/configuration.md,
+ * and tests/tap/ops.sh fails when they disagree. */
 #include <stdio.h>
 #include <string.h>
 

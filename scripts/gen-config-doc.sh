@@ -5,15 +5,18 @@
 #   scripts/gen-config-doc.sh GEN            print the reference (Markdown)
 #   scripts/gen-config-doc.sh --update GEN   rewrite it in the doc (make config-doc)
 #   scripts/gen-config-doc.sh --check GEN    exit 1, with a diff, if the doc disagrees
+#   scripts/gen-config-doc.sh --doc-path     print the doc's path (for tests)
 #   ... --doc FILE                           use FILE as the doc (tests)
 #   ... --daemon BIN                         add the daemon's own options, read
 #                                            from `BIN --help` (its option table)
 #
-# The doc is README.md; everything between its markers
+# The doc is docs/configuration.md (DOC below); everything between its markers
 #   <!-- config-reference -->  ...  <!-- /config-reference -->
-# is generated.
+# is generated. The README links to it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+DOC=docs/configuration.md
+if [ "${1:-}" = --doc-path ]; then echo "$DOC"; exit 0; fi
 mode=print doc= daemon=
 while [ $# -gt 1 ]; do
   case $1 in
@@ -56,7 +59,7 @@ want=$("$gen")
 if [ -n "$daemon" ]; then want+=$'\n'$(daemon_table); fi
 if [ "$mode" = print ]; then printf '%s\n' "$want"; exit 0; fi
 
-[ -n "$doc" ] || doc=README.md
+[ -n "$doc" ] || doc=$DOC
 if ! grep -qF -- "$begin" "$doc" || ! grep -qF -- "$end" "$doc"; then
   echo "gen-config-doc: $doc has no '$begin' ... '$end' markers" >&2
   exit 1

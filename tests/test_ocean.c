@@ -8,7 +8,8 @@
 #include <malloc.h>
 #include <math.h>
 #include <pthread.h>
-#include <stdarg.h>
+#include <sched.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -18,23 +19,9 @@
 
 #include "ocean_internal.h"
 
-static int passed, failed;
-static int quick;
+#include "common/check.h"
 
-static void check(int ok, const char *name, const char *fmt, ...)
-{
-    va_list ap;
-    printf("%s %s: ", ok ? "ok  " : "FAIL", name);
-    va_start(ap, fmt);
-    vprintf(fmt, ap);
-    va_end(ap);
-    printf("\n");
-    fflush(stdout);
-    if (ok)
-        passed++;
-    else
-        failed++;
-}
+static int quick;
 
 static struct ocean *make(const struct ocean_params *p, int threads)
 {
@@ -42,7 +29,7 @@ static struct ocean *make(const struct ocean_params *p, int threads)
     struct ocean_options opt = {threads, NULL, 0};
     struct ocean *o = ocean_create(p, &opt, err, sizeof err);
     if (!o)
-        check(0, "create", "ocean_create failed: %s", err);
+        CHECK(0, "create: ocean_create failed: %s", err);
     return o;
 }
 
@@ -104,7 +91,7 @@ static void test_params(void)
     struct ocean_params p, q;
     char err[256];
     params_defaults(&p);
-    check(params_validate(&p, err, sizeof err) == 0, "params.defaults_valid", "%s",
+    CHECK(params_validate(&p, err, sizeof err) == 0, "params.defaults_valid: %s",
           params_validate(&p, err, sizeof err) == 0 ? "defaults pass validation" : err);
     static const char *const names[] = {"resolution", "patch_size", "cascades", "wind_speed", "wind_direction",
         "amplitude", "spectrum", "fetch", "depth", "gamma", "directional_spread", "swell",
@@ -118,13 +105,13 @@ static void test_params(void)
         if (!(d->min <= d->def && d->def <= d->max) || !d->description || !d->unit)
             sane = 0;
     }
-    check(found == (int)(sizeof names / sizeof names[0]) && param_count == sizeof names / sizeof names[0] && sane,
-          "params.table", "%d of %zu fields in the table (param_count %zu), defaults in range: %s", found,
+    CHECK(found == (int)(sizeof names / sizeof names[0]) && param_count == sizeof names / sizeof names[0] && sane,
+          "params.table: %d of %zu fields in the table (param_count %zu), defaults in range: %s", found,
           sizeof names / sizeof names[0], param_count, sane ? "yes" : "no");
     const struct param_def *res = param_find("resolution");
-    check((res->flags & PARAM_POW2) && (res->flags & PARAM_REPLAN) && res->min == 16 && res->max == 2048 &&
+    CHECK((res->flags & PARAM_POW2) && (res->flags & PARAM_REPLAN) && res->min == 16 && res->max == 2048 &&
           (param_find("time_scale")->flags & PARAM_PLAYBACK) && (param_find("paused")->flags & PARAM_PLAYBACK),
-          "params.flags", "resolution POW2|REPLAN 16..2048, time_scale and paused PLAYBACK");
+          "params.flags: resolution POW2|REPLAN 16..2048, time_scale and paused PLAYBACK");
 
     q = p;
     int bad = 0;
@@ -137,7 +124,7 @@ static void test_params(void)
     bad += param_set_text(&q, param_find("spectrum"), "bretschneider", err, sizeof err) == -1 &&
            strstr(err, "jonswap");
     bad += param_set_text(&q, param_find("wind_speed"), "12x", err, sizeof err) == -1;
-    check(bad == 7 && memcmp(&q, &p, sizeof p) == 0, "params.set_rejects", "%d/7 invalid values rejected, "
+    CHECK(bad == 7 && memcmp(&q, &p, sizeof p) == 0, "params.set_rejects: %d/7 invalid values rejected, "
           "params unchanged: %s; last message: \"%s\"", bad, memcmp(&q, &p, sizeof p) == 0 ? "yes" : "no", err);
 
     int good = 0;
@@ -148,18 +135,18 @@ static void test_params(void)
     good += param_get(&q, param_find("wind_speed")) == 17.5 && param_get(&q, param_find("paused")) == 1;
     good += param_enum_index(param_find("transform"), "dft") == TRANSFORM_DFT &&
             strcmp(param_enum_name(param_find("spectrum"), 1), "pierson_moskowitz") == 0;
-    check(good == 6, "params.set_accepts", "%d/6 valid settings applied", good);
+    CHECK(good == 6, "params.set_accepts: %d/6 valid settings applied", good);
 
     q = p;
     q.transform = TRANSFORM_DFT;
     q.resolution = 128;
     int r1 = params_validate(&q, err, sizeof err);
-    check(r1 == -1 && strstr(err, "dft"), "params.validate_dft_bound", "dft at N=128: %s", err);
+    CHECK(r1 == -1 && strstr(err, "dft"), "params.validate_dft_bound: dft at N=128: %s", err);
     q.resolution = 64;
-    check(params_validate(&q, err, sizeof err) == 0, "params.validate_dft_small", "dft at N=64 accepted");
+    CHECK(params_validate(&q, err, sizeof err) == 0, "params.validate_dft_small: dft at N=64 accepted");
     q = p;
     q.resolution = 48;
-    check(params_validate(&q, err, sizeof err) == -1, "params.validate_range", "N=48: %s", err);
+    CHECK(params_validate(&q, err, sizeof err) == -1, "params.validate_range: N=48: %s", err);
 }
 
 /* ---- physics helpers ----------------------------------------------------- */
@@ -185,8 +172,8 @@ static void test_spreading_and_dispersion(void)
                 worst = fmax(worst, fabs(sum - 1));
             }
     double tol = quick ? 1e-4 : 1e-5;
-    check(worst < tol, "physics.spreading_unit_integral",
-          "max |int D dtheta - 1| = %.2e over spread, swell, w (limit %.0e)", worst, tol);
+    CHECK(worst < tol, "physics.spreading_unit_integral: max |int D dtheta - 1| = %.2e over spread, swell, w "
+          "(limit %.0e)", worst, tol);
 
     double dworst = 0;
     double depths[] = {0.5, 5, 50, 5000};
@@ -197,8 +184,8 @@ static void test_spreading_and_dispersion(void)
             dworst = fmax(dworst, fabs(num / dispersion_domega_dk(k, depths[di]) - 1));
         }
     double deep = dispersion_omega(1.0, 1e4), shallow = dispersion_omega(0.001, 1.0);
-    check(dworst < 1e-6 && fabs(deep - sqrt(9.81)) < 1e-9 && fabs(shallow / 0.001 - sqrt(9.81)) < 1e-3,
-          "physics.dispersion", "dw/dk vs finite difference %.1e; deep w(1)=%.6f, shallow c=%.4f", dworst, deep,
+    CHECK(dworst < 1e-6 && fabs(deep - sqrt(9.81)) < 1e-9 && fabs(shallow / 0.001 - sqrt(9.81)) < 1e-3,
+          "physics.dispersion: dw/dk vs finite difference %.1e; deep w(1)=%.6f, shallow c=%.4f", dworst, deep,
           shallow / 0.001);
 }
 
@@ -243,7 +230,7 @@ static void test_fft_vs_dft(void)
             double hmax = max_abs(ocean_field(o, OCEAN_HEIGHT), nn);
             char name[64];
             snprintf(name, sizeof name, "fft_eq_dft.N%d.%s", n, spec_name(s));
-            check(worst <= 1e-5 && hmax > 0, name, "all 6 fields, worst rel err %.2e (%s), max|h| %.3f m", worst,
+            CHECK(worst <= 1e-5 && hmax > 0, "%s: all 6 fields, worst rel err %.2e (%s), max|h| %.3f m", name, worst,
                   ocean_field_name(worst_f), hmax);
             ocean_free(o);
         }
@@ -262,7 +249,7 @@ static void test_fft_vs_dft(void)
     int r = ocean_reconfigure(o, &p, err, sizeof err);
     ocean_step(o, 5.0, OCEAN_ALL_FIELDS);
     double e = rel_err(h, ocean_field(o, OCEAN_HEIGHT), 256);
-    check(r == 0 && e <= 1e-5, "fft_eq_dft.switch", "ocean_step with transform=dft vs fft: rel err %.2e", e);
+    CHECK(r == 0 && e <= 1e-5, "fft_eq_dft.switch: ocean_step with transform=dft vs fft: rel err %.2e", e);
     free(h);
     ocean_free(o);
 }
@@ -285,7 +272,7 @@ static void test_layout(void)
             (i <= n / 2 && fabs(o->g->kx[i] - want) > 1e-5))
             bad++;
     }
-    check(bad == 0, "layout.k_table", "kx[i] = 2pi(i - N[i > N/2])/L for all i: %d mismatches", bad);
+    CHECK(bad == 0, "layout.k_table: kx[i] = 2pi(i - N[i > N/2])/L for all i: %d mismatches", bad);
 
     /* End to end: the FFT output's mode at index (ix, iz) must be the
      * reference amplitude of e^{i(kx x + kz z)} with k from that formula. */
@@ -309,7 +296,7 @@ static void test_layout(void)
         sum /= (double)n * n;
         worst = fmax(worst, cabs(sum - ref[iz * n + ix]) / refmax);
     }
-    check(worst < 1e-5 && refmax > 0, "layout.modes", "forward DFT of h at 7 indices vs reference h~(k): rel err %.2e",
+    CHECK(worst < 1e-5 && refmax > 0, "layout.modes: forward DFT of h at 7 indices vs reference h~(k): rel err %.2e",
           worst);
 
     /* Hermitian symmetry of every transform's spectrum, and real output. */
@@ -336,8 +323,8 @@ static void test_layout(void)
             im = fmax(im, fabs(cimag(s)));
             re = fmax(re, fabs(creal(s)));
         }
-    check(herm < 1e-12 && im < 1e-9 * re, "layout.hermitian_real",
-          "max |F(-k) - conj F(k)| / max|F| = %.1e over 8 spectra; complex sum: max|Im| %.1e vs max|Re| %.3f", herm,
+    CHECK(herm < 1e-12 && im < 1e-9 * re, "layout.hermitian_real: max |F(-k) - conj F(k)| / max|F| = %.1e over 8 "
+          "spectra; complex sum: max|Im| %.1e vs max|Re| %.3f", herm,
           im, re);
     free(ref);
     ocean_free(o);
@@ -374,8 +361,8 @@ static void test_slopes(void)
         }
 #undef H
     double rx = sqrt(ex / nx), rz = sqrt(ez / nz);
-    check(rx < 0.02 && rz < 0.02 && nx > 0, "slopes.finite_differences",
-          "rms(slope - FD)/rms(FD): x %.4f, z %.4f (limit 0.02)", rx, rz);
+    CHECK(rx < 0.02 && rz < 0.02 && nx > 0, "slopes.finite_differences: rms(slope - FD)/rms(FD): x %.4f, z %.4f "
+          "(limit 0.02)", rx, rz);
 
     /* Jacobian from the displacement by finite differences too. */
     const float *dX = ocean_field(o, OCEAN_DX), *dZ = ocean_field(o, OCEAN_DZ), *J = ocean_field(o, OCEAN_JACOBIAN);
@@ -393,14 +380,14 @@ static void test_slopes(void)
 #undef D1X
 #undef D1Z
     double rj = sqrt(ej / nj);
-    check(rj < 0.02 && nj > 0, "jacobian.finite_differences", "rms(J - J_FD)/rms(J_FD - 1) = %.4f (limit 0.02)", rj);
+    CHECK(rj < 0.02 && nj > 0, "jacobian.finite_differences: rms(J - J_FD)/rms(J_FD - 1) = %.4f (limit 0.02)", rj);
 
     /* lambda > 0 sharpens crests: the surface is compressed (J < 1) where h is high. */
     size_t nn = (size_t)n * n;
     double cov = 0;
     for (size_t i = 0; i < nn; i++)
         cov += h[i] * (J[i] - 1.0);
-    check(cov < 0, "jacobian.crests_compressed", "cov(h, J - 1) = %.3g (negative: crests sharpen)", cov / nn);
+    CHECK(cov < 0, "jacobian.crests_compressed: cov(h, J - 1) = %.3g (negative: crests sharpen)", cov / nn);
 
     p.choppiness = 0;
     char err[256];
@@ -412,8 +399,8 @@ static void test_slopes(void)
         mj = fmax(mj, fabs(ocean_field(o, OCEAN_JACOBIAN)[i] - 1.0));
     double dx_before = max_abs(dX, nn); /* dX aliases the output: now lambda = 0 */
     (void)dx_before;
-    check(mdx == 0 && mdz == 0 && mj == 0 && max_abs(ocean_field(o, OCEAN_HEIGHT), nn) > 0,
-          "displacement.lambda_zero", "lambda=0: max|Dx| %g, max|Dz| %g, max|J-1| %g", mdx, mdz, mj);
+    CHECK(mdx == 0 && mdz == 0 && mj == 0 && max_abs(ocean_field(o, OCEAN_HEIGHT), nn) > 0,
+          "displacement.lambda_zero: lambda=0: max|Dx| %g, max|Dz| %g, max|J-1| %g", mdx, mdz, mj);
     ocean_free(o);
 }
 
@@ -457,8 +444,8 @@ static void test_periodic(void)
             inner += pow(h[z * n + x] - h[z * n + x - 1], 2) + pow(h[x * n + z] - h[(x - 1) * n + z], 2);
     }
     double ratio = sqrt(seam / (2.0 * n)) / sqrt(inner / (2.0 * n * (n - 1)));
-    check(worst < 1e-9 * scale && ratio < 1.6, "periodic.tiling",
-          "|h(L,z+L) - h(0,z)| = %.1e m; seam jump rms / neighbour rms = %.2f", worst, ratio);
+    CHECK(worst < 1e-9 * scale && ratio < 1.6, "periodic.tiling: |h(L,z+L) - h(0,z)| = %.1e m; seam jump rms / "
+          "neighbour rms = %.2f", worst, ratio);
 
     p.loop_period = 20;
     char err[256];
@@ -481,9 +468,8 @@ static void test_periodic(void)
     e_half = rel_err(ocean_field(o, OCEAN_HEIGHT), a[OCEAN_HEIGHT], nn);
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
         free(a[f]);
-    check(e <= 1e-5 && e_ref <= 1e-5 && e_half > 0.1, "periodic.loop_period",
-          "T = 20 s, all fields: field(t + 1000 T) vs field(t) %.1e, vs unwrapped reference %.1e; "
-          "at t + T/2: %.2f (must differ)", e, e_ref, e_half);
+    CHECK(e <= 1e-5 && e_ref <= 1e-5 && e_half > 0.1, "periodic.loop_period: T = 20 s, all fields: field(t + 1000 "
+          "T) vs field(t) %.1e, vs unwrapped reference %.1e; at t + T/2: %.2f (must differ)", e, e_ref, e_half);
 
     /* No loop: phases in double precision, so day-long runs stay exact: the
      * step at t = 10 days must match the double-precision reference. */
@@ -495,7 +481,7 @@ static void test_periodic(void)
     ocean_step_dft(o, tday, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
     double ed = rel_err(hf, ocean_field(o, OCEAN_HEIGHT), nn);
     free(hf);
-    check(ed <= 1e-5, "time.ten_days", "t = 10 days: FFT path vs double reference rel err %.1e", ed);
+    CHECK(ed <= 1e-5, "time.ten_days: t = 10 days: FFT path vs double reference rel err %.1e", ed);
     ocean_free(o);
 }
 
@@ -537,9 +523,9 @@ static void test_time_max(void)
         }
         char name[64];
         snprintf(name, sizeof name, "time.max.%s", cases[c].what);
-        check(err[1] <= 1e-5 && err[0] <= 1e-5, name,
-              "N=%d L=%g m loop %g s: FFT vs double reference, all fields, at t = %.0e s %.1e, at t = %.2f s %.1e "
-              "(limit 1e-5 for both)", p.resolution, p.patch_size, p.loop_period, times[1], err[1], times[0], err[0]);
+        CHECK(err[1] <= 1e-5 && err[0] <= 1e-5, "%s: N=%d L=%g m loop %g s: FFT vs double reference, all fields, "
+              "at t = %.0e s %.1e, at t = %.2f s %.1e (limit 1e-5 for "
+              "both)", name, p.resolution, p.patch_size, p.loop_period, times[1], err[1], times[0], err[0]);
         ocean_free(o);
     }
 }
@@ -572,7 +558,7 @@ static void test_parseval(void)
         worst = fmax(worst, fabs(ex / nn / es - 1));
     }
     free(ref);
-    check(worst < 1e-5, "energy.parseval", "mean f^2 vs sum |F(k)|^2 over 8 transforms: worst rel diff %.1e", worst);
+    CHECK(worst < 1e-5, "energy.parseval: mean f^2 vs sum |F(k)|^2 over 8 transforms: worst rel diff %.1e", worst);
     ocean_free(o);
 }
 
@@ -597,8 +583,8 @@ static void test_variance_vs_n(void)
         lo = fmin(lo, v[i]);
         hi = fmax(hi, v[i]);
     }
-    check(hi / lo - 1 < 0.03, "energy.variance_independent_of_N",
-          "L=256 m, N=64/128%s: var(h) %.4f / %.4f%s%.4f m^2, spread %.1f%% (limit 3%%)", quick ? "" : "/256", v[0],
+    CHECK(hi / lo - 1 < 0.03, "energy.variance_independent_of_N: L=256 m, N=64/128%s: var(h) %.4f / %.4f%s%.4f "
+          "m^2, spread %.1f%% (limit 3%%)", quick ? "" : "/256", v[0],
           v[1], quick ? "" : " / ", quick ? 0.0 : v[2], 100 * (hi / lo - 1));
 }
 
@@ -649,8 +635,8 @@ static void test_significant_height(void)
         char name[64];
         snprintf(name, sizeof name, "energy.hs.%s", spec_name(s));
         double tol = quick ? 0.10 : 0.05;
-        check(fabs(hs / hs_ref - 1) <= tol && hs_ref > 0.1, name,
-              "Hs = 4 sqrt(m0): field %.3f m (mean of %d seeds) vs spectrum %.3f m, %+.1f%% (limit %.0f%%)", hs,
+        CHECK(fabs(hs / hs_ref - 1) <= tol && hs_ref > 0.1, "%s: Hs = 4 sqrt(m0): field %.3f m (mean of %d seeds) "
+              "vs spectrum %.3f m, %+.1f%% (limit %.0f%%)", name, hs,
               seeds, hs_ref, 100 * (hs / hs_ref - 1), 100 * tol);
         ocean_free(o);
     }
@@ -753,9 +739,9 @@ static void test_depth_displacement(void)
         double e = orbit_error(o, p.depth, &lo, &hi, &deep);
         char name[64];
         snprintf(name, sizeof name, "displacement.finite_depth.%s", path ? "dft" : "fft");
-        check(e < 1e-3 && lo < 0.5 && hi > 3 && deep > 0.3, name,
-              "depth %.0f m, modes with kd %.2f..%.2f: |D^ - i k/|k| coth(kd) h^| / (coth |h^|) <= %.1e (limit 1e-3); "
-              "the deep-water formula would be off by %.2f", p.depth, lo, hi, e, deep);
+        CHECK(e < 1e-3 && lo < 0.5 && hi > 3 && deep > 0.3, "%s: depth %.0f m, modes with kd %.2f..%.2f: |D^ - i "
+              "k/|k| coth(kd) h^| / (coth |h^|) <= %.1e (limit 1e-3); "
+              "the deep-water formula would be off by %.2f", name, p.depth, lo, hi, e, deep);
     }
     /* Deep water is unchanged: D^ = i k/|k| h^ to float precision. */
     p.depth = 1000;
@@ -764,8 +750,8 @@ static void test_depth_displacement(void)
     ocean_step_fft(o, 17.3, hxz);
     double lo, hi, deep;
     double e = orbit_error(o, p.depth, &lo, &hi, &deep);
-    check(e < 1e-3 && deep < 1e-3 && hi > lo, "displacement.deep_unchanged",
-          "depth 1000 m (kd >= %.0f): off the deep-water i k/|k| h^ by %.1e, off coth by %.1e", lo, deep, e);
+    CHECK(e < 1e-3 && deep < 1e-3 && hi > lo, "displacement.deep_unchanged: depth 1000 m (kd >= %.0f): off the "
+          "deep-water i k/|k| h^ by %.1e, off coth by %.1e", lo, deep, e);
     ocean_free(o);
 }
 
@@ -833,10 +819,10 @@ static void test_fetch_laws(void)
                "SPM 1984 %6.3f | Kahma-Calkoen %6.3f | fp %.4f Hz (paper %.4f)\n",
                U, F / 1000, chi, hs, hs_jonswap, 100 * (hs / hs_jonswap - 1), hs_spm, hs_kc, fp, fp_paper);
     }
-    check(worst_peak < 1e-4, "fetch.jonswap_peak", "spectral peak at Hasselmann's f_p = 3.5 (g/U) chi^-0.33: "
+    CHECK(worst_peak < 1e-4, "fetch.jonswap_peak: spectral peak at Hasselmann's f_p = 3.5 (g/U) chi^-0.33: "
           "worst rel diff %.1e", worst_peak);
-    check(worst_near <= 0.15 && worst_far <= 0.30, "fetch.jonswap_energy_law",
-          "Hs = 4 sqrt(m0) vs JONSWAP 4 sqrt(1.6e-7 chi) U^2/g: within %.1f%% for chi <= 1500 (limit 15%%), "
+    CHECK(worst_near <= 0.15 && worst_far <= 0.30, "fetch.jonswap_energy_law: Hs = 4 sqrt(m0) vs JONSWAP 4 "
+          "sqrt(1.6e-7 chi) U^2/g: within %.1f%% for chi <= 1500 (limit 15%%), "
           "%.1f%% up to the fully developed cap (limit 30%%)", 100 * worst_near, 100 * worst_far);
 }
 
@@ -951,7 +937,8 @@ static void test_sweep(void)
         }
         ocean_free(o);
     }
-    check(bad == 0 && runs > (quick ? 40 : 100), "robust.no_nan_sweep", "%d steps over min/mid/max of every parameter x 4 spectra%s%s",
+    CHECK(bad == 0 && runs > (quick ? 40 : 100), "robust.no_nan_sweep: %d steps over min/mid/max of every "
+          "parameter x 4 spectra%s%s",
           runs, bad ? ", first failure: " : ", all finite", where);
 }
 
@@ -977,8 +964,8 @@ static void test_determinism(void)
     ocean_reconfigure(c, &p, err, sizeof err);
     ocean_step(c, 12.5, OCEAN_ALL_FIELDS);
     int differs = memcmp(ocean_field(a, OCEAN_HEIGHT), ocean_field(c, OCEAN_HEIGHT), nn * sizeof(float)) != 0;
-    check(same_threads && same_runs && differs, "determinism.bit_identical",
-          "N=%d, all fields: 1 vs 2 threads %s, two runs %s, other seed differs %s", p.resolution,
+    CHECK(same_threads && same_runs && differs, "determinism.bit_identical: N=%d, all fields: 1 vs 2 threads %s, "
+          "two runs %s, other seed differs %s", p.resolution,
           same_threads ? "identical" : "DIFFER", same_runs ? "identical" : "DIFFER", differs ? "yes" : "NO");
     ocean_free(a);
     ocean_free(b);
@@ -999,8 +986,8 @@ static void test_determinism(void)
             mism += s->g->a[is] != l->g->a[il] || s->g->b[is] != l->g->b[il] || s->g->omega[is] != l->g->omega[il];
             nonzero += s->g->a[is] != 0;
         }
-    check(mism == 0 && nonzero > 100, "determinism.same_waves_any_N",
-          "h~0 and w at |m| < 16 equal between N=32 and N=64: %d mismatches", mism);
+    CHECK(mism == 0 && nonzero > 100, "determinism.same_waves_any_N: h~0 and w at |m| < 16 equal between N=32 and "
+          "N=64: %d mismatches", mism);
     ocean_free(s);
     ocean_free(l);
 }
@@ -1042,8 +1029,8 @@ static void test_reconfigure(void)
                      memcmp(ocean_field(o, OCEAN_HEIGHT), h, nn * sizeof(float)) == 0;
     }
     struct ocean *none = ocean_create(&q, NULL, err, sizeof err);
-    check(rejected == 6 && unchanged && messages && !none, "params.invalid_rejected",
-          "%d/6 rejected with a message, simulation unchanged: %s; create with bad params: %s", rejected,
+    CHECK(rejected == 6 && unchanged && messages && !none, "params.invalid_rejected: %d/6 rejected with a "
+          "message, simulation unchanged: %s; create with bad params: %s", rejected,
           unchanged ? "yes" : "NO", none ? "ACCEPTED" : "NULL");
     ocean_free(none);
 
@@ -1057,7 +1044,7 @@ static void test_reconfigure(void)
         h2[i] *= 0.5f;
     double e = rel_err(h2, h, nn);
     free(h2);
-    check(e < 1e-6, "reconfigure.keeps_phases", "amplitude x4 gives 2 h: rel err %.1e", e);
+    CHECK(e < 1e-6, "reconfigure.keeps_phases: amplitude x4 gives 2 h: rel err %.1e", e);
 
     /* Re-plan to another N and back. */
     q.resolution = 64;
@@ -1067,10 +1054,10 @@ static void test_reconfigure(void)
     q = p;
     r = ocean_reconfigure(o, &q, err, sizeof err);
     ocean_step(o, 6.0, OCEAN_ALL_FIELDS);
-    check(ok64 && r == 0 && memcmp(ocean_field(o, OCEAN_HEIGHT), h, nn * sizeof(float)) == 0,
-          "reconfigure.replan", "32 -> 64 -> 32: back to the identical field");
-    check(strcmp(ocean_field_name(OCEAN_SLOPE_Z), "slope_z") == 0 && ocean_field_name(OCEAN_FIELD_COUNT) == NULL,
-          "api.field_names", "stable names");
+    CHECK(ok64 && r == 0 && memcmp(ocean_field(o, OCEAN_HEIGHT), h, nn * sizeof(float)) == 0,
+          "reconfigure.replan: 32 -> 64 -> 32: back to the identical field");
+    CHECK(strcmp(ocean_field_name(OCEAN_SLOPE_Z), "slope_z") == 0 && ocean_field_name(OCEAN_FIELD_COUNT) == NULL,
+          "api.field_names: stable names");
     free(h);
     ocean_free(o);
 }
@@ -1139,7 +1126,7 @@ static void test_prepare_commit(void)
         fresh_same += same_fields(o, f);
         ocean_free(f);
     }
-    check(fresh_same == 6, "reconfigure.equals_fresh", "%d/6 changes (wind, seed, patch, depth+tma, spread+direction, "
+    CHECK(fresh_same == 6, "reconfigure.equals_fresh: %d/6 changes (wind, seed, patch, depth+tma, spread+direction, "
           "N) bit-identical to a fresh ocean_create", fresh_same);
 
     /* Prepared on another thread while this one steps; committed here. */
@@ -1166,8 +1153,9 @@ static void test_prepare_commit(void)
         same = same_fields(o, f);
         ocean_free(f);
     }
-    check(started && before_commit && rc == 0 && same && ocean_get_params(o)->seed == 3, "prepare.other_thread",
-          "prepared on a second thread during 5 steps, committed: fields equal a fresh ocean's %s", same ? "yes" : "NO");
+    CHECK(started && before_commit && rc == 0 && same && ocean_get_params(o)->seed == 3, "prepare.other_thread: "
+          "prepared on a second thread during 5 steps, committed: fields equal a fresh ocean's "
+          "%s", same ? "yes" : "NO");
 
     /* A stale prepare is refused and changes nothing; bad parameters give NULL. */
     q = p;
@@ -1187,8 +1175,9 @@ static void test_prepare_commit(void)
     q.resolution = 100;
     err[0] = 0;
     struct ocean_prepared *bad = ocean_prepare(o, &q, err, sizeof err);
-    check(stale != NULL && stale_rc == -1 && unchanged && !bad && strstr(err, "power of two"), "prepare.stale_and_invalid",
-          "commit after another reconfigure: %d (unchanged: %s); N=100: %s", stale_rc, unchanged ? "yes" : "NO", err);
+    CHECK(stale != NULL && stale_rc == -1 && unchanged && !bad && strstr(err, "power of "
+          "two"), "prepare.stale_and_invalid: commit after another reconfigure: %d (unchanged: %s); N=100: "
+          "%s", stale_rc, unchanged ? "yes" : "NO", err);
     ocean_free(o);
 }
 
@@ -1291,12 +1280,12 @@ static void test_easing(void)
     int end_new = same_fields(o, b);
     const float *o1 = ocean_cascade_field(o, 1, OCEAN_HEIGHT), *b1 = ocean_cascade_field(b, 1, OCEAN_HEIGHT);
     end_new &= o1 && b1 && memcmp(o1, b1, nn * sizeof(float)) == 0;
-    check(easable && rc == 0 && start_old && end_new && dmid <= 1e-5 * (1 + dab) && dab > 0.1,
-          "easing.reaches_new", "wind %g -> %g m/s over %g s: old sea at t0 %s, new at t0 + len %s (both cascades), "
+    CHECK(easable && rc == 0 && start_old && end_new && dmid <= 1e-5 * (1 + dab) && dab > 0.1,
+          "easing.reaches_new: wind %g -> %g m/s over %g s: old sea at t0 %s, new at t0 + len %s (both cascades), "
           "half way the mean of both within %.1e m (the seas differ by %.2f m)", p.wind_speed, q.wind_speed, len,
           start_old ? "bit for bit" : "NO", end_new ? "bit for bit" : "NO", dmid, dab);
-    check(change_bytes > 0 && change_bytes <= model_bytes / 2 && ease_kept, "easing.memory",
-          "the first eased change allocates %.2f MB (new amplitudes + easing buffers), the cap counts %.2f MB "
+    CHECK(change_bytes > 0 && change_bytes <= model_bytes / 2 && ease_kept, "easing.memory: the first eased "
+          "change allocates %.2f MB (new amplitudes + easing buffers), the cap counts %.2f MB "
           "for a change being built; a second one %.2f MB less (ocean_ease_memory_bytes x cascades = %.2f MB): %s",
           change_bytes / 1e6, model_bytes / 1e6, (double)(change_bytes - second_bytes) / 1e6, ease_bytes / 1e6,
           ease_kept ? "yes" : "NO");
@@ -1349,8 +1338,8 @@ static void test_easing(void)
         third = same_fields(o, c2);
         ocean_free(c2);
     }
-    check(rc == 0 && rc2 == 0 && no_jump && third && worst_tick < 3 * steady_tick, "easing.mid_change_no_jump",
-          "a change 3 ticks into an easing: the sea after the commit = before it %s; the largest tick-to-tick "
+    CHECK(rc == 0 && rc2 == 0 && no_jump && third && worst_tick < 3 * steady_tick, "easing.mid_change_no_jump: a "
+          "change 3 ticks into an easing: the sea after the commit = before it %s; the largest tick-to-tick "
           "height change while easing %.3f m (steady sea: %.3f m); reaches the third sea exactly %s",
           no_jump ? "bit for bit" : "NO", worst_tick, steady_tick, third ? "yes" : "NO");
 
@@ -1410,8 +1399,8 @@ static void test_easing(void)
         ocean_surface_free(splain);
         ocean_free(oq);
     }
-    check(qok && worst_q < 1e-4 && worst_live < 1e-4 && worst_old > 1e-2, "easing.query_equals_step",
-          "grid nodes during an easing: |query - step| %.1e m (snapshot prepared, then eased), %.1e m (live "
+    CHECK(qok && worst_q < 1e-4 && worst_live < 1e-4 && worst_old > 1e-2, "easing.query_equals_step: grid nodes "
+          "during an easing: |query - step| %.1e m (snapshot prepared, then eased), %.1e m (live "
           "snapshot); the new amplitudes alone are %.1e m off", worst_q, worst_live, worst_old);
 
     /* Not eased: a new seed (other phases), choppiness alone (no amplitude
@@ -1436,8 +1425,8 @@ static void test_easing(void)
         at_once = same_fields(o, fs);
         ocean_free(fs);
     }
-    check(not_easable && crc == 0 && at_once && el == 0, "easing.only_amplitudes",
-          "a new seed and choppiness alone are not easable; the seed change applies at once %s",
+    CHECK(not_easable && crc == 0 && at_once && el == 0, "easing.only_amplitudes: a new seed and choppiness alone "
+          "are not easable; the seed change applies at once %s",
           at_once ? "(bit for bit a fresh ocean's)" : "NO");
 out:
     ocean_free(o);
@@ -1478,7 +1467,7 @@ static void test_memory_bytes(void)
         snprintf(line + len, sizeof line - len, "%sN=%d: %.2f MB said, arrays %.2f, heap %s%.2f", i > first ? "; " : "",
                  n, want / 1e6, hook / 1e6, glibc ? "" : "(n/a) ", heap / 1e6);
     }
-    /* threads = 0 means every online core, uncapped below 64 (issue 15). */
+    /* threads = 0 means every online core, up to 64: a big machine's cores all help the step. */
     long cores = sysconf(_SC_NPROCESSORS_ONLN);
     int want_threads = cores < 1 ? 1 : cores > OCEAN_MAX_THREADS ? OCEAN_MAX_THREADS : (int)cores;
     struct ocean_params p0;
@@ -1489,13 +1478,13 @@ static void test_memory_bytes(void)
     struct ocean *o0 = ocean_create(&p0, &opt0, err0, sizeof err0);
     int got_threads = o0 ? o0->opt.threads : -1;
     ocean_free(o0);
-    check(got_threads == want_threads && ocean_threads(0) == want_threads && ocean_threads(100) == 64 &&
+    CHECK(got_threads == want_threads && ocean_threads(0) == want_threads && ocean_threads(100) == 64 &&
           ocean_threads(-3) == 1 && ocean_threads(12) == 12 &&
           ocean_memory_bytes(512, 0) == ocean_memory_bytes(512, want_threads),
-          "threads.zero_is_every_core", "threads 0 -> %d (cores online %ld; 12 -> %d, 100 -> %d, -3 -> %d)", got_threads,
+          "threads.zero_is_every_core: threads 0 -> %d (cores online %ld; 12 -> %d, 100 -> %d, -3 -> %d)", got_threads,
           cores, ocean_threads(12), ocean_threads(100), ocean_threads(-3));
-    check(worst_hook <= 0.10 && worst_heap <= 0.10, "memory.bytes_match",
-          "%s (limit 10%%: arrays %.1f%%, heap %s%.1f%%)", line, 100 * worst_hook, glibc ? "" : "not measured ",
+    CHECK(worst_hook <= 0.10 && worst_heap <= 0.10, "memory.bytes_match: %s (limit 10%%: arrays %.1f%%, heap "
+          "%s%.1f%%)", line, 100 * worst_hook, glibc ? "" : "not measured ",
           100 * worst_heap);
 }
 
@@ -1523,7 +1512,7 @@ static void test_wisdom(void)
 {
     char dir[] = "/tmp/test_ocean_XXXXXX", path[64];
     if (!mkdtemp(dir)) {
-        check(0, "fftw.wisdom", "mkdtemp failed");
+        CHECK(0, "fftw.wisdom: mkdtemp failed");
         return;
     }
     snprintf(path, sizeof path, "%s/wisdom", dir);
@@ -1549,7 +1538,7 @@ static void test_wisdom(void)
         for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
             e = fmax(e, rel_err(ocean_field(b, i), ocean_field(c, i), 32 * 32));
     }
-    check(a && b && size > 0 && e < 1e-5, "fftw.wisdom", "MEASURE plans, wisdom file %ld bytes, fields vs ESTIMATE %.1e",
+    CHECK(a && b && size > 0 && e < 1e-5, "fftw.wisdom: MEASURE plans, wisdom file %ld bytes, fields vs ESTIMATE %.1e",
           size, e);
     ocean_free(a);
     ocean_free(b);
@@ -1608,8 +1597,8 @@ static void test_foam(void)
         double cov = sum / samples, W = 3.84e-6 * pow(p.wind_speed, 3.41);
         char name[64];
         snprintf(name, sizeof name, "foam.coverage.U%g", p.wind_speed);
-        check(range && (quick || (cov >= W / 2 && cov <= 2 * W)), name,
-              "covered fraction %.4f (%.4f..%.4f over %d s) vs Monahan & O'Muircheartaigh W = %.4f: ratio %.2f%s",
+        CHECK(range && (quick || (cov >= W / 2 && cov <= 2 * W)), "%s: covered fraction %.4f (%.4f..%.4f over %d "
+              "s) vs Monahan & O'Muircheartaigh W = %.4f: ratio %.2f%s", name,
               cov, lo, hi, seconds, W, cov / W, quick ? " (quick mode, N = 64: only the range 0..1 checked)" : "");
         ocean_free(o);
     }
@@ -1644,9 +1633,9 @@ static void test_foam(void)
     for (int k = 30; k <= 30 + 4 * 30; k++)
         ocean_step(a, 50.0 + k / 30.0, OCEAN_FIELD_BIT(OCEAN_FOAM));
     fmaxv = max_abs(ocean_field(a, OCEAN_FOAM), nn);
-    check(same == 0 && c0 > 0 && foam_covered(a) == 0 && fmaxv <= exp(-4.0 / 3.0) + 1e-6, "foam.deterministic_and_fades",
-          "two oceans (1 and 2 threads, different pasts) after the same steps: max diff %.1e; covered %.4f, "
-          "4 s after the wind stops: covered %.4f, max foam %.3f (<= exp(-4/3))",
+    CHECK(same == 0 && c0 > 0 && foam_covered(a) == 0 && fmaxv <= exp(-4.0 / 3.0) + 1e-6,
+          "foam.deterministic_and_fades: two oceans (1 and 2 threads, different pasts) after the same steps: "
+          "max diff %.1e; covered %.4f, 4 s after the wind stops: covered %.4f, max foam %.3f (<= exp(-4/3))",
           same, c0, foam_covered(a), fmaxv);
     ocean_free(a);
     ocean_free(b);
@@ -1667,9 +1656,9 @@ static void test_param_ui(void)
         if (ok)
             groups[u->group]++;
     }
-    check(missing == 0 && groups[PARAM_GROUP_SEA] > 0 && groups[PARAM_GROUP_DEVELOPER] > 0 &&
+    CHECK(missing == 0 && groups[PARAM_GROUP_SEA] > 0 && groups[PARAM_GROUP_DEVELOPER] > 0 &&
               strcmp(param_group_name(PARAM_GROUP_DEVELOPER), "developer") == 0,
-          "params.ui", "%d of %zu parameters without label/group/help (first: %s); sea %d, advanced %d, developer %d",
+          "params.ui: %d of %zu parameters without label/group/help (first: %s); sea %d, advanced %d, developer %d",
           missing, param_count, first, groups[0], groups[1], groups[2]);
 }
 
@@ -1720,9 +1709,9 @@ static void test_cascades_hs(void)
         char name[64];
         snprintf(name, sizeof name, "cascades.hs.%s", spec_name(spectra[si]));
         double tol = quick ? 0.10 : 0.05;
-        check(fabs(hs / hs_ref - 1) <= tol && fine > 0.2, name,
-              "3 cascades (L %.0f / %.1f / %.1f m): Hs of the sum %.4f m (mean of %d seeds; variance shares "
-              "%.0f / %.0f / %.0f %%) vs spectrum over the combined band %.4f m, %+.1f%% (limit %.0f%%)",
+        CHECK(fabs(hs / hs_ref - 1) <= tol && fine > 0.2, "%s: 3 cascades (L %.0f / %.1f / %.1f m): Hs of the sum "
+              "%.4f m (mean of %d seeds; variance shares %.0f / %.0f / %.0f %%) vs spectrum over the combined "
+              "band %.4f m, %+.1f%% (limit %.0f%%)", name,
               p.patch_size, ocean_cascade_patch(p.patch_size, 1), L2, hs, seeds, 100 * m0[0] / sum,
               100 * m0[1] / sum, 100 * m0[2] / sum, hs_ref, 100 * (hs / hs_ref - 1), 100 * tol);
         ocean_free(o);
@@ -1750,9 +1739,9 @@ static void test_cascades_structure(void)
     int same = 1;
     for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
         same &= memcmp(ocean_field(one, f), ocean_cascade_field(three, 0, f), nn * sizeof(float)) == 0;
-    check(same && ocean_cascades(one) == 1 && ocean_cascades(three) == 3 && !ocean_cascade_field(one, 1, 0) &&
+    CHECK(same && ocean_cascades(one) == 1 && ocean_cascades(three) == 3 && !ocean_cascade_field(one, 1, 0) &&
           !ocean_cascade_field(three, 1, OCEAN_FOAM) && ocean_cascade_field(three, 2, OCEAN_HEIGHT),
-          "cascades.zero_is_single_patch", "cascade 0 of a 3-cascade sea equals the 1-cascade sea in all %d fields: %s",
+          "cascades.zero_is_single_patch: cascade 0 of a 3-cascade sea equals the 1-cascade sea in all %d fields: %s",
           OCEAN_FIELD_COUNT, same ? "yes" : "no");
 
     /* Forward DFT of cascades 1, 2's heights: zero outside their bands, which
@@ -1782,7 +1771,7 @@ static void test_cascades_structure(void)
     bands_ok &= ocean_cascade_band(64, 1) == (int)ceil(31.5 / OCEAN_CASCADE_RATIO) &&
                 ocean_cascade_band(64, 2) == (int)ceil(15.5 / OCEAN_CASCADE_RATIO) &&
                 ocean_cascade_band_top(64, 1) == 15 && ocean_cascade_band_top(64, 0) == 31;
-    check(bands_ok, "cascades.band", "N = 64, max(|mx|,|mz|) per cascade: %s", msg);
+    CHECK(bands_ok, "cascades.band: N = 64, max(|mx|,|mz|) per cascade: %s", msg);
 
     /* FFT = DFT on the finer cascades (same band, patch and seed on both paths). */
     float *fft[3];
@@ -1795,7 +1784,8 @@ static void test_cascades_structure(void)
     ocean_step(three, 7.5, OCEAN_FIELD_BIT(OCEAN_DX));
     double e1 = rel_err(fft[1], ocean_cascade_field(three, 1, OCEAN_DX), nn);
     double e2 = rel_err(fft[2], ocean_cascade_field(three, 2, OCEAN_DX), nn);
-    check(e1 <= 1e-5 && e2 <= 1e-5, "cascades.fft_eq_dft", "dx of cascades 1, 2 at N = 64: rel err %.2g, %.2g (limit 1e-5)",
+    CHECK(e1 <= 1e-5 && e2 <= 1e-5, "cascades.fft_eq_dft: dx of cascades 1, 2 at N = 64: rel err %.2g, %.2g "
+          "(limit 1e-5)",
           e1, e2);
 
     /* 3 -> 1 -> 4 (another N too) against a fresh 4-cascade ocean. */
@@ -1814,7 +1804,7 @@ static void test_cascades_structure(void)
             eq &= memcmp(ocean_cascade_field(three, c, OCEAN_HEIGHT), ocean_cascade_field(fresh, c, OCEAN_HEIGHT),
                          32 * 32 * sizeof(float)) == 0;
     }
-    check(eq, "cascades.reconfigure_equals_fresh", "cascades 3 -> 1 -> 4 (N 64 -> 32): every cascade bit-identical "
+    CHECK(eq, "cascades.reconfigure_equals_fresh: cascades 3 -> 1 -> 4 (N 64 -> 32): every cascade bit-identical "
           "to a fresh ocean: %s", eq ? "yes" : "no");
     ocean_free(fresh);
     free(fft[1]);
@@ -1865,7 +1855,7 @@ static void test_exchange_field(void)
                 ok &= memcmp(buf[c][f], want, nn * sizeof(float)) == 0;
             }
     }
-    check(ok && refused, "exchange.frames_same", "3 steps of 2 cascades x 5 fields taken by exchange equal a sea that "
+    CHECK(ok && refused, "exchange.frames_same: 3 steps of 2 cascades x 5 fields taken by exchange equal a sea that "
           "copies (every sample rewritten), foam and bad arguments refused: %s", ok && refused ? "yes" : "no");
     for (int c = 0; c < 2; c++)
         for (int f = 0; f < OCEAN_FIELD_COUNT; f++)
@@ -1923,9 +1913,9 @@ static void test_huge_pages(void)
     /* A kernel without THP has no such file and refuses the hint: only the alignment is checked. */
     int thp = access("/sys/kernel/mm/transparent_hugepage/enabled", F_OK) == 0;
     int asked = !thp || (found && strstr(flags, " hg") && strstr(spare_flags, " hg"));
-    check(aligned && asked, "memory.huge_pages",
-          "a 4 MB field (N = 1024) and a spare field buffer are 2 MB aligned (%s) and asked for as huge pages "
-          "(VmFlags%s hg: %s); the field got %ld kB of them (up to the kernel's THP setting and free memory)",
+    CHECK(aligned && asked, "memory.huge_pages: a 4 MB field (N = 1024) and a spare field buffer are 2 MB aligned "
+          "(%s) and asked for as huge pages (VmFlags%s hg: %s); the field got %ld kB of them (up to the kernel's "
+          "THP setting and free memory)",
           aligned ? "yes" : "no", found ? "" : " not found,", asked ? "yes" : "no", huge_kb);
     ocean_field_buffer_free(spare);
     ocean_free(o);
@@ -1975,9 +1965,9 @@ static void test_streaming_store(void)
                 differ = f;
         for (size_t j = 0; j < nn; j++)
             hmax = fmax(hmax, fabs(streamed[j]));
-        check(differ < 0 && hmax > 0, "step.streaming_store",
-              "N = %d: the six fields with the streaming store equal those with FFTW's copy bit for bit (%s); "
-              "max |height| %.3f m", n, differ < 0 ? "yes" : ocean_field_name((enum ocean_field)differ), hmax);
+        CHECK(differ < 0 && hmax > 0, "step.streaming_store: N = %d: the six fields with the streaming store "
+              "equal those with FFTW's copy bit for bit (%s); max |height| %.3f "
+              "m", n, differ < 0 ? "yes" : ocean_field_name((enum ocean_field)differ), hmax);
         free(streamed);
         ocean_free(o);
     }
@@ -2011,18 +2001,98 @@ static void test_rows_half_length(void)
                 worst_f = f;
             }
         }
-        check(worst < 1e-5, "step.rows_half_length",
-              "N = %d: six fields, half-length split vs FFTW's c2r: largest difference %.2g of the field's "
-              "largest value (%s; limit 1e-5)", n, worst, ocean_field_name((enum ocean_field)worst_f));
+        CHECK(worst < 1e-5, "step.rows_half_length: N = %d: six fields, half-length split vs FFTW's c2r: largest "
+              "difference %.2g of the field's largest value (%s; limit 1e-5)",
+              n, worst, ocean_field_name((enum ocean_field)worst_f));
         free(ours);
         ocean_free(o);
     }
 }
 
+/* The work pool (server/common/pool.c) on its own: a parallel-for covers
+ * every item once with distinct worker numbers, and asynchronous jobs run
+ * done once, on the thread that finished the last item, after every item,
+ * whether a caller helps (pool_wait) or not, back to back on one job. */
+struct pool_probe {
+    atomic_int hits[64];
+    atomic_int busy[4];        /* per worker number: items running now */
+    atomic_int overlap, done, items_at_done;
+    int items;
+};
+
+static void pool_probe_item(void *arg, int i0, int i1, int worker)
+{
+    struct pool_probe *c = arg;
+    if (worker < 0 || worker >= 4 || atomic_fetch_add(&c->busy[worker], 1) != 0)
+        atomic_fetch_add(&c->overlap, 1);
+    for (int i = i0; i < i1; i++)
+        atomic_fetch_add(&c->hits[i], 1);
+    if (worker >= 0 && worker < 4)
+        atomic_fetch_sub(&c->busy[worker], 1);
+}
+
+static void pool_probe_done(void *arg)
+{
+    struct pool_probe *c = arg;
+    int sum = 0;
+    for (int i = 0; i < c->items; i++)
+        sum += atomic_load(&c->hits[i]);
+    atomic_store(&c->items_at_done, sum);
+    atomic_fetch_add(&c->done, 1);
+}
+
+static void pool_probe_reset(struct pool_probe *c, int items)
+{
+    memset(c, 0, sizeof *c); /* no thread touches it between jobs */
+    c->items = items;
+}
+
+static bool pool_probe_once(struct pool_probe *c)
+{
+    for (int i = 0; i < c->items; i++)
+        if (atomic_load(&c->hits[i]) != 1)
+            return false;
+    return atomic_load(&c->overlap) == 0;
+}
+
+static void test_pool(void)
+{
+    struct pool *p = pool_new(3);
+    struct pool_probe c;
+    int rounds = quick ? 20 : 200, bad_for = 0, bad_async = 0, bad_done = 0;
+    for (int r = 0; r < rounds && p; r++) {
+        pool_probe_reset(&c, 1 + r % 64);
+        pool_for(p, 4, c.items, pool_probe_item, &c);
+        bad_for += !pool_probe_once(&c);
+    }
+    struct pool_job job = {0};
+    for (int r = 0; r < rounds && p; r++) {
+        pool_probe_reset(&c, 1 + r % 64);
+        pool_start(p, &job, c.items, pool_probe_item, pool_probe_done, &c);
+        if (r % 2)
+            pool_wait(p, &job); /* helping */
+        else
+            while (pool_busy(p, &job))
+                sched_yield(); /* not helping: the pool's threads alone */
+        bad_async += !pool_probe_once(&c);
+        bad_done += atomic_load(&c.done) != 1 || atomic_load(&c.items_at_done) != c.items;
+    }
+    CHECK(p && pool_threads(p) == 3 && !bad_for && !bad_async && !bad_done, "pool.items_once: "
+          "%d rounds each: parallel-for %d bad, async %d bad (items not run exactly once or a worker number "
+          "used twice at a time), done %d bad (not once, or before an item)", rounds, bad_for, bad_async, bad_done);
+    pool_free(p);
+    pool_probe_reset(&c, 5);
+    pool_for(NULL, 4, c.items, pool_probe_item, &c);
+    pool_start(NULL, &job, c.items, pool_probe_item, pool_probe_done, &c); /* no pool: on the caller */
+    CHECK(atomic_load(&c.hits[4]) == 2 && atomic_load(&c.done) == 1, "pool.none: "
+          "without a pool the caller runs every item (item 4 ran %d times of 2) and done (%d times of 1)",
+          atomic_load(&c.hits[4]), atomic_load(&c.done));
+}
+
 int main(void)
 {
-    const char *qenv = getenv("OCEAN_TEST_QUICK");
-    quick = qenv && *qenv && strcmp(qenv, "0") != 0;
+    check_verbose = 1; /* the passing lines carry the measured values */
+    quick = check_quick();
     only = getenv("OCEAN_TEST_ONLY");
     if (only && !*only)
         only = NULL;
@@ -2055,6 +2125,6 @@ int main(void)
     RUN(test_huge_pages);
     RUN(test_streaming_store);
     RUN(test_rows_half_length);
-    printf("%d passed, %d failed\n", passed, failed);
-    return failed ? 1 : 0;
+    RUN(test_pool);
+    return check_done();
 }

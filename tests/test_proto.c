@@ -15,24 +15,13 @@
 #include <cjson/cJSON.h>
 #include <math.h>
 #include <pthread.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <zlib.h>
 
-static int failures, checks;
-static void fail(const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    fprintf(stderr, "FAIL: ");
-    vfprintf(stderr, fmt, ap);
-    fprintf(stderr, "\n");
-    va_end(ap);
-    failures++;
-}
-#define CHECK(cond, ...) do { checks++; if (!(cond)) fail(__VA_ARGS__); } while (0)
+#include "common/check.h"
+#include "common/slurp.h"
 
 static unsigned long long rng = 0x2545F4914F6CDD1Dull;
 static uint32_t rnd(void) { rng ^= rng << 13; rng ^= rng >> 7; rng ^= rng << 17; return (uint32_t)(rng >> 32); }
@@ -42,15 +31,8 @@ static uint8_t *read_all(const char *dir, const char *name, size_t *len)
 {
     char path[1024];
     snprintf(path, sizeof path, "%s/%s", dir, name);
-    FILE *f = fopen(path, "rb");
-    if (!f) { fail("cannot open %s", path); return NULL; }
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    uint8_t *p = malloc(n > 0 ? (size_t)n : 1);
-    if (fread(p, 1, (size_t)n, f) != (size_t)n) { fail("short read %s", path); }
-    fclose(f);
-    *len = (size_t)n;
+    uint8_t *p = (uint8_t *)slurp(path, len);
+    CHECK(p != NULL, "cannot read %s", path);
     return p;
 }
 
@@ -61,7 +43,7 @@ static int vec_tile(void *user, const struct oc_frame_header *fh, const struct o
 {
     struct vec_ctx *c = user;
     cJSON *t = cJSON_GetArrayItem(c->tiles, c->index++);
-    if (!t) { fail("%s: more tiles than the manifest lists", c->name); return 1; }
+    if (!t) { CHECK(0, "%s: more tiles than the manifest lists", c->name); return 1; }
     const char *field = cJSON_GetObjectItem(t, "field")->valuestring;
     CHECK(strcmp(oc_field_name((enum oc_field)th->field), field) == 0, "%s: field %d vs %s", c->name, th->field, field);
     CHECK(th->lod == cJSON_GetObjectItem(t, "lod")->valueint, "%s: lod", c->name);
@@ -76,7 +58,7 @@ static int vec_tile(void *user, const struct oc_frame_header *fh, const struct o
     CHECK(th->scale == cJSON_GetObjectItem(t, "scale")->valuedouble, "%s: scale", c->name);
     CHECK(th->bound == (float)cJSON_GetObjectItem(t, "bound")->valuedouble, "%s: bound", c->name);
     size_t at = (size_t)cJSON_GetObjectItem(t, "sampleOffset")->valuedouble, count = (size_t)th->width * th->height;
-    if (at + count > c->nexp) { fail("%s: expected file too short", c->name); return 1; }
+    if (at + count > c->nexp) { CHECK(0, "%s: expected file too short", c->name); return 1; }
     CHECK(memcmp(s, c->expected + at, count * sizeof(float)) == 0, "%s tile %d: samples differ from expected bits",
           c->name, c->index - 1);
     double maxerr = 0;
@@ -102,11 +84,9 @@ static void test_vectors(const char *dir)
 {
     size_t mlen;
     char *mtext = (char *)read_all(dir, "manifest.json", &mlen);
-    if (!mtext) return;
-    mtext = realloc(mtext, mlen + 1);
-    mtext[mlen] = 0;
+    if (!mtext) return;   /* NUL-terminated by slurp */
     cJSON *m = cJSON_Parse(mtext);
-    if (!m) { fail("manifest.json does not parse"); free(mtext); return; }
+    if (!m) { CHECK(0, "manifest.json does not parse"); free(mtext); return; }
     struct oc_decoder *d = oc_decoder_new();
     int nvec = 0, nbad = 0;
     cJSON *v;
@@ -250,13 +230,13 @@ static double roundtrip(struct oc_encoder *e, struct oc_decoder *d, const float 
     for (int tz = 0; tz < grid; tz++)
         for (int tx = 0; tx < grid; tx++) {
             int rc = oc_encode_tile(e, f, n, ts, tx, tz, lod, OC_FIELD_HEIGHT, bound, buf);
-            if (rc) { fail("encode: %s", oc_strerror(rc)); return -1; }
+            if (rc) { CHECK(0, "encode: %s", oc_strerror(rc)); return -1; }
         }
     memset(c, 0, sizeof *c);
     c->field = f; c->n = n; c->bound = bound;
     struct oc_frame_header out;
     int rc = oc_decode_frame(d, buf->data, buf->len, &out, cmp_tile, c);
-    if (rc) { fail("decode of a fresh encode: %s", oc_strerror(rc)); return -1; }
+    if (rc) { CHECK(0, "decode of a fresh encode: %s", oc_strerror(rc)); return -1; }
     return c->maxerr;
 }
 
@@ -385,9 +365,7 @@ static void test_stream_vectors(const char *dir)
 {
     size_t mlen;
     char *mtext = (char *)read_all(dir, "manifest.json", &mlen);
-    if (!mtext) return;
-    mtext = realloc(mtext, mlen + 1);
-    mtext[mlen] = 0;
+    if (!mtext) return;   /* NUL-terminated by slurp */
     cJSON *m = cJSON_Parse(mtext);
     cJSON *streams = cJSON_GetObjectItem(m, "streams"), *st;
     int frames = 0, errors = 0, same = 0, packings[2] = { 0, 0 };
@@ -943,8 +921,5 @@ int main(int argc, char **argv)
     test_stream_wide_codes();
     test_stream_ranges();
     test_entropy_writer();
-    printf("%d checks, %d failed\n", checks, failures);
-    if (failures) { printf("test_proto: FAILED\n"); return 1; }
-    printf("test_proto: OK\n");
-    return 0;
+    return check_done();
 }

@@ -20,29 +20,15 @@
 #include <complex.h>
 #include <math.h>
 #include <pthread.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "ocean_internal.h"
 
-static int passed, failed, quick;
+#include "common/check.h"
 
-static void check(int ok, const char *name, const char *fmt, ...)
-{
-    va_list ap;
-    printf("%s %s: ", ok ? "ok  " : "FAIL", name);
-    va_start(ap, fmt);
-    vprintf(fmt, ap);
-    va_end(ap);
-    printf("\n");
-    fflush(stdout);
-    if (ok)
-        passed++;
-    else
-        failed++;
-}
+static int quick;
 
 /* cascades 0: the default (params_defaults); depth 0: the default. */
 static struct ocean *make_sea(int n, double chop, int spectrum, int cascades, double depth)
@@ -62,7 +48,7 @@ static struct ocean *make_sea(int n, double chop, int spectrum, int cascades, do
     struct ocean_options opt = {1, NULL, 0};
     struct ocean *o = ocean_create(&p, &opt, err, sizeof err);
     if (!o)
-        check(0, "create", "ocean_create failed: %s", err);
+        CHECK(0, "create: ocean_create failed: %s", err);
     return o;
 }
 
@@ -272,12 +258,11 @@ static void test_accuracy_sea(int n, double chop, int spectrum, int count, int c
              param_enum_name(param_find("spectrum"), spectrum), chop, nc, depth > 0 ? ".shallow" : "");
     /* With finer cascades, cascade 0 alone is centimetres off the sum at
      * some point: a query of cascade 0 only would fail the 1 mm bound. */
-    check(rc == 0 && worst_h <= 1e-3 && worst_map <= 1e-6 && worst_n <= 0.5 && worst_d <= 1e-3 &&
+    CHECK(rc == 0 && worst_h <= 1e-3 && worst_map <= 1e-6 && worst_n <= 0.5 && worst_d <= 1e-3 &&
               unconverged == 0 && ref_agree == ref_tried && hmax > 0 && (nc == 1 || c0_off > 2e-3),
-          name,
-          "%d points (|x| to 1e7 m), %d cascade(s), depth %g m: height err %.2e m (max |h| %.2f m; cascade 0 alone "
+          "%s: %d points (|x| to 1e7 m), %d cascade(s), depth %g m: height err %.2e m (max |h| %.2f m; cascade 0 alone "
           "%.1e m off), |x0+D(x0)-x| %.1e m, disp err %.1e m, normal %.2e deg, unconverged %d, folded %d, "
-          "reference inversion agrees %d/%d",
+          "reference inversion agrees %d/%d", name,
           count, nc, ocean_get_params(o)->depth, worst_h, hmax, c0_off, worst_map, worst_d, worst_n, unconverged,
           folded, ref_agree, ref_tried);
     ref_free(&r);
@@ -321,8 +306,8 @@ static void test_folds(void)
         worst_map = fmax(worst_map, hypot(out[i].source[0] + v[R_DX] - xz[i][0], out[i].source[1] + v[R_DZ] - xz[i][1]));
         worst_h = fmax(worst_h, fabs(out[i].height - v[R_H]));
     }
-    check(rc == 0 && folded > 0 && converged == COUNT && worst_map <= 1e-6 && worst_h <= 1e-3, "query.folds",
-          "chop 4, amplitude 3: %d of %d sources on folded sheets, %d converged, |x0+D(x0)-x| %.1e m, height %.1e m",
+    CHECK(rc == 0 && folded > 0 && converged == COUNT && worst_map <= 1e-6 && worst_h <= 1e-3, "query.folds: chop "
+          "4, amplitude 3: %d of %d sources on folded sheets, %d converged, |x0+D(x0)-x| %.1e m, height %.1e m",
           folded, COUNT, converged, worst_map, worst_h);
     ref_free(&r);
     free(xz);
@@ -381,11 +366,10 @@ static void test_derivatives(int n, double chop)
     snprintf(name, sizeof name, "query.time_derivatives.N%d.chop%g", n, chop);
     /* Tolerances: finite-difference truncation (dt^2 w^3 a) and rounding
      * (1e-12 m / dt^2 for the acceleration) are far below these. */
-    check(rc == 0 && used >= COUNT / 2 && ev <= 1e-5 + 1e-4 * vmax && ea <= 1e-3 + 1e-3 * amax && epv <= 1e-5 &&
+    CHECK(rc == 0 && used >= COUNT / 2 && ev <= 1e-5 + 1e-4 * vmax && ea <= 1e-3 + 1e-3 * amax && epv <= 1e-5 &&
               epa <= 1e-3,
-          name,
-          "%d points: d(height)/dt err %.1e m/s (max %.2f), d2/dt2 err %.1e m/s^2 (max %.2f); particle %.1e, %.1e; "
-          "|Eulerian - particle| up to %.2e m/s",
+          "%s: %d points: d(height)/dt err %.1e m/s (max %.2f), d2/dt2 err %.1e m/s^2 (max %.2f); particle %.1e, %.1e; "
+          "|Eulerian - particle| up to %.2e m/s", name,
           used, ev, vmax, ea, amax, epv, epa, euler_vs_particle);
     ref_free(&rm);
     ref_free(&r0);
@@ -443,9 +427,9 @@ static void test_derivatives_easing(void)
      * rounding a 1 ms second difference would amplify to 0.06 m/s^2; the
      * truncation at 4 ms is ~5e-4 m/s and ~5e-3 m/s^2. Without the ramp's rate
      * the errors are 1.5 m/s and 3.7 m/s^2. */
-    check(rc == 0 && sf && used >= COUNT && ev <= 1e-3 + 1e-3 * vmax && ea <= 1e-2 + 2e-3 * amax,
-          "query.time_derivatives.easing",
-          "%d points inside the ramp: d(height)/dt err %.1e m/s (max %.2f), d2/dt2 err %.1e m/s^2 (max %.2f)", used, ev,
+    CHECK(rc == 0 && sf && used >= COUNT && ev <= 1e-3 + 1e-3 * vmax && ea <= 1e-2 + 2e-3 * amax,
+          "query.time_derivatives.easing: %d points inside the ramp: d(height)/dt err %.1e m/s (max %.2f), d2/dt2 "
+          "err %.1e m/s^2 (max %.2f)", used, ev,
           vmax, ea, amax);
     ocean_surface_free(sf);
     ocean_free(o);
@@ -470,7 +454,8 @@ static void test_periodic_and_grid(void)
         d = fmax(d, fabs(a->normal[0] - b->normal[0]) + fabs(a->vertical_velocity - b->vertical_velocity));
         d = fmax(d, fabs((b->source[0] - xz[2 * k + 1][0]) - (a->source[0] - xz[2 * k][0])));
     }
-    check(rc == 0 && d < 1e-8, "query.periodic", "(x, z) vs (x + 1000 L, z - 7 L) and (x - 250 L, z + 99 L): max diff %.1e",
+    CHECK(rc == 0 && d < 1e-8, "query.periodic: (x, z) vs (x + 1000 L, z - 7 L) and (x - 250 L, z + 99 L): max "
+          "diff %.1e",
           d);
 
     /* Choppiness 0: the height at a grid sample is the FFT's sample there. */
@@ -491,8 +476,8 @@ static void test_periodic_and_grid(void)
         /* slope from the normal: n = (-sx, 1, -sz) / |.| when nothing folds */
         es = fmax(es, fabs(-g[k].normal[0] / g[k].normal[1] - sx[gi[k]]));
     }
-    check(re == 0 && rc == 0 && e < 1e-5 && es < 1e-4, "query.grid",
-          "chop 0, 3 grid samples vs the FFT step: height %.1e m, slope_x %.1e", e, es);
+    CHECK(re == 0 && rc == 0 && e < 1e-5 && es < 1e-4, "query.grid: chop 0, 3 grid samples vs the FFT step: "
+          "height %.1e m, slope_x %.1e", e, es);
     ocean_free(o);
 }
 
@@ -518,10 +503,9 @@ static void test_cascade_grid(void)
     double h0 = ocean_field(o, OCEAN_HEIGHT)[0];
     double e = fabs(q.height - h);
     double es = fmax(fabs(-q.normal[0] / q.normal[1] - sx), fabs(-q.normal[2] / q.normal[1] - sz));
-    check(rc == 0 && ocean_cascades(o) == 3 && e < 1e-5 && es < 1e-4 && fabs(q.height - h0) > 1e-4,
-          "query.cascade_grid",
-          "chop 0, 3 cascades, origin: height %.1e m and slopes %.1e off the sum of the cascades' FFT samples "
-          "(cascade 0 alone: %.1e m off)", e, es, fabs(q.height - h0));
+    CHECK(rc == 0 && ocean_cascades(o) == 3 && e < 1e-5 && es < 1e-4 && fabs(q.height - h0) > 1e-4,
+          "query.cascade_grid: chop 0, 3 cascades, origin: height %.1e m and slopes %.1e off the sum of the "
+          "cascades' FFT samples (cascade 0 alone: %.1e m off)", e, es, fabs(q.height - h0));
     ocean_free(o);
 }
 
@@ -556,8 +540,9 @@ static void test_bad_input(void)
     untouched = !memcmp(&out[0], &sentinel, sizeof sentinel) && !memcmp(&out[1], &sentinel, sizeof sentinel);
     int zero = ocean_surface_query(s, 1.0, NULL, 0, NULL);
     int okq = ocean_surface_query(s, 1.0, (const double(*)[2])good, 2, out);
-    check(s && fails == (int)(sizeof cases / sizeof cases[0]) && untouched && zero == 0 && okq == 0, "query.bad_input",
-          "%d/%zu bad calls return -1 and write nothing; 0 points ok; a good call after them works", fails,
+    CHECK(s && fails == (int)(sizeof cases / sizeof cases[0]) && untouched && zero == 0 && okq == 0,
+          "query.bad_input: %d/%zu bad calls return -1 and write nothing; 0 points ok; a good call after them works",
+          fails,
           sizeof cases / sizeof cases[0]);
     ocean_surface_free(s);
 
@@ -567,9 +552,9 @@ static void test_bad_input(void)
     ocean_reconfigure(o, &p, err, sizeof err);
     struct ocean_point calm[2];
     int rc = ocean_query(o, 4.0, (const double(*)[2])good, 2, calm);
-    check(rc == 0 && calm[1].height == 0 && calm[1].normal[1] == 1 && calm[1].vertical_velocity == 0 &&
+    CHECK(rc == 0 && calm[1].height == 0 && calm[1].normal[1] == 1 && calm[1].vertical_velocity == 0 &&
               calm[1].converged && calm[1].source[0] == 3 && calm[1].jacobian == 1,
-          "query.calm", "wind 0: height %g, normal y %g, source (%g, %g)", calm[1].height, calm[1].normal[1],
+          "query.calm: wind 0: height %g, normal y %g, source (%g, %g)", calm[1].height, calm[1].normal[1],
           calm[1].source[0], calm[1].source[1]);
     ocean_free(o);
 }
@@ -616,7 +601,7 @@ static void test_threads_and_snapshot(void)
         pthread_join(tid[i], NULL);
         same &= jobs[i].rc == 0 && !memcmp(got[i], ref, sizeof ref);
     }
-    check(s && rc == 0 && same, "query.threads", "%d threads x 3 queries on one snapshot while stepping: bit-identical",
+    CHECK(s && rc == 0 && same, "query.threads: %d threads x 3 queries on one snapshot while stepping: bit-identical",
           THREADS);
 
     /* A snapshot keeps the sea it was made from: reconfiguring the ocean
@@ -628,9 +613,9 @@ static void test_threads_and_snapshot(void)
     struct ocean_point after[COUNT], other[COUNT];
     ocean_surface_query(s, 9.0, (const double(*)[2])xz, COUNT, after);
     ocean_surface_query(s2, 9.0, (const double(*)[2])xz, COUNT, other);
-    check(!memcmp(after, ref, sizeof ref) && memcmp(other, ref, sizeof ref) != 0 &&
+    CHECK(!memcmp(after, ref, sizeof ref) && memcmp(other, ref, sizeof ref) != 0 &&
               ocean_surface_params(s)->wind_speed == 12 && ocean_surface_params(s2)->wind_speed == 20,
-          "query.snapshot", "old snapshot unchanged by reconfigure; new one sees wind 20 m/s");
+          "query.snapshot: old snapshot unchanged by reconfigure; new one sees wind 20 m/s");
     /* Every mode off the Nyquist row and column (and k = 0) is non-zero in
      * cascade 0; a finer cascade has its band's modes (ocean.h) of the half
      * spectrum kx >= 0: so many modes per point. */
@@ -641,8 +626,8 @@ static void test_threads_and_snapshot(void)
                 int a = abs(mz) > mx ? abs(mz) : mx;
                 expect += a >= ocean_cascade_band(64, c) && a <= ocean_cascade_band_top(64, c);
             }
-    check(ocean_surface_modes(s) == expect && ocean_cascades(o) == 3, "query.modes",
-          "N=64, %d cascades: %d non-zero modes in the snapshot (expected %d)", ocean_cascades(o),
+    CHECK(ocean_surface_modes(s) == expect && ocean_cascades(o) == 3, "query.modes: N=64, %d cascades: %d "
+          "non-zero modes in the snapshot (expected %d)", ocean_cascades(o),
           ocean_surface_modes(s), expect);
     /* Warm start, as a probe does: sources of the previous tick as guesses.
      * Same answers, fewer Newton steps. */
@@ -663,8 +648,8 @@ static void test_threads_and_snapshot(void)
         all &= cold[i].converged && warm[i].converged;
         dh = fmax(dh, fabs(cold[i].height - warm[i].height) + fabs(cold[i].vertical_velocity - warm[i].vertical_velocity));
     }
-    check(rc1 == 0 && rc2 == 0 && all && dh < 1e-7 && steps_warm < steps_cold, "query.warm_start",
-          "%d points one tick later: %d Newton steps from the previous sources vs %d from the points, same values (%.1e)",
+    CHECK(rc1 == 0 && rc2 == 0 && all && dh < 1e-7 && steps_warm < steps_cold, "query.warm_start: %d points one "
+          "tick later: %d Newton steps from the previous sources vs %d from the points, same values (%.1e)",
           COUNT, steps_warm, steps_cold, dh);
     ocean_surface_free(s);
     ocean_surface_free(s2);
@@ -673,8 +658,8 @@ static void test_threads_and_snapshot(void)
 
 int main(void)
 {
-    const char *q = getenv("OCEAN_TEST_QUICK");
-    quick = q && *q && strcmp(q, "0") != 0;
+    check_verbose = 1; /* the passing lines carry the measured values */
+    quick = check_quick();
     test_bad_input();
     test_periodic_and_grid();
     test_cascade_grid();
@@ -702,6 +687,5 @@ int main(void)
     test_derivatives_easing();
     if (!quick)
         test_accuracy(512, 1.0, SPECTRUM_JONSWAP, 4);
-    printf("%d passed, %d failed\n", passed, failed);
-    return failed ? 1 : 0;
+    return check_done();
 }

@@ -14,6 +14,8 @@
  * exit codes a script can rely on. */
 #include <cjson/cJSON.h>
 #include <errno.h>
+#include <math.h>
+#include <pthread.h>
 #include <getopt.h>
 #include <libwebsockets.h>
 #include <signal.h>
@@ -26,7 +28,7 @@
 
 #include "oc_proto.h"
 #include "tap_exr.h"
-#include "tap_frame.h"
+#include "tap_surface.h"
 #include "tap_write.h"
 
 enum exit_code {
@@ -47,6 +49,13 @@ enum exit_code {
 #define ID_QUIET 3     /* watch only: the smallest subscription there is */
 #define ID_QUERY 4
 #define ID_PROBE 5
+#define ID_RENDER 6
+/* Draft, not yet served by oceand: the `render` request (exact-time frames for
+ * bakes). Its frames carry this bit in the frame header's flags and their
+ * index k in seq; sim_time = start + k / fps. */
+#define RENDER_FRAME_FLAG 1u
+#define WRITER_QUEUE 4                      /* complete frames waiting for the file writer, at most */
+#define WRITER_BYTES ((size_t)256 << 20)    /* ... and their copies' bytes, at most (one frame always) */
 #define MAX_POINTS 256 /* of --query / --probe (the server caps probes lower) */
 
 static void usage(FILE *to)
@@ -73,6 +82,25 @@ static void usage(FILE *to)
         "                      exr: a Blender ocean-modifier bake, DIR/disp_NNNN.exr,\n"
         "                      normal_NNNN.exr, foam_NNNN.exr (+ frame_NNNN.json), frames\n"
         "                      numbered 1, 2, ...; subscribes to all six fields\n"
+        "Cascades (PROTOCOL.md §4.1; the default sea has 3, and the whole sea is their sum):\n"
+        "  --cascades K|all    also receive the finer cascades 1..K-1 (all: every one the\n"
+        "                      server runs) with the same fields, at lod max(--lod, 1) (a finer\n"
+        "                      cascade loses nothing at lod 1) and bound 0.001 (0 with --bound 0);\n"
+        "                      files DIR/<field>-c<k>-<seq>.<ext>, sidecar patch_size = its L_k.\n"
+        "                      Without it: cascade 0 only, 1-3 cm of height off the sea\n"
+        "  --sum M             also write the sum of the cascades of height, dx, dz, slope_x,\n"
+        "                      slope_z on an M x M grid: DIR/<field>-sum-<seq>.<ext>; with\n"
+        "                      --format exr the bake is that sum (default M: N >> lod)\n"
+        "  --sum-area X,Z,S    the grid's square: origin (X, Z), side S metres (default\n"
+        "                      0,0,patch_size); point [j][i] at (X + i*S/M, Z + j*S/M)\n"
+        "  --interp I          between grid nodes: spectral (default; exact signal on a 4x\n"
+        "                      finer grid, then cubic: ~0.1 mm from query) or bilinear (on\n"
+        "                      the streamed grids: ~14 mm rms off; docs/query.md)\n"
+        "Exact-time bakes (needs a daemon with the render request; one without it answers\n"
+        "unknown_type, exit 4):\n"
+        "  --bake --fps F --start T --frames K   frames at sim times T + k/F, k = 0..K-1,\n"
+        "                      rendered by the server for the parameters in force, every\n"
+        "                      one, in order; written like --out/--format (EXR frame k+1)\n"
         "  --stats             print frames/s, bytes and latency (each second to stderr,\n"
         "                      summary on stdout at exit)\n"
         "Control:\n"
@@ -87,7 +115,8 @@ static void usage(FILE *to)
         "  --time T            ... at sim time T (within the server's window; default now)\n"
         "  --probe \"X,Z;X,Z...\"  the probe values of these points with every tick: one\n"
         "                      JSON line (probe_data) per tick, or CSV with --csv\n"
-        "  --csv               --probe as CSV: seq,sim_time,params_version,point,x,z,height,\n"
+        "  --csv               --probe as CSV, a header row then one row per point and tick:\n"
+        "                      seq,sim_time,params_version,point,x,z,height,\n"
         "                      dx,dz,nx,ny,nz,vertical_velocity,vertical_acceleration\n"
         "  --ticks N           stop after N probe ticks (default: until Ctrl-C)\n"
         "Other:\n"
@@ -125,6 +154,14 @@ struct opts {
     int has_time;
     double time;          /* --time */
     long ticks;           /* --ticks, 0 = until Ctrl-C */
+    int cascades;         /* --cascades: 1 = cascade 0 only, -1 = all the server runs */
+    int sum_m;            /* --sum M, 0 = not given, -1 = the default (N >> lod) */
+    int has_area;
+    double area[3];       /* --sum-area X,Z,S */
+    int bilinear;         /* --interp bilinear */
+    int bake;             /* --bake: exact-time frames through the render request */
+    double fps, start;    /* --fps, --start */
+    int has_start;
 };
 
 /* "x,z;x,z;..." -> o->points. */
@@ -185,8 +222,12 @@ static int parse_args(int argc, char **argv, struct opts *o)
         {"query", required_argument, 0, 'Q'}, {"probe", required_argument, 0, 'P'},
         {"time", required_argument, 0, 'I'},  {"ticks", required_argument, 0, 'K'},
         {"csv", no_argument, 0, 'C'},         {"intra", no_argument, 0, 'A'},
+        {"cascades", required_argument, 0, 'c'}, {"sum", required_argument, 0, 'M'},
+        {"sum-area", required_argument, 0, 'a'}, {"interp", required_argument, 0, 'i'},
+        {"bake", no_argument, 0, 'B'},        {"fps", required_argument, 0, 'p'},
+        {"start", required_argument, 0, 'z'},
         {0, 0, 0, 0}};
-    *o = (struct opts){.frames = -1, .fields = 7u, .bound = -1, .format = TAP_NPY, .timeout = 10};
+    *o = (struct opts){.frames = -1, .fields = 7u, .bound = -1, .format = TAP_NPY, .timeout = 10, .cascades = 1};
     int c;
     char *end;
     while ((c = getopt_long(argc, argv, "vh", longs, NULL)) != -1) {
@@ -244,11 +285,57 @@ static int parse_args(int argc, char **argv, struct opts *o)
             if (*end || o->ticks < 0) return usage_error("--ticks needs a count >= 0");
             break;
         case 'C': o->csv = 1; break;
+        case 'c':
+            if (!strcmp(optarg, "all")) { o->cascades = -1; break; }
+            o->cascades = (int)strtol(optarg, &end, 10);
+            if (*end || o->cascades < 1 || o->cascades > OC_MAX_CASCADES)
+                return usage_error("--cascades needs all or a count 1..%d", OC_MAX_CASCADES);
+            break;
+        case 'M':
+            o->sum_m = (int)strtol(optarg, &end, 10);
+            if (*end || o->sum_m < 1 || o->sum_m > 8192) return usage_error("--sum needs a grid side 1..8192");
+            break;
+        case 'a':
+            if (sscanf(optarg, "%lf,%lf,%lf", &o->area[0], &o->area[1], &o->area[2]) != 3 || !(o->area[2] > 0) ||
+                !isfinite(o->area[0]) || !isfinite(o->area[1]) || !isfinite(o->area[2]))
+                return usage_error("--sum-area needs X,Z,SIZE (metres, SIZE > 0)");
+            o->has_area = 1;
+            break;
+        case 'B': o->bake = 1; break;
+        case 'p':
+            o->fps = strtod(optarg, &end);
+            if (*end || !(o->fps > 0 && o->fps <= 1000)) return usage_error("--fps needs frames per second in (0, 1000]");
+            break;
+        case 'z':
+            o->start = strtod(optarg, &end);
+            if (*end || !*optarg || !isfinite(o->start) || o->start < 0)
+                return usage_error("--start needs a sim time in seconds >= 0");
+            o->has_start = 1;
+            break;
+        case 'i':
+            if (!strcmp(optarg, "bilinear")) o->bilinear = 1;
+            else if (strcmp(optarg, "spectral")) return usage_error("--interp must be spectral or bilinear");
+            break;
         case 'h': usage(stdout); return EXIT_OK;
         default: return usage_error("unknown option");
         }
     }
-    if (o->format == TAP_EXR) o->fields = (1u << OC_FIELD_COUNT) - 1u; /* the bake needs all six */
+    /* The bake needs the six fields it writes from; not foam (its foam is 1 - jacobian). */
+    if (o->format == TAP_EXR) o->fields = ((1u << OC_FIELD_COUNT) - 1u) & ~(1u << OC_FIELD_FOAM);
+    if (o->bake && !(o->fps > 0 && o->has_start && o->frames > 0 && o->out_dir))
+        return usage_error("--bake needs --fps F, --start T, --frames K and --out DIR");
+    if (!o->bake && (o->fps > 0 || o->has_start)) return usage_error("--fps and --start are for --bake");
+    if (o->bake && (o->max_rate || o->stats || o->watch))
+        return usage_error("--bake does not mix with --max-rate, --stats or --watch");
+    if ((o->sum_m || o->has_area) && o->cascades == 1)
+        return usage_error("--sum/--sum-area add up cascades: give --cascades too");
+    if (o->has_area && !o->sum_m) o->sum_m = -1;
+    /* Cascade 0 holds waves up to its Nyquist: its LOD 1+ grids alias them, and no
+     * interpolation between their nodes can give them back. */
+    if (o->sum_m && o->lod > 0 && (o->has_area || o->sum_m > 0))
+        fprintf(stderr, "ocean-tap: warning: with --lod %d cascade 0's short waves are aliased: the sum is "
+                        "right only at the nodes of its LOD grid (use --lod 0 for other grids)\n", o->lod);
+    if (o->format == TAP_EXR && o->cascades != 1 && !o->sum_m) o->sum_m = -1; /* a bake of the whole sea */
     if (o->query && o->probe) return usage_error("--query and --probe: one at a time");
     if ((o->query || o->probe) && (o->frames >= 0 || o->out_dir || o->stats || o->watch))
         return usage_error("--query/--probe do not mix with frames (--frames/--out/--stats) or --watch");
@@ -261,7 +348,9 @@ static int parse_args(int argc, char **argv, struct opts *o)
 
 /* ---- session state ------------------------------------------------------ */
 
-enum stage { ST_HELLO, ST_SET, ST_SUBSCRIBE, ST_QUERY, ST_PROBE, ST_RUN, ST_DONE };
+struct job;
+
+enum stage { ST_HELLO, ST_SET, ST_SUBSCRIBE, ST_QUERY, ST_PROBE, ST_RENDER, ST_RUN, ST_DONE };
 
 struct stats {
     double t0, last_report;
@@ -280,7 +369,7 @@ struct session {
     struct oc_buf msg;    /* the message being reassembled */
     char *outq[4];        /* text messages waiting for WRITEABLE */
     int noutq;
-    struct tap_frame *grid; /* the subscribed fields, assembled from tiles */
+    struct oc_grid *grid;   /* the subscribed fields, assembled from tiles */
     long frames_done;
     double resync_t;      /* when we last resubscribed after a missing reference */
     long ticks_done;      /* probe_data lines printed */
@@ -289,6 +378,21 @@ struct session {
                              messages alone do not count, or a subscription served at a
                              coarser LOD, whose frames we cannot write, would wait for ever */
     int degraded_lod;     /* the LOD the server serves us at while degraded, else -1 */
+    int ncasc;            /* cascades received: 1 + finer ones (from --cascades and the hello) */
+    double patch[OC_MAX_CASCADES]; /* L_c from hello/params cascade_patch_sizes */
+    struct writer {       /* the file writer (below) */
+        pthread_t th;
+        int started, closing;
+        pthread_mutex_t mu;
+        pthread_cond_t cv_put, cv_get;
+        struct job *q[WRITER_QUEUE];
+        int head, count;
+        int err_code;
+        char err[600];
+        struct tap_surface *surface; /* the writer's own: */
+        float *sum_buf;               /* --sum: fields on the sum grid */
+    } wr;
+    int csv_header_done;
     struct stats st;
     struct lws *wsi;
 };
@@ -394,19 +498,58 @@ static void send_set(struct session *s)
     send_json(s, j);
 }
 
+/* Fields of the finer cascades: foam is cascade 0's only; a bake sums the
+ * finer cascades and takes the Jacobian (which does not add) from cascade 0. */
+static unsigned fine_fields(const struct opts *o)
+{
+    return o->fields & ~(1u << OC_FIELD_FOAM) & (o->format == TAP_EXR ? ~(1u << OC_FIELD_JACOBIAN) : ~0u);
+}
+static int fine_lod(const struct opts *o) { return o->lod > 1 ? o->lod : 1; }
+
+/* cascade_patch_sizes of a hello or params message into s->patch. */
+static void read_patch_sizes(struct session *s, cJSON *msg)
+{
+    cJSON *ps = cJSON_GetObjectItemCaseSensitive(msg, "cascade_patch_sizes"), *v;
+    int c = 0;
+    cJSON_ArrayForEach(v, ps) {
+        if (c < OC_MAX_CASCADES && cJSON_IsNumber(v)) s->patch[c] = v->valuedouble;
+        c++;
+    }
+}
+
 static void send_subscribe(struct session *s)
 {
     cJSON *j = cJSON_CreateObject(), *fields = cJSON_CreateArray();
-    cJSON_AddStringToObject(j, "type", "subscribe");
-    cJSON_AddNumberToObject(j, "id", ID_SUBSCRIBE);
+    int render = s->stage == ST_RENDER;
+    cJSON_AddStringToObject(j, "type", render ? "render" : "subscribe");
+    cJSON_AddNumberToObject(j, "id", render ? ID_RENDER : ID_SUBSCRIBE);
+    if (render) {
+        cJSON_AddNumberToObject(j, "start", s->o->start);
+        cJSON_AddNumberToObject(j, "fps", s->o->fps);
+        cJSON_AddNumberToObject(j, "frames", (double)s->o->frames);
+    }
     for (int f = 0; f < OC_FIELD_COUNT; f++)
         if (s->o->fields & (1u << f)) cJSON_AddItemToArray(fields, cJSON_CreateString(oc_field_name(f)));
     cJSON_AddItemToObject(j, "fields", fields);
     cJSON_AddNumberToObject(j, "lod", s->o->lod);
-    cJSON_AddStringToObject(j, "tiles", "all");
     if (s->o->bound >= 0) cJSON_AddNumberToObject(j, "bound", s->o->bound);
-    if (s->o->max_rate > 0) cJSON_AddNumberToObject(j, "max_rate", s->o->max_rate);
-    cJSON_AddBoolToObject(j, "temporal", !s->o->intra); /* PROTOCOL.md §5.9 */
+    if (!render) {
+        cJSON_AddStringToObject(j, "tiles", "all");
+        if (s->o->max_rate > 0) cJSON_AddNumberToObject(j, "max_rate", s->o->max_rate);
+        cJSON_AddBoolToObject(j, "temporal", !s->o->intra); /* PROTOCOL.md §5.9 */
+    }
+    /* The finer cascades (§4.1): same fields but foam (cascade 0's only), at LOD
+     * 1 or coarser (they hold nothing LOD 1 drops) and 1 mm, their heights being
+     * centimetres; lossless stays lossless. */
+    cJSON *casc = s->ncasc > 1 ? cJSON_AddArrayToObject(j, "cascades") : NULL;
+    for (int c = 1; c < s->ncasc; c++) {
+        cJSON *e = cJSON_CreateObject(), *ef = cJSON_AddArrayToObject(e, "fields");
+        for (int f = 0; f < OC_FIELD_COUNT; f++)
+            if (fine_fields(s->o) & (1u << f)) cJSON_AddItemToArray(ef, cJSON_CreateString(oc_field_name(f)));
+        cJSON_AddNumberToObject(e, "lod", fine_lod(s->o));
+        cJSON_AddNumberToObject(e, "bound", s->o->bound == 0 ? 0 : 0.001);
+        cJSON_AddItemToArray(casc, e);
+    }
     send_json(s, j);
 }
 
@@ -451,6 +594,10 @@ static void print_probe(struct session *s, cJSON *msg, const char *text, size_t 
     if (!s->o->csv) {
         printf("%.*s\n", (int)len, text);
     } else {
+        if (!s->csv_header_done) {
+            puts("seq,sim_time,params_version,point,x,z,height,dx,dz,nx,ny,nz,vertical_velocity,vertical_acceleration");
+            s->csv_header_done = 1;
+        }
         cJSON *seq = cJSON_GetObjectItemCaseSensitive(msg, "seq"), *t = cJSON_GetObjectItemCaseSensitive(msg, "sim_time");
         cJSON *v = cJSON_GetObjectItemCaseSensitive(msg, "params_version"), *pts = cJSON_GetObjectItemCaseSensitive(msg, "points");
         int i = 0;
@@ -480,6 +627,13 @@ static void advance(struct session *s)
     }
     if (s->stage == ST_PROBE) { s->stage = ST_RUN; s->st.t0 = s->st.last_report = now_s(); return; }
     if (s->stage == ST_HELLO && s->o->nsets) { s->stage = ST_SET; send_set(s); return; }
+    if (s->stage <= ST_SET && s->o->bake) {
+        s->stage = ST_RENDER;
+        send_quiet_subscribe(s); /* live frames are not wanted while the server renders ours */
+        send_subscribe(s);
+        return;
+    }
+    if (s->stage == ST_RENDER) { s->stage = ST_RUN; s->st.t0 = s->st.last_report = s->last_frame = now_s(); return; }
     if (s->stage <= ST_SET && s->want_frames) { s->stage = ST_SUBSCRIBE; send_subscribe(s); return; }
     if (s->stage <= ST_SUBSCRIBE && (s->want_frames || s->o->watch)) {
         s->stage = ST_RUN;
@@ -526,6 +680,14 @@ static void on_text(struct session *s, const char *text, size_t len)
                  cJSON_IsNumber(proto) ? proto->valueint : -1, OC_PROTO_VERSION);
         } else {
             s->schema = cJSON_DetachItemFromObjectCaseSensitive(msg, "schema");
+            read_patch_sizes(s, msg);
+            cJSON *np = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(msg, "params"), "cascades");
+            int have = cJSON_IsNumber(np) && np->valueint >= 1 && np->valueint <= OC_MAX_CASCADES ? np->valueint : 1;
+            s->ncasc = s->o->cascades < 0 || s->o->cascades > have ? have : s->o->cascades;
+            if (s->o->cascades > have)
+                fprintf(stderr, "ocean-tap: the server runs %d cascade%s: receiving %d\n", have, have > 1 ? "s" : "", have);
+            for (int c = 1; s->grid && c < s->ncasc; c++)
+                oc_grid_want(s->grid, c, fine_fields(s->o), fine_lod(s->o));
             if (!s->o->nsets && !s->want_frames && !s->o->watch && !s->o->query && !s->o->probe) {
                 /* Info mode: the hello without the long schema, one line. */
                 char *out = cJSON_PrintUnformatted(msg);
@@ -535,6 +697,7 @@ static void on_text(struct session *s, const char *text, size_t len)
             advance(s);
         }
     } else if (!strcmp(t, "params")) {
+        read_patch_sizes(s, msg);
         if (s->o->watch) {
             char *out = cJSON_PrintUnformatted(msg);
             if (out) { puts(out); fflush(stdout); }
@@ -580,12 +743,24 @@ static void on_text(struct session *s, const char *text, size_t len)
         printf("%.*s\n", (int)len, text);
         fflush(stdout);
         finish(s, EXIT_OK);
+    } else if (!strcmp(t, "rendering") && s->stage == ST_RENDER && id_is(msg, ID_RENDER)) {
+        advance(s);
+    } else if (!strcmp(t, "rendered") && s->o->bake && id_is(msg, ID_RENDER)) {
+        if (s->frames_done < s->o->frames)
+            fail(s, EXIT_PROTOCOL, "the server ended the render after %ld of %ld frames", s->frames_done, s->o->frames);
     } else if (!strcmp(t, "probing") && s->stage == ST_PROBE && id_is(msg, ID_PROBE)) {
         advance(s);
     } else if (!strcmp(t, "probe_data") && s->stage == ST_RUN && s->o->probe) {
         print_probe(s, msg, text, len);
     } else if (!strcmp(t, "error")) {
-        if ((s->stage == ST_QUERY && id_is(msg, ID_QUERY)) || (s->stage == ST_PROBE && id_is(msg, ID_PROBE))) {
+        if (s->o->bake && id_is(msg, ID_RENDER)) {
+            cJSON *code = cJSON_GetObjectItemCaseSensitive(msg, "code");
+            print_error(msg, "render rejected");
+            if (cJSON_IsString(code) && !strcmp(code->valuestring, "unknown_type"))
+                fprintf(stderr, "ocean-tap: this server has no render request (exact-time frames); "
+                                "bake from the stream instead: --format exr without --bake\n");
+            finish(s, EXIT_REJECTED);
+        } else if ((s->stage == ST_QUERY && id_is(msg, ID_QUERY)) || (s->stage == ST_PROBE && id_is(msg, ID_PROBE))) {
             print_error(msg, s->stage == ST_QUERY ? "query rejected" : "probe rejected");
             finish(s, EXIT_REJECTED);
         } else if (s->stage == ST_SET && (id_is(msg, ID_SET) || !cJSON_GetObjectItem(msg, "id"))) {
@@ -602,49 +777,292 @@ static void on_text(struct session *s, const char *text, size_t len)
     cJSON_Delete(msg);
 }
 
-/* --format exr: one Blender bake frame (tap_exr.h) from the six fields. */
-static int write_bake(struct session *s, const struct oc_frame_header *fh)
+/* ---- the writer thread ----------------------------------------------------
+ * Files are written by a thread of their own, from copies of complete frames,
+ * so that the connection is read while a frame is being written: a client that
+ * stops reading misses ticks (the server sends the latest frame only). */
+
+struct job {
+    struct oc_frame_header fh;
+    long number;                  /* 1, 2, ...: the bake's frame number */
+    int ncasc;
+    double patch[OC_MAX_CASCADES];
+    float *data[OC_MAX_CASCADES][OC_FIELD_COUNT];
+    int side[OC_MAX_CASCADES][OC_FIELD_COUNT];
+    float bound[OC_MAX_CASCADES][OC_FIELD_COUNT];
+};
+
+static const float *job_field(const struct job *j, int c, int f, int *side, float *bound)
 {
-    const float *f[OC_FIELD_COUNT];
-    int side = 0;
-    float bound = 0, b;
-    for (int i = 0; i < OC_FIELD_COUNT; i++) {
-        f[i] = tap_frame_field(s->grid, i, &side, &b);
-        bound = b > bound ? b : bound;
+    if (c < 0 || c >= OC_MAX_CASCADES || f < 0 || f >= OC_FIELD_COUNT || !j->data[c][f]) return NULL;
+    *side = j->side[c][f];
+    *bound = j->bound[c][f];
+    return j->data[c][f];
+}
+
+static void job_free(struct job *j)
+{
+    if (!j) return;
+    for (int c = 0; c < OC_MAX_CASCADES; c++)
+        for (int f = 0; f < OC_FIELD_COUNT; f++) free(j->data[c][f]);
+    free(j);
+}
+
+/* The writer's first failure: kept for the main thread, which reports it. */
+static void wfail(struct session *s, int code, const char *fmt, ...)
+{
+    pthread_mutex_lock(&s->wr.mu);
+    if (!s->wr.err_code) {
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(s->wr.err, sizeof s->wr.err, fmt, ap);
+        va_end(ap);
+        s->wr.err_code = code;
     }
-    struct tap_exr_fields ef = {f[OC_FIELD_HEIGHT], f[OC_FIELD_DX], f[OC_FIELD_DZ],
-                                f[OC_FIELD_SLOPE_X], f[OC_FIELD_SLOPE_Z], f[OC_FIELD_JACOBIAN]};
-    struct tap_meta m = {.field = "bake", .seq = fh->seq, .sim_time = fh->sim_time,
-                         .params_version = fh->params_version, .n = fh->n, .lod = s->o->lod,
-                         .patch_size = fh->patch_size, .bound = bound, .server_time_us = fh->server_time_us};
-    char err[512];
-    if (tap_exr_bake(s->o->out_dir, (int)s->frames_done, side, &ef, &m, err, sizeof err) != 0) {
-        fail(s, EXIT_OUTPUT, "cannot write the bake: %s", err);
+    pthread_mutex_unlock(&s->wr.mu);
+}
+
+static int write_frame(struct session *s, const struct job *j);
+
+static void *writer_main(void *arg)
+{
+    struct session *s = arg;
+    pthread_mutex_lock(&s->wr.mu);
+    for (;;) {
+        while (!s->wr.count && !s->wr.closing) pthread_cond_wait(&s->wr.cv_get, &s->wr.mu);
+        if (!s->wr.count) break;
+        struct job *j = s->wr.q[s->wr.head];
+        s->wr.head = (s->wr.head + 1) % WRITER_QUEUE;
+        s->wr.count--;
+        int failed = s->wr.err_code != 0;
+        pthread_cond_signal(&s->wr.cv_put);
+        pthread_mutex_unlock(&s->wr.mu);
+        if (!failed) write_frame(s, j); /* after a failure: drain, write nothing more */
+        job_free(j);
+        pthread_mutex_lock(&s->wr.mu);
+    }
+    pthread_mutex_unlock(&s->wr.mu);
+    return NULL;
+}
+
+/* Copy the complete frame in the grids and queue it; waits while the queue is
+ * full (its depth keeps the copies under WRITER_BYTES). */
+static int writer_put(struct session *s, const struct oc_frame_header *fh)
+{
+    struct job *j = calloc(1, sizeof *j);
+    if (!j) return -1;
+    j->fh = *fh;
+    j->number = s->frames_done;
+    j->ncasc = s->ncasc > 0 ? s->ncasc : 1;
+    memcpy(j->patch, s->patch, sizeof j->patch);
+    size_t bytes = 0;
+    for (int c = 0; c < j->ncasc; c++)
+        for (int f = 0; f < OC_FIELD_COUNT; f++) {
+            int side;
+            float bound;
+            const float *d = oc_grid_field(s->grid, c, f, &side, &bound);
+            if (!d) continue;
+            size_t n = (size_t)side * side * sizeof(float);
+            if (!(j->data[c][f] = malloc(n))) { job_free(j); return -1; }
+            memcpy(j->data[c][f], d, n);
+            j->side[c][f] = side;
+            j->bound[c][f] = bound;
+            bytes += n;
+        }
+    int depth = bytes ? (int)(WRITER_BYTES / bytes) : WRITER_QUEUE;
+    depth = depth < 1 ? 1 : depth > WRITER_QUEUE ? WRITER_QUEUE : depth;
+    pthread_mutex_lock(&s->wr.mu);
+    if (!s->wr.started) {
+        if (pthread_create(&s->wr.th, NULL, writer_main, s) != 0) {
+            pthread_mutex_unlock(&s->wr.mu);
+            job_free(j);
+            return -1;
+        }
+        s->wr.started = 1;
+    }
+    while (s->wr.count >= depth) pthread_cond_wait(&s->wr.cv_put, &s->wr.mu);
+    s->wr.q[(s->wr.head + s->wr.count) % WRITER_QUEUE] = j;
+    s->wr.count++;
+    pthread_cond_signal(&s->wr.cv_get);
+    pthread_mutex_unlock(&s->wr.mu);
+    return 0;
+}
+
+/* The writer's failure, if any: code (0 = none) and message. */
+static int writer_error(struct session *s, char *msg, size_t len)
+{
+    pthread_mutex_lock(&s->wr.mu);
+    int code = s->wr.err_code;
+    if (code) snprintf(msg, len, "%s", s->wr.err);
+    pthread_mutex_unlock(&s->wr.mu);
+    return code;
+}
+
+/* Write what is queued, then stop the thread. */
+static void writer_close(struct session *s)
+{
+    pthread_mutex_lock(&s->wr.mu);
+    s->wr.closing = 1;
+    pthread_cond_signal(&s->wr.cv_get);
+    int started = s->wr.started;
+    pthread_mutex_unlock(&s->wr.mu);
+    if (started) pthread_join(s->wr.th, NULL);
+    s->wr.started = 0;
+}
+
+/* The --sum grid: side, origin and extent (default: cascade 0's patch). */
+struct sum_grid { int m; double x0, z0, size; };
+
+static struct sum_grid sum_geometry(const struct session *s, const struct job *j)
+{
+    int side = 0;
+    float b;
+    job_field(j, 0, OC_FIELD_HEIGHT, &side, &b);
+    if (!side) side = j->fh.n >> s->o->lod;
+    struct sum_grid g = {s->o->sum_m > 0 ? s->o->sum_m : side, 0, 0, j->fh.patch_size};
+    if (s->o->has_area) { g.x0 = s->o->area[0]; g.z0 = s->o->area[1]; g.size = s->o->area[2]; }
+    return g;
+}
+
+/* Field f summed over the received cascades (or cascade 0 alone: only0) on
+ * the sum grid, into out (m*m floats). Returns 0, 1 when a cascade lacks the
+ * field, -1 on failure. */
+static int sum_field(struct session *s, const struct job *j, const struct sum_grid *sg, enum oc_field f,
+                     int only0, float *out, float *bound)
+{
+    struct tap_cascade_grid g[OC_MAX_CASCADES];
+    int nc = only0 ? 1 : j->ncasc;
+    *bound = 0;
+    for (int c = 0; c < nc; c++) {
+        float b = 0;
+        g[c].data = job_field(j, c, f, &g[c].side, &b);
+        g[c].period = c == 0 ? j->fh.patch_size : j->patch[c];
+        if (!g[c].data) return 1;
+        if (!(g[c].period > 0)) {
+            wfail(s, EXIT_PROTOCOL, "the server did not say the patch size of cascade %d", c);
+            return -1;
+        }
+        *bound += b;
+    }
+    if (!s->wr.surface && !(s->wr.surface = tap_surface_new())) { wfail(s, EXIT_OUTPUT, "out of memory"); return -1; }
+    if (tap_surface_grid(s->wr.surface, g, nc, sg->m, sg->x0, sg->z0, sg->size, s->o->bilinear, out) != 0) {
+        wfail(s, EXIT_OUTPUT, "out of memory for the %dx%d sum", sg->m, sg->m);
         return -1;
     }
     return 0;
 }
 
-static int write_frame(struct session *s, const struct oc_frame_header *fh)
+static float *sum_buffers(struct session *s, int m, int count)
 {
-    if (s->o->format == TAP_EXR) return write_bake(s, fh);
-    for (int f = 0; f < OC_FIELD_COUNT; f++) {
-        int side;
-        float bound;
-        const float *data = tap_frame_field(s->grid, f, &side, &bound);
-        if (!data) continue;
-        char path[4096];
-        snprintf(path, sizeof path, "%s/%s-%08llu.%s", s->o->out_dir, oc_field_name(f),
-                 (unsigned long long)fh->seq, tap_format_ext(s->o->format));
-        struct tap_meta m = {.field = oc_field_name(f), .seq = fh->seq, .sim_time = fh->sim_time,
-                             .params_version = fh->params_version, .n = fh->n, .lod = s->o->lod,
-                             .patch_size = fh->patch_size,
-                             .bound = bound,
-                             .server_time_us = fh->server_time_us};
-        if (tap_write_field(s->o->format, path, data, side, &m) != 0) {
-            fail(s, EXIT_OUTPUT, "cannot write %s: %s", path, strerror(errno));
-            return -1;
+    free(s->wr.sum_buf);
+    s->wr.sum_buf = malloc((size_t)count * m * m * sizeof(float));
+    if (!s->wr.sum_buf) wfail(s, EXIT_OUTPUT, "out of memory for the %dx%d sum", m, m);
+    return s->wr.sum_buf;
+}
+
+/* --format exr: one Blender bake frame (tap_exr.h) from the six fields: cascade
+ * 0's grids, or with --cascades the sum of the cascades on the --sum grid. */
+static int write_bake(struct session *s, const struct job *j)
+{
+    const struct oc_frame_header *fh = &j->fh;
+    const float *f[OC_FIELD_COUNT];
+    int side = 0;
+    float bound = 0, b;
+    double x0 = 0, z0 = 0, size = fh->patch_size;
+    if (s->o->sum_m) {
+        struct sum_grid sg = sum_geometry(s, j);
+        float *buf = sum_buffers(s, sg.m, 6);
+        if (!buf) return -1;
+        static const enum oc_field order[6] = {OC_FIELD_HEIGHT, OC_FIELD_DX, OC_FIELD_DZ, OC_FIELD_SLOPE_X,
+                                               OC_FIELD_SLOPE_Z, OC_FIELD_JACOBIAN};
+        for (int k = 0; k < 6; k++) {
+            float *out = buf + (size_t)k * sg.m * sg.m;
+            /* The Jacobian does not add across cascades (§4.1): cascade 0's, for the foam. */
+            if (sum_field(s, j, &sg, order[k], order[k] == OC_FIELD_JACOBIAN, out, &b) != 0) {
+                wfail(s, EXIT_PROTOCOL, "the frame lacks %s", oc_field_name(order[k]));
+                return -1;
+            }
+            f[order[k]] = out;
+            bound = b > bound ? b : bound;
         }
+        side = sg.m;
+        x0 = sg.x0;
+        z0 = sg.z0;
+        size = sg.size;
+    } else {
+        for (int i = 0; i < OC_FIELD_COUNT; i++) {
+            f[i] = job_field(j, 0, i, &side, &b);
+            bound = b > bound ? b : bound;
+        }
+    }
+    struct tap_exr_fields ef = {f[OC_FIELD_HEIGHT], f[OC_FIELD_DX], f[OC_FIELD_DZ],
+                                f[OC_FIELD_SLOPE_X], f[OC_FIELD_SLOPE_Z], f[OC_FIELD_JACOBIAN]};
+    struct tap_meta m = {.field = "bake", .seq = fh->seq, .sim_time = fh->sim_time,
+                         .params_version = fh->params_version, .n = fh->n, .lod = s->o->lod,
+                         .patch_size = (float)size, .bound = bound, .server_time_us = fh->server_time_us,
+                         .cascade = s->o->sum_m ? TAP_CASCADE_SUM : 0, .origin_x = x0, .origin_z = z0};
+    char err[512];
+    if (tap_exr_bake(s->o->out_dir, (int)j->number, side, &ef, &m, j->ncasc, err, sizeof err) != 0) {
+        wfail(s, EXIT_OUTPUT, "cannot write the bake: %s", err);
+        return -1;
+    }
+    return 0;
+}
+
+static int write_one(struct session *s, const char *path, const float *data, int side, const struct tap_meta *m)
+{
+    if (tap_write_field(s->o->format, path, data, side, m) != 0) {
+        wfail(s, EXIT_OUTPUT, "cannot write %s: %s", path, strerror(errno));
+        return -1;
+    }
+    return 0;
+}
+
+static int write_frame(struct session *s, const struct job *j)
+{
+    const struct oc_frame_header *fh = &j->fh;
+    if (s->o->format == TAP_EXR) return write_bake(s, j);
+    unsigned long long seq = (unsigned long long)fh->seq;
+    for (int c = 0; c < j->ncasc; c++)
+        for (int f = 0; f < OC_FIELD_COUNT; f++) {
+            int side;
+            float bound;
+            const float *data = job_field(j, c, f, &side, &bound);
+            if (!data) continue;
+            char path[4096];
+            /* Cascade 0 keeps the names of a one-cascade sea. */
+            if (c == 0)
+                snprintf(path, sizeof path, "%s/%s-%08llu.%s", s->o->out_dir, oc_field_name(f), seq,
+                         tap_format_ext(s->o->format));
+            else
+                snprintf(path, sizeof path, "%s/%s-c%d-%08llu.%s", s->o->out_dir, oc_field_name(f), c, seq,
+                         tap_format_ext(s->o->format));
+            struct tap_meta m = {.field = oc_field_name(f), .seq = fh->seq, .sim_time = fh->sim_time,
+                                 .params_version = fh->params_version, .n = fh->n,
+                                 .lod = c == 0 ? s->o->lod : fine_lod(s->o),
+                                 .patch_size = (float)(c == 0 ? fh->patch_size : j->patch[c]), .bound = bound,
+                                 .server_time_us = fh->server_time_us, .cascade = c};
+            if (write_one(s, path, data, side, &m) != 0) return -1;
+        }
+    if (!s->o->sum_m) return 0;
+    struct sum_grid sg = sum_geometry(s, j);
+    float *buf = sum_buffers(s, sg.m, 1);
+    if (!buf) return -1;
+    static const enum oc_field summed[5] = {OC_FIELD_HEIGHT, OC_FIELD_DX, OC_FIELD_DZ, OC_FIELD_SLOPE_X,
+                                            OC_FIELD_SLOPE_Z};
+    for (int k = 0; k < 5; k++) {
+        float bound;
+        int r = sum_field(s, j, &sg, summed[k], 0, buf, &bound);
+        if (r < 0) return -1;
+        if (r > 0) continue; /* not subscribed */
+        char path[4096];
+        snprintf(path, sizeof path, "%s/%s-sum-%08llu.%s", s->o->out_dir, oc_field_name(summed[k]), seq,
+                 tap_format_ext(s->o->format));
+        struct tap_meta m = {.field = oc_field_name(summed[k]), .seq = fh->seq, .sim_time = fh->sim_time,
+                             .params_version = fh->params_version, .n = fh->n, .lod = 0,
+                             .patch_size = (float)sg.size, .bound = bound, .server_time_us = fh->server_time_us,
+                             .cascade = TAP_CASCADE_SUM, .origin_x = sg.x0, .origin_z = sg.z0};
+        if (write_one(s, path, buf, sg.m, &m) != 0) return -1;
     }
     return 0;
 }
@@ -685,7 +1103,11 @@ static void on_binary(struct session *s, const uint8_t *data, size_t len)
 {
     if (s->stage != ST_RUN || !s->want_frames) return; /* frames of the default subscription */
     struct oc_frame_header fh;
-    int r = tap_frame_add(s->grid, data, len, &fh);
+    if (s->o->bake) {
+        /* Only the rendered frames, every one, in order, at exactly start + k/fps. */
+        if (len < 40 || !((data[38] | data[39] << 8) & RENDER_FRAME_FLAG)) return;
+    }
+    int r = oc_grid_add(s->grid, data, len, &fh);
     if (r == OC_E_REFERENCE) {
         /* A predicted frame whose references we lack (we missed one): subscribing
          * again makes the server send keyframes next (PROTOCOL.md §5.9). Once a
@@ -700,10 +1122,18 @@ static void on_binary(struct session *s, const uint8_t *data, size_t len)
         return;
     }
     if (r) {
-        fail(s, EXIT_PROTOCOL, "bad binary frame (%zu bytes): %s", len, tap_frame_strerror(r));
+        fail(s, EXIT_PROTOCOL, "bad binary frame (%zu bytes): %s", len, oc_strerror(r));
         return;
     }
-    if (!tap_frame_complete(s->grid)) return; /* not every tile of every field at our LOD (degraded, or before
+    if (s->o->bake) {
+        double want = s->o->start + (double)s->frames_done / s->o->fps;
+        if (fh.seq != (uint64_t)s->frames_done || !oc_grid_complete(s->grid) || fabs(fh.sim_time - want) > 1e-6) {
+            fail(s, EXIT_PROTOCOL, "render frame %llu at sim time %.9f: expected frame %ld, complete, at %.9f",
+                 (unsigned long long)fh.seq, fh.sim_time, s->frames_done, want);
+            return;
+        }
+    }
+    if (!oc_grid_complete(s->grid)) return; /* not every tile of every field at our LOD (degraded, or before
                                                   the subscription took effect): nothing new to write */
     s->frames_done++;
     s->last_frame = now_s();
@@ -714,7 +1144,10 @@ static void on_binary(struct session *s, const uint8_t *data, size_t len)
         if (p) { s->st.lat_ms = p; s->st.caplat = cap; }
     }
     if (s->st.nlat < s->st.caplat) s->st.lat_ms[s->st.nlat++] = (wall_us() - (double)fh.server_time_us) / 1e3;
-    if (s->o->out_dir && write_frame(s, &fh) != 0) return;
+    if (s->o->out_dir && writer_put(s, &fh) != 0) {
+        fail(s, EXIT_OUTPUT, "out of memory for a frame's copy");
+        return;
+    }
     if (s->o->frames > 0 && s->frames_done >= s->o->frames) finish(s, EXIT_OK);
 }
 
@@ -821,6 +1254,9 @@ int main(int argc, char **argv)
     int r = parse_args(argc, argv, &o);
     if (r >= 0) return r;
     struct session s = {.o = &o, .degraded_lod = -1};
+    pthread_mutex_init(&s.wr.mu, NULL);
+    pthread_cond_init(&s.wr.cv_put, NULL);
+    pthread_cond_init(&s.wr.cv_get, NULL);
     s.want_frames = o.frames >= 0 || o.out_dir || o.stats;
     if (o.frames < 0) o.frames = 0;
     if (o.out_dir) {
@@ -829,7 +1265,7 @@ int main(int argc, char **argv)
             return EXIT_OUTPUT;
         }
     }
-    if (s.want_frames && !(s.grid = tap_frame_new(o.fields, o.lod))) {
+    if (s.want_frames && !(s.grid = oc_grid_new(o.fields, o.lod))) {
         fprintf(stderr, "ocean-tap: out of memory\n");
         return EXIT_PROTOCOL;
     }
@@ -857,6 +1293,12 @@ int main(int argc, char **argv)
     while (r < 0 && s.stage != ST_DONE) {
         lws_service(ctx, 100);
         double t = now_s();
+        char werr[600];
+        int wcode = writer_error(&s, werr, sizeof werr);
+        if (wcode) {
+            fail(&s, wcode, "%s", werr);
+            break;
+        }
         if (interrupted) {
             /* Ctrl-C ends a stream or watch normally; anything else is cut short. */
             finish(&s, s.stage == ST_RUN ? EXIT_OK : EXIT_INTERRUPTED);
@@ -875,6 +1317,7 @@ int main(int argc, char **argv)
                              : s.stage == ST_SUBSCRIBE ? "the answer to subscribe"
                              : s.stage == ST_QUERY ? "the answer to query"
                              : s.stage == ST_PROBE ? "the answer to probe"
+                             : s.stage == ST_RENDER ? "the answer to render"
                              : o.probe ? "the next probe tick" : "the next complete frame";
             if (counting && s.degraded_lod >= 0 && s.degraded_lod != o.lod)
                 fail(&s, EXIT_TIMEOUT, "timed out after %.1f s waiting for %s: the server serves this "
@@ -885,6 +1328,14 @@ int main(int argc, char **argv)
         }
     }
     if (r < 0) r = s.exit_code;
+    /* The frames still queued are written before the exit code is known. */
+    writer_close(&s);
+    char werr[600];
+    int wcode = writer_error(&s, werr, sizeof werr);
+    if (wcode && (r == EXIT_OK || r == EXIT_INTERRUPTED)) {
+        fprintf(stderr, "ocean-tap: %s\n", werr);
+        r = wcode;
+    }
     if (o.stats && s.want_frames && s.st.t0 > 0) report_stats(&s, now_s(), 1);
 
     lws_sul_cancel(&tick_sul);
@@ -893,7 +1344,12 @@ int main(int argc, char **argv)
     for (int i = 0; i < s.noutq; i++) free(s.outq[i]);
     cJSON_Delete(s.schema);
     oc_buf_free(&s.msg);
-    tap_frame_free(s.grid);
+    oc_grid_free(s.grid);
+    tap_surface_free(s.wr.surface);
+    free(s.wr.sum_buf);
+    pthread_mutex_destroy(&s.wr.mu);
+    pthread_cond_destroy(&s.wr.cv_put);
+    pthread_cond_destroy(&s.wr.cv_get);
     free(s.st.lat_ms);
     return r;
 }

@@ -78,6 +78,9 @@ static int write_sidecar(const char *path, const char *format, const char *dtype
     strcpy(json + stem, ".json");
     const char *base = strrchr(path, '/');
     base = base ? base + 1 : path;
+    char casc[16];
+    if (m->cascade == TAP_CASCADE_SUM) snprintf(casc, sizeof casc, "\"sum\"");
+    else snprintf(casc, sizeof casc, "%d", m->cascade);
     FILE *f = fopen(json, "w");
     if (!f) return -1;
     int ok = fprintf(f,
@@ -87,12 +90,12 @@ static int write_sidecar(const char *path, const char *format, const char *dtype
                  "  \"field\": \"%s\",\n  \"seq\": %llu,\n  \"sim_time\": %.17g,\n"
                  "  \"params_version\": %u,\n  \"n\": %d,\n  \"lod\": %d,\n"
                  "  \"patch_size\": %.9g,\n  \"spacing\": %.9g,\n  \"bound\": %.9g,\n"
-                 "  \"server_time_us\": %llu%s\n}\n",
+                 "  \"server_time_us\": %llu,\n  \"cascade\": %s,\n  \"origin\": [%.17g, %.17g]%s\n}\n",
                  base, format, dtype, strcmp(dtype, "uint16") ? "little" : "big", side, side, m->field,
                  (unsigned long long)m->seq, m->sim_time,
                  (unsigned)m->params_version, m->n, m->lod, (double)m->patch_size,
                  (double)m->patch_size / side, (double)m->bound,
-                 (unsigned long long)m->server_time_us, extra ? extra : "") > 0;
+                 (unsigned long long)m->server_time_us, casc, m->origin_x, m->origin_z, extra ? extra : "") > 0;
     return finish(f, ok);
 }
 

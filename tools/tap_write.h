@@ -30,7 +30,10 @@ struct tap_meta {
     int n, lod;                 /* full resolution and LOD: side = n >> lod */
     float patch_size, bound;
     uint64_t server_time_us;
+    int cascade;                /* PROTOCOL.md §4.1: 0..3, or TAP_CASCADE_SUM for the summed surface */
+    double origin_x, origin_z;  /* world position of sample [0][0] (0 for a cascade's own grid) */
 };
+#define TAP_CASCADE_SUM (-1)
 
 /* Write side*side floats (row-major, row = z) to path, and its sidecar
  * next to it with ".json" in place of the extension. Not for TAP_EXR. */

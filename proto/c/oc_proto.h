@@ -215,4 +215,28 @@ int oc_stream_keyframe_tile(struct oc_stream *s, struct oc_encoder *e, int tile_
 struct oc_stream_stats { uint64_t ticks, key_tiles, predicted_tiles, demand_key_tiles, change_intra_tiles; };
 void oc_stream_stats(const struct oc_stream *s, struct oc_stream_stats *out);
 
+/* Grids: the tiles of frames put together into whole fields, per cascade
+ * (PROTOCOL.md §4, §4.1). Each wanted field of each wanted cascade is a
+ * (n >> lod)^2 float grid, row-major (row = z); a cascade's grid covers its own
+ * patch (cascade_patch_sizes of hello). The grid decodes with a decoder of its
+ * own (so frames of one stream, in order). A frame is complete when it carried
+ * every tile of every wanted field of every wanted cascade at its LOD: a frame
+ * served at a coarser LOD (degraded, §7.2) is not, and the grids then still
+ * hold an earlier frame. A change of n or tile_size starts empty grids. The
+ * cascades add up only as surfaces (each at x mod L_c): to sum them on another
+ * grid, resample each (tools/tap_surface.c does it spectrally). */
+struct oc_grid;
+/* Cascade 0's fields (bit mask of enum oc_field) at lod. NULL: out of memory. */
+struct oc_grid *oc_grid_new(unsigned fields, int lod);
+void oc_grid_free(struct oc_grid *g);
+/* Also (or no longer: fields 0) assemble cascade 1..3 with its own fields and
+ * LOD (a finer cascade loses nothing at LOD 1, §4.1). 0, or -1 for bad values. */
+int oc_grid_want(struct oc_grid *g, int cascade, unsigned fields, int lod);
+/* Decode one binary message into the grids: 0 or a negative OC_E_*. */
+int oc_grid_add(struct oc_grid *g, const uint8_t *data, size_t len, struct oc_frame_header *fh);
+int oc_grid_complete(const struct oc_grid *g);
+/* Cascade c's grid of field f (side*side floats), NULL when not wanted or not
+ * yet shaped; *bound = the error bound of its latest tile (0 = lossless). */
+const float *oc_grid_field(const struct oc_grid *g, int cascade, enum oc_field f, int *side, float *bound);
+
 #endif

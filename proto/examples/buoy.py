@@ -7,7 +7,7 @@
 
 The buoy's Hs is 4 * std of its heave series (the spectral Hs, m0 = variance);
 the sea's is 4 * std of the streamed height field over the same span (frames
-decoded with oceanproto.py). Also prints the peak period of the heave
+decoded with the oceand package, proto/python). Also prints the peak period of the heave
 spectrum. Seconds are of sim time (a server running with --time-scale 4
 fills a minute of record in 15 s). Debian python3-websockets + python3-numpy.
 """
@@ -20,8 +20,11 @@ import sys
 import numpy as np
 import websockets
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import oceanproto  # noqa: E402
+try:
+    import oceand as oceanproto
+except ImportError:   # a checkout without `pip install ./proto/python`: the package beside this folder
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
+    import oceand as oceanproto  # noqa: E402
 
 
 def point(text):
@@ -69,7 +72,7 @@ async def record(args):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("url")
     ap.add_argument("--at", type=point, action="append", help="x,z of a probe (repeatable; default a 3x3 array)")
     ap.add_argument("--seconds", type=float, default=120.0, help="record length, s of sim time")

@@ -69,7 +69,7 @@ async def sail(args):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("url")
     ap.add_argument("--x", type=float, default=0.0)
     ap.add_argument("--z", type=float, default=0.0)

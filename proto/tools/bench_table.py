@@ -33,7 +33,7 @@ if js:
         if r["codec"] == 1:
             print(f"| {r['N']} | {r['field']} | {r['bound']} | {r['tile']} | {r['dec_MBs']} | {r['dec_MBs_cpu']} |")
 
-# Temporal streams (codec 3): the README's table.
+# Temporal streams (codec 3): docs/codec.md's stream table.
 st = [r for r in rows if r.get("bench") == "codec_stream"]
 if st:
     print()

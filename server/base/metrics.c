@@ -125,7 +125,7 @@ size_t metrics_render(char *buf, size_t cap)
     counter(&o, "oceand_probe_ticks_skipped_total", "Ticks whose probes were skipped (worker behind).",
             atomic_load(&m->probe_skipped));
     gauge(&o, "oceand_probe_points", "Points probed by all clients.", atomic_load(&m->probe_points));
-    put(&o, "# HELP oceand_clients_refused_total WebSocket upgrades refused before a session (issue 16).\n"
+    put(&o, "# HELP oceand_clients_refused_total WebSocket upgrades refused before a session.\n"
             "# TYPE oceand_clients_refused_total counter\n"
             "oceand_clients_refused_total{reason=\"host\"} %llu\n"
             "oceand_clients_refused_total{reason=\"handshake\"} %llu\n",

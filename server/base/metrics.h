@@ -23,7 +23,7 @@ struct metrics {
     atomic_uint_least64_t control_messages, control_errors, param_changes;
     atomic_uint_least64_t control_units, control_rate_limited, control_busy; /* dispatch_take_token */
     atomic_uint_least64_t rejected_full, rejected_origin, closed_too_large;
-    /* issue 16: refusals and closes of hostile peers (server/net/) */
+    /* refusals and closes of hostile peers (server/net/; docs/reliability.md) */
     atomic_uint_least64_t rejected_host, rejected_handshake, http_refused_host, http_refused_symlink;
     atomic_uint_least64_t closed_output_limit, closed_unmasked, closed_stalled, closed_pinned, refused_fd_limit;
     atomic_int clients;

@@ -377,10 +377,12 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         snprintf(dc->state_file, sizeof dc->state_file, "build/oceand-state.json");
 
     int rc = 0;
-    /* The resolution before the saved state, to fall back to if the saved
-     * one does not fit the memory cap that the flags set below. */
-    const int resolution_before_state = p->resolution;
-    bool resolution_from_state = false;
+    /* Whether the resolution and the cascades in force come from the saved
+     * state (not overridden by the config file or a flag): a saved pair that
+     * does not fit the memory cap set below is not used (as any bad saved
+     * value), while the same from the command line is an error. */
+    const int resolution_before_state = p->resolution, cascades_before_state = p->cascades;
+    bool resolution_from_state = false, cascades_from_state = false;
     if (dc->state_file[0]) {
         char serr[256];
         int s = state_load(dc->state_file, p, &res->params_version, &res->sim_time, serr, sizeof serr);
@@ -395,9 +397,12 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
             LOGW("ignoring saved state: %s", serr);  /* a corrupt state file must not stop the daemon */
         res->state_loaded = s > 0;
         resolution_from_state = s > 0 && p->resolution != resolution_before_state;
+        cascades_from_state = s > 0 && p->cascades != cascades_before_state;
     }
     if (cJSON_GetObjectItemCaseSensitive(cfg, "resolution"))
         resolution_from_state = false;
+    if (cJSON_GetObjectItemCaseSensitive(cfg, "cascades"))
+        cascades_from_state = false;
     rc = apply_config_object(dc, p, cfg, err, errlen);
     cJSON_Delete(cfg);
     if (rc)
@@ -423,6 +428,8 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
         }
         if (base == p && strcmp(d->name, "resolution") == 0)
             resolution_from_state = false;
+        if (base == p && strcmp(d->name, "cascades") == 0)
+            cascades_from_state = false;
         char perr[200];
         if (setting_set_text(base, d, v, perr, sizeof perr) != PARAM_OK) {
             snprintf(err, errlen, "--%s: %s", name, perr);
@@ -443,22 +450,36 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
     }
     resolve_wisdom_path(dc);
     long cores = sysconf(_SC_NPROCESSORS_ONLN);
-    if (dc->fft_threads == 0) /* every core: the step scales to 16 threads (issue 15) */
+    if (dc->fft_threads == 0) /* every core (docs/simulation.md, "Threads") */
         dc->fft_threads = cores < 1 ? 1 : cores > 64 ? 64 : (int)cores;
     if (dc->encode_threads == 0)
         dc->encode_threads = cores < 1 ? 1 : cores > 64 ? 64 : (int)cores;
-    if (dc->max_memory_mb == 0)
+    const bool cap_default = dc->max_memory_mb == 0;
+    if (cap_default)
         dc->max_memory_mb = config_default_memory_mb();
     char verr[200];
     if (params_validate(p, verr, sizeof verr) != 0) {
         snprintf(err, errlen, "parameters: %s", verr);
         return -1;
     }
-    if (!control_fits_memory(p->resolution, p->cascades, dc->max_memory_mb) && resolution_from_state) {
-        /* Like every other bad saved value: warn and fall back. */
-        LOGW("ignoring the saved resolution %d: it exceeds --max-memory-mb %d; using %d", p->resolution,
-             dc->max_memory_mb, resolution_before_state);
-        p->resolution = resolution_before_state;
+    if (!control_fits_memory(p->resolution, p->cascades, dc->max_memory_mb) &&
+        (resolution_from_state || cascades_from_state)) {
+        /* A live `set` of the same is refused; at start-up the largest fit
+         * is used instead (the saved N halved, then the saved cascades
+         * fewer), and the log says so: never the saved values unchecked. */
+        const int saved_n = p->resolution, saved_c = p->cascades;
+        const double need = control_memory_mb(saved_n, saved_c);
+        while (resolution_from_state && p->resolution / 2 >= 16 &&
+               !control_fits_memory(p->resolution, p->cascades, dc->max_memory_mb))
+            p->resolution /= 2;
+        while (cascades_from_state && p->cascades > 1 &&
+               !control_fits_memory(p->resolution, p->cascades, dc->max_memory_mb))
+            p->cascades--;
+        if (control_fits_memory(p->resolution, p->cascades, dc->max_memory_mb))
+            LOGW("saved state: resolution %d with %d cascade%s needs %.0f MB, over the memory cap of %d MB (%s); "
+                 "using resolution %d with %d cascade%s", saved_n, saved_c, saved_c > 1 ? "s" : "", need,
+                 dc->max_memory_mb, cap_default ? "a quarter of this machine's memory; see --max-memory-mb" : "--max-memory-mb",
+                 p->resolution, p->cascades, p->cascades > 1 ? "s" : "");
         if (params_validate(p, verr, sizeof verr) != 0) {
             snprintf(err, errlen, "parameters: %s", verr);
             return -1;

@@ -53,7 +53,7 @@ struct daemon_config {
     int    query_queue;        /* queries waiting at most */
     int    probe_max_points;   /* probe points per client */
     int    probe_max_total;    /* probe points, all clients */
-    /* Cluster (issue 12, docs/scaling.md): --role all needs none of these. */
+    /* Cluster (docs/scaling.md): --role all needs none of these. */
     char   role[8];            /* "all", "sim" or "edge" */
     char   nats_url[512];      /* --nats: nats://HOST:4222 (comma-separated list allowed) */
     char   nats_prefix[72];    /* subject prefix: several seas share one NATS */

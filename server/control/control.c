@@ -215,7 +215,7 @@ static size_t memory_bytes(int n)
     return b;
 }
 
-bool control_fits_memory(int n, int cascades, int max_memory_mb)
+double control_memory_mb(int n, int cascades)
 {
     /* While a new N is being built the old simulation still runs, so two
      * exist at once (one grid per cascade, and from its first eased change on
@@ -225,7 +225,12 @@ bool control_fits_memory(int n, int cascades, int max_memory_mb)
     const double c = cascades > 1 ? cascades : 1;
     double bytes = 2.0 * c * (double)memory_bytes(n) + c * (double)ocean_ease_memory_bytes(n) +
                    (3.0 + 6.0) * 4.0 * (double)n * (double)n;
-    return bytes <= (double)max_memory_mb * 1048576.0;
+    return bytes / 1048576.0;
+}
+
+bool control_fits_memory(int n, int cascades, int max_memory_mb)
+{
+    return control_memory_mb(n, cascades) <= (double)max_memory_mb;
 }
 
 const char *control_error_code(enum param_error r)
@@ -340,13 +345,28 @@ static int utf8_next(const unsigned char *s, uint32_t *cp)
     return len;
 }
 
-/* Characters a name may not hold although they are valid UTF-8: controls,
- * and the invisible ones that could make a name look like another or
- * reorder the text around it. */
+/* The format characters, general category Cf: invisible, they join,
+ * reorder or hide the text around them (bidi marks, tag characters that
+ * spell text nobody sees). Unicode 15.1, extracted/DerivedGeneralCategory.txt
+ * (https://www.unicode.org/Public/15.1.0/ucd/extracted/DerivedGeneralCategory.txt),
+ * every "; Cf" line. */
+static const uint32_t format_chars[][2] = {
+    {0x00ad, 0x00ad},   {0x0600, 0x0605},   {0x061c, 0x061c},   {0x06dd, 0x06dd},   {0x070f, 0x070f},
+    {0x0890, 0x0891},   {0x08e2, 0x08e2},   {0x180e, 0x180e},   {0x200b, 0x200f},   {0x202a, 0x202e},
+    {0x2060, 0x2064},   {0x2066, 0x206f},   {0xfeff, 0xfeff},   {0xfff9, 0xfffb},   {0x110bd, 0x110bd},
+    {0x110cd, 0x110cd}, {0x13430, 0x1343f}, {0x1bca0, 0x1bca3}, {0x1d173, 0x1d17a}, {0xe0001, 0xe0001},
+    {0xe0020, 0xe007f},
+};
+
+/* Characters a name may not hold although they are valid UTF-8: controls
+ * (Cc), format characters (Cf, above), line and paragraph separators,
+ * private use, noncharacters, and the unassigned rest of U+2060-U+206F. */
 static bool name_char_refused(uint32_t c)
 {
-    return c < 0x20 || (c >= 0x7f && c < 0xa0) || c == 0xad || (c >= 0x200b && c <= 0x200f) ||
-           (c >= 0x2028 && c <= 0x202e) || (c >= 0x2060 && c <= 0x206f) || c == 0xfeff ||
+    for (size_t i = 0; i < sizeof format_chars / sizeof format_chars[0]; i++)
+        if (c >= format_chars[i][0] && c <= format_chars[i][1])
+            return true;
+    return c < 0x20 || (c >= 0x7f && c < 0xa0) || (c >= 0x2028 && c <= 0x2029) || (c >= 0x2060 && c <= 0x206f) ||
            (c >= 0xe000 && c <= 0xf8ff) || (c >= 0xfff0 && c <= 0xffff) || (c & 0xfffe) == 0xfffe ||
            (c >= 0xfdd0 && c <= 0xfdef) || c >= 0xf0000;
 }
@@ -375,6 +395,49 @@ bool control_valid_utf8(const char *s, size_t len)
     return true;
 }
 
+/* Unicode White_Space that a name may hold (PropList.txt; the controls
+ * among them are refused anyway). */
+static bool name_char_space(uint32_t c)
+{
+    return c == 0x20 || c == 0xa0 || c == 0x1680 || (c >= 0x2000 && c <= 0x200a) || c == 0x202f || c == 0x205f ||
+           c == 0x3000;
+}
+
+/* Whether the name reads as one of the page's own words: the web page says
+ * "you set ..." for the reader's own changes and "the server" for changes
+ * nobody named (web/src/panel.js, who()), so a peer named "You" would pass
+ * its changes off as the reader's. Compared case-insensitively, with the
+ * spaces of any kind at either end dropped and runs of them as one. */
+static bool name_reserved(const char *s)
+{
+    static const char *const reserved[] = {"you", "the server"};
+    char norm[CTL_NAME_MAX_CHARS + 1];
+    size_t n = 0;
+    bool gap = false;
+    uint32_t c;
+    for (const unsigned char *p = (const unsigned char *)s; *p;) {
+        int len = utf8_next(p, &c);
+        if (!len)
+            return false;
+        p += len;
+        if (name_char_space(c)) {
+            gap = n > 0;
+            continue;
+        }
+        if (c >= 0x80 || n + 2 >= sizeof norm)
+            return false; /* not ASCII: none of the words */
+        if (gap)
+            norm[n++] = ' ';
+        gap = false;
+        norm[n++] = (char)(c >= 'A' && c <= 'Z' ? c + 32 : c);
+    }
+    norm[n] = 0;
+    for (size_t i = 0; i < sizeof reserved / sizeof reserved[0]; i++)
+        if (strcmp(norm, reserved[i]) == 0)
+            return true;
+    return false;
+}
+
 int control_check_name(const char *s, struct ctl_error *e)
 {
     const unsigned char *p = (const unsigned char *)s;
@@ -389,12 +452,14 @@ int control_check_name(const char *s, struct ctl_error *e)
         if (c < 0x80 && strchr("<>&\"'", (int)c))
             return ctl_fail(e, "bad_name", NULL, "name may not contain %c (no markup: < > & \" ')", (int)c);
         if (name_char_refused(c))
-            return ctl_fail(e, "bad_name", NULL, "name may not contain U+%04X (control or invisible character)", (unsigned)c);
+            return ctl_fail(e, "bad_name", NULL, "name may not contain U+%04X (control or invisible formatting character)", (unsigned)c);
         if (chars == 1 && c == ' ')
             return ctl_fail(e, "bad_name", NULL, "name may not start with a space");
         p += len;
     }
     if (chars && c == ' ')
         return ctl_fail(e, "bad_name", NULL, "name may not end with a space");
+    if (name_reserved(s))
+        return ctl_fail(e, "bad_name", NULL, "\"%s\" is reserved: the page uses it for its own words", s);
     return 0;
 }

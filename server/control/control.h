@@ -117,6 +117,8 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
  * simulations (ocean_memory_bytes, the running one and one being built)
  * plus the frames in flight. */
 bool control_fits_memory(int n, int cascades, int max_memory_mb);
+/* The memory that check counts, in MB. */
+double control_memory_mb(int n, int cascades);
 
 /* JSON builders; all return a cJSON tree the caller prints and deletes. */
 cJSON *control_params_object(const struct ocean_params *p);

@@ -128,9 +128,19 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
         cJSON_ArrayForEach(item, j) {
             if (!cJSON_IsObject(item))
                 return ctl_fail(e, "bad_subscription", NULL, "\"cascades\"[%d] must be an object {fields, lod, bound}", c - 1);
-            struct cascade_sub cs = {tmp.fields, tmp.lod, tmp.bound_index};
+            /* Foam is one field of the whole sea, made for cascade 0 only: a
+             * finer cascade's frame never has it, and a client whose layers
+             * a frame lacks gets no frame at all (not even cascade 0's).
+             * Named, it is refused; inherited from the top level, left out. */
+            struct cascade_sub cs = {tmp.fields & ~OCEAN_FIELD_BIT(OCEAN_FOAM), tmp.lod, tmp.bound_index};
             if (parse_layer(item, &cs.fields, &cs.lod, NULL, &cs.bound_index, e) != 0)
                 return -1;
+            if (cs.fields & OCEAN_FIELD_BIT(OCEAN_FOAM))
+                return ctl_fail(e, "bad_subscription", NULL, "\"cascades\"[%d]: foam exists for cascade 0 only "
+                                "(the top-level \"fields\"), not for cascade %d", c - 1, c);
+            if (!cs.fields)
+                return ctl_fail(e, "bad_subscription", NULL, "\"cascades\"[%d] has no fields: foam, the only one "
+                                "inherited from the top level, exists for cascade 0 only", c - 1);
             tmp.cascade[c++] = cs;
         }
         for (int k = c; k < CTL_MAX_CASCADES; k++)

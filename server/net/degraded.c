@@ -1,5 +1,5 @@
-/* capacity.c — the network side of server/tick/capacity.h (issue 15, issue 16
- * defect 2): the `capacity` member of hello and params, `busy` for a
+/* capacity.c — the network side of server/tick/capacity.h (docs/daemon.md,
+ * "Capacity"): the `capacity` member of hello and params, `busy` for a
  * subscription that would push the distinct layers past the encode budget,
  * and `degraded` to the clients whose subscription group the tick serves
  * coarser, less often, or (temporal clients) with the intra codec than asked

@@ -276,10 +276,10 @@ int fanout_write(struct net *n, struct session *s)
  * whatever the client sends (pings and pongs do not count as reading):
  *   stalled: no byte of its frame taken for --idle-timeout seconds;
  *   pinned:  the frames held by clients, the latest excepted, counted once
- *            each, pass NET_PINNED_MAX bytes: the clients holding the
+ *            each, pass NET_PINNED_MAX bytes (32 MB): the clients holding the
  *            oldest are closed until they fit.
  * Either closes the client with 1008 and lets its frame go at once. */
-#define NET_PINNED_MAX ((size_t)48 << 20)
+#define NET_PINNED_MAX ((size_t)32 << 20)
 #define POLICE_PERIOD_S 0.1
 
 static void let_go(struct session *s, atomic_uint_least64_t *counter, const char *why)

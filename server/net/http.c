@@ -20,6 +20,37 @@ static const char placeholder_html[] =
     "<p>WebSocket: subprotocol <code>oceand.v1</code> on this port. "
     "<a href=/metrics>/metrics</a> · <a href=/healthz>/healthz</a></p>\n";
 
+/* /healthz, built whole with cJSON: a cluster role adds its members (the
+ * layers its viewers or edges want: dozens of names), so no fixed buffer
+ * may cut it (a monitor that parses it must always get valid JSON). */
+static char *render_health(struct net *n, size_t *len)
+{
+    cJSON *extra = cJSON_CreateObject(), *o = cJSON_CreateObject();
+    char *text = NULL, *body = NULL;
+    if (!extra || !o)
+        goto out;
+    const char *status = n->cluster.health ? n->cluster.health(n->cluster.user, extra) : "ok";
+    cJSON_AddStringToObject(o, "status", status);
+    cJSON_AddNumberToObject(o, "clients", (double)n->sessions.count);
+    cJSON_AddNumberToObject(o, "params_version", (double)n->applied_version);
+    cJSON_AddNumberToObject(o, "ticks", (double)atomic_load(&g_metrics.ticks));
+    while (extra->child) { /* the role's members after the daemon's own, in its order */
+        cJSON *item = cJSON_DetachItemViaPointer(extra, extra->child);
+        if (!cJSON_AddItemToObject(o, item->string, item)) /* copies the name, frees the old one */
+            cJSON_Delete(item);
+    }
+    if (!(text = cJSON_PrintUnformatted(o)))
+        goto out;
+    *len = strlen(text) + 1;
+    if ((body = malloc(LWS_PRE + *len + 1)))
+        snprintf(body + LWS_PRE, *len + 1, "%s\n", text);
+out:
+    cJSON_free(text);
+    cJSON_Delete(extra);
+    cJSON_Delete(o);
+    return body;
+}
+
 /* The body for uri (LWS_PRE bytes of headroom, then *len bytes), with its
  * type; NULL with *len = 0 for 404, NULL with *len = 1 when out of memory. */
 static char *render(struct net *n, const char *uri, size_t *len, const char **type)
@@ -28,12 +59,7 @@ static char *render(struct net *n, const char *uri, size_t *len, const char **ty
     *len = 0;
     if (strcmp(uri, "/healthz") == 0) {
         *type = "application/json";
-        char extra[1024] = "";
-        const char *status = n->cluster.health ? n->cluster.health(n->cluster.user, extra, sizeof extra) : "ok";
-        if ((body = malloc(LWS_PRE + 1280)))
-            *len = (size_t)snprintf(body + LWS_PRE, 1280, "{\"status\":\"%s\",\"clients\":%d,\"params_version\":%u,\"ticks\":%llu%s}\n",
-                                    status, (int)n->sessions.count, n->applied_version,
-                                    (unsigned long long)atomic_load(&g_metrics.ticks), extra);
+        body = render_health(n, len);
     } else if (strcmp(uri, "/metrics") == 0) {
         *type = "text/plain; version=0.0.4; charset=utf-8";
         size_t cap = 16384;
@@ -104,19 +130,50 @@ static int filter_accept(struct net *n, int fd)
     return 1;
 }
 
+/* HEAD is GET without the body (RFC 9110 §9.3.2). lws 4.1 serves HEAD of
+ * a static file itself; everything else reaches LWS_CALLBACK_HTTP with the
+ * path under WSI_TOKEN_HEAD_URI, not GET_URI. */
+static bool is_head(struct lws *wsi) { return lws_hdr_total_length(wsi, WSI_TOKEN_HEAD_URI) > 0; }
+
+/* A status with a one-line text body, and for HEAD the same head without
+ * it: lws_return_http_status sends its HTML body whatever the method, so
+ * on a kept-alive connection the next response would start inside it.
+ * Returns nonzero when the write failed. */
+static int http_status(struct lws *wsi, unsigned code, const char *text)
+{
+    unsigned char buf[LWS_PRE + 512], *start = buf + LWS_PRE, *p = start, *end = buf + sizeof buf - 1;
+    size_t tl = strlen(text);
+    char clen[24];
+    int cl = snprintf(clen, sizeof clen, "%zu", tl);
+    if (lws_add_http_header_status(wsi, code, &p, end) ||
+        lws_add_http_header_by_token(wsi, WSI_TOKEN_HTTP_CONTENT_TYPE, (const unsigned char *)"text/plain; charset=utf-8",
+                                     25, &p, end) ||
+        lws_add_http_header_by_token(wsi, WSI_TOKEN_HTTP_CONTENT_LENGTH, (const unsigned char *)clen, cl, &p, end) ||
+        lws_finalize_http_header(wsi, &p, end))
+        return 1;
+    if (!is_head(wsi)) {
+        if ((size_t)(end - p) < tl)
+            return 1;
+        memcpy(p, text, tl);
+        p += tl;
+    }
+    int len = lws_ptr_diff(p, start);
+    return lws_write(wsi, start, (size_t)len, LWS_WRITE_HTTP) != len;
+}
+
 /* Every plain HTTP request, before lws looks at its mounts. */
 static int filter_http(struct net *n, struct lws *wsi, const char *uri)
 {
     if (!net_host_allowed(n, wsi)) {
         atomic_fetch_add(&g_metrics.http_refused_host, 1);
-        lws_return_http_status(wsi, 421, "unknown Host (see --server-name)");
+        http_status(wsi, 421, "unknown Host (see --server-name)\n");
         return 1;
     }
     if (!n->placeholder && uri && strcmp(uri, "/healthz") != 0 && strcmp(uri, "/metrics") != 0 &&
         static_path_has_symlink(n, uri)) {
         atomic_fetch_add(&g_metrics.http_refused_symlink, 1);
         LOGW("refusing %s: a symlink in the web root", uri);
-        lws_return_http_status(wsi, HTTP_STATUS_NOT_FOUND, NULL);
+        http_status(wsi, HTTP_STATUS_NOT_FOUND, "not found\n");
         return 1;
     }
     return 0;
@@ -141,21 +198,28 @@ int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void 
         return 1;
     case LWS_CALLBACK_HTTP: {
         char uri[256] = "";
-        lws_hdr_copy(wsi, uri, sizeof uri, WSI_TOKEN_GET_URI);
+        bool head = is_head(wsi);
+        lws_hdr_copy(wsi, uri, sizeof uri, head ? WSI_TOKEN_HEAD_URI : WSI_TOKEN_GET_URI);
         const char *type = "text/plain; charset=utf-8";
         size_t blen;
         char *body = render(n, uri, &blen, &type);
         if (!body && blen == 0)
-            return lws_return_http_status(wsi, HTTP_STATUS_NOT_FOUND, NULL) ? -1 : lws_http_transaction_completed(wsi);
+            return http_status(wsi, HTTP_STATUS_NOT_FOUND, "not found\n") ? -1 : lws_http_transaction_completed(wsi);
         if (!body)
             return -1;
-        hs->body = (unsigned char *)body;
-        hs->len = blen;
         unsigned char hdr[LWS_PRE + 512], *start = hdr + LWS_PRE, *p = start, *end = hdr + sizeof hdr - 1;
         if (lws_add_http_common_headers(wsi, HTTP_STATUS_OK, type, blen, &p, end) ||
             lws_add_http_header_by_token(wsi, WSI_TOKEN_HTTP_CACHE_CONTROL, (const unsigned char *)"no-store", 8, &p, end) ||
-            lws_finalize_write_http_header(wsi, start, &p, end))
+            lws_finalize_write_http_header(wsi, start, &p, end)) {
+            free(body);
             return 1;
+        }
+        if (head) { /* the GET's head, Content-Length included, and no body */
+            free(body);
+            return lws_http_transaction_completed(wsi) ? -1 : 0;
+        }
+        hs->body = (unsigned char *)body;
+        hs->len = blen;
         lws_callback_on_writable(wsi);
         return 0;
     }

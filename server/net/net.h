@@ -15,6 +15,7 @@
 
 struct net;
 struct sim;
+struct cJSON;
 
 /* Creates the lws context and starts listening. */
 struct net *net_create(const struct daemon_config *dc, const struct ocean_params *p, uint32_t version,
@@ -35,7 +36,7 @@ int net_service(struct net *n);
 int net_port(const struct net *n);
 void net_destroy(struct net *n);
 
-/* ---- cluster roles (issue 12; server/roles/role_sim.c, server/roles/role_edge.c) ----
+/* ---- cluster roles (docs/scaling.md; server/roles/role_sim.c, server/roles/role_edge.c) ----
  * Hooks for daemons whose simulation is elsewhere (edge) or whose clients
  * are elsewhere (sim). All run on the service thread. --role all sets none. */
 struct frame;
@@ -62,8 +63,10 @@ struct net_cluster_hooks {
     void (*on_probe_data)(void *user, uint64_t serial, const char *text);
     /* sim: an applied set's `params` event (no id), who caused it */
     void (*on_params_event)(void *user, const char *text, const char *origin, const char *by);
-    /* /healthz: returns "ok" or "degraded" and appends ,"member":... to extra */
-    const char *(*health)(void *user, char *extra, size_t cap);
+    /* /healthz: returns "ok" or "degraded" and adds its members ("role",
+     * "cluster", "layers", ...) to the object obj (a cJSON object: the
+     * answer is built whole, so it is valid JSON whatever its size) */
+    const char *(*health)(void *user, struct cJSON *obj);
     /* /metrics: appends Prometheus lines; returns bytes written */
     size_t (*metrics)(void *user, char *buf, size_t cap);
 };

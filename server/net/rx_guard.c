@@ -39,7 +39,8 @@ struct rx_guard {
     uint8_t line_len;           /* HEAD: bytes kept of the current line (lower case) */
     uint16_t line_n;            /* HEAD: its true length (saturating), CR not counted */
     bool upgrade, chunked;      /* HEAD: seen in this request's head */
-    char line[40];
+    bool colon, ows;            /* HEAD: the line's first ':' kept; skipping the blanks after it */
+    char line[40];              /* HEAD: "name:value", the blanks after the colon left out */
     uint64_t clen;              /* HEAD: Content-Length of this request */
     uint64_t left;              /* BODY: bytes of body left; WS: payload bytes left */
     uint64_t plen;              /* WS: payload length of the frame whose header is being read */
@@ -57,6 +58,7 @@ static void head_reset(struct rx_guard *g)
     g->phase = G_HEAD;
     g->line_len = 0;
     g->line_n = 0;
+    g->colon = g->ows = false;
     g->upgrade = g->chunked = false;
     g->clen = 0;
 }
@@ -89,6 +91,7 @@ static void head_line_end(struct rx_guard *g)
         g->clen = strtoull(g->line + 15, NULL, 10);
     g->line_len = 0;
     g->line_n = 0;
+    g->colon = g->ows = false;
 }
 
 /* The bytes lws is about to get: n read into buf (room for cap). Returns
@@ -103,10 +106,19 @@ static ssize_t guard_feed(struct rx_guard *g, unsigned char *buf, size_t n, size
             if (c == '\n') {
                 head_line_end(g);
             } else if (c != '\r') {
-                if (g->line_len < sizeof g->line - 1)
-                    g->line[g->line_len++] = (char)(c >= 'A' && c <= 'Z' ? c + 32 : c);
                 if (g->line_n < UINT16_MAX)
                     g->line_n++;
+                /* Any amount of blanks may precede a value (RFC 9110 §5.6.3,
+                 * OWS): kept, 40 of them pushed "websocket" or a length out
+                 * of the line, and a legal upgrade was refused. */
+                if (g->ows && (c == ' ' || c == '\t'))
+                    break;
+                g->ows = false;
+                if (g->line_len < sizeof g->line - 1) {
+                    g->line[g->line_len++] = (char)(c >= 'A' && c <= 'Z' ? c + 32 : c);
+                    if (c == ':' && !g->colon)
+                        g->colon = g->ows = true;
+                }
             }
             break;
         case G_BODY: {

@@ -1,7 +1,12 @@
 /* query_worker.c — exact point queries and per-tick probes on worker
- * threads (query_worker.h). Who touches what:
+ * threads (query_worker.h): an instance of the program's one work pool
+ * (server/common/pool.h). Each piece of work queued (a query, a tick's
+ * grids, a probe set change) starts a drain on the pool unless `threads`
+ * drains run already; a drain runs what it finds (probes first) until
+ * nothing is left. Who touches what:
  *   lock-guarded: epochs (snapshots per params_version), the job queue,
- *     the probe grid buffers (spare / pending), probe commands, results;
+ *     the probe grid buffers (spare / pending), probe commands, results,
+ *     the drains (which run, how many);
  *   the worker doing a probe tick (one at a time: probe_busy): the probe
  *     clients and their history;
  *   lws thread only: the budget bucket and the per-client probe counts;
@@ -18,6 +23,7 @@
 #include "clock.h"
 #include "log.h"
 #include "metrics.h"
+#include "pool.h"
 #include "probe.h"
 
 #define MAX_EPOCHS 32             /* versions kept at most (a burst of sets inside the window) */
@@ -84,13 +90,21 @@ struct probe_count {
     int n;
 };
 
+/* One drain's pool job (pool.h: reused only once the pool has finished it). */
+struct drain {
+    struct query_service *q;
+    struct pool_job job;
+    bool running;                 /* under the service's lock: started, and has not found nothing yet */
+};
+
 struct query_service {
     struct query_config cfg;
-    pthread_t *threads;
+    struct pool *pool;            /* cfg.threads threads */
+    struct drain *drains;         /* one per thread */
     int nthreads;
 
     pthread_mutex_t lock;
-    pthread_cond_t cond;          /* workers wait: jobs, grids, stop */
+    int draining;                 /* drains running (<= nthreads) */
     bool stop;
     struct epoch epochs[MAX_EPOCHS];
     int nepochs;
@@ -365,9 +379,11 @@ static void run_probes(struct query_service *q, struct grids *g)
     post(q, first, last);
 }
 
-static void *worker_main(void *arg)
+/* A pool job: run what is queued until nothing is (or the service stops). */
+static void drain_run(void *arg, int i0, int i1, int worker)
 {
-    struct query_service *q = arg;
+    struct drain *d = arg;
+    struct query_service *q = d->q;
     pthread_mutex_lock(&q->lock);
     while (!q->stop) {
         if (q->pending && !q->probe_busy) { /* probes first: they are due every tick */
@@ -418,10 +434,34 @@ static void *worker_main(void *arg)
             pthread_mutex_lock(&q->lock);
             continue;
         }
-        pthread_cond_wait(&q->cond, &q->lock);
+        break;
     }
+    d->running = false; /* in the same critical section as finding nothing: no work is left behind */
+    q->draining--;
     pthread_mutex_unlock(&q->lock);
+}
+
+/* Work was just queued (lock held): the drain to start on the pool, or NULL
+ * when `threads` drains run already (one of them takes it). */
+static struct drain *kick_locked(struct query_service *q)
+{
+    if (q->stop || q->draining >= q->nthreads)
+        return NULL;
+    for (int i = 0; i < q->nthreads; i++)
+        if (!q->drains[i].running) {
+            q->drains[i].running = true;
+            q->draining++;
+            return &q->drains[i];
+        }
     return NULL;
+}
+
+/* Without the service's lock: pool_start waits if the pool is still
+ * finishing this drain's previous run (its function has returned). */
+static void kick_start(struct query_service *q, struct drain *d)
+{
+    if (d)
+        pool_start(q->pool, &d->job, 1, drain_run, NULL, d);
 }
 
 /* ---- tick thread: probe grids ---- */
@@ -492,8 +532,9 @@ void query_tick(struct query_service *q, const struct ocean *o, const unsigned *
             old = NULL;
         }
     }
-    pthread_cond_signal(&q->cond);
+    struct drain *d = kick_locked(q);
     pthread_mutex_unlock(&q->lock);
+    kick_start(q, d);
     if (old) {
         free(old->h);
         free(old);
@@ -576,8 +617,9 @@ int query_submit(struct query_service *q, uint64_t serial, const cJSON *id, cons
     *q->jobs_tail = j;
     q->jobs_tail = &j->next;
     q->njobs++;
-    pthread_cond_signal(&q->cond);
+    struct drain *d = kick_locked(q);
     pthread_mutex_unlock(&q->lock);
+    kick_start(q, d);
     return 0;
 }
 
@@ -601,8 +643,9 @@ static void send_cmd(struct query_service *q, uint64_t serial, struct probe_clie
     pthread_mutex_lock(&q->lock);
     *q->cmds_tail = c;
     q->cmds_tail = &c->next;
-    pthread_cond_signal(&q->cond);
+    struct drain *d = kick_locked(q);
     pthread_mutex_unlock(&q->lock);
+    kick_start(q, d);
 }
 
 static void set_count(struct query_service *q, uint64_t serial, int n)
@@ -685,8 +728,8 @@ struct query_service *query_service_new(const struct query_config *c, char *err,
     struct query_service *q = calloc(1, sizeof *q);
     int nt = c->threads < 1 ? 1 : c->threads;
     if (q)
-        q->threads = calloc((size_t)nt, sizeof *q->threads);
-    if (!q || !q->threads) {
+        q->drains = calloc((size_t)nt, sizeof *q->drains);
+    if (!q || !q->drains) {
         free(q);
         snprintf(err, errlen, "out of memory");
         return NULL;
@@ -698,17 +741,15 @@ struct query_service *query_service_new(const struct query_config *c, char *err,
     q->tokens = INFINITY; /* a full bucket: clipped to its cap (which depends on the snapshot) at first use */
     q->tokens_t = mono_now();
     pthread_mutex_init(&q->lock, NULL);
-    pthread_cond_init(&q->cond, NULL);
-    for (int i = 0; i < nt; i++) {
-        int rc = pthread_create(&q->threads[i], NULL, worker_main, q);
-        if (rc != 0) {
-            snprintf(err, errlen, "cannot start a query worker: %s", strerror(rc));
-            q->nthreads = i;
-            query_service_free(q);
-            return NULL;
-        }
-        q->nthreads = i + 1;
+    for (int i = 0; i < nt; i++)
+        q->drains[i].q = q;
+    q->pool = pool_new(nt);
+    if (!q->pool) {
+        snprintf(err, errlen, "cannot start the query workers");
+        query_service_free(q);
+        return NULL;
     }
+    q->nthreads = pool_threads(q->pool); /* fewer if not all could start */
     return q;
 }
 
@@ -717,12 +758,10 @@ void query_service_free(struct query_service *q)
     if (!q)
         return;
     pthread_mutex_lock(&q->lock);
-    q->stop = true;
-    pthread_cond_broadcast(&q->cond);
+    q->stop = true; /* drains still queued return at once */
     pthread_mutex_unlock(&q->lock);
-    for (int i = 0; i < q->nthreads; i++)
-        pthread_join(q->threads[i], NULL);
-    free(q->threads);
+    pool_free(q->pool);
+    free(q->drains);
     while (q->jobs) {
         struct job *j = q->jobs;
         q->jobs = j->next;
@@ -748,7 +787,6 @@ void query_service_free(struct query_service *q)
         query_out_free(o);
     }
     free(q->counts);
-    pthread_cond_destroy(&q->cond);
     pthread_mutex_destroy(&q->lock);
     free(q);
 }

@@ -569,13 +569,13 @@ static void edge_on_wake(void *user)
     probe_keepalives(r, now);
 }
 
-static const char *edge_health(void *user, char *extra, size_t cap)
+static const char *edge_health(void *user, cJSON *obj)
 {
     struct role_edge *r = user;
     update_state(r);
-    size_t off = (size_t)snprintf(extra, cap, ",\"role\":\"edge\",\"cluster\":\"%s\"", state_name[r->state]);
-    if (off < cap)
-        role_keys_json(r->want, extra + off, cap - off);
+    cJSON_AddStringToObject(obj, "role", "edge");
+    cJSON_AddStringToObject(obj, "cluster", state_name[r->state]);
+    role_keys_json(r->want, obj);
     return r->state == EDGE_OK ? "ok" : "degraded";
 }
 

@@ -1,6 +1,7 @@
 /* role_link.c — the NATS link's options and counters for both cluster roles. */
 #include "role_link.h"
 
+#include <cjson/cJSON.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -54,18 +55,15 @@ size_t role_link_metrics(struct cl_link *l, char *buf, size_t cap)
     return off < cap ? off : (cap ? cap - 1 : 0);
 }
 
-size_t role_keys_json(const uint8_t bits[CL_KEY_BYTES], char *buf, size_t cap)
+void role_keys_json(const uint8_t bits[CL_KEY_BYTES], cJSON *obj)
 {
-    size_t off = (size_t)snprintf(buf, cap, ",\"layers\":[");
-    int n = 0;
-    for (int k = 0; k < CL_KEYS && off < cap; k++)
-        if (cl_bit(bits, k))
-            off += (size_t)snprintf(buf + off, cap - off, "%s\"%s%.0d%s%s.%d.%d\"", n++ ? "," : "",
-                                    layer_key_which_cascade(k) ? "c" : "", layer_key_which_cascade(k),
-                                    layer_key_which_cascade(k) ? "." : "",
-                                    ocean_field_name((enum ocean_field)layer_key_field(k)), layer_key_lod(k),
-                                    layer_key_bound(k));
-    if (off < cap)
-        off += (size_t)snprintf(buf + off, cap - off, "]");
-    return off < cap ? off : (cap ? cap - 1 : 0);
+    cJSON *a = cJSON_AddArrayToObject(obj, "layers");
+    for (int k = 0; a && k < CL_KEYS; k++)
+        if (cl_bit(bits, k)) {
+            char name[64];
+            snprintf(name, sizeof name, "%s%.0d%s%s.%d.%d", layer_key_which_cascade(k) ? "c" : "",
+                     layer_key_which_cascade(k), layer_key_which_cascade(k) ? "." : "",
+                     ocean_field_name((enum ocean_field)layer_key_field(k)), layer_key_lod(k), layer_key_bound(k));
+            cJSON_AddItemToArray(a, cJSON_CreateString(name));
+        }
 }

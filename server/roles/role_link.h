@@ -5,6 +5,8 @@
 
 #include <stddef.h>
 
+struct cJSON;
+
 #include "cluster.h"
 #include "config.h"
 #include "frame.h"
@@ -21,8 +23,8 @@ _Static_assert(CL_KEY_BYTES == SIM_DEMAND_BYTES, "the sim's remote demand bitmap
 void role_link_config(const struct daemon_config *dc, enum cl_role role, struct cl_config *cfg);
 /* Prometheus lines of the link's counters; returns bytes written. */
 size_t role_link_metrics(struct cl_link *l, char *buf, size_t cap);
-/* ",\"layers\":[\"height.0.2\",\"c1.height.1.4\",...]" for a key bitmap, into buf
+/* Adds "layers":["height.0.2","c1.height.1.4",...] for a key bitmap to obj
  * (field.lod.bound_index; a finer cascade's prefixed with c<cascade>.). */
-size_t role_keys_json(const uint8_t bits[CL_KEY_BYTES], char *buf, size_t cap);
+void role_keys_json(const uint8_t bits[CL_KEY_BYTES], struct cJSON *obj);
 
 #endif

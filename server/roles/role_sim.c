@@ -13,6 +13,7 @@
 
 #include "clock.h"
 
+#include <cjson/cJSON.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -277,7 +278,7 @@ static void sim_on_wake(void *user)
     }
 }
 
-static const char *sim_health(void *user, char *extra, size_t cap)
+static const char *sim_health(void *user, cJSON *obj)
 {
     struct role_sim *r = user;
     struct cl_stats st;
@@ -288,11 +289,12 @@ static const char *sim_health(void *user, char *extra, size_t cap)
         uint64_t w = atomic_load(&r->demand[i]);
         memcpy(bits + 8 * i, &w, 8);
     }
-    size_t off = (size_t)snprintf(extra, cap, ",\"role\":\"sim\",\"cluster\":\"%s\",\"edges\":%d,\"lease\":\"%s\","
-                                  "\"instance\":\"%s\"", up ? "ok" : "nats_unavailable", st.demand_edges,
-                                  role_lease_state_name(role_lease_state(r->lease)), cl_link_instance(r->link));
-    if (off < cap)
-        role_keys_json(bits, extra + off, cap - off);
+    cJSON_AddStringToObject(obj, "role", "sim");
+    cJSON_AddStringToObject(obj, "cluster", up ? "ok" : "nats_unavailable");
+    cJSON_AddNumberToObject(obj, "edges", st.demand_edges);
+    cJSON_AddStringToObject(obj, "lease", role_lease_state_name(role_lease_state(r->lease)));
+    cJSON_AddStringToObject(obj, "instance", cl_link_instance(r->link));
+    role_keys_json(bits, obj);
     return up ? "ok" : "degraded";
 }
 

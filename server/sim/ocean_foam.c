@@ -86,7 +86,7 @@ static int step_and_foam(struct ocean *o, double t, unsigned fields, double dt, 
     struct foam_ctx c = {o->g, u};
     struct ocean_grid *g = o->g;
     int threads = g->n >= OCEAN_THREADS_FROM_N ? g->workers : 1;
-    ocean_parallel(o->pool, threads, g->n / OCEAN_ROW_BLOCK, foam_rows, &c);
+    pool_for(o->pool, threads, g->n / OCEAN_ROW_BLOCK, foam_rows, &c);
     return 0;
 }
 

@@ -10,6 +10,7 @@
 
 #include "ocean.h"
 #include "ocean_spectrum.h"
+#include "pool.h"
 
 /* The real fields that go through an inverse FFT. Output fields map onto
  * them; the Jacobian needs three (dDx/dx, dDz/dz, dDx/dz = dDz/dx). */
@@ -92,7 +93,21 @@ static inline double ocean_ease_rate(double t0, double len, double t)
 /* Within a column: a = col, b = col + N, d = col + 2N, e = col + 3N,
  * linvk = col + 4N, omega = (double *)(col + 5N). */
 
-/* Everything whose size depends on N: made together, swapped together. */
+/* Everything whose size depends on N: made together, swapped together.
+ * Who writes and who reads (ocean.h: one thread steps and commits, the
+ * stepping thread; another may prepare meanwhile, the preparing thread):
+ *   n, nh, tile, modes, ring*, rings, workers, scratch_floats, row_twiddle,
+ *     the plans, plan_flags: ocean_grid_new (ocean_grid.c), once; read by all.
+ *   a, b, d, e, omega, ampc, gauss, seed, kx, kz: a new grid's filled by the
+ *     preparing thread (ocean_prepare.c, ocean_amplitudes.c) before anyone
+ *     else sees it; a live grid's swapped in by ocean_commit (stepping
+ *     thread); read by the step, the DFT path and the preparing thread
+ *     (the next change, query snapshots), which never overlaps a commit.
+ *   ease_*: ocean_commit_eased (stepping thread); read by the step and by
+ *     ocean_prepared_surface (preparing thread, not during a commit).
+ *   col, scratch, jac: the step's own (each worker its items' parts).
+ *   out: written by the step; read by the caller between steps, swapped by
+ *     ocean_exchange_cascade_field (stepping thread). */
 struct ocean_grid {
     int n, nh;                 /* N, N/2 + 1 (columns of the half spectrum) */
     int tile;                  /* OCEAN_COL_TILE, or N/2 if smaller */
@@ -104,7 +119,7 @@ struct ocean_grid {
     float *a, *b, *d, *e;
     double *omega;             /* rad/s, per mode */
     float *kx, *kz;            /* rad/m, per column / per row (layout formula) */
-    /* What a parameter change keeps (ocean.c, prepare): per mode, the four
+    /* What a parameter change keeps (ocean_prepare.c): per mode, the four
      * standard normals of h~0(k) and h~0(-k) for `seed` (xi_r, xi_i of +k,
      * of -k), and its ring: the index of |m|^2 = mx^2 + mz^2 in ring_m2
      * (ascending, `rings` distinct values), since all of Psi but the
@@ -159,34 +174,40 @@ struct ocean_grid {
     unsigned plan_flags;       /* FFTW_MEASURE or FFTW_ESTIMATE, as the grid's plans were made */
 };
 
-/* A small persistent thread pool (ocean.c): threads - 1 sleeping workers
- * plus the caller. Items are handed out one at a time from a shared
- * counter, so a worker that the (shared) machine deschedules does not hold
- * up the others; which thread does an item never changes its result. */
-struct ocean_pool;
-struct ocean_pool *ocean_pool_new(int threads);
-void ocean_pool_free(struct ocean_pool *pool);
-/* Run fn(ctx, i, i + 1, worker) for every item i in [0, items) on up to
- * `threads` threads (caller included); worker is 0..threads-1 and distinct
- * among concurrent calls. Returns when all items are done. pool may be NULL
- * (then the caller does everything). */
-void ocean_parallel(struct ocean_pool *pool, int threads, int items,
-                    void (*fn)(void *ctx, int i0, int i1, int worker), void *ctx);
+/* The library's threads are instances of the program's one work pool
+ * (server/common/pool.h): `threads` - 1 pool threads beside the caller,
+ * whose parallel-for (pool_for) hands items out one at a time from a
+ * shared counter, so a thread that the (shared) machine deschedules does
+ * not hold up the others; which thread does an item never changes its
+ * result; worker numbers 0..threads-1 index the grid's scratch slots.
+ * NULL for one thread (pool_for then runs everything on the caller). */
+static inline struct pool *ocean_pool_new(int threads)
+{
+    return threads > 1 ? pool_new((threads < OCEAN_MAX_THREADS ? threads : OCEAN_MAX_THREADS) - 1) : NULL;
+}
 
+/* Who writes and who reads: opt, wisdom_path, pool: ocean_create, then
+ * read only. p, model, g, ncascades, fine*, generation: written only by
+ * ocean_create and the commit (stepping thread); read by the step and by
+ * the preparing thread (ocean_prepare, never during a commit). prep_pool:
+ * the preparing thread's alone. foam_*: the step's (ocean_foam.c); the
+ * commit clears foam_warm with a new grid. */
 struct ocean {
     struct ocean_params p;
     struct ocean_options opt;  /* opt.wisdom_path points at our own copy */
     char *wisdom_path;
     struct spectrum_model model;
     struct ocean_grid *g;      /* cascade 0; ocean_step_fft/_dft step g under `model` */
-    /* Cascades 1 .. ncascades-1 ([0] unused): their grids and models. To step
-     * cascade c, ocean.c puts them in g and model for the duration of the
-     * call (step_cascade), so the step code knows nothing of cascades. */
+    /* Cascades 1 .. ncascades-1 ([0] unused): their grids and models. A
+     * cascade is stepped on its own grid and model (ocean.c, step_cascade:
+     * ocean_step_fft_grid / ocean_step_dft_grid), so stepping writes
+     * nothing of struct ocean but the foam's fields. */
     int ncascades;
     struct ocean_grid *fine[OCEAN_MAX_CASCADES];
     struct spectrum_model fine_model[OCEAN_MAX_CASCADES];
-    struct ocean_pool *pool;   /* opt.threads - 1 workers; NULL for one thread */
-    struct ocean_pool *prep_pool; /* ocean_prepare's own (another thread's), made on first use */
+    struct pool *pool;         /* opt.threads - 1 pool threads; NULL for one thread. Made by
+                                * ocean_create; used by the stepping thread (step, commit's easing) */
+    struct pool *prep_pool;    /* ocean_prepare's own (the preparing thread's), made on its first call */
     unsigned long generation;  /* commits so far: a prepare made before the last one is stale */
     /* Foam (ocean_foam.c): the state is g->out[OCEAN_FOAM] itself. */
     double foam_time;          /* t of the last foam step */
@@ -282,6 +303,51 @@ int ocean_tile_dist(int n);
 
 /* Wavenumber of index i on an N grid of side L: 2 pi (i - N [i > N/2]) / L. */
 double ocean_wavenumber(int i, int n, double patch);
+
+/* ocean_grid.c: the library's arrays and grids. Every array comes from
+ * ocean_zalloc (zeroed) or ocean_xalloc (not: for arrays written whole
+ * before they are read), counted in ocean_alloc_bytes, and goes back with
+ * free(); *ok becomes false when one fails (so a run of allocations is
+ * checked once). */
+void *ocean_zalloc(size_t bytes, bool *ok);
+void *ocean_xalloc(size_t bytes, bool *ok);
+/* The amplitude arrays a step reads: what a parameter change replaces.
+ * Written by ocean_amps_compute (the preparing thread); swapped into the
+ * grid by the commit (the stepping thread); read by the step. */
+struct ocean_amps {
+    float *a, *b, *d, *e;
+    double *omega;
+    float *ampc;
+};
+bool ocean_amps_alloc(struct ocean_amps *s, int n);
+void ocean_amps_free(struct ocean_amps *s);
+/* Swap the amplitude arrays of a grid with a set (commit: O(1)). */
+void ocean_amps_swap(struct ocean_grid *g, struct ocean_amps *s);
+/* A grid for N: every array, the rings, the FFTW plans (planned here, once,
+ * under ocean_fftw_lock); amplitudes, normals and wavenumbers are left for
+ * the caller (ocean_prepare.c). NULL with err on failure. */
+struct ocean_grid *ocean_grid_new(int n, const struct ocean_options *opt, char *err, size_t errlen);
+void ocean_grid_free(struct ocean_grid *g);
+
+/* ocean_amplitudes.c: the fill of a parameter change, on the preparing
+ * thread and its pool (threads as for pool_for). The normals of (seed,
+ * k) into gauss (4 floats per mode); h~0 and w for every mode of grid g
+ * into amps (false: no memory for the radial table); kx, kz for a patch. */
+void ocean_gauss_compute(int n, uint32_t seed, float *gauss, struct pool *pool, int threads);
+bool ocean_amps_compute(const struct ocean_grid *g, const struct spectrum_model *m, double lambda,
+                        const float *gauss, struct ocean_amps *amps, struct pool *pool, int threads);
+void ocean_set_k_tables(struct ocean_grid *g, double patch);
+
+/* ocean_prepare.c: everything new parameters need, made beside the live
+ * grids (read only) on `pool` (ocean_create and ocean_reconfigure use the
+ * stepping pool, ocean_prepare its own). */
+struct ocean_prepared *ocean_prepare_on(const struct ocean *o, const struct ocean_params *p, struct pool *pool,
+                                        int threads, char *err, size_t errlen);
+/* The live grid of cascade c, or NULL. */
+static inline struct ocean_grid *ocean_cascade_grid(const struct ocean *o, int c)
+{
+    return c == 0 ? o->g : c < o->ncascades ? o->fine[c] : NULL;
+}
 
 /* ocean_fftw.c: once-per-process FFTW threads setup and the lock that
  * serialises planning and wisdom I/O (FFTW's planner is global state). */

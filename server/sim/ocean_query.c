@@ -163,7 +163,7 @@ static size_t grid_spans(const struct ocean_grid *g, const float *also[2], const
 }
 
 /* The snapshot of the grids of cascades 0 .. count-1 (all of the same N)
- * under parameters pp (ocean.c also calls it on a prepared state). */
+ * under parameters pp (ocean_prepare.c also calls it on a prepared state). */
 struct ocean_surface *ocean_surface_from(const struct ocean_grid *const *grids, int count,
                                          const struct ocean_params *pp, char *err, size_t errlen)
 {

@@ -65,7 +65,7 @@ double spectrum_spreading(const struct spectrum_model *m, double omega, double t
  * the integral of Psi over the plane. Includes amplitude and cutoff. */
 double spectrum_directional(const struct spectrum_model *m, double kx, double kz);
 
-/* Psi(k) split for the fast amplitude path (ocean.c): everything but the
+/* Psi(k) split for the fast amplitude path (ocean_amplitudes.c): everything but the
  * spreading's angle depends on |k| alone, so it is evaluated once per
  * distinct |k| ("ring") instead of twice per mode:
  *   Psi(kx, kz) = psi_k * spectrum_spreading_cos(m, r, cos theta). */

@@ -149,7 +149,7 @@ float *ocean_row_jacobian_terms(float *scratch, int n) { return scratch + row_bu
 /* h~(k, t) down one kx column (N modes, N a multiple of 16), interleaved
  * complex, from its column-major amplitudes (ocean_amp_col):
  * h~ = (a c + b s) + i (d c - e s). w depends on |k| only (one value per
- * ring, ocean.c), so rows iz and N - iz of a column have the same w, bit
+ * ring, ocean_grid.c), so rows iz and N - iz of a column have the same w, bit
  * for bit: sin and cos are computed for rows 0 .. N/2 only (16 at a time:
  * a fixed trip count vectorises fully) into s, c (phase_floats each), and
  * rows N/2+1 .. N-1 use those of row N - iz. Half the phase work. */
@@ -487,10 +487,10 @@ static void row_blocks(void *arg, int b0, int b1, int worker)
 static void run_step(struct fill_ctx *c, int threads)
 {
     struct ocean_grid *g = c->g;
-    struct ocean_pool *pool = c->o->pool;
+    struct pool *pool = c->o->pool;
     /* Tiles cover kx columns 0 .. N/2-1; the Nyquist column is zero. */
-    ocean_parallel(pool, threads, (g->n / 2) / g->tile, fill_tiles, c);
-    ocean_parallel(pool, threads, g->n / OCEAN_ROW_BLOCK, row_blocks, c);
+    pool_for(pool, threads, (g->n / 2) / g->tile, fill_tiles, c);
+    pool_for(pool, threads, g->n / OCEAN_ROW_BLOCK, row_blocks, c);
 }
 
 static int step_threads(const struct ocean_grid *g)

@@ -1,5 +1,5 @@
 /* capacity.h — what this daemon can do at its tick rate, and what it does
- * when asked for more (issue 15, issue 16 defect 2).
+ * when asked for more (docs/daemon.md, "Capacity").
  *
  * A cost model measured at start-up (sim_start: a few steps and encodes at
  * the starting N, on this machine) and kept current from every frame:

@@ -2,7 +2,6 @@
  * subjects, the layer-part format (OCNL) and its splitting/reassembly, the
  * envelope format (OCNE), and the demand table's expiry. No NATS here
  * (tests/cluster/test_cluster_nats.c has the integration test). */
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -10,26 +9,13 @@
 #include "cluster/cluster.h"
 #include "layer_gen.h"
 
-static int checks, failures;
-static const char *current;
-
-static void fail(const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    fprintf(stderr, "FAIL [%s] ", current);
-    vfprintf(stderr, fmt, ap);
-    fputc('\n', stderr);
-    va_end(ap);
-    failures++;
-}
-#define CHECK(cond, ...) do { checks++; if (!(cond)) fail(__VA_ARGS__); } while (0)
+#include "../common/check.h"
 
 /* ---- subjects ---- */
 
 static void test_subjects(void)
 {
-    current = "subjects";
+    check_section = "subjects";
     const char *good[] = { "oceand", "sea-1", "eu.west.sea_2", "A", NULL };
     const char *bad[] = { "", ".", "a.", ".a", "a..b", "a*", "a.>", "a b", "sea\n", "s\xc3\xa9", NULL };
     for (int i = 0; good[i]; i++)
@@ -88,7 +74,7 @@ static void test_subjects(void)
 
 static void test_part_roundtrip(void)
 {
-    current = "layer part round trip";
+    check_section = "layer part round trip";
     struct gen_layer g;
     CHECK(gen_layer_make(&g, 64, 16, 3, 1, 2, 42, 300, 1) == 0, "gen");
     g.info.frame_flags = 0;
@@ -186,7 +172,7 @@ static void m_layer_flags(uint8_t *m) { m[41] = 2; }
 
 static void test_part_rejects(void)
 {
-    current = "layer part rejects";
+    check_section = "layer part rejects";
     expect_bad("magic", m_magic, CL_E_MAGIC);
     expect_bad("version", m_version, CL_E_VERSION);
     expect_bad("header size", m_hsize, CL_E_CORRUPT);
@@ -218,7 +204,7 @@ static void test_part_rejects(void)
 /* Split into parts that fit max_payload, reassemble: identical layer. */
 static void test_split_assemble(void)
 {
-    current = "split and reassemble";
+    check_section = "split and reassemble";
     struct gen_layer g;
     gen_layer_make(&g, 256, 32, 5, 2, 4, 100, 4000, 3); /* 64 tiles, ~130 KB */
     int total = 64;
@@ -293,7 +279,7 @@ static void test_split_assemble(void)
  * collected into one frame, cascade 0's first. */
 static void test_cascades(void)
 {
-    current = "cascades";
+    check_section = "cascades";
     struct gen_layer g0, g2;
     gen_layer_make(&g0, 128, 16, 0, 1, 4, 50, 900, 11);
     gen_layer_make(&g2, 128, 16, 0, 1, 4, 50, 900, 12);
@@ -360,7 +346,7 @@ out:
 
 static void test_envelope(void)
 {
-    current = "envelope";
+    check_section = "envelope";
     const char *body = "{\"type\":\"set\",\"params\":{\"wind_speed\":12}}";
     size_t size = cl_envelope_size("edge-a", "c17", strlen(body));
     uint8_t *m = malloc(size);
@@ -429,7 +415,7 @@ static void keys(uint8_t bits[CL_KEY_BYTES], int a, int b)
 
 static void test_demand(void)
 {
-    current = "demand table";
+    check_section = "demand table";
     struct cl_demand *d = cl_demand_new(2);
     uint8_t a[CL_KEY_BYTES], b[CL_KEY_BYTES], u[CL_KEY_BYTES], empty[CL_KEY_BYTES] = { 0 };
     keys(a, 1, 2);
@@ -481,7 +467,7 @@ static struct cl_layer *mk_layer(int field, uint64_t seq, const int *enc, int ne
 
 static void test_collector(void)
 {
-    current = "frame collector";
+    check_section = "frame collector";
     const int A = cl_key(0, 0, 0), B = cl_key(1, 0, 0), C = cl_key(2, 0, 0), D = cl_key(3, 0, 0);
     const int abc[] = { A, B, C }, ab[] = { A, B };
     uint8_t want[CL_KEY_BYTES] = { 0 };
@@ -553,7 +539,7 @@ static void test_collector(void)
  * CL_MAX_ASSEMBLY_BYTES, here 4 MiB so that the test stays small). */
 static void test_assembler_budget(void)
 {
-    current = "assembler budget";
+    check_section = "assembler budget";
     const size_t budget = 4u << 20, maxp = 65536;
     struct cl_assembler *a = cl_assembler_new();
     cl_assembler_set_budget(a, budget);
@@ -611,7 +597,5 @@ int main(void)
     test_envelope();
     test_demand();
     test_collector();
-    printf("test_cluster_msg: %d checks\n", checks);
-    printf("%d passed, %d failed\n", checks - failures, failures);
-    return failures ? 1 : 0;
+    return check_done();
 }

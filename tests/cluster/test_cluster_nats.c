@@ -16,7 +16,6 @@
 #include <pthread.h>
 #include <signal.h>
 #include <stdatomic.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -30,20 +29,7 @@
 #include "cluster/cluster.h"
 #include "layer_gen.h"
 
-static int checks, failures;
-static const char *current = "setup";
-
-static void fail(const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    fprintf(stderr, "FAIL [%s] ", current);
-    vfprintf(stderr, fmt, ap);
-    fputc('\n', stderr);
-    va_end(ap);
-    failures++;
-}
-#define CHECK(cond, ...) do { checks++; if (!(cond)) fail(__VA_ARGS__); } while (0)
+#include "../common/check.h"
 
 static double now_s(void)
 {
@@ -313,7 +299,7 @@ static struct cl_link *open_link_ex(struct obs *o, enum cl_role role, const char
     };
     o->link = cl_link_open(&c, err, sizeof err);
     if (!o->link && !may_fail)
-        fail("open %s: %s", name, err);
+        CHECK(0, "open %s: %s", name, err);
     return o->link;
 }
 
@@ -389,15 +375,15 @@ static int publish(struct obs *sim, const struct gen_layer *g)
 int main(void)
 {
     setvbuf(stdout, NULL, _IOLBF, 0);
+    check_section = "setup";
     natsd_bin = find_nats_server();
     if (!natsd_bin) {
-        fprintf(stderr, "nats-server not found: run `make deps` (scripts/apt-packages.txt lists it)\n");
-        printf("0 passed, 1 failed\n");
-        return 1;
+        CHECK(0, "nats-server not found: run `make deps` (scripts/apt-packages.txt lists it)");
+        return check_done();
     }
     if (!mkdtemp(tmpdir)) {
-        perror("mkdtemp");
-        return 1;
+        CHECK(0, "mkdtemp %s: %s", tmpdir, strerror(errno));
+        return check_done();
     }
     atexit(cleanup);
     signal(SIGINT, on_signal);
@@ -405,9 +391,8 @@ int main(void)
     signal(SIGABRT, on_signal);
     natsd_port = free_port();
     if (natsd_port <= 0 || !natsd_start()) {
-        fprintf(stderr, "could not start %s on 127.0.0.1:%d (log in %s)\n", natsd_bin, natsd_port, tmpdir);
-        printf("0 passed, 1 failed\n");
-        return 1;
+        CHECK(0, "could not start %s on 127.0.0.1:%d (log in %s)", natsd_bin, natsd_port, tmpdir);
+        return check_done();
     }
     char prefix[64];
     snprintf(prefix, sizeof prefix, "test.sea%ld", (long)getpid());
@@ -419,7 +404,7 @@ int main(void)
     all_obs[nobs++] = &ec;
     const int K1 = cl_key(0, 0, 2), K2 = cl_key(1, 1, 0), K3 = cl_key(5, 0, 0), K4 = cl_key(3, 0, 0);
 
-    current = "connect";
+    check_section = "connect";
     if (!open_link(&sim, CL_ROLE_SIM, "sim-1", prefix) || !open_link(&ea, CL_ROLE_EDGE, "edge-a", prefix) ||
         !open_link(&eb, CL_ROLE_EDGE, "edge-b", prefix))
         goto out;
@@ -440,14 +425,14 @@ int main(void)
         CHECK(cl_link_connected(all_obs[i]->link), "%s: cl_link_connected false", all_obs[i]->who);
     }
 
-    current = "sim heartbeat";
+    check_section = "sim heartbeat";
     {
         struct evwant wa = { &ea, CL_EV_SIM_UP, 1 }, wb = { &eb, CL_EV_SIM_UP, 1 };
         CHECK(spin_until(5, p_event, &wa) && cl_link_sim_up(ea.link), "edge-a never saw the sim");
         CHECK(spin_until(5, p_event, &wb), "edge-b never saw the sim");
     }
 
-    current = "demand";
+    check_section = "demand";
     {
         uint8_t u[CL_KEY_BYTES];
         CHECK(cl_sim_demand(sim.link, u) == 0, "demand before any edge asked");
@@ -459,7 +444,7 @@ int main(void)
         CHECK(p_demand(&w4), "edge-a's second key missing");
     }
 
-    current = "layers";
+    check_section = "layers";
     {
         struct gen_layer g1, g2, g3;
         gen_layer_make(&g1, 64, 16, 0, 0, 2, 1, 500, 11);     /* K1, one part */
@@ -493,7 +478,7 @@ int main(void)
         gen_layer_free(&g3);
     }
 
-    current = "request/reply";
+    check_section = "request/reply";
     {
         const char *set = "{\"type\":\"set\",\"id\":5,\"params\":{\"wind_speed\":14}}";
         struct reply_box ra = { 0 }, rb = { 0 };
@@ -561,7 +546,7 @@ int main(void)
         }
     }
 
-    current = "params events";
+    check_section = "params events";
     {
         const char *p = "{\"type\":\"params\",\"params_version\":2,\"by\":\"c7\"}";
         CHECK(cl_sim_publish_params(sim.link, "edge-a", "c7", p, strlen(p)) == 0, "publish params");
@@ -572,7 +557,7 @@ int main(void)
         CHECK(spin_until(5, p_params, &wb) && strcmp(eb.params_text, p) == 0, "edge-b params: %s", eb.params_text);
     }
 
-    current = "demand goodbye and expiry";
+    check_section = "demand goodbye and expiry";
     {
         demand1(&ea, -1, -1); /* edge-a's viewers left: it says so at once */
         struct demwant w = { &sim, K1, K2, 1, K4 };
@@ -584,7 +569,7 @@ int main(void)
         CHECK(spin_until(5, p_demand, &gone), "edge-b's demand never expired");
     }
 
-    current = "nats-server killed";
+    check_section = "nats-server killed";
     {
         natsd_kill(SIGKILL);
         struct evwant ws = { &sim, CL_EV_DISCONNECTED, 1 }, wa = { &ea, CL_EV_DISCONNECTED, 1 };
@@ -611,9 +596,9 @@ int main(void)
         CHECK(ec.ev[CL_EV_CONNECTED] == 0, "edge-c connected to nothing");
     }
 
-    current = "nats-server restarted";
+    check_section = "nats-server restarted";
     if (!natsd_start()) {
-        fail("could not restart nats-server on port %d", natsd_port);
+        CHECK(0, "could not restart nats-server on port %d", natsd_port);
         goto out;
     }
     {
@@ -646,7 +631,7 @@ int main(void)
         CHECK(spin_until(5, p_reply, &r) && r.status == 0, "request/reply after restart: status %d", r.status);
     }
 
-    current = "sim down and back";
+    check_section = "sim down and back";
     {
         /* counted from here: a slow NATS restart above may have shown edge-a a
          * sim_down and sim_up already */
@@ -693,7 +678,7 @@ int main(void)
         }
     }
 
-    current = "TLS";
+    check_section = "TLS";
     for (int i = 0; i < nobs; i++)
         if (all_obs[i]->link)
             close_link(all_obs[i]);
@@ -709,7 +694,7 @@ int main(void)
         natsd_tls = true;
         natsd_port = free_port();
         if (system(cmd) != 0 || !natsd_start()) {
-            fail("could not start nats-server with TLS");
+            CHECK(0, "could not start nats-server with TLS");
             goto out;
         }
         struct obs ts = { .who = "tls-sim" }, te = { .who = "tls-edge" }, tp = { .who = "plain-edge" };
@@ -747,7 +732,7 @@ int main(void)
     }
 
 out:
-    current = "shutdown";
+    check_section = "shutdown";
     for (int i = 0; i < nobs; i++)
         if (all_obs[i]->link)
             close_link(all_obs[i]);
@@ -755,7 +740,5 @@ out:
         obs_free(all_obs[i]);
     natsd_kill(SIGTERM);
     cl_library_shutdown();
-    printf("test_cluster_nats: %d checks\n", checks);
-    printf("%d passed, %d failed\n", checks - failures, failures);
-    return failures ? 1 : 0;
+    return check_done();
 }

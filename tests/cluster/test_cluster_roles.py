@@ -6,16 +6,14 @@ one or two `--role edge` daemons, and real WebSocket clients; everything is kill
 the end, even on failure (and nats-server dies with this process: PR_SET_PDEATHSIG).
     /usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand build/oceand [--cycles 5]
 Prints "N passed, M failed" last. Helpers (clients, frame parsing) come from
-tests/daemon/test_daemon.py.
+tests/daemon/test_daemon.py, the processes from tests/common/oceand_proc.py.
 """
 import argparse
 import asyncio
-import ctypes
 import json
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -25,87 +23,27 @@ import urllib.error
 import urllib.request
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "daemon"))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
 import test_daemon as td  # noqa: E402
+import oceand_proc  # noqa: E402
 from test_daemon import TestFailure, check, connect, recv_json, recv_frame, parse_header  # noqa: E402
 
 ARGS = None
 N = 256
-NATS_BIN = shutil.which("nats-server") or "/usr/sbin/nats-server"
 
 
-def _die_with_parent():
-    ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-
-
-class Nats:
-    """A nats-server on 127.0.0.1; stop() and start() keep the port."""
-
-    def __init__(self, tmp):
-        self.port = td.free_port()
-        self.url = "nats://127.0.0.1:%d" % self.port
-        self.log = open(os.path.join(tmp, "nats.log"), "ab")
-        self.proc = None
-        self.start()
-
-    def start(self):
-        self.proc = subprocess.Popen([NATS_BIN, "-a", "127.0.0.1", "-p", str(self.port)],
-                                     stdout=self.log, stderr=self.log, preexec_fn=_die_with_parent)
-        deadline = time.time() + 10
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", self.port), timeout=0.5).close()
-                return
-            except OSError:
-                check(self.proc.poll() is None, "nats-server exited at start")
-                check(time.time() < deadline, "nats-server did not listen")
-                time.sleep(0.05)
-
-    def stop(self):
-        if self.proc and self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait()
-
-    def close(self):
-        self.stop()
-        self.log.close()
-
-
-class Node:
+class Node(oceand_proc.Oceand):
     """One oceand (--role all|sim|edge); restart() keeps its port and state file."""
 
     def __init__(self, tmp, name, *extra, port=None, state_file=None):
-        self.tmp, self.name, self.extra = tmp, name, list(extra)
-        self.port = port or td.free_port()
         self.state_file = state_file or os.path.join(tmp, name + "-state.json")
-        self.log_path = os.path.join(tmp, name + ".log")
-        self.url = "ws://127.0.0.1:%d/" % self.port
-        self.http = "http://127.0.0.1:%d" % self.port
-        self.tls_ctx = None
-        self.proc = None
-        self.start()
-
-    def start(self):
-        args = [ARGS.oceand, "--port", str(self.port), "--state-file", self.state_file,
-                "--web-root", os.path.join(self.tmp, "web"), "--resolution", str(N), "--tick-rate", "30",
-                "--plan-rigor", "0", "--wisdom-file", "none", "--log-level", "info",
-                # the old fixed cap (the default follows the machine's memory): BAD_SETS
-                # expects N = 2048 refused, not a multi-second build
-                "--max-memory-mb", "256"] + self.extra
-        self.log = open(self.log_path, "ab")
-        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log, preexec_fn=_die_with_parent)
-        deadline = time.time() + 20
-        while True:
-            check(self.proc.poll() is None, "%s exited at start: %s\n%s" % (self.name, self.proc.returncode, self.read_log()))
-            try:
-                urllib.request.urlopen(self.http + "/healthz", timeout=1).read()
-                return
-            except (urllib.error.URLError, ConnectionError, OSError):
-                check(time.time() < deadline, "%s did not answer /healthz" % self.name)
-                time.sleep(0.05)
-
-    def read_log(self):
-        with open(self.log_path, "rb") as f:
-            return f.read().decode(errors="replace")[-3000:]
+        super().__init__(ARGS.oceand, "--state-file", self.state_file,
+                         "--web-root", os.path.join(tmp, "web"), "--resolution", str(N), "--tick-rate", "30",
+                         "--plan-rigor", "0", "--wisdom-file", "none", "--log-level", "info",
+                         # the old fixed cap (the default follows the machine's memory): BAD_SETS
+                         # expects N = 2048 refused, not a multi-second build
+                         "--max-memory-mb", "256", *extra,
+                         tmp=tmp, port=port, name=name, preexec_fn=oceand_proc.die_with_parent, error=TestFailure)
 
     def health(self):
         with urllib.request.urlopen(self.http + "/healthz", timeout=5) as r:
@@ -117,31 +55,17 @@ class Node:
     def get(self, path):
         return td.Daemon.get(self, path)
 
-    def rss_kb(self):
-        return td.Daemon.rss_kb(self)
-
     def kill(self, sig=signal.SIGKILL):
-        if self.proc and self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if not self.log.closed:
-            self.log.close()
-        return self.proc.returncode
-
-    def restart(self):
-        self.kill()
-        self.start()
+        """sig, up to 10 s to exit (then SIGKILL), log closed; returns the exit code."""
+        self.stop(sig, 10)
+        return super().kill()
 
 
 class Cluster:
     def __init__(self, edges=2, sim_extra=(), edge_extra=(), state=None):
         self.tmp = tempfile.mkdtemp(prefix="oceand-cluster-")
         self.nodes = []
-        self.nats = Nats(self.tmp)
+        self.nats = oceand_proc.Nats(self.tmp, error=TestFailure)
         try:
             sf = os.path.join(self.tmp, "sim-state.json")
             if state is not None:
@@ -713,8 +637,9 @@ def main():
     ap.add_argument("-k", default="")
     ARGS = ap.parse_args()
     td.ARGS = ARGS
-    if not os.path.exists(NATS_BIN):
+    if not os.path.exists(oceand_proc.NATS_BIN):
         print("nats-server not found (scripts/deps.sh installs it)")
+        print("0 passed, 1 failed")
         return 1
     passed = failed = 0
     for fn in TESTS:

@@ -14,6 +14,8 @@
 #include "oc_proto.h"
 #include "ocean.h"
 
+#include "../common/slurp.h"
+
 struct check {
     struct ocean *o;
     long samples, bad;
@@ -46,27 +48,6 @@ static int on_tile(void *user, const struct oc_frame_header *fh, const struct oc
             }
         }
     return 0;
-}
-
-static char *slurp(const char *path, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *b = malloc((size_t)n + 1);
-    if (b && fread(b, 1, (size_t)n, f) != (size_t)n) {
-        free(b);
-        b = NULL;
-    }
-    fclose(f);
-    if (b) {
-        b[n] = 0;
-        *len = (size_t)n;
-    }
-    return b;
 }
 
 int main(int argc, char **argv)

@@ -21,18 +21,7 @@
 #include "ocean.h"
 #include "state.h"
 
-static int passed, failed;
-#define CHECK(cond, ...)                                                  \
-    do {                                                                  \
-        if (cond) {                                                       \
-            passed++;                                                     \
-        } else {                                                          \
-            failed++;                                                     \
-            printf("FAIL %s:%d: ", __FILE__, __LINE__);                   \
-            printf(__VA_ARGS__);                                          \
-            printf("\n");                                                 \
-        }                                                                 \
-    } while (0)
+#include "../common/check.h"
 
 static const struct ctl_limits lim = { .tick_rate = 30, .max_memory_mb = 256 };
 
@@ -366,7 +355,7 @@ static void write_text(const char *path, const char *text)
     }
 }
 
-/* Issue 10: one validation path. The same fault gets the same reason from
+/* One validation path. The same fault gets the same reason from
  * the JSON `set`, the config file and the command line, and each reason maps
  * to one documented wire code. */
 static void test_one_validation_path(void)
@@ -441,7 +430,7 @@ static void test_one_validation_path(void)
     rmdir(dir);
 }
 
-/* Issue 16 (3): an echoed id is capped at CTL_MAX_ID_BYTES of JSON. */
+/* An echoed id is capped at CTL_MAX_ID_BYTES of JSON. */
 static void test_id_cap(void)
 {
     char id[CTL_MAX_ID_BYTES + 64], text[CTL_MAX_ID_BYTES + 128];
@@ -575,8 +564,7 @@ static void test_short_frames(void)
     CHECK(oc_frame_header_read(ocn, 8, &h) == OC_E_TRUNCATED, "8 bytes of a header: not truncated");
 }
 
-/* Issue 10 (3): a config file over 16 MiB is refused, not cut; issue 16 (6):
- * a FIFO as the config or state file is refused at once (it used to block
+/* A config file over 16 MiB is refused, not cut; a FIFO as the config or state file is refused at once (it used to block
  * start-up forever: the alarm turns a hang into a failure). */
 static void test_config_file_limits(void)
 {
@@ -630,7 +618,7 @@ static void test_config_file_limits(void)
     rmdir(dir);
 }
 
-/* Issue 16 (4, 5, minor): bad saved values are warned about and fall back;
+/* Bad saved values are warned about and fall back;
  * none stops the daemon. */
 static void test_state_values(void)
 {
@@ -741,10 +729,9 @@ static void fuzz(void)
         ctl_msg_free(&m);
     }
     CHECK(accepted > 0, "fuzz never produced a valid set");
-    passed++;
 }
 
-/* capacity.c: the plan of a tick (issue 15 / 16 defect 2), from a model
+/* capacity.c: the plan of a tick (docs/daemon.md, "Capacity"), from a model
  * with fixed numbers: behaviour only, no clock. */
 static void test_capacity_plan(void)
 {
@@ -995,7 +982,6 @@ static void test_capacity_codecs(void)
         if (ci.sizes[i].n == 1024)
             CHECK(fabs(ci.sizes[i].est_ms[2] - (cost_step_s(&l, 1024, 3) + l.enc_temporal_s * 3 * 1024 * 1024) * 1e3) < 1e-3,
                   "est_ms at 1024: %g", ci.sizes[i].est_ms[2]);
-    passed++;
 }
 
 /* capacity.c: the codec rung with two temporal groups, and the announcement
@@ -1069,7 +1055,6 @@ static void test_capacity_codec_rung(void)
         if (ci.sizes[i].n == 1024)
             CHECK(ci.sizes[i].temporal_fields == 2 && ci.sizes[i].full_rate_fields == 5, "1024 capped: temporal %d full %d",
                   ci.sizes[i].temporal_fields, ci.sizes[i].full_rate_fields);
-    passed++;
 }
 
 /* Display names (PROTOCOL.md §7.1 `name`): what is accepted and refused,
@@ -1162,6 +1147,5 @@ int main(void)
     test_state_values();
     test_display_names();
     fuzz();
-    printf("test_control: %d passed, %d failed\n", passed, failed);
-    return failed != 0;
+    return check_done();
 }

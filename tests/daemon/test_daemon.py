@@ -43,57 +43,24 @@ TILE_HDR = struct.Struct("<BBBBHHHHfddII")       # 40 bytes
 
 from harness import TestFailure, check, running, run_tests  # noqa: E402,F401 (re-exported to the other suites)
 
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
+import oceand_proc  # noqa: E402
 
 
-class Daemon:
-    """One oceand process with its own port, state file and log."""
+class Daemon(oceand_proc.Oceand):
+    """One oceand with its own port, state file and log, at the suite's settings."""
 
     def __init__(self, *extra, state_file=None, tmpdir=None, tls_ctx=None, env=None):
-        self.tmp = tmpdir or tempfile.mkdtemp(prefix="oceand-test-")
-        self.tls_ctx = tls_ctx           # client SSL context when the daemon serves https/wss
-        self.port = free_port()
-        self.state_file = state_file or os.path.join(self.tmp, "state.json")
-        self.log_path = os.path.join(self.tmp, "oceand.log")
-        args = [ARGS.oceand, "--port", str(self.port), "--state-file", self.state_file,
-                "--web-root", os.path.join(self.tmp, "web"), "--resolution", str(BASE_N),
-                "--tick-rate", str(int(TICK)),
-                # ESTIMATE plans, like frame_check's reference: bit-exact comparisons
-                "--plan-rigor", "0", "--wisdom-file", "none",
-                # the old fixed cap, so that the tests do not depend on this machine's memory
-                "--max-memory-mb", "256"] + list(extra)
-        self.log = open(self.log_path, "ab")
-        self.proc = subprocess.Popen(args, stdout=self.log, stderr=self.log,
-                                     env=dict(os.environ, **env) if env else None)
-        scheme = "s" if tls_ctx else ""
-        self.url = "ws%s://127.0.0.1:%d/" % (scheme, self.port)
-        self.http = "http%s://127.0.0.1:%d" % (scheme, self.port)
-        deadline = time.time() + 20
-        while True:
-            if self.proc.poll() is not None:
-                raise TestFailure("oceand exited at start with %s; log:\n%s" % (self.proc.returncode, self.read_log()))
-            try:
-                urllib.request.urlopen(self.http + "/healthz", timeout=1, context=self.tls_ctx).read()
-                break
-            except (urllib.error.URLError, ConnectionError, OSError):
-                if time.time() > deadline:
-                    raise TestFailure("oceand did not answer /healthz")
-                time.sleep(0.05)
-
-    def read_log(self):
-        with open(self.log_path, "rb") as f:
-            return f.read().decode(errors="replace")[-4000:]
-
-    def rss_kb(self):
-        with open("/proc/%d/status" % self.proc.pid) as f:
-            for line in f:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1])
-        return 0
+        tmp = tmpdir or tempfile.mkdtemp(prefix="oceand-test-")
+        self.state_file = state_file or os.path.join(tmp, "state.json")
+        super().__init__(ARGS.oceand, "--state-file", self.state_file,
+                         "--web-root", os.path.join(tmp, "web"), "--resolution", str(BASE_N),
+                         "--tick-rate", str(int(TICK)),
+                         # ESTIMATE plans, like frame_check's reference: bit-exact comparisons
+                         "--plan-rigor", "0", "--wisdom-file", "none",
+                         # the old fixed cap, so that the tests do not depend on this machine's memory
+                         "--max-memory-mb", "256", *extra,
+                         tmp=tmp, own_tmp=tmpdir is None, env=env, tls_ctx=tls_ctx, error=TestFailure)
 
     def get(self, path):
         with urllib.request.urlopen(self.http + path, timeout=5, context=self.tls_ctx) as r:
@@ -104,28 +71,6 @@ class Daemon:
         m = re.search(r"^%s (\S+)$" % re.escape(name), text, re.M)
         check(m, "metric %s missing" % name)
         return float(m.group(1))
-
-    def stop(self, sig=signal.SIGTERM, timeout=10):
-        """Signal and wait; returns (exit code, seconds)."""
-        if self.proc.poll() is not None:
-            return self.proc.returncode, 0.0
-        t0 = time.time()
-        self.proc.send_signal(sig)
-        try:
-            rc = self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            if os.environ.get("OCEAND_TEST_GDB"):
-                subprocess.run(["gdb", "-p", str(self.proc.pid), "-batch", "-ex", "thread apply all bt"])
-            self.proc.kill()
-            self.proc.wait()
-            rc = None
-        return rc, time.time() - t0
-
-    def kill(self):
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait()
-        self.log.close()
 
 
 async def connect(d, **kw):
@@ -927,7 +872,7 @@ def test_config_precedence():
 TESTS.append(test_config_precedence)
 
 
-# ------------------------------------------------ defects of issue 10 (each failed before its fix)
+# ------------------------------------------------ regressions (each failed before its fix)
 
 # Test-only hook of the daemon (server/sim_thread.h): a build whose parameters
 # have this seed takes 0.5 s and then fails as if out of memory.
@@ -935,7 +880,7 @@ FAIL_SEED = 4242
 
 
 def test_failed_set_keeps_pending_sets_in_view():
-    """Issue 10 defect 1: a set that fails at apply time must not drop the
+    """A set that fails at apply time must not drop the
     sets accepted after it from the view the next set is checked against."""
     with running(Daemon, env={"OCEAND_TEST_FAIL_BUILD_SEED": str(FAIL_SEED)}) as d:
         async def run():
@@ -962,7 +907,7 @@ TESTS.append(test_failed_set_keeps_pending_sets_in_view)
 
 
 def test_build_out_of_memory_answers_and_keeps_base():
-    """Issue 10 defect 2: a batch whose build runs out of memory gets a coded
+    """A batch whose build runs out of memory gets a coded
     error for every sender, and the base of later sets does not move."""
     with running(Daemon, env={"OCEAND_TEST_FAIL_BUILD_SEED": str(FAIL_SEED)}) as d:
         async def run():
@@ -992,7 +937,7 @@ TESTS.append(test_build_out_of_memory_answers_and_keeps_base)
 
 @test
 def test_join_after_idle_gets_a_current_frame(d):
-    """Issue 10 defect 4: after a period with no client, a new client's first
+    """After a period with no client, a new client's first
     frame is from the current tick, and seq counts the idle ticks (§3.1)."""
     async def run():
         a, _ = await connect(d)
@@ -1014,7 +959,7 @@ def test_join_after_idle_gets_a_current_frame(d):
 
 
 def test_tile_size_follows_resolution():
-    """Issue 10 defect 5: hello and params announce the tile size frames use."""
+    """Hello and params announce the tile size frames use."""
     with running(Daemon, "--resolution", "64", stop=False) as d:
         async def run():
             a, h = await connect(d)
@@ -1041,7 +986,7 @@ TESTS.append(test_tile_size_follows_resolution)
 
 @test
 def test_rate_limited_error_has_id(d):
-    """Issue 10 defect 6: rate_limited errors echo the request id (§7)."""
+    """`rate_limited` errors echo the request id (§7)."""
     async def run():
         a, _ = await connect(d)
         sent = ["r%d" % i for i in range(100)]
@@ -1060,7 +1005,7 @@ def test_rate_limited_error_has_id(d):
         check(sorted(answered) == sorted(sent), "ids answered do not match the ids sent")
 
 
-# ------------------------------------------- spec gaps and hardening (issues 10, 16)
+# ------------------------------------------- spec gaps and hardening
 
 @test
 def test_spec_gaps_codec_tiles_id_pong(d):
@@ -1162,7 +1107,7 @@ def test_refused_upgrade_is_closed_without_response(d):
 
 
 def test_sighup_saves_state():
-    """Issue 16 (7): SIGHUP saves the state (a set acknowledged just before is
+    """SIGHUP saves the state (a set acknowledged just before is
     kept) and the daemon keeps running; the configuration is not reloaded."""
     tmp = tempfile.mkdtemp(prefix="oceand-test-")
     state = os.path.join(tmp, "state.json")
@@ -1196,7 +1141,7 @@ TESTS.append(test_sighup_saves_state)
 
 
 def test_bad_state_files_do_not_stop_the_daemon():
-    """Issue 16 (4, 5, 6): a saved N over the memory cap and a sim_time out of
+    """A saved N over the memory cap and a sim_time out of
     range are warned about and replaced; a FIFO as the state file is refused
     at once (exit 2), not waited on."""
     tmp = tempfile.mkdtemp(prefix="oceand-test-")
@@ -1218,29 +1163,12 @@ def test_bad_state_files_do_not_stop_the_daemon():
         # the saved N=2048 is the one in force: the daemon must start at the default.
         with open(state, "w") as f:
             json.dump({"params": {"resolution": 2048}, "params_version": 5}, f)
-        port = free_port()
-        proc = subprocess.Popen([ARGS.oceand, "--port", str(port), "--state-file", state, "--max-memory-mb", "64",
-                                 "--wisdom-file", "none", "--plan-rigor", "0", "--web-root", tmp],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-        try:
-            deadline = time.time() + 20
-            while True:
-                if proc.poll() is not None:
-                    raise TestFailure("saved N=2048 over --max-memory-mb 64 stopped the daemon: exit %r, %s"
-                                      % (proc.returncode, proc.stderr.read()))
-                try:
-                    body = urllib.request.urlopen("http://127.0.0.1:%d/healthz" % port, timeout=1).read()
-                    break
-                except (urllib.error.URLError, ConnectionError, OSError):
-                    check(time.time() < deadline, "no /healthz")
-                    time.sleep(0.05)
-            proc.send_signal(signal.SIGTERM)
-            _, err = proc.communicate(timeout=10)
-            check(proc.returncode == 0 and "resolution 2048" in err, "exit %r, log %r" % (proc.returncode, err))
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+        with running(oceand_proc.Oceand, ARGS.oceand, "--state-file", state, "--max-memory-mb", "64",
+                     "--wisdom-file", "none", "--plan-rigor", "0", "--web-root", tmp,
+                     tmp=tmp, name="oceand-no-resolution", error=TestFailure, stop=False, remove=False) as d:
+            rc, _ = d.stop()
+            log = d.read_log()
+            check(rc == 0 and "resolution 2048" in log, "exit %r, log %r" % (rc, log))
         fifo = os.path.join(tmp, "fifo")
         os.mkfifo(fifo)
         for flag in ("--state-file", "--config"):
@@ -1257,7 +1185,7 @@ def test_bad_state_files_do_not_stop_the_daemon():
 TESTS.append(test_bad_state_files_do_not_stop_the_daemon)
 
 
-# ------------------------------------------- capacity (issue 15, issue 16 defect 2)
+# ------------------------------------------- capacity (docs/daemon.md, "Capacity")
 
 def metric_value(d, name):
     text = urllib.request.urlopen(d.http + "/metrics", timeout=5).read().decode()
@@ -1325,7 +1253,7 @@ TESTS.append(test_capacity_announced_matches_refusals)
 
 
 def test_encode_budget_busy_and_degraded():
-    """Issue 16 defect 2 / issue 15: a subscription that would push the encode
+    """A subscription that would push the encode
     work past the budget gets `busy` and changes nothing; demand that exceeds it
     anyway (a new client's default subscription) degrades only the most
     expensive group, its clients are told with `degraded`, frames carry the
@@ -1377,7 +1305,7 @@ TESTS.append(test_encode_budget_busy_and_degraded)
 
 def test_degraded_group_recovers_with_headroom():
     """A group degraded for a real reason comes back to full detail when the
-    headroom returns with no change of demand (the recovery rule, issue 15):
+    headroom returns with no change of demand (the recovery rule):
     one client's default subscription over --encode-budget at N, then N
     halved by `set` (same subscription, a quarter of the samples): it is told
     `degraded` inactive, /metrics shows no degraded group, frames are lod 0.
@@ -1406,7 +1334,7 @@ TESTS.append(test_degraded_group_recovers_with_headroom)
 
 
 def test_viewers_cannot_exceed_encode_budget():
-    """Issue 16 defect 2: viewers each asking for a different field x LOD x bound
+    """Viewers each asking for a different field x LOD x bound
     get `busy` once the distinct layers reach the budget; what they admitted
     adds up to no more than it; a layer someone already gets is always free."""
     n = BASE_N
@@ -1456,7 +1384,7 @@ TESTS.append(test_viewers_cannot_exceed_encode_budget)
 
 
 # ---------------------------------------------------------------- runner
-# ---------------------------------------------------------------- display names, foam (issue 13)
+# ---------------------------------------------------------------- display names, foam
 
 BAD_NAMES = ["<b>Ana</b>", "Ana & Bo", 'say "hi"', "it's", "x" * 33, "\u202eanA", "tab\there", " Ana", "Ana ",
              "zero\u200bwidth", "\ue000"]

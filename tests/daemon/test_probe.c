@@ -14,16 +14,7 @@
 #include "probe.h"
 #include "query_msg.h"
 
-static int failures;
-#define CHECK(c, ...)                                                                                                  \
-    do {                                                                                                               \
-        if (!(c)) {                                                                                                    \
-            fprintf(stderr, "FAIL %s:%d: ", __FILE__, __LINE__);                                                       \
-            fprintf(stderr, __VA_ARGS__);                                                                              \
-            fputc('\n', stderr);                                                                                       \
-            failures++;                                                                                                \
-        }                                                                                                              \
-    } while (0)
+#include "../common/check.h"
 
 #define NPTS 200
 #define DT (1.0 / 30.0)
@@ -173,9 +164,5 @@ int main(void)
     accuracy(0, &l0);
     accuracy(1, &l1);
     accuracy(2, &l2);
-    if (failures)
-        fprintf(stderr, "test_probe: %d failures\n", failures);
-    else
-        printf("test_probe: ok\n");
-    return failures ? 1 : 0;
+    return check_done();
 }

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Integration tests of point queries and probes (issue 14, PROTOCOL.md §7.4)
+"""Integration tests of point queries and probes (PROTOCOL.md §7.4, docs/query.md)
 against a real oceand, reusing test_daemon.py's harness.
 
     /usr/bin/python3 tests/daemon/test_query.py --oceand build/oceand \

@@ -4,20 +4,8 @@
  * within a second. Pure: times are given, not measured. */
 #include <stdio.h>
 
+#include "../common/check.h"
 #include "seq_guard.h"
-
-static int passed, failed;
-#define CHECK(cond, ...)                                                        \
-    do {                                                                        \
-        if (cond) {                                                             \
-            passed++;                                                           \
-        } else {                                                                \
-            failed++;                                                           \
-            printf("FAIL %s:%d: ", __FILE__, __LINE__);                         \
-            printf(__VA_ARGS__);                                                \
-            printf("\n");                                                       \
-        }                                                                       \
-    } while (0)
 
 #define RATE 30.0
 
@@ -87,6 +75,5 @@ int main(void)
     /* A guard that has seen nothing believes the first seq. */
     struct seq_guard fresh = { 0 };
     CHECK(seq_guard_check(&fresh, 7, 0, RATE) == SEQ_ACCEPT, "the first seq is believed");
-    printf("test_seq_guard: %d passed, %d failed\n", passed, failed);
-    return failed ? 1 : 0;
+    return check_done();
 }

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Temporal codec (codec 3) against a real daemon (PROTOCOL.md §5.9, issue 11).
+"""Temporal codec (codec 3) against a real daemon (PROTOCOL.md §5.9, docs/codec.md).
 
 Behaviour, not timing: every frame a temporal client receives decodes, in
 order, with one decoder (build/frame_check, C) and lies within the bound of
@@ -489,7 +489,7 @@ def test_temporal_sea_changes():
 
 @test
 def test_temporal_group_served_intra_at_full_detail():
-    """The plan's codec rung (issue 15): a temporal group whose temporal encode
+    """The plan's codec rung: a temporal group whose temporal encode
     does not fit, but whose intra encode does, is served intra at its own LOD
     and full rate, never coarser. Forced without timing by --temporal-budget
     (the temporal samples per tick; the default subscription, 3 n^2, over it

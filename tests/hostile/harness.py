@@ -8,18 +8,22 @@ Only 127.0.0.1 is ever used. Every loop is bounded by a count or a deadline.
 import fcntl
 import json
 import os
+import resource
 import select
 import signal
 import socket
 import struct
 import subprocess
+import sys
 import tempfile
 import time
-import urllib.error
 import urllib.request
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PY = "/usr/bin/python3"
+
+sys.path.insert(0, os.path.join(HERE, "..", "common"))
+import oceand_proc  # noqa: E402
 
 
 class CaseFailure(Exception):
@@ -31,68 +35,45 @@ def check(cond, msg):
         raise CaseFailure(msg)
 
 
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 # ---------------------------------------------------------------- daemon
 
-class Daemon:
+class Daemon(oceand_proc.Oceand):
     """One oceand with its own port, temp dir, state file and log."""
 
     def __init__(self, oceand, *extra, resolution=64, tick_rate=30, web=False, nofile=None, env=None,
                  log_pipe=False, fsize=None):
-        self.tmp = tempfile.mkdtemp(prefix="oceand-hostile-")
+        tmp = tempfile.mkdtemp(prefix="oceand-hostile-")
         if web:   # a real web root (static file mount) instead of the placeholder page
-            os.makedirs(os.path.join(self.tmp, "web"))
-            with open(os.path.join(self.tmp, "web", "index.html"), "w") as f:
+            os.makedirs(os.path.join(tmp, "web"))
+            with open(os.path.join(tmp, "web", "index.html"), "w") as f:
                 f.write("<!doctype html><title>hostile test</title>")
-        self.port = free_port()
-        self.log_path = os.path.join(self.tmp, "oceand.log")
         self.tick_rate = tick_rate
-        args = [oceand, "--bind", "127.0.0.1", "--port", str(self.port),
-                "--state-file", os.path.join(self.tmp, "state.json"),
-                "--web-root", os.path.join(self.tmp, "web"),
-                "--resolution", str(resolution), "--tick-rate", str(tick_rate),
-                "--log-level", "warn",
-                # the old fixed memory cap (the default now follows the machine, issue 15):
-                # cases that expect N = 2048 refused do not depend on this machine's memory
-                "--max-memory-mb", "256"] + [str(a) for a in extra]
-        self.log = open(self.log_path, "ab")
-        self.pipe_r = None
-        out = self.log
+        self.pipe_r = self.pipe_w = None
         if log_pipe:   # stderr is a 4 KiB pipe that the test drains only when it chooses (drain_log)
-            self.pipe_r, out = os.pipe()
-            fcntl.fcntl(out, 1031, 4096)            # F_SETPIPE_SZ: one page
+            self.pipe_r, self.pipe_w = os.pipe()
+            fcntl.fcntl(self.pipe_w, 1031, 4096)            # F_SETPIPE_SZ: one page
             os.set_blocking(self.pipe_r, False)
-        import resource
 
         def preexec():
             if nofile:   # a low descriptor limit (ulimit -n) for the daemon only
                 resource.setrlimit(resource.RLIMIT_NOFILE, (nofile, nofile))
             if fsize:    # a file size limit (ulimit -f, bytes): writes past it fail (or SIGXFSZ)
                 resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
-        self.proc = subprocess.Popen(args, stdout=out, stderr=out, preexec_fn=preexec if nofile or fsize else None,
-                                     env=dict(os.environ, **(env or {})))
-        if log_pipe:
-            os.close(out)
-        self.url = "ws://127.0.0.1:%d/" % self.port
-        self.http = "http://127.0.0.1:%d" % self.port
-        deadline = time.time() + 20
-        while True:
-            if self.proc.poll() is not None:
-                raise CaseFailure("oceand exited at start (%s): %s" % (self.proc.returncode, self.read_log()))
-            try:
-                urllib.request.urlopen(self.http + "/healthz", timeout=1).read()
-                break
-            except (urllib.error.URLError, ConnectionError, OSError):
-                check(time.time() < deadline, "oceand did not answer /healthz within 20 s")
-                time.sleep(0.05)
+        super().__init__(oceand, "--bind", "127.0.0.1",
+                         "--state-file", os.path.join(tmp, "state.json"),
+                         "--web-root", os.path.join(tmp, "web"),
+                         "--resolution", str(resolution), "--tick-rate", str(tick_rate),
+                         "--log-level", "warn",
+                         # the old fixed memory cap (the default now follows the machine's memory):
+                         # cases that expect N = 2048 refused do not depend on this machine's memory
+                         "--max-memory-mb", "256", *extra,
+                         tmp=tmp, own_tmp=True, env=env, out=self.pipe_w,
+                         preexec_fn=preexec if nofile or fsize else None, error=CaseFailure)
 
-    def alive(self):
-        return self.proc.poll() is None
+    def _spawned(self):
+        if self.pipe_w is not None:   # the daemon holds the write end now
+            os.close(self.pipe_w)
+            self.pipe_w = None
 
     def drain_log(self):
         """Pipe mode: move what the daemon wrote to its stderr pipe into the log file."""
@@ -104,19 +85,13 @@ class Daemon:
             if not data:
                 break
             self.log.write(data)
-        self.log.flush()
+        if not self.log.closed:
+            self.log.flush()
 
     def read_log(self, tail=3000):
-        self.drain_log()
-        with open(self.log_path, "rb") as f:
-            return f.read().decode(errors="replace")[-tail:]
-
-    def rss_kb(self):
-        with open("/proc/%d/status" % self.proc.pid) as f:
-            for line in f:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1])
-        return 0
+        if self.log is not None and not self.log.closed:
+            self.drain_log()
+        return super().read_log(tail)
 
     def sched(self):
         """(cpu_ms, runq_wait_ms) summed over the daemon's threads (/proc/PID/task/*/schedstat).
@@ -131,12 +106,6 @@ class Daemon:
             except (OSError, IndexError, ValueError):
                 pass
         return cpu / 1e6, wait / 1e6
-
-    def cpu_s(self):
-        """User + system CPU seconds the daemon has used (/proc/PID/stat, all threads)."""
-        with open("/proc/%d/stat" % self.proc.pid) as f:
-            a = f.read().rsplit(")", 1)[1].split()
-        return (int(a[11]) + int(a[12])) / os.sysconf("SC_CLK_TCK")
 
     def fds(self):
         return len(os.listdir("/proc/%d/fd" % self.proc.pid))
@@ -163,26 +132,22 @@ class Daemon:
 
     def stop(self, timeout=10):
         """SIGTERM and wait; returns the exit code (None if it had to be killed)."""
-        if self.proc.poll() is not None:
-            rc = self.proc.returncode
-        else:
-            self.proc.send_signal(signal.SIGTERM)
-            deadline = time.time() + timeout
-            while self.proc.poll() is None and time.time() < deadline:
-                self.drain_log()      # pipe mode: never let our own pipe hold the daemon up
-                time.sleep(0.05)
-            if self.proc.poll() is None:
-                self.proc.kill()
-                self.proc.wait()
-                rc = None
-            else:
-                rc = self.proc.returncode
-        self.drain_log()
-        if self.pipe_r is not None:
-            os.close(self.pipe_r)
-            self.pipe_r = None
-        self.log.close()
+        # pipe mode: never let our own pipe hold the daemon up
+        rc, _ = super().stop(signal.SIGTERM, timeout, while_waiting=self.drain_log)
+        self.kill()
         return rc
+
+    def kill(self):
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        if self.log is not None and not self.log.closed:
+            self.drain_log()
+        for fd in (self.pipe_r, self.pipe_w):
+            if fd is not None:
+                os.close(fd)
+        self.pipe_r = self.pipe_w = None
+        return super().kill()
 
 
 def wait_until(pred, timeout, step=0.05):

@@ -45,7 +45,7 @@ for d in sys.argv[3:]:
         if f.endswith(".exr"):
             info = json.loads(subprocess.run([exr_read, f, f + ".tmp.npy"], check=True, capture_output=True,
                                              text=True).stdout)
-            kind, frame = re.match(r"(disp|normal|foam)_(\d{4})\.exr$", base).groups()
+            kind, frame = re.match(r"(disp|normal|foam|vdisp)_(\d{4})\.exr$", base).groups()
             assert info["oceand_field"] == kind, (base, info)
             side = json.load(open(os.path.join(d, f"frame_{frame}.json")))
             assert str(side["seq"]) == info["oceand_seq"] and float(info["oceand_sim_time"]) == side["sim_time"], \

@@ -185,7 +185,7 @@ check_reference() {
   gen=$BUILD/gen-config-doc
   scripts/gen-config-doc.sh --check --daemon "$BUILD/oceand" "$gen" || fail "configuration reference out of date"
   # The check must be able to fail: change one default in a copy of the doc.
-  doc=README.md
+  doc=$(scripts/gen-config-doc.sh --doc-path)
   sed '/<!-- config-reference -->/,/<!-- \/config-reference -->/ s/| `wind_speed` \(.*\)| [0-9.]* |/| `wind_speed` \1| 99999 |/' "$doc" > "$tmp/doc.md"
   cmp -s "$doc" "$tmp/doc.md" && fail "could not plant a wrong default in a copy of $doc"
   scripts/gen-config-doc.sh --check --daemon "$BUILD/oceand" --doc "$tmp/doc.md" "$gen" >/dev/null 2>&1 && fail "the check accepted a wrong default"

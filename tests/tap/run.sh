@@ -114,8 +114,10 @@ ok "npy, raw, pgm, pgm8 sidecars, PGM comments and EXR attributes carry the fram
 
 section "EXR bake (Blender ocean modifier layout) round trip"
 # Both clients at once, lossless: the npy run starts first and is stopped
-# (SIGINT, exit 130) only after the bake is done, so on a slow, shared
-# machine too every bake frame's seq is in the npy run.
+# (SIGINT, exit 130) only after the bake is done. On a loaded machine both skip
+# ticks, each its own, and may share no seq: the sea is paused, so that a bake
+# frame can also be checked against an npy frame of the same sim_time.
+run 0 "pause for the round trip" "$TAP" "$URL" --set paused=true
 "$TAP" "$URL" --frames 600 --bound 0 --fields height,dx,dz,slope_x,slope_z,jacobian --out "$tmp/rt-npy" \
   >"$tmp/rt.out" 2>&1 &
 rt_pid=$!
@@ -127,16 +129,18 @@ rt_rc=0; wait $rt_pid || rt_rc=$?
 [ $rt_rc = 130 ] || [ $rt_rc = 0 ] || fail "npy run for the round trip failed ($rt_rc): $(cat "$tmp/rt.out")"
 ls "$tmp"/rt-exr/{disp,normal,foam}_0001.exr >/dev/null || fail "bake files missing: $(ls "$tmp/rt-exr")"
 $PY tests/tap/check_exr.py "$tmp/rt-npy" "$tmp/rt-exr" "$BUILD/exr-read" || fail "EXR bake differs from the streamed fields"
+run 0 "resume after the round trip" "$TAP" "$URL" --set paused=false
 ok "disp/normal/foam_NNNN.exr read back with OpenEXR equal the streamed fields at the same seq (half precision)"
 
 section "memory checks (valgrind)"
 if command -v valgrind >/dev/null; then
   VG="valgrind -q --error-exitcode=99 --leak-check=full --errors-for-leak-kinds=definite,indirect"
-  # One run through every code path that allocates: set, subscribe, frames, stats, files.
+  # One run through every code path that allocates: set, subscribe, frames, stats, files,
+  # the finer cascades and their sum (FFTW).
   run 0 "ocean-tap under valgrind" $VG "$TAP" "$URL" --set amplitude=1 --frames 2 --fields height,jacobian \
-    --lod 1 --bound 0.001 --out "$tmp/vg" --format raw --stats
+    --lod 1 --bound 0.001 --out "$tmp/vg" --format raw --stats --cascades all --sum 48 --sum-area 3,4,50
   run 0 "ocean-tap --format exr under valgrind" $VG "$TAP" "$URL" --frames 2 --lod 2 --out "$tmp/vg-exr" --format exr
-  ok "no memory errors or leaks in ocean-tap (set, frames, stats, raw output, EXR bake)"
+  ok "no memory errors or leaks in ocean-tap (set, frames, stats, raw output, EXR bake, cascades and their sum)"
 else
   echo "  skip: valgrind not installed"
 fi
@@ -197,10 +201,13 @@ run 0 "pause" "$TAP" "$URL" --set paused=true
 compare() {
   local lod=$1 bound=$2 a=$tmp/cmp-tap-$1-$2 b=$tmp/cmp-py-$1-$2
   # Python starts slower (numpy import): give it a head start for more common frames.
-  $PY "$EXAMPLE" "$URL" --frames 8 --fields height,dx,dz,jacobian --lod "$lod" --bound "$bound" --save "$b" >"$tmp/py.out" 2>&1 &
+  # --max-rate 10: numpy keeps up, so neither client misses a tick of the shared stream and
+  # resubscribes (that client's next tiles would be keyframes, not the other's predicted ones).
+  $PY "$EXAMPLE" "$URL" --frames 8 --fields height,dx,dz,jacobian --lod "$lod" --bound "$bound" --max-rate 10 \
+    --save "$b" >"$tmp/py.out" 2>&1 &
   local pp=$!
   sleep 0.3
-  "$TAP" "$URL" --frames 8 --fields height,dx,dz,jacobian --lod "$lod" --bound "$bound" --out "$a" >"$tmp/tap.out" 2>&1
+  "$TAP" "$URL" --frames 8 --fields height,dx,dz,jacobian --lod "$lod" --bound "$bound" --max-rate 10 --out "$a" >"$tmp/tap.out" 2>&1
   local trc=$?
   wait $pp; local prc=$?
   [ $trc -eq 0 ] || fail "ocean-tap (lod $lod, bound $bound) exited $trc: $(cat "$tmp/tap.out")"
@@ -256,10 +263,34 @@ err = np.abs(x - y).max()
 assert err <= float(sys.argv[3]) * (1 + 1e-6) + np.abs(x).max() * 2**-23, err
 print(f"  max |lossy - lossless| = {err:.6f} <= 0.005")
 EOF
+# The finer cascades: per-cascade files, and their sum against the exact surface (query).
+# This daemon runs N = 128 and the default 3 cascades; the sea is still paused.
+run 0 "cascades + sum" "$TAP" "$URL" --frames 1 --bound 0 --cascades all --sum $N --fields height,dx,dz --out "$tmp/sum"
+for f in height dx dz; do
+  ls "$tmp"/sum/$f-c1-*.npy "$tmp"/sum/$f-c2-*.npy "$tmp"/sum/$f-sum-*.npy >/dev/null || fail "no $f cascade/sum files: $(ls "$tmp/sum")"
+done
+[ "$(json_get "$(ls "$tmp"/sum/height-c1-*.json)" 'j["cascade"]')" = 1 ] || fail "cascade 1's sidecar does not say cascade 1"
+$PY tests/tap/check_sum.py "$URL" "$tmp/sum" 0.001 || fail "the summed grid is off query at its nodes"
+run 0 "sum anywhere" "$TAP" "$URL" --frames 1 --bound 0 --cascades all --sum 150 --sum-area -37.3,12.1,100 \
+  --fields height,dx,dz --out "$tmp/sum-area"
+$PY tests/tap/check_sum.py "$URL" "$tmp/sum-area" 0.005 || fail "the summed grid is off query between nodes"
+run 0 "sum bilinear" "$TAP" "$URL" --frames 1 --bound 0 --cascades all --sum 150 --sum-area -37.3,12.1,100 \
+  --fields height,dx,dz --interp bilinear --out "$tmp/sum-bil"
+$PY tests/tap/check_sum.py "$URL" "$tmp/sum-bil" 1 0.002 || fail "bilinear is not measurably off: the check is blind"
+run 1 "--sum without --cascades" "$TAP" "$URL" --frames 1 --sum 64
+ok "--cascades all: c1/c2 files; --sum on cascade 0's nodes and on another grid within 1 and 5 mm of query"
+# ocean_stats.py --save writes ocean-tap's sidecar beside each .npy
+f=$(ls "$tmp"/lossy/height-*.npy | head -n 1)
+[ "$(json_get "${f%.npy}.json" 'j["seq"]')" = "$((10#$(basename "$f" .npy | cut -d- -f2)))" ] \
+  || fail "ocean_stats.py --save: no sidecar with the seq of $f"
+run 0 "ocean_stats.py --cascades" $PY "$EXAMPLE" "$URL" --frames 1 --fields height --lod 1 --bound 0.001 --cascades
+grep -Eq 'sum of 3 cascades: height std [0-9.]+ \(cascade 0 off it by [0-9.]+ mm rms\)' "$tmp/out" \
+  || fail "ocean_stats.py --cascades prints no summed sea: $(cat "$tmp/out")"
+ok "ocean_stats.py --save writes the sidecar; --cascades sums the finer cascades"
 run 0 "resume" "$TAP" "$URL" --set paused=false
 ok "lossless and lossy (LOD 0/1/2) frames identical in both decoders; bound honoured"
 
-section "--query and --probe (issue 14)"
+section "--query and --probe"
 run 1 "bad --query points" "$TAP" "$URL" --query "1;2"
 run 1 "--query with frames" "$TAP" "$URL" --query "1,2" --frames 1
 run 0 "query" "$TAP" "$URL" --query "1.5,-2;1e6,-3e6"
@@ -284,7 +315,9 @@ assert all(b > a for a, b in zip(seqs, seqs[1:])), seqs
 assert all(l["type"] == "probe_data" and len(l["points"]) == 2 and len(l["points"][0]) == 8 for l in lines)
 EOF
 run 0 "probe csv" "$TAP" "$URL" --probe "1.5,-2;40,7" --ticks 3 --csv
-[ "$(wc -l <"$tmp/out")" -eq 6 ] || fail "--csv: expected 3 ticks x 2 points rows: $(cat "$tmp/out")"
+[ "$(head -n 1 "$tmp/out")" = "seq,sim_time,params_version,point,x,z,height,dx,dz,nx,ny,nz,vertical_velocity,vertical_acceleration" ] \
+  || fail "--csv: no header row: $(head -n 1 "$tmp/out")"
+[ "$(wc -l <"$tmp/out")" -eq 7 ] || fail "--csv: expected a header and 3 ticks x 2 points rows: $(cat "$tmp/out")"
 [ "$(awk -F, '{print NF}' "$tmp/out" | sort -u)" = 14 ] || fail "--csv rows do not have 14 columns"
 run 4 "probe over the limit" "$TAP" "$URL" --probe "$(for i in $(seq 1 17); do printf '%d,0;' $i; done | sed 's/;$//')"
 grep -q 'too_many_points' "$tmp/err" || fail "no too_many_points in: $(cat "$tmp/err")"
@@ -298,9 +331,36 @@ j = json.loads(open(sys.argv[1]).read().strip().splitlines()[-1])
 assert j["points"] == 9 and j["samples"] >= 60 and j["frames"] >= 5, j
 assert 0.5 < j["ratio"] < 2 and j["hs_sea_m"] > 0, j
 EOF
+run 0 "ship --help" $PY proto/examples/ship.py --help
+grep -q 'probes are moved once a second' "$tmp/out" || fail "ship.py --help is cut short: $(cat "$tmp/out")"
 run 0 "ship" timeout 30 $PY proto/examples/ship.py "$URL" --ticks 6 --speed 5 --heading 45
 [ "$(grep -c '^ *[0-9]' "$tmp/out")" -eq 6 ] || fail "ship.py: expected 6 motion lines: $(cat "$tmp/out")"
 ok "buoy.py compares its Hs with the sea's; ship.py prints heave, pitch and roll per tick"
+
+section "--bake: exact-time frames through the render request (draft; a stand-in server)"
+run 1 "--bake without --fps" "$TAP" "$URL" --bake --start 0 --frames 2 --out "$tmp/bk"
+run 4 "--bake against oceand" "$TAP" "$URL" --bake --fps 24 --start 1 --frames 2 --out "$tmp/bk"
+grep -q 'no render request' "$tmp/err" || fail "--bake against a daemon without render: $(cat "$tmp/err")"
+fport=$(free_port)
+$PY tests/tap/fake_render.py "$fport" "$tmp/render.json" &
+fake_pid=$!
+for _ in $(seq 50); do (exec 3<>/dev/tcp/127.0.0.1/$fport) 2>/dev/null && break; sleep 0.1; done
+run 0 "--bake" "$TAP" "ws://127.0.0.1:$fport" --bake --fps 24 --start 100.5 --frames 5 --bound 0 \
+  --cascades all --format exr --out "$tmp/bake-exact"
+wait $fake_pid || fail "the stand-in server failed"
+$PY - "$tmp/render.json" "$tmp/bake-exact" <<'EOF2' || fail "--bake output"
+import json, os, sys
+req, d = json.load(open(sys.argv[1])), sys.argv[2]
+assert req["type"] == "render" and (req["start"], req["fps"], req["frames"]) == (100.5, 24, 5), req
+assert len(req["cascades"]) == 2 and req["bound"] == 0 and "temporal" not in req, req
+for k in range(5):
+    m = json.load(open(os.path.join(d, f"frame_{k + 1:04d}.json")))
+    assert m["seq"] == k and abs(m["sim_time"] - (100.5 + k / 24)) < 1e-9 and m["cascades"] == 3, m
+    assert os.path.exists(os.path.join(d, f"vdisp_{k + 1:04d}.exr"))
+assert not os.path.exists(os.path.join(d, "frame_0006.json")), "the live frame was written"
+print("  5 frames at 100.5 + k/24 s, numbered 1..5; the live frame between them left out")
+EOF2
+ok "--bake sends render (start, fps, frames, fields, cascades), writes every rendered frame at its exact time"
 
 section "control token, timeouts and a server that goes away"
 silent=$(free_port)

@@ -79,7 +79,7 @@ from types import SimpleNamespace as NS  # noqa: E402
 
 def synth(seq, lod, value, n=64, ts=32):
     side = ts >> lod
-    return NS(seq=seq, n=n, tile_size=ts, tiles=[NS(field="height", lod=lod, x=x, z=z,
+    return NS(seq=seq, n=n, tile_size=ts, tiles=[NS(field="height", lod=lod, cascade=0, x=x, z=z,
                                                    samples=np.full((side, side), value, np.float32))
                                                 for z in range(n // ts) for x in range(n // ts)])
 

@@ -1,0 +1,19 @@
+"""oceand - Python client of the oceand ocean daemon (protocol v1, proto/PROTOCOL.md).
+
+    from oceand import Client
+    with Client("ws://127.0.0.1:8080") as sea:
+        sea.subscribe(fields=["height", "dx", "dz"], cascades="all")
+        s = sea.surface()                    # one frame of every cascade
+        h = s.grid("height", 256)            # the summed sea on a grid of your choosing
+        print(sea.query([[10, 20]])["points"][0]["height"])
+
+Modules: frames (the binary frame decoder), surface (cascades summed and
+interpolated), client (AsyncClient, Client).
+"""
+from .frames import FIELDS, SUBPROTOCOL, VERSION, Assembler, DecoderState, Frame, ProtocolError, Tile, decode_frame
+from .surface import Surface
+from .client import AsyncClient, Client, ServerError
+
+__version__ = "0.1.0"
+__all__ = ["FIELDS", "SUBPROTOCOL", "VERSION", "Assembler", "DecoderState", "Frame", "ProtocolError", "Tile",
+           "decode_frame", "Surface", "AsyncClient", "Client", "ServerError"]

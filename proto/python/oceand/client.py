@@ -1,0 +1,286 @@
+"""oceand.client - a WebSocket client of oceand, async and sync.
+
+    async with await AsyncClient.connect("ws://127.0.0.1:8080") as sea:
+        await sea.subscribe(fields=["height", "dx", "dz"], bound=0, cascades="all")
+        surface = await sea.surface()            # oceand.surface.Surface: every cascade of one frame
+        h = surface.grid("height", 256)          # summed height on a 256 x 256 grid
+        answer = await sea.query([[10, 20]])     # exact values (PROTOCOL.md §7.4)
+
+    with Client("ws://127.0.0.1:8080") as sea:   # the same calls, blocking
+        sea.subscribe(cascades="all"); s = sea.surface(); sea.query([[0, 0]])
+
+One reader task takes every message off the socket: replies go to the request
+that waits for them (by id), frames are decoded in order (predicted tiles need
+every frame, §5.8) and the latest complete one is kept, probe_data is queued.
+Uses Debian's python3-websockets (10.x) and python3-numpy only.
+"""
+import asyncio
+import itertools
+import json
+import threading
+
+import websockets
+
+from . import frames as fr
+from .surface import Surface
+
+
+class ServerError(Exception):
+    """The server answered a request with an `error` (§7.2): .code, .message, .reply."""
+
+    def __init__(self, reply):
+        self.reply, self.code, self.message = reply, reply.get("code"), reply.get("message", "")
+        super().__init__(f"{self.code}: {self.message}")
+
+
+def _cascade_count(params):
+    return int(params.get("cascades", 1))
+
+
+class AsyncClient:
+    """One connection. Create with `await AsyncClient.connect(url)`."""
+
+    def __init__(self, ws, hello, timeout):
+        self.ws, self.hello, self.timeout = ws, hello, timeout
+        self.params = dict(hello.get("params", {}))
+        self.params_version = hello.get("params_version")
+        self.cascade_patch_sizes = list(hello.get("cascade_patch_sizes") or [self.params.get("patch_size")])
+        self.subscription = hello.get("subscription", {})
+        self._ids = itertools.count(1)
+        self._waiting = {}                    # id -> Future of the reply
+        self._state = fr.DecoderState()
+        self._assemblers = {}                 # cascade -> Assembler
+        self._surface, self._surface_event = None, asyncio.Event()
+        self._probe_queue = asyncio.Queue(maxsize=256)
+        self._frame_error = None
+        self._resub = None                    # the last subscribe, sent again to resync (§5.9)
+        self._resync_t = -1.0
+        self._temporal, self._latest = False, None
+        self._reader = asyncio.get_running_loop().create_task(self._read())
+
+    @classmethod
+    async def connect(cls, url, timeout=10.0):
+        ws = await websockets.connect(url, subprotocols=[fr.SUBPROTOCOL], max_size=None, compression=None,
+                                      open_timeout=timeout, close_timeout=1)
+        hello = json.loads(await asyncio.wait_for(ws.recv(), timeout))
+        if hello.get("type") != "hello" or hello.get("protocol") != fr.VERSION:
+            await ws.close(1002)
+            raise fr.ProtocolError("version", f"unexpected first message: {str(hello)[:200]}")
+        return cls(ws, hello, timeout)
+
+    async def __aenter__(self):
+        return self
+
+    async def __aexit__(self, *exc):
+        await self.close()
+
+    async def close(self):
+        self._reader.cancel()
+        try:
+            await self._reader
+        except (asyncio.CancelledError, Exception):
+            pass
+        await self.ws.close()
+
+    # ---- the reader --------------------------------------------------------
+
+    async def _read(self):
+        try:
+            async for msg in self.ws:
+                if isinstance(msg, bytes):
+                    self._on_frame(msg)
+                else:
+                    self._on_text(json.loads(msg))
+        except Exception as e:   # the connection ended: every waiting request learns it
+            err = e
+        else:
+            err = ConnectionError("the server closed the connection")
+        for f in self._waiting.values():
+            if not f.done():
+                f.set_exception(err)
+        self._frame_error = err
+        self._surface_event.set()
+
+    def _on_text(self, m):
+        t = m.get("type")
+        if t == "params":
+            self.params.update(m.get("params", {}))
+            self.params_version = m.get("params_version", self.params_version)
+            if m.get("cascade_patch_sizes"):
+                self.cascade_patch_sizes = list(m["cascade_patch_sizes"])
+        elif t == "probe_data":
+            if self._probe_queue.full():      # a reader that does not keep up loses the oldest
+                self._probe_queue.get_nowait()
+            self._probe_queue.put_nowait(m)
+        f = self._waiting.pop(m.get("id"), None) if "id" in m else None
+        if f is not None and not f.done():
+            if t == "error":
+                f.set_exception(ServerError(m))
+            else:
+                f.set_result(m)
+
+    def _on_frame(self, data):
+        if not self._temporal:
+            # Intra frames decode alone: keep the latest and decode it when asked, so
+            # the reader never falls behind the replies (numpy decodes ~10 frames/s of
+            # 3 fields x 3 cascades, the server sends 30).
+            self._latest = data
+            self._surface_event.set()
+            return
+        self._decode(data)
+
+    def _decode(self, data):
+        try:
+            frame = fr.decode_frame(data, self._state if self._temporal else None)
+        except fr.ProtocolError as e:
+            if e.code != "reference":
+                self._frame_error = e
+                self._surface_event.set()
+                return
+            # Predicted tiles whose references we lack: subscribing again brings keyframes (§5.9).
+            now = asyncio.get_running_loop().time()
+            if self._resub is not None and now - self._resync_t > 1.0:
+                self._resync_t = now
+                asyncio.ensure_future(self.ws.send(json.dumps(self._resub)))
+            return
+        if not self._assemblers:
+            return
+        complete = True
+        for a in self._assemblers.values():
+            a.add(frame)
+            complete = complete and a.complete()
+        if complete:
+            sizes = self.cascade_patch_sizes
+            grids = {c: {k: v.copy() for k, v in a.fields.items()}
+                     for c, a in self._assemblers.items() if c < len(sizes)}
+            self._surface = Surface(frame.sim_time, frame.seq, frame.params_version, sizes, grids)
+            self._surface_event.set()
+
+    # ---- requests ----------------------------------------------------------
+
+    async def request(self, msg):
+        """Send a JSON request with a fresh id and wait for its reply (raises ServerError)."""
+        msg = dict(msg, id=next(self._ids))
+        fut = asyncio.get_running_loop().create_future()
+        self._waiting[msg["id"]] = fut
+        await self.ws.send(json.dumps(msg))
+        try:
+            return await asyncio.wait_for(fut, self.timeout)
+        finally:
+            self._waiting.pop(msg["id"], None)
+
+    async def subscribe(self, fields=("height", "dx", "dz"), lod=0, bound=None, cascades="all",
+                        max_rate=None, temporal=False, fine_lod=1, fine_bound=0.001):
+        """Subscribe to `fields` of cascade 0 at `lod` and `bound` and, with cascades="all",
+        the same fields of every finer cascade (3 entries: a 4th cascade is sent when
+        it exists) at `fine_lod`, `fine_bound` (LOD 1 of a finer cascade loses nothing,
+        §4.1); cascades=None: cascade 0 only; a list: the `cascades` member as is.
+        temporal=True asks for predicted frames (codec 3, fewer bytes), which must all
+        be decoded in order: only for a reader as fast as the stream."""
+        msg = {"type": "subscribe", "fields": list(fields), "lod": lod, "tiles": "all", "temporal": temporal}
+        if bound is not None:
+            msg["bound"] = bound
+        if max_rate is not None:
+            msg["max_rate"] = max_rate
+        if cascades == "all":
+            fb = fine_bound if bound != 0 else 0
+            cascades = [{"fields": list(fields), "lod": fine_lod, "bound": fb}] * 3
+        msg["cascades"] = list(cascades or [])
+        reply = await self.request(msg)
+        self.subscription = reply.get("subscription", {})
+        self._resub = msg
+        self._state.reset()
+        n = min(_cascade_count(self.params), 1 + len(msg["cascades"]))
+        self._assemblers = {0: fr.Assembler(fields, lod, 0)}
+        for c, sub in enumerate(msg["cascades"][:n - 1], start=1):
+            self._assemblers[c] = fr.Assembler(sub.get("fields", fields), sub.get("lod", lod), c)
+        self._temporal, self._latest = temporal, None
+        self._surface = None
+        self._surface_event.clear()
+        return self.subscription
+
+    async def surface(self, newer_than=None):
+        """The next complete frame of every subscribed cascade, as a Surface
+        (newer than the Surface or seq given, else the next one to arrive)."""
+        seq = getattr(newer_than, "seq", newer_than)
+        if seq is None and self._surface is not None:
+            seq = self._surface.seq
+        while True:
+            if self._frame_error is not None:
+                raise self._frame_error
+            if self._latest is not None:
+                data, self._latest = self._latest, None
+                self._decode(data)
+            s = self._surface
+            if s is not None and (seq is None or s.seq > seq):
+                return s
+            self._surface_event.clear()
+            await asyncio.wait_for(self._surface_event.wait(), self.timeout)
+
+    async def query(self, points, time=None):
+        """Exact values at up to 256 world points (§7.4): the query_result message."""
+        msg = {"type": "query", "points": [[float(x), float(z)] for x, z in points]}
+        if time is not None:
+            msg["time"] = float(time)
+        return await self.request(msg)
+
+    async def probe(self, points):
+        """Probe these points every tick (§7.4); [] ends it. Read with probe_data()."""
+        while not self._probe_queue.empty():
+            self._probe_queue.get_nowait()
+        return await self.request({"type": "probe", "points": [[float(x), float(z)] for x, z in points]})
+
+    async def probe_data(self):
+        """The next probe_data message (oldest first)."""
+        return await asyncio.wait_for(self._probe_queue.get(), self.timeout)
+
+    async def set(self, token=None, **params):
+        """Change sea parameters (controller role): the `params` reply."""
+        msg = {"type": "set", "params": params}
+        if token:
+            msg["token"] = token
+        return await self.request(msg)
+
+
+class Client:
+    """The AsyncClient's calls, blocking: its event loop runs in a thread of its own
+    (Debian 12's websockets 10 has no synchronous client)."""
+
+    def __init__(self, url, timeout=10.0):
+        self._loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self._loop.run_forever, name="oceand-client", daemon=True)
+        self._thread.start()
+        self.timeout = timeout
+        try:
+            self._client = self._call(AsyncClient.connect(url, timeout))
+        except BaseException:
+            self._stop()
+            raise
+
+    def _call(self, coro):
+        return asyncio.run_coroutine_threadsafe(coro, self._loop).result(self.timeout + 5)
+
+    def _stop(self):
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(5)
+        self._loop.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self):
+        if self._loop.is_closed():
+            return
+        try:
+            self._call(self._client.close())
+        finally:
+            self._stop()
+
+    def __getattr__(self, name):
+        attr = getattr(self._client, name)
+        if asyncio.iscoroutinefunction(attr):
+            return lambda *a, **k: self._call(attr(*a, **k))
+        return attr
