@@ -20,6 +20,8 @@ import traceback
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "daemon"))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
+import oceand_proc  # noqa: E402
 import test_cluster_roles as cr  # noqa: E402
 import test_daemon as td  # noqa: E402
 from test_cluster_roles import Cluster, Node, wait_for, expect_status  # noqa: E402
@@ -77,36 +79,13 @@ async def set_until_acked(ws, i, wind, after):
     return m
 
 
-class JsNats(cr.Nats):
-    """nats-server with JetStream, its file store in a folder of the test's: kept
-    across stop()/start(), as on a real server."""
-
-    def __init__(self, tmp):
-        self.store = os.path.join(tmp, "js")
-        super().__init__(tmp)
-
-    def start(self):
-        self.proc = None
-        args = [cr.NATS_BIN, "-a", "127.0.0.1", "-p", str(self.port), "-js", "-sd", self.store]
-        self.proc = cr.subprocess.Popen(args, stdout=self.log, stderr=self.log, preexec_fn=cr._die_with_parent)
-        deadline = time.time() + 10
-        while True:
-            try:
-                cr.socket.create_connection(("127.0.0.1", self.port), timeout=0.5).close()
-                return
-            except OSError:
-                check(self.proc.poll() is None, "nats-server exited at start")
-                check(time.time() < deadline, "nats-server did not listen")
-                time.sleep(0.05)
-
-
 class JsCluster(Cluster):
     """JetStream, sims sims (the first active, the others standbys) and edges edges."""
 
     def __init__(self, sims=2, edges=1, sim_extra=()):
         self.tmp = tempfile.mkdtemp(prefix="oceand-durable-")
         self.nodes = []
-        self.nats = JsNats(self.tmp)
+        self.nats = oceand_proc.Nats(self.tmp, store=True, error=TestFailure)  # JetStream, its store in tmp
         try:
             self.sims = []
             for i in range(sims):
@@ -495,7 +474,7 @@ def main():
     ap.add_argument("-k", default="")
     ARGS = ap.parse_args()
     td.ARGS = cr.ARGS = ARGS
-    if not os.path.exists(cr.NATS_BIN):
+    if not os.path.exists(oceand_proc.NATS_BIN):
         print("nats-server not found (scripts/deps.sh installs it)")
         return 1
     passed = failed = 0
