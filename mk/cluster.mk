@@ -8,6 +8,9 @@
 #   make test-cluster-roles      oceand --role sim|edge end to end (nats-server, a sim, edges,
 #                                WebSocket clients; kill/restart cycles), and the same against
 #                                the ASan+UBSan daemon (fewer cycles)
+#   make test-cluster-durable    no acknowledged set lost by a kill -9 of a sim, NATS, an edge or
+#                                --role all; versions never back; the standby sim takes over
+#                                (nats-server with JetStream, its store in the test's folder)
 # oceand links the module for --role sim|edge (mk/daemon.mk); only the role
 # glue (server/roles/) sees server/cluster/.
 
@@ -19,7 +22,7 @@ PROTO_LIB       ?= $(BUILD)/liboc_proto.a
 PROTO_SAN_LIB   ?= $(BUILD)/san/liboc_proto.a
 
 BINS  += $(CLUSTER_LIB) $(BUILD)/test_cluster_msg $(BUILD)/test_cluster_nats
-TESTS += test-cluster test-cluster-valgrind test-cluster-roles
+TESTS += test-cluster test-cluster-valgrind test-cluster-roles test-cluster-durable
 
 # The module sees only its own folder and the protocol's header: no sim
 # internals, no daemon headers, no libwebsockets.
@@ -58,13 +61,26 @@ test-cluster-roles: $(BUILD)/oceand $(BUILD)/san/oceand
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/cluster/test_cluster_roles.py --oceand $(BUILD)/san/oceand --cycles 2 --recovery-s 6
 
+CLUSTER_DURABLE_CYCLES ?= 3
+.PHONY: test-cluster-durable
+test-cluster-durable: $(BUILD)/oceand $(BUILD)/san/oceand
+	/usr/bin/python3 tests/cluster/test_cluster_durable.py --oceand $(BUILD)/oceand --cycles $(CLUSTER_DURABLE_CYCLES)
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  /usr/bin/python3 tests/cluster/test_cluster_durable.py --oceand $(BUILD)/san/oceand --cycles 2
+
 # 1 sim + 1, 2, 3 edges + nats-server on this machine vs --role all (docs/scaling.md).
 BENCHES += bench-cluster
 .PHONY: bench-cluster
 bench-cluster: $(BUILD)/oceand $(BUILD)/load_client
 	/usr/bin/python3 bench/cluster.py --oceand $(BUILD)/oceand --load-client $(BUILD)/load_client $(BENCH_CLUSTER_ARGS)
 
-# nats-server (installed by make deps if missing) + one sim + two edges on loopback.
+# Standby take-over gap (median of 5 kill -9 of the active sim) and acknowledged sets lost.
+BENCHES += bench-cluster-failover
+.PHONY: bench-cluster-failover
+bench-cluster-failover: $(BUILD)/oceand
+	/usr/bin/python3 bench/cluster_failover.py --oceand $(BUILD)/oceand $(BENCH_FAILOVER_ARGS)
+
+# nats-server (installed by make deps if missing) + two sims + two edges on loopback.
 .PHONY: run-cluster
 run-cluster: deps
 	@$(MAKE) --no-print-directory build-all

@@ -1,6 +1,6 @@
 /* main.c — oceand: read the configuration, start the simulation (tick and
- * builder threads), serve HTTP + WebSocket on this thread until SIGINT/SIGTERM,
- * saving the parameters as they change. Threads: docs/threads.md. */
+ * builder threads), serve HTTP + WebSocket on this thread until SIGINT/SIGTERM;
+ * the builder saves the parameters before a change is applied. Threads: docs/threads.md. */
 #include <errno.h>
 #include <signal.h>
 #include <stdio.h>
@@ -168,12 +168,20 @@ int main(int argc, char **argv)
         .wake_user = net,
         .queries = queries,
     };
+    /* Durability: the builder saves each batch of sets before it is applied
+     * and acknowledged (sim_config.persist); role_sim_open may add the
+     * JetStream copy on top. */
+    struct state_saver saver;
+    state_saver_init(&saver, dc.state_file, &params, res.params_version);
+    sc.persist = state_saver_persist;
+    sc.persist_user = &saver;
     /* --role sim: the NATS link feeds demand in and takes frames out. */
     struct role_sim *cluster = NULL;
     if (strcmp(dc.role, "sim") == 0 && !(cluster = role_sim_open(&dc, net, &sc, err, sizeof err))) {
         LOGE("%s", err);
         query_service_free(queries);
         net_destroy(net);
+        state_saver_destroy(&saver);
         return 1;
     }
     struct sim *sim = sim_start(&params, &sc, err, sizeof err);
@@ -182,38 +190,36 @@ int main(int argc, char **argv)
         query_service_free(queries);
         role_sim_close(cluster);
         net_destroy(net);
+        state_saver_destroy(&saver);
         return 1;
     }
     net_attach_sim(net, sim);
     net_attach_queries(net, queries);
-    /* State saving listens to the parameter changes the sim applies. */
-    struct state_saver saver;
-    state_saver_init(&saver, dc.state_file, &params, res.params_version);
-    net_on_params(net, state_saver_on_params, &saver);
+    if (role_sim_attach(cluster, sim, &params, res.params_version) != 0)
+        LOGW("cluster: no lease thread: this simulation stays a standby");
 
     LOGI("oceand listening on %s://%s:%d/ (N=%d, %g Hz, web root %s)", dc.tls_cert[0] ? "https" : "http", dc.bind, net_port(net),
          params.resolution, dc.tick_rate, dc.web_root);
-    /* lws_service returns after each wake-up (every tick): a save that the
-     * once-a-second limit held back is written within a tick of its time. */
     while (!interrupted) {
         if (net_service(net) < 0)
             break;
-        if (hangup) {
+        if (hangup) { /* the builder saves: no fsync on this thread */
             hangup = 0;
             LOGI("SIGHUP/SIGUSR1/SIGUSR2: saving the state; the configuration is not reloaded (restart to apply it)");
-            state_saver_flush(&saver, sim_time_now(sim), true);
+            sim_save_now(sim);
         }
-        state_saver_flush(&saver, sim_time_now(sim), false);
     }
 
     LOGI("stopping");
-    state_saver_flush(&saver, sim_time_now(sim), true);
+    role_sim_detach(cluster); /* releases the lease: a standby takes over at once */
+    state_saver_final(&saver, sim_time_now(sim));
     sim_stop(sim);
     net_attach_queries(net, NULL);
     query_service_free(queries); /* after the tick: it no longer hands over grids */
     net_attach_sim(net, NULL);
     role_sim_close(cluster); /* after the tick (it publishes), before net (it holds requests) */
     net_destroy(net);
+    state_saver_destroy(&saver);
     LOGI("bye");
     return 0;
 }

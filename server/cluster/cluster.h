@@ -48,7 +48,8 @@
  *   PREFIX.frame.<c>.<field>.<lod>.<bound>  sim -> edges: layer parts (OCNL) of cascade c,
  *                                       e.g. oceand.frame.0.height.0.2
  *   PREFIX.params                       sim -> edges: params events (OCNE kind PARAMS)
- *   PREFIX.status                       sim -> edges: sim heartbeat (OCNE kind STATUS)
+ *   PREFIX.status                       sim -> edges: sim heartbeat (OCNE kind STATUS; by = the sim
+ *                                       process's instance id, cl_link_instance)
  *   PREFIX.ctl                          edge -> sim request/reply: set, pause, resume (OCNE CTL -> REPLY)
  *   PREFIX.hello                        edge -> sim request/reply: current params + schema (OCNE HELLO -> REPLY)
  *   PREFIX.demand                       edges -> sim: demand heartbeats with expiry (OCNE DEMAND)
@@ -116,6 +117,8 @@ enum cl_error {
     CL_E_TIMEOUT = -10,      /* no reply in time */
     CL_E_NO_RESPONDERS = -11,/* nobody serves the subject: the sim is not running */
     CL_E_NATS = -12,         /* the NATS library refused (message in the log / err text) */
+    CL_E_LOST = -13,         /* the sim's record was written by another sim: it holds the lease now */
+    CL_E_NO_JETSTREAM = -14, /* the NATS server has no JetStream (or no bucket could be made) */
 };
 const char *cl_strerror(int err);
 
@@ -323,6 +326,8 @@ enum cl_event {
     CL_EV_CLOSED,        /* gave up or closed: final */
     CL_EV_SIM_UP,        /* edge: sim heartbeats arrive (again) */
     CL_EV_SIM_DOWN,      /* edge: none for sim_timeout_s */
+    CL_EV_SIM_NEW,       /* edge: heartbeats from another sim process than before (a restart shorter
+                            than sim_timeout_s, or a standby that took over): ask hello again */
 };
 const char *cl_event_name(enum cl_event ev);
 
@@ -379,6 +384,7 @@ struct cl_config {
     double query_timeout_s;     /* edge: for QUERY requests (the sim's workers may queue them); 0 = 5 */
     double reconnect_min_s, reconnect_max_s; /* backoff; 0 = 0.1, 2 */
     size_t outbox_max_bytes;    /* 0 = 64 MiB */
+    bool standby;               /* sim: start silent (no STATUS) until cl_sim_set_standby(l, false) */
     void (*wake)(void *user);   /* called from NATS/pump threads when there is something to dispatch */
     void *wake_user;
     struct cl_handlers h;
@@ -413,6 +419,9 @@ int cl_link_dispatch(struct cl_link *l);
 bool cl_link_connected(struct cl_link *l);
 bool cl_link_sim_up(struct cl_link *l);   /* edge */
 const char *cl_link_name(const struct cl_link *l);
+/* Sim: this process's random id (16 hex digits), sent as `by` of every
+ * STATUS heartbeat: edges tell a new sim process from the old one by it. */
+const char *cl_link_instance(const struct cl_link *l);
 void cl_link_stats(struct cl_link *l, struct cl_stats *out);
 /* After every link is closed, at exit: lets the NATS library free its globals. */
 void cl_library_shutdown(void);
@@ -424,6 +433,10 @@ int cl_sim_publish_layer(struct cl_link *l, const struct cl_layer_info *info, co
                          const uint32_t *tile_off, void (*release)(void *ctx), void *ctx);
 int cl_sim_publish_params(struct cl_link *l, const char *origin, const char *by, const char *text, size_t len);
 void cl_sim_set_status(struct cl_link *l, const char *text, size_t len);  /* body of the next heartbeats */
+/* A standby sim sends no STATUS (edges must not take it for the active one)
+ * and is not subscribed to the request subjects (ctl, hello, query, probe):
+ * with no sim acting, requests get "no responders" at once. */
+void cl_sim_set_standby(struct cl_link *l, bool standby);
 int cl_sim_demand(struct cl_link *l, uint8_t out[CL_KEY_BYTES]);          /* tick thread; returns live edges */
 /* text NULL: drop without answering. */
 void cl_request_reply(struct cl_link *l, struct cl_request *req, const char *text, size_t len);
@@ -432,6 +445,32 @@ void cl_request_reply(struct cl_link *l, struct cl_request *req, const char *tex
  * while the outbox holds more than outbox_max_bytes: probes are per tick,
  * the next one replaces it. */
 int cl_sim_publish_probe_data(struct cl_link *l, const char *stream, const char *by, const char *text, size_t len);
+
+/* ---- the sim's record in JetStream (durability, hot standby) ---------------
+ * One key, "sim", in the KV bucket OCEAND_<prefix> ('.' -> '_'; file
+ * storage, history 1): the active sim's lease and the sea's state, as text
+ * the daemon composes. Every write is a compare-and-set on the revision the
+ * writer last saw (etcd-style: a revision is never reused), so a sim that
+ * lost the lease (a standby took over while it was stalled or cut off)
+ * learns it at its next write (CL_E_LOST) and never overwrites the newer
+ * record. Each call blocks for a JetStream request (at most timeout_ms): the
+ * sim makes them on its builder and lease threads, never on tick or lws.
+ * Thread-safe (one mutex per bucket handle). */
+struct cl_kv;
+/* Binds the bucket, making it if missing. CL_E_NOT_CONNECTED,
+ * CL_E_NO_JETSTREAM, or CL_E_NATS (err says why). */
+int cl_kv_open(struct cl_link *l, int timeout_ms, struct cl_kv **out, char *err, size_t errlen);
+void cl_kv_close(struct cl_kv *kv);
+/* The record now: 1 with a malloc'd NUL-terminated copy and its revision,
+ * 0 when there is none, or a negative CL_E_*. */
+int cl_kv_read(struct cl_kv *kv, char **text, size_t *len, uint64_t *rev);
+/* Become the holder: create the record (seen = 0) or replace the revision
+ * seen (a holder that stopped renewing). CL_OK, or CL_E_LOST (someone else
+ * wrote it first). Later writes are checked against this one. */
+int cl_kv_claim(struct cl_kv *kv, uint64_t seen, const char *text, size_t len);
+/* Replace our own last write (renewal, a new state). CL_E_LOST when
+ * another sim wrote the record since (or we never claimed it). */
+int cl_kv_write(struct cl_kv *kv, const char *text, size_t len);
 
 /* Edge role. */
 int cl_edge_set_demand(struct cl_link *l, const uint8_t bits[CL_KEY_BYTES]); /* subscribes + heartbeats now */

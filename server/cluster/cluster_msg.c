@@ -33,6 +33,8 @@ const char *cl_strerror(int err)
     case CL_E_TIMEOUT: return "no reply in time";
     case CL_E_NO_RESPONDERS: return "no responders: the simulation is not running";
     case CL_E_NATS: return "NATS error";
+    case CL_E_LOST: return "another simulation holds the lease";
+    case CL_E_NO_JETSTREAM: return "no JetStream on the NATS server";
     default: return "unknown error";
     }
 }

@@ -7,6 +7,7 @@
 #include "link_internal.h"
 
 #include <errno.h>
+#include <sys/random.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -23,11 +24,13 @@ const char *cl_event_name(enum cl_event ev)
     case CL_EV_CLOSED: return "closed";
     case CL_EV_SIM_UP: return "sim_up";
     case CL_EV_SIM_DOWN: return "sim_down";
+    case CL_EV_SIM_NEW: return "sim_new";
     }
     return "unknown";
 }
 
 const char *cl_link_name(const struct cl_link *l) { return l->name; }
+const char *cl_link_instance(const struct cl_link *l) { return l->instance; }
 bool cl_link_connected(struct cl_link *l) { return atomic_load(&l->connected); }
 bool cl_link_sim_up(struct cl_link *l) { return atomic_load(&l->sim_up_flag); }
 
@@ -166,11 +169,12 @@ void link_unsubscribe(natsSubscription **sub)
  * <inbox>.*); false when one fails. */
 static bool subscribe_role(struct cl_link *l)
 {
-    static const enum sub_kind sim[] = { SUB_CTL, SUB_HELLO, SUB_QUERY, SUB_PROBE, SUB_DEMAND };
+    static const enum sub_kind sim[] = { SUB_DEMAND, SUB_CTL, SUB_HELLO, SUB_QUERY, SUB_PROBE };
     static const enum sub_kind edge[] = { SUB_PARAMS, SUB_STATUS, SUB_INBOX };
     bool is_sim = l->cfg.role == CL_ROLE_SIM;
     const enum sub_kind *kinds = is_sim ? sim : edge;
-    size_t n = is_sim ? sizeof sim / sizeof *sim : sizeof edge / sizeof *edge;
+    /* A silent sim takes requests only once it acts (the pump subscribes them then). */
+    size_t n = is_sim ? (l->cfg.standby ? 1 : sizeof sim / sizeof *sim) : sizeof edge / sizeof *edge;
     char wild[CL_SUBJECT_MAX + 4];
     snprintf(wild, sizeof wild, "%s.*", l->inbox);
     for (size_t i = 0; i < n; i++) {
@@ -317,6 +321,12 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
     c->name = l->name;
     c->url = c->creds_file = c->tls_ca = c->tls_cert = c->tls_key = NULL; /* not kept: used below only */
     l->rng = (unsigned)getpid() ^ (unsigned)(uintptr_t)l;
+    atomic_store(&l->standby, cfg->standby); /* before the pump's first heartbeat */
+    /* Random, not the pid or the name: a restarted sim may get both again. */
+    uint64_t id = 0;
+    if (getrandom(&id, sizeof id, GRND_NONBLOCK) != (ssize_t)sizeof id)
+        id = ((uint64_t)time(NULL) << 32) ^ (uint64_t)getpid() ^ (uint64_t)(uintptr_t)l;
+    snprintf(l->instance, sizeof l->instance, "%016llx", (unsigned long long)id);
     pthread_mutex_init(&l->out_lock, NULL);
     /* the pump waits with deadlines on the monotonic clock */
     pthread_condattr_t ca;

@@ -13,6 +13,32 @@
 
 /* ---- sim side ---- */
 
+void cl_sim_set_standby(struct cl_link *l, bool standby)
+{
+    atomic_store(&l->standby, standby);
+    pthread_mutex_lock(&l->out_lock);
+    pthread_cond_signal(&l->out_cond); /* the pump (un)subscribes the requests now */
+    pthread_mutex_unlock(&l->out_lock);
+}
+
+/* pump: a standby is not subscribed to the request subjects, so while no
+ * sim acts an edge's request gets "no responders" at once instead of
+ * waiting for its timeout, and a standby never sees them. */
+static void sync_request_subs(struct cl_link *l)
+{
+    static const enum sub_kind req[] = { SUB_CTL, SUB_HELLO, SUB_QUERY, SUB_PROBE };
+    bool on = !atomic_load(&l->standby), added = false;
+    for (size_t i = 0; i < sizeof req / sizeof *req; i++) {
+        natsSubscription **sub = &l->subs[req[i]];
+        if (on && !*sub)
+            added |= (*sub = link_subscribe(l, l->subj[req[i]], req[i])) != NULL; /* NULL: again next round */
+        else if (!on && *sub)
+            link_unsubscribe(sub);
+    }
+    if (added) /* the server has them before the first heartbeat tells the edges we act */
+        natsConnection_FlushTimeout(l->nc, 1000);
+}
+
 void cl_sim_set_status(struct cl_link *l, const char *text, size_t len)
 {
     char *copy = malloc(len + 1);
@@ -88,6 +114,10 @@ void link_on_status(struct cl_link *l, natsMsg *msg)
         STAT_ADD(l, bad_messages, 1);
         return;
     }
+    /* Another sim process (restarted within sim_timeout_s, or a standby
+     * that took over) may hold another sea than our hello says. */
+    bool fresh = l->sim_instance[0] && strcmp(l->sim_instance, env.by) != 0;
+    snprintf(l->sim_instance, sizeof l->sim_instance, "%s", env.by);
     pthread_mutex_lock(&l->in_lock);
     l->sim_last_seen = link_now();
     bool up = !l->sim_up;
@@ -96,8 +126,11 @@ void link_on_status(struct cl_link *l, natsMsg *msg)
     if (up) {
         atomic_store(&l->sim_up_flag, true);
         link_push_state(l, CL_EV_SIM_UP);
-        link_kick_demand(l); /* a restarted sim knows no demand yet */
+    } else if (fresh) {
+        link_push_state(l, CL_EV_SIM_NEW);
     }
+    if (up || fresh)
+        link_kick_demand(l); /* a restarted sim knows no demand yet */
 }
 
 /* pump: make the layer subscriptions match want. */
@@ -162,9 +195,15 @@ void link_beat_send(struct cl_link *l, struct link_beat *b, double now)
 {
     if (l->cfg.role == CL_ROLE_EDGE) {
         edge_beat(l, b, now);
-    } else if (now >= b->next) {
-        link_send_envelope(l, l->subj[SUB_STATUS], CL_KIND_STATUS, "", b->status ? b->status : "{}",
-                           b->status ? b->status_len : 2);
+        free(b->status);
+        b->status = NULL;
+        return;
+    }
+    sync_request_subs(l);
+    if (now >= b->next) {
+        if (!atomic_load(&l->standby)) /* the deadline moves on either way: the pump sleeps until it */
+            link_send_envelope(l, l->subj[SUB_STATUS], CL_KIND_STATUS, l->instance, b->status ? b->status : "{}",
+                               b->status ? b->status_len : 2);
         b->next = now + l->cfg.heartbeat_s;
     }
     free(b->status);

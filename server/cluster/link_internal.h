@@ -78,12 +78,14 @@ struct cl_link {
     /* Set by open, read-only until close: every thread reads them. */
     struct cl_config cfg;           /* defaults filled in; url and credentials not kept */
     char prefix[CL_PREFIX_MAX + 1], name[CL_NAME_MAX];
+    char instance[CL_NAME_MAX];     /* this process's random id (sim: in every STATUS) */
     char subj[SUB_KINDS][CL_SUBJECT_MAX];
     char inbox[CL_SUBJECT_MAX];     /* edge: replies come to inbox.<id>, probe data to inbox.p */
     struct sub_ctx sctx[SUB_KINDS];
     natsOptions *opts;
     natsConnection *nc;             /* the library locks it: the pump publishes, open/pump subscribe */
-    natsSubscription *subs[SUB_KINDS]; /* open subscribes, close destroys */
+    natsSubscription *subs[SUB_KINDS]; /* open subscribes, close destroys; a sim's request subjects
+                                          (CTL, HELLO, QUERY, PROBE): the pump (un)subscribes them */
 
     natsSubscription *layer_subs[CL_KEYS]; /* edge: pump only (close after the pump has ended) */
     unsigned rng;                   /* reconnect jitter: NATS reconnect thread only */
@@ -111,10 +113,12 @@ struct cl_link {
     struct cl_assembler *assembler; /* edge: NATS delivery thread; cl_link_stats reads its drop count */
     bool sim_up;                    /* edge: NATS delivery sets (status), pump clears (timeout) */
     double sim_last_seen;           /* edge: NATS delivery writes, pump reads */
+    char sim_instance[CL_NAME_MAX]; /* edge: NATS delivery only: the instance of the last STATUS */
 
     struct cl_demand *demand;       /* sim: its own mutex; NATS delivery updates, tick thread reads the union */
     atomic_bool connected;          /* NATS connection callbacks (and open) write, any thread reads */
     atomic_bool sim_up_flag;        /* edge: sim_up without in_lock: NATS delivery sets, pump clears, any reads */
+    atomic_bool standby;            /* sim: the caller sets (cl_sim_set_standby), pump reads: no STATUS */
 
     /* close_lock: close waits until NATS has finished calling us. */
     pthread_mutex_t close_lock;

@@ -64,6 +64,19 @@ int state_save(const char *path, const struct ocean_params *p, uint32_t version,
     free(text);
     if (rc == 0 && rename(tmp, path) != 0)
         rc = -1;
+    /* The rename itself must reach the disk before the change is acknowledged. */
+    if (rc == 0) {
+        char dir[600];
+        snprintf(dir, sizeof dir, "%s", path);
+        char *slash = strrchr(dir, '/');
+        if (slash)
+            *(slash == dir ? slash + 1 : slash) = '\0';
+        int dfd = open(slash ? dir : ".", O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        if (dfd >= 0) {
+            fsync(dfd);
+            close(dfd);
+        }
+    }
     if (rc != 0) {
         snprintf(err, errlen, "saving %s: %s", path, strerror(errno));
         unlink(tmp);

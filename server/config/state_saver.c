@@ -1,7 +1,5 @@
-/* state_saver.c — save the parameters when they change (see state_saver.h). */
+/* state_saver.c — the state file as the sim's persist hook (see state_saver.h). */
 #include "state_saver.h"
-
-#include "clock.h"
 
 #include "log.h"
 #include "state.h"
@@ -9,27 +7,32 @@
 void state_saver_init(struct state_saver *sv, const char *path, const struct ocean_params *p, uint32_t version)
 {
     sv->path = path;
+    pthread_mutex_init(&sv->lock, NULL);
     sv->params = *p;
     sv->version = version;
-    sv->dirty = false;
-    sv->saved_t = mono_now();
 }
 
-void state_saver_on_params(void *saver, const struct ocean_params *p, uint32_t version)
+void state_saver_destroy(struct state_saver *sv) { pthread_mutex_destroy(&sv->lock); }
+
+int state_saver_persist(void *saver, const struct ocean_params *p, uint32_t version, double sim_time, char *err,
+                        size_t errlen)
 {
     struct state_saver *sv = saver;
-    sv->params = *p;
-    sv->version = version;
-    sv->dirty = true;
+    pthread_mutex_lock(&sv->lock);
+    int rc = sv->path[0] ? state_save(sv->path, p, version, sim_time, err, errlen) : 0;
+    if (rc == 0) {
+        sv->params = *p;
+        sv->version = version;
+    }
+    pthread_mutex_unlock(&sv->lock);
+    return rc;
 }
 
-void state_saver_flush(struct state_saver *sv, double sim_time, bool force)
+void state_saver_final(struct state_saver *sv, double sim_time)
 {
-    if (!sv->path[0] || !(force || (sv->dirty && mono_now() - sv->saved_t >= 1.0)))
-        return;
     char err[300];
-    if (state_save(sv->path, &sv->params, sv->version, sim_time, err, sizeof err) != 0)
+    pthread_mutex_lock(&sv->lock); /* held throughout: a save the builder makes meanwhile is newer */
+    if (sv->path[0] && state_save(sv->path, &sv->params, sv->version, sim_time, err, sizeof err) != 0)
         LOGW("%s", err);
-    sv->dirty = false;
-    sv->saved_t = mono_now();
+    pthread_mutex_unlock(&sv->lock);
 }

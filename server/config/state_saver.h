@@ -1,29 +1,32 @@
-/* state_saver.h — keeps the state file (state.h) in step with the parameters
- * the simulation applies: a listener for applied changes (net_on_params) and
- * a flush the service loop calls after every wake-up. At most one write a
- * second: a file write per slider move is too many. Used on one thread (the
- * lws service thread); main.c wires it up. */
+/* state_saver.h — the state file (state.h) as the durable record of the
+ * sea: the simulation's persist hook (sim_config.persist) writes it, with
+ * fsync and rename, on the builder thread BEFORE a batch of sets is applied
+ * and acknowledged, so no acknowledged set is lost by a crash (docs/scaling.md
+ * "Failure model"). A mutex: the builder saves, main saves the clock once
+ * more at shutdown. main.c wires it up. */
 #ifndef OCEAND_STATE_SAVER_H
 #define OCEAND_STATE_SAVER_H
 
-#include <stdbool.h>
+#include <pthread.h>
+#include <stddef.h>
 #include <stdint.h>
 
 #include "params.h"
 
 struct state_saver {
     const char *path;           /* "" = do not save */
-    struct ocean_params params; /* latest applied */
+    pthread_mutex_t lock;       /* one save at a time; guards the fields below */
+    struct ocean_params params; /* the last saved (or restored) */
     uint32_t version;
-    bool dirty;                 /* params changed since the last save */
-    double saved_t;             /* mono_now() of the last save */
 };
 
 void state_saver_init(struct state_saver *sv, const char *path, const struct ocean_params *p, uint32_t version);
-/* The listener: record an applied change (a net_params_fn). */
-void state_saver_on_params(void *saver, const struct ocean_params *p, uint32_t version);
-/* Save if a change is unsaved and the last save is at least 1 s old; or, with
- * force (shutdown), now whatever the state. sim_time: the clock to store. */
-void state_saver_flush(struct state_saver *sv, double sim_time, bool force);
+void state_saver_destroy(struct state_saver *sv);
+/* sim_config.persist: saves now (write, fsync, rename, fsync of the
+ * folder); 0, or -1 with err (nothing was replaced). */
+int state_saver_persist(void *saver, const struct ocean_params *p, uint32_t version, double sim_time, char *err,
+                        size_t errlen);
+/* At shutdown: the last saved state with the final clock. */
+void state_saver_final(struct state_saver *sv, double sim_time);
 
 #endif

@@ -124,5 +124,6 @@ void net_destroy(struct net *n)
     frame_unref(n->latest);
     dispatch_free_requests(n);
     free(n->status_text);
+    cJSON_Delete(n->sim_capacity);
     free(n);
 }

@@ -236,6 +236,8 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
 {
     n->applied = a->params; /* in force after this set, applied or refused */
     n->applied_version = a->version;
+    if (a->adopt) /* a take-over (sim_adopt): nobody asked; edges ask hello of the new sim */
+        return;
     struct request *r = NULL;
     for (lws_dll2_t *d = lws_dll2_get_head(&n->requests); d && !r; d = d->next)
         if (request_of(d)->tag == a->tag)
@@ -273,7 +275,7 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
         else
             cJSON_Delete(mine);
     } else if (origin || r->reply) {
-        struct ctl_error e = { .code = a->status == SIM_SET_NO_MEMORY ? "internal" : "invalid" };
+        struct ctl_error e = { .code = a->status == SIM_SET_INVALID ? "invalid" : "internal" }; /* out of memory, not saved */
         snprintf(e.message, sizeof e.message, "%s", a->message);
         respond_error(origin, &rm, &e, r->id);
     }

@@ -170,6 +170,7 @@ struct net {
     /* Cluster roles (net.h, cluster.c); all zero for --role all. */
     struct net_cluster_hooks cluster; /* main writes (net_set_cluster) before the loop */
     char *status_text;            /* edge: {"type":"status",...} for new clients, NULL = healthy */
+    cJSON *sim_capacity;          /* edge: the sim's `capacity` (its hello, params of a new N) for hello, or NULL */
     lws_dll2_owner_t remote_queries; /* sim: struct remote_query, queries of edges' clients in the workers */
     uint64_t next_remote;         /* sim: last remote query / probe serial handed out (net_remote_serial) */
     uint64_t published;           /* edge: frames handed to net_publish_frame (frame.index) */
@@ -234,5 +235,8 @@ void net_capacity_wake(struct net *n);                       /* after a wake-up:
 
 /* http.c */
 int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len);
+
+/* remote_sim.c: an edge's hello gets the sim's capacity (the sim's own has it from sim_capacity). */
+cJSON *net_hello_capacity(struct net *n, cJSON *hello);
 
 #endif

@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "log.h"
+#include "sim_thread.h"
 
 void net_set_cluster(struct net *n, const struct net_cluster_hooks *h) { n->cluster = *h; }
 
@@ -55,6 +56,28 @@ static void send_all(struct net *n, const char *text, const char *skip_client)
             session_queue_text(session_of(d), text, false);
 }
 
+/* The sim's capacity from its hello or a params event (sent with a new N):
+ * kept for this edge's hellos. Only an object passes (net_sim_message
+ * bounded the message's size). */
+static void adopt_capacity(struct net *n, const cJSON *root)
+{
+    const cJSON *c = cJSON_GetObjectItemCaseSensitive(root, "capacity");
+    cJSON *copy = cJSON_IsObject(c) ? cJSON_Duplicate(c, 1) : NULL;
+    if (!copy)
+        return;
+    cJSON_Delete(n->sim_capacity);
+    n->sim_capacity = copy;
+}
+
+cJSON *net_hello_capacity(struct net *n, cJSON *hello)
+{
+    cJSON *c;
+    if (hello && !n->sim && n->sim_capacity && !cJSON_HasObjectItem(hello, "capacity") &&
+        (c = cJSON_Duplicate(n->sim_capacity, 1)))
+        cJSON_AddItemToObject(hello, "capacity", c);
+    return hello;
+}
+
 /* The params (and version) of a hello or params message onto n->applied.
  * -1 if the message has neither a valid params object nor a version. */
 static int adopt_params(struct net *n, const cJSON *root, uint64_t *changed)
@@ -94,6 +117,7 @@ int net_adopt_hello(struct net *n, const char *text, size_t len)
         n->dc.tile_size = ts->valueint;
     if (cJSON_IsNumber(ease) && ease->valueint >= 0 && ease->valueint <= 300) /* the sim's, told to this edge's clients */
         n->dc.ease_ticks = ease->valueint;
+    adopt_capacity(n, root);
     cJSON_Delete(root);
     if (n->applied_version != before || changed) {
         /* Clients that got hello from an older cache learn the sim's values now. */
@@ -134,6 +158,8 @@ int net_broadcast_params(struct net *n, const char *text, size_t len, const char
     }
     uint64_t changed = 0;
     int rc = root ? adopt_params(n, root, &changed) : -1;
+    if (rc == 0)
+        adopt_capacity(n, root);
     cJSON_Delete(root);
     if (rc != 0)
         return -1;
@@ -163,6 +189,11 @@ char *net_hello_text(struct net *n)
         .client_id = "", .controller = false, .params = &n->applied, .params_version = n->applied_version,
         .tick_rate = n->dc.tick_rate, .tile_size = net_tile_size(n), .sub = &sub, .ease_ticks = n->dc.ease_ticks,
     };
+    struct capacity_info ci;
+    if (n->sim) { /* edges pass it on in their hellos */
+        sim_capacity(n->sim, &ci);
+        h.capacity = &ci;
+    }
     cJSON *m = control_hello_msg(&h);
     if (m) /* the configured tile side, so that edges follow N changes like the sim */
         cJSON_AddNumberToObject(m, "cluster_tile_size", n->dc.tile_size);

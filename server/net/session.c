@@ -153,7 +153,7 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
         sim_capacity(n->sim, &ci);
         h.capacity = &ci;
     }
-    session_queue_json(s, control_hello_msg(&h));
+    session_queue_json(s, net_hello_capacity(n, control_hello_msg(&h))); /* edge: the sim's capacity */
     if (n->status_text)
         session_queue_text(s, n->status_text, false); /* cluster trouble: the banner at once */
     net_capacity_tell(n, s);

@@ -543,7 +543,7 @@ static void edge_on_state(void *user, enum cl_event ev)
 {
     struct role_edge *r = user;
     LOGI("cluster: %s", cl_event_name(ev));
-    if (ev == CL_EV_CONNECTED || ev == CL_EV_RECONNECTED || ev == CL_EV_SIM_UP) {
+    if (ev == CL_EV_CONNECTED || ev == CL_EV_RECONNECTED || ev == CL_EV_SIM_UP || ev == CL_EV_SIM_NEW) {
         request_hello(r); /* the sim may have moved on (or restarted) meanwhile */
         r->keepalive_t = 0; /* and may have lost our probes: ask now */
     }

@@ -21,6 +21,7 @@
 
 #include "log.h"
 #include "metrics.h"
+#include "role_lease.h"
 #include "role_link.h"
 
 #define STATUS_PERIOD 0.25 /* s between updates of the heartbeat body (the link sends it at its own rate) */
@@ -43,6 +44,9 @@ struct role_sim {
     struct rprobe *probes;
     double probes_t;                              /* when expiry was last checked */
     double status_t;                              /* lws: when the heartbeat body was last set */
+    struct role_lease *lease;                     /* standby and the JetStream record (role_lease.h) */
+    int (*file_persist)(void *, const struct ocean_params *, uint32_t, double, char *, size_t);
+    void *file_user;                              /* the state file's persist hook (main.c), called after JetStream */
     _Atomic uint64_t demand[CL_KEY_BYTES / 8];    /* tick writes (last union), lws reads (/healthz) */
     atomic_uint_least64_t layers_encoded;         /* tick writes, lws reads (/metrics) */
 };
@@ -59,6 +63,8 @@ static void sim_remote_demand(void *user, uint8_t bits[])
         memcpy(&w, u + 8 * i, 8);
         atomic_store(&r->demand[i], w);
     }
+    if (!role_lease_acting(r->lease))
+        return; /* a standby encodes nothing */
     for (int i = 0; i < SIM_DEMAND_BYTES && i < CL_KEY_BYTES; i++)
         bits[i] |= u[i];
 }
@@ -70,6 +76,8 @@ static void release_frame(void *ctx) { frame_unref(ctx); }
 static void sim_on_frame(void *user, struct frame *f)
 {
     struct role_sim *r = user;
+    if (!role_lease_acting(r->lease))
+        return;
     struct cl_layer_info info = {
         .seq = f->hdr.seq, .sim_time = f->hdr.sim_time, .params_version = f->hdr.params_version,
         .n = f->hdr.n, .tile_size = f->hdr.tile_size, .patch_size = f->hdr.patch_size,
@@ -211,6 +219,10 @@ static void expire_probes(struct role_sim *r, double now)
 static void sim_on_request(void *user, struct cl_request *req)
 {
     struct role_sim *r = user;
+    if (!role_lease_acting(r->lease)) { /* the active sim answers; the edge times out if there is none */
+        cl_request_reply(r->link, req, NULL, 0);
+        return;
+    }
     if (req->kind == CL_KIND_PROBE) {
         sim_probe(r, req);
         return;
@@ -280,6 +292,8 @@ static const char *sim_health(void *user, cJSON *obj)
     cJSON_AddStringToObject(obj, "role", "sim");
     cJSON_AddStringToObject(obj, "cluster", up ? "ok" : "nats_unavailable");
     cJSON_AddNumberToObject(obj, "edges", st.demand_edges);
+    cJSON_AddStringToObject(obj, "lease", role_lease_state_name(role_lease_state(r->lease)));
+    cJSON_AddStringToObject(obj, "instance", cl_link_instance(r->link));
     role_keys_json(bits, obj);
     return up ? "ok" : "degraded";
 }
@@ -293,6 +307,28 @@ static size_t sim_metrics(void *user, char *buf, size_t cap)
                                 "# TYPE oceand_cluster_layers_encoded_total counter\noceand_cluster_layers_encoded_total %llu\n",
                                 (unsigned long long)atomic_load(&r->layers_encoded));
     return off < cap ? off : (cap ? cap - 1 : 0);
+}
+
+/* sim_config.persist: the JetStream record first (the copy a standby
+ * takes over from; a lost lease refuses the change), then the state file. */
+static int sim_persist(void *user, const struct ocean_params *p, uint32_t version, double sim_time, char *err,
+                       size_t errlen)
+{
+    struct role_sim *r = user;
+    if (role_lease_persist(r->lease, p, version, sim_time, err, errlen) != 0)
+        return -1;
+    return r->file_persist ? r->file_persist(r->file_user, p, version, sim_time, err, errlen) : 0;
+}
+
+int role_sim_attach(struct role_sim *r, struct sim *sim, const struct ocean_params *p, uint32_t version)
+{
+    return r ? role_lease_start(r->lease, sim, p, version) : 0;
+}
+
+void role_sim_detach(struct role_sim *r)
+{
+    if (r)
+        role_lease_stop(r->lease);
 }
 
 struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, struct sim_config *sc,
@@ -311,6 +347,7 @@ struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, st
     cfg.user = r;
     cfg.h.on_state = sim_on_state;
     cfg.h.on_request = sim_on_request;
+    cfg.standby = true; /* silent until the lease says this sim acts (role_lease.c) */
     char lerr[256];
     r->link = cl_link_open(&cfg, lerr, sizeof lerr);
     if (!r->link) {
@@ -322,6 +359,16 @@ struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, st
      * back, or they would wait for it to catch up. A tick runs at most once a
      * period, so wall-clock periods since 1970 are always ahead of the last run's seq. */
     sc->start_seq = (uint64_t)((double)unix_us() * 1e-6 * dc->tick_rate);
+    if (!(r->lease = role_lease_new(r->link, dc->tick_rate))) {
+        snprintf(err, errlen, "out of memory");
+        cl_link_close(r->link);
+        free(r);
+        return NULL;
+    }
+    r->file_persist = sc->persist;
+    r->file_user = sc->persist_user;
+    sc->persist = sim_persist;
+    sc->persist_user = r;
     sc->remote_demand = sim_remote_demand;
     sc->on_frame = sim_on_frame;
     sc->cluster_user = r;
@@ -343,6 +390,7 @@ void role_sim_close(struct role_sim *r)
     net_drop_remote_requests(r->net); /* they hold cl_requests of this link */
     struct net_cluster_hooks none = { .no_viewers = true };
     net_set_cluster(r->net, &none);
+    role_lease_free(r->lease); /* before the link: it may release the lease */
     cl_link_close(r->link);
     while (r->probes) { /* the query service is freed after this: nothing to tell it */
         struct rprobe *p = r->probes;

@@ -19,6 +19,11 @@ struct role_sim;
 struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, struct sim_config *sc,
                                char *err, size_t errlen);
 void role_sim_close(struct role_sim *r);
+/* After sim_start: the lease thread (role_lease.h) with the state the sim
+ * started from; 0 or an errno. r NULL: nothing. */
+int role_sim_attach(struct role_sim *r, struct sim *sim, const struct ocean_params *p, uint32_t version);
+/* Before sim_stop: stops the lease thread, releasing the lease if held. */
+void role_sim_detach(struct role_sim *r);
 
 /* edge: opens the link and sets the net hooks (demand, forwarding, frames
  * rebuilt from the sim's layers, hello cache, status banner). Close before

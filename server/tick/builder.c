@@ -75,6 +75,62 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
     out->sets = sets;
 }
 
+/* What build_base and build_version stand for, with the clock now: a
+ * SIGHUP save. The state in force or the one waiting in `ready` (persisted
+ * when it was built): either way nothing older than what anyone was told. */
+static void persist_now(struct sim *s)
+{
+    char err[300];
+    if (s->cfg.persist &&
+        s->cfg.persist(s->cfg.persist_user, &s->build_base, s->build_version, atomic_load(&s->now_time), err,
+                       sizeof err) != 0)
+        LOGW("saving the state: %s", err);
+}
+
+/* Durability before the ack: the batch's outcome is persisted (write +
+ * fsync + rename, or a JetStream put: sim_config.persist) before the tick
+ * may apply it, so a version is durable before any frame carries it and a
+ * set before its `params` goes out; many sets share one save (group
+ * commit). A batch that cannot be saved is refused as a whole and the
+ * prepared state dropped: the builder's base goes back to `base`. */
+static void persist_batch(struct sim *s, struct built *b, const struct ocean_params *base)
+{
+    uint32_t v = s->build_version;
+    int applying = 0;
+    for (struct sim_set *set = b->sets; set; set = set->next) {
+        if (set->status != SIM_SET_QUEUED)
+            continue;
+        if (set->adopt) {
+            v = set->adopt_version; /* already durable: the record it came from */
+        } else {
+            v++;
+            applying++;
+        }
+    }
+    if (!applying || !s->cfg.persist) {
+        s->build_version = v;
+        return;
+    }
+    char err[300];
+    if (s->cfg.persist(s->cfg.persist_user, &b->params, v, atomic_load(&s->now_time), err, sizeof err) == 0) {
+        s->build_version = v;
+        return;
+    }
+    LOGW("a parameter change could not be saved, so it is refused: %s", err);
+    char msg[200];
+    snprintf(msg, sizeof msg, "not saved, nothing changed: %.150s", err);
+    for (struct sim_set *set = b->sets; set; set = set->next)
+        if (set->status == SIM_SET_QUEUED)
+            set_failed(set, SIM_SET_NOT_SAVED, msg);
+    if (b->prepared)
+        ocean_prepared_free(b->prepared);
+    ocean_surface_free(b->surface);
+    b->prepared = NULL;
+    b->surface = NULL;
+    b->params = *base;
+    s->build_base = *base;
+}
+
 void *builder_main(void *arg)
 {
     struct sim *s = arg;
@@ -88,6 +144,13 @@ void *builder_main(void *arg)
             pthread_mutex_lock(&s->lock);
             continue;
         }
+        if (s->save_wanted && (!s->pending || s->ready_full)) {
+            s->save_wanted = false;
+            pthread_mutex_unlock(&s->lock);
+            persist_now(s);
+            pthread_mutex_lock(&s->lock);
+            continue;
+        }
         if (!s->pending || s->ready_full) {
             pthread_cond_wait(&s->cond, &s->lock);
             continue;
@@ -96,10 +159,13 @@ void *builder_main(void *arg)
         s->pending = NULL;
         s->pending_tail = &s->pending;
         s->builder_busy = true;
+        s->save_wanted = false; /* the batch's save below carries the clock too */
         pthread_mutex_unlock(&s->lock);
 
         struct built b;
+        struct ocean_params base = s->build_base;
         build_batch(s, sets, &b);
+        persist_batch(s, &b, &base);
 
         pthread_mutex_lock(&s->lock);
         s->builder_busy = false;
@@ -108,6 +174,26 @@ void *builder_main(void *arg)
     }
     pthread_mutex_unlock(&s->lock);
     return NULL;
+}
+
+/* A take-over (sim_adopt): the other sim's version, and its clock carried
+ * on by the wall-clock time since it was written, so the sea goes on where
+ * it was; seq never goes back (edges keep their streams). */
+static void adopt_clock(struct sim *s, const struct sim_set *set)
+{
+    s->version = set->adopt_version;
+    double since = ((double)unix_us() - (double)set->adopt_wall_us) * 1e-6;
+    if (since < 0)
+        since = 0;
+    double t = set->adopt_time + (s->params.paused ? 0 : s->params.time_scale * since);
+    if (t >= 0 && t <= OCEAN_TIME_MAX)
+        s->sim_time = t;
+    uint64_t seq = set->adopt_seq + (uint64_t)(since * s->cfg.tick_rate);
+    if (seq > s->seq)
+        s->seq = seq;
+    atomic_store(&s->now_time, s->sim_time);
+    atomic_store(&s->now_seq, s->seq);
+    s->reset_streams = true;
 }
 
 /* At a tick boundary: swap in what the builder prepared, one version per
@@ -133,6 +219,8 @@ void apply_prepared(struct sim *s)
         if (commit_rc == 0 && b.surface && ocean_surface_ease(b.surface, s->ocean) != 0)
             LOGW("point queries: the snapshot of version %u misses the easing", (unsigned)(s->version + 1));
         if (commit_rc != 0) {
+            /* The builder saved this batch's versions already: they stay unused and
+             * the saved version runs ahead of the tick's (skipped, never reused). */
             LOGE("a prepared parameter change no longer fits the simulation; refused");
             for (struct sim_set *set = b.sets; set; set = set->next)
                 if (set->status == SIM_SET_QUEUED)
@@ -173,7 +261,10 @@ void apply_prepared(struct sim *s)
         if (set->status == SIM_SET_QUEUED) {
             struct ocean_params before = s->params;
             s->params = params_with(&set->prev, &set->values, set->mask);
-            s->version++;
+            if (set->adopt)
+                adopt_clock(s, set);
+            else
+                s->version++;
             atomic_fetch_add(&g_metrics.param_changes, 1);
             set->status = SIM_SET_APPLIED;
             set->changed = params_diff(&before, &s->params);

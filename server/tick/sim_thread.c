@@ -55,6 +55,31 @@ void sim_want_keyframes(struct sim *s, int key, int delta) { atomic_fetch_add(&s
 double sim_time_now(struct sim *s) { return atomic_load(&s->now_time); }
 bool sim_take_trim(struct sim *s) { return atomic_exchange(&s->trim_wanted, false); }
 
+int sim_adopt(struct sim *s, const struct ocean_params *p, uint32_t version, double sim_time, uint64_t wall_us,
+              uint64_t seq)
+{
+    struct sim_set *set = calloc(1, sizeof *set);
+    if (!set)
+        return -1;
+    set->values = *p;
+    set->mask = PARAM_COUNT >= 64 ? ~0ull : (1ull << PARAM_COUNT) - 1; /* every parameter */
+    set->adopt = true;
+    set->adopt_version = version;
+    set->adopt_time = sim_time;
+    set->adopt_wall_us = wall_us;
+    set->adopt_seq = seq;
+    sim_submit(s, set);
+    return 0;
+}
+
+void sim_save_now(struct sim *s)
+{
+    pthread_mutex_lock(&s->lock);
+    s->save_wanted = true;
+    pthread_cond_signal(&s->cond);
+    pthread_mutex_unlock(&s->lock);
+}
+
 void sim_capacity(struct sim *s, struct capacity_info *out)
 {
     pthread_mutex_lock(&s->lock);
@@ -144,6 +169,7 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     pthread_cond_init(&s->cond, NULL);
     pthread_cond_init(&s->prod_cond, NULL);
     s->build_base = *p;
+    s->build_version = cfg->start_version;
     s->ocean = ocean_create(p, &cfg->opts, err, errlen);
     if (!s->ocean) {
         sim_free_parts(s);

@@ -31,6 +31,7 @@ enum sim_set_status {
     SIM_SET_APPLIED,
     SIM_SET_INVALID,        /* refused at apply time: whole-set check or the build refused it */
     SIM_SET_NO_MEMORY,      /* the build ran out of memory; nothing changed */
+    SIM_SET_NOT_SAVED,      /* it could not be made durable (sim_config.persist failed); nothing changed */
 };
 
 /* A parameter change accepted by the network thread. The same object comes
@@ -52,6 +53,13 @@ struct sim_set {
     double build_s;             /* seconds the builder took to prepare its batch (0 = nothing built) */
     /* Builder and tick threads only. */
     struct ocean_params prev;   /* the params this set was checked on top of */
+    /* sim_adopt (tag 0): the state another sim left. values are whole
+     * parameters; the version and clock replace this sim's own. */
+    bool adopt;
+    uint32_t adopt_version;
+    double adopt_time;          /* sim time at adopt_wall_us (Unix µs) */
+    uint64_t adopt_wall_us;
+    uint64_t adopt_seq;         /* seq at adopt_wall_us: seq goes on from at least there */
 };
 void sim_set_free(struct sim_set *set);
 
@@ -85,6 +93,17 @@ struct sim_config {
     void (*remote_demand)(void *user, uint8_t bits[]);
     void (*on_frame)(void *user, struct frame *f);
     void *cluster_user;
+    /* Durability: no acknowledged set is lost. Called on the builder thread
+     * with what will be in force once a batch is applied (parameters, the
+     * version after its last set, the clock), BEFORE the tick applies it:
+     * so before any frame carries that version and before anyone is told.
+     * It may block (write + fsync + rename, a JetStream put): the builder is
+     * the one thread that may wait for a disk or NATS. Nonzero refuses the
+     * batch's sets (SIM_SET_NOT_SAVED: nothing changes). Also called by
+     * sim_save_now. NULL = nothing is kept. */
+    int (*persist)(void *user, const struct ocean_params *p, uint32_t version, double sim_time, char *err,
+                   size_t errlen);
+    void *persist_user;
 };
 #define SIM_DEMAND_BYTES 128        /* bitmap of layer keys (every cascade) handed to remote_demand */
 _Static_assert(LAYER_KEYS_ALL <= SIM_DEMAND_BYTES * 8, "layer keys fit the remote demand bitmap");
@@ -115,6 +134,16 @@ void sim_demand(struct sim *s, int layer_key, int delta);   /* subscriptions in 
 void sim_demand_temporal(struct sim *s, int layer_key, int delta);
 void sim_want_keyframes(struct sim *s, int layer_key, int delta);
 double sim_time_now(struct sim *s);
+/* Ask the builder to persist the state in force with the current clock
+ * (SIGHUP); returns at once. */
+void sim_save_now(struct sim *s);
+/* Take over the state another sim left (a hot standby, server/roles/):
+ * these parameters (built off the tick like a set), this version, and the
+ * clock extrapolated from (sim_time, seq) at wall_us; seq never goes back.
+ * Not persisted (it comes from the durable record). Answered with tag 0
+ * (sim_take_answers). Any thread; returns at once; -1 out of memory. */
+int sim_adopt(struct sim *s, const struct ocean_params *p, uint32_t version, double sim_time, uint64_t wall_us,
+              uint64_t seq);
 /* Whether the pipeline freed memory (temporal streams) since the last call:
  * the lws thread then returns the free pages to the system (malloc_trim). */
 bool sim_take_trim(struct sim *s);

@@ -87,6 +87,7 @@ struct sim {
     /* builder only: the params of the newest state built (applied, or
      * waiting in `ready`): the base the next batch is checked against. */
     struct ocean_params build_base;
+    uint32_t build_version;       /* builder only: the version persisted for build_base (>= the tick's) */
 
     pthread_mutex_t lock;             /* guards the fields below up to the atomics */
     pthread_cond_t cond;              /* tick and lws signal, builder waits */
@@ -95,6 +96,7 @@ struct sim {
     struct sim_set *pending, **pending_tail;  /* lws appends (sim_submit); builder takes */
     struct built ready;               /* builder writes; tick takes at a tick boundary */
     bool ready_full;                  /* builder sets, tick clears */
+    bool save_wanted;                 /* lws sets (sim_save_now), builder clears */
     struct ocean_prepared *to_free;   /* tick writes (the state a commit swapped out); builder frees it */
     struct sim_set *answers, **answers_tail;  /* tick appends; lws takes (sim_take_answers) */
     pthread_cond_t prod_cond;         /* tick signals, producer waits */

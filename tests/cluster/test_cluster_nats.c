@@ -164,7 +164,7 @@ static void on_signal(int sig)
 struct obs {
     const char *who;
     struct cl_link *link;
-    int ev[CL_EV_SIM_DOWN + 1];
+    int ev[CL_EV_SIM_NEW + 1];
     struct cl_layer *layers[CL_KEYS]; /* latest of each key */
     int nlayers;
     struct cl_request *reqs[MAXQ];
@@ -650,6 +650,31 @@ int main(void)
             /* the edges repeat their demand at once for a new sim */
             struct demwant w = { &sim, K1, K2, 2, -1 };
             CHECK(spin_until(1.0, p_demand, &w), "the new sim did not get the edges' demand within a second");
+        }
+        /* Another sim process under the same name within the edges' 2 s
+         * detection: its heartbeat's instance id differs, so the edges hear
+         * of it (sim_new: ask hello again) without a sim_down in between. */
+        int news = ea.ev[CL_EV_SIM_NEW], downs2 = ea.ev[CL_EV_SIM_DOWN];
+        if (sim.link) {
+            close_link(&sim);
+            if (open_link(&sim, CL_ROLE_SIM, "sim-2", prefix)) {
+                struct evwant nw = { &ea, CL_EV_SIM_NEW, news + 1 };
+                CHECK(spin_until(3, p_event, &nw), "edge-a never saw the new sim instance");
+                CHECK(ea.ev[CL_EV_SIM_DOWN] == downs2, "edge-a saw a sim_down for a quick restart");
+                /* A standby sends no heartbeat: the edges see no sim. */
+                cl_sim_set_standby(sim.link, true);
+                struct evwant dw = { &ea, CL_EV_SIM_DOWN, downs2 + 1 };
+                CHECK(spin_until(5, p_event, &dw), "a standby's heartbeats kept the sim up at edge-a");
+                /* ...and takes no request: nobody answers, at once */
+                struct reply_box rs = { 0 };
+                cl_edge_request(ea.link, CL_KIND_CTL, "c8", "{}", 2, h_reply, &rs);
+                CHECK(spin_until(5, p_reply, &rs) && rs.status == CL_E_NO_RESPONDERS,
+                      "request to a standby: status %d (%s)", rs.status, cl_strerror(rs.status));
+                int ups2 = ea.ev[CL_EV_SIM_UP];
+                cl_sim_set_standby(sim.link, false);
+                struct evwant uw = { &ea, CL_EV_SIM_UP, ups2 + 1 };
+                CHECK(spin_until(3, p_event, &uw), "edge-a did not see the sim acting again");
+            }
         }
     }
 

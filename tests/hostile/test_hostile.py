@@ -1493,10 +1493,12 @@ def state_save_fsize(d, fig):
     """The disk is full, as far as the daemon can tell: `ulimit -f 1` (1 KiB;
     the state file is larger). A write past the limit raised SIGXFSZ, whose
     default action ended the daemon at its first save. It must fail like a
-    full disk: a warning, nothing left behind, the daemon running."""
+    full disk: a warning, nothing left behind, the daemon running. A set is
+    saved before it is acknowledged, so the set that cannot be saved is
+    refused (`internal`, not saved) and changes nothing."""
     s, r = attacker(d)
     m = ask(s, r, '{"type":"set","id":1,"params":{"wind_speed":18.5}}')
-    check(m and m.get("type") == "params", "set: %r" % (m,))
+    check(m and m.get("type") == "error" and m.get("code") == "internal", "unsaved set: %r" % (m,))
     d.proc.send_signal(signal.SIGHUP)     # save now
     warned = wait_until(lambda: not d.alive() or b"File too large" in open(d.log_path, "rb").read(), 5)
     s.close()
