@@ -1,4 +1,4 @@
-# mk/cluster.mk — the cluster transport (issue 12): server/cluster/, one
+# mk/cluster.mk — the cluster transport: server/cluster/, one
 # simulation and many edge daemons over NATS. See docs/scaling.md.
 #   make build/libcluster.a      the module (and build/san/libcluster.a)
 #   make test-cluster            unit test (formats, assembler, demand expiry), normal and ASan+UBSan,

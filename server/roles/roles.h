@@ -1,4 +1,4 @@
-/* roles.h — `oceand --role sim` and `--role edge` (issue 12, docs/scaling.md):
+/* roles.h — `oceand --role sim` and `--role edge` (docs/scaling.md):
  * the glue between the daemon (sim thread, net) and the NATS link of
  * server/cluster/. `--role all` uses none of this. main.c calls these on
  * its own thread (the lws service thread). */

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Integration tests of `oceand --role sim|edge` over NATS (issue 12, docs/scaling.md).
+"""Integration tests of `oceand --role sim|edge` over NATS (docs/scaling.md).
 
 Each test starts its own nats-server on a free 127.0.0.1 port, one `--role sim` and
 one or two `--role edge` daemons, and real WebSocket clients; everything is killed at
