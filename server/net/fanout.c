@@ -143,14 +143,19 @@ void fanout_set_latest(struct net *n, struct frame *f)
         frame_unref(f);
         return;
     }
-    if (f) {
+    bool temporal = false; /* only temporal clients catch up: nobody else needs the ring's memory */
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d && !temporal; d = d->next)
+        temporal = session_of(d)->eff.temporal;
+    if (f && temporal) {
         ring_push(n, f);
+    } else {
+        ring_clear(n);
+    }
+    if (f) {
         on_publish(n, f);
         n->seen_any = true;
         n->seen_index = f->index;
         n->seen_seq = f->hdr.seq;
-    } else {
-        ring_clear(n); /* nobody subscribed: nothing kept */
     }
     frame_unref(n->latest);
     n->latest = f; /* NULL after a tick that built no frame: nothing stale is kept */

@@ -35,7 +35,7 @@
 
 #define CHUNK_SIZE (64 * 1024)    /* bytes per lws_write of a frame, at most: ladder_chunk writes about one tick of the link */
 #define NET_RING 18               /* recent frames kept for temporal clients a few ticks behind (fanout.c) */
-#define NET_RING_MAX_BYTES ((size_t)32 << 20) /* ...and their bytes at most */
+#define NET_RING_MAX_BYTES ((size_t)16 << 20) /* ...and their bytes at most (large N: fewer frames) */
 #define LAG_MAX 15                /* ticks a temporal client may run behind the newest frame to keep its chain:
                                    * its 4 keyframe ticks at ~3x a shared frame's bytes, on a link that fits the shared ones */
 #define LADDER_MAX_RUNGS 12
