@@ -33,10 +33,12 @@
 #define HOLD_MAX_S 32.0
 #define HOLD_RESET_S 20.0     /* calm this long: a failed probe is forgotten */
 #define PROBE_FAIL_S 3.0      /* a step down this soon after a step up: the probe failed */
+#define LOST_MAX_PCT 15        /* ticks lost in a window beyond which it is congested */
 #define FIT 0.8               /* a rung fits when it needs at most this share of the link */
 #define LOWAT_MIN 4096u
 #define LOWAT_MAX ((uint32_t)CHUNK_SIZE)
 #define LOWAT_START (16u * 1024)
+#define YOUNG_S 2.0           /* TCP's start-up: its rate samples are not the link's yet */
 
 /* The rungs, finest first. A rung that serves the same as the one before it
  * (e.g. no finer cascades to drop, LOD already 4) is skipped. Finer cascades
@@ -191,8 +193,8 @@ void ladder_open(struct net *n, struct session *s)
     l->hold = HOLD_MIN_S;
     l->bits_t = 1.5; /* measured at 1 cm, N = 256 (docs/codec.md); replaced by what this client's frames cost */
     l->bits_i = 4.0;
-    l->win_t = mono_now();
-    l->changed_t = l->win_t - SETTLE_S / 2; /* its first keyframes settle like a change's, half as long */
+    l->win_t = l->open_t = mono_now();
+    l->changed_t = l->win_t; /* its first keyframes settle like a change's */
     l->lowat = LOWAT_START;
     tcp_probe_lowat(lws_get_socket_fd(s->wsi), l->lowat);
     s->eff = s->sub;
@@ -225,6 +227,15 @@ void ladder_tick(struct net *n, struct session *s, const struct frame *f, int lo
     struct ladder *l = &s->lad;
     if (f)
         l->win_ticks++;
+    if (f && s->cur) {
+        /* Busy with an older frame: is the socket full (the link or the
+         * reader is the bottleneck) or waiting for this thread (the daemon
+         * is late: a lower rung would not help)? */
+        struct tcp_probe p;
+        tcp_probe_read(lws_get_socket_fd(s->wsi), &p);
+        if (!p.ok || p.notsent >= l->lowat / 2)
+            l->win_full++;
+    }
     l->win_skips += lost;
     if (lag > l->win_lag)
         l->win_lag = lag;
@@ -262,7 +273,7 @@ static void estimate(struct net *n, struct session *s, double now)
     /* An app-limited sample is a lower bound of the link (we sent less than
      * it takes); a sample of a full pipe is the link. Keep the larger of the
      * recent ones, and let a full-pipe sample lower it after 2 s. */
-    if (p.delivery_bps > 0 && !p.app_limited) {
+    if (p.delivery_bps > 0 && !p.app_limited && now - l->open_t > YOUNG_S) {
         l->cap_bps = p.delivery_bps;
         l->cap_t = now;
     }
@@ -288,9 +299,9 @@ void ladder_police(struct net *n, struct session *s, double now)
     estimate(n, s, now);
     if (now - l->win_t < WINDOW_S)
         return;
-    int ticks = l->win_ticks, skips = l->win_skips, lag = l->win_lag;
+    int ticks = l->win_ticks, skips = l->win_skips, lag = l->win_lag, full = l->win_full;
     l->win_t = now;
-    l->win_ticks = l->win_skips = l->win_lag = 0;
+    l->win_ticks = l->win_skips = l->win_lag = l->win_full = 0;
     if (l->nrungs <= 1 || ticks < 3)
         return;
     /* Nothing taken for a whole window: a stall (a dead radio link, a page
@@ -302,14 +313,19 @@ void ladder_police(struct net *n, struct session *s, double now)
     }
     /* Lost ticks, or running far behind and not catching up (a client
      * working off its keyframes gets closer window after window). */
-    bool congested = skips * 10 > ticks || (lag > LAG_MAX / 2 && lag >= l->prev_lag);
+    bool congested = full > 0 && (skips * 100 > ticks * LOST_MAX_PCT || (lag > LAG_MAX / 2 && l->prev_lag > LAG_MAX / 2 &&
+                                                         lag >= l->prev_lag));
     l->prev_lag = lag;
     bool settling = now - l->changed_t < SETTLE_S;
     if (congested && !settling && l->rung < l->nrungs - 1) {
         if (now - l->up_t < PROBE_FAIL_S)
             l->hold = fmin(l->hold * 2, HOLD_MAX_S);
         int r = l->rung + 1;
-        while (r < l->nrungs - 1 && l->rate_bps > 0 && need_bps(n, s, r) > FIT * l->rate_bps)
+        /* One more at once only on a measured link (a full pipe, past TCP's
+         * start-up) that the next rung does not fit: a sample of a pipe that
+         * was full for another reason (a busy reader, a lost packet) must not
+         * throw the client to the floor. */
+        if (r < l->nrungs - 1 && l->cap_bps > 0 && now - l->cap_t < 5.0 && need_bps(n, s, r) > FIT * l->cap_bps)
             r++;
         snprintf(l->why, sizeof l->why, "congestion: %d of %d ticks lost, %d behind; link %.0f kbit/s",
                  skips, ticks, lag, l->rate_bps * 8 / 1000);

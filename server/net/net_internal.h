@@ -55,12 +55,15 @@ struct text {
  * §7.2 `link`). lws thread only. */
 struct ladder {
     int rung, nrungs;             /* rung in force (0 = as asked), rungs of this subscription */
+    double open_t;                /* when the client connected */
     double changed_t;             /* mono time of the last change of rung */
     double up_t;                  /* ...of the last step up (a step down soon after it is a failed probe) */
     double hold;                  /* seconds without congestion before the next probe up */
     double win_t;                 /* start of the current evaluation window */
     int win_ticks, win_skips;     /* frames published / ticks this client lost, in the window */
     int win_lag;                  /* largest lag (ticks behind the newest frame) seen in the window */
+    int win_full;                 /* ticks at which its socket held about a queue's worth unsent: the link (or
+                                   * the reader) was the bottleneck, not this daemon being late */
     int calm;                     /* windows in a row without congestion */
     int prev_lag;                 /* win_lag of the window before */
     double rate_bps;              /* link estimate (bytes/s): TCP_INFO delivery rate, recent non-app-limited max */
