@@ -321,11 +321,12 @@ void ladder_police(struct net *n, struct session *s, double now)
         if (now - l->up_t < PROBE_FAIL_S)
             l->hold = fmin(l->hold * 2, HOLD_MAX_S);
         int r = l->rung + 1;
-        /* One more at once only on a measured link (a full pipe, past TCP's
-         * start-up) that the next rung does not fit: a sample of a pipe that
-         * was full for another reason (a busy reader, a lost packet) must not
-         * throw the client to the floor. */
-        if (r < l->nrungs - 1 && l->cap_bps > 0 && now - l->cap_t < 5.0 && need_bps(n, s, r) > FIT * l->cap_bps)
+        /* Further at once to the first rung the estimate says fits, once TCP's
+         * start-up is over (its early samples are not the link's). The
+         * estimate is the largest recent sample: one sample of a pipe full for
+         * another reason (a busy reader, a lost packet) does not lower it. */
+        while (r < l->nrungs - 1 && now - l->open_t > YOUNG_S && l->rate_bps > 0 &&
+               need_bps(n, s, r) > FIT * l->rate_bps)
             r++;
         snprintf(l->why, sizeof l->why, "congestion: %d of %d ticks lost, %d behind; link %.0f kbit/s",
                  skips, ticks, lag, l->rate_bps * 8 / 1000);
