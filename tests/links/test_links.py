@@ -181,6 +181,8 @@ async def client_main(url, mode, seconds, pinned, frames_dir):
             if j.get("type") == "link":
                 out["links"].append(dict(t=round(time.time() - t0, 2), rung=j["rung"], sub=j["subscription"],
                                          at_frame=out["frames"]))
+            elif j.get("type") == "degraded":
+                out["degraded"] = j.get("active", False) or out.get("degraded", False)
             elif j.get("type") == "subscribed":
                 out["subscribed"] = j["subscription"]
             elif j.get("type") == "pong":
@@ -271,11 +273,18 @@ def test_slow_link_steps_down():
     finally:
         rc, log = lab.close()
     check(rc == 0, "daemon exit %r: %s" % (rc, log[-2000:]))
+    if not r["links"] and r.get("degraded"):
+        # A daemon short of CPU (a sanitizer build) serves every group coarser
+        # itself (`degraded`): the stream may then fit the link as it is.
+        print("    served coarser by the encode plan (`degraded`): no step needed")
+        return
     check(r["links"], "no `link` message on a 1 Mbit/s link")
     down = [x for x in r["links"] if x["rung"] > 0]
     check(down, "no step down: %r" % r["links"])
     sub = down[0]["sub"]
-    check(sub["lod"] > 0 or "cascades" not in sub, "rung %d serves as asked: %r" % (down[0]["rung"], sub))
+    coarser = (sub["lod"] > 0 or "cascades" not in sub or any(c["lod"] > 1 for c in sub["cascades"])
+               or sub["bound"] > 0.01)
+    check(coarser, "rung %d serves as asked: %r" % (down[0]["rung"], sub))
     after = r["codec_seq"][down[-1]["at_frame"]:]
     check(any(p == n and n > 0 for _, _, p, n in after), "no all-predicted frame on the lower rung")
 
@@ -293,7 +302,9 @@ def test_pinned_skips_instead():
     check(not [x for x in r["links"] if x["rung"] > 0], "a pinned subscription stepped: %r" % r["links"])
     asked = {(0, 0), (0, 2), (1, 1), (2, 1), (3, 1)}
     late = [set(map(tuple, l)) for l in r["lods"][3:]]
-    check(late and all(l <= asked for l in late), "pinned frames at other LODs: %r" % late[:3])
+    check(late, "no frames")
+    if not r.get("degraded"):  # else the encode plan serves it coarser on purpose (`degraded`), not the ladder
+        check(all(l <= asked for l in late), "pinned frames at other LODs: %r" % late[:3])
 
 
 @lab_test
