@@ -85,6 +85,10 @@ size_t metrics_render(char *buf, size_t cap)
     counter(&o, "oceand_subscriptions_refused_busy_total", "Subscriptions refused with `busy` (encode budget).",
             atomic_load(&m->refused_busy));
     counter(&o, "oceand_degraded_messages_total", "`degraded` messages sent to clients.", atomic_load(&m->degraded_sent));
+    counter(&o, "oceand_link_messages_total", "`link` messages sent to clients (their rung changed).", atomic_load(&m->link_sent));
+    counter(&o, "oceand_rung_changes_total", "Changes of a client's rung on its quality ladder.", atomic_load(&m->rung_changes));
+    counter(&o, "oceand_frames_caught_up_total",
+            "Frames sent to a temporal client behind the newest one, to keep its chain.", atomic_load(&m->frames_caught_up));
     counter(&o, "oceand_replans_total", "FFT re-plans after a resolution change.", atomic_load(&m->replans));
     gauge(&o, "oceand_clients", "Connected WebSocket clients.", atomic_load(&m->clients));
     put(&o, "# HELP oceand_clients_rejected_total WebSocket upgrades refused.\n"

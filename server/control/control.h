@@ -43,6 +43,7 @@ struct subscription {
     struct cascade_sub cascade[CTL_MAX_CASCADES]; /* [1 .. ncascades-1]: the finer cascades ([0] unused) */
     double max_rate;        /* frames per second, 0 < r <= tick rate */
     bool temporal;          /* accepts codec 3 (predicted tiles, PROTOCOL.md §5.9); default false */
+    bool pinned;            /* "adapt": false: served as asked whatever the link (no quality ladder) */
     bool all_tiles;
     int ntiles;             /* when !all_tiles */
     uint16_t tiles[CTL_MAX_TILES][2];

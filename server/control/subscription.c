@@ -157,6 +157,11 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
             return ctl_fail(e, "bad_subscription", NULL, "\"temporal\" must be true or false");
         tmp.temporal = cJSON_IsTrue(j);
     }
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "adapt"))) {
+        if (!cJSON_IsBool(j))
+            return ctl_fail(e, "bad_subscription", NULL, "\"adapt\" must be true or false");
+        tmp.pinned = !cJSON_IsTrue(j);
+    }
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "codec"))) {
         /* One encoding per layer is shared by every client, so a client
          * cannot pick the entropy coder: codec 1 is the only one to ask for
@@ -243,6 +248,8 @@ cJSON *control_subscription_object(const struct subscription *s)
     cJSON_AddNumberToObject(o, "bound", bound_text[s->bound_index]);
     cJSON_AddNumberToObject(o, "max_rate", s->max_rate);
     cJSON_AddBoolToObject(o, "temporal", s->temporal);
+    if (s->pinned) /* the default (adapt) is not written: replies stay as they were for clients that never pin */
+        cJSON_AddBoolToObject(o, "adapt", false);
     if (s->ncascades > 1) { /* only when asked for: a client that knows no cascades sees what it always saw */
         cJSON *cs = cJSON_AddArrayToObject(o, "cascades");
         for (int c = 1; c < s->ncascades && c < CTL_MAX_CASCADES; c++) {

@@ -121,6 +121,7 @@ void net_destroy(struct net *n)
         return;
     lws_context_destroy(n->ctx); /* closes every client: CLOSED frees sessions */
     rx_guard_stop();
+    fanout_free_ring(n);
     frame_unref(n->latest);
     dispatch_free_requests(n);
     free(n->status_text);

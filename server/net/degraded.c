@@ -24,7 +24,7 @@ void net_capacity_add(struct net *n, cJSON *msg)
 bool net_capacity_admit(struct net *n, struct session *s, const struct subscription *want, struct ctl_error *e)
 {
     long need, budget;
-    if (!n->sim || sim_admit(n->sim, &s->sub, want, &need, &budget))
+    if (!n->sim || sim_admit(n->sim, &s->eff, want, &need, &budget))
         return true;
     atomic_fetch_add(&g_metrics.refused_busy, 1);
     e->code = "busy";
@@ -42,18 +42,18 @@ bool net_capacity_admit(struct net *n, struct session *s, const struct subscript
  * frame_job.c); it is told the codec either way. */
 static void tell(struct net *n, struct session *s, const struct plan *p)
 {
-    int g = plan_group(s->sub.lod, s->sub.bound_index);
-    bool active = plan_degraded_for(p, g, s->sub.temporal);
+    int g = plan_group(s->eff.lod, s->eff.bound_index);
+    bool active = plan_degraded_for(p, g, s->eff.temporal);
     double rate = (active ? p->rate[g] : 1.0) * n->dc.tick_rate;
-    int lod = active ? p->lod[g] : s->sub.lod;
-    int codec = s->sub.temporal && lod == s->sub.lod && !(active && plan_intra(p, g)) ? 3 : 1;
+    int lod = active ? p->lod[g] : s->eff.lod;
+    int codec = s->eff.temporal && lod == s->eff.lod && !(active && plan_intra(p, g)) ? 3 : 1;
     session_queue_json(s, control_degraded_msg(active, s->sub.lod, lod, codec, rate, active ? p->reason : ""));
     atomic_fetch_add(&g_metrics.degraded_sent, 1);
 }
 
 void net_capacity_tell(struct net *n, struct session *s)
 {
-    if (n->sim && n->told_gen && plan_degraded_for(&n->told, plan_group(s->sub.lod, s->sub.bound_index), s->sub.temporal))
+    if (n->sim && n->told_gen && plan_degraded_for(&n->told, plan_group(s->eff.lod, s->eff.bound_index), s->eff.temporal))
         tell(n, s, &n->told);
 }
 
@@ -67,8 +67,8 @@ void net_capacity_wake(struct net *n)
         return;
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
         struct session *s = session_of(d);
-        int g = plan_group(s->sub.lod, s->sub.bound_index);
-        bool t = s->sub.temporal;
+        int g = plan_group(s->eff.lod, s->eff.bound_index);
+        bool t = s->eff.temporal;
         bool was = n->told_gen && plan_degraded_for(&n->told, g, t), is = plan_degraded_for(&p, g, t);
         if (is ? !was || p.lod[g] != n->told.lod[g] || p.rate[g] != n->told.rate[g] ||
                      (t && plan_intra(&p, g) != plan_intra(&n->told, g))

@@ -652,18 +652,24 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         break;
     }
     case CTL_SUBSCRIBE: {
-        struct subscription *ns = malloc(sizeof *ns); /* ~4 kB (tile list): not on the stack */
+        /* ~4 kB each (tile list): not on the stack. [0] the new one, [1] what was served. */
+        struct subscription *ns = malloc(2 * sizeof *ns);
         if (!ns)
             break;
         if (control_apply_subscribe(m.root, &s->sub, &n->lim, ns, &e) != 0 || !net_capacity_admit(n, s, ns, &e)) {
             session_send_error(s, &e, m.id);
         } else {
+            /* Demand follows what is served: the new subscription at the
+             * ladder's rung (ladder.c), counted before the old one goes. */
             fanout_want_keyframes(n, s, false); /* counted with the old subscription */
-            dispatch_demand(n, ns, +1);
-            dispatch_demand(n, &s->sub, -1);
-            s->sub = *ns;
+            ns[1] = s->eff;
+            s->sub = ns[0];
+            ladder_subscribed(n, s); /* s->eff from s->sub */
+            dispatch_demand(n, &s->eff, +1);
+            dispatch_demand(n, &ns[1], -1);
             fanout_subscribed(n, s); /* temporal: keyframes from the next frame on (PROTOCOL.md §5.9) */
             session_queue_json(s, control_subscribed_msg(&s->sub, m.id));
+            ladder_announce(n, s);
             net_capacity_tell(n, s);
         }
         free(ns);

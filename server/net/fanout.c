@@ -18,39 +18,17 @@
 #include "metrics.h"
 #include "sim_thread.h"
 
-/* Frame `f` replaces the previous one (latest frame wins): every client
- * that did not start sending the previous one skips it, and every client
- * skips the frames in between, which the sim published while this thread
- * was busy and nobody ever saw. Counted here, as it happens, so that a
- * client that stopped reading shows up in the metrics at once; per client
- * the count equals the holes in the seq numbers it receives (while it is
- * subscribed, every tick builds a frame). */
-static void count_skipped(struct net *n, const struct frame *f)
-{
-    if (!n->seen_any)
-        return;
-    uint64_t unseen = f->index > n->seen_index + 1 ? f->index - n->seen_index - 1 : 0;
-    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
-        struct session *s = session_of(d);
-        if (!s->last_seq || s->last_seq >= f->hdr.seq)
-            continue; /* no frame yet (holes count from the first frame on) */
-        uint64_t k = unseen + (s->last_seq < n->seen_seq ? 1 : 0);
-        if (k)
-            atomic_fetch_add(s->sub.max_rate < n->dc.tick_rate ? &g_metrics.dropped_rate : &g_metrics.dropped_slow, k);
-    }
-}
-
 /* Depth of a codec 3 tile is at most 4 (PROTOCOL.md §5.6): a client that
  * holds 4 consecutive ticks can always take the shared tiles. */
 #define TEMPORAL_MAX_NEED 4
 
 void fanout_want_keyframes(struct net *n, struct session *s, bool want)
 {
-    want = want && s->sub.temporal && n->sim; /* edge: its sim sends intra tiles only */
+    want = want && s->eff.temporal && n->sim; /* edge: its sim sends intra tiles only */
     if (want == s->key_wanted)
         return;
     int keys[LAYER_KEYS_ALL] = { 0 }; /* the keys dispatch_demand counts as temporal */
-    subscription_layer_keys(&s->sub, keys, 1);
+    subscription_layer_keys(&s->eff, keys, 1);
     for (int key = 0; key < LAYER_KEYS_ALL; key++)
         if (keys[key])
             sim_want_keyframes(n->sim, key, want ? 1 : -1);
@@ -64,14 +42,92 @@ void fanout_subscribed(struct net *n, struct session *s)
     fanout_want_keyframes(n, s, true);
 }
 
-/* A temporal client that will not get the tick before f (it is busy with an
- * older frame, or max_rate holds it back) loses its chain: it wants this
- * tick's keyframe tiles, so that the next frames carry them. */
-static void note_gaps(struct net *n, const struct frame *f)
+/* ---- recent frames ----
+ *
+ * A temporal client a few ticks behind (a keyframe took longer than a tick
+ * on its link) is sent the tick after the last one it got, not the newest:
+ * it keeps its chain and takes the small shared tiles while it catches up,
+ * instead of skipping to keyframe tiles it can send no faster (the keyframe
+ * trap). net.ring keeps the last NET_RING frames for that; a client more
+ * than LAG_MAX ticks behind skips to the newest as before. */
+static struct frame *ring_find(const struct net *n, uint64_t seq)
+{
+    for (int i = n->nring - 1; i >= 0; i--)
+        if (n->ring[i]->hdr.seq == seq)
+            return n->ring[i];
+    return NULL;
+}
+
+static void ring_clear(struct net *n)
+{
+    for (int i = 0; i < n->nring; i++)
+        frame_unref(n->ring[i]);
+    n->nring = 0;
+}
+
+static void ring_push(struct net *n, struct frame *f)
+{
+    frame_ref(f);
+    if (n->nring == NET_RING) {
+        frame_unref(n->ring[0]);
+        memmove(n->ring, n->ring + 1, sizeof n->ring[0] * (NET_RING - 1));
+        n->nring--;
+    }
+    n->ring[n->nring++] = f;
+    size_t bytes = 0;
+    for (int i = 0; i < n->nring; i++)
+        bytes += frame_bytes(n->ring[i]);
+    while (n->nring > 1 && bytes > NET_RING_MAX_BYTES) { /* large N: fewer frames kept */
+        bytes -= frame_bytes(n->ring[0]);
+        frame_unref(n->ring[0]);
+        memmove(n->ring, n->ring + 1, sizeof n->ring[0] * (size_t)(n->nring - 1));
+        n->nring--;
+    }
+}
+
+void fanout_free_ring(struct net *n) { ring_clear(n); }
+
+/* s will be sent the tick after its last one, newest being f's seq. */
+static bool catching_up(const struct net *n, const struct session *s, uint64_t newest)
+{
+    return s->eff.temporal && s->eff.max_rate >= n->dc.tick_rate && s->hist_seq && s->hist > 0 &&
+           newest <= s->hist_seq + 1 + LAG_MAX && ring_find(n, s->hist_seq + 1);
+}
+
+/* Frames up to index upto that s did not get are holes. They tell the
+ * ladder about the link only when s was busy sending until then (not when it
+ * waited for keyframe tiles or for max_rate). */
+static void count_holes(struct net *n, struct session *s, uint64_t upto)
+{
+    uint64_t done = s->counted_index > s->last_index ? s->counted_index : s->last_index;
+    if (upto <= done)
+        return;
+    uint64_t k = upto - done;
+    s->counted_index = upto;
+    bool throttled = s->eff.max_rate < n->dc.tick_rate;
+    atomic_fetch_add(throttled ? &g_metrics.dropped_rate : &g_metrics.dropped_slow, k);
+    bool busy = s->cur || mono_now() - s->lad.done_t < 1.5 / n->dc.tick_rate;
+    ladder_tick(n, s, NULL, throttled || !busy ? 0 : (int)k, 0);
+}
+
+/* Frame f was published. Per client: the frames it will never get are
+ * counted now (a client that stopped reading shows in the metrics at once;
+ * per client the count equals the holes in the seq numbers it receives),
+ * except for a client still catching up, whose holes are counted when it
+ * skips; its ladder sees the tick and its lag; a temporal client that will
+ * not get the tick before f loses its chain and wants this tick's keyframe
+ * tiles, so that the next frames carry them. */
+static void on_publish(struct net *n, const struct frame *f)
 {
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
         struct session *s = session_of(d);
-        if (s->sub.temporal && !s->key_wanted && s->hist_seq + 1 < f->hdr.seq)
+        bool catching = catching_up(n, s, f->hdr.seq);
+        if (n->seen_any && s->last_seq && s->last_seq < f->hdr.seq && !catching)
+            count_holes(n, s, f->index - 1);
+        /* Behind: still sending a frame older than the one before f. */
+        int lag = s->cur && f->hdr.seq > s->cur->hdr.seq + 1 ? (int)(f->hdr.seq - s->cur->hdr.seq - 1) : 0;
+        ladder_tick(n, s, f, 0, lag > 1000 ? 1000 : lag);
+        if (s->eff.temporal && !s->key_wanted && s->hist_seq + 1 < f->hdr.seq && !catching)
             fanout_want_keyframes(n, s, true);
     }
 }
@@ -87,9 +143,16 @@ void fanout_set_latest(struct net *n, struct frame *f)
         frame_unref(f);
         return;
     }
+    bool temporal = false; /* only temporal clients catch up: nobody else needs the ring's memory */
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d && !temporal; d = d->next)
+        temporal = session_of(d)->eff.temporal;
+    if (f && temporal) {
+        ring_push(n, f);
+    } else {
+        ring_clear(n);
+    }
     if (f) {
-        count_skipped(n, f);
-        note_gaps(n, f);
+        on_publish(n, f);
         n->seen_any = true;
         n->seen_index = f->index;
         n->seen_seq = f->hdr.seq;
@@ -108,6 +171,7 @@ void net_stream_restart(struct net *n)
         s->hist_seq = 0;
     }
     n->seen_any = false;
+    ring_clear(n);
     frame_unref(n->latest);
     n->latest = NULL;
 }
@@ -126,21 +190,25 @@ static bool begin_frame(struct net *n, struct session *s, struct frame *f)
 {
     int tps = f->tiles_per_side;
     int nf = 0;
+    uint64_t samples_per_tile = 0; /* over the layers: for the ladder's bits per sample */
     /* Ticks this client received in a row up to the one before f (§5.9). */
     int usable = s->hist_seq && s->hist_seq + 1 == f->hdr.seq ? s->hist : 0;
     int nshared = 0;
     for (int c = 0; c < OCEAN_MAX_CASCADES; c++) {
         int lod, bound_index;
-        unsigned fields = c < f->ncascades ? subscription_cascade(&s->sub, c, &lod, &bound_index) : 0;
+        unsigned fields = c < f->ncascades ? subscription_cascade(&s->eff, c, &lod, &bound_index) : 0;
         for (int fi = 0; fi < OCEAN_FIELD_COUNT; fi++) {
             int slot = c * OCEAN_FIELD_COUNT + fi;
             s->layers[slot] = NULL;
             if (!(fields & OCEAN_FIELD_BIT(fi)))
                 continue;
-            const struct layer *l = frame_layer_cascade(f, c, fi, c == 0 ? subscription_lod(&s->sub, fi) : lod, bound_index);
+            int llod = c == 0 ? subscription_lod(&s->eff, fi) : lod;
+            const struct layer *l = frame_layer_cascade(f, c, fi, llod, bound_index);
             if (!l)
                 return false;
-            if (s->sub.temporal && l->shared_off && usable >= l->need) {
+            int w = f->hdr.tile_size >> llod;
+            samples_per_tile += (uint64_t)w * (uint64_t)w;
+            if (s->eff.temporal && l->shared_off && usable >= l->need) {
                 s->lbuf[slot] = l->shared.data;
                 s->loff[slot] = l->shared_off;
                 nshared++;
@@ -159,14 +227,16 @@ static bool begin_frame(struct net *n, struct session *s, struct frame *f)
         }
     }
     s->ntiles = 0;
-    if (s->sub.all_tiles) {
+    if (s->eff.all_tiles) {
         for (int i = 0; i < tps * tps; i++)
             s->tiles[s->ntiles++] = (uint16_t)i;
     } else {
-        for (int i = 0; i < s->sub.ntiles; i++)
-            if (s->sub.tiles[i][0] < tps && s->sub.tiles[i][1] < tps)
-                s->tiles[s->ntiles++] = (uint16_t)(s->sub.tiles[i][1] * tps + s->sub.tiles[i][0]);
+        for (int i = 0; i < s->eff.ntiles; i++)
+            if (s->eff.tiles[i][0] < tps && s->eff.tiles[i][1] < tps)
+                s->tiles[s->ntiles++] = (uint16_t)(s->eff.tiles[i][1] * tps + s->eff.tiles[i][0]);
     }
+    s->lad.frame_samples = samples_per_tile * (uint64_t)s->ntiles;
+    s->lad.frame_shared = nf > 0 && nshared == nf;
     struct oc_frame_header h = f->hdr;
     h.tile_count = (uint16_t)(nf * s->ntiles);
     oc_frame_header_write(s->hdr, &h);
@@ -174,12 +244,12 @@ static bool begin_frame(struct net *n, struct session *s, struct frame *f)
     for (int fi = 0; fi < OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT; fi++)
         for (int i = 0; s->layers[fi] && i < s->ntiles; i++)
             s->total += s->loff[fi][s->tiles[i] + 1] - s->loff[fi][s->tiles[i]];
-    if (s->sub.temporal) {
+    if (s->eff.temporal) {
         atomic_fetch_add(&g_metrics.sent_shared_tiles, (uint64_t)(nshared * s->ntiles));
         atomic_fetch_add(&g_metrics.sent_key_tiles, (uint64_t)((nf - nshared) * s->ntiles));
         s->hist = usable + 1;
         s->hist_seq = f->hdr.seq;
-        fanout_want_keyframes(n, s, s->hist < TEMPORAL_MAX_NEED || s->sub.max_rate < n->dc.tick_rate);
+        fanout_want_keyframes(n, s, s->hist < TEMPORAL_MAX_NEED || s->eff.max_rate < n->dc.tick_rate);
     }
     frame_ref(f);
     s->cur = f;
@@ -227,11 +297,11 @@ static size_t fill(struct session *s, unsigned char *dst, size_t cap)
     return n;
 }
 
-static int send_chunk(struct session *s)
+static int send_chunk(struct net *n, struct session *s)
 {
     if (!s->chunk && !(s->chunk = malloc(LWS_PRE + CHUNK_SIZE)))
         return -1;
-    size_t len = fill(s, s->chunk + LWS_PRE, CHUNK_SIZE);
+    size_t len = fill(s, s->chunk + LWS_PRE, ladder_chunk(s));
     bool first = s->sent == 0, last = s->sent + len >= s->total;
     int flags = lws_write_ws_flags(LWS_WRITE_BINARY, first, last);
     if (lws_write(s->wsi, s->chunk + LWS_PRE, len, (enum lws_write_protocol)flags) < (int)len)
@@ -241,6 +311,7 @@ static int send_chunk(struct session *s)
     if (last) {
         atomic_fetch_add(&g_metrics.frames_sent, 1);
         atomic_fetch_add(&g_metrics.bytes_sent, s->total);
+        ladder_frame_done(n, s, s->total);
         frame_unref(s->cur);
         s->cur = NULL;
     }
@@ -253,19 +324,27 @@ static int send_chunk(struct session *s)
 int fanout_write(struct net *n, struct session *s)
 {
     if (!s->cur) {
-        struct frame *f = n->latest;
         if (!fanout_want_write(n, s))
             return 0;
         double now = mono_now();
         /* max_rate: wait until a period has (almost) passed; half a tick of slack absorbs jitter. */
-        if (s->sub.max_rate < n->dc.tick_rate && now - s->last_frame_t < 1.0 / s->sub.max_rate - 0.5 / n->dc.tick_rate)
+        if (s->eff.max_rate < n->dc.tick_rate && now - s->last_frame_t < 1.0 / s->eff.max_rate - 0.5 / n->dc.tick_rate)
             return 0;
-        if (!begin_frame(n, s, f))
+        struct frame *f = n->latest;
+        struct frame *next = catching_up(n, s, f->hdr.seq) ? ring_find(n, s->hist_seq + 1) : NULL;
+        if (next && next != f && begin_frame(n, s, next)) {
+            f = next;
+            atomic_fetch_add(&g_metrics.frames_caught_up, 1);
+        } else if (!begin_frame(n, s, f)) {
             return 0;
+        }
+        if (s->last_seq) /* holes count from the first frame on */
+            count_holes(n, s, f->index - 1);
         s->last_seq = f->hdr.seq;
+        s->last_index = f->index;
         s->last_frame_t = s->progress_t = now;
     }
-    return send_chunk(s) == 0 ? 1 : -1;
+    return send_chunk(n, s) == 0 ? 1 : -1;
 }
 
 /* ---- clients that do not read ----
@@ -297,6 +376,9 @@ void fanout_police(struct net *n)
     if (now - n->police_t < POLICE_PERIOD_S)
         return;
     n->police_t = now;
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
+        if (!session_of(d)->closing)
+            ladder_police(n, session_of(d), now);
     size_t pinned = 0;
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
         struct session *s = session_of(d);

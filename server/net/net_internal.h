@@ -33,7 +33,12 @@
 #include "net.h"
 #include "oc_proto.h"
 
-#define CHUNK_SIZE (32 * 1024)    /* bytes per lws_write of a frame */
+#define CHUNK_SIZE (64 * 1024)    /* bytes per lws_write of a frame, at most: ladder_chunk writes about one tick of the link */
+#define NET_RING 18               /* recent frames kept for temporal clients a few ticks behind (fanout.c) */
+#define NET_RING_MAX_BYTES ((size_t)16 << 20) /* ...and their bytes at most (large N: fewer frames) */
+#define LAG_MAX 15                /* ticks a temporal client may run behind the newest frame to keep its chain:
+                                   * its 4 keyframe ticks at ~3x a shared frame's bytes, on a link that fits the shared ones */
+#define LADDER_MAX_RUNGS 12
 #define MAX_TEXT_QUEUE 256        /* a client this far behind on JSON is not reading: drop it */
 #define TRIM_DELAY_S 0.5          /* after a change of N: time for the builder to free the old grids */
 #define CUT_OFF_GRACE_S 10        /* a client cut off (1008) that does not read its close frame: hung up after */
@@ -46,6 +51,36 @@ struct text {
     unsigned char data[];         /* LWS_PRE bytes, then the message */
 };
 
+/* The link estimate and quality ladder of one client (ladder.c, PROTOCOL.md
+ * §7.2 `link`). lws thread only. */
+struct ladder {
+    int rung, nrungs;             /* rung in force (0 = as asked), rungs of this subscription */
+    double open_t;                /* when the client connected */
+    double changed_t;             /* mono time of the last change of rung */
+    double up_t;                  /* ...of the last step up (a step down soon after it is a failed probe) */
+    double hold;                  /* seconds without congestion before the next probe up */
+    double win_t;                 /* start of the current evaluation window */
+    int win_ticks, win_skips;     /* frames published / ticks this client lost, in the window */
+    int win_lag;                  /* largest lag (ticks behind the newest frame) seen in the window */
+    int win_full;                 /* ticks at which its socket held about a queue's worth unsent: the link (or
+                                   * the reader) was the bottleneck, not this daemon being late */
+    int calm;                     /* windows in a row without congestion */
+    int prev_lag;                 /* win_lag of the window before */
+    double rate_bps;              /* link estimate (bytes/s): TCP_INFO delivery rate, recent non-app-limited max */
+    double rate_t;                /* when rate_bps was last raised by a sample */
+    double cap_bps, cap_t;        /* the last sample of a full pipe (not app-limited): the link, measured */
+    double rtt_ms;                /* smoothed RTT */
+    uint32_t notsent;             /* bytes written and not sent yet, last sample */
+    uint32_t lowat;               /* TCP_NOTSENT_LOWAT in force */
+    double bits_t, bits_i;        /* bits per sample of shared (temporal) and keyframe/intra frames, EWMA */
+    double bits_r[LADDER_MAX_RUNGS]; /* ...of shared frames per rung, 0 = never seen */
+    double done_t;                /* when the last frame's last byte was handed to the kernel */
+    uint64_t frame_samples;       /* samples of the frame in progress */
+    bool frame_shared;            /* ...and whether all its tiles were shared (temporal) ones */
+    bool told;                    /* a `link` message went out for this subscription */
+    char why[112];                /* reason of the last change, for `link` */
+};
+
 /* One WebSocket client: lws' per-session data of the oceand.v1 protocol.
  * Every field is written and read on the lws thread only (session.c,
  * dispatch.c, fanout.c); no other thread ever sees a session. */
@@ -56,7 +91,9 @@ struct session {
     char client_id[24];           /* "c<serial>": hello.client_id, params.by */
     char name[CTL_NAME_BYTES];    /* display name (`name`, or a set's "name"), "" = none: params.by_name */
     bool controller;              /* may set without a token */
-    struct subscription sub;      /* in force; counted in the sim's demand */
+    struct subscription sub;      /* as asked (`subscribed`) */
+    struct subscription eff;      /* as served: sub at the ladder's rung; counted in the sim's demand */
+    struct ladder lad;            /* ladder.c */
 
     /* receive */
     char *rx;                     /* a text message being assembled from fragments */
@@ -86,6 +123,8 @@ struct session {
     size_t off;                   /* ...and byte within the tile */
     uint64_t first_seq;           /* frames older than this are never sent (tick at join) */
     uint64_t last_seq;            /* seq of the last frame started, 0 = none yet */
+    uint64_t last_index;          /* its frame.index */
+    uint64_t counted_index;       /* frames up to this index are counted as sent or skipped */
     double last_frame_t;          /* when it started (max_rate) */
     double progress_t;            /* when a byte of the frame in progress was last written (stall rule) */
     /* temporal layers (codec 3, PROTOCOL.md §5.9; fanout.c) */
@@ -139,6 +178,8 @@ struct net {
     struct sim *sim;              /* main writes (net_attach_sim) outside the service loop; lws reads */
     struct query_service *queries; /* main writes (net_attach_queries) outside the loop; lws reads (query, probe) */
     struct frame *latest;         /* newest frame taken from the sim (one reference), or NULL */
+    struct frame *ring[NET_RING]; /* the newest frames, oldest first (one reference each; latest is the last) */
+    int nring;
     uint64_t seen_index;          /* frame.index of the last frame taken (skip counting) */
     uint64_t seen_seq;            /* its seq */
     bool seen_any;                /* a frame was taken at least once */
@@ -217,7 +258,8 @@ void fanout_set_latest(struct net *n, struct frame *f);      /* takes f's refere
 bool fanout_want_write(const struct net *n, const struct session *s); /* a frame is ready for s */
 int fanout_write(struct net *n, struct session *s);          /* one lws_write of a frame */
 void fanout_session_free(struct session *s);
-void fanout_police(struct net *n);
+void fanout_police(struct net *n);                           /* also each client's ladder, ~10 Hz */
+void fanout_free_ring(struct net *n);
 /* Close s with status (1008) after dropping its queued replies; a client
  * that never reads is hung up by a timeout (session.c). */
 void session_cut_off(struct session *s, int status, const char *reason);                           /* close clients that do not read (stalled, pinned) */
@@ -226,6 +268,19 @@ void session_cut_off(struct session *s, int status, const char *reason);        
  * subscription changes or the session goes, so the counts stay balanced. */
 void fanout_subscribed(struct net *n, struct session *s);
 void fanout_want_keyframes(struct net *n, struct session *s, bool want);
+
+/* ladder.c: per-client link estimate and quality ladder */
+void ladder_open(struct net *n, struct session *s);          /* after the socket is set up */
+void ladder_subscribed(struct net *n, struct session *s);    /* s->sub changed: rebuild s->eff at the rung in force */
+void ladder_announce(struct net *n, struct session *s);      /* after `subscribed`: `link` if the rung is not 0 */
+void ladder_tick(struct net *n, struct session *s, const struct frame *f, int lost, int lag); /* a frame was published */
+void ladder_frame_done(struct net *n, struct session *s, size_t bytes);
+void ladder_police(struct net *n, struct session *s, double now);  /* ~10 Hz: estimate, decide */
+size_t ladder_chunk(const struct session *s);                /* bytes to hand to one lws_write */
+/* tcp_probe.c: TCP_INFO without netinet/tcp.h's truncated struct */
+struct tcp_probe { double delivery_bps, rtt_ms; uint32_t notsent; bool app_limited, ok; };
+void tcp_probe_read(int fd, struct tcp_probe *p);
+void tcp_probe_lowat(int fd, uint32_t bytes);
 
 /* capacity.c: capacity in hello/params, `busy`, `degraded` (server/tick/capacity.h) */
 void net_capacity_add(struct net *n, cJSON *msg);            /* "capacity" member into msg */

@@ -140,7 +140,8 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
      * frame built may be minutes old (PROTOCOL.md §3.1). */
     s->first_seq = n->sim ? sim_seq(n->sim) : net_latest_seq(n);
     subscription_default(&s->sub, n->dc.tick_rate);
-    dispatch_demand(n, &s->sub, +1);
+    ladder_open(n, s); /* s->eff = s->sub: the first rung until the link says otherwise */
+    dispatch_demand(n, &s->eff, +1);
     lws_dll2_add_tail(&s->list, &n->sessions);
     atomic_store(&g_metrics.clients, (int)n->sessions.count);
     struct hello_info h = {
@@ -166,7 +167,7 @@ static void session_close(struct net *n, struct session *s)
     atomic_store(&g_metrics.clients, (int)n->sessions.count);
     LOGD("client %s gone (%d left)", s->client_id, (int)n->sessions.count);
     fanout_want_keyframes(n, s, false);
-    dispatch_demand(n, &s->sub, -1);
+    dispatch_demand(n, &s->eff, -1);
     query_client_gone(n->queries, s->serial);
     if (n->cluster.client_gone) /* edge: its probe at the sim ends */
         n->cluster.client_gone(n->cluster.user, s->serial);

@@ -1348,7 +1348,10 @@ def test_viewers_cannot_exceed_encode_budget():
                 clients.append(ws)
             # everyone off the default first, onto one cheap shared layer
             for ws in clients:
-                await ws.send(json.dumps({"type": "subscribe", "fields": ["height"], "lod": 4, "bound": 0.05}))
+                # adapt: false: these clients read no frames; the layers they are
+                # counted on must stay the ones they asked for (no ladder, `link`)
+                await ws.send(json.dumps({"type": "subscribe", "fields": ["height"], "lod": 4, "bound": 0.05,
+                                          "adapt": False}))
                 m = await recv_json(ws, lambda m: m["type"] in ("error", "subscribed"))
                 check(m["type"] == "subscribed", "shared cheap layer refused: %r" % m)
             fields = ["height", "dx", "dz", "slope_x", "slope_z", "jacobian"]
@@ -1446,7 +1449,9 @@ def test_foam_field_streamed(d):
         # The calibration's grid (N = 256 on 256 m): finer or coarser grids resolve other waves.
         await a.send(json.dumps({"type": "set", "id": 1, "params": {"wind_speed": 20, "resolution": 256}}))
         await recv_json(a, lambda m: m["type"] == "params")
-        await a.send(json.dumps({"type": "subscribe", "id": 2, "fields": ["foam"], "bound": 0.01}))
+        # adapt: false: this reader decodes in Python, slower than the tick; the
+        # ladder would otherwise serve it coarser (PROTOCOL.md §7.2 `link`).
+        await a.send(json.dumps({"type": "subscribe", "id": 2, "fields": ["foam"], "bound": 0.01, "adapt": False}))
         s = await recv_json(a, lambda m: m["type"] == "subscribed")
         check(s["subscription"]["fields"] == ["foam"], "subscribed %r" % s)
         covered = []

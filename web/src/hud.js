@@ -73,6 +73,7 @@ export class Hud {
       `latency  ${f(s.latencyMs, 0)} ms   dropped ${s.dropped}\n` +
       `decode   ${f(s.decodeMs, 2)} ms  upload ${f(s.uploadMs, 2)} ms\n` +
       `N ${st.n ?? '–'}  lod ${st.lod ?? '–'}  foam ${st.foamLod === null || st.foamLod === undefined ? 'from folds' : `lod ${st.foamLod}`}\n` +
-      `params v${st.paramsVersion ?? '–'}  seq ${st.lastSeq ?? '–'}` + err;
+      `params v${st.paramsVersion ?? '–'}  seq ${st.lastSeq ?? '–'}\n` +
+      `link     rung ${st.link ? `${st.link.rung}/${st.link.rungs - 1}  ${f(st.link.link_kbps / 1000, 1)} Mbit/s` : '0 (as asked)'}` + err;
   }
 }

@@ -154,6 +154,9 @@ const conn = new Connection(serverUrl(), {
         st.subscription = msg.subscription || msg;
         panel.subscribed(msg.subscription || msg);
         break;
+      case 'link': // the server's quality ladder for this link (PROTOCOL.md §7.2): shown in the HUD
+        st.link = msg;
+        break;
       case 'status': // cluster edge: the simulation behind it is unavailable (or back); the socket stays open
         st.clusterState = msg.state;
         hud.message(msg.state === 'ok' ? '' : (msg.message || 'simulation unavailable'));

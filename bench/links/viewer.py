@@ -1,0 +1,145 @@
+#!/usr/bin/python3
+"""One viewer of the link lab (bench/links/run.sh): subscribes like the web
+client, reads every frame as it arrives, and prints one JSON object with
+what it saw over the measured window:
+
+  fps, ticks (share of the ticks in the window it received), latency p50/p95
+  (arrival minus the frame's server_time_us: both clocks are this machine's),
+  kB/frame, codec shares of its tiles, the rung (`link` messages), and the
+  round trip of a `set` that changes nothing (sent every second).
+
+    viewer.py URL --seconds 20 --warmup 5 [--pinned] [--stall-log FILE]
+    viewer.py URL --timeline ...   also a per-second list (fps, temporal share, rung)
+"""
+import argparse
+import asyncio
+import json
+import struct
+import sys
+import time
+
+import websockets
+
+WEB_SUB = {"type": "subscribe", "id": "sub", "fields": ["height", "dx", "dz", "foam"], "field_lod": {"foam": 2},
+           "cascades": [{"fields": ["height"], "lod": 1, "bound": 0.001}] * 3, "temporal": True}
+
+
+def frame_info(b):
+    seq, = struct.unpack_from("<Q", b, 8)
+    tile_count, = struct.unpack_from("<H", b, 36)
+    server_us, = struct.unpack_from("<Q", b, 40)
+    hsize, = struct.unpack_from("<H", b, 6)
+    off = hsize
+    codecs = {}
+    lods = set()
+    for _ in range(tile_count):
+        codec = b[off + 2]
+        lods.add(b[off + 1])
+        plen, = struct.unpack_from("<I", b, off + 32)
+        codecs[codec] = codecs.get(codec, 0) + 1
+        off += 40 + plen
+    return seq, server_us, codecs, lods
+
+
+def pct(v, p):
+    if not v:
+        return None
+    v = sorted(v)
+    return v[min(len(v) - 1, int(p / 100 * len(v)))]
+
+
+async def run(a):
+    sub = dict(WEB_SUB)
+    if a.pinned:
+        sub["adapt"] = False
+    frames = []       # (t_arrival, seq, bytes, codecs, latency_ms)
+    links = []        # (t, rung, msg)
+    sets = []         # round trips (ms)
+    pending = {}
+    t_start = time.time()
+    async with websockets.connect(a.url, subprotocols=["oceand.v1"], max_size=None, ping_interval=None,
+                                  open_timeout=20) as ws:
+        hello = json.loads(await ws.recv())
+        wind = hello["params"]["wind_speed"]
+        await ws.send(json.dumps(sub))
+        next_set = time.time() + 1
+        k = 0
+        while time.time() - t_start < a.warmup + a.seconds:
+            if a.sets and time.time() >= next_set:
+                k += 1
+                pending["s%d" % k] = time.time()
+                await ws.send(json.dumps({"type": "set", "id": "s%d" % k, "params": {"wind_speed": wind}}))
+                next_set += 1
+            try:
+                m = await asyncio.wait_for(ws.recv(), 0.2)
+            except asyncio.TimeoutError:
+                continue
+            now = time.time()
+            if isinstance(m, bytes):
+                seq, sus, codecs, lods = frame_info(m)
+                frames.append((now, seq, len(m), codecs, (now * 1e6 - sus) / 1000, lods))
+                continue
+            j = json.loads(m)
+            if j.get("type") == "link":
+                links.append((now, j.get("rung"), j))
+            elif j.get("id") in pending and j.get("type") in ("params", "error"):
+                sets.append((now - pending.pop(j["id"])) * 1000)
+    t0 = t_start + a.warmup
+    win = [f for f in frames if f[0] >= t0]
+    out = {"link": a.name}
+    if len(win) >= 2:
+        span = win[-1][0] - win[0][0]
+        seqs = win[-1][1] - win[0][1] + 1
+        tiles = {}
+        for f in win:
+            for c, n in f[3].items():
+                tiles[c] = tiles.get(c, 0) + n
+        nt = sum(tiles.values()) or 1
+        lat = [f[4] for f in win]
+        out.update(fps=round((len(win) - 1) / span, 1) if span > 0 else None,
+                   ticks=round(len(win) / seqs, 3),
+                   latency_p50_ms=round(pct(lat, 50), 1), latency_p95_ms=round(pct(lat, 95), 1),
+                   kb_frame=round(sum(f[2] for f in win) / len(win) / 1000, 1),
+                   codec_shares={str(c): round(n / nt, 3) for c, n in sorted(tiles.items())},
+                   temporal=round(tiles.get(3, 0) / nt, 3),
+                   lods=sorted(set().union(*[f[5] for f in win])))
+    else:
+        out.update(fps=0, ticks=0)
+    out["rung"] = links[-1][1] if links else 0
+    out["rung_changes"] = len(links)
+    if links:
+        out["link_kbps"] = links[-1][2].get("link_kbps")
+    out["set_rtt_p50_ms"] = round(pct(sets, 50), 1) if sets else None
+    out["set_rtt_max_ms"] = round(max(sets), 1) if sets else None
+    if a.timeline:
+        tl = []
+        for sec in range(int(a.warmup + a.seconds)):
+            fs = [f for f in frames if t_start + sec <= f[0] < t_start + sec + 1]
+            nt = sum(sum(f[3].values()) for f in fs) or 1
+            rung = 0
+            for lt, r, _ in links:
+                if lt < t_start + sec + 1:
+                    rung = r
+            tl.append([sec, len(fs), round(sum(f[3].get(3, 0) for f in fs) / nt, 2), rung])
+        out["timeline"] = tl
+    if a.rungs:
+        out["links"] = [dict(t=round(t - t_start, 2), rung=r, reason=j.get("reason")) for t, r, j in links]
+    print(json.dumps(out), flush=True)
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("url")
+    p.add_argument("--name", default="")
+    p.add_argument("--seconds", type=float, default=20)
+    p.add_argument("--warmup", type=float, default=5)
+    p.add_argument("--pinned", action="store_true")
+    p.add_argument("--sets", type=int, default=1)
+    p.add_argument("--timeline", action="store_true")
+    p.add_argument("--rungs", action="store_true")
+    a = p.parse_args()
+    asyncio.run(run(a))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,29 @@
+# mk/links.mk — the link lab: a stream that fits every link (PROTOCOL.md §7.2
+# `link`, server/net/ladder.c). Two network namespaces joined by a userspace
+# shaper (bench/links/shaper.c: rate, delay, loss, drop-tail queue; this
+# kernel has no netem), oceand in one, viewers in the other. Needs root; a
+# run without it says so (bench) or runs the loopback part only (test).
+#
+#   make bench-links    one JSON object per link: fps, share of ticks, latency
+#                       p50/p95, kB/frame, codec shares, rung, set round trip
+#                       (LINKS="10M:10000:50:0 ..." to choose; see bench/links/run.sh)
+#   make test-links     behaviour, never timings: the ladder steps down on a slow
+#                       link, a stall recovers to temporal tiles that decode,
+#                       replies overtake frames, adapt:false pins (~1.5 min)
+
+SHAPER := $(BUILD)/shaper
+LINKS ?=
+
+TESTS   += test-links
+BENCHES += bench-links
+
+$(SHAPER): bench/links/shaper.c
+	@mkdir -p $(dir $@)
+	$(CC) -O2 -g -std=c11 $(WARN) -o $@ $<
+
+.PHONY: bench-links test-links
+bench-links: $(BUILD)/oceand $(SHAPER)
+	bench/links/run.sh $(BUILD)/oceand $(SHAPER) $(LINKS)
+
+test-links: $(BUILD)/oceand $(SHAPER) $(BUILD)/frame_check
+	/usr/bin/python3 tests/links/test_links.py --oceand $(BUILD)/oceand --shaper $(SHAPER) --frame-check $(BUILD)/frame_check
