@@ -16,7 +16,6 @@ import signal
 import sys
 import tempfile
 import time
-import traceback
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "daemon"))
@@ -24,7 +23,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 import oceand_proc  # noqa: E402
 import test_cluster_roles as cr  # noqa: E402
 import test_daemon as td  # noqa: E402
-from test_cluster_roles import Cluster, Node, wait_for, expect_status  # noqa: E402
+from test_cluster_roles import Cluster, Node, wait_for  # noqa: E402
 from test_daemon import TestFailure, check, connect, recv_json, recv_frame  # noqa: E402
 
 ARGS = None
@@ -111,18 +110,7 @@ class JsCluster(Cluster):
 
 
 def with_js_cluster(**kw):
-    def deco(fn):
-        def run():
-            c = JsCluster(**kw)
-            ok = False
-            try:
-                fn(c)
-                ok = True
-            finally:
-                c.close(failed=not ok)
-        run.__name__ = fn.__name__
-        return run
-    return deco
+    return cr.with_cluster(JsCluster, **kw)
 
 
 # ---------------------------------------------------------------- tests
@@ -477,22 +465,7 @@ def main():
     if not os.path.exists(oceand_proc.NATS_BIN):
         print("nats-server not found (scripts/deps.sh installs it)")
         return 1
-    passed = failed = 0
-    for fn in TESTS:
-        if ARGS.k and ARGS.k not in fn.__name__:
-            continue
-        t0 = time.time()
-        try:
-            fn()
-            passed += 1
-            print("PASS %s (%.1f s)" % (fn.__name__, time.time() - t0))
-        except Exception:
-            failed += 1
-            print("FAIL %s" % fn.__name__)
-            traceback.print_exc()
-        sys.stdout.flush()
-    print("%d passed, %d failed" % (passed, failed))
-    return 1 if failed else 0
+    return cr.run_tests(TESTS, ARGS.k)
 
 
 if __name__ == "__main__":

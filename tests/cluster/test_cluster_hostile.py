@@ -18,11 +18,10 @@ import socket
 import struct
 import sys
 import time
-import traceback
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import test_cluster_roles as tcr  # noqa: E402
-from test_cluster_roles import Cluster, check, connect, recv_frame, recv_json, wait_for  # noqa: E402
+from test_cluster_roles import check, connect, recv_frame, recv_json  # noqa: E402
 
 PREFIX = "oceand"
 
@@ -255,22 +254,7 @@ def main():
     args = ap.parse_args()
     tcr.ARGS = args
     tcr.td.ARGS = args
-    passed = failed = 0
-    for fn in TESTS:
-        if args.k and args.k not in fn.__name__:
-            continue
-        t0 = time.time()
-        try:
-            fn()
-            passed += 1
-            print("PASS %s (%.1f s)" % (fn.__name__, time.time() - t0))
-        except Exception:
-            failed += 1
-            print("FAIL %s" % fn.__name__)
-            traceback.print_exc()
-        sys.stdout.flush()
-    print("%d passed, %d failed" % (passed, failed))
-    return 1 if failed else 0
+    return tcr.run_tests(TESTS, args.k)
 
 
 if __name__ == "__main__":

@@ -137,10 +137,12 @@ def test(fn):
     return fn
 
 
-def with_cluster(**kw):
+def with_cluster(cls=None, **kw):
+    """The test runs against a fresh cluster of class cls (Cluster by default),
+    closed afterwards (its logs printed when the test failed)."""
     def deco(fn):
         def run():
-            c = Cluster(**kw)
+            c = (cls or Cluster)(**kw)
             ok = False
             try:
                 fn(c)
@@ -635,22 +637,12 @@ def test_kill_restart_cycles_under_load(c):
     asyncio.run(run())
 
 
-def main():
-    global ARGS
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--oceand", required=True)
-    ap.add_argument("--cycles", type=int, default=5)
-    ap.add_argument("--recovery-s", type=float, default=2.0, help="frames again this soon after recovery")
-    ap.add_argument("-k", default="")
-    ARGS = ap.parse_args()
-    td.ARGS = ARGS
-    if not os.path.exists(oceand_proc.NATS_BIN):
-        print("nats-server not found (scripts/deps.sh installs it)")
-        print("0 passed, 1 failed")
-        return 1
+def run_tests(tests, only=""):
+    """Each test (those whose name contains `only`), its PASS or FAIL, and the
+    closing "N passed, N failed" line; the exit status. The cluster suites share it."""
     passed = failed = 0
-    for fn in TESTS:
-        if ARGS.k and ARGS.k not in fn.__name__:
+    for fn in tests:
+        if only and only not in fn.__name__:
             continue
         t0 = time.time()
         try:
@@ -664,6 +656,22 @@ def main():
         sys.stdout.flush()
     print("%d passed, %d failed" % (passed, failed))
     return 1 if failed else 0
+
+
+def main():
+    global ARGS
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--oceand", required=True)
+    ap.add_argument("--cycles", type=int, default=5)
+    ap.add_argument("--recovery-s", type=float, default=2.0, help="frames again this soon after recovery")
+    ap.add_argument("-k", default="")
+    ARGS = ap.parse_args()
+    td.ARGS = ARGS
+    if not os.path.exists(oceand_proc.NATS_BIN):
+        print("nats-server not found (scripts/deps.sh installs it)")
+        print("0 passed, 1 failed")
+        return 1
+    return run_tests(TESTS, ARGS.k)
 
 
 if __name__ == "__main__":
