@@ -41,6 +41,11 @@ const sky = new SkyModel(renderer);
 const ocean = new Ocean(renderer, sky.uniforms, { detail: Number(query.get('detail') || 1), skirts: query.get('skirt') !== '0', hexTiling: query.get('hex') !== '0' });
 ocean.setCrackFixes({ stitch: query.get('stitch') !== '0', skirts: query.get('skirt') !== '0' });
 sky.uniforms.uGapProbe.value = query.get('gapprobe') === '1' ? 1 : 0; // ?gapprobe=1: magenta sky and skirts (tests)
+// ?debugview=foam: the water writes (foam amount, -Jacobian, height) as colour; ?foamshift=x,z
+// moves every foam lookup by (x, z) metres (tests: foam placed away from its crests).
+ocean.uniforms.uDebugView.value = query.get('debugview') === 'foam' ? 1 : 0;
+const foamShift = (query.get('foamshift') || '').split(',').map(Number);
+if (foamShift.length === 2 && foamShift.every(Number.isFinite)) ocean.uniforms.uFoamShift.value.set(...foamShift);
 const stats = new Stats();
 const hud = new Hud(document.getElementById('hud'), document.getElementById('banner'), { compact });
 if (query.get('hud') === '0') hud.setVisible(false, false); // ?hud=0: hide for this visit only
@@ -265,6 +270,29 @@ function resize() {
   }
 }
 
+// The camera never goes below the displaced surface beneath it + CAMERA_CLEARANCE (the
+// orbit's polar limit only keeps it above sea level; a storm's crests are metres higher).
+// The surface is read from the grids drawn (cascade 0 and the finer cascades), at the
+// camera and a ring of points as wide as the near plane's half-diagonal, so the view does
+// not cut into a crest beside it. ?camfloor=0 turns it off (tests show what it prevents).
+const CAMERA_CLEARANCE = 1;
+const camFloor = query.get('camfloor') !== '0';
+function clearanceAt(x, z) {
+  let h = ocean.surfaceHeight(x, z);
+  const r = 0.6; // metres: beyond the near plane's corners (0.5 m, 55° field of view)
+  for (let k = 0; k < 6; k++) h = Math.max(h, ocean.surfaceHeight(x + r * Math.cos(k * Math.PI / 3), z + r * Math.sin(k * Math.PI / 3)));
+  return h;
+}
+function keepAboveWaves() {
+  if (!camFloor || !ocean.hasData) return;
+  const p = camera.position, floor = clearanceAt(p.x, p.z) + CAMERA_CLEARANCE;
+  if (p.y >= floor) return;
+  p.y = floor;
+  // Looking at a target above the camera would flip the orbit: keep the target lower.
+  if (controls.target.y > p.y - 0.5) controls.target.y = p.y - 0.5;
+  camera.lookAt(controls.target);
+}
+
 function frameLoop() {
   const now = performance.now();
   resize();
@@ -284,6 +312,7 @@ function frameLoop() {
     stats.latencyMs = (performance.timeOrigin + now) - f.header.serverTimeUs / 1000;
   }
   controls.update();
+  keepAboveWaves();
   // Sky, sun and light follow the local hour and the shared sea's wind; haze thickens with it.
   if (sky.update(view.hour, st.params?.wind_speed ?? 10)) ocean.uniforms.uFogDensity.value = 0.00009 * (1 + 4 * sky.state.overcast ** 2);
   if (!bench) ocean.render(camera, now);
@@ -330,6 +359,42 @@ if (query.has('test')) {
   window.oceandTest = Object.freeze({
     freeze(on) { view.freeze = !!on; panel.refreshView(); },
     crackFixes(fixes) { ocean.setCrackFixes(fixes); },
+    // The grids drawn around (x, z), as plain arrays (tests compute the surface beneath the
+    // camera themselves): the nodes of cascade 0 within r metres, of both frames blended
+    // ((dx, h, dz) at node (i0 + a, j0 + b) = patch-periodic index), and the finer cascades'.
+    grids(x, z, r) {
+      const win = (data, m, L, stride) => {
+        const cell = L / m, i0 = Math.floor((x - r) / cell), j0 = Math.floor((z - r) / cell), w = Math.ceil(2 * r / cell) + 2;
+        const out = [];
+        for (let b = 0; b < w; b++) for (let a = 0; a < w; a++) {
+          const i = ((i0 + a) % m + m) % m, j = ((j0 + b) % m + m) % m, k = stride * (j * m + i);
+          out.push(data[k], data[k + 1], data[k + 2]);
+        }
+        return { cell, i0, j0, w, v: out };
+      };
+      return {
+        disp: ocean.disp.filter((t) => t && t.image.data.length === ocean.m * ocean.m * 4).map((t) => win(t.image.data, ocean.m, ocean.patch, 4)),
+        cascades: [1, 2, 3].map((c) => (ocean.cascades[c] && ocean.uniforms.uCOn.value.getComponent(c - 1) > 0
+          ? ocean.cascades[c].tex.map((t) => win(t.image.data, ocean.cascades[c].m, ocean.uniforms.uCPatch.value.getComponent(c - 1), 4)) : null)),
+      };
+    },
+    // Where a world point lands on the canvas, in CSS pixels (null: behind the camera).
+    project([x, y, z]) {
+      const v = new THREE.Vector3(x, y, z).project(camera);
+      if (v.z > 1) return null;
+      return [(v.x + 1) / 2 * canvas.clientWidth, (1 - v.y) / 2 * canvas.clientHeight];
+    },
+    slopeVariance() { return ocean.slopeVar || null; },
+    // The foam field drawn: size, and the share of samples at >= 0.5 and > 0.1.
+    foamStats() {
+      const f = ocean.foam[1]?.image.data;
+      if (!f) return null;
+      let half = 0, some = 0;
+      for (const v of f) { half += v >= 0.5; some += v > 0.1; }
+      return { size: ocean.foamM, covered: half / f.length, some: some / f.length, jc: ocean.uniforms.uFoamJc.value };
+    },
+    // Put the camera at pos looking at target (as the URL's ?cam= and ?target= do).
+    look(pos, target) { camera.position.set(...pos); controls.target.set(...target); controls.update(); },
   });
 }
 
