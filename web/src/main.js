@@ -47,6 +47,22 @@ ocean.uniforms.uDebugView.value = query.get('debugview') === 'foam' ? 1 : 0;
 const foamShift = (query.get('foamshift') || '').split(',').map(Number);
 if (foamShift.length === 2 && foamShift.every(Number.isFinite)) ocean.uniforms.uFoamShift.value.set(...foamShift);
 const stats = new Stats();
+// Notes about the shared sea (who changed what, a restart) also reach a user whose panel
+// is closed (phones start so): a line at the bottom for a few seconds.
+const toast = document.createElement('div');
+toast.id = 'toast';
+toast.dataset.ui = 'toast';
+toast.setAttribute('role', 'status');
+toast.hidden = true;
+document.body.appendChild(toast);
+let toastTimer = 0;
+function showToast(text) {
+  if (!panel.closed) return;
+  toast.textContent = text;
+  toast.hidden = false;
+  clearTimeout(toastTimer);
+  toastTimer = setTimeout(() => { toast.hidden = true; }, 8000);
+}
 const hud = new Hud(document.getElementById('hud'), document.getElementById('banner'), { compact });
 if (query.get('hud') === '0') hud.setVisible(false, false); // ?hud=0: hide for this visit only
 if (query.get('ui') === '0') document.body.classList.add('oc-no-ui'); // ?ui=0: the sea alone (pictures, measurements)
@@ -122,7 +138,10 @@ const conn = new Connection(serverUrl(), {
   onMessage(msg) {
     if (probe.onMessage(msg)) return; // the buoy marker's probe/query answers (probe.js)
     switch (msg.type) {
-      case 'hello':
+      case 'hello': {
+        // A new session after an old one: did the sea change meanwhile? A lower parameters
+        // version means the daemon restarted (without its saved state, if the sea differs).
+        const prev = lastHello ? { params: st.params, version: st.paramsVersion } : null;
         st.clientId = msg.client_id; st.role = msg.role; st.name = null;
         st.lastSeq = null; // a new session: seq gaps across a reconnect are not drops
         worker.postMessage({ type: 'reset' }); // its references belong to the old session
@@ -140,7 +159,16 @@ const conn = new Connection(serverUrl(), {
           if (Object.keys(wantedSub).length || foam || casc) conn.send({ type: 'subscribe', ...(casc || {}), ...wantedSub, ...(foam || {}) });
         }
         hud.message('');
+        if (prev && prev.params) {
+          const diff = panel.differences(prev.params, msg.params || {});
+          const restarted = msg.params_version < prev.version;
+          if (diff.length) {
+            st.restartNote = `${restarted ? 'the server restarted and the sea was reset' : 'the sea changed while you were away'}: ${diff.slice(0, 4).join(', ')}${diff.length > 4 ? ', …' : ''}`;
+            panel.announce(st.restartNote);
+          } else if (restarted) panel.announce(`the server restarted; the sea is as it was (you are now ${msg.client_id})`);
+        }
         break;
+      }
       case 'params':
         st.params = msg.params; st.paramsVersion = msg.params_version;
         panel.update(msg);
@@ -200,6 +228,8 @@ const panel = new Panel({
   },
 }, { compact: compact || query.get('panel') === 'closed' });
 hud.onToggle = (on) => { view.hud = on; panel.refreshView(); };
+panel.onAnnounce = showToast;
+hud.onBanner = (shown) => { if (shown) toast.hidden = true; }; // the banner's place
 if (query.get('wireframe') === '1') { view.wireframe = true; ocean.wireframe = true; panel.refreshView(); }
 // H shows or hides the status (not while typing in a panel field).
 window.addEventListener('keydown', (ev) => {
@@ -237,6 +267,7 @@ worker.onmessage = (ev) => {
   const msg = ev.data;
   if (msg.type === 'behind') { workerBusy -= msg.count; dropped(); return; } // it dropped its queue
   workerBusy--;
+  if (msg.type === 'skip' || msg.type === 'frame') { stats.decoded(msg.seq ?? msg.header?.seq, msg.serverTimeUs ?? msg.header?.serverTimeUs); stats.lastDecodedAt = performance.now(); }
   if (msg.type === 'skip') return; // decoded (a reference for the next), overtaken before assembly
   if (msg.type === 'error' && msg.code === 'reference') { st.referenceErrors++; resync(); return; }
   if (msg.type === 'error') { st.lastError = { code: 'decode', message: msg.message }; return; }
@@ -293,6 +324,24 @@ function keepAboveWaves() {
   camera.lookAt(controls.target);
 }
 
+// Settings whose waves are all shorter than the grids resolve (a patch of kilometres over
+// a half-metre-deep sea) draw a flat, featureless sea: say why on screen, and what helps.
+// Flat: the grids hold under 2 % of the slope variance the wind gives (Cox & Munk).
+function flatNotice() {
+  const v = ocean.slopeVar;
+  const flat = !!(v && st.connected && v.cascade0 + v.cascades[0] + v.cascades[1] + v.cascades[2] < 0.02 * v.total && v.total > 0.004);
+  const text = flat ? `The sea looks flat: its waves are shorter than the grid resolves (cells of ${v.cell >= 10 ? v.cell.toFixed(0) : v.cell.toFixed(1)} m). A smaller patch size, a deeper sea or a longer fetch shows them.` : '';
+  if (text === st.flatNotice) return;
+  st.flatNotice = text;
+  flatEl.hidden = !text;
+  flatEl.textContent = text;
+}
+const flatEl = document.createElement('div');
+flatEl.id = 'flat-note';
+flatEl.dataset.ui = 'flat-note';
+flatEl.hidden = true;
+document.body.appendChild(flatEl);
+
 function frameLoop() {
   const now = performance.now();
   resize();
@@ -300,6 +349,7 @@ function frameLoop() {
     const f = pendingFrame;
     pendingFrame = null;
     const { uploadMs, released } = ocean.setFrame(f, now, bench);
+    stats.shownFrames++;
     stats.uploadMs = uploadMs;
     if (bench && timings.decode.length < 10000) { timings.decode.push(f.decodeMs); timings.assemble.push(f.assembleMs); timings.upload.push(uploadMs); }
     const buffers = released.map((a) => ({ buffer: a.buffer, channels: a.length === f.m * f.m * 4 ? 4 : a.length === f.m * f.m * 2 ? 2 : 1 }));
@@ -317,6 +367,7 @@ function frameLoop() {
   if (sky.update(view.hour, st.params?.wind_speed ?? 10)) ocean.uniforms.uFogDensity.value = 0.00009 * (1 + 4 * sky.state.overcast ** 2);
   if (!bench) ocean.render(camera, now);
   if (ocean.hasData) st.rendered++;
+  flatNotice();
   stats.renders++;
   stats.tick(now);
   hud.draw(now, stats, st);
@@ -341,6 +392,8 @@ window.oceand = Object.freeze({
   get foam() { return snapshot({ source: ocean.uniforms.uFoamField.value ? 'field' : 'jacobian', lod: st.foamLod, size: st.foamM }); },
   get wireframe() { return ocean.wireframe; },
   get view() { return snapshot({ hour: view.hour, hud: hud.visible, compact, sky: sky.state }); },
+  get flatNotice() { return st.flatNotice || null; },
+  get note() { return { panel: document.querySelector('[data-ui=last-change]')?.textContent ?? null, toast: toast.hidden ? null : toast.textContent }; },
   get camera() { return snapshot({ position: camera.position.toArray(), target: controls.target.toArray() }); },
   get stats() {
     return Object.freeze({

@@ -114,8 +114,7 @@ export class Ocean {
       // from x = -M/2, instead of the field's, so every stage of the foam shows in one view.
       uFoamRamp: { value: Number(new URLSearchParams(globalThis.location?.search).get('foamramp')) || 0 },
       uFoamJc: { value: foamThreshold(10) }, uFoamGain: { value: 1 }, uFoamShift: { value: new THREE.Vector2(0, 0) },
-      // The sun's irradiance on the water, in units of uSunColor (the sky cube's radiance scale).
-      uSunIrr: { value: 40 }, uDebugView: { value: 0 },
+      uDebugView: { value: 0 },
     };
     this.material = new THREE.ShaderMaterial({
       uniforms: this.uniforms, vertexShader: waterVertex, fragmentShader: waterFragment,
@@ -171,7 +170,7 @@ export class Ocean {
     u.uVar0.value = v0;
     u.uCVar.value.set(cv[0], cv[1], cv[2]);
     u.uVarBeyond.value = Math.max(total - v0 - cv[0] - cv[1] - cv[2], 0.05 * total);
-    this.slopeVar = { cascade0: v0, cascades: cv, beyond: u.uVarBeyond.value, total };
+    this.slopeVar = { cascade0: v0, cascades: cv, beyond: u.uVarBeyond.value, total, cell: this.patch / Math.max(this.m, 1) };
   }
 
   // Height of the displaced surface at world (x, z) on the frames drawn (the larger of the

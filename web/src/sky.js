@@ -158,6 +158,9 @@ export class SkyModel {
       uSunColor: { value: new THREE.Color(1, 1, 1) },
       uDiscSize: { value: 0.99999 },                      // cos of the disc's angular radius
       uDiscGain: { value: 600 },                          // sun 600, moon 60 (shaders.js sunDisc)
+      // The key light's irradiance on the water in units of its colour: its disc's radiance
+      // times its solid angle, so the moon's is a tenth of the sun's as its disc is.
+      uSunIrr: { value: 40 },
       uMoonDir: { value: new THREE.Vector3(0, 1, 0) },
       uMoonColor: { value: new THREE.Color(0, 0, 0) },
       uStars: { value: 0 },
@@ -220,11 +223,13 @@ export class SkyModel {
       U.uSunColor.value.copy(sunT).multiplyScalar(1.25 * hidden);
       U.uDiscSize.value = Math.cos(0.27 * Math.PI / 180);
       U.uDiscGain.value = 600;
+      U.uSunIrr.value = 40;
     } else {
       U.uSunDir.value.copy(moonDir);
       U.uSunColor.value.copy(U.uMoonColor.value);
       U.uDiscSize.value = Math.cos(0.26 * Math.PI / 180);
       U.uDiscGain.value = 60;
+      U.uSunIrr.value = 4;
     }
     U.uStars.value = night * (1 - s01(0.3, 0.8, overcast));
     // The eye adapts, but not fully: twilight and night stay darker than day. While the sun
