@@ -456,7 +456,7 @@ try {
     const v1 = (await state(b)).paramsVersion;
     assert(v1 === v0 + 1, `parameters version ${v0} -> ${v1}: something besides the valid value was sent`);
     // The wind's compass says where the wind comes from beside where it blows.
-    const compass = await a.locator('[data-ui=compass]').innerText();
+    const compass = await a.locator('[data-ui=compass] .oc-compass-text').innerText();
     const dir = (await state(a)).params.wind_direction;
     assert(/from [NESW]{1,3} \(\d+°\), blowing toward [NESW]{1,3} \(\d+°\)/.test(compass), `compass: "${compass}"`);
     if (dir === 0) assert(compass.startsWith('from E (90°)') && compass.includes('toward W (270°)'), `wind toward +x (west) reads "${compass}"`);

@@ -205,6 +205,7 @@ export class Panel {
   // The server's answer (named): the name now in force.
   named(name) {
     this.serverName = name;
+    if (this.keepNote) return; // a restart's note outranks "you are …"
     this.note.textContent = name ? `you are ${name} (${this.myId})` : `connected as ${this.myId}`;
   }
 
@@ -236,6 +237,7 @@ export class Panel {
     this.capacity = hello.capacity;
     this.refreshCapacity();
     this.note.textContent = `connected as ${hello.client_id}${this.readOnly ? ' (view only)' : ''}`;
+    this.keepNote = false;
     this.setConnected(true);
   }
 
@@ -379,6 +381,7 @@ export class Panel {
   // Said in the note and outside the panel (a daemon restart that changed the sea).
   announce(text) {
     this.note.textContent = text;
+    this.keepNote = true;
     this.onAnnounce?.(text);
   }
   get closed() { return this.gui._closed; }
@@ -415,6 +418,7 @@ export class Panel {
     }
     const preset = this.markPreset();
     if (!changed.length) return;
+    this.keepNote = false;
     const what = changed.map((n) => `${this.schema[n]?.label || n} ${formatValue(msg.params[n], this.schema[n])}`).join(', ');
     this.note.textContent = preset && changed.length > 1
       ? `${this.who(msg)} chose ${preset.label} (${preset.beaufort}): ${what}`

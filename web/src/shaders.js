@@ -283,7 +283,7 @@ float foamCover(vec2 xz, float jac, float hex) {
   float f = foamFieldAt(xz);
   if (hex > 0.0) f = mix(f, foamFieldHex(xz), hex);
   float trail = 1.5 + 2.5 * smoothstep(8.0, 20.0, uFoamWindSpeed);   // metres per tap
-  for (int k = 1; k <= 3; k++) f = max(f, foamFieldAt(xz - uFoamWind * (trail * float(k))) * (1.0 - 0.24 * float(k)) * (1.0 - hex));
+  if (hex < 1.0) for (int k = 1; k <= 3; k++) f = max(f, foamFieldAt(xz - uFoamWind * (trail * float(k))) * (1.0 - 0.24 * float(k)) * (1.0 - hex));
   float crest = smoothstep(1.2, 0.7, jac);
   return clamp(max(f * mix(0.2, 1.35, crest), fresh), 0.0, 1.0);
 }
@@ -496,10 +496,10 @@ void main() {
   vec3 light = ambN * 1.6 + uSunColor * diff * 0.7;
   vec3 body = uDeep * light;
   // Bubbles left in the squeezed water of the crests scatter light back up (turquoise).
-  body += uScatter * amb * 0.5 * smoothstep(1.05, 0.6, jac);
+  body += uScatter * amb * 1.2 * smoothstep(1.05, 0.6, jac);
   // (Far away the height is hex-tiled too: the crests would print the lattice back.)
   float crest = clamp(height * 0.25 + 0.3, 0.0, 1.0);
-  body += uScatter * crest * (uSunColor * pow(max(dot(V, -L) * 0.5 + 0.5, 0.0), 3.0) * 0.6 + amb * 0.3);
+  body += uScatter * crest * (uSunColor * pow(max(dot(V, -L) * 0.5 + 0.5, 0.0), 3.0) * 0.6 + amb * 0.9);
   vec3 c = mix(body, refl, F);
   // Glitter: the sun (or moon) in the facets of the unresolved slopes.
   c += uSunColor * uSunIrr * sunGlitter(n, V, L, s2) * step(0.0, L.y);
