@@ -142,6 +142,8 @@ async function viewPage(port, query, version, viewport = { width: 480, height: 3
   p.on('pageerror', (e) => pageErrors.push(e.message));
   await p.goto(`http://127.0.0.1:${port}/?test=1&aa=0&scale=0.5&detail=${detail}&ui=0${query}`, { timeout: 120000 });
   await waitFor(p, 'frames of the parameters set', (v) => window.oceand.frameParamsVersion >= v && window.oceand.rendered > 3, version, 120000);
+  // The foam field and the finer cascades come with the page's own subscription, a little later.
+  await waitFor(p, 'frames with the foam field', () => window.oceand.foam.source === 'field', null, 120000);
   await renderedMore(p, 3);
   return p;
 }
@@ -578,7 +580,8 @@ try {
       assert(off.length > 0 && on.length > 0, `options ${JSON.stringify(opts)}`);
       assert(Math.min(...off.map((o) => o.n)) > Math.max(...on.map((o) => o.n)), `disabled sizes not the largest: ${JSON.stringify(opts)}`);
       assert(off.every((o) => /memory cap/.test(o.why)), `no reason on a disabled size: ${JSON.stringify(off)}`);
-      await p.click('[data-folder=advanced] > .title'); // the grid resolution is an advanced parameter
+      // The grid resolution is an advanced parameter: open that folder (if it is not).
+      await p.evaluate(() => { const f = document.querySelector('[data-folder=advanced]'); if (f.classList.contains('closed')) f.querySelector(':scope > .title').click(); });
       await waitFor(p, 'the reason beside the option', () => {
         const n = document.querySelector('[data-param=resolution] + [data-ui=capacity-note]');
         return n && !n.hidden && n.getBoundingClientRect().height > 0 && /memory cap of 64 MB/.test(n.textContent);

@@ -348,7 +348,7 @@ vec3 foamShade(vec3 c, vec2 xz, float jac, float hex, vec3 n, float px, out floa
   vec3 nf = normalize(n - vec3(g.x, 0.0, g.y) * 0.06 * (1.0 - smoothstep(0.05, 0.5, px)));
   float sun = max(dot(nf, uSunDir), 0.0) * step(0.0, uSunDir.y);
   vec3 amb = skyAmbient() * (0.75 + 0.25 * nf.y);
-  vec3 lit = 0.85 * (amb * 1.9 + uSunColor * sun * 0.95);
+  vec3 lit = 0.85 * (amb * 1.3 + uSunColor * sun * 0.95);
   vec3 thin = lit * vec3(0.78, 0.92, 0.95);
   return mix(c, mix(thin, lit, a), a * 0.95);
 }
