@@ -580,8 +580,12 @@ try {
       assert(off.length > 0 && on.length > 0, `options ${JSON.stringify(opts)}`);
       assert(Math.min(...off.map((o) => o.n)) > Math.max(...on.map((o) => o.n)), `disabled sizes not the largest: ${JSON.stringify(opts)}`);
       assert(off.every((o) => /memory cap/.test(o.why)), `no reason on a disabled size: ${JSON.stringify(off)}`);
-      // The grid resolution is an advanced parameter: open that folder (if it is not).
-      await p.evaluate(() => { const f = document.querySelector('[data-folder=advanced]'); if (f.classList.contains('closed')) f.querySelector(':scope > .title').click(); });
+      // Open the folders that hold the grid resolution (the schema says which), if closed.
+      await p.evaluate(() => {
+        for (let f = document.querySelector('[data-param=resolution]').parentElement; f; f = f.parentElement) {
+          if (f.classList.contains('lil-gui') && f.classList.contains('closed')) f.querySelector(':scope > .title').click();
+        }
+      });
       await waitFor(p, 'the reason beside the option', () => {
         const n = document.querySelector('[data-param=resolution] + [data-ui=capacity-note]');
         return n && !n.hidden && n.getBoundingClientRect().height > 0 && /memory cap of 64 MB/.test(n.textContent);

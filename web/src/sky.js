@@ -223,7 +223,9 @@ export class SkyModel {
       U.uSunColor.value.copy(sunT).multiplyScalar(1.25 * hidden);
       U.uDiscSize.value = Math.cos(0.27 * Math.PI / 180);
       U.uDiscGain.value = 600;
-      U.uSunIrr.value = 40;
+      // Eased from 40 to 12 as the sun climbs past 3°..12°: with the full value the path of a
+      // higher sun is a solid white band after the tone curve (a look: the curve cannot hold it).
+      U.uSunIrr.value = 12 + 28 * (1 - s01(3, 12, Math.asin(sinAlt) * 180 / Math.PI));
     } else {
       U.uSunDir.value.copy(moonDir);
       U.uSunColor.value.copy(U.uMoonColor.value);
