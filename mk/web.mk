@@ -1,4 +1,4 @@
-# mk/web.mk — the browser client (issue 5): bundle, playwright tests, decode+upload bench.
+# mk/web.mk — the browser client: bundle, playwright tests, decode+upload bench.
 # web/node_modules comes from `npm ci` (scripts/deps.sh, from web/package-lock.json).
 
 WEB_SRC := web/index.html web/build.mjs $(wildcard web/src/*.js web/src/*.css) proto/js/oc_decode.js proto/js/oc_wasm.js \

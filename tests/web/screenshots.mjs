@@ -33,6 +33,12 @@ const SHOTS = [
   { name: 'night', preset: 'fresh', hour: 23, cam: '0,14,48', face: { yaw: 0, dist: 120, ty: 8, moon: true } },
   { name: 'from-800m', preset: 'fresh', hour: 16, cam: '0,800,600', target: '0,0,-200' },
   { name: 'phone', preset: 'fresh', hour: 17.5, device: 'Pixel 7', hud: true, face: { yaw: 20, dist: 100, ty: 2 } },
+  // Views a closer look takes: straight down on a gale and a storm, dusk, a crest, the glitter.
+  { name: 'gale-down-30m', preset: 'gale', hour: 15, cam: '0,30,0.01', target: '0,0,0' },
+  { name: 'storm-down-80m', preset: 'storm', hour: 15, cam: '0,80,0.01', target: '0,0,0' },
+  { name: 'dusk', preset: 'fresh', hour: 19.5, cam: '0,14,48', face: { yaw: 0, dist: 300, ty: 12 } },
+  { name: 'storm-crest', preset: 'storm', hour: 15, cam: '0,9,24', target: '0,1,0' },
+  { name: 'sunset-glitter', preset: 'fresh', hour: 18.39, cam: '0,30,0', face: { yaw: 0, dist: 400, ty: 0 } },
 ];
 // Foam at other distances and winds (iterating on the foam texture; `--only foam-gale,...`).
 // ramp: coverage rises 0 → 1 over that many metres of x (ocean.js ?foamramp=), every stage in one view.

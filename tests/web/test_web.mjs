@@ -9,10 +9,14 @@ import { ROOT } from './webdeps.mjs';
 import { createRequire } from 'node:module';
 import { SEA_PRESETS } from '../../web/src/presets.js';
 import { checkName, tidyName } from '../../web/src/name.js';
+import { sunDirection } from '../../web/src/sky.js';
+import { glitterRatio, twilightRatio } from './light.mjs';
 
 const { devices } = createRequire(path.join(ROOT, 'web', 'package.json'))('playwright-core');
 
-const args = parseArgs(process.argv, { oceand: 'build/oceand', webRoot: 'build/web', out: 'build/web-test', fake: false });
+// --only REGEX: run only the checks whose name matches (the pages they share still open).
+const args = parseArgs(process.argv, { oceand: 'build/oceand', webRoot: 'build/web', out: 'build/web-test', fake: false, only: '' });
+const only = args.only ? new RegExp(args.only) : null;
 fs.mkdirSync(args.out, { recursive: true });
 const VIEW = { width: 800, height: 500 };
 // test: keep the drawing buffer; aa=0: no MSAA; detail: a lighter mesh (software GL is slow)
@@ -20,6 +24,7 @@ const QUERY = '?test=1&aa=0&detail=0.25&scale=0.5';
 
 let passed = 0, failed = 0;
 async function check(name, fn) {
+  if (only && !only.test(name)) return;
   const t0 = Date.now();
   try {
     await fn();
@@ -98,6 +103,97 @@ const renderedMore = async (page, k) => {
   const r = (await state(page)).rendered;
   await waitFor(page, `${k} more rendered frames`, ([r0, n]) => window.oceand.rendered >= r0 + n, [r, k]);
 };
+
+// The local hour at which the sun stands altDeg above the horizon in the evening (bisection
+// on sky.js's sunDirection, which falls monotonically from noon to midnight).
+function eveningHour(altDeg) {
+  let lo = 12, hi = 23.9;
+  for (let k = 0; k < 40; k++) {
+    const mid = (lo + hi) / 2;
+    if (Math.asin(sunDirection(mid).y) * 180 / Math.PI > altDeg) lo = mid; else hi = mid;
+  }
+  return (lo + hi) / 2;
+}
+
+// One `set` from a plain protocol client (as a preset button sends it); resolves with the
+// new params_version.
+async function setParams(port, params) {
+  const { default: WebSocket } = await import(path.join(ROOT, 'web', 'node_modules', 'ws', 'index.js'));
+  const ws = new WebSocket(`ws://127.0.0.1:${port}/`, 'oceand.v1');
+  try {
+    const reply = await new Promise((resolve, reject) => {
+      const t = setTimeout(() => reject(new Error('no reply to set')), 15000);
+      ws.on('message', (data, binary) => {
+        if (binary) return;
+        const m = JSON.parse(String(data));
+        if (m.type === 'hello') ws.send(JSON.stringify({ type: 'set', id: 1, params }));
+        if (m.id === 1) { clearTimeout(t); resolve(m); }
+      });
+      ws.on('error', reject);
+    });
+    if (reply.type !== 'params') throw new Error(`set refused: ${JSON.stringify(reply)}`);
+    return reply.params_version;
+  } finally { ws.close(); }
+}
+
+// A page on `port` with extra query, drawing frames of params_version >= version.
+async function viewPage(port, query, version, viewport = { width: 480, height: 300 }, detail = 0.5) {
+  const p = await browser.newPage({ viewport });
+  p.on('pageerror', (e) => pageErrors.push(e.message));
+  await p.goto(`http://127.0.0.1:${port}/?test=1&aa=0&scale=0.5&detail=${detail}&ui=0${query}`, { timeout: 120000 });
+  await waitFor(p, 'frames of the parameters set', (v) => window.oceand.frameParamsVersion >= v && window.oceand.rendered > 3, version, 120000);
+  // The foam field and the finer cascades come with the page's own subscription, a little later.
+  await waitFor(p, 'frames with the foam field', () => window.oceand.foam.source === 'field', null, 120000);
+  await renderedMore(p, 3);
+  return p;
+}
+
+// Height of the displaced surface at (x, z) from the page's grids (oceandTest.grids), by
+// brute force: every point of a 0.1 m lattice within 10 m is displaced (bilinear between the
+// grid's nodes) and the highest that lands within 0.2 m of (x, z) counts, plus the finer
+// cascades' heights at (x, z) (the higher of the two frames each).
+function surfaceAt(g, x, z) {
+  const bil = (w, px, pz, ch) => {
+    const fx = px / w.cell - w.i0, fz = pz / w.cell - w.j0, a = Math.floor(fx), b = Math.floor(fz), tx = fx - a, tz = fz - b;
+    const at = (i, j) => w.v[3 * (j * w.w + i) + ch];
+    return (at(a, b) * (1 - tx) + at(a + 1, b) * tx) * (1 - tz) + (at(a, b + 1) * (1 - tx) + at(a + 1, b + 1) * tx) * tz;
+  };
+  let best = -Infinity;
+  for (const w of g.disp) {
+    for (let a = -10; a <= 10; a += 0.1) for (let b = -10; b <= 10; b += 0.1) {
+      const px = x + a, pz = z + b;
+      const X = px + bil(w, px, pz, 0), Z = pz + bil(w, px, pz, 2);
+      if (Math.hypot(X - x, Z - z) <= 0.2) best = Math.max(best, bil(w, px, pz, 1));
+    }
+  }
+  for (const c of g.cascades) if (c) best += Math.max(...c.map((w) => bil(w, x, z, 1)));
+  return best;
+}
+
+// Drags and zooms that push the camera down into a storm's waves; the least height of the
+// camera above the surface beneath it after each.
+async function lowestClearance(p) {
+  const box = await p.locator('#ocean').boundingBox();
+  const cx = box.x + box.width / 2, cy = box.y + box.height / 2;
+  let least = Infinity;
+  const gestures = [
+    async () => { await p.mouse.move(cx, cy); await p.mouse.wheel(0, -400); },
+    async () => { await p.mouse.move(cx, cy); await p.mouse.down(); await p.mouse.move(cx, cy - 120, { steps: 6 }); await p.mouse.up(); },
+    async () => { await p.mouse.move(cx, cy); await p.mouse.wheel(0, -800); },
+    async () => { await p.mouse.move(cx - 100, cy); await p.mouse.down(); await p.mouse.move(cx + 60, cy - 80, { steps: 6 }); await p.mouse.up(); },
+    async () => { await p.keyboard.press('ArrowUp'); await p.keyboard.press('ArrowUp'); },
+  ];
+  for (const g of gestures) {
+    await g();
+    await renderedMore(p, 2);
+    const { cam, grids } = await p.evaluate(() => {
+      const c = window.oceand.camera.position;
+      return { cam: c, grids: window.oceandTest.grids(c[0], c[2], 11) };
+    });
+    least = Math.min(least, cam[1] - surfaceAt(grids, cam[0], cam[2]));
+  }
+  return least;
+}
 
 // Magenta (?gapprobe=1: sky and skirts) pixels of a view looking down on patch seams, for
 // the crack fixes off and on, all on one held frame; `again` repeats the first variant.
@@ -219,6 +315,9 @@ try {
     await waitFor(a, '10 more frames after the stall', (n) => window.oceand.framesReceived >= n + 10, f1, 60000);
     const s = await state(a);
     assert(s.stats.localDrops === d0, `the page dropped frames after a 1 s stall of its main thread: ${d0} -> ${s.stats.localDrops}`);
+    // The burst after the stall is not a faster stream: the rate is counted on the server's clock
+    // (the daemon ticks at 30 Hz by default; a burst read on the page's clock gave up to 90).
+    assert(s.stats.framesPerSec > 0 && s.stats.framesPerSec <= 33, `stream rate after the stall ${s.stats.framesPerSec.toFixed(1)} frames/s from a 30 Hz daemon`);
     // Giving the temporal codec up happens only after the start-up grace, when the decoder itself
     // fell behind three times in 10 s (worker.js MAX_WAIT_MS).
     const fb = s.stats.fallback;
@@ -339,6 +438,31 @@ try {
     await waitFor(b, `frames with params_version ${sb.paramsVersion}`, (v) => window.oceand.frameParamsVersion >= v, sb.paramsVersion, 15000);
     await waitFor(a, 'page A frames with the new version', (v) => window.oceand.frameParamsVersion >= v, sb.paramsVersion, 15000);
   });
+  await check('typed values out of range are refused in the panel with the range, not clamped and sent', async () => {
+    await waitFor(b, 'second page connected', () => window.oceand.connected && window.oceand.framesReceived > 0);
+    await waitFor(a, 'page A has the same version', (v) => window.oceand.paramsVersion === v, (await state(b)).paramsVersion, 15000);
+    const v0 = (await state(b)).paramsVersion, w0 = (await state(b)).params.wind_speed;
+    const input = a.locator('[data-param=wind_speed] input').first();
+    for (const bad of ['-5', '1e9']) {
+      await input.fill(bad);
+      await input.press('Enter');
+      await waitFor(a, `the panel refuses ${bad}`, (t) => document.querySelector('[data-ui=last-change]').textContent.includes(`${Number(t)} is outside 0 to 40`), bad, 5000)
+        .catch(async () => assert(false, `note after typing ${bad}: "${await a.locator('[data-ui=last-change]').innerText()}"`));
+      assert(Number(await input.inputValue()) === w0, `the field shows ${await input.inputValue()} after refusing ${bad}, not ${w0}`);
+    }
+    // A valid value now: if a refused one had been sent, the version would have moved twice.
+    const good = w0 === 12.5 ? 11.5 : 12.5;
+    await input.fill(String(good));
+    await input.press('Enter');
+    await waitFor(b, 'page B has the valid value', (g) => window.oceand.params.wind_speed === g, good, 15000);
+    const v1 = (await state(b)).paramsVersion;
+    assert(v1 === v0 + 1, `parameters version ${v0} -> ${v1}: something besides the valid value was sent`);
+    // The wind's compass says where the wind comes from beside where it blows.
+    const compass = await a.locator('[data-ui=compass] .oc-compass-text').innerText();
+    const dir = (await state(a)).params.wind_direction;
+    assert(/from [NESW]{1,3} \(\d+°\), blowing toward [NESW]{1,3} \(\d+°\)/.test(compass), `compass: "${compass}"`);
+    if (dir === 0) assert(compass.startsWith('from E (90°)') && compass.includes('toward W (270°)'), `wind toward +x (west) reads "${compass}"`);
+  });
   await check('a sea preset is one shared set: it applies and syncs to the other page', async () => {
     const storm = SEA_PRESETS.find((p) => p.name === 'storm');
     const v0 = (await state(b)).paramsVersion;
@@ -413,6 +537,9 @@ try {
     assert(await a.locator('#banner').isHidden(), 'banner still shown after reconnecting');
     const enabled = await a.evaluate(() => [...document.querySelectorAll('[data-param] input')].every((e) => !e.disabled));
     assert(enabled, 'panel still locked after reconnecting');
+    // The new daemon has no saved state (a new state file): the sea was reset, and the page says so.
+    await waitFor(a, 'the note says the server restarted', () => /server restarted and the sea was reset: .*→/.test(window.oceand.note.panel), null, 15000)
+      .catch(async () => assert(false, `note after the restart: "${(await state(a)).note.panel}"`));
   });
 
   await a.close(); // a rendering page in the background only slows the rest down
@@ -453,6 +580,16 @@ try {
       assert(off.length > 0 && on.length > 0, `options ${JSON.stringify(opts)}`);
       assert(Math.min(...off.map((o) => o.n)) > Math.max(...on.map((o) => o.n)), `disabled sizes not the largest: ${JSON.stringify(opts)}`);
       assert(off.every((o) => /memory cap/.test(o.why)), `no reason on a disabled size: ${JSON.stringify(off)}`);
+      // Open the folders that hold the grid resolution (the schema says which), if closed.
+      await p.evaluate(() => {
+        for (let f = document.querySelector('[data-param=resolution]').parentElement; f; f = f.parentElement) {
+          if (f.classList.contains('lil-gui') && f.classList.contains('closed')) f.querySelector(':scope > .title').click();
+        }
+      });
+      await waitFor(p, 'the reason beside the option', () => {
+        const n = document.querySelector('[data-param=resolution] + [data-ui=capacity-note]');
+        return n && !n.hidden && n.getBoundingClientRect().height > 0 && /memory cap of 64 MB/.test(n.textContent);
+      }, null, 10000).catch(async () => assert(false, `the reason is not beside the option: "${await p.locator('[data-ui=capacity-note]').innerText().catch(() => '')}"`));
     } finally {
       await p.close();
       await small.stop();
@@ -477,6 +614,91 @@ try {
     assert(c.stitched <= c.open / 5, `sky shows through the stitched seams: ${c.stitched} pixels (unstitched ${c.open})`);
     assert(c.normal <= c.old / 2, `skirts show in the stitched seams: ${c.normal} pixels (unstitched ${c.old})`);
   });
+
+
+  // Light and foam on a sea that holds still (--paused: t = 0, seed 1), so every variant
+  // sees the same waves: a fresh breeze for the sky and glitter, a storm for the camera
+  // and the foam.
+  {
+    const port5 = await freePort();
+    const still = await startServer({ ...srvOpts, port: port5, extra: ['--paused', 'true'] });
+    try {
+      const fresh = SEA_PRESETS.find((p) => p.name === 'fresh').params, storm = SEA_PRESETS.find((p) => p.name === 'storm').params;
+      let version = await setParams(port5, { ...fresh, paused: true });
+      await check('sunset glitter: the path under a sun 2° up is at least twice the water 20° beside it', async () => {
+        const hour = eveningHour(2), sun = sunDirection(hour).toArray(), cam = [0, 30, 0];
+        const p = await viewPage(port5, `&hour=${hour}&cam=${cam}&target=${sun[0] * 1000},0,${sun[2] * 1000}`, version);
+        try {
+          const r = await glitterRatio(p, cam, sun);
+          fs.writeFileSync(path.join(args.out, 'glitter.png'), await p.screenshot({ timeout: 240000 }));
+          console.log(`     path ${r.path.toFixed(1)}, water 20° beside ${r.side.toFixed(1)} (luminance 0..255): ratio ${r.ratio.toFixed(2)}`);
+          assert(r.on.every((n) => n >= 5), `points off screen: ${r.on}`);
+          assert(r.ratio >= 2, `the glitter path is only ${r.ratio.toFixed(2)}x the water beside it`);
+        } finally { await p.close(); }
+      });
+      await check('dusk: the band above the horizon under a sun 3° below is brighter than the top of the sky', async () => {
+        const hour = eveningHour(-3), sun = sunDirection(hour).toArray(), cam = [0, 10, 0];
+        const p = await viewPage(port5, `&hour=${hour}&cam=${cam}&target=${sun[0] * 1000},9,${sun[2] * 1000}`, version);
+        try {
+          const r = await twilightRatio(p, cam, sun);
+          fs.writeFileSync(path.join(args.out, 'dusk.png'), await p.screenshot({ timeout: 240000 }));
+          console.log(`     band 0-5° ${r.band.toFixed(1)}, top of the view (25° up) ${r.top.toFixed(1)}: ratio ${r.ratio.toFixed(2)}`);
+          assert(r.on[0] >= 20 && r.on[1] >= 5, `points off screen: ${r.on}`);
+          assert(r.ratio >= 1.2, `the twilight band is only ${r.ratio.toFixed(2)}x the top of the sky`);
+        } finally { await p.close(); }
+      });
+      version = await setParams(port5, { ...storm, paused: true });
+      await check('storm: drags and zooms never take the camera within 1 m of the surface beneath it', async () => {
+        const start = '&cam=0,6,14&target=0,0,0';
+        const small = { width: 240, height: 150 }; // only the camera's position is looked at
+        const p = await viewPage(port5, start, version, small, 0.25);
+        let kept, free;
+        try { kept = await lowestClearance(p); } finally { await p.close(); }
+        const q = await viewPage(port5, `${start}&camfloor=0`, version, small, 0.25);
+        try { free = await lowestClearance(q); } finally { await q.close(); }
+        console.log(`     least height above the surface beneath: ${kept.toFixed(2)} m (without the floor: ${free.toFixed(2)} m)`);
+        assert(free < 1, `without the floor the gestures stay ${free.toFixed(2)} m above the waves: they no longer test it`);
+        assert(kept >= 1 - 0.05, `the camera came within ${kept.toFixed(2)} m of the surface`);
+      });
+      await check('storm from 80 m straight down: the foam lies on the crests, not at random', async () => {
+        // The foam field is a history: held still it keeps what the earlier (fresh) sea left,
+        // so the storm runs here, and the statistics below carry the check.
+        version = await setParams(port5, { paused: false });
+        const corr = async (shift) => {
+          const p = await viewPage(port5, `&cam=0,80,0.01&target=0,0,0&debugview=foam${shift ? `&foamshift=${shift}` : ''}`, version, { width: 400, height: 400 });
+          try {
+            const png = await p.screenshot({ type: 'png', timeout: 240000 });
+            if (!shift) fs.writeFileSync(path.join(args.out, 'foam-mask.png'), png);
+            return await p.evaluate(async (b64) => {
+              const img = new Image();
+              img.src = `data:image/png;base64,${b64}`;
+              await img.decode();
+              const c = document.createElement('canvas');
+              c.width = img.width; c.height = img.height;
+              const g = c.getContext('2d');
+              g.drawImage(img, 0, 0);
+              const d = g.getImageData(0, 0, c.width, c.height).data;
+              // Pearson correlation of the foam (red) with -J (green) and with height (blue).
+              const r = (ch) => {
+                let n = 0, sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
+                for (let i = 0; i < d.length; i += 4) { const a = d[i], b = d[i + ch]; n++; sa += a; sb += b; saa += a * a; sbb += b * b; sab += a * b; }
+                const va = saa / n - (sa / n) ** 2, vb = sbb / n - (sb / n) ** 2;
+                return (sab / n - (sa / n) * (sb / n)) / Math.sqrt(Math.max(va * vb, 1e-9));
+              };
+              let foam = 0;
+              for (let i = 0; i < d.length; i += 4) foam += d[i] > 127;
+              return { squeeze: r(1), height: r(2), foam: foam / (d.length / 4) };
+            }, png.toString('base64'));
+          } finally { await p.close(); }
+        };
+        const placed = await corr(null), random = await corr('37.3,-53.9');
+        console.log(`     foam vs -J ${placed.squeeze.toFixed(2)}, vs height ${placed.height.toFixed(2)} (foam on ${(100 * placed.foam).toFixed(1)} % of pixels); moved 37 m, 54 m: ${random.squeeze.toFixed(2)}, ${random.height.toFixed(2)}`);
+        assert(placed.foam > 0.01, `hardly any foam in a storm: ${(100 * placed.foam).toFixed(2)} %`);
+        assert(placed.squeeze > 0.2 && placed.height > 0.05, `foam does not follow the crests: ${JSON.stringify(placed)}`);
+        assert(placed.squeeze > random.squeeze + 0.15, `foam placed at random correlates as well: ${JSON.stringify(random)}`);
+      });
+    } finally { await still.stop(); }
+  }
 
   // Phones: playwright's device descriptors (viewport, touch, mobile user agent), with
   // deviceScaleFactor 1 so that SwiftShader renders 1/7 of the pixels (layout is in CSS px).
@@ -503,6 +725,14 @@ try {
         const after = (await state(p)).camera;
         const turned = Math.abs(az(after) - az(before)) * 180 / Math.PI;
         assert(turned > 10, `one-finger drag turned the camera by ${turned.toFixed(1)}°`);
+        if (name === 'Pixel 7' && !args.fake) { // another user's change reaches the phone with its panel closed
+          const w = (await state(p)).params.wind_speed === 14 ? 15 : 14;
+          await setParams(port, { wind_speed: w });
+          await waitFor(p, 'a note outside the closed panel', (w) => {
+            const t = document.querySelector('[data-ui=toast]');
+            return t && !t.hidden && t.getBoundingClientRect().height > 0 && t.textContent.includes(`Wind speed ${w}`);
+          }, w, 15000).catch(async () => assert(false, `no note on the phone: ${JSON.stringify((await state(p)).note)}`));
+        }
         await p.close();
         // A page whose server is down: the banner joins the HUD and the panel title.
         const d = await ctx.newPage();
@@ -516,6 +746,24 @@ try {
       } finally { await ctx.close(); }
     });
   }
+
+  await check('tablet: the open panel leaves most of the sea in view, apart from the HUD', async () => {
+    const ctx = await browser.newContext({ ...devices['iPad Mini'], deviceScaleFactor: 1 });
+    try {
+      const p = await ctx.newPage();
+      p.on('pageerror', (e) => pageErrors.push(e.message));
+      await p.goto(url);
+      await waitFor(p, 'connected', () => window.oceand.connected && window.oceand.params !== null);
+      const r = await p.evaluate(() => {
+        const b = (el) => el.getBoundingClientRect();
+        const pn = b(document.getElementById('panel')), h = b(document.getElementById('hud'));
+        return { share: (pn.width * pn.height) / (innerWidth * innerHeight), overlap: h.right > pn.left && pn.right > h.left && h.bottom > pn.top && pn.bottom > h.top, open: !document.getElementById('panel').classList.contains('closed') };
+      });
+      console.log(`     open panel covers ${(100 * r.share).toFixed(0)} % of the screen`);
+      assert(r.share <= 0.2, `the open panel covers ${(100 * r.share).toFixed(0)} % of a tablet's screen`);
+      assert(!r.overlap, 'the panel overlaps the HUD');
+    } finally { await ctx.close(); }
+  });
 
   await check('no uncaught errors in the pages', async () => {
     assert(pageErrors.length === 0, pageErrors.join('; '));

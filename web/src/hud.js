@@ -1,22 +1,39 @@
-// Status overlay: connection, render and stream rates, latency, drops.
-// Rates are computed over a sliding one-second window.
+// Status overlay: connection, render and stream rates, latency.
+// Rates over a sliding one-second window of this page's clock, except the stream's: frames
+// reach the page in bursts whenever its thread was busy (a burst of 30 in one window read as
+// 90 frames/s), so the stream's rate is counted on the server's clock, from the sequence
+// numbers and server times of the frames decoded over the last two seconds.
 export class Stats {
   constructor() {
-    this.frames = 0; this.bytes = 0; this.renders = 0; this.dropped = 0;
-    this.window = []; // [t, frames, bytes, renders]
-    this.fps = 0; this.framesPerSec = 0; this.kBps = 0;
+    this.frames = 0; this.bytes = 0; this.renders = 0; this.dropped = 0; this.shownFrames = 0;
+    this.window = []; // [t, frames, bytes, renders, shown]
+    this.stream = []; // [serverTimeUs, seq] of decoded frames
+    this.fps = 0; this.framesPerSec = 0; this.kBps = 0; this.shownPerSec = 0;
     this.latencyMs = null; this.decodeMs = null; this.uploadMs = null;
   }
+  // A frame decoded (shown or overtaken): its place on the server's clock.
+  decoded(seq, serverTimeUs) {
+    if (!Number.isFinite(serverTimeUs)) return;
+    const s = this.stream;
+    if (s.length && (seq <= s[s.length - 1][1] || serverTimeUs < s[s.length - 1][0])) s.length = 0; // a new session
+    s.push([serverTimeUs, seq]);
+    while (s.length > 2 && serverTimeUs - s[0][0] > 2e6) s.shift();
+    const dt = (serverTimeUs - s[0][0]) / 1e6;
+    if (dt > 0.3) this.framesPerSec = (seq - s[0][1]) / dt;
+  }
   tick(now) {
-    this.window.push([now, this.frames, this.bytes, this.renders]);
+    this.window.push([now, this.frames, this.bytes, this.renders, this.shownFrames]);
     while (this.window.length > 2 && now - this.window[0][0] > 1000) this.window.shift();
-    const [t0, f0, b0, r0] = this.window[0];
+    const [t0, , b0, r0, s0] = this.window[0];
     const dt = (now - t0) / 1000;
     if (dt > 0.2) {
-      this.framesPerSec = (this.frames - f0) / dt;
       this.kBps = (this.bytes - b0) / 1024 / dt;
       this.fps = (this.renders - r0) / dt;
+      this.shownPerSec = (this.shownFrames - s0) / dt;
     }
+    // No frame for 2 s of this page's clock: the stream has stopped (paused page or server).
+    const last = this.stream[this.stream.length - 1];
+    if (last && this.lastDecodedAt !== undefined && now - this.lastDecodedAt > 2000) this.framesPerSec = 0;
   }
 }
 
@@ -52,6 +69,7 @@ export class Hud {
   message(text) {
     this.banner.hidden = !text;
     this.banner.textContent = text || '';
+    this.onBanner?.(!!text);
   }
   draw(now, s, st) {
     if (now - this.lastDraw < 250 || !this.visible) return; // 4 Hz is plenty for text
@@ -63,17 +81,21 @@ export class Hud {
     if (this.compact) {
       this.text.innerHTML =
         `<span class="${cls}">●</span> ${esc(st.connected ? st.clientId || '' : st.connectionState)} ${f(s.fps, s.fps < 10 ? 1 : 0)} fps\n` +
-        `${f(s.framesPerSec, 0)} f/s ${f(s.kBps, 0)} kB/s` + err;
+        `${f(s.framesPerSec, 0)} frames/s ${f(s.kBps, 0)} kB/s` + err;
       return;
     }
+    // Only what a user can act on: a decoder that kept falling behind after the start-up
+    // grace, so the page gave the temporal codec up (a smaller grid helps), not the frames
+    // skipped in passing or a resync while the page was starting.
+    const behind = st.fallback ? `\n<span class="warn">decoder too slow: intra frames now (a smaller grid helps)</span>` : '';
     this.text.innerHTML =
       `<span class="${cls}">● ${esc(st.connectionState)}</span>  ${esc(st.clientId || '')}\n` +
       `render   ${f(s.fps, s.fps < 10 ? 1 : 0)} fps\n` +
-      `stream   ${f(s.framesPerSec, 1)} frames/s  ${f(s.kBps, 0)} kB/s\n` +
-      `latency  ${f(s.latencyMs, 0)} ms   dropped ${s.dropped}\n` +
+      `stream   ${f(s.framesPerSec, 1)} frames/s  shown ${f(s.shownPerSec, 0)}/s\n` +
+      `         ${f(s.kBps, 0)} kB/s  latency ${f(s.latencyMs, 0)} ms\n` +
       `decode   ${f(s.decodeMs, 2)} ms  upload ${f(s.uploadMs, 2)} ms\n` +
       `N ${st.n ?? '–'}  lod ${st.lod ?? '–'}  foam ${st.foamLod === null || st.foamLod === undefined ? 'from folds' : `lod ${st.foamLod}`}\n` +
       `params v${st.paramsVersion ?? '–'}  seq ${st.lastSeq ?? '–'}\n` +
-      `link     rung ${st.link ? `${st.link.rung}/${st.link.rungs - 1}  ${f(st.link.link_kbps / 1000, 1)} Mbit/s` : '0 (as asked)'}` + err;
+      `link     rung ${st.link ? `${st.link.rung}/${st.link.rungs - 1}  ${f(st.link.link_kbps / 1000, 1)} Mbit/s` : '0 (as asked)'}` + behind + err;
   }
 }

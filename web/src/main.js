@@ -10,6 +10,10 @@ import { ProbeMarker } from './probe.js';
 import { SkyModel } from './sky.js';
 import { DEFAULT_HOUR } from './presets.js';
 
+// How far seq may go back before the page takes it for a restarted stream: an edge adopts a new
+// count only when it is more than 2 s of ticks behind, and frames decoded out of order differ
+// by a tick or two.
+const STREAM_RESTART_TICKS = 30;
 const query = new URLSearchParams(location.search);
 const canvas = document.getElementById('ocean');
 // ?aa=0 turns off multisampling (software GL in tests); ?detail=x scales mesh density.
@@ -41,7 +45,28 @@ const sky = new SkyModel(renderer);
 const ocean = new Ocean(renderer, sky.uniforms, { detail: Number(query.get('detail') || 1), skirts: query.get('skirt') !== '0', hexTiling: query.get('hex') !== '0' });
 ocean.setCrackFixes({ stitch: query.get('stitch') !== '0', skirts: query.get('skirt') !== '0' });
 sky.uniforms.uGapProbe.value = query.get('gapprobe') === '1' ? 1 : 0; // ?gapprobe=1: magenta sky and skirts (tests)
+// ?debugview=foam: the water writes (foam amount, -Jacobian, height) as colour; ?foamshift=x,z
+// moves every foam lookup by (x, z) metres (tests: foam placed away from its crests).
+ocean.uniforms.uDebugView.value = query.get('debugview') === 'foam' ? 1 : 0;
+const foamShift = (query.get('foamshift') || '').split(',').map(Number);
+if (foamShift.length === 2 && foamShift.every(Number.isFinite)) ocean.uniforms.uFoamShift.value.set(...foamShift);
 const stats = new Stats();
+// Notes about the shared sea (who changed what, a restart) also reach a user whose panel
+// is closed (phones start so): a line at the bottom for a few seconds.
+const toast = document.createElement('div');
+toast.id = 'toast';
+toast.dataset.ui = 'toast';
+toast.setAttribute('role', 'status');
+toast.hidden = true;
+document.body.appendChild(toast);
+let toastTimer = 0;
+function showToast(text) {
+  if (!panel.closed) return;
+  toast.textContent = text;
+  toast.hidden = false;
+  clearTimeout(toastTimer);
+  toastTimer = setTimeout(() => { toast.hidden = true; }, 8000);
+}
 const hud = new Hud(document.getElementById('hud'), document.getElementById('banner'), { compact });
 if (query.get('hud') === '0') hud.setVisible(false, false); // ?hud=0: hide for this visit only
 if (query.get('ui') === '0') document.body.classList.add('oc-no-ui'); // ?ui=0: the sea alone (pictures, measurements)
@@ -117,7 +142,10 @@ const conn = new Connection(serverUrl(), {
   onMessage(msg) {
     if (probe.onMessage(msg)) return; // the buoy marker's probe/query answers (probe.js)
     switch (msg.type) {
-      case 'hello':
+      case 'hello': {
+        // A new session after an old one: did the sea change meanwhile? A lower parameters
+        // version means the daemon restarted (without its saved state, if the sea differs).
+        const prev = lastHello ? { params: st.params, version: st.paramsVersion } : null;
         st.clientId = msg.client_id; st.role = msg.role; st.name = null;
         st.lastSeq = null; // a new session: seq gaps across a reconnect are not drops
         worker.postMessage({ type: 'reset' }); // its references belong to the old session
@@ -135,7 +163,16 @@ const conn = new Connection(serverUrl(), {
           if (Object.keys(wantedSub).length || foam || casc) conn.send({ type: 'subscribe', ...(casc || {}), ...wantedSub, ...(foam || {}) });
         }
         hud.message('');
+        if (prev && prev.params) {
+          const diff = panel.differences(prev.params, msg.params || {});
+          const restarted = msg.params_version < prev.version;
+          if (diff.length) {
+            st.restartNote = `${restarted ? 'the server restarted and the sea was reset' : 'the sea changed while you were away'}: ${diff.slice(0, 4).join(', ')}${diff.length > 4 ? ', …' : ''}`;
+            panel.announce(st.restartNote);
+          } else if (restarted) panel.announce(`the server restarted; the sea is as it was (you are now ${msg.client_id})`);
+        }
         break;
+      }
       case 'params':
         st.params = msg.params; st.paramsVersion = msg.params_version;
         panel.update(msg);
@@ -198,6 +235,8 @@ const panel = new Panel({
   },
 }, { compact: compact || query.get('panel') === 'closed' });
 hud.onToggle = (on) => { view.hud = on; panel.refreshView(); };
+panel.onAnnounce = showToast;
+hud.onBanner = (shown) => { if (shown) toast.hidden = true; }; // the banner's place
 if (query.get('wireframe') === '1') { view.wireframe = true; ocean.wireframe = true; panel.refreshView(); }
 // H shows or hides the status (not while typing in a panel field).
 window.addEventListener('keydown', (ev) => {
@@ -235,11 +274,15 @@ worker.onmessage = (ev) => {
   const msg = ev.data;
   if (msg.type === 'behind') { workerBusy -= msg.count; dropped(); return; } // it dropped its queue
   workerBusy--;
+  if (msg.type === 'skip' || msg.type === 'frame') { stats.decoded(msg.seq ?? msg.header?.seq, msg.serverTimeUs ?? msg.header?.serverTimeUs); stats.lastDecodedAt = performance.now(); }
   if (msg.type === 'skip') return; // decoded (a reference for the next), overtaken before assembly
   if (msg.type === 'error' && msg.code === 'reference') { st.referenceErrors++; resync(); return; }
   if (msg.type === 'error') { st.lastError = { code: 'decode', message: msg.message }; return; }
   const h = msg.header;
   st.lastError = null;
+  // A seq far behind the last one is a new stream (an edge whose simulation was replaced,
+  // PROTOCOL.md §3.3): count afresh instead of waiting for seq to pass the old value.
+  if (st.lastSeq !== null && h.seq + STREAM_RESTART_TICKS < st.lastSeq) st.lastSeq = null;
   // Two frames may decode at once (the decoder awaits); never show an older one after a newer.
   if (st.lastSeq !== null && h.seq <= st.lastSeq) { recycle(msg); return; }
   if (st.lastSeq !== null && h.seq > st.lastSeq + 1) stats.dropped += h.seq - st.lastSeq - 1;
@@ -268,6 +311,47 @@ function resize() {
   }
 }
 
+// The camera never goes below the displaced surface beneath it + CAMERA_CLEARANCE (the
+// orbit's polar limit only keeps it above sea level; a storm's crests are metres higher).
+// The surface is read from the grids drawn (cascade 0 and the finer cascades), at the
+// camera and a ring of points as wide as the near plane's half-diagonal, so the view does
+// not cut into a crest beside it. ?camfloor=0 turns it off (tests show what it prevents).
+const CAMERA_CLEARANCE = 1;
+const camFloor = query.get('camfloor') !== '0';
+function clearanceAt(x, z) {
+  let h = ocean.surfaceHeight(x, z);
+  const r = 0.6; // metres: beyond the near plane's corners (0.5 m, 55° field of view)
+  for (let k = 0; k < 6; k++) h = Math.max(h, ocean.surfaceHeight(x + r * Math.cos(k * Math.PI / 3), z + r * Math.sin(k * Math.PI / 3)));
+  return h;
+}
+function keepAboveWaves() {
+  if (!camFloor || !ocean.hasData) return;
+  const p = camera.position, floor = clearanceAt(p.x, p.z) + CAMERA_CLEARANCE;
+  if (p.y >= floor) return;
+  p.y = floor;
+  // Looking at a target above the camera would flip the orbit: keep the target lower.
+  if (controls.target.y > p.y - 0.5) controls.target.y = p.y - 0.5;
+  camera.lookAt(controls.target);
+}
+
+// Settings whose waves are all shorter than the grids resolve (a patch of kilometres over
+// a half-metre-deep sea) draw a flat, featureless sea: say why on screen, and what helps.
+// Flat: the grids hold under 2 % of the slope variance the wind gives (Cox & Munk).
+function flatNotice() {
+  const v = ocean.slopeVar;
+  const flat = !!(v && st.connected && v.cascade0 + v.cascades[0] + v.cascades[1] + v.cascades[2] < 0.02 * v.total && v.total > 0.004);
+  const text = flat ? `The sea looks flat: its waves are shorter than the grid resolves (cells of ${v.cell >= 10 ? v.cell.toFixed(0) : v.cell.toFixed(1)} m). A smaller patch size, a deeper sea or a longer fetch shows them.` : '';
+  if (text === st.flatNotice) return;
+  st.flatNotice = text;
+  flatEl.hidden = !text;
+  flatEl.textContent = text;
+}
+const flatEl = document.createElement('div');
+flatEl.id = 'flat-note';
+flatEl.dataset.ui = 'flat-note';
+flatEl.hidden = true;
+document.body.appendChild(flatEl);
+
 function frameLoop() {
   const now = performance.now();
   resize();
@@ -275,6 +359,7 @@ function frameLoop() {
     const f = pendingFrame;
     pendingFrame = null;
     const { uploadMs, released } = ocean.setFrame(f, now, bench);
+    stats.shownFrames++;
     stats.uploadMs = uploadMs;
     if (bench && timings.decode.length < 10000) { timings.decode.push(f.decodeMs); timings.assemble.push(f.assembleMs); timings.upload.push(uploadMs); }
     const buffers = released.map((a) => ({ buffer: a.buffer, channels: a.length === f.m * f.m * 4 ? 4 : a.length === f.m * f.m * 2 ? 2 : 1 }));
@@ -287,10 +372,12 @@ function frameLoop() {
     stats.latencyMs = (performance.timeOrigin + now) - f.header.serverTimeUs / 1000;
   }
   controls.update();
+  keepAboveWaves();
   // Sky, sun and light follow the local hour and the shared sea's wind; haze thickens with it.
   if (sky.update(view.hour, st.params?.wind_speed ?? 10)) ocean.uniforms.uFogDensity.value = 0.00009 * (1 + 4 * sky.state.overcast ** 2);
   if (!bench) ocean.render(camera, now);
   if (ocean.hasData) st.rendered++;
+  flatNotice();
   stats.renders++;
   stats.tick(now);
   hud.draw(now, stats, st);
@@ -315,6 +402,8 @@ window.oceand = Object.freeze({
   get foam() { return snapshot({ source: ocean.uniforms.uFoamField.value ? 'field' : 'jacobian', lod: st.foamLod, size: st.foamM }); },
   get wireframe() { return ocean.wireframe; },
   get view() { return snapshot({ hour: view.hour, hud: hud.visible, compact, sky: sky.state }); },
+  get flatNotice() { return st.flatNotice || null; },
+  get note() { return { panel: document.querySelector('[data-ui=last-change]')?.textContent ?? null, toast: toast.hidden ? null : toast.textContent }; },
   get camera() { return snapshot({ position: camera.position.toArray(), target: controls.target.toArray() }); },
   get stats() {
     return Object.freeze({
@@ -333,6 +422,42 @@ if (query.has('test')) {
   window.oceandTest = Object.freeze({
     freeze(on) { view.freeze = !!on; panel.refreshView(); },
     crackFixes(fixes) { ocean.setCrackFixes(fixes); },
+    // The grids drawn around (x, z), as plain arrays (tests compute the surface beneath the
+    // camera themselves): the nodes of cascade 0 within r metres, of both frames blended
+    // ((dx, h, dz) at node (i0 + a, j0 + b) = patch-periodic index), and the finer cascades'.
+    grids(x, z, r) {
+      const win = (data, m, L, stride) => {
+        const cell = L / m, i0 = Math.floor((x - r) / cell), j0 = Math.floor((z - r) / cell), w = Math.ceil(2 * r / cell) + 2;
+        const out = [];
+        for (let b = 0; b < w; b++) for (let a = 0; a < w; a++) {
+          const i = ((i0 + a) % m + m) % m, j = ((j0 + b) % m + m) % m, k = stride * (j * m + i);
+          out.push(data[k], data[k + 1], data[k + 2]);
+        }
+        return { cell, i0, j0, w, v: out };
+      };
+      return {
+        disp: ocean.disp.filter((t) => t && t.image.data.length === ocean.m * ocean.m * 4).map((t) => win(t.image.data, ocean.m, ocean.patch, 4)),
+        cascades: [1, 2, 3].map((c) => (ocean.cascades[c] && ocean.uniforms.uCOn.value.getComponent(c - 1) > 0
+          ? ocean.cascades[c].tex.map((t) => win(t.image.data, ocean.cascades[c].m, ocean.uniforms.uCPatch.value.getComponent(c - 1), 4)) : null)),
+      };
+    },
+    // Where a world point lands on the canvas, in CSS pixels (null: behind the camera).
+    project([x, y, z]) {
+      const v = new THREE.Vector3(x, y, z).project(camera);
+      if (v.z > 1) return null;
+      return [(v.x + 1) / 2 * canvas.clientWidth, (1 - v.y) / 2 * canvas.clientHeight];
+    },
+    slopeVariance() { return ocean.slopeVar || null; },
+    // The foam field drawn: size, and the share of samples at >= 0.5 and > 0.1.
+    foamStats() {
+      const f = ocean.foam[1]?.image.data;
+      if (!f) return null;
+      let half = 0, some = 0;
+      for (const v of f) { half += v >= 0.5; some += v > 0.1; }
+      return { size: ocean.foamM, covered: half / f.length, some: some / f.length, jc: ocean.uniforms.uFoamJc.value };
+    },
+    // Put the camera at pos looking at target (as the URL's ?cam= and ?target= do).
+    look(pos, target) { camera.position.set(...pos); controls.target.set(...target); controls.update(); },
   });
 }
 

@@ -64,6 +64,13 @@ function farRingGeometry() {
   return geo;
 }
 
+// The server's breaking threshold on the Jacobian for wind speed U10 (server/sim/ocean_foam.c,
+// ocean_foam_threshold): the page's fresh foam starts where the server's field is fed.
+export function foamThreshold(u) {
+  const over = Math.max((u ?? 10) - 8, 0);
+  return 0.707 + 0.0008 * over + 0.00018 * over * over;
+}
+
 export class Ocean {
   // skyUniforms: the shared sky cube, key light and exposure (sky.js SkyModel.uniforms).
   constructor(renderer, skyUniforms, { detail = 1, skirts = true, hexTiling = true } = {}) {
@@ -96,12 +103,18 @@ export class Ocean {
       uCPatch: { value: new THREE.Vector3(1, 1, 1) }, uCTexel: { value: new THREE.Vector3(1, 1, 1) },
       uCOn: { value: new THREE.Vector3(0, 0, 0) },
       uMinCell: { value: 1 }, uLodPixel: { value: this.lodPixel },
+      // Slope variance per axis (shaders.js LIGHT): cascade 0, cascades 1..3 (measured on
+      // the streamed grids, slopeVariance) and the band finer than the finest cascade
+      // (Cox & Munk's total less what the cascades hold).
+      uVar0: { value: 0 }, uCVar: { value: new THREE.Vector3(0, 0, 0) }, uVarBeyond: { value: 0.004 },
       // Foam (shaders.js FOAM): the server's field, two frames like the displacement.
       uFoamA: { value: null }, uFoamB: { value: null }, uFoamField: { value: 0 }, uFoamTexel: { value: 1 },
       uFoamWind: { value: new THREE.Vector2(1, 0) }, uFoamWindSpeed: { value: 10 },
       // ?foamramp=M (pictures of the foam texture): coverage rises 0 → 1 over M metres of x
       // from x = -M/2, instead of the field's, so every stage of the foam shows in one view.
       uFoamRamp: { value: Number(new URLSearchParams(globalThis.location?.search).get('foamramp')) || 0 },
+      uFoamJc: { value: foamThreshold(10) }, uFoamGain: { value: 1 }, uFoamShift: { value: new THREE.Vector2(0, 0) },
+      uDebugView: { value: 0 },
     };
     this.material = new THREE.ShaderMaterial({
       uniforms: this.uniforms, vertexShader: waterVertex, fragmentShader: waterFragment,
@@ -126,6 +139,68 @@ export class Ocean {
     this.cascades = [null, null, null, null]; // [c] = { m, tex: [A, B] } for cascades 1..3
     this.foam = [null, null]; // F×F single-channel float, F = N >> foam LOD
     this.foamM = 0;
+    this.windSpeed = 10;
+    this.foamFrames = 0;
+    this.varFrames = 0;       // frames since the slope variances were last measured
+  }
+
+  // Slope variances per axis, <(dh/dx)^2 + (dh/dz)^2> / 2, of cascade 0 and 1..3 from their
+  // newest grids (forward differences of height on the undisplaced grid), and what remains
+  // of the wind's total (Cox & Munk 1954: mean square slope 0.003 + 5.12e-3 U, clean sea)
+  // for the waves finer than the finest cascade. A few ms at N = 512: every 30 frames.
+  measureSlopeVariance() {
+    const u = this.uniforms;
+    const grid = (data, m, L) => {
+      if (!data || !m) return 0;
+      const k2 = (m / L) ** 2;
+      let s = 0, n = 0;
+      for (let j = 0; j < m; j++) for (let i = 0; i < m; i++) {
+        const h = data[4 * (j * m + i) + 1];
+        const hx = data[4 * (j * m + (i + 1) % m) + 1], hz = data[4 * (((j + 1) % m) * m + i) + 1];
+        s += ((hx - h) ** 2 + (hz - h) ** 2) * k2; n++;
+      }
+      return n ? 0.5 * s / n : 0;
+    };
+    const v0 = grid(this.disp[1]?.image.data, this.m, this.patch);
+    const cv = [1, 2, 3].map((c) => {
+      const slot = this.cascades[c];
+      return slot && u.uCOn.value.getComponent(c - 1) > 0 ? grid(slot.tex[1].image.data, slot.m, u.uCPatch.value.getComponent(c - 1)) : 0;
+    });
+    const total = 0.5 * (0.003 + 5.12e-3 * Math.max(this.windSpeed, 0));
+    u.uVar0.value = v0;
+    u.uCVar.value.set(cv[0], cv[1], cv[2]);
+    u.uVarBeyond.value = Math.max(total - v0 - cv[0] - cv[1] - cv[2], 0.05 * total);
+    this.slopeVar = { cascade0: v0, cascades: cv, beyond: u.uVarBeyond.value, total, cell: this.patch / Math.max(this.m, 1) };
+  }
+
+  // Height of the displaced surface at world (x, z) on the frames drawn (the larger of the
+  // two being blended, and the finer cascades' heights): the undisplaced point whose
+  // displacement lands on (x, z) is found by fixed-point iteration (horizontal
+  // displacement is smooth and smaller than the wavelength, so it converges in a few steps).
+  surfaceHeight(x, z) {
+    if (!this.hasData) return 0;
+    const m = this.m, L = this.patch;
+    const bilinear = (data, mm, LL, px, pz, ch) => {
+      const fx = ((px / LL) * mm % mm + mm) % mm, fz = ((pz / LL) * mm % mm + mm) % mm;
+      const i0 = Math.floor(fx), j0 = Math.floor(fz), tx = fx - i0, tz = fz - j0, i1 = (i0 + 1) % mm, j1 = (j0 + 1) % mm;
+      const at = (i, j) => data[4 * (j * mm + i) + ch];
+      return (at(i0, j0) * (1 - tx) + at(i1, j0) * tx) * (1 - tz) + (at(i0, j1) * (1 - tx) + at(i1, j1) * tx) * tz;
+    };
+    let best = -Infinity;
+    for (const t of this.disp) {
+      const d = t?.image.data;
+      if (!d || d.length !== m * m * 4) continue;
+      let px = x, pz = z;
+      for (let k = 0; k < 6; k++) { px = x - bilinear(d, m, L, px, pz, 0); pz = z - bilinear(d, m, L, px, pz, 2); }
+      best = Math.max(best, bilinear(d, m, L, px, pz, 1));
+    }
+    for (let c = 1; c < 4; c++) {
+      const slot = this.cascades[c];
+      if (!slot || !(this.uniforms.uCOn.value.getComponent(c - 1) > 0)) continue;
+      const Lc = this.uniforms.uCPatch.value.getComponent(c - 1);
+      best += Math.max(...slot.tex.map((t) => bilinear(t.image.data, slot.m, Lc, x, z, 1)));
+    }
+    return Number.isFinite(best) ? best : 0;
   }
 
   // The finer cascades of a frame (worker.js assembleCascades): each its own pair of
@@ -153,6 +228,8 @@ export class Ocean {
     // A cascade that stopped coming: off, and no texture left bound to it.
     for (let c = 1; c < 4; c++) if (!on[c - 1]) { u[`uC${c}A`].value = u[`uC${c}B`].value = this.blank(); }
     u.uCOn.value.set(on[0], on[1], on[2]);
+    // (here: the frame's cascades are in; a new wind or layout measures at once)
+    if (this.hasData && this.varFrames++ % 30 === 0) this.measureSlopeVariance();
     return released.filter((a) => a && a.buffer.byteLength);
   }
 
@@ -164,9 +241,12 @@ export class Ocean {
 
   // Wind of the shared sea (params): the foam streaks follow it.
   setWind(speed, directionDeg) {
+    this.windSpeed = speed ?? 10;
+    this.varFrames = 0;
     const a = (directionDeg || 0) * Math.PI / 180;
     this.uniforms.uFoamWind.value.set(Math.cos(a), Math.sin(a));
     this.uniforms.uFoamWindSpeed.value = speed ?? 10;
+    this.uniforms.uFoamJc.value = foamThreshold(speed);
   }
 
   // The foam field of a frame (or none: the shader falls back to the Jacobian).
@@ -186,8 +266,22 @@ export class Ocean {
     this.renderer.initTexture(this.foam[1]);
     if (fresh) { this.foam[0].image.data = f.foam.slice(); this.foam[0].needsUpdate = true; }
     u.uFoamA.value = this.foam[0]; u.uFoamB.value = this.foam[1];
+    if (fresh || this.foamFrames++ % 30 === 0) this.foamCoverage(f.foam);
     u.uFoamTexel.value = 1 / f.fm;
     u.uFoamField.value = 1;
+  }
+
+  // The streamed field is coarse (about 64×64: each value a mean over some 16 of the
+  // server's samples), so fewer of its values reach 0.5 than the server's own do, most of
+  // all in light winds where whitecaps are smaller than a cell. The gain scales it so that
+  // the share at >= 0.5 is Monahan & O'Muircheartaigh's W(U) (docs/simulation.md, Foam), to
+  // which the server's full field is calibrated: the field keeps where and how long foam
+  // lives, the law sets how much of the sea it covers.
+  foamCoverage(data) {
+    const W = Math.min(3.84e-6 * Math.max(this.windSpeed, 0) ** 3.41, 0.5);
+    const sorted = Float32Array.from(data).sort();
+    const q = sorted[Math.min(sorted.length - 1, Math.floor((1 - W) * sorted.length))];
+    this.uniforms.uFoamGain.value = W > 1e-4 && q > 0.02 ? Math.min(Math.max(0.5 / q, 1), 4) : 1;
   }
 
   set wireframe(on) { this.material.wireframe = on; }
@@ -241,6 +335,7 @@ export class Ocean {
     this.disp = [0, 1].map(() => floatTexture(new Float32Array(m * m * 4), m, THREE.RGBAFormat));
     this.slope = [null, null];
     this.hasData = false;
+    this.varFrames = 0;
     const u = this.uniforms;
     u.uPatch.value = patch; u.uTexel.value = 1 / m;
     u.uMinCell.value = patch / Math.min(MAX_GRID, m);

@@ -75,12 +75,14 @@ export function showCapacity(ctrl, capacity, nfields, temporal = true) {
   if (!select || !values || !capacity) return;
   const sizes = new Map((capacity.resolutions || []).map((z) => [z.n, z]));
   const k = Math.min(Math.max(nfields, 1), 6) - 1;
+  let capped = null;
   values.forEach((n, i) => {
     const opt = select.options[i], z = sizes.get(Number(n));
     if (!opt) return;
     const over = Number(n) > capacity.max_resolution;
     const tf = z ? (z.temporal_fields ?? z.full_rate_fields) : 6; // a server before the codec rung: no difference
     opt.disabled = over;
+    if (over && capped === null) capped = Number(n);
     opt.dataset.capacity = over ? 'memory' : !z ? 'ok' : z.full_rate_fields < nfields ? 'degraded' : temporal && tf < nfields ? 'intra' : 'ok';
     const label = { memory: ' (over memory cap)', degraded: ' (degraded)', intra: ' (intra codec)' }[opt.dataset.capacity] || '';
     opt.textContent = String(n) + label;
@@ -92,6 +94,37 @@ export function showCapacity(ctrl, capacity, nfields, temporal = true) {
           ? `about ${z.est_ms[k]} ms per frame with ${nfields} fields with the temporal codec, ${intraMs} ms intra; the tick allows ${capacity.budget_ms} ms: full detail and rate with the intra codec (more bytes)`
           : '';
   });
+  // The reason beside the option too: a disabled option's tooltip is seldom seen.
+  let note = ctrl.domElement.nextElementSibling;
+  if (!note || !note.classList.contains('oc-capnote')) {
+    note = document.createElement('div');
+    note.className = 'oc-capnote';
+    note.dataset.ui = 'capacity-note';
+    ctrl.domElement.after(note);
+  }
+  note.hidden = capped === null;
+  note.textContent = capped === null ? '' : `N ≥ ${capped} is off: over the server's memory cap of ${capacity.memory_cap_mb} MB (N ≤ ${capacity.max_resolution})`;
+}
+
+// Wind direction: the simulation's wind_direction is where the wind blows toward, in the
+// sea's x-z plane (0 = +x, 90 = +z); the world's north is +z and east -x (sky.js). Sailors
+// name a wind by where it comes from: bearings clockwise from north, and the 16 points.
+const POINTS = ['N', 'NNE', 'NE', 'ENE', 'E', 'ESE', 'SE', 'SSE', 'S', 'SSW', 'SW', 'WSW', 'W', 'WNW', 'NW', 'NNW'];
+export function windBearings(towardDeg) {
+  const a = (towardDeg || 0) * Math.PI / 180;
+  const toward = ((Math.atan2(-Math.cos(a), Math.sin(a)) * 180 / Math.PI) + 360) % 360;
+  const from = (toward + 180) % 360;
+  const name = (b) => POINTS[Math.round(b / 22.5) % 16];
+  return { from, toward, fromName: name(from), towardName: name(toward) };
+}
+
+// A value typed into a number field that the parameter's range does not hold: the reason,
+// or null. (lil-gui would clamp it to the range and the clamped value would be sent.)
+export function rangeError(s, v) {
+  if (!s || (s.type !== 'float' && s.type !== 'int') || !Number.isFinite(s.min) || !Number.isFinite(s.max)) return null;
+  if (!Number.isFinite(v)) return `not a number; allowed ${s.min} to ${s.max}${s.unit ? ` ${s.unit}` : ''}`;
+  if (v >= s.min && v <= s.max) return null;
+  return `${v} is outside ${s.min} to ${s.max}${s.unit ? ` ${s.unit}` : ''}`;
 }
 
 export class Panel {
@@ -172,6 +205,7 @@ export class Panel {
   // The server's answer (named): the name now in force.
   named(name) {
     this.serverName = name;
+    if (this.keepNote) return; // a restart's note outranks "you are …"
     this.note.textContent = name ? `you are ${name} (${this.myId})` : `connected as ${this.myId}`;
   }
 
@@ -187,6 +221,9 @@ export class Panel {
   build(hello) {
     for (const c of Object.values(this.ctrls)) c.destroy();
     if (this.sub) this.sub.destroy();
+    this.compass?.remove();
+    this.compass = null;
+    for (const e of this.gui.domElement.querySelectorAll('.oc-capnote')) e.remove();
     this.ctrls = {};
     this.schema = {};
     this.values = { ...hello.params };
@@ -200,6 +237,7 @@ export class Panel {
     this.capacity = hello.capacity;
     this.refreshCapacity();
     this.note.textContent = `connected as ${hello.client_id}${this.readOnly ? ' (view only)' : ''}`;
+    this.keepNote = false;
     this.setConnected(true);
   }
 
@@ -223,18 +261,65 @@ export class Panel {
       c = folder.add(obj, name);
       if (s.type === 'int') c.step(1);
     }
-    c.name(s.unit ? `${info.label} (${s.unit})` : info.label);
+    // (wind_direction is where the wind blows toward: said in the label, the compass says "from")
+    const label = name === 'wind_direction' ? `${info.label}, toward` : info.label;
+    c.name(s.unit ? `${label} (${s.unit})` : label);
     c.domElement.dataset.param = name;
     c.domElement.dataset.group = info.group;
     if (info.help) c.domElement.title = info.help;
+    // What was typed, before lil-gui clamps it to the range (capture: before its own listener).
+    let typed = null;
+    if (c.$input && (s.type === 'float' || s.type === 'int')) {
+      c.domElement.addEventListener('input', (ev) => { if (ev.target === c.$input) typed = c.$input.value; }, true);
+    }
     // Send on release (not on every drag step): the server rate-limits sets.
     c.onFinishChange((v) => {
+      const raw = typed;
+      typed = null;
+      if (raw !== null && raw.trim() !== '') {
+        const why = rangeError(s, Number(raw));
+        if (why) { this.refuse(name, why); return; }
+      }
+      c.domElement.classList.remove('oc-invalid');
       if (v === this.params[name]) return;
       let val = v;
       if (s.type === 'int') val = Math.round(Number(v));
       this.actions.set({ [name]: val });
     });
     this.ctrls[name] = c;
+    if (name === 'wind_direction') this.addCompass(c);
+  }
+
+  // A typed value out of range: not sent; the field shows the value in force again.
+  refuse(name, why) {
+    const c = this.ctrls[name];
+    this.note.textContent = `${this.schema[name]?.label || name} not changed: ${why}`;
+    c.domElement.classList.add('oc-invalid');
+    if (this.params && name in this.params) this.values[name] = this.params[name];
+    c.updateDisplay();
+  }
+
+  // A compass under the wind direction: an arrow the way the wind blows, and the direction
+  // it comes from (as sailors name winds) beside the one it blows toward.
+  addCompass(ctrl) {
+    const el = document.createElement('div');
+    el.className = 'oc-compass';
+    el.dataset.ui = 'compass';
+    el.innerHTML = `<svg viewBox="-20 -20 40 40" width="40" height="40" aria-hidden="true">
+      <circle r="17" fill="none" stroke="currentColor" stroke-opacity="0.5"/>
+      <text y="-10" text-anchor="middle" font-size="8" fill="currentColor">N</text>
+      <g class="oc-arrow"><line y1="11" y2="-9" stroke="#7fd0ff" stroke-width="2.5"/><path d="M0 -14 L-5 -6 L5 -6 Z" fill="#7fd0ff"/></g>
+    </svg><span class="oc-compass-text"></span>`;
+    ctrl.domElement.after(el);
+    this.compass = el;
+    this.updateCompass();
+  }
+  updateCompass() {
+    if (!this.compass) return;
+    const b = windBearings(this.values.wind_direction);
+    this.compass.querySelector('.oc-arrow').setAttribute('transform', `rotate(${b.toward.toFixed(1)})`);
+    this.compass.querySelector('.oc-compass-text').textContent =
+      `from ${b.fromName} (${Math.round(b.from)}°), blowing toward ${b.towardName} (${Math.round(b.toward)}°)`;
   }
 
   buildSubscription(hello) {
@@ -293,6 +378,20 @@ export class Panel {
     }
   }
 
+  // Said in the note and outside the panel (a daemon restart that changed the sea).
+  announce(text) {
+    this.note.textContent = text;
+    this.keepNote = true;
+    this.onAnnounce?.(text);
+  }
+  get closed() { return this.gui._closed; }
+
+  // What differs between two parameter sets, as the note says it ("Wind speed 13.25 → 10 m/s").
+  differences(before, after) {
+    return Object.keys(after).filter((k) => before && k in before && before[k] !== after[k])
+      .map((k) => `${this.schema[k]?.label || k} ${formatValue(before[k], this.schema[k])} → ${formatValue(after[k], this.schema[k])}`);
+  }
+
   // Who a change came from: "you", the changer's display name, or its id.
   who(msg) {
     if (msg.by && msg.by === this.myId) return 'you';
@@ -310,6 +409,7 @@ export class Panel {
     this.params = { ...msg.params };
     Object.assign(this.values, msg.params);
     for (const c of Object.values(this.ctrls)) c.updateDisplay();
+    this.updateCompass();
     if (msg.capacity) { this.capacity = msg.capacity; this.refreshCapacity(); }
     const changed = msg.changed || [];
     for (const name of changed) {
@@ -318,11 +418,14 @@ export class Panel {
     }
     const preset = this.markPreset();
     if (!changed.length) return;
+    this.keepNote = false;
     const what = changed.map((n) => `${this.schema[n]?.label || n} ${formatValue(msg.params[n], this.schema[n])}`).join(', ');
     this.note.textContent = preset && changed.length > 1
       ? `${this.who(msg)} chose ${preset.label} (${preset.beaufort}): ${what}`
       : `${this.who(msg)} set ${what}`;
     this.note.title = `parameters version ${msg.params_version}`;
+    // Someone else's change: also said outside the panel (closed on phones).
+    if (this.who(msg) !== 'you') this.onAnnounce?.(this.note.textContent);
   }
 
   // A rejected set: show why and put the server's values back.

@@ -1,4 +1,4 @@
-// probe.js — an optional buoy marker (issue 14, PROTOCOL.md §7.4). Double-click
+// probe.js — an optional buoy marker (PROTOCOL.md §7.4). Double-click
 // the sea to drop a buoy there: it subscribes to a `probe` of that world point
 // and bobs at the height the server reports every tick, so it should ride the
 // rendered surface (which is drawn from the streamed, lossy grids). A one-shot

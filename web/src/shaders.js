@@ -8,6 +8,7 @@ uniform samplerCube uEnv;
 uniform vec3 uSunDir;      // key light: the sun by day, the moon by night
 uniform vec3 uSunColor;
 uniform float uDiscSize;   // cos of the key light's angular radius
+uniform float uDiscGain;   // the disc's radiance in units of the key light's colour
 uniform vec3 uMoonDir;
 uniform vec3 uMoonColor;
 uniform float uStars;
@@ -23,7 +24,9 @@ float discMask(vec3 d, vec3 c, float cosR) { return smoothstep(cosR - 0.000015, 
 vec3 sunDisc(vec3 d) {
   // The disc plus a narrow aureole; its colour is the transmitted sunlight.
   float s = max(dot(d, uSunDir), 0.0);
-  return uSunColor * (60.0 * discMask(d, uSunDir, uDiscSize) + 0.25 * pow(s, 400.0));
+  // (the sun's 600: the disc must stand out of the sunset glow after the tone curve, even reddened
+  // to a few % of its noon brightness.)
+  return uSunColor * (uDiscGain * discMask(d, uSunDir, uDiscSize) + 0.6 * pow(s, 400.0) + 0.08 * pow(s, 40.0));
 }
 vec3 moonDisc(vec3 d) { return uMoonColor * 60.0 * discMask(d, uMoonDir, 0.99999); }
 // ACES filmic fit (Narkowicz) and sRGB output: we write display-ready colour.
@@ -203,6 +206,9 @@ uniform vec2 uFoamWind;      // unit vector the wind blows toward (x, z)
 uniform float uFoamWindSpeed; // m/s
 uniform float uFoam;         // overall strength (1)
 uniform float uFoamRamp;     // > 0: coverage is a ramp along x over this many metres (pictures)
+uniform float uFoamJc;       // the server's breaking threshold on J for this wind (ocean_foam.c)
+uniform vec2 uFoamShift;     // metres: every foam lookup moved (tests: foam placed at random)
+uniform float uFoamGain;     // the streamed field's scale to Monahan's coverage (ocean.js foamCoverage)
 float foamHash(vec2 p) {     // Hoskins' hash without sine: stable for large coordinates
   vec3 p3 = fract(vec3(p.xyx) * 0.1031);
   p3 += dot(p3, p3.yzx + 33.33);
@@ -251,7 +257,7 @@ vec2 foamFbm(vec2 q, float s, int n, float px) {
 }
 float foamFieldAt(vec2 xz) {
   vec2 uv = xz / uPatch + 0.5 * uFoamTexel;
-  return mix(textureLod(uFoamA, uv, 0.0).r, textureLod(uFoamB, uv, 0.0).r, uMix);
+  return min(uFoamGain * mix(textureLod(uFoamA, uv, 0.0).r, textureLod(uFoamB, uv, 0.0).r, uMix), 1.0);
 }
 // The field seen far away: read at the hex-tiled offsets of hexSample (same lattice),
 // so whitecaps do not print the patch lattice from above.
@@ -262,13 +268,24 @@ float foamFieldHex(vec2 xz) {
           + w.z * foamFieldAt(xz + hexHash(v3) * uPatch);
   return f / max(w.x + w.y + w.z, 1e-3);
 }
-// Coverage 0..1 at xz: the server's field, or the Jacobian (folds) without it.
+// Coverage 0..1 at xz. The server's field (about 4 m a cell) says where foam lives and
+// for how long: it is the persistence and the calibrated coverage. Where in that cell it
+// lies comes from the Jacobian at the surface grid's full resolution (1-2 m): foam sits on
+// the squeezed water of the crests (J < 1) and thins where the surface is stretched, and
+// water breaking now (J below the server's threshold uFoamJc) is foam at once. Foam left
+// behind trails downwind: the field is also read a few metres upwind (streaks, stronger
+// with the wind). uFoamShift moves every foam lookup (tests: foam placed at random).
 float foamCover(vec2 xz, float jac, float hex) {
+  xz += uFoamShift;
   if (uFoamRamp > 0.0) return clamp(xz.x / uFoamRamp + 0.5, 0.0, 1.0);
-  if (uFoamField < 0.5) return smoothstep(0.7, 0.25, jac);
+  float fresh = smoothstep(uFoamJc + 0.06, uFoamJc - 0.12, jac);
+  if (uFoamField < 0.5) return max(fresh, smoothstep(0.7, 0.25, jac));
   float f = foamFieldAt(xz);
   if (hex > 0.0) f = mix(f, foamFieldHex(xz), hex);
-  return clamp(f, 0.0, 1.0);
+  float trail = 1.5 + 2.5 * smoothstep(8.0, 20.0, uFoamWindSpeed);   // metres per tap
+  if (hex < 1.0) for (int k = 1; k <= 3; k++) f = max(f, foamFieldAt(xz - uFoamWind * (trail * float(k))) * (1.0 - 0.24 * float(k)) * (1.0 - hex));
+  float crest = smoothstep(1.2, 0.7, jac);
+  return clamp(max(f * mix(0.2, 1.35, crest), fresh), 0.0, 1.0);
 }
 // How much of the pixel is foam (0..1), with texture; px = pixel footprint in metres.
 // A domain-warped fractal noise (swirled like foam stirred by the breaking, many scales,
@@ -317,12 +334,23 @@ float foamAmount(vec2 xz, float cover, float px) {
   return mix(a, far, smoothstep(0.8, 4.0, px));
 }
 
-// Shade foam over the water colour c; light = what lights the water body.
-vec3 foamShade(vec3 c, vec2 xz, float jac, float hex, vec3 light, float px) {
+// Foam shaded as a rough white layer a few centimetres thick: Lambert under the sun and the
+// sky, with its own relief (the slope of its thickness, from the screen-space derivatives
+// of the amount), so dense foam shows lumps and the sun side of a crest is brighter than
+// its lee. Thin foam lets the water through, a little green-blue.
+vec3 foamShade(vec3 c, vec2 xz, float jac, float hex, vec3 n, float px, out float amount) {
   float a = foamAmount(xz, foamCover(xz, jac, hex), px) * uFoam;
-  // Thick foam is a bright diffuse white; thin foam lets the water through, a little green-blue.
-  vec3 white = vec3(0.84, 0.88, 0.90) * light * 0.92;
-  return mix(c, mix(white * vec3(0.85, 0.95, 0.97), white, a), a * 0.95);
+  amount = a;
+  vec2 dxz = dFdx(xz), dyz = dFdy(xz), da = vec2(dFdx(a), dFdy(a)); // (before any branch)
+  if (a <= 0.0) return c;
+  float det = dxz.x * dyz.y - dxz.y * dyz.x;
+  vec2 g = abs(det) > 1e-12 ? vec2(dyz.y * da.x - dxz.y * da.y, -dyz.x * da.x + dxz.x * da.y) / det : vec2(0.0);
+  vec3 nf = normalize(n - vec3(g.x, 0.0, g.y) * 0.06 * (1.0 - smoothstep(0.05, 0.5, px)));
+  float sun = max(dot(nf, uSunDir), 0.0) * step(0.0, uSunDir.y);
+  vec3 amb = skyAmbient() * (0.75 + 0.25 * nf.y);
+  vec3 lit = 0.85 * (amb * 1.3 + uSunColor * sun * 0.95);
+  vec3 thin = lit * vec3(0.78, 0.92, 0.95);
+  return mix(c, mix(thin, lit, a), a * 0.95);
 }
 `;
 
@@ -335,6 +363,10 @@ uniform sampler2D uSlopeB;
 uniform float uHasSlope, uHasJac, uFogDensity;
 uniform float uHexNear, uHexFar; // metres: from periodic normals to hex-tiled ones
 uniform vec3 uDeep, uScatter;
+uniform float uVar0, uVarBeyond; // slope variance per axis: cascade 0, the band beyond the finest cascade
+uniform vec3 uCVar;              // ... and of cascades 1..3
+uniform float uSunIrr;           // the sun's irradiance on the water in units of uSunColor
+uniform float uDebugView;        // tests: 1 writes (foam amount, -J, height) instead of colour
 varying vec3 vWorld;
 varying vec2 vGround;
 varying float vHeight;
@@ -380,6 +412,26 @@ vec3 hexSample(vec2 xz, float e) {
 }
 ${FOAM}
 
+// Sun glitter from the slopes a pixel does not resolve (Bruneton, Neyret & Holzschuch 2010,
+// "Real-time realistic ocean lighting using seamless transitions from geometry to BRDF",
+// eq. 8-9 and 14): within a pixel the facets' slopes are Gaussian about the resolved normal
+// n with variance s2 per axis, and the sun is reflected by those facing the half vector,
+// with Smith's shadowing and masking.
+float erfcApprox(float x) { return 2.0 * exp(-x * x) / (1.7724539 * (x + sqrt(x * x + 1.2732395))); }
+float smithLambda(float mu, float s2) {
+  mu = clamp(mu, 1e-3, 0.9999);
+  float v = mu / sqrt(2.0 * s2 * (1.0 - mu * mu));
+  return max(0.0, (exp(-v * v) - v * 1.7724539 * erfcApprox(v)) / (2.0 * v * 1.7724539));
+}
+float sunGlitter(vec3 n, vec3 V, vec3 L, float s2) {
+  vec3 H = normalize(L + V);
+  float zH = max(dot(H, n), 1e-3), zV = max(dot(V, n), 0.01), zL = max(dot(L, n), 0.01);
+  float t2 = (1.0 - zH * zH) / (zH * zH);
+  float p = exp(-0.5 * t2 / s2) / (6.2831853 * s2);
+  float Fh = 0.02 + 0.98 * pow(1.0 - max(dot(V, H), 0.0), 5.0);
+  return Fh * p / (4.0 * zV * zH * zH * zH * zH * (1.0 + smithLambda(zL, s2) + smithLambda(zV, s2)));
+}
+
 void main() {
   vec2 xz = vGround;
   // Central differences of the displaced surface. The step grows with the pixel
@@ -403,9 +455,18 @@ void main() {
     height = mix(height, hs.z, hex);
   }
   // Finer cascades: their slopes add to cascade 0's (cascades block).
-  vec2 cs = cascadesSlope(xz, 0.5 * max(fw.x, fw.y));
+  float fp = 0.5 * max(fw.x, fw.y);
+  vec2 cs = cascadesSlope(xz, fp);
   vec2 s0 = -n.xz / max(n.y, 1e-3);          // n is along (-dh/dx, 1, -dh/dz)
   n = normalize(vec3(-(s0.x + cs.x), 1.0, -(s0.y + cs.y)));
+  // What the pixel does not resolve goes into the BRDF as slope variance: the band finer
+  // than the finest cascade, the cascades faded out for this footprint, and the octaves of
+  // cascade 0 the difference over 2e averages away (a Phillips-like sea holds about the
+  // same slope variance in each octave of wavenumber).
+  float spacing0 = uPatch * uTexel;
+  float lost0 = clamp(log2(e / spacing0) / max(log2(1.0 / uTexel) - 3.0, 1.0), 0.0, 1.0);
+  float s2 = uVarBeyond + lost0 * uVar0 + dot(vec3(1.0) - cascadeWeights(fp), uCVar);
+  s2 = max(s2, 2e-4);
   // Jacobian of the horizontal map: < 1 where crests fold, which is where foam forms.
   float jac = (tx.x * tz.z - tz.x * tx.z) / (4.0 * e * e);
   if (uHasJac > 0.5) jac = dispAt(xz).w;
@@ -417,26 +478,43 @@ void main() {
   vec3 R = reflect(-V, n);
   R.y = abs(R.y);
 
-  float F = 0.02 + 0.98 * pow(1.0 - max(dot(n, V), 0.0), 5.0);
-  // Reflection of the same sky, blurrier far away (unresolved slopes).
-  vec3 refl = skyColor(R, clamp(log2(dist / 400.0), 0.0, 3.0));
+  // Fresnel averaged over the unresolved facets (Bruneton et al. 2010, the fit of their
+  // sec. 4.2, meanFresnel): a rough sea reflects less at grazing angles than a mirror, as
+  // the facets that face the viewer reflect little and those that face away are hidden.
+  float sV = sqrt(s2);
+  float F = 0.02 + 0.98 * pow(1.0 - max(dot(n, V), 0.0), 5.0 * exp(-2.69 * sV)) / (1.0 + 22.7 * pow(sV, 1.5));
+  // Reflection of the same sky, blurred by the unresolved slopes: the reflected ray spreads
+  // by twice the slope's deviation (a cube texel is 1/81 rad at 128 per face).
+  vec3 refl = skyColor(R, clamp(log2(163.0 * sqrt(s2)), 0.0, 5.0));
   // Water body: deep colour lit by the sky and the key light, plus light scattered
   // through thin crests toward the viewer.
+  // The sky light a facet gathers depends on where it faces (the cube's blurriest level in
+  // the normal's direction), so the slopes show in the body even under an even sky.
   vec3 amb = skyAmbient();
+  vec3 ambN = mix(amb, skyColor(n, 6.0), 0.6);
   float diff = max(dot(n, L), 0.0);
-  vec3 light = amb * 1.6 + uSunColor * diff * 0.7;
+  vec3 light = ambN * 1.6 + uSunColor * diff * 0.7;
   vec3 body = uDeep * light;
+  // Bubbles left in the squeezed water of the crests scatter light back up (turquoise).
+  body += uScatter * amb * 1.2 * smoothstep(1.05, 0.6, jac);
   // (Far away the height is hex-tiled too: the crests would print the lattice back.)
   float crest = clamp(height * 0.25 + 0.3, 0.0, 1.0);
-  body += uScatter * crest * (uSunColor * pow(max(dot(V, -L) * 0.5 + 0.5, 0.0), 3.0) * 0.6 + amb * 0.3);
+  body += uScatter * crest * (uSunColor * pow(max(dot(V, -L) * 0.5 + 0.5, 0.0), 3.0) * 0.6 + amb * 0.9);
   vec3 c = mix(body, refl, F);
-  // Glitter: a sharp Blinn-Phong lobe of the sun (or moon), widened with distance
-  // where single waves are no longer resolved.
-  vec3 H = normalize(L + V);
-  float shin = mix(900.0, 140.0, clamp(dist / 2500.0, 0.0, 1.0));
-  c += uSunColor * pow(max(dot(n, H), 0.0), shin) * (shin / 60.0) * F * 1.6 * step(0.0, L.y);
-  // Foam: the server's shared field (or the folds), with texture (FOAM above).
-  c = foamShade(c, xz, jac, hex, light, max(fw.x, fw.y));
+  // Glitter: the sun (or moon) in the facets of the unresolved slopes.
+  c += uSunColor * uSunIrr * sunGlitter(n, V, L, s2) * step(0.0, L.y);
+  // Foam: the server's shared field shaped by the Jacobian (FOAM above), lit.
+  float foamA, foamJ = jac;
+  if (uFoamShift != vec2(0.0)) { // (tests) the crest signal moves with the foam
+    vec2 q = xz + uFoamShift;
+    vec3 qx = surf(q + vec2(e, 0.0)) - surf(q - vec2(e, 0.0)), qz = surf(q + vec2(0.0, e)) - surf(q - vec2(0.0, e));
+    foamJ = (qx.x * qz.z - qz.x * qx.z) / (4.0 * e * e);
+  }
+  c = foamShade(c, xz, foamJ, hex, n, max(fw.x, fw.y), foamA);
+  if (uDebugView > 0.5) {
+    gl_FragColor = vec4(foamA, clamp(0.5 - 0.5 * (jac - 1.0), 0.0, 1.0), clamp(0.5 + 0.125 * height, 0.0, 1.0), 1.0);
+    return;
+  }
   // Aerial perspective into the horizon colour.
   float fog = 1.0 - exp(-dist * uFogDensity);
   // The haze takes the horizon's colour in the direction of view near the horizon,

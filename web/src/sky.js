@@ -76,6 +76,9 @@ function skyMaterial() {
       uNight: { value: new THREE.Color(0, 0, 0) },
       uOvercast: { value: 0 },
       uCloudLit: { value: new THREE.Color(1, 1, 1) },
+      uTwilight: { value: new THREE.Color(0, 0, 0) },
+      uTwilightSky: { value: new THREE.Color(0, 0, 0) },
+      uCloudWarm: { value: new THREE.Color(0, 0, 0) },
     },
     vertexShader: src.vertexShader, fragmentShader, side: THREE.BackSide, depthWrite: false,
   });
@@ -86,6 +89,22 @@ uniform vec3 uSkyGain;    // dims and tints the clear sky at night
 uniform vec3 uNight;      // night floor: airglow and moonlit sky
 uniform float uOvercast;  // 0 clear .. 1 closed deck
 uniform vec3 uCloudLit;   // cloud base colour in the current light
+uniform vec3 uTwilight;   // twilight glow at the horizon below the sun (0 by day and night)
+uniform vec3 uTwilightSky; // the twilight sky's blue, over the whole dome
+uniform vec3 uCloudWarm;  // low sun: light on the clouds toward it, reddened
+// Twilight: Preetham's model has no sky once the sun is down; the glow is added as it is
+// seen (Rozenberg 1966, Twilight, ch. 1): brightest on the horizon under the sun, falling
+// off within a few degrees of elevation and some tens of degrees of azimuth, orange at the
+// horizon and yellow then blue above it; the anti-solar side keeps a faint pink band.
+vec3 twilight(vec3 dir) {
+  float h = max(dir.y, 0.0);
+  vec2 sh = normalize(vSunDirection.xz + vec2(1e-5, 0.0)), dh = normalize(dir.xz + vec2(1e-5, 0.0));
+  float toward = 0.5 + 0.5 * dot(sh, dh);
+  float band = exp(-h / 0.06), broad = exp(-h / 0.18);
+  vec3 glow = uTwilight * (pow(toward, 3.0) * (band * vec3(1.0, 0.55, 0.25) + 0.35 * broad * vec3(1.0, 0.8, 0.55))
+                         + 0.12 * pow(1.0 - toward, 2.0) * exp(-h / 0.15) * vec3(0.9, 0.6, 0.75));
+  return glow + uTwilightSky * (0.6 + 0.4 * broad);
+}
 float oc_hash(vec2 p) { return fract(sin(dot(p, vec2(127.1, 311.7))) * 43758.5453); }
 float oc_noise(vec2 p) {
   vec2 i = floor(p), f = fract(p);
@@ -99,7 +118,7 @@ float oc_fbm(vec2 p) {
 }
 vec3 weather(vec3 dir, vec3 clear) {
   // Under a spreading deck the clear sky left in the gaps is dimmer too.
-  vec3 c = clear * uSkyGain * (1.0 - 0.5 * uOvercast) + uNight * (0.55 + 0.45 * max(dir.y, 0.0));
+  vec3 c = clear * uSkyGain * (1.0 - 0.5 * uOvercast) + uNight * (0.55 + 0.45 * max(dir.y, 0.0)) + twilight(dir) * (1.0 - 0.6 * uOvercast);
   // A cloud layer seen as a plane overhead: cells shrink toward the horizon.
   float h = max(dir.y, 0.0);
   float n = oc_fbm(dir.xz / (h + 0.12) * 1.3);
@@ -110,6 +129,11 @@ vec3 weather(vec3 dir, vec3 clear) {
   // sky (Moon & Spencer 1942): L(h) = Lz (1 + 2 sin h) / 3, the horizon a third of the zenith.
   float deck = smoothstep(0.6, 1.0, uOvercast);
   vec3 cloud = uCloudLit * mix(0.78 + 0.3 * n + 0.8 * silver, (1.0 + 2.0 * h) / 3.0 * (0.9 + 0.2 * n), deck);
+  // Low sun: clouds toward it are lit from the side and below, warmest at their thin edges
+  // (forward scattering), and keep that light a little after sunset at their height.
+  float az = 0.5 + 0.5 * dot(normalize(dir.xz + vec2(1e-5, 0.0)), normalize(vSunDirection.xz + vec2(1e-5, 0.0)));
+  float edge = 1.0 - smoothstep(1.05 - uOvercast, 1.6 - uOvercast, n + 0.35);
+  cloud += uCloudWarm * (0.25 + 2.2 * pow(az, 6.0) * (0.4 + edge)) * (1.0 - 0.7 * deck);
   return mix(c, cloud, cover * mix(0.55 + 0.45 * smoothstep(0.0, 0.1, dir.y), 1.0, deck));
 }
 `;
@@ -133,6 +157,10 @@ export class SkyModel {
       uSunDir: { value: new THREE.Vector3(0, 1, 0) },     // the key light: sun by day, moon by night
       uSunColor: { value: new THREE.Color(1, 1, 1) },
       uDiscSize: { value: 0.99999 },                      // cos of the disc's angular radius
+      uDiscGain: { value: 600 },                          // sun 600, moon 60 (shaders.js sunDisc)
+      // The key light's irradiance on the water in units of its colour: its disc's radiance
+      // times its solid angle, so the moon's is a tenth of the sun's as its disc is.
+      uSunIrr: { value: 40 },
       uMoonDir: { value: new THREE.Vector3(0, 1, 0) },
       uMoonColor: { value: new THREE.Color(0, 0, 0) },
       uStars: { value: 0 },
@@ -172,6 +200,16 @@ export class SkyModel {
     lit.g += 0.52 * s01(-0.1, 0.4, sinAlt) + 0.0105;
     lit.b += 0.56 * s01(-0.1, 0.4, sinAlt) + 0.0200;
     lit.multiplyScalar(1 - darkening);
+    // Twilight (sun from +4° to -18°): glow under the sun and the dome's blue, strongest
+    // around sunset, fading with the depression (about e-fold per 4°).
+    const altDeg = Math.asin(sinAlt) * 180 / Math.PI;
+    const tw = s01(4, 0, altDeg) * Math.exp(-Math.max(-altDeg, 0) / 4.5) * s01(-18, -8, altDeg);
+    u.uTwilight.value.setRGB(0.5, 0.38, 0.3).multiplyScalar(tw);
+    u.uTwilightSky.value.setRGB(0.010, 0.022, 0.065).multiplyScalar(s01(3, -1, altDeg) * Math.exp(-Math.max(-altDeg, 0) / 5) * s01(-18, -6, altDeg));
+    // Clouds at ~2 km see the sun until it is ~1.5° below the sea horizon: their warm light
+    // is the sunlight through the air mass at that altitude.
+    const warm = sunTransmittance(Math.sin((altDeg + 1.5) * Math.PI / 180), turbidity);
+    u.uCloudWarm.value.copy(warm).multiplyScalar(1.4 * s01(12, 1, altDeg) * s01(-5, -0.5, altDeg) * (1 - darkening));
     // Key light: the sun, then the moon (fixed high in the south-east) once the sun is down.
     const sunT = sunTransmittance(sinAlt, turbidity);
     const hidden = 1 - s01(0.4, 0.85, overcast); // a closed deck hides the disc
@@ -184,16 +222,22 @@ export class SkyModel {
       U.uSunDir.value.copy(sun);
       U.uSunColor.value.copy(sunT).multiplyScalar(1.25 * hidden);
       U.uDiscSize.value = Math.cos(0.27 * Math.PI / 180);
+      U.uDiscGain.value = 600;
+      // Eased from 40 to 12 as the sun climbs past 3°..12°: with the full value the path of a
+      // higher sun is a solid white band after the tone curve (a look: the curve cannot hold it).
+      U.uSunIrr.value = 12 + 28 * (1 - s01(3, 12, Math.asin(sinAlt) * 180 / Math.PI));
     } else {
       U.uSunDir.value.copy(moonDir);
       U.uSunColor.value.copy(U.uMoonColor.value);
       U.uDiscSize.value = Math.cos(0.26 * Math.PI / 180);
+      U.uDiscGain.value = 60;
+      U.uSunIrr.value = 4;
     }
     U.uStars.value = night * (1 - s01(0.3, 0.8, overcast));
     // The eye adapts, but not fully: twilight and night stay darker than day. While the sun
     // is up the exposure is kept for the bright sky around it (as a camera would), so the
     // sunset sky keeps its colour and the water before it stays dark; it opens up at dusk.
-    U.uExposure.value = 0.5 + 0.8 * (1 - s01(-0.1, 0.1, sinAlt)) + 2.2 * night;
+    U.uExposure.value = 0.42 + 0.88 * (1 - s01(-0.1, 0.06, sinAlt)) + 2.2 * night;
     this.state = { hour, wind, sun: sun.toArray(), sunAltitudeDeg: Math.asin(sinAlt) * 180 / Math.PI, overcast, darkening };
     this.cubeCamera.update(this.renderer, this.scene);
     return true;

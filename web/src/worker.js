@@ -111,7 +111,7 @@ async function handle(msg, superseded) {
     self.postMessage({ type: 'error', code: e && e.code, message: String(e && e.message || e) });
     return;
   }
-  if (!assemble) { self.postMessage({ type: 'skip', seq: frame.header.seq }); return; }
+  if (!assemble) { self.postMessage({ type: 'skip', seq: frame.header.seq, serverTimeUs: frame.header.serverTimeUs }); return; }
   lastAssembled = t0;
   const { lod, m, present, disp, slope, fine, foam, foamLod, fm } = plan;
   const decodeMs = performance.now() - t0;
