@@ -34,6 +34,8 @@ FUZZ_SRCS_grid    = fuzz/fuzz_grid.c $(wildcard proto/c/*.c)
 FUZZ_SRCS_config  = fuzz/fuzz_config.c $(wildcard server/config/*.c server/control/*.c server/base/*.c) \
                     $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_query   = fuzz/fuzz_query.c server/query/probe.c $(wildcard server/control/*.c) $(SIM_SRCS_FOR_FUZZ)
+# cluster_*.c are the transport's NATS-free parts (formats, subjects, assembly,
+# demand); link*.c talk to NATS and are not fuzzed here.
 FUZZ_SRCS_cluster = fuzz/fuzz_cluster.c $(wildcard server/cluster/cluster_*.c) proto/c/oc_header.c
 $(BUILD)/fuzz/fuzz_cluster: $(wildcard server/cluster/*.[ch])
 FUZZ_SRCS_netwire = fuzz/fuzz_netwire.c server/net/upgrade.c server/base/metrics.c server/base/log.c

@@ -1,4 +1,4 @@
-/* cluster_kv.c — the sim's record in a JetStream KV bucket (cluster.h):
+/* link_kv.c — the sim's record in a JetStream KV bucket (cluster.h):
  * compare-and-set writes on the last revision seen, so one sim at a time
  * holds it. Blocking calls, for the sim's builder and lease threads. */
 #include "link_internal.h"
