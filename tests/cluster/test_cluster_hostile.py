@@ -58,9 +58,19 @@ class RawNats:
         return data
 
     def sub(self, subject):
+        """Subscribe, and wait until the server has it (PING answered after the SUB):
+        otherwise a message published right after could pass by unseen."""
         self.sid += 1
-        self.s.sendall(b"SUB %s %d\r\n" % (subject.encode(), self.sid))
-        return self.sid
+        self.s.sendall(b"SUB %s %d\r\nPING\r\n" % (subject.encode(), self.sid))
+        self.s.settimeout(5)
+        while True:
+            line = self._line()
+            if line == b"PONG":
+                return self.sid
+            if line == b"PING":
+                self.s.sendall(b"PONG\r\n")
+            elif line.startswith(b"MSG "):
+                self._take(int(line.split()[-1]))   # an earlier subscription's message: not wanted here
 
     def pub(self, subject, payload, reply=None):
         r = b" " + reply.encode() if reply else b""
