@@ -66,7 +66,7 @@ deps:
 # then the others one at a time, alone on the machine: CPU-heavy ones (ASan,
 # valgrind, TSan, fuzz, SwiftShader) and the hostile battery (it measures
 # the observer's share of frames; it runs its light cases 2 at a time itself).
-TESTS_CONCURRENT := test-cluster-roles test-daemon test-tap test-ops test-python test-blender
+TESTS_CONCURRENT := test-cluster-roles test-daemon test-tap test-ops test-python test-blender test-cluster-durable
 TEST_LOGS        := $(BUILD)/test-logs
 test: deps
 	@$(MAKE) --no-print-directory -j$$(nproc) build-all
