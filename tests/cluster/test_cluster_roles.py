@@ -260,13 +260,16 @@ def test_frames_identical_to_role_all():
 
     state = {"params": {"paused": True, "wind_speed": 13, "seed": 7, "cascades": 3}, "params_version": 3,
              "sim_time": 12.5}
-    c = Cluster(edges=1, state=state)
+    # 5 Hz (200 ms a tick against a step of ~6 ms): neither the sim nor --role all degrades its
+    # plan on a loaded machine (a coarser LOD or a lower rate would change the bytes; seen in CI).
+    slow = ("--tick-rate", "5")
+    c = Cluster(edges=1, state=state, sim_extra=slow)
     ok = False
     try:
         sf = os.path.join(c.tmp, "all-state.json")
         with open(sf, "w") as f:
             json.dump(state, f)
-        alone = c.node("all", state_file=sf)
+        alone = c.node("all", *slow, state_file=sf)
 
         def same(fe, fa, what):
             ee, aa = parse_header(fe), parse_header(fa)
