@@ -60,41 +60,25 @@ deps:
 # Every suite runs even if one fails; the closing line counts suites.
 # First everything is built in parallel (build-all, then test-bins), so that the suites
 # below do not compile their sanitizer/fuzz/TSan flavours one file at a time.
-# Then the suites that mostly wait (real daemons on loopback at 30 Hz, NATS
-# restarts: wall time >> CPU time) run concurrently with each other (free
-# ports, own temp dirs), each into its own log, printed whole and in order;
-# then the others one at a time, alone on the machine: CPU-heavy ones (ASan,
-# valgrind, TSan, fuzz, SwiftShader) and the hostile battery (it measures
-# the observer's share of frames; it runs its light cases 2 at a time itself).
+# Then tests/run_suites.sh runs them in three phases: the suites that mostly
+# wait (real daemons on loopback at 30 Hz, NATS restarts: wall time >> CPU
+# time) all at once, each into its own log (free ports, own temp dirs); the
+# single-threaded CPU-bound ones that time nothing (valgrind, fuzzing, the
+# libraries' sanitizer builds) one per core, the longest first; the others one
+# at a time, alone on the machine: daemons that must keep their tick (ASan),
+# the hostile battery (it measures the observer's share of frames; it runs its
+# light cases 2 at a time itself), the link lab, SwiftShader.
 TESTS_CONCURRENT := test-cluster-roles test-daemon test-tap test-ops test-python test-blender test-cluster-durable
+TESTS_PAIRED     := test-fuzz test-proto-valgrind test-sim-asan test-query-valgrind test-sim-valgrind \
+                    test-daemon-valgrind test-sim test-cluster-valgrind test-proto-asan test-query \
+                    test-proto test-proto-js test-sim-tsan test-query-asan test-layout test-wording
 TEST_LOGS        := $(BUILD)/test-logs
 test: deps
 	@$(MAKE) --no-print-directory -j$$(nproc) build-all
 	@$(MAKE) --no-print-directory -k -j$$(nproc) test-bins >$(BUILD)/test-bins.log 2>&1 || \
 	  echo "test-bins: some test binaries did not build (their suites report it; log: $(BUILD)/test-bins.log)"
-	@pass=0; fail=0; failed=""; pids=(); \
-	rm -rf $(TEST_LOGS) && mkdir -p $(TEST_LOGS); \
-	conc="$(filter $(TESTS_CONCURRENT),$(TESTS))"; \
-	trap 'for p in "$${pids[@]}"; do kill -TERM -- -$$p 2>/dev/null; done; exit 130' INT TERM; \
-	echo "=== running concurrently:$$conc (logs in $(TEST_LOGS)/)"; \
-	for t in $$conc; do \
-	  setsid bash -c '$(MAKE) --no-print-directory $$0; rc=$$?; echo "--- $$0: exit $$rc after $$SECONDS s"; exit $$rc' \
-	    $$t >$(TEST_LOGS)/$$t.log 2>&1 & pids+=($$!); \
-	done; \
-	i=0; for t in $$conc; do \
-	  echo "=== $$t"; \
-	  if wait $${pids[$$i]}; then ok=1; else ok=0; fi; i=$$((i+1)); \
-	  cat $(TEST_LOGS)/$$t.log; \
-	  if [ $$ok = 1 ]; then pass=$$((pass+1)); else fail=$$((fail+1)); failed="$$failed $$t"; fi; \
-	done; \
-	for t in $(filter-out $(TESTS_CONCURRENT),$(TESTS)); do \
-	  echo "=== $$t"; s=$$SECONDS; \
-	  if $(MAKE) --no-print-directory $$t; then pass=$$((pass+1)); rc=0; \
-	  else rc=$$?; fail=$$((fail+1)); failed="$$failed $$t"; fi; \
-	  echo "--- $$t: exit $$rc after $$((SECONDS-s)) s"; \
-	done; \
-	[ -n "$$failed" ] && echo "failed suites:$$failed"; \
-	echo "$$pass passed, $$fail failed"; [ $$fail -eq 0 ]
+	@MAKE="$(MAKE)" tests/run_suites.sh $(TEST_LOGS) "$(filter $(TESTS_CONCURRENT),$(TESTS))" \
+	  "$(filter $(TESTS),$(TESTS_PAIRED))" "$(filter-out $(TESTS_CONCURRENT) $(TESTS_PAIRED),$(TESTS))"
 
 # Every binary a suite runs that build-all does not make (sanitizer, TSan and
 # fuzz flavours, test helpers). One missing here is still built by its suite.
