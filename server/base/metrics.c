@@ -134,6 +134,9 @@ size_t metrics_render(char *buf, size_t cap)
     put(&o, "# HELP oceand_render_seconds_total Render worker time (step and encode) of those frames.\n"
             "# TYPE oceand_render_seconds_total counter\noceand_render_seconds_total %.6f\n",
         (double)atomic_load(&m->render_us) / 1e6);
+    put(&o, "# HELP oceand_render_cpu_seconds_total CPU time of the render workers for those frames.\n"
+            "# TYPE oceand_render_cpu_seconds_total counter\noceand_render_cpu_seconds_total %.6f\n",
+        (double)atomic_load(&m->render_cpu_us) / 1e6);
     counter(&o, "oceand_render_refused_total", "Renders refused with busy or over --render-max-units.",
             atomic_load(&m->render_refused));
     put(&o, "# HELP oceand_clients_refused_total WebSocket upgrades refused before a session.\n"

@@ -48,7 +48,9 @@ if "--bake" in args:
     T, F = float(args.split("--start ")[1].split()[0]), float(args.split("--fps ")[1].split()[0])
     row["frames_missing"] = int(want) - len(m) + sum(1 for k, x in enumerate(m) if x["seq"] != k)
     row["max_time_error_s"] = max(abs(x["sim_time"] - (T + k / F)) for k, x in enumerate(m))
-    row["render_ms_per_frame"] = round((float(r1) - float(r0)) * 1e3 / len(m), 2)
+    (w0, c0), (w1, c1) = (map(float, r0.split(":")), map(float, r1.split(":")))
+    row["render_ms_per_frame"] = round((w1 - w0) * 1e3 / len(m), 2)
+    row["render_cpu_ms_per_frame"] = round((c1 - c0) * 1e3 / len(m), 2)
 else:
     row["ticks_skipped"] = sum(b - a - 1 for a, b in zip(seqs, seqs[1:]))
     row["ticks_spanned"] = seqs[-1] - seqs[0] + 1
@@ -59,7 +61,8 @@ PY
 }
 render_s() { /usr/bin/python3 -c 'import re,sys,urllib.request
 t = urllib.request.urlopen(sys.argv[1], timeout=5).read().decode()
-print(re.search(r"^oceand_render_seconds_total (\S+)$", t, re.M).group(1))' "http://127.0.0.1:$port/metrics"; }
+print(re.search(r"^oceand_render_seconds_total (\S+)$", t, re.M).group(1) + ":" +
+      re.search(r"^oceand_render_cpu_seconds_total (\S+)$", t, re.M).group(1))' "http://127.0.0.1:$port/metrics"; }
 status=0
 bake exact --bound 0 --bake --fps 24 --start 100 --cascades all
 bake exact_1mm --bound 0.001 --bake --fps 24 --start 100 --cascades all
