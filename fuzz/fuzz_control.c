@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "control.h"
+#include "render_msg.h"
 
 static void check(int ok)
 {
@@ -63,6 +64,23 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             free(control_print(control_subscribed_msg(&s[1], m.id)));
         }
         free(s);
+    } else if (m.type == CTL_RENDER) {
+        struct render_req *r = malloc(sizeof *r);
+        check(r != NULL);
+        if (render_parse(m.root, &lim, r, &e) == 0) {
+            check(r->frames >= 1 && r->frames <= RENDER_MAX_FRAMES && r->fps > 0 && r->fps <= RENDER_MAX_FPS);
+            check(r->start >= 0 && render_time(r, r->frames - 1) <= OCEAN_TIME_MAX && !r->sub.temporal);
+            check(r->sub.fields != 0 && r->sub.lod >= 0 && r->sub.lod <= CTL_MAX_LOD);
+            check(r->sub.bound_index >= 0 && r->sub.bound_index < CTL_BOUND_COUNT);
+            double u = render_frame_units(r, 256, 4);
+            check(u >= 1 && u <= 25);
+            free(control_print(render_rendering_msg(m.id, r, 3, 256, 3, u * (double)r->frames)));
+            free(control_print(render_rendered_msg(m.id, r->frames, NULL)));
+        } else {
+            check(e.code != NULL && !strcmp(e.code, "bad_render") && e.message[0] != '\0');
+            free(control_print(control_error_msg(&e, m.id)));
+        }
+        free(r);
     } else if (m.type == CTL_PING) {
         free(control_print(control_pong_msg(m.id, m.has_t, m.t, 1)));
     }

@@ -21,7 +21,8 @@ maxlen=16384; { [ "$t" = frame ] || [ "$t" = grid ]; } && maxlen=65536
 # Shallow allocation stacks: most of the time in JSON targets went to
 # recording them; a crash report still has the full stack of the fault.
 export ASAN_OPTIONS=${ASAN_OPTIONS:-malloc_context_size=2}
-if ! "$bin" -max_total_time="$secs" -max_len=$maxlen -timeout=10 -rss_limit_mb=2048 \
+dict=(); [ -f "fuzz/$t.dict" ] && dict=(-dict="fuzz/$t.dict")
+if ! "$bin" -max_total_time="$secs" -max_len=$maxlen -timeout=10 -rss_limit_mb=2048 "${dict[@]}" \
      -print_final_stats=1 -artifact_prefix="$build/fuzz/artifacts/$t-" \
      "$build/fuzz/work-$t" "fuzz/corpus/$t" 2>"$build/fuzz/$t.log"; then
   tail -40 "$build/fuzz/$t.log"

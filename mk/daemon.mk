@@ -60,6 +60,7 @@ test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	/usr/bin/python3 tests/daemon/test_temporal.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
 	$(BUILD)/test_probe
 	/usr/bin/python3 tests/daemon/test_query.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check --query-ref $(BUILD)/query_ref
+	/usr/bin/python3 tests/daemon/test_render.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
 
 # Same integration tests against an ASan+UBSan build (slower: frames at a lower N).
 test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(DAEMON_TEST_DEPS)
@@ -71,6 +72,8 @@ test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(DAEMON_TEST_DE
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/daemon/test_query.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check \
 	  --query-ref $(BUILD)/query_ref --sanitized
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  /usr/bin/python3 tests/daemon/test_render.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check --sanitized
 
 test-daemon-valgrind: $(BUILD)/test_control
 	$(VALGRIND) $(BUILD)/test_control

@@ -13,6 +13,7 @@
 #include "log.h"
 #include "net.h"
 #include "query_worker.h"
+#include "render_worker.h"
 #include "roles.h"
 #include "sim_thread.h"
 #include "state_saver.h"
@@ -84,12 +85,14 @@ static void install_signals(void)
 
 /* --role edge: no simulation here; frames, hello and answers come from the
  * sim over NATS (server/roles/role_edge.c). Nothing to save: an edge is stateless. */
-static int run_edge(const struct daemon_config *dc, struct net *net)
+static int run_edge(const struct daemon_config *dc, struct net *net, struct render_service *renders)
 {
     char err[512];
     struct role_edge *edge = role_edge_open(dc, net, err, sizeof err);
     if (!edge) {
         LOGE("%s", err);
+        net_attach_renders(net, NULL);
+        render_service_free(renders);
         net_destroy(net);
         return 1;
     }
@@ -99,6 +102,8 @@ static int run_edge(const struct daemon_config *dc, struct net *net)
         if (net_service(net) < 0)
             break;
     LOGI("stopping");
+    net_attach_renders(net, NULL);
+    render_service_free(renders);
     role_edge_close(edge);
     net_destroy(net);
     LOGI("bye");
@@ -135,8 +140,21 @@ int main(int argc, char **argv)
         return 1;
     }
     install_signals();
+    /* Renders need only the parameters in force: an edge serves them too. */
+    struct render_config rc = {
+        .workers = dc.render_workers, .budget = dc.render_budget, .max_units = dc.render_max_units,
+        .nice = dc.render_nice, .tile_size = dc.tile_size, .plan_rigor = dc.plan_rigor,
+        .wisdom_path = dc.wisdom_file[0] ? dc.wisdom_file : NULL, .wake = net_wake, .wake_user = net,
+    };
+    struct render_service *renders = render_service_new(&rc, err, sizeof err);
+    if (!renders) {
+        LOGE("render workers: %s", err);
+        net_destroy(net);
+        return 1;
+    }
+    net_attach_renders(net, renders);
     if (strcmp(dc.role, "edge") == 0)
-        return run_edge(&dc, net); /* no simulation here: no point queries either */
+        return run_edge(&dc, net, renders); /* no simulation here: no point queries either */
     struct query_config qc = {
         .threads = dc.query_threads, .window = dc.query_window, .budget = dc.query_budget,
         .queue = dc.query_queue, .probe_max_points = dc.probe_max_points, .probe_max_total = dc.probe_max_total,
@@ -145,6 +163,8 @@ int main(int argc, char **argv)
     struct query_service *queries = query_service_new(&qc, err, sizeof err);
     if (!queries) {
         LOGE("point queries: %s", err);
+        net_attach_renders(net, NULL);
+        render_service_free(renders);
         net_destroy(net);
         return 1;
     }
@@ -180,6 +200,8 @@ int main(int argc, char **argv)
     if (strcmp(dc.role, "sim") == 0 && !(cluster = role_sim_open(&dc, net, &sc, err, sizeof err))) {
         LOGE("%s", err);
         query_service_free(queries);
+        net_attach_renders(net, NULL);
+        render_service_free(renders);
         net_destroy(net);
         state_saver_destroy(&saver);
         return 1;
@@ -189,6 +211,8 @@ int main(int argc, char **argv)
         LOGE("simulation: %s", err);
         query_service_free(queries);
         role_sim_close(cluster);
+        net_attach_renders(net, NULL);
+        render_service_free(renders);
         net_destroy(net);
         state_saver_destroy(&saver);
         return 1;
@@ -217,6 +241,8 @@ int main(int argc, char **argv)
     net_attach_queries(net, NULL);
     query_service_free(queries); /* after the tick: it no longer hands over grids */
     net_attach_sim(net, NULL);
+    net_attach_renders(net, NULL);
+    render_service_free(renders); /* a render in progress ends where it is */
     role_sim_close(cluster); /* after the tick (it publishes), before net (it holds requests) */
     net_destroy(net);
     state_saver_destroy(&saver);

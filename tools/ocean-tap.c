@@ -50,9 +50,9 @@ enum exit_code {
 #define ID_QUERY 4
 #define ID_PROBE 5
 #define ID_RENDER 6
-/* Draft, not yet served by oceand: the `render` request (exact-time frames for
- * bakes). Its frames carry this bit in the frame header's flags and their
- * index k in seq; sim_time = start + k / fps. */
+/* The `render` request (exact-time frames for bakes, PROTOCOL.md §7.5): its
+ * frames carry this bit in the frame header's flags and their index k in
+ * seq; sim_time = start + k / fps. */
 #define RENDER_FRAME_FLAG 1u
 #define WRITER_QUEUE 4                      /* complete frames waiting for the file writer, at most */
 #define WRITER_BYTES ((size_t)256 << 20)    /* ... and their copies' bytes, at most (one frame always) */
@@ -96,8 +96,8 @@ static void usage(FILE *to)
         "  --interp I          between grid nodes: spectral (default; exact signal on a 4x\n"
         "                      finer grid, then cubic: ~0.1 mm from query) or bilinear (on\n"
         "                      the streamed grids: ~14 mm rms off; docs/query.md)\n"
-        "Exact-time bakes (needs a daemon with the render request; one without it answers\n"
-        "unknown_type, exit 4):\n"
+        "Exact-time bakes (the render request, PROTOCOL.md §7.5; an older daemon answers\n"
+        "unknown_type, a busy one busy: exit 4):\n"
         "  --bake --fps F --start T --frames K   frames at sim times T + k/F, k = 0..K-1,\n"
         "                      rendered by the server for the parameters in force, every\n"
         "                      one, in order; written like --out/--format (EXR frame k+1)\n"

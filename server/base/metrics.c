@@ -129,6 +129,16 @@ size_t metrics_render(char *buf, size_t cap)
     counter(&o, "oceand_probe_ticks_skipped_total", "Ticks whose probes were skipped (worker behind).",
             atomic_load(&m->probe_skipped));
     gauge(&o, "oceand_probe_points", "Points probed by all clients.", atomic_load(&m->probe_points));
+    counter(&o, "oceand_render_frames_total", "Frames rendered for `render` requests.",
+            atomic_load(&m->render_frames));
+    put(&o, "# HELP oceand_render_seconds_total Render worker time (step and encode) of those frames.\n"
+            "# TYPE oceand_render_seconds_total counter\noceand_render_seconds_total %.6f\n",
+        (double)atomic_load(&m->render_us) / 1e6);
+    put(&o, "# HELP oceand_render_cpu_seconds_total CPU time of the render workers for those frames.\n"
+            "# TYPE oceand_render_cpu_seconds_total counter\noceand_render_cpu_seconds_total %.6f\n",
+        (double)atomic_load(&m->render_cpu_us) / 1e6);
+    counter(&o, "oceand_render_refused_total", "Renders refused with busy or over --render-max-units.",
+            atomic_load(&m->render_refused));
     put(&o, "# HELP oceand_clients_refused_total WebSocket upgrades refused before a session.\n"
             "# TYPE oceand_clients_refused_total counter\n"
             "oceand_clients_refused_total{reason=\"host\"} %llu\n"

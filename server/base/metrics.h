@@ -37,6 +37,8 @@ struct metrics {
     struct histogram query_seconds, probe_seconds;  /* worker time per query / per probe tick */
     atomic_uint_least64_t queries, query_points, query_busy, probe_ticks, probe_skipped;
     atomic_int probe_points;
+    /* exact-time renders (render_worker.c) */
+    atomic_uint_least64_t render_frames, render_us, render_cpu_us, render_refused;
     /* temporal layers (codec 3, layer_stream.c, fanout.c) */
     atomic_uint_least64_t stream_key_tiles, stream_predicted_tiles, stream_demand_key_tiles;
     atomic_uint_least64_t sent_shared_tiles, sent_key_tiles, frames_waited_keyframe;

@@ -83,6 +83,15 @@ static const struct param_def opt_table[] = {
     OPT("query_queue", PARAM_INT, query_queue, 1, 4096, 64, NULL, 0, "queries waiting at most; more: busy"),
     OPT("probe_max_points", PARAM_INT, probe_max_points, 1, 64, 16, NULL, 0, "probe points per client"),
     OPT("probe_max_total", PARAM_INT, probe_max_total, 1, 100000, 2048, NULL, 0, "probe points, all clients together"),
+    OPT("render_workers", PARAM_INT, render_workers, 1, 16, 1, NULL, 0, "worker threads for exact-time renders "
+        "(`render`, bakes): renders that run at once, each on a simulation of its own with one FFT thread"),
+    OPT("render_budget", PARAM_FLOAT, render_budget, 1, 1e6, 1000, NULL, 0, "render units per second, all renders "
+        "together (a unit: one field of one cascade of one frame at N = 256, (N/256)^2 at other N; a bake frame of "
+        "6 + 5 + 5 fields over 3 cascades costs 16): the renders are paced to it"),
+    OPT("render_max_units", PARAM_FLOAT, render_max_units, 1, 1e9, 65536, NULL, 0, "render units accepted and not "
+        "yet rendered, all renders together; a render that would pass it: busy (one that alone passes it: bad_render)"),
+    OPT("render_nice", PARAM_INT, render_nice, 0, 19, 5, NULL, 0, "nice value of the render threads: above the "
+        "tick's, so that renders take what the live sea leaves"),
     OPT("max_memory_mb", PARAM_INT, max_memory_mb, 0, 1 << 20, 0, NULL, 0, "memory cap for the simulation; limits N "
       "(0 = a quarter of the machine's memory: MemTotal or the cgroup limit, whichever is lower)"),
     OPT_STR("role", role, "all", 0, "all = one process (no NATS); sim = simulate and publish on NATS "

@@ -53,6 +53,11 @@ struct daemon_config {
     int    query_queue;        /* queries waiting at most */
     int    probe_max_points;   /* probe points per client */
     int    probe_max_total;    /* probe points, all clients */
+    /* exact-time renders (render_worker.h, PROTOCOL.md §7.5) */
+    int    render_workers;     /* render threads: renders that run at once */
+    double render_budget;      /* render units per second, all renders together */
+    double render_max_units;   /* units accepted and not yet rendered; more: busy */
+    int    render_nice;        /* nice value of the render threads */
     /* Cluster (docs/scaling.md): --role all needs none of these. */
     char   role[8];            /* "all", "sim" or "edge" */
     char   nats_url[512];      /* --nats: nats://HOST:4222 (comma-separated list allowed) */

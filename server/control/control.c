@@ -156,6 +156,10 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
         m->type = CTL_QUERY;
     } else if (strcmp(ts, "probe") == 0) {
         m->type = CTL_PROBE;
+    } else if (strcmp(ts, "render") == 0) {
+        m->type = CTL_RENDER;
+    } else if (strcmp(ts, "render_cancel") == 0) {
+        m->type = CTL_RENDER_CANCEL;
     } else if (strcmp(ts, "ping") == 0) {
         m->type = CTL_PING;
         const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "t");

@@ -56,7 +56,8 @@ struct ctl_limits {
 };
 
 enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING,
-                CTL_QUERY, CTL_PROBE /* members checked by query_msg.c */, CTL_NAME };
+                CTL_QUERY, CTL_PROBE /* members checked by query_msg.c */, CTL_NAME,
+                CTL_RENDER /* members checked by render_msg.c */, CTL_RENDER_CANCEL };
 
 /* Display names (PROTOCOL.md §7.1 `name`): at most CTL_NAME_MAX_CHARS code
  * points of printable Unicode, UTF-8; CTL_NAME_BYTES holds any valid one. */

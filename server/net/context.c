@@ -104,6 +104,7 @@ struct net *net_create(const struct daemon_config *dc, const struct ocean_params
 
 void net_attach_sim(struct net *n, struct sim *s) { n->sim = s; }
 void net_attach_queries(struct net *n, struct query_service *q) { n->queries = q; }
+void net_attach_renders(struct net *n, struct render_service *r) { n->renders = r; }
 
 void net_on_params(struct net *n, net_params_fn fn, void *user)
 {

@@ -688,6 +688,12 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
     case CTL_PROBE:
         dispatch_probe(n, s, m.root, m.id, text, len);
         break;
+    case CTL_RENDER: /* standalone and edge alike: the sea is a function of the params in force */
+        renders_dispatch(n, s, m.root, m.id);
+        break;
+    case CTL_RENDER_CANCEL:
+        renders_cancel(n, s);
+        break;
     }
     ctl_msg_free(&m);
 }

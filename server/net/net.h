@@ -26,6 +26,10 @@ void net_attach_sim(struct net *n, struct sim *s);
 /* The point-query service (query_worker.h); set once after sim_start, NULL before it is freed. */
 struct query_service;
 void net_attach_queries(struct net *n, struct query_service *q);
+/* The render workers (render_worker.h), standalone and edge alike; set once
+ * before the service loop, NULL before they are freed. */
+struct render_service;
+void net_attach_renders(struct net *n, struct render_service *r);
 /* Called on the service thread for every parameter change the sim applied. */
 typedef void (*net_params_fn)(void *user, const struct ocean_params *p, uint32_t version);
 void net_on_params(struct net *n, net_params_fn fn, void *user);

@@ -132,7 +132,11 @@ struct session {
     int hist;                     /* consecutive ticks received, up to hist_seq */
     bool key_wanted;              /* counted in the sim's key_want for the subscription's layers */
     uint64_t waited_seq;          /* last frame skipped for want of keyframe tiles (counted once) */
-    unsigned char *chunk;         /* LWS_PRE + CHUNK_SIZE */
+    unsigned char *chunk;         /* LWS_PRE + CHUNK_SIZE (live and rendered frames) */
+    /* transmit: its render's frames and closing message, in order (renders.c) */
+    struct render_out *rq, *rq_tail; /* oldest first; a frame is sent whole before anything else */
+    int rq_frames;                /* frames in rq (at most RENDER_WINDOW: the worker waits for room) */
+    size_t rq_sent;               /* bytes of rq's head written, 0 = not started */
 };
 
 /* A set sent to the sim and not answered yet: the sim knows it only by tag. */
@@ -177,6 +181,7 @@ struct net {
     struct ctl_limits lim;        /* read-only after net_create */
     struct sim *sim;              /* main writes (net_attach_sim) outside the service loop; lws reads */
     struct query_service *queries; /* main writes (net_attach_queries) outside the loop; lws reads (query, probe) */
+    struct render_service *renders; /* main writes (net_attach_renders) outside the loop; lws reads (render) */
     struct frame *latest;         /* newest frame taken from the sim (one reference), or NULL */
     struct frame *ring[NET_RING]; /* the newest frames, oldest first (one reference each; latest is the last) */
     int nring;
@@ -268,6 +273,14 @@ void session_cut_off(struct session *s, int status, const char *reason);        
  * subscription changes or the session goes, so the counts stay balanced. */
 void fanout_subscribed(struct net *n, struct session *s);
 void fanout_want_keyframes(struct net *n, struct session *s, bool want);
+
+/* renders.c: exact-time renders (render_worker.h does the work) */
+struct render_out;
+void renders_dispatch(struct net *n, struct session *s, const cJSON *root, const cJSON *id); /* `render` */
+void renders_cancel(struct net *n, struct session *s);      /* `render_cancel` */
+void renders_take(struct net *n);                            /* after a wake-up: the workers' output */
+int renders_write(struct net *n, struct session *s);         /* one lws_write of s->rq */
+void renders_session_free(struct net *n, struct session *s); /* the client is gone: its render ends */
 
 /* ladder.c: per-client link estimate and quality ladder */
 void ladder_open(struct net *n, struct session *s);          /* after the socket is set up */

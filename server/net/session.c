@@ -169,6 +169,7 @@ static void session_close(struct net *n, struct session *s)
     fanout_want_keyframes(n, s, false);
     dispatch_demand(n, &s->eff, -1);
     query_client_gone(n->queries, s->serial);
+    renders_session_free(n, s);
     if (n->cluster.client_gone) /* edge: its probe at the sim ends */
         n->cluster.client_gone(n->cluster.user, s->serial);
     while (s->tq.head) {
@@ -257,16 +258,21 @@ static int on_receive(struct net *n, struct session *s, struct lws *wsi, const c
 /* ---- write schedule: one lws_write per writable callback ---- */
 
 /* The frame in progress first (a message cannot interleave with its
- * fragments), then one queued JSON message, then a newer frame. */
+ * fragments: a live one, or a rendered one), then one queued JSON message,
+ * then the next of the client's render (renders.c), then a newer frame. */
 static int on_writable(struct net *n, struct session *s)
 {
     int rc;
-    if (!s->cur && s->tq.count) {
+    if (!s->cur && s->rq && s->rq_sent > 0 && !s->closing) {
+        rc = renders_write(n, s);
+    } else if (!s->cur && s->tq.count) {
         rc = write_text(s);
     } else if (!s->cur && s->closing) {
         lws_close_reason(s->wsi, (enum lws_close_status)s->closing, (unsigned char *)s->close_reason,
                          strlen(s->close_reason));
         return -1;
+    } else if (!s->cur && s->rq) {
+        rc = renders_write(n, s);
     } else {
         rc = fanout_write(n, s);
     }
@@ -274,7 +280,7 @@ static int on_writable(struct net *n, struct session *s)
         return -1;
     /* Keep going while there is more: the rest of the frame, a message, or a
      * newer frame that arrived meanwhile (no need to wait for the next wake-up). */
-    if (rc > 0 && (s->cur || s->tq.count || s->closing || fanout_want_write(n, s)))
+    if (rc > 0 && (s->cur || s->tq.count || s->rq || s->closing || fanout_want_write(n, s)))
         lws_callback_on_writable(s->wsi);
     return 0;
 }
@@ -287,6 +293,8 @@ static void on_sim_wakeup(struct net *n)
         n->cluster.on_wake(n->cluster.user); /* cluster messages (NATS link) */
     if (n)
         fanout_police(n);
+    if (n)
+        renders_take(n); /* an edge renders too */
     if (!n || !n->sim)
         return;
     fanout_take_latest(n);

@@ -19,6 +19,7 @@
 #include "log.h"
 #include "oc_proto.h"
 #include "ocean.h"
+#include "render_msg.h"
 #include "state.h"
 
 #include "../common/check.h"
@@ -1122,6 +1123,63 @@ static void test_display_names(void)
     }
 }
 
+/* `render` (PROTOCOL.md §7.5): times, layers, refusals and the cost in units. */
+static void test_render(void)
+{
+    static const struct { const char *text, *code, *param; } cases[] = {
+        { "{\"type\":\"render\",\"start\":100.5,\"fps\":24,\"frames\":240,\"fields\":[\"height\",\"dx\"]}", "ok", "" },
+        { "{\"type\":\"render\",\"fps\":24,\"frames\":2,\"fields\":[\"height\"]}", "bad_render", "start" },
+        { "{\"type\":\"render\",\"start\":0,\"fps\":0,\"frames\":2,\"fields\":[\"height\"]}", "bad_render", "fps" },
+        { "{\"type\":\"render\",\"start\":0,\"fps\":1001,\"frames\":2,\"fields\":[\"height\"]}", "bad_render", "fps" },
+        { "{\"type\":\"render\",\"start\":0,\"fps\":24,\"frames\":2.5,\"fields\":[\"height\"]}", "bad_render", "frames" },
+        { "{\"type\":\"render\",\"start\":0,\"fps\":24,\"frames\":0,\"fields\":[\"height\"]}", "bad_render", "frames" },
+        { "{\"type\":\"render\",\"start\":-1,\"fps\":24,\"frames\":2,\"fields\":[\"height\"]}", "bad_render", "start" },
+        { "{\"type\":\"render\",\"start\":1e9,\"fps\":1,\"frames\":2,\"fields\":[\"height\"]}", "bad_render", "frames" },
+        { "{\"type\":\"render\",\"start\":0,\"fps\":24,\"frames\":2}", "bad_render", "fields" },
+        { "{\"type\":\"render\",\"start\":0,\"fps\":24,\"frames\":2,\"fields\":[\"nope\"]}", "bad_render", "" },
+        { "{\"type\":\"render\",\"start\":0,\"fps\":24,\"frames\":2,\"fields\":[\"height\"],\"temporal\":true}", "bad_render", "temporal" },
+        { "{\"type\":\"render\",\"start\":0,\"fps\":24,\"frames\":2,\"fields\":[\"height\"],\"max_rate\":5}", "bad_render", "max_rate" },
+        { "{\"type\":\"render\",\"start\":0,\"fps\":24,\"frames\":2,\"fields\":[\"height\"],\"bound\":0.002}", "bad_render", "" },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        struct ctl_msg m;
+        struct ctl_error e = { 0 };
+        cJSON *id = NULL;
+        CHECK(control_parse(cases[i].text, strlen(cases[i].text), &m, &id, &e) == 0 && m.type == CTL_RENDER,
+              "%s does not parse as a render", cases[i].text);
+        struct render_req *r = malloc(sizeof *r);
+        const char *code = render_parse(m.root, &lim, r, &e) == 0 ? "ok" : e.code;
+        CHECK(strcmp(code, cases[i].code) == 0, "%s -> %s (%s), want %s", cases[i].text, code, e.message, cases[i].code);
+        if (strcmp(code, "ok") != 0 && cases[i].param[0])
+            CHECK(strcmp(e.param, cases[i].param) == 0, "%s: param %s", cases[i].text, e.param);
+        if (i == 0) {
+            CHECK(r->frames == 240 && r->start == 100.5 && r->fps == 24 && !r->sub.temporal, "parsed values");
+            CHECK(render_time(r, 0) == 100.5 && fabs(render_time(r, 239) - (100.5 + 239.0 / 24)) < 1e-9, "times");
+            CHECK(render_frame_units(r, 256, 3) == 2 && render_frame_units(r, 512, 3) == 8, "units: %g",
+                  render_frame_units(r, 256, 3));
+        }
+        free(r);
+        ctl_msg_free(&m);
+    }
+    /* Cascades count their fields; those not in force do not. */
+    const char *t = "{\"type\":\"render\",\"start\":0,\"fps\":24,\"frames\":1,\"fields\":[\"height\",\"dx\",\"dz\","
+                    "\"slope_x\",\"slope_z\",\"jacobian\"],\"cascades\":[{\"fields\":[\"height\",\"dx\",\"dz\",\"slope_x\","
+                    "\"slope_z\"]},{\"fields\":[\"height\",\"dx\",\"dz\",\"slope_x\",\"slope_z\"]}]}";
+    struct ctl_msg m;
+    struct ctl_error e = { 0 };
+    struct render_req *r = malloc(sizeof *r);
+    CHECK(control_parse(t, strlen(t), &m, NULL, &e) == 0 && render_parse(m.root, &lim, r, &e) == 0, "bake render: %s",
+          e.message);
+    CHECK(render_frame_units(r, 256, 3) == 16 && render_frame_units(r, 256, 1) == 6, "bake units %g",
+          render_frame_units(r, 256, 3));
+    free(r);
+    ctl_msg_free(&m);
+    struct ctl_msg c;
+    CHECK(control_parse("{\"type\":\"render_cancel\"}", 24, &c, NULL, &e) == 0 && c.type == CTL_RENDER_CANCEL,
+          "render_cancel");
+    ctl_msg_free(&c);
+}
+
 int main(void)
 {
     test_capacity_plan();
@@ -1146,6 +1204,7 @@ int main(void)
     test_config_file_limits();
     test_state_values();
     test_display_names();
+    test_render();
     fuzz();
     return check_done();
 }

@@ -337,10 +337,26 @@ run 0 "ship" timeout 30 $PY proto/examples/ship.py "$URL" --ticks 6 --speed 5 --
 [ "$(grep -c '^ *[0-9]' "$tmp/out")" -eq 6 ] || fail "ship.py: expected 6 motion lines: $(cat "$tmp/out")"
 ok "buoy.py compares its Hs with the sea's; ship.py prints heave, pitch and roll per tick"
 
-section "--bake: exact-time frames through the render request (draft; a stand-in server)"
+section "--bake: exact-time frames through the render request (oceand, and a stand-in server)"
 run 1 "--bake without --fps" "$TAP" "$URL" --bake --start 0 --frames 2 --out "$tmp/bk"
-run 4 "--bake against oceand" "$TAP" "$URL" --bake --fps 24 --start 1 --frames 2 --out "$tmp/bk"
-grep -q 'no render request' "$tmp/err" || fail "--bake against a daemon without render: $(cat "$tmp/err")"
+run 4 "--bake over --render-max-units" "$TAP" "$URL" --bake --fps 24 --start 1 --frames 100000 --out "$tmp/bk"
+grep -q 'render rejected: error bad_render' "$tmp/err" || fail "--bake refused: $(cat "$tmp/err")"
+run 0 "--bake against oceand" "$TAP" "$URL" --bake --fps 24 --start 12.5 --frames 7 --bound 0 --cascades all \
+  --format exr --out "$tmp/bake-oceand"
+$PY - "$tmp/bake-oceand" <<'EOF2' || fail "--bake against oceand: output"
+import glob, json, os, sys
+d = sys.argv[1]
+metas = sorted(glob.glob(os.path.join(d, "frame_*.json")))
+assert len(metas) == 7, "%d frames written, asked for 7" % len(metas)
+for k, f in enumerate(metas):
+    m = json.load(open(f))
+    assert m["frame"] == k + 1 and m["seq"] == k and abs(m["sim_time"] - (12.5 + k / 24)) <= 1e-6, m
+    for kind in ("disp", "normal", "foam", "vdisp"):
+        assert os.path.exists(os.path.join(d, "%s_%04d.exr" % (kind, k + 1))), (kind, k)
+assert len(glob.glob(os.path.join(d, "*.exr"))) == 28, "EXR files: %d" % len(glob.glob(os.path.join(d, "*.exr")))
+print("  7 frames at 12.5 + k/24 s, 4 EXR files each, nothing more")
+EOF2
+ok "--bake against oceand writes exactly K frames at T + k/F; a refused render exits 4"
 fport=$(free_port)
 $PY tests/tap/fake_render.py "$fport" "$tmp/render.json" &
 fake_pid=$!

@@ -130,6 +130,27 @@ with oceand.Client(url) as sea:
         check(e.code == "time_out_of_window", f"error code {e.code}")
     ok("probe / probe_data; a refused query raises ServerError(time_out_of_window)")
 
+    # Exact-time renders (PROTOCOL.md §7.5): every frame, at start + k/fps, the summed sea of query.
+    now = sea.query([[0, 0]])["sim_time"]
+    T, F, K = max(0.0, now - 2.0), 10.0, 5
+    got = list(sea.render(T, F, K, fields=["height", "dx", "dz"], bound=0))
+    check([r.seq for r in got] == list(range(K)), f"render seqs {[r.seq for r in got]}")
+    check(all(abs(r.sim_time - (T + k / F)) <= 1e-6 for k, r in enumerate(got)), "render times")
+    r = got[-1]
+    check(r.cascades == [0, 1, 2], f"render cascades {r.cascades}")
+    g = r.grid("height", N)
+    px, pz = x0 + r.sample("dx", x0, z0), z0 + r.sample("dz", x0, z0)
+    q = sea.query(np.stack([px, pz], 1)[:64], time=r.sim_time)
+    e = np.abs(g[iz, ix][:64] - np.array([p["height"] for p in q["points"]]))
+    check(e.max() <= NODE_MAX_M, f"rendered sum at nodes vs query: max {e.max() * 1e3:.3f} mm")
+    try:
+        list(sea.render(0, 24, 10 ** 6))
+        check(False, "a render of a million frames was accepted")
+    except oceand.ServerError as err:
+        check(err.code == "bad_render", f"error code {err.code}")
+    ok(f"render: {K} frames at T + k/{F:g}, summed grid at nodes vs query {rms(e) * 1e3:.3f} mm rms; "
+       f"a refused render raises ServerError(bad_render)")
+
 
 # ---- the async client: two frames in order, one cascade ----
 async def async_checks():
@@ -141,7 +162,13 @@ async def async_checks():
         check(a.grids[0]["height"].shape == (sea.params["resolution"] // 2,) * 2, "lod 1 shape")
         q, p = await asyncio.gather(sea.query([[1, 2]]), sea.query([[3, 4]]))
         check(q["points"] and p["points"] and q["id"] != p["id"], "concurrent queries")
-    ok("AsyncClient: surfaces in seq order, concurrent queries matched by id")
+        ok("AsyncClient: surfaces in seq order, concurrent queries matched by id")
+        gen = sea.render(3.0, 30, 50, fields=["height"], lod=2, cascades=None)
+        check((await gen.__anext__()).seq == 0, "first rendered frame")
+        await gen.aclose()                 # cancels the render
+        seqs = [r.seq async for r in sea.render(1.0, 24, 4, fields=["height"], lod=2, cascades=None)]
+        check(seqs == [0, 1, 2, 3], f"a render after a cancelled one: seqs {seqs}")
+    ok("AsyncClient.render: closing it early cancels; the next render follows")
 
 
 asyncio.run(async_checks())

@@ -5,13 +5,17 @@
         surface = await sea.surface()            # oceand.surface.Surface: every cascade of one frame
         h = surface.grid("height", 256)          # summed height on a 256 x 256 grid
         answer = await sea.query([[10, 20]])     # exact values (PROTOCOL.md §7.4)
+        async for s in sea.render(start=100, fps=24, frames=240):   # exact times (§7.5)
+            print(s.sim_time)                    # 100 + k/24, every k, in order
 
     with Client("ws://127.0.0.1:8080") as sea:   # the same calls, blocking
         sea.subscribe(cascades="all"); s = sea.surface(); sea.query([[0, 0]])
 
 One reader task takes every message off the socket: replies go to the request
 that waits for them (by id), frames are decoded in order (predicted tiles need
-every frame, §5.8) and the latest complete one is kept, probe_data is queued.
+every frame, §5.8) and the latest complete one is kept, probe_data is queued,
+rendered frames (§7.5) wait in a short queue for render() (the reader waits when it
+is full, so a slow consumer slows the render, never buffers it whole).
 Uses Debian's python3-websockets (10.x) and python3-numpy only.
 """
 import asyncio
@@ -31,6 +35,9 @@ class ServerError(Exception):
     def __init__(self, reply):
         self.reply, self.code, self.message = reply, reply.get("code"), reply.get("message", "")
         super().__init__(f"{self.code}: {self.message}")
+
+
+RENDERED = 1   # frame header flags bit 0 (byte 38): a rendered frame (§7.5)
 
 
 def _cascade_count(params):
@@ -56,6 +63,8 @@ class AsyncClient:
         self._resub = None                    # the last subscribe, sent again to resync (§5.9)
         self._resync_t = -1.0
         self._temporal, self._latest = False, None
+        self._render_q = asyncio.Queue(maxsize=4)   # rendered frames, then the render's end message
+        self._render_id = None
         self._reader = asyncio.get_running_loop().create_task(self._read())
 
     @classmethod
@@ -88,9 +97,18 @@ class AsyncClient:
         try:
             async for msg in self.ws:
                 if isinstance(msg, bytes):
-                    self._on_frame(msg)
+                    if len(msg) >= 40 and msg[38] & RENDERED:
+                        if self._render_id is not None:   # else a cancelled render's: dropped
+                            await self._render_q.put(msg)  # waits for render() to take one
+                    else:
+                        self._on_frame(msg)
                 else:
-                    self._on_text(json.loads(msg))
+                    m = json.loads(msg)
+                    if self._render_id is not None and m.get("id") == self._render_id and \
+                            m.get("type") in ("rendered", "error") and self._render_id not in self._waiting:
+                        await self._render_q.put(m)
+                    else:
+                        self._on_text(m)
         except Exception as e:   # the connection ended: every waiting request learns it
             err = e
         else:
@@ -100,6 +118,8 @@ class AsyncClient:
                 f.set_exception(err)
         self._frame_error = err
         self._surface_event.set()
+        if self._render_id is not None and not self._render_q.full():
+            self._render_q.put_nowait(err)
 
     def _on_text(self, m):
         t = m.get("type")
@@ -234,6 +254,71 @@ class AsyncClient:
         """The next probe_data message (oldest first)."""
         return await asyncio.wait_for(self._probe_queue.get(), self.timeout)
 
+    async def render(self, start, fps, frames, fields=("height", "dx", "dz"), lod=0, bound=None, cascades="all",
+                     fine_lod=1, fine_bound=0.001):
+        """Frames of the sea at exactly start + k/fps, k = 0 .. frames-1 (PROTOCOL.md §7.5),
+        rendered by the server for the parameters in force: an async generator of one
+        Surface per frame, every one, in order (.sim_time, .seq = k). Layers as in
+        subscribe(); it does not change the subscription. Raises ServerError when the
+        server refuses it (bad_render, busy) or ends it with an error. Closing the
+        generator early (aclose(); the sync Client does it when its loop is left) cancels
+        the render and waits for its end, so the next render may follow at once."""
+        msg = {"type": "render", "id": next(self._ids), "start": float(start), "fps": float(fps),
+               "frames": int(frames), "fields": list(fields), "lod": lod}
+        if bound is not None:
+            msg["bound"] = bound
+        if cascades == "all":
+            fb = fine_bound if bound != 0 else 0
+            cascades = [{"fields": [f for f in fields if f != "foam"], "lod": fine_lod, "bound": fb}] * 3
+        msg["cascades"] = list(cascades or [])
+        fut = asyncio.get_running_loop().create_future()
+        self._waiting[msg["id"]] = fut
+        self._render_id = msg["id"]
+        done, started, over = 0, False, False
+        try:
+            await self.ws.send(json.dumps(msg))
+            try:
+                reply = await asyncio.wait_for(fut, self.timeout)   # rendering, or ServerError
+            finally:
+                self._waiting.pop(msg["id"], None)
+            started = True
+            n = min(int(reply.get("cascades", 1)), 1 + len(msg["cascades"]))
+            subs = [(fields, lod)] + [(c.get("fields", fields), c.get("lod", lod)) for c in msg["cascades"]]
+            while True:
+                item = await asyncio.wait_for(self._render_q.get(), max(self.timeout, 60.0))
+                if isinstance(item, Exception):
+                    over = True
+                    raise item
+                if isinstance(item, dict):
+                    over = True
+                    if item.get("type") == "error":
+                        raise ServerError(item)
+                    if item.get("frames", done) != done:
+                        raise fr.ProtocolError("corrupt", f"render ended after {item.get('frames')} frames, "
+                                                          f"{done} received")
+                    return
+                frame = fr.decode_frame(item)
+                grids = {}
+                for c in range(n):
+                    a = fr.Assembler(subs[c][0], subs[c][1], c)
+                    a.add(frame)
+                    grids[c] = a.fields
+                done += 1
+                yield Surface(frame.sim_time, frame.seq, frame.params_version, self.cascade_patch_sizes, grids)
+        finally:
+            if started and not over and not self.ws.closed:
+                # Left early: cancel, and wait for its `rendered`, after which the server takes the next.
+                try:
+                    await self.ws.send('{"type":"render_cancel"}')
+                    while not isinstance(await asyncio.wait_for(self._render_q.get(), self.timeout),
+                                         (dict, Exception)):
+                        pass
+                except Exception:
+                    pass
+            self._render_id = None
+            while not self._render_q.empty():   # what was on its way: the reader drops the rest
+                self._render_q.get_nowait()
+
     async def set(self, token=None, **params):
         """Change sea parameters (controller role): the `params` reply."""
         msg = {"type": "set", "params": params}
@@ -278,6 +363,19 @@ class Client:
             self._call(self._client.close())
         finally:
             self._stop()
+
+    def render(self, *a, **k):
+        """AsyncClient.render, as a plain generator of Surfaces."""
+        gen = self._client.render(*a, **k)
+        try:
+            while True:
+                try:
+                    yield asyncio.run_coroutine_threadsafe(gen.__anext__(), self._loop).result(
+                        max(self.timeout, 60.0) + 5)
+                except StopAsyncIteration:
+                    return
+        finally:
+            asyncio.run_coroutine_threadsafe(gen.aclose(), self._loop).result(self.timeout + 5)
 
     def __getattr__(self, name):
         attr = getattr(self._client, name)
