@@ -24,6 +24,7 @@ struct net *net_create(const struct daemon_config *dc, const struct ocean_params
     n->lim.max_memory_mb = dc->max_memory_mb;
     n->view = n->applied = *p;
     n->applied_version = version;
+    net_instance_tag(n->instance_tag, sizeof n->instance_tag);
 
     /* [0] plain HTTP (and refusal of WebSockets without our subprotocol),
      * [1] oceand.v1. The sim's wake-up is handled in [1] (session.c). */

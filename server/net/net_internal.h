@@ -88,7 +88,7 @@ struct session {
     lws_dll2_t list;              /* in net.sessions; detached = not (or no longer) established */
     struct lws *wsi;              /* NULL once closed */
     uint64_t serial;              /* unique for the daemon's life; requests find their sender by it */
-    char client_id[24];           /* "c<serial>": hello.client_id, params.by */
+    char client_id[32];           /* "c<serial>-<instance tag>": hello.client_id, params.by (PROTOCOL.md §4.1) */
     char name[CTL_NAME_BYTES];    /* display name (`name`, or a set's "name"), "" = none: params.by_name */
     bool controller;              /* may set without a token */
     struct subscription sub;      /* as asked (`subscribed`) */
@@ -190,6 +190,7 @@ struct net {
     bool seen_any;                /* a frame was taken at least once */
     lws_dll2_owner_t sessions;    /* struct session; .count = connected clients */
     uint64_t next_serial;         /* last session serial handed out */
+    char instance_tag[8];         /* 4 random letters/digits drawn at start: in every client id */
     lws_dll2_owner_t requests;    /* struct request: sets sent to the sim, not answered yet */
     uint64_t next_tag;            /* last struct sim_set tag handed out */
     struct ocean_params applied;  /* in force (from the sim's answers) */
@@ -248,6 +249,7 @@ void session_queue_text(struct session *s, const char *msg, bool front);
 void session_queue_json(struct session *s, cJSON *msg);   /* prints and deletes msg */
 void session_send_error(struct session *s, const struct ctl_error *e, const cJSON *id);
 struct session *session_find(struct net *n, uint64_t serial);
+void net_instance_tag(char *out, size_t cap);   /* the 4-character per-start part of client ids */
 
 /* dispatch.c */
 bool dispatch_take_token(struct net *n, struct session *s, const char *text, size_t len);

@@ -17,7 +17,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/random.h>
 #include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
 
 #include "log.h"
 #include "metrics.h"
@@ -106,6 +109,26 @@ static int write_text(struct session *s)
     return 1;
 }
 
+/* The per-start part of every client id: 4 characters of Crockford's base32
+ * (lower case: no i, l, o, u), drawn at random when the daemon starts, so that
+ * "c1" of this start is not "c1" of the last one (nor of another edge): ids are
+ * "c<serial>-<tag>", e.g. "c7-k3qf" (1 in 2^20 that two starts share a tag). */
+void net_instance_tag(char *out, size_t cap)
+{
+    static const char abc[] = "0123456789abcdefghjkmnpqrstvwxyz";
+    uint32_t r = 0;
+    if (getrandom(&r, sizeof r, GRND_NONBLOCK) != (ssize_t)sizeof r) {
+        struct timespec ts;
+        clock_gettime(CLOCK_REALTIME, &ts);
+        r = (uint32_t)ts.tv_nsec ^ (uint32_t)ts.tv_sec * 2654435761u ^ (uint32_t)getpid() << 12;
+    }
+    size_t k = 0;
+    for (; k < 4 && k + 1 < cap; k++, r >>= 5)
+        out[k] = abc[r & 31];
+    if (cap)
+        out[k] = 0;
+}
+
 struct session *session_find(struct net *n, uint64_t serial)
 {
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
@@ -130,7 +153,7 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
     setsockopt(lws_get_socket_fd(wsi), SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
     s->output_limit = (size_t)n->dc.output_limit_kb * 1024;
     s->serial = ++n->next_serial;
-    snprintf(s->client_id, sizeof s->client_id, "c%llu", (unsigned long long)s->serial);
+    snprintf(s->client_id, sizeof s->client_id, "c%llu-%s", (unsigned long long)s->serial, n->instance_tag);
     s->controller = n->dc.control_token[0] == 0;
     s->tokens = n->dc.control_burst;
     s->tokens_t = mono_now();

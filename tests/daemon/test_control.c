@@ -532,7 +532,7 @@ static void test_hello_matches_vector(void)
     params_defaults(&p);
     struct subscription sub;
     subscription_default(&sub, 30);
-    struct hello_info h = { "c7", true, &p, 12, 30, 64, &sub, NULL, 8 };
+    struct hello_info h = { "c7-k3qf", true, &p, 12, 30, 64, &sub, NULL, 8 };
     cJSON *have = control_hello_msg(&h);
     strip_descriptions(want);
     strip_descriptions(have);

@@ -850,6 +850,36 @@ def test_sigterm_and_state_restore():
 TESTS.append(test_sigterm_and_state_restore)
 
 
+def test_client_ids_differ_across_restarts():
+    """A restarted daemon (same state file) hands out client ids none of the last start's: "c1
+    chose storm" names one client, not one per start (PROTOCOL.md §7.2: c<serial>-<tag>)."""
+    tmp = tempfile.mkdtemp(prefix="oceand-test-")
+    state = os.path.join(tmp, "state.json")
+    starts = []
+    for k in range(2):
+        with running(Daemon, state_file=state, tmpdir=tmp, remove=k == 1) as d:
+            async def run():
+                ids = []
+                for _ in range(3):
+                    ws, h = await connect(d)
+                    ids.append(h["client_id"])
+                    await ws.close()
+                return ids
+            starts.append(asyncio.run(run()))
+    a, b = starts
+    print("    first start %s, second start %s" % (", ".join(a), ", ".join(b)))
+    for ids in starts:
+        check(len(set(ids)) == len(ids), "ids within one start not distinct: %r" % ids)
+        for i in ids:
+            check(re.fullmatch(r"c[1-9][0-9]*-[0-9a-hjkmnp-tv-z]{4}", i) and len(i) <= 31,
+                  "client id %r is not c<serial>-<tag>" % i)
+    check(not set(a) & set(b), "the restarted daemon reused client ids: %r and %r" % (a, b))
+    check(a[0].startswith("c1-") and b[0].startswith("c1-"), "serials do not start at 1: %r %r" % (a, b))
+
+
+TESTS.append(test_client_ids_differ_across_restarts)
+
+
 def test_config_precedence():
     tmp = tempfile.mkdtemp(prefix="oceand-test-")
     cfg = os.path.join(tmp, "c.json")

@@ -93,7 +93,7 @@ async function take(browser, port, s, file) {
 
 async function shoot(ctx, port, s, file) {
   const page = await ctx.newPage();
-  page.setDefaultTimeout(150000); // software GL on a shared 2-core machine can take a while
+  page.setDefaultTimeout(600000); // software GL on a shared 2-core machine can take a while
   const errors = [];
   page.on('pageerror', (e) => errors.push(e.message));
   const q = new URLSearchParams({ test: '1', hour: String(s.hour) });
@@ -105,15 +105,20 @@ async function shoot(ctx, port, s, file) {
   if (!s.panel) q.set('panel', 'closed');
   if (!s.hud && !s.panel) q.set('ui', '0'); // the sea alone
   await page.goto(`http://127.0.0.1:${port}/?${q}`);
-  await waitFor(page, 'connected and rendering', () => window.oceand.connected && window.oceand.rendered > 2, null, 60000);
+  await waitFor(page, 'connected and rendering', () => window.oceand.connected && window.oceand.rendered > 2, null, 300000);
   const version = s.preset ? await applyPreset(port, s.preset) : null;
-  if (version !== null) await waitFor(page, 'frames of the preset', (v) => window.oceand.frameParamsVersion >= v, version, 60000);
+  if (version !== null) await waitFor(page, 'frames of the preset', (v) => window.oceand.frameParamsVersion >= v, version, 300000);
+  // The page's own subscription (the foam field, the finer cascades) comes a
+  // little after the first frames: a picture before it shows foam from the folds instead.
+  await waitFor(page, 'the foam field', () => window.oceand.foam.source === 'field', null, 300000);
   // Let the HUD fill in, frames blend, and a few more frames render.
   const r0 = await page.evaluate(() => window.oceand.rendered);
-  await waitFor(page, 'three more frames', (r) => window.oceand.rendered >= r + 3, r0, 120000);
+  await waitFor(page, 'three more frames', (r) => window.oceand.rendered >= r + 3, r0, 600000);
   await sleep(600);
   await page.screenshot({ path: file, type: 'png' });
-  const view = await page.evaluate(() => window.oceand.view);
+  // The surface's LOD in the picture: a server short of CPU, or a page slow to read, serves a
+  // coarser one for a while (a blurred sea, fewer small waves): say so, to retake it.
+  const view = await page.evaluate(() => ({ ...window.oceand.view, lod: window.oceand.stats.lod }));
   if (errors.length) throw new Error(`page errors: ${errors.join('; ')}`);
   return view;
 }
@@ -130,7 +135,7 @@ try {
     const t0 = Date.now();
     try {
       const v = await take(browser, port, s, file);
-      console.log(`${file}  (${((Date.now() - t0) / 1000).toFixed(1)} s; sun ${v.sky.sunAltitudeDeg.toFixed(1)}°, overcast ${v.sky.overcast.toFixed(2)})`);
+      console.log(`${file}  (${((Date.now() - t0) / 1000).toFixed(1)} s; sun ${v.sky.sunAltitudeDeg.toFixed(1)}°, overcast ${v.sky.overcast.toFixed(2)}, surface lod ${v.lod}${v.lod ? ': COARSER than the stream offers, retake it' : ''})`);
     } catch (e) { failed++; console.log(`FAIL ${s.name}: ${e.message}`); }
   }
   if (!only.size || only.has('screenshot')) {

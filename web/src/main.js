@@ -75,7 +75,7 @@ if (query.get('ui') === '0') document.body.classList.add('oc-no-ui'); // ?ui=0: 
 const st = {
   connected: false, connectionState: 'idle', clientId: null, role: null,
   framesReceived: 0, lastSeq: null, paramsVersion: null, params: null,
-  rendered: 0, n: null, lod: null, frameParamsVersion: null, lastError: null, serverError: null,
+  rendered: 0, n: null, lod: null, frameParamsVersion: null, frameSimTime: null, lastError: null, serverError: null,
   name: null, subscription: null, foamLod: null, foamM: 0,
   clusterState: null, // edge's {"type":"status"}: 'ok', 'sim_unavailable', 'nats_unavailable'
   referenceErrors: 0, resyncs: 0, // temporal: predicted frames without their references, and resubscriptions
@@ -89,6 +89,9 @@ const view = { wireframe: false, freeze: false, hour: query.has('hour') && hourA
 // ?bench=1: time decode + upload per frame (upload waits for the GPU with finish())
 // and draw nothing, so rendering does not compete for the CPU being measured.
 const bench = query.has('bench');
+// ?draw=0 (tests): everything but drawing the sea (frames decoded and uploaded, sky, HUD,
+// panel), for pages whose checks read the page's state and layout, not its pixels.
+const draw = !bench && query.get('draw') !== '0';
 const timings = { decode: [], assemble: [], upload: [] };
 
 const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
@@ -317,7 +320,7 @@ function resize() {
 // camera and a ring of points as wide as the near plane's half-diagonal, so the view does
 // not cut into a crest beside it. ?camfloor=0 turns it off (tests show what it prevents).
 const CAMERA_CLEARANCE = 1;
-const camFloor = query.get('camfloor') !== '0';
+let camFloor = query.get('camfloor') !== '0';
 function clearanceAt(x, z) {
   let h = ocean.surfaceHeight(x, z);
   const r = 0.6; // metres: beyond the near plane's corners (0.5 m, 55° field of view)
@@ -365,7 +368,7 @@ function frameLoop() {
     const buffers = released.map((a) => ({ buffer: a.buffer, channels: a.length === f.m * f.m * 4 ? 4 : a.length === f.m * f.m * 2 ? 2 : 1 }));
     for (const a of ocean.setCascades(f.fine)) buffers.push({ buffer: a.buffer, channels: 4 });
     worker.postMessage({ type: 'recycle', buffers }, buffers.map((b) => b.buffer));
-    st.n = f.header.n; st.lod = f.lod; st.frameParamsVersion = f.header.paramsVersion;
+    st.n = f.header.n; st.lod = f.lod; st.frameParamsVersion = f.header.paramsVersion; st.frameSimTime = f.header.simTime;
     if (graceEnd === Infinity) { graceEnd = now + GRACE_MS; st.firstDrawnMs = Math.round(now); }
     st.foamLod = f.foam ? f.foamLod : null; st.foamM = f.foam ? f.fm : 0;
     // Latency: server encode time to the frame reaching the screen (clocks of one machine, or NTP).
@@ -375,7 +378,7 @@ function frameLoop() {
   keepAboveWaves();
   // Sky, sun and light follow the local hour and the shared sea's wind; haze thickens with it.
   if (sky.update(view.hour, st.params?.wind_speed ?? 10)) ocean.uniforms.uFogDensity.value = 0.00009 * (1 + 4 * sky.state.overcast ** 2);
-  if (!bench) ocean.render(camera, now);
+  if (draw) ocean.render(camera, now);
   if (ocean.hasData) st.rendered++;
   flatNotice();
   stats.renders++;
@@ -393,6 +396,7 @@ window.oceand = Object.freeze({
   get lastSeq() { return st.lastSeq; },
   get paramsVersion() { return st.paramsVersion; },
   get frameParamsVersion() { return st.frameParamsVersion; },
+  get frameSimTime() { return st.frameSimTime; }, // sim_time (s) of the frame drawn last
   get params() { return snapshot(st.params); },
   get rendered() { return st.rendered; },
   get clientId() { return st.clientId; },
@@ -458,6 +462,17 @@ if (query.has('test')) {
     },
     // Put the camera at pos looking at target (as the URL's ?cam= and ?target= do).
     look(pos, target) { camera.position.set(...pos); controls.target.set(...target); controls.update(); },
+    // What the URL's ?hour=, ?gapprobe=, ?debugview=foam, ?foamshift=, ?camfloor= and ?scale= set, on
+    // a page already open (one page serves several views; any member may be left out).
+    options({ hour, gapProbe, debugFoam, foamShift: shift, camFloor: floorOn, scale } = {}) {
+      if (hour !== undefined) view.hour = hour;
+      if (scale !== undefined) renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2) * Math.min(1, Math.max(0.25, scale)));
+      if (gapProbe !== undefined) sky.uniforms.uGapProbe.value = gapProbe ? 1 : 0;
+      if (debugFoam !== undefined) ocean.uniforms.uDebugView.value = debugFoam ? 1 : 0;
+      if (shift !== undefined) ocean.uniforms.uFoamShift.value.set(...(shift || [0, 0]));
+      if (floorOn !== undefined) camFloor = !!floorOn;
+      panel.refreshView();
+    },
   });
 }
 

@@ -54,24 +54,33 @@ function sunTransmittance(sinAlt, turbidity) {
   return new THREE.Color(t[0] * edge, t[1] * edge, t[2] * edge);
 }
 
-// The Sky addon's shader with two edits: its sun disc is left out (the dome draws a
-// sharp one; a disc in a 128² cube would be a blurred blob), and its colour passes
-// through weather() — night floor and cloud deck — before it is written.
+// The Sky addon's shader with three edits: its sun disc is left out (the dome draws a
+// sharp one; a disc in a 128² cube would be a blurred blob); its closing
+// pow(texColor, 1/2.4), a display gamma (the addon's sunPosition is a unit vector, so
+// vSunfade is 1 and the exponent always 1/2.4), is undone by day: our own tone curve and
+// sRGB encoding follow (shaders.js toDisplay), and the two gammas in a row made the clear
+// sky almost white (saturation ~0.1 at 40° from a noon sun, linear blue/red ~1.7 where
+// Preetham's radiances give ~5). With the sun low the addon's curve is kept (uSkyLinear 0):
+// the sunset and twilight looks were judged with it. Then its colour passes through
+// weather() — night floor and cloud deck — before it is written.
 function skyMaterial() {
   const src = Sky.SkyShader;
   const disc = 'L0 += ( vSunE * 19000.0 * Fex ) * sundisk;';
+  const gamma = 'vec3 retColor = pow( texColor, vec3( 1.0 / ( 1.2 + ( 1.2 * vSunfade ) ) ) );';
   const out = 'gl_FragColor = vec4( retColor, 1.0 );';
-  if (!src.fragmentShader.includes(disc) || !src.fragmentShader.includes(out)) {
+  if (![disc, gamma, out].every((s) => src.fragmentShader.includes(s))) {
     throw new Error('three.js Sky shader changed: update web/src/sky.js');
   }
   const fragmentShader = src.fragmentShader
     .replace(disc, '')
+    .replace(gamma, `vec3 retColor = mix( pow( texColor, vec3( 1.0 / ( 1.2 + ( 1.2 * vSunfade ) ) ) ), ${LINEAR_GAIN.toFixed(3)} * texColor, uSkyLinear );`)
     .replace('void main() {', `${WEATHER}\nvoid main() {`)
     .replace(out, 'gl_FragColor = vec4( weather( direction, retColor ), 1.0 );');
   return new THREE.ShaderMaterial({
     name: 'OceandSky',
     uniforms: {
       ...THREE.UniformsUtils.clone(src.uniforms),
+      uSkyLinear: { value: 0 },
       uSkyGain: { value: new THREE.Color(1, 1, 1) },
       uNight: { value: new THREE.Color(0, 0, 0) },
       uOvercast: { value: 0 },
@@ -84,7 +93,12 @@ function skyMaterial() {
   });
 }
 
+// Preetham's radiance (texColor) kept linear is scaled by this, so the clear sky 30-60° from a
+// high sun has about the luminance it had through the addon's gamma (blue much the same, red less).
+const LINEAR_GAIN = 0.3;
+
 const WEATHER = /* glsl */`
+uniform float uSkyLinear; // 0: the addon's gamma-curved colour (low sun), 1: its linear radiance (day)
 uniform vec3 uSkyGain;    // dims and tints the clear sky at night
 uniform vec3 uNight;      // night floor: airglow and moonlit sky
 uniform float uOvercast;  // 0 clear .. 1 closed deck
@@ -186,6 +200,8 @@ export class SkyModel {
     u.rayleigh.value = 2 + 1.5 * (1 - day);      // deeper blue at twilight
     u.mieCoefficient.value = 0.003 + 0.01 * overcast;
     u.mieDirectionalG.value = 0.75;
+    // The addon's display gamma is undone as the sun climbs from 6° to 20° (skyMaterial).
+    u.uSkyLinear.value = s01(6, 20, Math.asin(sinAlt) * 180 / Math.PI);
     u.uSkyGain.value.setRGB(0.08 + 0.92 * day, 0.1 + 0.9 * day, 0.2 + 0.8 * day).multiplyScalar(1 - darkening * 0.5);
     u.uNight.value.setRGB(0.006, 0.011, 0.026).multiplyScalar(1 - day);
     u.uOvercast.value = overcast;
@@ -199,6 +215,14 @@ export class SkyModel {
     lit.r += 0.5 * s01(-0.1, 0.4, sinAlt) + 0.0075;
     lit.g += 0.52 * s01(-0.1, 0.4, sinAlt) + 0.0105;
     lit.b += 0.56 * s01(-0.1, 0.4, sinAlt) + 0.0200;
+    // A high sun lights broken cloud from above and the side: brighter than the blue sky
+    // around it (the sky is no longer washed out to near white, so clouds lit as before read
+    // as grey-brown blots), sunlight plus the sky's blue fill, for a cloud's white; not a
+    // closing deck, which stays grey.
+    const high = s01(6, 20, Math.asin(sinAlt) * 180 / Math.PI) * (1 - s01(0.5, 0.95, overcast));
+    lit.r += (1.3 * sunT0.r + 0.25) * high;
+    lit.g += (1.3 * sunT0.g + 0.32) * high;
+    lit.b += (1.3 * sunT0.b + 0.45) * high;
     lit.multiplyScalar(1 - darkening);
     // Twilight (sun from +4° to -18°): glow under the sun and the dome's blue, strongest
     // around sunset, fading with the depression (about e-fold per 4°).
