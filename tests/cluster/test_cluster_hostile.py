@@ -280,7 +280,8 @@ def rogue_temporal_layers_and_demand(c):
     rogue edge wishing for keyframes of the viewer's layers. The malformed ones are refused
     (counted); the viewer, temporal, keeps getting frames and decodes every one in order
     with one decoder state (never a predicted tile without its references), codec 3
-    among them."""
+    among them. (A copy under another epoch holds the real sim's tiles, so it cannot show
+    a wrong decode: test_two_sims_never_mix_chains in test_cluster_roles.py does.)"""
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
     import oceanproto
     rogue = RawNats(c.nats.url)

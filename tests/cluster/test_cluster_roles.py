@@ -352,6 +352,50 @@ def test_intra_and_temporal_viewers_share_an_edge(c):
     asyncio.run(run())
 
 
+@test
+def test_two_sims_never_mix_chains():
+    """Two sims acting on one prefix at once (no JetStream: nothing stops the second, a
+    misconfiguration) with different seas, so their chains' grids differ: the edge
+    relays frames of both, their seqs interleaved (both count from the wall clock), and
+    without the epoch a viewer would take one sim's predicted tile against the other's
+    reference. The edge's temporal viewer decodes every frame it gets in order with one
+    decoder state (the decoder refuses a reference of another grid: `reference`), and
+    the edge counts its new chains (oceand_cluster_new_chains_total)."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+    import oceanproto
+
+    c = Cluster(edges=1, state={"params": {"wind_speed": 13, "seed": 7}, "params_version": 1, "sim_time": 3})
+    ok = False
+    try:
+        async def run():
+            ws, _ = await connect(c.edges[0])
+            await ws.send('{"type":"subscribe","id":1,"temporal":true,"adapt":false}')
+            await recv_json(ws, lambda m: m["type"] in ("subscribed", "error"))
+            state = oceanproto.DecoderState()
+            await until_predicted(ws, 10, state, oceanproto)
+            sf = os.path.join(c.tmp, "sim2-state.json")
+            with open(sf, "w") as f:
+                json.dump({"params": {"wind_speed": 21, "seed": 99}, "params_version": 1, "sim_time": 40}, f)
+            c.node("sim2", "--role", "sim", "--nats", c.nats.url, state_file=sf)
+            await await_for(lambda: c.edges[0].metric("oceand_cluster_new_chains_total") >= 2,
+                            "the edge sees frames of both sims", timeout=20)
+            n, t_end = 0, time.time() + 3
+            while time.time() < t_end:
+                try:
+                    _, b = await recv_frame(ws, timeout=max(0.1, t_end - time.time()))
+                except (asyncio.TimeoutError, TestFailure):
+                    break
+                oceanproto.decode_frame(b, state)   # ProtocolError `reference`: a chain of the other sim
+                n += 1
+            print("  %d frames decoded with both sims acting; new chains at the edge: %d"
+                  % (n, c.edges[0].metric("oceand_cluster_new_chains_total")))
+            await ws.close()
+        asyncio.run(run())
+        ok = True
+    finally:
+        c.close(failed=not ok)
+
+
 QUERIES = [
     '{"type":"query","id":7,"points":[[12.5,-3],[1e6,40],[0,0]]}',
     '{"type":"query","id":"t","points":[[3,4]],"time":12.5}',
