@@ -11,7 +11,7 @@
  * frames are unmasked) that skips payload with one pass over each recv.
  *
  *   load_client PORT CLIENTS WARMUP_S WINDOW_S [SUBSCRIBE_JSON]
- * SUBSCRIBE_JSON (at most 125 bytes) is sent by every client after the
+ * SUBSCRIBE_JSON (at most 4096 bytes) is sent by every client after the
  * handshake, e.g. {"type":"subscribe","fields":["height"]}.
  * Environment LOAD_SET_INTERVAL_S: seconds between client 0's wind sets
  * (default 0.3, someone steering; 0 = no sets, the sea left alone). */
