@@ -11,7 +11,7 @@
  * frames are unmasked) that skips payload with one pass over each recv.
  *
  *   load_client PORT CLIENTS WARMUP_S WINDOW_S [SUBSCRIBE_JSON]
- * SUBSCRIBE_JSON (at most 125 bytes) is sent by every client after the
+ * SUBSCRIBE_JSON (at most 4096 bytes) is sent by every client after the
  * handshake, e.g. {"type":"subscribe","fields":["height"]}.
  * Environment LOAD_SET_INTERVAL_S: seconds between client 0's wind sets
  * (default 0.3, someone steering; 0 = no sets, the sea left alone). */
@@ -55,6 +55,7 @@ static struct client *clients;
 static int nclients;
 static bool measuring;
 static double *lat;
+static double *sizes;            /* bytes of each frame received while measuring (as lat) */
 static size_t nlat, lat_cap;
 static uint64_t seq_max;
 static bool set_waiting;
@@ -104,8 +105,10 @@ static void on_frame(struct client *c)
     if (measuring) {
         c->frames++;
         c->bytes += c->msg_off;
-        if (nlat < lat_cap)
+        if (nlat < lat_cap) {
+            sizes[nlat] = (double)c->msg_off;
             lat[nlat++] = ((double)unix_us() - (double)us) / 1000.0;
+        }
     }
     if (c->idx == 0 && set_waiting && version > set_version) {
         if (nset < 4096)
@@ -237,8 +240,9 @@ int main(int argc, char **argv)
     clients = calloc((size_t)nclients, sizeof *clients);
     lat_cap = (size_t)nclients * 32 * (size_t)(window + 2) + 1024;
     lat = malloc(lat_cap * sizeof *lat);
+    sizes = malloc(lat_cap * sizeof *sizes);
     int ep = epoll_create1(0);
-    if (!clients || !lat || ep < 0)
+    if (!clients || !lat || !sizes || ep < 0)
         return 1;
     int connected = 0, errors = 0;
     for (int i = 0; i < nclients; i++) {
@@ -304,18 +308,19 @@ int main(int argc, char **argv)
     printf("{\"connected\":%d,\"errors\":%d,\"open_at_end\":%d,\"window_s\":%g,\"frames_made\":%llu,\"fps_median\":%.2f,"
            "\"fps_min\":%.2f,\"delivered\":%.4f,\"delivered_median\":%.4f,\"lat_p50_ms\":%.2f,\"lat_p99_ms\":%.2f,"
            "\"set_latency_ticks_p50\":%.1f,\"set_latency_ticks_p99\":%.1f,\"set_samples\":%d,\"mbytes_per_s\":%.3f,"
-           "\"frame_kb\":%.1f}\n",
+           "\"frame_kb\":%.1f,\"frame_kb_p50\":%.1f}\n",
            connected, errors, still_open, window, (unsigned long long)made, pct(fps, (size_t)nclients, 0.5),
            pct(fps, (size_t)nclients, 0), pct(share, (size_t)nclients, 0), pct(share, (size_t)nclients, 0.5),
            pct(lat, nlat, 0.5), pct(lat, nlat, 0.99), pct(set_samples, (size_t)nset, 0.5),
            pct(set_samples, (size_t)nset, 0.99), nset, (double)bytes / window / 1e6,
-           nlat ? (double)bytes / (double)nlat / 1024 : 0);
+           nlat ? (double)bytes / (double)nlat / 1024 : 0, pct(sizes, nlat, 0.5) / 1024);
     for (int i = 0; i < nclients; i++)
         if (clients[i].fd > 0)
             close(clients[i].fd);
     free(fps);
     free(share);
     free(lat);
+    free(sizes);
     free(clients);
     return 0;
 }

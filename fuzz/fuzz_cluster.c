@@ -18,17 +18,18 @@ static void check_part(const uint8_t *msg, size_t len, struct cl_assembler *a, s
     struct cl_layer_part p;
     if (cl_layer_part_parse(msg, len, &p) != CL_OK)
         return;
-    int total = p.info.tiles_per_side * p.info.tiles_per_side;
-    if (p.tile_first + p.tile_count > total)
+    int total = cl_layer_tiles(&p.info), sec = p.info.tiles_per_side * p.info.tiles_per_side;
+    if (p.tile_first + p.tile_count > total || p.tile_first / sec != (p.tile_first + p.tile_count - 1) / sec ||
+        p.info.need > CL_LAYER_MAX_NEED || !p.info.epoch)
         abort();
-    /* round trip: absolute offsets as the sim would hold them, rewritten */
+    /* round trip: absolute offsets of its section as the sim would hold them, rewritten */
     if (msg[6] == CL_LAYER_HEADER_SIZE && msg[7] == 0) {
-        uint32_t *off = calloc((size_t)total + 1, sizeof *off);
+        uint32_t *off = calloc((size_t)sec + 1, sizeof *off);
         uint8_t *out = malloc(len);
         if (!off || !out)
             abort();
         for (int i = 0; i <= p.tile_count; i++)
-            off[p.tile_first + i] = cl_part_off(&p, i);
+            off[p.tile_first % sec + i] = cl_part_off(&p, i);
         long w = cl_layer_part_write(out, len, &p.info, p.tile_first, p.tile_count, p.data, off);
         if (w != (long)len || memcmp(out, msg, len) != 0)
             abort();
@@ -37,7 +38,7 @@ static void check_part(const uint8_t *msg, size_t len, struct cl_assembler *a, s
     }
     struct cl_layer *l = NULL;
     if (cl_assembler_add(a, &p, &l) == 1) {
-        if (!l || l->tile_off[0] != 0 || l->tile_off[total] != l->len)
+        if (!l || l->tile_off[0] != 0 || l->tile_off[total] != l->len || cl_layer_tiles(&l->info) != total)
             abort();
         for (int i = 0; i < total; i++)
             if (l->tile_off[i + 1] < l->tile_off[i] + 40)
@@ -72,6 +73,22 @@ static void check_envelope(const uint8_t *msg, size_t len, struct cl_demand *d, 
     if (e.kind == CL_KIND_DEMAND && cl_demand_body_parse(e.body, e.body_len, &ttl, bits) == CL_OK) {
         cl_demand_update(d, e.origin, bits, ttl / 1000.0, t);
         int live = cl_demand_union(d, t, u);
+        if (live < 0 || live > 4)
+            abort();
+    }
+    struct cl_demand_bits b, ub;
+    if (e.kind == CL_KIND_DEMAND && cl_demand_body_parse_ex(e.body, e.body_len, &ttl, &b) == CL_OK) {
+        for (int i = 0; i < CL_KEY_BYTES; i++) /* stream and wish are subsets of keys */
+            if ((b.stream[i] & ~b.keys[i]) || (b.wish[i] & ~b.keys[i]))
+                abort();
+        uint8_t back[CL_DEMAND_BODY_EX];
+        if (e.body_len == CL_DEMAND_BODY_EX) {
+            cl_demand_body_write_ex(back, ttl, &b);
+            if (memcmp(back, e.body, CL_DEMAND_BODY_EX) != 0)
+                abort();
+        }
+        cl_demand_update_ex(d, e.origin, &b, ttl / 1000.0, t);
+        int live = cl_demand_union_ex(d, t, &ub);
         if (live < 0 || live > 4)
             abort();
     }

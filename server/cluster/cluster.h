@@ -52,7 +52,8 @@
  *                                       process's instance id, cl_link_instance)
  *   PREFIX.ctl                          edge -> sim request/reply: set, pause, resume (OCNE CTL -> REPLY)
  *   PREFIX.hello                        edge -> sim request/reply: current params + schema (OCNE HELLO -> REPLY)
- *   PREFIX.demand                       edges -> sim: demand heartbeats with expiry (OCNE DEMAND)
+ *   PREFIX.demand                       edges -> sim: demand heartbeats with expiry (OCNE DEMAND: keys,
+ *                                       and which of them stream and which need keyframes now)
  *   PREFIX.query                        edge -> sim request/reply: a client's point query (OCNE QUERY -> REPLY)
  *   PREFIX.probe                        edge -> sim request/reply: a client's probe (OCNE PROBE -> REPLY),
  *                                       repeated as a keepalive; the sim then streams
@@ -145,20 +146,33 @@ int cl_subject_layer_parse(const char *subject, const char *prefix);
  *   6  u16 header_size   40 u8  bound_index    60 u8  cascade (0..ncascades-1)
  *   8  u64 seq           41 u8  layer_flags    61 u8  ncascades (1..4: in force)
  *   16 f64 sim_time      42 u16 tiles_per_side 62 u8  encoded_lod (lod..4: of its tiles)
- *   24 u32 params_version 44 u16 tile_first    63 u8  reserved (0)
+ *   24 u32 params_version 44 u16 tile_first    63 u8  need (0..4; 0 unless SHARED)
  *   28 u16 n             46 u16 tile_count     64 u8[128] encoded: keys the
  *   30 u16 tile_size                                  sim encoded this tick
- *   32 f32 patch_size
- *   36 u16 frame_flags
- *   192 u32 off[tile_count + 1]: tile i of the part is data[off[i], off[i+1])
+ *   32 f32 patch_size                          192 u64 epoch: the sim process
+ *   36 u16 frame_flags                                 (its instance id, != 0)
+ *   200 u32 off[tile_count + 1]: tile i of the part is data[off[i], off[i+1])
  *      then data_len bytes: the tiles as on the WebSocket (tile header + payload;
  *      its flags byte is the cascade, its lod byte encoded_lod)
  * Bytes 8..47 carry the fields of the WebSocket frame header, so an edge
- * rebuilds byte-identical frames. Version 1 (cascade 0 only, 32-byte key
- * bitmaps, header 96) is not read any more: sim and edges upgrade together. */
+ * rebuilds byte-identical frames.
+ * Sections (layer_flags): a layer's tiles are numbered 0 .. sections x
+ * tiles_per_side^2 - 1: first its intra tiles (codec 1/0, decodable alone:
+ * for a temporal layer this tick's keyframe tiles) when it has them, then,
+ * with CL_LAYER_SHARED, its stream's shared tiles (codec 3 and the chains'
+ * keyframes, PROTOCOL.md §5.9), which need the `need` previous ticks of the
+ * same epoch. A layer without CL_LAYER_SHARED has its intra tiles only;
+ * one with it has intra tiles too exactly when CL_LAYER_INTRA is set.
+ * Predicted tiles reference the frames of one sim process: an edge never
+ * lets a viewer's references span two epochs (a take-over, a restart).
+ * Versions 1 and 2 (intra only, no epoch) are not read any more: sim and
+ * edges upgrade together. */
 #define CL_LAYER_MAGIC       "OCNL"
-#define CL_LAYER_VERSION     2
-#define CL_LAYER_HEADER_SIZE (64 + CL_KEY_BYTES)
+#define CL_LAYER_VERSION     3
+#define CL_LAYER_HEADER_SIZE (64 + CL_KEY_BYTES + 8)
+#define CL_LAYER_SHARED      0x02 /* layer_flags: the shared tiles of the layer's stream follow */
+#define CL_LAYER_INTRA       0x04 /* with CL_LAYER_SHARED: intra (keyframe) tiles come first */
+#define CL_LAYER_MAX_NEED    4    /* PROTOCOL.md §5.6: depth 1..4 */
 #define CL_MAX_TILES_PER_SIDE 256
 #define CL_MAX_LAYER_BYTES   (64u << 20)
 
@@ -172,9 +186,27 @@ struct cl_layer_info {
     uint64_t server_time_us;
     uint8_t field, lod, bound_index, layer_flags;
     uint8_t cascade, ncascades, encoded_lod;
+    uint8_t need;           /* CL_LAYER_SHARED: ticks of history the shared tiles need */
     uint16_t tiles_per_side;
     uint8_t encoded[CL_KEY_BYTES];
+    uint64_t epoch;         /* the sim process that encoded it (cl_link_epoch); not 0 */
 };
+/* Which sections a layer carries (cl_layer_sections: 1 or 2), and whether
+ * it has intra tiles (first section) and shared tiles (last section). */
+static inline bool cl_info_has_intra(const struct cl_layer_info *i)
+{
+    return !(i->layer_flags & CL_LAYER_SHARED) || (i->layer_flags & CL_LAYER_INTRA);
+}
+static inline bool cl_info_has_shared(const struct cl_layer_info *i) { return i->layer_flags & CL_LAYER_SHARED; }
+static inline int cl_layer_sections(const struct cl_layer_info *i)
+{
+    return (cl_info_has_intra(i) ? 1 : 0) + (cl_info_has_shared(i) ? 1 : 0);
+}
+/* Tiles of a whole layer: sections x tiles_per_side^2. */
+static inline int cl_layer_tiles(const struct cl_layer_info *i)
+{
+    return cl_layer_sections(i) * i->tiles_per_side * i->tiles_per_side;
+}
 /* The layer's key (cl_key_cascade). */
 static inline int cl_info_key(const struct cl_layer_info *i)
 {
@@ -196,8 +228,10 @@ int cl_layer_part_parse(const uint8_t *msg, size_t len, struct cl_layer_part *ou
 /* Bytes of a part with tile_count tiles and data_len bytes of tiles. */
 size_t cl_layer_part_size(int tile_count, size_t data_len);
 /* Writes tiles [tile_first, tile_first + tile_count) of a whole layer
- * (data with tile_off[tps^2 + 1] absolute offsets) into dst; returns the
- * bytes written or a negative CL_E_*. */
+ * into dst; returns the bytes written or a negative CL_E_*. The tiles must
+ * lie in one section (cl_layer_sections): data and tile_off[tps^2 + 1]
+ * (absolute offsets into data) are that section's, indexed by the tile's
+ * number within it (tile_first mod tps^2). */
 long cl_layer_part_write(uint8_t *dst, size_t cap, const struct cl_layer_info *info,
                          int tile_first, int tile_count, const uint8_t *data, const uint32_t *tile_off);
 /* How many tiles from tile_first fit one message of at most max_payload
@@ -210,7 +244,7 @@ struct cl_layer {
     struct cl_layer_info info;
     uint8_t *data;
     size_t len;
-    uint32_t *tile_off;     /* tiles_per_side^2 + 1 offsets into data */
+    uint32_t *tile_off;     /* cl_layer_tiles + 1 offsets into data (every section's tiles) */
 };
 void cl_layer_free(struct cl_layer *l);
 
@@ -281,7 +315,7 @@ enum cl_kind {
     CL_KIND_REPLY = 3,   /* sim -> edge: the JSON answer */
     CL_KIND_PARAMS = 4,  /* sim -> edges: params event JSON; origin/by = who caused it */
     CL_KIND_STATUS = 5,  /* sim -> edges: heartbeat; body = JSON status text */
-    CL_KIND_DEMAND = 6,  /* edge -> sim: body = u32 ttl_ms + u8[CL_KEY_BYTES] keys */
+    CL_KIND_DEMAND = 6,  /* edge -> sim: body = u32 ttl_ms + u8[CL_KEY_BYTES] keys (+ stream + wish) */
     CL_KIND_QUERY = 7,   /* edge -> sim request: a client's `query` JSON (answered by REPLY) */
     CL_KIND_PROBE = 8,   /* edge -> sim request: a client's `probe` JSON (REPLY: `probing` or an error);
                             sent again unchanged every CL_PROBE_KEEPALIVE_S while the probe lasts */
@@ -300,6 +334,24 @@ long cl_envelope_write(uint8_t *dst, size_t cap, enum cl_kind kind, const char *
 #define CL_DEMAND_BODY (4 + CL_KEY_BYTES)
 void cl_demand_body_write(uint8_t dst[CL_DEMAND_BODY], uint32_t ttl_ms, const uint8_t bits[CL_KEY_BYTES]);
 int cl_demand_body_parse(const uint8_t *body, size_t len, uint32_t *ttl_ms, uint8_t bits[CL_KEY_BYTES]);
+/* An edge's demand with the temporal codec (docs/scaling.md, "Temporal
+ * layers through edges"): body = u32 ttl_ms + keys + stream + wish, three
+ * bitmaps of CL_KEY_BYTES:
+ *   keys    the layers its viewers subscribe to (as CL_DEMAND_BODY's);
+ *   stream  those some viewer takes with the temporal codec: the sim encodes
+ *           their stream (codec 3) and publishes its shared tiles;
+ *   wish    those that need intra (keyframe) tiles at the next ticks: a viewer
+ *           that is not temporal, or a temporal one short of references (new,
+ *           after a gap, a step of its ladder, a new sim).
+ * stream and wish are subsets of keys. A body of CL_DEMAND_BODY bytes (an
+ * edge that does not stream) parses as stream = none, wish = keys. */
+#define CL_DEMAND_BODY_EX (4 + 3 * CL_KEY_BYTES)
+struct cl_demand_bits {
+    uint8_t keys[CL_KEY_BYTES], stream[CL_KEY_BYTES], wish[CL_KEY_BYTES];
+};
+void cl_demand_body_write_ex(uint8_t dst[CL_DEMAND_BODY_EX], uint32_t ttl_ms, const struct cl_demand_bits *b);
+/* Either length; CL_E_CORRUPT for keys beyond CL_KEYS or stream / wish outside keys. */
+int cl_demand_body_parse_ex(const uint8_t *body, size_t len, uint32_t *ttl_ms, struct cl_demand_bits *out);
 
 /* ---- demand table (sim side) ----------------------------------------------
  * Edge name -> (keys, expiry). The sim encodes the union of the live
@@ -316,6 +368,10 @@ void cl_demand_free(struct cl_demand *d);
 int cl_demand_update(struct cl_demand *d, const char *edge, const uint8_t bits[CL_KEY_BYTES], double ttl, double now);
 /* Drops expired entries, writes the union of the others; returns how many are live. */
 int cl_demand_union(struct cl_demand *d, double now, uint8_t out[CL_KEY_BYTES]);
+/* The same with the temporal bitmaps (cl_demand_bits): cl_demand_update's
+ * bits count as keys = wish = bits, stream = none. */
+int cl_demand_update_ex(struct cl_demand *d, const char *edge, const struct cl_demand_bits *b, double ttl, double now);
+int cl_demand_union_ex(struct cl_demand *d, double now, struct cl_demand_bits *out);
 
 /* ---- the NATS link ------------------------------------------------------- */
 enum cl_role { CL_ROLE_SIM, CL_ROLE_EDGE };
@@ -422,6 +478,8 @@ const char *cl_link_name(const struct cl_link *l);
 /* Sim: this process's random id (16 hex digits), sent as `by` of every
  * STATUS heartbeat: edges tell a new sim process from the old one by it. */
 const char *cl_link_instance(const struct cl_link *l);
+/* The same id as a number (never 0): the epoch of the layers a sim publishes. */
+uint64_t cl_link_epoch(const struct cl_link *l);
 void cl_link_stats(struct cl_link *l, struct cl_stats *out);
 /* After every link is closed, at exit: lets the NATS library free its globals. */
 void cl_library_shutdown(void);
@@ -431,6 +489,12 @@ void cl_library_shutdown(void);
  * copies nor waits. Returns 0 or a negative CL_E_*. */
 int cl_sim_publish_layer(struct cl_link *l, const struct cl_layer_info *info, const uint8_t *data, size_t len,
                          const uint32_t *tile_off, void (*release)(void *ctx), void *ctx);
+/* The same for a layer of one or two sections (info->layer_flags,
+ * cl_layer_sections): data[i], len[i], tile_off[i] (tiles_per_side^2 + 1
+ * offsets) of section i. info->epoch 0 = this link's (cl_link_epoch). */
+int cl_sim_publish_layer_sections(struct cl_link *l, const struct cl_layer_info *info, const uint8_t *const data[2],
+                                  const size_t len[2], const uint32_t *const tile_off[2], void (*release)(void *ctx),
+                                  void *ctx);
 int cl_sim_publish_params(struct cl_link *l, const char *origin, const char *by, const char *text, size_t len);
 void cl_sim_set_status(struct cl_link *l, const char *text, size_t len);  /* body of the next heartbeats */
 /* A standby sim sends no STATUS (edges must not take it for the active one)
@@ -438,6 +502,7 @@ void cl_sim_set_status(struct cl_link *l, const char *text, size_t len);  /* bod
  * with no sim acting, requests get "no responders" at once. */
 void cl_sim_set_standby(struct cl_link *l, bool standby);
 int cl_sim_demand(struct cl_link *l, uint8_t out[CL_KEY_BYTES]);          /* tick thread; returns live edges */
+int cl_sim_demand_ex(struct cl_link *l, struct cl_demand_bits *out);      /* the same with stream and wish */
 /* text NULL: drop without answering. */
 void cl_request_reply(struct cl_link *l, struct cl_request *req, const char *text, size_t len);
 /* One probe_data text for client `by` of the edge whose stream subject is
@@ -474,6 +539,9 @@ int cl_kv_write(struct cl_kv *kv, const char *text, size_t len);
 
 /* Edge role. */
 int cl_edge_set_demand(struct cl_link *l, const uint8_t bits[CL_KEY_BYTES]); /* subscribes + heartbeats now */
+/* The same with stream and wish (cl_demand_bits): subscribes to b->keys; a
+ * change of any bitmap is announced at the pump's next round (coalesced). */
+int cl_edge_set_demand_ex(struct cl_link *l, const struct cl_demand_bits *b);
 int cl_edge_request(struct cl_link *l, enum cl_kind kind, const char *by, const char *body, size_t len,
                     cl_reply_fn done, void *ctx);
 

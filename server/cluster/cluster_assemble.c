@@ -14,7 +14,7 @@ static bool same_frame(const struct cl_layer_info *a, const struct cl_layer_info
            a->params_version == b->params_version && a->n == b->n && a->tile_size == b->tile_size &&
            memcmp(&a->patch_size, &b->patch_size, sizeof a->patch_size) == 0 && a->frame_flags == b->frame_flags &&
            a->server_time_us == b->server_time_us && a->tiles_per_side == b->tiles_per_side &&
-           a->ncascades == b->ncascades &&
+           a->ncascades == b->ncascades && a->epoch == b->epoch &&
            memcmp(a->encoded, b->encoded, CL_KEY_BYTES) == 0;
 }
 
@@ -23,7 +23,8 @@ static bool same_frame(const struct cl_layer_info *a, const struct cl_layer_info
 static bool same_layer(const struct cl_layer_info *a, const struct cl_layer_info *b)
 {
     return same_frame(a, b) && a->field == b->field && a->lod == b->lod && a->bound_index == b->bound_index &&
-           a->layer_flags == b->layer_flags && a->cascade == b->cascade && a->encoded_lod == b->encoded_lod;
+           a->layer_flags == b->layer_flags && a->cascade == b->cascade && a->encoded_lod == b->encoded_lod &&
+           a->need == b->need;
 }
 
 /* ---- assembler: parts -> layers ---- */
@@ -103,7 +104,7 @@ int cl_assembler_add(struct cl_assembler *a, const struct cl_layer_part *p, stru
             a->dropped++; /* a new layer began before the old one was complete */
         slot_reset(a, s);
         s->info = p->info;
-        s->total = p->info.tiles_per_side * p->info.tiles_per_side;
+        s->total = cl_layer_tiles(&p->info); /* every section's tiles */
         size_t off_bytes = sizeof(uint32_t) * ((size_t)s->total + 1);
         if (!make_room(a, s, off_bytes)) {
             a->dropped++;

@@ -10,7 +10,7 @@
 
 struct entry {
     char edge[CL_NAME_MAX];      /* "" = free */
-    uint8_t bits[CL_KEY_BYTES];
+    struct cl_demand_bits bits;
     double expires;
 };
 
@@ -54,7 +54,8 @@ static bool empty(const uint8_t bits[CL_KEY_BYTES])
     return true;
 }
 
-int cl_demand_update(struct cl_demand *d, const char *edge, const uint8_t bits[CL_KEY_BYTES], double ttl, double now)
+int cl_demand_update_ex(struct cl_demand *d, const char *edge, const struct cl_demand_bits *bits, double ttl,
+                        double now)
 {
     if (!d || !edge || !edge[0] || strlen(edge) >= CL_NAME_MAX || !bits || !(ttl == ttl))
         return CL_E_ARG;
@@ -74,7 +75,7 @@ int cl_demand_update(struct cl_demand *d, const char *edge, const uint8_t bits[C
         else if (!e->edge[0] && !free_slot)
             free_slot = e;
     }
-    if (empty(bits)) {
+    if (empty(bits->keys)) {
         if (slot)
             slot->edge[0] = 0; /* the edge has no viewers left: forget it now */
     } else {
@@ -83,7 +84,7 @@ int cl_demand_update(struct cl_demand *d, const char *edge, const uint8_t bits[C
             strcpy(slot->edge, edge);
         }
         if (slot) {
-            memcpy(slot->bits, bits, CL_KEY_BYTES);
+            slot->bits = *bits;
             slot->expires = now + ttl;
         } else {
             rc = CL_E_FULL;
@@ -93,9 +94,20 @@ int cl_demand_update(struct cl_demand *d, const char *edge, const uint8_t bits[C
     return rc;
 }
 
-int cl_demand_union(struct cl_demand *d, double now, uint8_t out[CL_KEY_BYTES])
+int cl_demand_update(struct cl_demand *d, const char *edge, const uint8_t bits[CL_KEY_BYTES], double ttl, double now)
 {
-    memset(out, 0, CL_KEY_BYTES);
+    if (!bits)
+        return CL_E_ARG;
+    struct cl_demand_bits b;
+    memcpy(b.keys, bits, CL_KEY_BYTES);
+    memset(b.stream, 0, CL_KEY_BYTES);
+    memcpy(b.wish, bits, CL_KEY_BYTES);
+    return cl_demand_update_ex(d, edge, &b, ttl, now);
+}
+
+int cl_demand_union_ex(struct cl_demand *d, double now, struct cl_demand_bits *out)
+{
+    memset(out, 0, sizeof *out);
     int live = 0;
     pthread_mutex_lock(&d->lock);
     for (int i = 0; i < d->max; i++) {
@@ -107,9 +119,20 @@ int cl_demand_union(struct cl_demand *d, double now, uint8_t out[CL_KEY_BYTES])
             continue;
         }
         live++;
-        for (int b = 0; b < CL_KEY_BYTES; b++)
-            out[b] |= e->bits[b];
+        for (int b = 0; b < CL_KEY_BYTES; b++) {
+            out->keys[b] |= e->bits.keys[b];
+            out->stream[b] |= e->bits.stream[b];
+            out->wish[b] |= e->bits.wish[b];
+        }
     }
     pthread_mutex_unlock(&d->lock);
+    return live;
+}
+
+int cl_demand_union(struct cl_demand *d, double now, uint8_t out[CL_KEY_BYTES])
+{
+    struct cl_demand_bits b;
+    int live = cl_demand_union_ex(d, now, &b);
+    memcpy(out, b.keys, CL_KEY_BYTES);
     return live;
 }

@@ -72,8 +72,15 @@ static int info_check(const struct cl_layer_info *h)
         return CL_E_CORRUPT;
     if (h->field >= CL_FIELDS || h->lod >= CL_LODS || h->bound_index >= CL_BOUNDS || (h->tile_size >> h->lod) < 1)
         return CL_E_CORRUPT;
-    if (!isfinite(h->sim_time) || !isfinite(h->patch_size) || !(h->patch_size > 0) || h->layer_flags > 1)
+    if (!isfinite(h->sim_time) || !isfinite(h->patch_size) || !(h->patch_size > 0) ||
+        (h->layer_flags & ~(1 | CL_LAYER_SHARED | CL_LAYER_INTRA)))
         return CL_E_CORRUPT;
+    if ((h->layer_flags & CL_LAYER_INTRA) && !(h->layer_flags & CL_LAYER_SHARED))
+        return CL_E_CORRUPT;
+    if (h->need > CL_LAYER_MAX_NEED || (h->need && !(h->layer_flags & CL_LAYER_SHARED)) || !h->epoch)
+        return CL_E_CORRUPT;
+    if ((h->layer_flags & CL_LAYER_SHARED) && h->encoded_lod != h->lod)
+        return CL_E_CORRUPT; /* a temporal layer is never degraded to a coarser LOD (frame_job.c) */
     if (h->ncascades < 1 || h->ncascades > CL_CASCADES || h->cascade >= h->ncascades)
         return CL_E_CORRUPT;
     if (h->encoded_lod < h->lod || h->encoded_lod >= CL_LODS || (h->tile_size >> h->encoded_lod) < 1)
@@ -107,10 +114,13 @@ long cl_layer_part_write(uint8_t *dst, size_t cap, const struct cl_layer_info *i
     int rc = info_check(info);
     if (rc)
         return CL_E_ARG;
-    int total = info->tiles_per_side * info->tiles_per_side;
-    if (tile_first < 0 || tile_count < 1 || tile_first > total - tile_count)
-        return CL_E_ARG;
-    uint32_t base = tile_off[tile_first], end = tile_off[tile_first + tile_count];
+    int total = cl_layer_tiles(info), sec = info->tiles_per_side * info->tiles_per_side;
+    if (tile_first < 0 || tile_count < 1 || tile_first > total - tile_count ||
+        tile_first / sec != (tile_first + tile_count - 1) / sec)
+        return CL_E_ARG; /* beyond the layer, or across two sections */
+    int local = tile_first % sec;
+    tile_off += local; /* the section's offsets, from this part's first tile on */
+    uint32_t base = tile_off[0], end = tile_off[tile_count];
     if (end < base || end - base > CL_MAX_LAYER_BYTES)
         return CL_E_ARG;
     size_t size = cl_layer_part_size(tile_count, end - base);
@@ -139,12 +149,13 @@ long cl_layer_part_write(uint8_t *dst, size_t cap, const struct cl_layer_info *i
     p[60] = info->cascade;
     p[61] = info->ncascades;
     p[62] = info->encoded_lod;
-    p[63] = 0;
+    p[63] = info->need;
     memcpy(p + 64, info->encoded, CL_KEY_BYTES);
+    put64(p + 64 + CL_KEY_BYTES, info->epoch);
     uint8_t *off = p + CL_LAYER_HEADER_SIZE;
     for (int i = 0; i <= tile_count; i++) {
-        uint32_t a = tile_off[tile_first + i];
-        if (a < base || a > end || (i > 0 && a < tile_off[tile_first + i - 1]))
+        uint32_t a = tile_off[i];
+        if (a < base || a > end || (i > 0 && a < tile_off[i - 1]))
             return CL_E_ARG;
         put32(off + 4 * i, a - base);
     }
@@ -200,15 +211,16 @@ int cl_layer_part_parse(const uint8_t *msg, size_t len, struct cl_layer_part *ou
     h->cascade = msg[60];
     h->ncascades = msg[61];
     h->encoded_lod = msg[62];
+    h->need = msg[63];
     memcpy(h->encoded, msg + 64, CL_KEY_BYTES);
-    if (msg[63] != 0)
-        return CL_E_CORRUPT;
+    h->epoch = get64(msg + 64 + CL_KEY_BYTES);
     int rc = info_check(h);
     if (rc)
         return rc;
-    int total = h->tiles_per_side * h->tiles_per_side;
-    if (p.tile_count < 1 || p.tile_first >= total || p.tile_count > total - p.tile_first)
-        return CL_E_CORRUPT;
+    int total = cl_layer_tiles(h), sec = h->tiles_per_side * h->tiles_per_side;
+    if (p.tile_count < 1 || p.tile_first >= total || p.tile_count > total - p.tile_first ||
+        p.tile_first / sec != (p.tile_first + p.tile_count - 1) / sec)
+        return CL_E_CORRUPT; /* beyond the layer, or across its sections */
     if (p.data_len > CL_MAX_LAYER_BYTES)
         return CL_E_TOO_LARGE;
     size_t offs = 4 * ((size_t)p.tile_count + 1);
@@ -334,5 +346,43 @@ int cl_demand_body_parse(const uint8_t *body, size_t len, uint32_t *ttl_ms, uint
             return CL_E_CORRUPT;
     *ttl_ms = get32(body);
     memcpy(bits, body + 4, CL_KEY_BYTES);
+    return CL_OK;
+}
+
+void cl_demand_body_write_ex(uint8_t dst[CL_DEMAND_BODY_EX], uint32_t ttl_ms, const struct cl_demand_bits *b)
+{
+    put32(dst, ttl_ms);
+    memcpy(dst + 4, b->keys, CL_KEY_BYTES);
+    memcpy(dst + 4 + CL_KEY_BYTES, b->stream, CL_KEY_BYTES);
+    memcpy(dst + 4 + 2 * CL_KEY_BYTES, b->wish, CL_KEY_BYTES);
+}
+
+int cl_demand_body_parse_ex(const uint8_t *body, size_t len, uint32_t *ttl_ms, struct cl_demand_bits *out)
+{
+    if (!body || len < CL_DEMAND_BODY)
+        return CL_E_TRUNCATED;
+    if (len == CL_DEMAND_BODY) { /* keys only: every layer intra */
+        int rc = cl_demand_body_parse(body, len, ttl_ms, out->keys);
+        if (rc == CL_OK) {
+            memset(out->stream, 0, CL_KEY_BYTES);
+            memcpy(out->wish, out->keys, CL_KEY_BYTES);
+        }
+        return rc;
+    }
+    if (len < CL_DEMAND_BODY_EX)
+        return CL_E_TRUNCATED;
+    if (len != CL_DEMAND_BODY_EX)
+        return CL_E_CORRUPT;
+    const uint8_t *k = body + 4, *st = k + CL_KEY_BYTES, *w = st + CL_KEY_BYTES;
+    for (int kk = CL_KEYS; kk < CL_KEY_BYTES * 8; kk++)
+        if (cl_bit(k, kk))
+            return CL_E_CORRUPT;
+    for (int i = 0; i < CL_KEY_BYTES; i++)
+        if ((st[i] & ~k[i]) || (w[i] & ~k[i]))
+            return CL_E_CORRUPT; /* a layer streamed or wished for that is not demanded */
+    *ttl_ms = get32(body);
+    memcpy(out->keys, k, CL_KEY_BYTES);
+    memcpy(out->stream, st, CL_KEY_BYTES);
+    memcpy(out->wish, w, CL_KEY_BYTES);
     return CL_OK;
 }

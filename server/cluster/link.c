@@ -31,6 +31,7 @@ const char *cl_event_name(enum cl_event ev)
 
 const char *cl_link_name(const struct cl_link *l) { return l->name; }
 const char *cl_link_instance(const struct cl_link *l) { return l->instance; }
+uint64_t cl_link_epoch(const struct cl_link *l) { return l->epoch; }
 bool cl_link_connected(struct cl_link *l) { return atomic_load(&l->connected); }
 bool cl_link_sim_up(struct cl_link *l) { return atomic_load(&l->sim_up_flag); }
 
@@ -326,6 +327,9 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
     uint64_t id = 0;
     if (getrandom(&id, sizeof id, GRND_NONBLOCK) != (ssize_t)sizeof id)
         id = ((uint64_t)time(NULL) << 32) ^ (uint64_t)getpid() ^ (uint64_t)(uintptr_t)l;
+    if (!id)
+        id = 1; /* the layers' epoch is never 0 */
+    l->epoch = id;
     snprintf(l->instance, sizeof l->instance, "%016llx", (unsigned long long)id);
     pthread_mutex_init(&l->out_lock, NULL);
     /* the pump waits with deadlines on the monotonic clock */

@@ -57,44 +57,66 @@ void link_on_demand(struct cl_link *l, natsMsg *msg)
 {
     struct cl_envelope env;
     uint32_t ttl_ms;
-    uint8_t bits[CL_KEY_BYTES];
+    struct cl_demand_bits bits;
     if (!link_msg_envelope(msg, CL_KIND_DEMAND, &env) || !env.origin[0] ||
-        cl_demand_body_parse(env.body, env.body_len, &ttl_ms, bits) != 0) {
+        cl_demand_body_parse_ex(env.body, env.body_len, &ttl_ms, &bits) != 0) {
         STAT_ADD(l, bad_messages, 1);
         return;
     }
-    if (cl_demand_update(l->demand, env.origin, bits, ttl_ms / 1000.0, link_now()) != 0)
+    if (cl_demand_update_ex(l->demand, env.origin, &bits, ttl_ms / 1000.0, link_now()) != 0)
         STAT_ADD(l, bad_messages, 1); /* table full: this edge's demand is not counted */
+}
+
+int cl_sim_demand_ex(struct cl_link *l, struct cl_demand_bits *out)
+{
+    if (!l->demand) {
+        memset(out, 0, sizeof *out);
+        return 0;
+    }
+    int n = cl_demand_union_ex(l->demand, link_now(), out);
+    __atomic_store_n(&l->st.demand_edges, n, __ATOMIC_RELAXED);
+    return n;
 }
 
 int cl_sim_demand(struct cl_link *l, uint8_t out[CL_KEY_BYTES])
 {
-    if (!l->demand) {
-        memset(out, 0, CL_KEY_BYTES);
-        return 0;
-    }
-    int n = cl_demand_union(l->demand, link_now(), out);
-    __atomic_store_n(&l->st.demand_edges, n, __ATOMIC_RELAXED);
+    struct cl_demand_bits b;
+    int n = cl_sim_demand_ex(l, &b);
+    memcpy(out, b.keys, CL_KEY_BYTES);
     return n;
 }
 
 /* ---- edge side ---- */
 
-int cl_edge_set_demand(struct cl_link *l, const uint8_t bits[CL_KEY_BYTES])
+int cl_edge_set_demand_ex(struct cl_link *l, const struct cl_demand_bits *b)
 {
-    if (!l || l->cfg.role != CL_ROLE_EDGE)
+    if (!l || l->cfg.role != CL_ROLE_EDGE || !b)
         return CL_E_ARG;
     for (int k = CL_KEYS; k < CL_KEY_BYTES * 8; k++)
-        if (cl_bit(bits, k))
+        if (cl_bit(b->keys, k))
+            return CL_E_ARG;
+    for (int i = 0; i < CL_KEY_BYTES; i++)
+        if ((b->stream[i] & ~b->keys[i]) || (b->wish[i] & ~b->keys[i]))
             return CL_E_ARG;
     pthread_mutex_lock(&l->out_lock);
-    if (memcmp(l->want, bits, CL_KEY_BYTES) != 0) {
-        memcpy(l->want, bits, CL_KEY_BYTES);
+    if (memcmp(&l->want, b, sizeof *b) != 0) {
+        l->want = *b;
         l->want_changed = true;
         pthread_cond_signal(&l->out_cond);
     }
     pthread_mutex_unlock(&l->out_lock);
     return CL_OK;
+}
+
+int cl_edge_set_demand(struct cl_link *l, const uint8_t bits[CL_KEY_BYTES])
+{
+    if (!bits)
+        return CL_E_ARG;
+    struct cl_demand_bits b;
+    memcpy(b.keys, bits, CL_KEY_BYTES);
+    memset(b.stream, 0, CL_KEY_BYTES);
+    memcpy(b.wish, bits, CL_KEY_BYTES);
+    return cl_edge_set_demand_ex(l, &b);
 }
 
 void link_kick_demand(struct cl_link *l)
@@ -152,15 +174,15 @@ static void sync_layer_subs(struct cl_link *l, const uint8_t want[CL_KEY_BYTES])
 static void edge_beat(struct cl_link *l, struct link_beat *b, double now)
 {
     if (b->changed)
-        sync_layer_subs(l, b->want);
+        sync_layer_subs(l, b->want.keys);
     if (b->changed || now >= b->next) {
         bool any = false;
         for (int i = 0; i < CL_KEY_BYTES; i++)
-            any |= b->want[i] != 0;
+            any |= b->want.keys[i] != 0;
         /* an empty set is announced once (the sim forgets us at once), not every period */
         if (any || b->changed || !b->sent_empty) {
-            uint8_t body[CL_DEMAND_BODY];
-            cl_demand_body_write(body, (uint32_t)(l->cfg.demand_ttl_s * 1000), b->want);
+            uint8_t body[CL_DEMAND_BODY_EX];
+            cl_demand_body_write_ex(body, (uint32_t)(l->cfg.demand_ttl_s * 1000), &b->want);
             link_send_envelope(l, l->subj[SUB_DEMAND], CL_KIND_DEMAND, "", body, sizeof body);
             b->sent_empty = !any;
         }
@@ -183,7 +205,7 @@ void link_beat_take(struct cl_link *l, struct link_beat *b, double now)
 {
     b->changed = l->want_changed;
     l->want_changed = false;
-    memcpy(b->want, l->want, sizeof b->want);
+    b->want = l->want;
     b->status = NULL;
     b->status_len = l->status_len;
     /* a copy: cl_sim_set_status may replace the text while the pump sends it */

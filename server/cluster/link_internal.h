@@ -29,8 +29,10 @@ struct out_item {
     size_t bytes;                   /* counted against outbox_max_bytes */
     /* OUT_LAYER: the caller's bytes, borrowed until release(ctx) */
     struct cl_layer_info info;
-    const uint8_t *data;
+    const uint8_t *data;            /* first section (cl_layer_sections) */
     const uint32_t *tile_off;
+    const uint8_t *data2;           /* second section, if any */
+    const uint32_t *tile_off2;
     void (*release)(void *);
     void *ctx;
     /* OUT_MSG: an encoded envelope */
@@ -79,6 +81,7 @@ struct cl_link {
     struct cl_config cfg;           /* defaults filled in; url and credentials not kept */
     char prefix[CL_PREFIX_MAX + 1], name[CL_NAME_MAX];
     char instance[CL_NAME_MAX];     /* this process's random id (sim: in every STATUS) */
+    uint64_t epoch;                 /* the same id as a number (sim: in every layer); set at open */
     char subj[SUB_KINDS][CL_SUBJECT_MAX];
     char inbox[CL_SUBJECT_MAX];     /* edge: replies come to inbox.<id>, probe data to inbox.p */
     struct sub_ctx sctx[SUB_KINDS];
@@ -96,7 +99,7 @@ struct cl_link {
     struct out_item *out_head, **out_tail; /* caller threads append, pump drains */
     size_t out_bytes;               /* caller threads add, pump zeroes on draining */
     bool stop;                      /* close sets, pump reads */
-    uint8_t want[CL_KEY_BYTES];     /* edge: lws thread writes (cl_edge_set_demand), pump reads */
+    struct cl_demand_bits want;     /* edge: lws thread writes (cl_edge_set_demand_ex), pump reads */
     bool want_changed;              /* edge: lws and NATS threads set, pump clears: resubscribe and heartbeat now */
     char *status_text;              /* sim: caller writes (cl_sim_set_status), pump copies: heartbeat body */
     size_t status_len;
@@ -200,7 +203,7 @@ struct link_beat {
     double next;                    /* when the next heartbeat is due */
     bool sent_empty;                /* edge: an empty demand was announced (once is enough) */
     bool changed;                   /* edge: want changed or the sim must hear it now */
-    uint8_t want[CL_KEY_BYTES];
+    struct cl_demand_bits want;
     char *status;                   /* sim: a copy of the status text when a heartbeat is due */
     size_t status_len;
 };

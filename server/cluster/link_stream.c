@@ -10,12 +10,25 @@
 
 /* ---- sim side ---- */
 
-int cl_sim_publish_layer(struct cl_link *l, const struct cl_layer_info *info, const uint8_t *data, size_t len,
-                         const uint32_t *tile_off, void (*release)(void *ctx), void *ctx)
+int cl_sim_publish_layer_sections(struct cl_link *l, const struct cl_layer_info *info, const uint8_t *const data[2],
+                                  const size_t len[2], const uint32_t *const tile_off[2], void (*release)(void *ctx),
+                                  void *ctx)
 {
-    int total = info ? info->tiles_per_side * info->tiles_per_side : 0;
-    if (!l || l->cfg.role != CL_ROLE_SIM || !cl_layer_info_valid(info) || !tile_off || total < 1 ||
-        tile_off[0] != 0 || tile_off[total] != len || len > CL_MAX_LAYER_BYTES) {
+    struct cl_layer_info in = { 0 };
+    if (info) {
+        in = *info;
+        if (!in.epoch && l)
+            in.epoch = l->epoch;
+    }
+    int sec = info ? in.tiles_per_side * in.tiles_per_side : 0, nsec = info ? cl_layer_sections(&in) : 0;
+    bool ok = l && l->cfg.role == CL_ROLE_SIM && cl_layer_info_valid(&in) && sec >= 1 && data && len && tile_off;
+    size_t bytes = 0;
+    for (int i = 0; ok && i < nsec; i++) {
+        ok = tile_off[i] && tile_off[i][0] == 0 && tile_off[i][sec] == len[i] && len[i] <= CL_MAX_LAYER_BYTES &&
+             (data[i] || !len[i]);
+        bytes += ok ? len[i] : 0;
+    }
+    if (!ok) {
         if (release)
             release(ctx);
         return CL_E_ARG;
@@ -27,14 +40,32 @@ int cl_sim_publish_layer(struct cl_link *l, const struct cl_layer_info *info, co
         return CL_E_NOMEM;
     }
     it->type = OUT_LAYER;
-    it->info = *info;
-    it->data = data;
-    it->tile_off = tile_off;
-    it->bytes = len;
+    it->info = in;
+    it->data = data[0];
+    it->tile_off = tile_off[0];
+    if (nsec > 1) {
+        it->data2 = data[1];
+        it->tile_off2 = tile_off[1];
+    }
+    it->bytes = bytes;
     it->release = release;
     it->ctx = ctx;
     link_push_out(l, it);
     return CL_OK;
+}
+
+int cl_sim_publish_layer(struct cl_link *l, const struct cl_layer_info *info, const uint8_t *data, size_t len,
+                         const uint32_t *tile_off, void (*release)(void *ctx), void *ctx)
+{
+    if (info && cl_info_has_shared(info)) { /* one section only: intra tiles */
+        if (release)
+            release(ctx);
+        return CL_E_ARG;
+    }
+    const uint8_t *d[2] = { data, NULL };
+    size_t n[2] = { len, 0 };
+    const uint32_t *o[2] = { tile_off, NULL };
+    return cl_sim_publish_layer_sections(l, info, d, n, o, release, ctx);
 }
 
 void link_publish_layer(struct cl_link *l, const struct out_item *it, uint8_t **scratch, size_t *scap)
@@ -49,14 +80,18 @@ void link_publish_layer(struct cl_link *l, const struct out_item *it, uint8_t **
     int64_t maxp = natsConnection_GetMaxPayload(l->nc);
     if (maxp <= 0)
         maxp = 1 << 20;
-    int total = it->info.tiles_per_side * it->info.tiles_per_side;
+    int sec = it->info.tiles_per_side * it->info.tiles_per_side, total = cl_layer_tiles(&it->info);
     for (int first = 0; first < total;) {
-        int k = cl_layer_part_tiles(it->tile_off, first, total, (size_t)maxp);
+        /* parts never span two sections: each has its own buffer and offsets */
+        const uint8_t *data = first < sec ? it->data : it->data2;
+        const uint32_t *off = first < sec ? it->tile_off : it->tile_off2;
+        int local = first % sec;
+        int k = cl_layer_part_tiles(off, local, sec, (size_t)maxp);
         if (k == 0) {
             STAT_ADD(l, layers_too_large, 1);
             return;
         }
-        size_t size = cl_layer_part_size(k, it->tile_off[first + k] - it->tile_off[first]);
+        size_t size = cl_layer_part_size(k, off[local + k] - off[local]);
         if (size > *scap) {
             uint8_t *p = realloc(*scratch, size);
             if (!p)
@@ -64,7 +99,7 @@ void link_publish_layer(struct cl_link *l, const struct out_item *it, uint8_t **
             *scratch = p;
             *scap = size;
         }
-        long w = cl_layer_part_write(*scratch, *scap, &it->info, first, k, it->data, it->tile_off);
+        long w = cl_layer_part_write(*scratch, *scap, &it->info, first, k, data, off);
         if (w < 0 || natsConnection_Publish(l->nc, subj, *scratch, (int)w) != NATS_OK) {
             STAT_ADD(l, layers_dropped_offline, 1);
             return;

@@ -30,7 +30,7 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
     for (int key = 0; key < LAYER_KEYS_ALL; key++)
         if (keys[key]) {
             if (n->cluster.demand) /* edge: the sim is elsewhere */
-                n->cluster.demand(n->cluster.user, key, delta);
+                n->cluster.demand(n->cluster.user, key, delta, sub->temporal);
             else {
                 sim_demand(n->sim, key, delta);
                 if (sub->temporal) /* the temporal codec: every cascade's layers */

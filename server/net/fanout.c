@@ -24,14 +24,18 @@
 
 void fanout_want_keyframes(struct net *n, struct session *s, bool want)
 {
-    want = want && s->eff.temporal && n->sim; /* edge: its sim sends intra tiles only */
+    want = want && s->eff.temporal && (n->sim || n->cluster.keyframes); /* edge: its sim hears it (the wish) */
     if (want == s->key_wanted)
         return;
     int keys[LAYER_KEYS_ALL] = { 0 }; /* the keys dispatch_demand counts as temporal */
     subscription_layer_keys(&s->eff, keys, 1);
     for (int key = 0; key < LAYER_KEYS_ALL; key++)
-        if (keys[key])
-            sim_want_keyframes(n->sim, key, want ? 1 : -1);
+        if (keys[key]) {
+            if (n->sim)
+                sim_want_keyframes(n->sim, key, want ? 1 : -1);
+            else if (n->cluster.keyframes)
+                n->cluster.keyframes(n->cluster.user, key, want ? 1 : -1);
+        }
     s->key_wanted = want;
 }
 
@@ -174,6 +178,16 @@ void net_stream_restart(struct net *n)
     ring_clear(n);
     frame_unref(n->latest);
     n->latest = NULL;
+}
+
+void net_stream_new_chains(struct net *n)
+{
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
+        struct session *s = session_of(d);
+        s->hist = 0;       /* references of the other sim's chains: useless now */
+        s->hist_seq = 0;
+    }
+    ring_clear(n);         /* nobody catches up across it */
 }
 
 bool fanout_want_write(const struct net *n, const struct session *s)

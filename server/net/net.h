@@ -48,7 +48,12 @@ struct net_cluster_hooks {
     void *user;
     bool no_viewers;                                   /* sim: refuse WebSocket upgrades */
     void (*on_wake)(void *user);                       /* every wake-up (cl_link_dispatch) */
-    void (*demand)(void *user, int layer_key, int delta); /* edge: instead of sim_demand */
+    /* edge: instead of sim_demand (and sim_demand_temporal: temporal = the
+     * subscription takes the temporal codec) */
+    void (*demand)(void *user, int layer_key, int delta, bool temporal);
+    /* edge: instead of sim_want_keyframes: delta clients of the layer lack
+     * the references of its shared tiles (PROTOCOL.md §5.9) */
+    void (*keyframes)(void *user, int layer_key, int delta);
     /* edge: a set / pause / resume that passed the size, rate limit and
      * token checks, to be answered later with net_send_text(serial) */
     void (*forward)(void *user, uint64_t serial, const char *client_id, const void *id_json,
@@ -81,6 +86,10 @@ void net_publish_frame(struct net *n, struct frame *f);
  * sim, seq_guard.h): every client takes the next frame, whatever its seq,
  * and starts its temporal history again. */
 void net_stream_restart(struct net *n);
+/* edge: the frames from now on come from another sim process (another
+ * epoch, cluster.h): no client keeps temporal references across it, so
+ * each takes keyframe tiles next, whatever the seq. */
+void net_stream_new_chains(struct net *n);
 /* A message from a sim in another process, before an edge uses or relays
  * it: at most cap bytes, strict UTF-8 without NUL (a browser must fail a
  * socket that receives anything else), a JSON object whose "type" is one

@@ -58,7 +58,12 @@ struct role_edge {
     struct seq_guard seq;         /* which layers' seqs follow the sim's stream */
     double refused_log_t;         /* when a refused layer was last logged */
     int count[CL_KEYS];           /* clients' subscriptions per layer key */
+    int tcount[CL_KEYS];          /* those that take the temporal codec */
+    int kcount[CL_KEYS];          /* temporal clients short of references (fanout_want_keyframes) */
     uint8_t want[CL_KEY_BYTES];   /* keys with count > 0: what we subscribe to */
+    struct cl_demand_bits demand; /* what the sim hears: want, and which keys stream / need keyframes */
+    uint64_t epoch;               /* the sim process of the last frame published (cluster.h); 0 = none yet */
+    uint64_t new_chains;          /* times the epoch changed under the clients (/metrics) */
     uint64_t frames;              /* frames handed to the fan-out (frame.index) */
     enum edge_state state;
     struct forward *forwards;
@@ -72,6 +77,43 @@ struct role_edge {
 
 /* ---- frames ---- */
 
+/* One layer's sections (cluster.h) as the fan-out's struct layer: intra
+ * tiles in buf/tile_off, the stream's shared tiles in shared/shared_off
+ * (adopting the layer's buffers where it can). -1 when out of memory. */
+static int adopt_layer(struct layer *l, struct cl_layer *cl)
+{
+    int sec = cl->info.tiles_per_side * cl->info.tiles_per_side;
+    bool intra = cl_info_has_intra(&cl->info), shared = cl_info_has_shared(&cl->info);
+    if (intra && shared) { /* the shared tiles follow the intra ones: copied out */
+        uint32_t base = cl->tile_off[sec];
+        size_t n = cl->len - base;
+        uint8_t *data = malloc(n ? n : 1);
+        uint32_t *off = malloc(sizeof *off * ((size_t)sec + 1));
+        if (!data || !off) {
+            free(data);
+            free(off);
+            return -1;
+        }
+        memcpy(data, cl->data + base, n);
+        for (int i = 0; i <= sec; i++)
+            off[i] = cl->tile_off[sec + i] - base;
+        l->shared = (struct oc_buf){ .data = data, .len = n, .cap = n };
+        l->shared_off = off;
+        l->buf = (struct oc_buf){ .data = cl->data, .len = base, .cap = cl->len };
+        l->tile_off = cl->tile_off; /* its first sec + 1 entries */
+    } else if (shared) {
+        l->shared = (struct oc_buf){ .data = cl->data, .len = cl->len, .cap = cl->len };
+        l->shared_off = cl->tile_off;
+    } else {
+        l->buf = (struct oc_buf){ .data = cl->data, .len = cl->len, .cap = cl->len };
+        l->tile_off = cl->tile_off;
+    }
+    l->need = shared ? cl->info.need : 0;
+    cl->data = NULL;
+    cl->tile_off = NULL;
+    return 0;
+}
+
 /* A collected frame (layers of one seq) as a struct frame, adopting the
  * layers' buffers. */
 static void publish_set(struct role_edge *r, struct cl_frame_set *set)
@@ -79,6 +121,16 @@ static void publish_set(struct role_edge *r, struct cl_frame_set *set)
     struct frame *f = frame_new(set->nlayers);
     if (!f)
         return;
+    if (set->hdr.epoch != r->epoch) {
+        /* Another sim process (a take-over, a restart): its chains are not the
+         * ones our clients hold, whatever the seqs say. */
+        if (r->epoch) {
+            LOGI("cluster: frames from another simulation process now: every temporal client takes keyframes");
+            r->new_chains++;
+            net_stream_new_chains(r->net);
+        }
+        r->epoch = set->hdr.epoch;
+    }
     const struct cl_layer_info *h = &set->hdr;
     f->hdr = (struct oc_frame_header){
         .seq = h->seq, .sim_time = h->sim_time, .params_version = h->params_version, .n = h->n,
@@ -96,10 +148,10 @@ static void publish_set(struct role_edge *r, struct cl_frame_set *set)
         l->bound_index = cl->info.bound_index;
         l->cascade = cl->info.cascade;
         l->encoded_lod = cl->info.encoded_lod;
-        l->buf = (struct oc_buf){ .data = cl->data, .len = cl->len, .cap = cl->len };
-        l->tile_off = cl->tile_off;
-        cl->data = NULL;
-        cl->tile_off = NULL;
+        if (adopt_layer(l, cl) != 0) {
+            f->nlayers--; /* this layer is missing from the frame: its clients skip it */
+            memset(l, 0, sizeof *l);
+        }
     }
     net_publish_frame(r->net, f);
     frame_unref(f);
@@ -136,23 +188,46 @@ static void edge_on_layer(void *user, struct cl_layer *layer)
     }
 }
 
-static void edge_demand(void *user, int key, int delta)
+/* The demand the sim hears for key (cluster.h, cl_demand_bits): the key
+ * while any client subscribes to it; its stream while a temporal one does;
+ * keyframe (intra) tiles while a client is not temporal or lacks references. */
+static void key_bits(struct role_edge *r, int key)
+{
+    cl_bit_set(r->demand.keys, key, r->count[key] > 0);
+    cl_bit_set(r->demand.stream, key, r->count[key] > 0 && r->tcount[key] > 0);
+    cl_bit_set(r->demand.wish, key, r->count[key] > 0 && (r->count[key] > r->tcount[key] || r->kcount[key] > 0));
+}
+
+static void edge_demand(void *user, int key, int delta, bool temporal)
 {
     struct role_edge *r = user;
     if (key < 0 || key >= CL_KEYS)
         return;
     bool before = r->count[key] > 0;
     r->count[key] += delta;
+    if (temporal)
+        r->tcount[key] += delta;
     bool after = r->count[key] > 0;
+    key_bits(r, key);
+    cl_bit_set(r->want, key, after);
+    cl_edge_set_demand_ex(r->link, &r->demand); /* subscribes and heartbeats at the pump's next round */
     if (before == after)
         return;
-    cl_bit_set(r->want, key, after);
-    cl_edge_set_demand(r->link, r->want); /* subscribes and heartbeats at once */
     struct cl_frame_set *done = cl_collector_check(r->collector, r->want);
     if (done) { /* a viewer left: the pending frame needs no more layers */
         publish_set(r, done);
         cl_frame_set_free(done);
     }
+}
+
+static void edge_keyframes(void *user, int key, int delta)
+{
+    struct role_edge *r = user;
+    if (key < 0 || key >= CL_KEYS)
+        return;
+    r->kcount[key] += delta;
+    key_bits(r, key);
+    cl_edge_set_demand_ex(r->link, &r->demand); /* the sim makes keyframe tiles from its next tick on */
 }
 
 /* ---- requests ---- */
@@ -576,6 +651,7 @@ static const char *edge_health(void *user, cJSON *obj)
     cJSON_AddStringToObject(obj, "role", "edge");
     cJSON_AddStringToObject(obj, "cluster", state_name[r->state]);
     role_keys_json(r->want, obj);
+    role_keys_json_as(r->demand.stream, obj, "streams");
     return r->state == EDGE_OK ? "ok" : "degraded";
 }
 
@@ -592,9 +668,13 @@ static size_t edge_metrics(void *user, char *buf, size_t cap)
                                 "# TYPE oceand_cluster_sim_up gauge\noceand_cluster_sim_up %d\n"
                                 "# HELP oceand_cluster_layers_refused_total layers whose seq does not follow the sim's "
                                 "stream (seq_guard.h)\n"
-                                "# TYPE oceand_cluster_layers_refused_total counter\noceand_cluster_layers_refused_total %llu\n",
+                                "# TYPE oceand_cluster_layers_refused_total counter\noceand_cluster_layers_refused_total %llu\n"
+                                "# HELP oceand_cluster_new_chains_total frames from another sim process than the "
+                                "last: temporal clients took keyframes\n"
+                                "# TYPE oceand_cluster_new_chains_total counter\noceand_cluster_new_chains_total %llu\n",
                                 (unsigned long long)cs.frames, (unsigned long long)cs.partial,
-                                r->state == EDGE_OK ? 1 : 0, (unsigned long long)r->seq.refused);
+                                r->state == EDGE_OK ? 1 : 0, (unsigned long long)r->seq.refused,
+                                (unsigned long long)r->new_chains);
     return off < cap ? off : (cap ? cap - 1 : 0);
 }
 
@@ -625,7 +705,7 @@ struct role_edge *role_edge_open(const struct daemon_config *dc, struct net *n, 
         return NULL;
     }
     struct net_cluster_hooks h = {
-        .user = r, .on_wake = edge_on_wake, .demand = edge_demand, .forward = edge_forward,
+        .user = r, .on_wake = edge_on_wake, .demand = edge_demand, .keyframes = edge_keyframes, .forward = edge_forward,
         .forward_query = edge_forward_query, .forward_probe = edge_forward_probe, .client_gone = edge_client_gone,
         .health = edge_health, .metrics = edge_metrics,
     };

@@ -55,9 +55,11 @@ size_t role_link_metrics(struct cl_link *l, char *buf, size_t cap)
     return off < cap ? off : (cap ? cap - 1 : 0);
 }
 
-void role_keys_json(const uint8_t bits[CL_KEY_BYTES], cJSON *obj)
+void role_keys_json(const uint8_t bits[CL_KEY_BYTES], cJSON *obj) { role_keys_json_as(bits, obj, "layers"); }
+
+void role_keys_json_as(const uint8_t bits[CL_KEY_BYTES], cJSON *obj, const char *member)
 {
-    cJSON *a = cJSON_AddArrayToObject(obj, "layers");
+    cJSON *a = cJSON_AddArrayToObject(obj, member);
     for (int k = 0; a && k < CL_KEYS; k++)
         if (cl_bit(bits, k)) {
             char name[64];

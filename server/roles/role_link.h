@@ -26,5 +26,7 @@ size_t role_link_metrics(struct cl_link *l, char *buf, size_t cap);
 /* Adds "layers":["height.0.2","c1.height.1.4",...] for a key bitmap to obj
  * (field.lod.bound_index; a finer cascade's prefixed with c<cascade>.). */
 void role_keys_json(const uint8_t bits[CL_KEY_BYTES], struct cJSON *obj);
+/* The same under another member name ("streams": the keys edges stream). */
+void role_keys_json_as(const uint8_t bits[CL_KEY_BYTES], struct cJSON *obj, const char *member);
 
 #endif

@@ -48,25 +48,31 @@ struct role_sim {
     int (*file_persist)(void *, const struct ocean_params *, uint32_t, double, char *, size_t);
     void *file_user;                              /* the state file's persist hook (main.c), called after JetStream */
     _Atomic uint64_t demand[CL_KEY_BYTES / 8];    /* tick writes (last union), lws reads (/healthz) */
+    _Atomic uint64_t streams[CL_KEY_BYTES / 8];   /* the same for the keys edges stream (temporal codec) */
     atomic_uint_least64_t layers_encoded;         /* tick writes, lws reads (/metrics) */
 };
 
 /* ---- tick thread ---- */
 
-static void sim_remote_demand(void *user, uint8_t bits[])
+static void sim_remote_demand(void *user, uint8_t bits[], uint8_t stream[], uint8_t wish[])
 {
     struct role_sim *r = user;
-    uint8_t u[CL_KEY_BYTES];
-    cl_sim_demand(r->link, u);
+    struct cl_demand_bits u;
+    cl_sim_demand_ex(r->link, &u);
     for (int i = 0; i < CL_KEY_BYTES / 8; i++) {
         uint64_t w;
-        memcpy(&w, u + 8 * i, 8);
+        memcpy(&w, u.keys + 8 * i, 8);
         atomic_store(&r->demand[i], w);
+        memcpy(&w, u.stream + 8 * i, 8);
+        atomic_store(&r->streams[i], w);
     }
     if (!role_lease_acting(r->lease))
         return; /* a standby encodes nothing */
-    for (int i = 0; i < SIM_DEMAND_BYTES && i < CL_KEY_BYTES; i++)
-        bits[i] |= u[i];
+    for (int i = 0; i < SIM_DEMAND_BYTES && i < CL_KEY_BYTES; i++) {
+        bits[i] |= u.keys[i];
+        stream[i] |= u.stream[i];
+        wish[i] |= u.wish[i];
+    }
 }
 
 static void release_frame(void *ctx) { frame_unref(ctx); }
@@ -87,20 +93,41 @@ static void sim_on_frame(void *user, struct frame *f)
     /* Every cascade: the layer keys of the cluster are the daemon's (role_link.h). */
     for (int i = 0; i < f->nlayers; i++) {
         const struct layer *l = &f->layers[i];
-        if (l->tile_off)
+        if (l->tile_off || l->shared_off)
             cl_bit_set(info.encoded, layer_key_cascade(l->cascade, l->field, l->lod, l->bound_index), true);
     }
     for (int i = 0; i < f->nlayers; i++) {
         const struct layer *l = &f->layers[i];
-        if (!l->tile_off)
-            continue; /* no intra tiles this tick (edges always ask for them: their demand counts as intra) */
+        if (!l->tile_off && !l->shared_off)
+            continue;
         info.field = l->field;
         info.lod = l->lod;
         info.bound_index = l->bound_index;
         info.cascade = l->cascade;
         info.encoded_lod = l->encoded_lod;
+        /* Sections (cluster.h): this tick's intra (keyframe) tiles when some
+         * edge needs them, then the stream's shared tiles of a temporal layer;
+         * both encoded once, whatever the number of edges. */
+        const uint8_t *data[2] = { NULL, NULL };
+        size_t len[2] = { 0, 0 };
+        const uint32_t *off[2] = { NULL, NULL };
+        int n = 0;
+        if (l->tile_off) {
+            data[n] = l->buf.data;
+            len[n] = l->buf.len;
+            off[n++] = l->tile_off;
+        }
+        info.layer_flags = 0;
+        info.need = 0;
+        if (l->shared_off) {
+            info.layer_flags = (uint8_t)(CL_LAYER_SHARED | (l->tile_off ? CL_LAYER_INTRA : 0));
+            info.need = l->need;
+            data[n] = l->shared.data;
+            len[n] = l->shared.len;
+            off[n++] = l->shared_off;
+        }
         frame_ref(f);
-        int rc = cl_sim_publish_layer(r->link, &info, l->buf.data, l->buf.len, l->tile_off, release_frame, f);
+        int rc = cl_sim_publish_layer_sections(r->link, &info, data, len, off, release_frame, f);
         if (rc == CL_OK)
             atomic_fetch_add(&r->layers_encoded, 1);
         else if (rc != CL_E_NOT_CONNECTED)
@@ -295,6 +322,11 @@ static const char *sim_health(void *user, cJSON *obj)
     cJSON_AddStringToObject(obj, "lease", role_lease_state_name(role_lease_state(r->lease)));
     cJSON_AddStringToObject(obj, "instance", cl_link_instance(r->link));
     role_keys_json(bits, obj);
+    for (int i = 0; i < CL_KEY_BYTES / 8; i++) {
+        uint64_t w = atomic_load(&r->streams[i]);
+        memcpy(bits + 8 * i, &w, 8);
+    }
+    role_keys_json_as(bits, obj, "streams");
     return up ? "ok" : "degraded";
 }
 

@@ -88,9 +88,13 @@ struct sim_config {
      * the tick thread, on_frame on the encode thread that publishes the
      * frame (one at a time, in seq order); neither may block: remote_demand ORs the layer keys other
      * daemons want into bits (SIM_DEMAND_BYTES, bit k = layer key k) before
-     * the demand snapshot; on_frame sees each frame right after it is
-     * published (frame_ref it to keep it). */
-    void (*remote_demand)(void *user, uint8_t bits[]);
+     * the demand snapshot, those of them some edge streams (temporal codec:
+     * the key counts as one temporal subscriber and gets intra tiles only
+     * while wished for) into stream, and those an edge needs keyframe
+     * (intra) tiles of at the next ticks into wish (cl_demand_bits);
+     * on_frame sees each frame right after it is published (frame_ref it
+     * to keep it). */
+    void (*remote_demand)(void *user, uint8_t bits[], uint8_t stream[], uint8_t wish[]);
     void (*on_frame)(void *user, struct frame *f);
     void *cluster_user;
     /* Durability: no acknowledged set is lost. Called on the builder thread

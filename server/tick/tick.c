@@ -46,16 +46,29 @@ static void advance_clock(struct sim *s, int n)
  * the keys other daemons want (an edge's key counts as one subscriber). */
 static void gather_demand(struct sim *s, struct demand_snapshot *d)
 {
+    uint8_t stream[SIM_DEMAND_BYTES] = { 0 }, wish[SIM_DEMAND_BYTES] = { 0 };
     memset(d->remote, 0, sizeof d->remote);
     if (s->cfg.remote_demand)
-        s->cfg.remote_demand(s->cfg.cluster_user, d->remote);
+        s->cfg.remote_demand(s->cfg.cluster_user, d->remote, stream, wish);
     d->any = false;
     for (int k = 0; k < LAYER_KEYS_ALL; k++) {
         d->demand[k] = atomic_load(&s->demand[k]);
         d->tdemand[k] = atomic_load(&s->tdemand[k]);
         d->key_want[k] = atomic_load(&s->key_want[k]);
-        if (d->demand[k] <= 0 && ((d->remote[k >> 3] >> (k & 7)) & 1))
+        uint8_t bit = (uint8_t)(1u << (k & 7));
+        bool remote = d->remote[k >> 3] & bit;
+        if (d->demand[k] <= 0 && remote)
             d->demand[k] = 1;
+        if (remote && (stream[k >> 3] & bit)) {
+            /* Edges stream it (docs/scaling.md): one temporal subscriber, that
+             * takes this tick's keyframe tiles only while some edge wishes for
+             * them; d->remote keeps the keys edges take intra every tick. */
+            if (d->tdemand[k] < d->demand[k])
+                d->tdemand[k]++;
+            if (wish[k >> 3] & bit)
+                d->key_want[k]++;
+            d->remote[k >> 3] = (uint8_t)(d->remote[k >> 3] & ~bit);
+        }
         d->any |= d->demand[k] > 0;
     }
 }

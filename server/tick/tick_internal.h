@@ -135,7 +135,8 @@ struct demand_snapshot {
     int demand[LAYER_KEYS_ALL];   /* subscriptions per key, remote keys counted as 1 */
     int tdemand[LAYER_KEYS_ALL];  /* temporal subscriptions per key (also in demand) */
     int key_want[LAYER_KEYS_ALL]; /* temporal clients lacking the references of the shared tiles */
-    uint8_t remote[SIM_DEMAND_BYTES]; /* bit k: an edge wants key k */
+    uint8_t remote[SIM_DEMAND_BYTES]; /* bit k: an edge wants key k intra every tick (one that streams
+                                         it counts in tdemand, and in key_want while it wishes for keyframes) */
     bool any;                     /* some key has demand */
 };
 

@@ -44,6 +44,7 @@ static inline int gen_layer_make(struct gen_layer *g, int n, int tile_size, int 
     h->tiles_per_side = (uint16_t)(n / tile_size);
     h->ncascades = 1;
     h->encoded_lod = (uint8_t)lod;
+    h->epoch = 0x5eed0000feedull; /* a sim process (cluster.h: never 0) */
     cl_bit_set(h->encoded, cl_key(field, lod, bound), true);
     int total = h->tiles_per_side * h->tiles_per_side;
     g->tile_off = malloc(sizeof(uint32_t) * ((size_t)total + 1));
@@ -104,7 +105,8 @@ static inline int gen_layer_equal(const struct gen_layer *g, const struct cl_lay
         a->frame_flags != b->frame_flags || a->server_time_us != b->server_time_us || a->field != b->field ||
         a->lod != b->lod || a->bound_index != b->bound_index || a->layer_flags != b->layer_flags ||
         a->cascade != b->cascade || a->ncascades != b->ncascades || a->encoded_lod != b->encoded_lod ||
-        a->tiles_per_side != b->tiles_per_side || memcmp(a->encoded, b->encoded, CL_KEY_BYTES) != 0)
+        a->tiles_per_side != b->tiles_per_side || memcmp(a->encoded, b->encoded, CL_KEY_BYTES) != 0 ||
+        a->need != b->need || a->epoch != b->epoch)
         return 0;
     int total = a->tiles_per_side * a->tiles_per_side;
     return g->len == l->len && memcmp(g->data, l->data, g->len) == 0 &&

@@ -365,6 +365,101 @@ def test_standby_takes_over_during_sets(c):
     asyncio.run(run())
 
 
+class TemporalViewer:
+    """A temporal viewer of an edge that decodes every frame it gets, in order, with one
+    decoder state (oceanproto raises ProtocolError `reference` for a predicted tile whose
+    references it lacks): per frame (seq, codecs); the first decoding error, if any."""
+
+    def __init__(self, ws, oceanproto):
+        self.ws, self.op = ws, oceanproto
+        self.state = oceanproto.DecoderState()
+        self.frames, self.error, self.stopped = [], None, False
+        self.task = asyncio.ensure_future(self.run())
+
+    async def run(self):
+        while not self.stopped:   # (a cancel may be lost in wait_for when a frame arrives at once)
+            try:
+                h, b = await recv_frame(self.ws, timeout=30)
+            except Exception:
+                return
+            try:
+                f = self.op.decode_frame(b, self.state)
+            except Exception as e:    # noqa: BLE001: kept for the check
+                self.error = self.error or "seq %d: %r" % (h["seq"], e)
+                continue
+            self.frames.append((h["seq"], {t.codec for t in f.tiles}))
+
+    def predicted_after(self, n):
+        return sum(1 for _, c in self.frames[n:] if 3 in c)
+
+    async def stop(self):
+        self.stopped = True
+        self.task.cancel()
+        try:
+            await self.task
+        except asyncio.CancelledError:
+            pass
+
+
+@test
+@with_js_cluster(sims=2, edges=1, sim_extra=("--tick-rate", "10"))
+def test_temporal_viewer_across_take_overs(c):
+    """A temporal viewer of an edge (the sim encodes its layers' stream once, the edge
+    relays it) across a kill -9 of the active sim and then a SIGSTOP of the new one (the
+    stalled holder runs again while the other acts): the new sim's chains are new, so the
+    edge lets no viewer's references span two sim processes (oceand_cluster_new_chains_total)
+    and the viewer takes keyframes first; it decodes every frame it gets in order with one
+    decoder state, and gets predicted tiles again after each take-over. (10 Hz: the sims'
+    plans keep the temporal codec on a loaded machine or under ASan.)"""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+    import oceanproto
+
+    async def run():
+        ws, _ = await connect(c.edges[0])
+        await ws.send('{"type":"subscribe","id":1,"temporal":true,"adapt":false}')
+        await recv_json(ws, lambda m: m["type"] in ("subscribed", "error"))
+        v = TemporalViewer(ws, oceanproto)
+
+        async def frames_on(what, n0, count=10, timeout=60):
+            deadline = time.time() + timeout
+            while len(v.frames) < n0 + count or not v.predicted_after(n0):
+                check(v.error is None, "%s: %s" % (what, v.error))
+                check(time.time() < deadline, "%s: %d frames, %d with predicted tiles"
+                      % (what, len(v.frames) - n0, v.predicted_after(n0)))
+                await asyncio.sleep(0.05)
+
+        await frames_on("before", 0)
+        chains0 = c.edges[0].metric("oceand_cluster_new_chains_total")
+        first = one_active(c)
+        n = len(v.frames)
+        kill_active(c)
+        wait_for(lambda: c.active() not in (None, first), "the standby holds the lease", timeout=10)
+        await frames_on("after the take-over", n)
+        check(c.edges[0].metric("oceand_cluster_new_chains_total") > chains0,
+              "the edge did not start new chains for the other sim")
+        c.killed.start()
+        wait_for(lambda: c.killed.health()["lease"] == "standby", "the killed sim is a standby again")
+        # the stalled holder: it runs again while the other one acts
+        old = one_active(c)
+        n = len(v.frames)
+        old.proc.send_signal(signal.SIGSTOP)
+        try:
+            wait_for(lambda: any(x is not old and x.health()["lease"] == "active" for x in c.sims),
+                     "the standby took over from the stalled one", timeout=10)
+        finally:
+            old.proc.send_signal(signal.SIGCONT)
+        wait_for(lambda: old.health()["lease"] == "standby", "the stalled holder stepped down")
+        await frames_on("after the stalled holder ran again", n)
+        seqs = [sq for sq, _ in v.frames]
+        check(seqs == sorted(seqs) and len(set(seqs)) == len(seqs), "seq went back or repeated at the viewer")
+        check(v.error is None, "decoding: %s" % v.error)
+        print("  %d frames, %d with predicted tiles, new chains at the edge: %d" % (
+            len(v.frames), v.predicted_after(0), c.edges[0].metric("oceand_cluster_new_chains_total")))
+        await v.stop()
+        await ws.close()
+    asyncio.run(run())
+
+
 @test
 @with_js_cluster(sims=2, edges=1)
 def test_stalled_holder_steps_down(c):

@@ -257,6 +257,168 @@ def edge_refused_set_keeps_no_name(c):
     asyncio.run(run())
 
 
+KIND_DEMAND = 6
+LAYER_HEADER = 200          # OCNL v3: 64 + 128-byte key bitmap + u64 epoch
+SHARED, INTRA = 0x02, 0x04  # layer_flags (server/cluster/cluster.h, "Sections")
+
+
+def with_byte(part, offset, value):
+    return part[:offset] + bytes([value]) + part[offset + 1:]
+
+
+def with_epoch(part, epoch):
+    return part[:LAYER_HEADER - 8] + struct.pack("<Q", epoch) + part[LAYER_HEADER:]
+
+
+@test
+@tcr.with_cluster(edges=1)
+def rogue_temporal_layers_and_demand(c):
+    """The temporal stream through an edge against a rogue publisher: copies of the sim's
+    temporal layer parts under another epoch (a second "sim") a few ticks ahead, parts
+    with a need of 9, with the intra-section flag alone, with epoch 0; demand bodies with
+    a streamed or wished-for layer outside the demanded keys, of a wrong length, and a
+    rogue edge wishing for keyframes of the viewer's layers. The malformed ones are refused
+    (counted); the viewer, temporal, keeps getting frames and decodes every one in order
+    with one decoder state (never a predicted tile without its references), codec 3
+    among them. (A copy under another epoch holds the real sim's tiles, so it cannot show
+    a wrong decode: test_two_sims_never_mix_chains in test_cluster_roles.py does.)"""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+    import oceanproto
+    rogue = RawNats(c.nats.url)
+    try:
+        async def run():
+            ws, _ = await connect(c.edges[0])
+            await ws.send('{"type":"subscribe","id":1,"temporal":true,"adapt":false}')
+            await recv_json(ws, lambda m: m["type"] in ("subscribed", "error"))
+            state = oceanproto.DecoderState()
+            for _ in range(10):
+                _, b = await recv_frame(ws, timeout=10)
+                oceanproto.decode_frame(b, state)
+            rogue.sub("%s.frame.>" % PREFIX)
+            parts = capture_frame(rogue, WEB_LAYERS)
+            check(all(p[41] & SHARED for p in parts.values()), "the sim publishes no shared tiles: flags %r"
+                  % [p[41] for p in parts.values()])
+            real = seq_of(next(iter(parts.values())))
+            epoch = struct.unpack_from("<Q", next(iter(parts.values())), LAYER_HEADER - 8)[0]
+            bad0 = c.edges[0].metric("oceand_cluster_bad_messages_total")
+            for subj in WEB_LAYERS:
+                p = parts[subj]
+                rogue.pub(subj, with_byte(p, 63, 9))                          # need 9
+                rogue.pub(subj, with_byte(with_byte(p, 41, INTRA), 63, 0))    # intra-section flag alone
+                rogue.pub(subj, with_epoch(p, 0))                             # epoch 0
+            for subj in WEB_LAYERS:                                           # a second "sim", ahead
+                rogue.pub(subj, with_seq(with_epoch(parts[subj], epoch ^ 0x5a5a), real + 8))
+            keys = bytearray(128)
+            keys[0] = 0x01
+            outside = bytearray(128)
+            outside[1] = 0x01
+            ttl = struct.pack("<I", 3000)
+            rogue.pub("%s.demand" % PREFIX, envelope(KIND_DEMAND, ttl + bytes(keys) + bytes(outside) + bytes(128)))
+            rogue.pub("%s.demand" % PREFIX, envelope(KIND_DEMAND, ttl + bytes(keys) + bytes(128) + bytes(outside)))
+            rogue.pub("%s.demand" % PREFIX, envelope(KIND_DEMAND, ttl + bytes(keys) * 2))
+            ours = bytearray(128)                                             # the viewer's 3 layers
+            for k in (3, 28, 53):
+                ours[k >> 3] |= 1 << (k & 7)
+            rogue.pub("%s.demand" % PREFIX, envelope(KIND_DEMAND, ttl + bytes(ours) + bytes(128) + bytes(ours)))
+            codecs, n, seqs = set(), 0, []
+            t_end = time.time() + 4   # (decoding every frame in Python: a loaded machine reads fewer)
+            while time.time() < t_end:
+                h, b = await recv_frame(ws, timeout=5)
+                f = oceanproto.decode_frame(b, state)   # raises ProtocolError `reference` on a bad chain
+                codecs |= {t.codec for t in f.tiles}
+                seqs.append(h["seq"])
+                n += 1
+            check(n >= 10, "the viewer got %d frames in 4 s" % n)
+            check(seqs == sorted(seqs), "seq went back at the viewer")
+            check(3 in codecs, "no predicted tile after the rogue's messages: %r" % codecs)
+            bad = c.edges[0].metric("oceand_cluster_bad_messages_total") - bad0
+            check(bad >= 9, "the edge refused %r of the 9 malformed parts" % bad)
+            sbad = c.sim.metric("oceand_cluster_bad_messages_total")
+            check(sbad >= 3, "the sim refused %r of the 3 malformed demands" % sbad)
+            await ws.close()
+        asyncio.run(run())
+    finally:
+        rogue.close()
+
+
+@test
+@tcr.with_cluster(edges=1)
+def another_sims_frames_ahead(c):
+    """Complete frames of another sim process (a sim of another sea on another prefix,
+    its temporal layers captured at steady state: predicted tiles whose references are
+    that sim's frames) republished on this prefix for the next 10 seqs of the real
+    stream, so they reach the edge before the real sim's (and its catch-up ring); 5 times. The edge hands them out as
+    another epoch: its temporal viewer's history is cleared, so it is never sent one of
+    those predicted tiles against the real sim's frames, and it decodes every frame in
+    order with one decoder state (an edge that kept the history across the epoch sends
+    it one: the decoder meets `reference`)."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+    import oceanproto
+    other = "other"
+    sf = os.path.join(c.tmp, "other-state.json")
+    with open(sf, "w") as f:
+        json.dump({"params": {"wind_speed": 21, "seed": 99}, "params_version": 1, "sim_time": 40}, f)
+    c.node("other", "--role", "sim", "--nats", c.nats.url, "--nats-prefix", other, state_file=sf)
+    rogue = RawNats(c.nats.url)
+    try:
+        async def run():
+            # the other sim streams the viewer's 3 layers (a demand of its own, no keyframe wish)
+            ours = bytearray(128)
+            for k in (3, 28, 53):
+                ours[k >> 3] |= 1 << (k & 7)
+            demand = envelope(KIND_DEMAND, struct.pack("<I", 3000) + bytes(ours) + bytes(ours) + bytes(128),
+                              origin="rogue-edge")
+            rogue.sub("%s.frame.>" % other)
+            other_layers = [s.replace(PREFIX + ".", other + ".", 1) for s in WEB_LAYERS]
+            t_end = time.time() + 20
+            parts = None
+            while time.time() < t_end:
+                rogue.pub("%s.demand" % other, demand)
+                try:
+                    got = capture_frame(rogue, other_layers, timeout=2)
+                except (tcr.TestFailure, OSError):
+                    continue
+                if all(p[41] == SHARED and p[63] >= 1 for p in got.values()):   # predicted, no keyframe section
+                    parts = got
+                    break
+            check(parts is not None, "no steady-state temporal frame captured from the other sim")
+            ws, _ = await connect(c.edges[0])
+            await ws.send('{"type":"subscribe","id":1,"temporal":true,"adapt":false}')
+            await recv_json(ws, lambda m: m["type"] in ("subscribed", "error"))
+            state = oceanproto.DecoderState()
+            last = None
+            for _ in range(200):   # until the viewer holds its chain (predicted tiles)
+                h, b = await recv_frame(ws, timeout=10)
+                f = oceanproto.decode_frame(b, state)
+                last = h["seq"]
+                if any(t.codec == 3 for t in f.tiles):
+                    break
+            check(last is not None, "no frame")
+            rogue.sub("%s.frame.>" % PREFIX)          # where the real stream is now (the viewer may lag)
+            chains0 = c.edges[0].metric("oceand_cluster_new_chains_total")
+            n = 0
+            for _ in range(5):   # 5 rounds: each meets the viewer holding a chain at some point of it
+                real = seq_of(next(iter(capture_frame(rogue, WEB_LAYERS).values())))
+                for k in range(1, 11):
+                    for subj, osubj in zip(WEB_LAYERS, other_layers):
+                        rogue.pub(subj, with_seq(parts[osubj], real + k))
+                t_end = time.time() + 1.0
+                while time.time() < t_end:
+                    try:
+                        _, b = await recv_frame(ws, timeout=max(0.1, t_end - time.time()))
+                    except (asyncio.TimeoutError, tcr.TestFailure):
+                        break
+                    oceanproto.decode_frame(b, state)   # ProtocolError `reference`: the other sim's chain
+                    n += 1
+            check(n >= 10, "the viewer got %d frames in 5 s with the other sim's" % n)
+            check(c.edges[0].metric("oceand_cluster_new_chains_total") > chains0,
+                  "the edge did not take the other sim's frames as another epoch")
+            await ws.close()
+        asyncio.run(run())
+    finally:
+        rogue.close()
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--oceand", required=True)

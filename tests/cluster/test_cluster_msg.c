@@ -152,7 +152,7 @@ static void m_tps(uint8_t *m) { m[42] = 3; }
 static void m_n(uint8_t *m) { m[28] = 48; } /* 48 / tile_size 16 = 3 tiles per side, header says 2 */
 static void m_tile_count(uint8_t *m) { m[46] = 5; }
 static void m_tile_first(uint8_t *m) { m[44] = 1; }
-static void m_reserved(uint8_t *m) { m[63] = 1; }
+static void m_reserved(uint8_t *m) { m[63] = 1; } /* need without shared tiles */
 static void m_cascade(uint8_t *m) { m[60] = 1; }      /* cascade 1 of 1 */
 static void m_ncascades0(uint8_t *m) { m[61] = 0; }
 static void m_ncascades5(uint8_t *m) { m[61] = 5; }
@@ -168,7 +168,10 @@ static void m_tile_field(uint8_t *m) { m[HS + 5 * 4] = 1; } /* first tile's head
 static void m_tile_lod(uint8_t *m) { m[HS + 5 * 4 + 1] = 1; } /* ... lod 1 (the layer's encoded_lod is 0) */
 static void m_tile_cascade(uint8_t *m) { m[HS + 5 * 4 + 3] = 1; } /* ... cascade 1 (flags bits 0-1) */
 static void m_tile_len(uint8_t *m) { m[HS + 5 * 4 + 32] ^= 1; }
-static void m_layer_flags(uint8_t *m) { m[41] = 2; }
+static void m_layer_flags(uint8_t *m) { m[41] = 8; }
+static void m_intra_alone(uint8_t *m) { m[41] = CL_LAYER_INTRA; } /* intra section flag without the shared one */
+static void m_need_shared(uint8_t *m) { m[41] = CL_LAYER_SHARED; m[63] = CL_LAYER_MAX_NEED + 1; }
+static void m_epoch0(uint8_t *m) { memset(m + 64 + CL_KEY_BYTES, 0, 8); }
 
 static void test_part_rejects(void)
 {
@@ -199,6 +202,9 @@ static void test_part_rejects(void)
     expect_bad("tile header cascade", m_tile_cascade, CL_E_CORRUPT);
     expect_bad("tile payload_len", m_tile_len, CL_E_CORRUPT);
     expect_bad("layer flags", m_layer_flags, CL_E_CORRUPT);
+    expect_bad("intra section flag alone", m_intra_alone, CL_E_CORRUPT);
+    expect_bad("need beyond 4", m_need_shared, CL_E_CORRUPT);
+    expect_bad("epoch 0", m_epoch0, CL_E_CORRUPT);
 }
 
 /* Split into parts that fit max_payload, reassemble: identical layer. */
@@ -586,6 +592,158 @@ static void test_assembler_budget(void)
     cl_assembler_free(a);
 }
 
+
+/* A temporal layer (cluster.h, "Sections"): intra tiles, then the shared
+ * tiles of its stream, each section with its own buffer and offsets; parts
+ * never span the two; the edge gets 2 x tps^2 tiles back in order. Layers
+ * of one seq from two sim processes (epochs) are never one frame. */
+static void test_sections(void)
+{
+    check_section = "temporal sections";
+    struct gen_layer g, sh;
+    gen_layer_make(&g, 128, 32, 0, 1, 2, 77, 2000, 5);   /* 16 intra tiles */
+    gen_layer_make(&sh, 128, 32, 0, 1, 2, 77, 600, 6);   /* 16 shared tiles (codec 3 in real life) */
+    struct cl_layer_info info = g.info;
+    info.layer_flags = CL_LAYER_SHARED | CL_LAYER_INTRA;
+    info.need = 3;
+    int sec = 16;
+    CHECK(cl_layer_sections(&info) == 2 && cl_layer_tiles(&info) == 32, "sections %d tiles %d",
+          cl_layer_sections(&info), cl_layer_tiles(&info));
+    size_t maxp = 8192;
+    uint8_t *buf = malloc(maxp);
+    CHECK(cl_layer_part_write(buf, maxp, &info, sec - 1, 2, g.data, g.tile_off) == CL_E_ARG,
+          "a part across the two sections was written");
+    struct cl_assembler *a = cl_assembler_new();
+    struct cl_layer *out = NULL;
+    int parts = 0;
+    for (int first = 0; first < 2 * sec;) {
+        const struct gen_layer *s = first < sec ? &g : &sh;
+        int local = first % sec;
+        int k = cl_layer_part_tiles(s->tile_off, local, sec, maxp);
+        CHECK(k >= 1, "no tile fits at %d", first);
+        if (k < 1)
+            break;
+        long w = cl_layer_part_write(buf, maxp, &info, first, k, s->data, s->tile_off);
+        CHECK(w > 0, "part write %ld at %d", w, first);
+        struct cl_layer_part p;
+        int rc = cl_layer_part_parse(buf, (size_t)w, &p);
+        CHECK(rc == 0 && p.tile_first == first && p.info.need == 3 && p.info.epoch == g.info.epoch,
+              "part parse %d at %d", rc, first);
+        if (rc)
+            break;
+        if (first == 0) { /* the same part claiming to run across the sections */
+            uint8_t *c = malloc((size_t)w);
+            memcpy(c, buf, (size_t)w);
+            c[44] = (uint8_t)(sec - 1); /* tile_first */
+            struct cl_layer_part q;
+            CHECK(k < 2 || cl_layer_part_parse(c, (size_t)w, &q) == CL_E_CORRUPT, "a part across sections parsed");
+            c[44] = 0;
+            c[41] = 0; /* intra only: 16 tiles in all */
+            c[63] = 0;
+            CHECK(cl_layer_part_parse(c, (size_t)w, &q) == 0 && cl_layer_tiles(&q.info) == sec, "intra-only part");
+            free(c);
+        }
+        rc = cl_assembler_add(a, &p, &out);
+        CHECK(rc == (first + k == 2 * sec ? 1 : 0), "assembler %d at %d", rc, first);
+        parts++;
+        first += k;
+    }
+    CHECK(parts >= 4, "only %d parts", parts);
+    CHECK(out && out->len == g.len + sh.len && out->tile_off[2 * sec] == out->len, "assembled layer size");
+    if (out) {
+        int ok = memcmp(out->data, g.data, g.len) == 0 && memcmp(out->data + g.len, sh.data, sh.len) == 0;
+        for (int i = 0; i <= sec; i++)
+            ok &= out->tile_off[i] == g.tile_off[i] && out->tile_off[sec + i] == g.len + sh.tile_off[i];
+        CHECK(ok, "the sections' tiles or offsets differ after reassembly");
+        CHECK(out->info.need == 3 && cl_info_has_intra(&out->info) && cl_info_has_shared(&out->info), "flags");
+    }
+    /* shared tiles only: one section */
+    struct cl_layer_info only = info;
+    only.layer_flags = CL_LAYER_SHARED;
+    CHECK(cl_layer_sections(&only) == 1 && !cl_info_has_intra(&only), "shared-only layer");
+    long w = cl_layer_part_write(buf, maxp, &only, 0, 1, sh.data, sh.tile_off);
+    struct cl_layer_part p;
+    CHECK(w > 0 && cl_layer_part_parse(buf, (size_t)w, &p) == 0 && cl_info_has_shared(&p.info), "shared-only part");
+    /* a temporal layer is never at a coarser LOD than its key */
+    struct cl_layer_info coarse = only;
+    coarse.encoded_lod = 2;
+    CHECK(!cl_layer_info_valid(&coarse), "a degraded temporal layer accepted");
+    free(buf);
+
+    /* the same seq from another sim process: not part of this frame */
+    struct cl_collector *c = cl_collector_new();
+    uint8_t want[CL_KEY_BYTES] = { 0 };
+    cl_bit_set(want, cl_key(0, 1, 2), true);
+    cl_bit_set(want, cl_key(1, 1, 2), true);
+    struct gen_layer o;
+    gen_layer_make(&o, 128, 32, 1, 1, 2, 77, 100, 8);
+    o.info.epoch = g.info.epoch + 1;
+    cl_bit_set(o.info.encoded, cl_key(0, 1, 2), true);
+    cl_bit_set(out->info.encoded, cl_key(1, 1, 2), true);
+    struct cl_frame_set *fs[2];
+    CHECK(cl_collector_add(c, out, want, fs) == 0, "half a frame handed out");
+    struct cl_layer *ol = malloc(sizeof *ol);
+    ol->info = o.info;
+    ol->len = o.len;
+    ol->data = o.data;
+    ol->tile_off = o.tile_off;
+    o.data = NULL;
+    o.tile_off = NULL;
+    CHECK(cl_collector_add(c, ol, want, fs) == CL_E_CORRUPT, "a layer of another epoch joined the frame");
+    struct cl_collector_stats st;
+    cl_collector_stats(c, &st);
+    CHECK(st.mismatched == 1, "mismatched %llu", (unsigned long long)st.mismatched);
+    cl_collector_free(c);
+    cl_assembler_free(a);
+    gen_layer_free(&o);
+    gen_layer_free(&g);
+    gen_layer_free(&sh);
+}
+
+/* The edge's demand with the temporal codec: keys, stream, wish. */
+static void test_demand_ex(void)
+{
+    check_section = "demand with stream and wish";
+    struct cl_demand_bits b, back;
+    memset(&b, 0, sizeof b);
+    cl_bit_set(b.keys, 3, true);
+    cl_bit_set(b.keys, 40, true);
+    cl_bit_set(b.stream, 40, true);
+    cl_bit_set(b.wish, 3, true);
+    uint8_t db[CL_DEMAND_BODY_EX];
+    cl_demand_body_write_ex(db, 2500, &b);
+    uint32_t ttl = 0;
+    CHECK(cl_demand_body_parse_ex(db, sizeof db, &ttl, &back) == 0 && ttl == 2500 &&
+          memcmp(&b, &back, sizeof b) == 0, "round trip");
+    CHECK(cl_demand_body_parse_ex(db, sizeof db - 1, &ttl, &back) == CL_E_TRUNCATED, "short body");
+    CHECK(cl_demand_body_parse_ex(db, CL_DEMAND_BODY + 1, &ttl, &back) == CL_E_TRUNCATED, "odd length");
+    uint8_t longer[CL_DEMAND_BODY_EX + 1];
+    memcpy(longer, db, sizeof db);
+    longer[sizeof db] = 0;
+    CHECK(cl_demand_body_parse_ex(longer, sizeof longer, &ttl, &back) == CL_E_CORRUPT, "trailing byte");
+    db[4 + CL_KEY_BYTES + 1] |= 1; /* stream key 8: not demanded */
+    CHECK(cl_demand_body_parse_ex(db, sizeof db, &ttl, &back) == CL_E_CORRUPT, "stream outside keys");
+    cl_demand_body_write_ex(db, 2500, &b);
+    db[4 + 2 * CL_KEY_BYTES + 2] |= 1; /* wish key 16: not demanded */
+    CHECK(cl_demand_body_parse_ex(db, sizeof db, &ttl, &back) == CL_E_CORRUPT, "wish outside keys");
+    /* a keys-only body (an edge that does not stream): every key intra */
+    uint8_t old[CL_DEMAND_BODY];
+    cl_demand_body_write(old, 1000, b.keys);
+    CHECK(cl_demand_body_parse_ex(old, sizeof old, &ttl, &back) == 0 && memcmp(back.keys, b.keys, CL_KEY_BYTES) == 0 &&
+          memcmp(back.wish, b.keys, CL_KEY_BYTES) == 0 && !cl_bit(back.stream, 40), "keys-only body");
+
+    struct cl_demand *d = cl_demand_new(4);
+    struct cl_demand_bits e2, u;
+    memset(&e2, 0, sizeof e2);
+    cl_bit_set(e2.keys, 40, true);
+    cl_bit_set(e2.wish, 40, true);
+    CHECK(cl_demand_update_ex(d, "a", &b, 3, 0) == 0 && cl_demand_update_ex(d, "b", &e2, 1, 0) == 0, "update");
+    CHECK(cl_demand_union_ex(d, 0.5, &u) == 2 && cl_bit(u.stream, 40) && cl_bit(u.wish, 40) && cl_bit(u.wish, 3) &&
+          cl_bit(u.keys, 3), "union of two edges");
+    CHECK(cl_demand_union_ex(d, 2, &u) == 1 && !cl_bit(u.wish, 40) && cl_bit(u.stream, 40), "b expired: its wish too");
+    cl_demand_free(d);
+}
+
 int main(void)
 {
     test_subjects();
@@ -597,5 +755,7 @@ int main(void)
     test_envelope();
     test_demand();
     test_collector();
+    test_sections();
+    test_demand_ex();
     return check_done();
 }

@@ -206,36 +206,214 @@ def test_set_reaches_both_edges_and_frames_are_identical(c):
     check(c.sim.metric("oceand_cluster_layers_published_total") > 0, "no layers published")
 
 
-@test
-@with_cluster(edges=1)
-def test_temporal_client_on_an_edge_gets_intra(c):
-    """The sim publishes intra tiles only: a client of an edge that asks for the temporal
-    codec gets keyframe (codec 1) tiles in every frame, each decodable in order with one
-    decoder state (PROTOCOL.md §5.9 lets a server send keyframes at any time)."""
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
-    import oceanproto
-
-    async def run():
-        ws, _ = await connect(c.edges[0])
-        await ws.send('{"type":"subscribe","id":1,"temporal":true}')
-        m = await recv_json(ws, lambda j: j["type"] in ("subscribed", "error"))
-        check(m["type"] == "subscribed" and m["subscription"]["temporal"] is True, "subscribe: %r" % m)
-        state, codecs = oceanproto.DecoderState(), set()
-        for _ in range(15):
-            _, b = await recv_frame(ws, timeout=10)
-            f = oceanproto.decode_frame(b, state)
-            codecs |= {t.codec for t in f.tiles}
-        check(codecs == {1}, "tile codecs through the edge: %r" % codecs)
-        await ws.close()
-    asyncio.run(run())
-
-
 # The web client's subscription (web/src/main.js): cascade 0's height/dx/dz plus the
 # foam field at its own LOD, and the finer cascades' height at LOD 1 and 1 mm.
 # Pinned (adapt false): the edge's frames are compared byte for byte with --role all's, so
 # neither may step its client down a rung of the link ladder (a slow ASan build would).
 WEB_SUB = {"type": "subscribe", "id": 2, "fields": ["height", "dx", "dz", "foam"], "field_lod": {"foam": 2},
            "cascades": [{"fields": ["height"], "lod": 1, "bound": 0.001}] * 3, "adapt": False}
+
+
+# The web client's subscription as the web client sends it: with the temporal codec.
+WEB_SUB_T = dict(WEB_SUB, temporal=True)
+# Its layers' bounds: cascade 0 at the default 1 cm, the finer cascades at 1 mm.
+WEB_BOUND = {0: 0.01, 1: 0.001, 2: 0.001, 3: 0.001}
+
+
+def surface(frame):
+    """(cascade, field, lod, tile_x, tile_z) -> the decoded samples of a frame."""
+    return {(t.cascade, t.field, t.lod, t.x, t.z): t.samples for t in frame.tiles}
+
+
+async def temporal_frames(ws, count, state, oceanproto, timeout=10):
+    """count frames decoded in order with one decoder state (a predicted tile whose
+    references the state lacks raises ProtocolError `reference`): their headers, the
+    decoded frames, and the codecs seen per frame."""
+    out = []
+    for _ in range(count):
+        h, b = await recv_frame(ws, timeout=timeout)
+        f = oceanproto.decode_frame(b, state)
+        out.append((h, f, {t.codec for t in f.tiles}, len(b)))
+    return out
+
+
+async def until_predicted(ws, count, state, oceanproto, most=120):
+    """temporal_frames until at least count frames and one with predicted (codec 3) tiles
+    (at most `most` frames: a loaded machine may serve intra for a while, PROTOCOL.md §5.9)."""
+    out = []
+    while len(out) < count or not any(3 in x[2] for x in out):
+        check(len(out) < most, "no predicted (codec 3) tile through the edge in %d frames: codecs %r"
+              % (len(out), set().union(*(x[2] for x in out))))
+        out += await temporal_frames(ws, 1, state, oceanproto)
+    return out
+
+
+@test
+def test_temporal_web_client_through_an_edge():
+    """The web client's subscription with the temporal codec through an edge (the sim
+    encodes each layer's stream once and publishes its shared tiles and, when an edge
+    wishes for them, its keyframe tiles): the edge's viewer gets codec 3 tiles, every
+    frame decodes in order with one decoder state (never a predicted tile without its
+    references), and, the sea paused at the same state in the sim and in a --role all
+    daemon, its surface is --role all's within the bounds. A second viewer joining
+    mid-chain decodes from its first frame with a fresh state, and after a subscribe
+    again (its references dropped) the first one too. The sim's demand says `stream`."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+    import numpy as np
+    import oceanproto
+
+    state = {"params": {"paused": True, "wind_speed": 13, "seed": 7, "cascades": 3}, "params_version": 3,
+             "sim_time": 12.5}
+    slow = ("--tick-rate", "5")   # neither plan degrades on a loaded machine (or ASan): see below
+    c = Cluster(edges=1, state=state, sim_extra=slow)
+    ok = False
+    try:
+        sf = os.path.join(c.tmp, "all-state.json")
+        with open(sf, "w") as f:
+            json.dump(state, f)
+        alone = c.node("all", *slow, state_file=sf)
+
+        async def run():
+            e, _ = await connect(c.edges[0])
+            a, _ = await connect(alone)
+            for ws in (e, a):
+                await ws.send(json.dumps(WEB_SUB_T))
+            se = await recv_json(e, lambda m: m["type"] in ("subscribed", "error"))
+            sa = await recv_json(a, lambda m: m["type"] in ("subscribed", "error"))
+            check(se == sa and se["type"] == "subscribed" and se["subscription"]["temporal"] is True,
+                  "subscribed: edge %r, all %r" % (se, sa))
+            await await_for(lambda: "c1.height.1.1" in c.sim.health().get("streams", []),
+                            "the sim streams the edge's layers: %r" % c.sim.health().get("streams"))
+            se_state, sa_state = oceanproto.DecoderState(), oceanproto.DecoderState()
+            fe = await until_predicted(e, 24, se_state, oceanproto)
+            fa = await temporal_frames(a, 24, sa_state, oceanproto)
+            check(fe[0][2] <= {0, 1}, "the first frame through the edge is not all keyframes: %r" % fe[0][2])
+            pred = sum(1 for x in fe if 3 in x[2])
+            print("  edge: %d of %d frames with predicted tiles; bytes per frame edge %.0f, all %.0f"
+                  % (pred, len(fe), sum(x[3] for x in fe) / len(fe), sum(x[3] for x in fa) / len(fa)))
+            # The same surface as --role all's (paused: every frame shows the same sea), compared on
+            # frames of the same layers (a loaded machine may degrade a plan's LOD for a while).
+            for _ in range(60):
+                de, da = surface(fe[-1][1]), surface(fa[-1][1])
+                if set(de) == set(da) and len(de) == 6 * 4:
+                    break
+                fe += await temporal_frames(e, 1, se_state, oceanproto)
+                fa += await temporal_frames(a, 1, sa_state, oceanproto)
+            check(set(de) == set(da) and len(de) == 6 * 4, "tiles: edge %d, all %d; only at the edge %r, only at "
+                  "--role all %r" % (len(de), len(da), sorted(set(de) - set(da)), sorted(set(da) - set(de))))
+            for k in de:
+                diff = float(np.abs(de[k].astype(np.float64) - da[k].astype(np.float64)).max())
+                check(diff <= 2 * WEB_BOUND[k[0]] * 1.0001, "tile %r: edge and --role all differ by %g" % (k, diff))
+            check(any(float(np.abs(v).max()) > 1e-4 for v in de.values()), "the edge's surface is flat")
+            await a.close()   # read no more: an unread socket's keepalive would time out
+            # the first viewer subscribes again (as a client does after `reference`): fresh state, keyframes
+            await e.send(json.dumps(WEB_SUB_T))
+            await recv_json(e, lambda m: m["type"] in ("subscribed", "error"))
+            e_state = oceanproto.DecoderState()
+            fe2 = await temporal_frames(e, 6, e_state, oceanproto)   # decodes from its first frame
+            check(fe2[0][2] <= {0, 1}, "after subscribe again: not keyframes first: %r" % fe2[0][2])
+            # a viewer joining mid-chain (e keeps the stream going, and is read meanwhile):
+            # keyframes first, then the chain, decodable from its first frame
+            j, _ = await connect(c.edges[0])
+            await j.send(json.dumps(WEB_SUB_T))
+            await recv_json(j, lambda m: m["type"] in ("subscribed", "error"))
+            stop = []
+
+            async def drain():
+                while not stop:
+                    _, b = await recv_frame(e, timeout=10)
+                    oceanproto.decode_frame(b, e_state)   # e's own chain goes on, decodable too
+            drainer = asyncio.ensure_future(drain())
+            try:
+                fj = await until_predicted(j, 6, oceanproto.DecoderState(), oceanproto)
+            finally:
+                stop.append(True)
+            await drainer
+            check(fj[0][2] <= {0, 1}, "the joiner's first frame is not keyframes: %r" % fj[0][2])
+            d = c.sim.health()
+            check(sorted(d.get("streams", [])) == sorted(["height.0.3", "dx.0.3", "dz.0.3", "foam.2.3",
+                                                           "c1.height.1.1", "c2.height.1.1", "c3.height.1.1"]),
+                  "the edge's streamed layers at the sim: %r" % d.get("streams"))
+            for ws in (e, j):
+                await ws.close()
+        asyncio.run(run())
+        ok = True
+    finally:
+        c.close(failed=not ok)
+
+
+@test
+@with_cluster(edges=1, sim_extra=("--tick-rate", "5"))
+def test_intra_and_temporal_viewers_share_an_edge(c):
+    """A viewer that is not temporal and a temporal one on the same edge and layers: the
+    first gets intra (codec 1) tiles in every frame, the second codec 3 once it holds its
+    references; both decode every frame in order. (5 Hz: the sim's plan keeps the
+    temporal codec on a loaded machine or under ASan.)"""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+    import oceanproto
+
+    async def run():
+        i, _ = await connect(c.edges[0])
+        t, _ = await connect(c.edges[0])
+        await t.send('{"type":"subscribe","id":1,"temporal":true,"adapt":false}')
+        await recv_json(t, lambda m: m["type"] in ("subscribed", "error"))
+        fi, ft = await asyncio.gather(temporal_frames(i, 20, oceanproto.DecoderState(), oceanproto),
+                                      until_predicted(t, 20, oceanproto.DecoderState(), oceanproto))
+        ci = set().union(*(x[2] for x in fi))
+        check(ci <= {0, 1}, "the intra viewer got %r" % ci)
+        for ws in (i, t):
+            await ws.close()
+    asyncio.run(run())
+
+
+@test
+def test_two_sims_never_mix_chains():
+    """Two sims acting on one prefix at once (no JetStream: nothing stops the second, a
+    misconfiguration) with different seas, so their chains' grids differ: the edge
+    relays frames of both, their seqs interleaved (both count from the wall clock), and
+    without the epoch a viewer would take one sim's predicted tile against the other's
+    reference. The edge's temporal viewer decodes every frame it gets in order with one
+    decoder state (the decoder refuses a reference of another grid: `reference`), and
+    the edge counts its new chains (oceand_cluster_new_chains_total)."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "examples"))
+    import oceanproto
+
+    # 30 Hz: the two sims' ticks then interleave at the edge (at 5 Hz one sim's layers always
+    # come first and the other's are dropped as mismatched: nothing to mix, a mutant without
+    # the epoch passes). Under ASan 5 Hz, so that the plans keep the temporal codec: that run
+    # checks memory, the normal build's checks the chains.
+    slow = ("--tick-rate", "5") if os.sep + "san" + os.sep in ARGS.oceand else ()
+    c = Cluster(edges=1, state={"params": {"wind_speed": 13, "seed": 7}, "params_version": 1, "sim_time": 3},
+                sim_extra=slow)
+    ok = False
+    try:
+        async def run():
+            ws, _ = await connect(c.edges[0])
+            await ws.send('{"type":"subscribe","id":1,"temporal":true,"adapt":false}')
+            await recv_json(ws, lambda m: m["type"] in ("subscribed", "error"))
+            state = oceanproto.DecoderState()
+            await until_predicted(ws, 10, state, oceanproto)
+            sf = os.path.join(c.tmp, "sim2-state.json")
+            with open(sf, "w") as f:
+                json.dump({"params": {"wind_speed": 21, "seed": 99}, "params_version": 1, "sim_time": 40}, f)
+            c.node("sim2", "--role", "sim", "--nats", c.nats.url, *slow, state_file=sf)
+            await await_for(lambda: c.edges[0].metric("oceand_cluster_new_chains_total") >= 2,
+                            "the edge sees frames of both sims", timeout=20)
+            n, t_end = 0, time.time() + 3
+            while time.time() < t_end:
+                try:
+                    _, b = await recv_frame(ws, timeout=max(0.1, t_end - time.time()))
+                except (asyncio.TimeoutError, TestFailure):
+                    break
+                oceanproto.decode_frame(b, state)   # ProtocolError `reference`: a chain of the other sim
+                n += 1
+            print("  %d frames decoded with both sims acting; new chains at the edge: %d"
+                  % (n, c.edges[0].metric("oceand_cluster_new_chains_total")))
+            await ws.close()
+        asyncio.run(run())
+        ok = True
+    finally:
+        c.close(failed=not ok)
 
 
 QUERIES = [
