@@ -234,6 +234,10 @@ const required = {
   resume: [],
   name: ['name'],
   named: ['name'],
+  render: ['start', 'fps', 'frames', 'fields'],
+  rendering: ['frames', 'start', 'fps', 'params_version', 'n', 'cascades', 'units', 'layers'],
+  rendered: ['frames'],
+  render_cancel: [],
 };
 const cdir = join(vdir, 'control');
 for (const f of readdirSync(cdir).filter((n) => n.endsWith('.json')).sort()) {
