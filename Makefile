@@ -64,14 +64,14 @@ deps:
 # wait (real daemons on loopback at 30 Hz, NATS restarts: wall time >> CPU
 # time) all at once, each into its own log (free ports, own temp dirs); the
 # single-threaded CPU-bound ones that time nothing (valgrind, fuzzing, the
-# libraries' sanitizer builds) one per core, the longest first; the others one
+# libraries' sanitizer builds, the cluster's unit tests) one per core, the longest first; the others one
 # at a time, alone on the machine: daemons that must keep their tick (ASan),
 # the hostile battery (it measures the observer's share of frames; it runs its
 # light cases 2 at a time itself), the link lab, SwiftShader.
 TESTS_CONCURRENT := test-cluster-roles test-daemon test-tap test-ops test-python test-blender test-cluster-durable
 TESTS_PAIRED     := test-fuzz test-proto-valgrind test-sim-asan test-query-valgrind test-sim-valgrind \
                     test-daemon-valgrind test-sim test-cluster-valgrind test-proto-asan test-query \
-                    test-proto test-proto-js test-sim-tsan test-query-asan test-layout test-wording
+                    test-cluster test-proto test-proto-js test-sim-tsan test-query-asan test-layout test-wording
 TEST_LOGS        := $(BUILD)/test-logs
 test: deps
 	@$(MAKE) --no-print-directory -j$$(nproc) build-all

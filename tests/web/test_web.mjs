@@ -220,7 +220,7 @@ async function lowestClearance(p) {
 // first variant. The page is left drawing as before (crack fixes on, no probe colour).
 async function seamPixels(p) {
   try {
-    await setView(p, { viewport: { width: 600, height: 600 }, scale: 1, gapProbe: true, cam: [0, 150, 150], target: [0, 0, -100] });
+    await setView(p, { viewport: { width: 420, height: 420 }, scale: 1, gapProbe: true, cam: [0, 150, 150], target: [0, 0, -100] });
     await p.evaluate(() => window.oceandTest.freeze(true));
     await renderedMore(p, 2); // the held frame fully blended in (uMix 1)
     const count = async (fixes) => {
