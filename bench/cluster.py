@@ -98,25 +98,32 @@ def run_all(args, k):
         stop([d])
 
 
+def start_cluster(args, tmp, procs, edges, k):
+    """nats-server, a sim and `edges` edges (room for k clients each) in tmp, each appended to
+    procs as it starts (the caller stops them); returns the sim, the edges and the pids by role."""
+    nats = oceand_proc.Nats(tmp)
+    procs.append(nats)
+    sim = oceand_proc.Oceand(args.oceand, "--role", "sim", "--nats", nats.url, "--state-file", "none",
+                             "--web-root", tmp, "--log-level", "warn", "--resolution", str(args.n),
+                             tmp=tmp, name="sim")
+    procs.append(sim)
+    eprocs = []
+    for i in range(edges):
+        e = oceand_proc.Oceand(args.oceand, "--role", "edge", "--nats", nats.url, "--state-file", "none",
+                               "--web-root", tmp, "--max-clients", str(k + 16), "--log-level", "warn",
+                               tmp=tmp, name="edge%d" % i, ready=lambda j: j.get("cluster") == "ok")
+        procs.append(e)
+        eprocs.append(e)
+    pids = {"sim": sim.pid, "nats": nats.pid}
+    pids.update({"edge%d" % i: e.pid for i, e in enumerate(eprocs)})
+    return sim, eprocs, pids
+
+
 def run_cluster(args, edges, k):
     tmp = tempfile.mkdtemp(prefix="oceand-bench-cluster-")
     procs = []
     try:
-        nats = oceand_proc.Nats(tmp)
-        procs.append(nats)
-        sim = oceand_proc.Oceand(args.oceand, "--role", "sim", "--nats", nats.url, "--state-file", "none",
-                                 "--web-root", tmp, "--log-level", "warn", "--resolution", str(args.n),
-                                 tmp=tmp, name="sim")
-        procs.append(sim)
-        eprocs = []
-        for i in range(edges):
-            e = oceand_proc.Oceand(args.oceand, "--role", "edge", "--nats", nats.url, "--state-file", "none",
-                                   "--web-root", tmp, "--max-clients", str(k + 16), "--log-level", "warn",
-                                   tmp=tmp, name="edge%d" % i, ready=lambda j: j.get("cluster") == "ok")
-            procs.append(e)
-            eprocs.append(e)
-        pids = {"sim": sim.pid, "nats": nats.pid}
-        pids.update({"edge%d" % i: e.pid for i, e in enumerate(eprocs)})
+        sim, eprocs, pids = start_cluster(args, tmp, procs, edges, k)
         res, cpu, nat = measure(args, [e.port for e in eprocs], pids, k, sim.port)
         out = {"bench": "cluster", "mode": "cluster", "edges": edges, "clients_per_edge": k, "N": args.n,
                "delivered_min": min(r["delivered"] for r in res),
@@ -179,21 +186,7 @@ def run_web_once(args, edges_list, run):
         tmp = tempfile.mkdtemp(prefix="oceand-bench-cluster-")
         procs = []
         try:
-            nats = oceand_proc.Nats(tmp)
-            procs.append(nats)
-            sim = oceand_proc.Oceand(args.oceand, "--role", "sim", "--nats", nats.url, "--state-file", "none",
-                                     "--web-root", tmp, "--log-level", "warn", "--resolution", str(args.n),
-                                     tmp=tmp, name="sim")
-            procs.append(sim)
-            eprocs = []
-            for i in range(edges):
-                e = oceand_proc.Oceand(args.oceand, "--role", "edge", "--nats", nats.url, "--state-file", "none",
-                                       "--web-root", tmp, "--max-clients", str(k + 16), "--log-level", "warn",
-                                       tmp=tmp, name="edge%d" % i, ready=lambda j: j.get("cluster") == "ok")
-                procs.append(e)
-                eprocs.append(e)
-            pids = {"sim": sim.pid, "nats": nats.pid}
-            pids.update({"edge%d" % i: e.pid for i, e in enumerate(eprocs)})
+            sim, eprocs, pids = start_cluster(args, tmp, procs, edges, k)
             res, cpu, nat = measure(args, [e.port for e in eprocs], pids, k, sim.port, WEB_SUB)
             kb = statistics.mean(r["frame_kb"] for r in res)
             p50 = statistics.mean(r["frame_kb_p50"] for r in res)
