@@ -35,21 +35,6 @@ def test(fn):
     return fn
 
 
-def with_cluster(**kw):
-    def deco(fn):
-        def run():
-            c = Cluster(**kw)
-            ok = False
-            try:
-                fn(c)
-                ok = True
-            finally:
-                c.close(failed=not ok)
-        run.__name__ = fn.__name__
-        return run
-    return deco
-
-
 def read_state(path):
     with open(path) as f:
         return json.load(f)
@@ -239,7 +224,7 @@ async def set_stream_then_kill(c, ws, watcher, kill_after, kill=kill_and_restart
 
 
 @test
-@with_cluster(edges=1)
+@cr.with_cluster(edges=1)
 def test_sim_kill9_during_sets_keeps_the_last_acknowledged(c):
     """A stream of sets through an edge; kill -9 of the sim and an immediate restart
     (shorter than the edge's 2 s detection: it sees a new sim instance in the
