@@ -121,20 +121,7 @@ def _residuals(payload, codec, count):
     size = count + esc_count * esc_width
     body = payload[LOSSY_PREFIX.size:]
     raw = _inflate(body, size) if codec == CODEC_DEFLATE else _unzstd(body, size)
-    a = np.frombuffer(raw, np.uint8, count)
-    z = a.astype(np.uint64)
-    escaped = np.flatnonzero(a == 255)
-    if len(escaped) != esc_count:
-        raise ProtocolError("corrupt", f"{len(escaped)} escapes in stream A, prefix says {esc_count}")
-    if esc_count:
-        # Stream B: byte planes, least significant first.
-        planes = np.frombuffer(raw, np.uint8, esc_count * esc_width, count).reshape(esc_width, esc_count)
-        x = np.zeros(esc_count, np.uint64)
-        for p in range(esc_width):
-            x |= planes[p].astype(np.uint64) << np.uint64(8 * p)
-        if (x > 2**32 - 256).any():
-            raise ProtocolError("corrupt", "escaped residual out of range")
-        z[escaped] = 255 + x
+    z = _escaped_values(raw, count, esc_count, esc_width)
     # zigzag: 0, 1, 2, 3, 4 ... -> 0, -1, 1, -2, 2 ...
     r = (z >> np.uint64(1)).astype(np.int64) ^ -(z & np.uint64(1)).astype(np.int64)
     return r, np.array(coef, np.int64)
@@ -204,7 +191,8 @@ class DecoderState:
 
 
 def _escaped_values(raw, count, esc_count, esc_width):
-    """§5.2: count bytes (255 = escaped) + byte planes -> uint64 zigzag values."""
+    """§5.2: count bytes (stream A, 255 = escaped) + byte planes (stream B, least significant
+    first) -> uint64 zigzag values."""
     a = np.frombuffer(raw, np.uint8, count)
     z = a.astype(np.uint64)
     escaped = np.flatnonzero(a == 255)
