@@ -66,7 +66,7 @@ check_runtime() {
   dev_runtime=$(deps_of $dev_pkgs)
   for p in $runtime_pkgs; do
     case $p in curl|ca-certificates) continue ;; esac  # tools of the image itself (HEALTHCHECK)
-    echo "$dev_runtime" | grep -qx "$p" || fail "runtime package $p is not the runtime half of any -dev package in $LIST"
+    grep -qx "$p" <<<"$dev_runtime" || fail "runtime package $p is not the runtime half of any -dev package in $LIST"
   done
   # Every shared library the shipped binaries load must come from a runtime
   # package, a dependency of one, or an essential package of Debian itself.
@@ -90,9 +90,9 @@ check_runtime() {
       [ -n "$pkg" ] || fail "$bin loads $lib, which no Debian package owns"
       prio=$(dpkg-query -W -f='${Priority}' "$pkg" 2>/dev/null)
       [ "$prio" = required ] && continue
-      if ! echo "$have" | grep -qx "$pkg"; then  # once more before failing: see dpkg-query above
+      if ! grep -qx "$pkg" <<<"$have"; then  # once more before failing: see dpkg-query above
         have=$(printf '%s\n' $runtime_pkgs $(deps_of $runtime_pkgs) | sort -u)
-        echo "$have" | grep -qx "$pkg" || fail "$bin needs $pkg ($lib) but the Dockerfile's runtime stage does not install it"
+        grep -qx "$pkg" <<<"$have" || fail "$bin needs $pkg ($lib) but the Dockerfile's runtime stage does not install it"
       fi
       checked=$((checked + 1))
     done
@@ -103,14 +103,14 @@ check_runtime() {
 check_image() {
   section "3. image and unit rules, and their command lines start the daemon"
   rt=$(runtime_stage)
-  echo "$rt" | grep -q '^EXPOSE 8080$' || fail "runtime stage must EXPOSE 8080"
-  echo "$rt" | grep -q '^HEALTHCHECK .*curl .*/healthz' || fail "HEALTHCHECK must curl /healthz"
+  grep -q '^EXPOSE 8080$' <<<"$rt" || fail "runtime stage must EXPOSE 8080"
+  grep -q '^HEALTHCHECK .*curl .*/healthz' <<<"$rt" || fail "HEALTHCHECK must curl /healthz"
   user=$(echo "$rt" | sed -n 's/^USER //p' | tail -1)
   [ -n "$user" ] && [ "$user" != root ] && [ "$user" != 0 ] || fail "runtime stage must switch to a non-root USER"
-  echo "$rt" | grep -q "useradd .*$user" || fail "runtime stage does not create user $user"
+  grep -q "useradd .*$user" <<<"$rt" || fail "runtime stage does not create user $user"
   cmd_json=$(echo "$rt" | sed -n 's/^CMD //p')
   cmd_args=$($PY -c 'import json,sys; print("\n".join(json.loads(sys.argv[1])))' "$cmd_json") || fail "CMD is not an exec-form JSON array"
-  echo "$cmd_args" | grep -qx -- '--bind' && echo "$cmd_args" | grep -A1 -x -- '--bind' | grep -qx '0.0.0.0' || fail "CMD must bind 0.0.0.0"
+  [ "$(grep -A1 -x -- '--bind' <<<"$cmd_args" | tail -n1)" = 0.0.0.0 ] || fail "CMD must bind 0.0.0.0"
   # The build context is the repository: host build output must not leak into the image.
   for d in build web/node_modules; do
     grep -qx "$d" docker/Dockerfile.dockerignore || fail "docker/Dockerfile.dockerignore does not exclude $d"
