@@ -542,6 +542,9 @@ int cl_edge_set_demand(struct cl_link *l, const uint8_t bits[CL_KEY_BYTES]); /* 
 /* The same with stream and wish (cl_demand_bits): subscribes to b->keys; a
  * change of any bitmap is announced at the pump's next round (coalesced). */
 int cl_edge_set_demand_ex(struct cl_link *l, const struct cl_demand_bits *b);
+/* Ask the sim. CL_OK: done(ctx, ...) runs exactly once, in cl_link_dispatch
+ * (a reply, no responders, not connected, or the deadline). Anything else:
+ * done never runs and the caller keeps ctx. */
 int cl_edge_request(struct cl_link *l, enum cl_kind kind, const char *by, const char *body, size_t len,
                     cl_reply_fn done, void *ctx);
 

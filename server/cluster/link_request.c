@@ -98,9 +98,11 @@ int cl_edge_request(struct cl_link *l, enum cl_kind kind, const char *by, const 
     int rc = link_push_envelope(l, l->subj[sk], reply, kind, l->name, by, body, len);
     if (rc != CL_OK) {
         pthread_mutex_lock(&l->out_lock);
-        pending_take(l, id);
+        struct pending *mine = pending_take(l, id);
         pthread_mutex_unlock(&l->out_lock);
-        free(p);
+        if (!mine) /* the time-out sweep took it first and has answered done: one answer, one free */
+            return CL_OK;
+        free(mine);
     }
     return rc;
 }
