@@ -21,7 +21,7 @@
 static pthread_mutex_t planner_lock = PTHREAD_MUTEX_INITIALIZER;
 
 /* Per axis: the 4 taps and weights of each output coordinate (separable). */
-struct taps { int idx[4]; double w[4]; };
+struct taps { int idx[4]; double w[4]; float f[4]; /* w as floats */ };
 
 /* Plans and buffers for one (side, fine, m) geometry, kept across frames. */
 struct plan_set {
@@ -42,6 +42,7 @@ struct tap_surface {
     struct plan_set p[8];
     int np;
     double *acc;             /* m x m sums, kept from call to call */
+    float *acct;             /* m x m sums of the spectral cascades, transposed ([i*m + j]) */
     struct taps *tx, *tz;    /* m each */
     int cap;                 /* the m they hold */
 };
@@ -75,6 +76,7 @@ void tap_surface_free(struct tap_surface *s)
     if (!s) return;
     for (int i = 0; i < s->np; i++) free_set(&s->p[i]);
     free(s->acc);
+    free(s->acct);
     free(s->tx);
     free(s->tz);
     free(s);
@@ -138,10 +140,12 @@ static void axis_taps(struct taps *t, int m, double o, double size, double perio
         double fr = u - f;
         if (cubic) {
             catmull_rom(fr, t[i].w);
-            for (int k = 0; k < 4; k++) t[i].idx[k] = wrap(i0 + k - 1, gside);
         } else {
             t[i].w[0] = 0; t[i].w[1] = 1 - fr; t[i].w[2] = fr; t[i].w[3] = 0;
-            for (int k = 0; k < 4; k++) t[i].idx[k] = wrap(i0 + k - 1, gside);
+        }
+        for (int k = 0; k < 4; k++) {
+            t[i].idx[k] = wrap(i0 + k - 1, gside);
+            t[i].f[k] = (float)t[i].w[k];
         }
     }
 }
@@ -173,10 +177,11 @@ static void add_taps(double *acc, int m, const float *grid, int side, const stru
         }
 }
 
-/* acc += the band-limited signal of one cascade's grid at the output points,
- * through a grid `up` times finer: rows first, then columns. */
+/* acct += the band-limited signal of one cascade's grid at the output points
+ * (transposed: [i*m + j] is point (i, j)), through a grid `up` times finer:
+ * rows first, then columns. */
 static int add_spectral(struct tap_surface *s, const struct tap_cascade_grid *g, int up, int m, double x0, double z0,
-                        double size, struct taps *tx, struct taps *tz, double *acc)
+                        double size, struct taps *tx, struct taps *tz, float *acct)
 {
     int side = g->side, fine = side * up, h = side / 2, sc = side / 2 + 1, fc = fine / 2 + 1;
     struct plan_set *p = set_for(s, side, fine, m);
@@ -201,8 +206,8 @@ static int add_spectral(struct tap_surface *s, const struct tap_cascade_grid *g,
         const float *row = p->xfine + (size_t)r * fine;
         for (int i = 0; i < m; i++) {
             const struct taps *t = &tx[i];
-            p->a[(size_t)i * side + r] = (float)(t->w[0] * row[t->idx[0]] + t->w[1] * row[t->idx[1]] +
-                                                 t->w[2] * row[t->idx[2]] + t->w[3] * row[t->idx[3]]);
+            p->a[(size_t)i * side + r] =
+                t->f[0] * row[t->idx[0]] + t->f[1] * row[t->idx[1]] + t->f[2] * row[t->idx[2]] + t->f[3] * row[t->idx[3]];
         }
     }
     fftwf_execute(p->zf);
@@ -220,10 +225,10 @@ static int add_spectral(struct tap_surface *s, const struct tap_cascade_grid *g,
     axis_taps(tz, m, z0, size, g->period, fine, 1);
     for (int i = 0; i < m; i++) {
         const float *col = p->zfine + (size_t)i * fine;
+        float *o = acct + (size_t)i * m;
         for (int j = 0; j < m; j++) {
             const struct taps *t = &tz[j];
-            acc[(size_t)j * m + i] += t->w[0] * col[t->idx[0]] + t->w[1] * col[t->idx[1]] + t->w[2] * col[t->idx[2]] +
-                                      t->w[3] * col[t->idx[3]];
+            o[j] += t->f[0] * col[t->idx[0]] + t->f[1] * col[t->idx[1]] + t->f[2] * col[t->idx[2]] + t->f[3] * col[t->idx[3]];
         }
     }
     return 0;
@@ -234,16 +239,19 @@ int tap_surface_grid(struct tap_surface *s, const struct tap_cascade_grid *g, in
 {
     if (m > s->cap) {
         free(s->acc);
+        free(s->acct);
         free(s->tx);
         free(s->tz);
         s->acc = malloc((size_t)m * m * sizeof *s->acc);
+        s->acct = malloc((size_t)m * m * sizeof *s->acct);
         s->tx = malloc((size_t)m * sizeof *s->tx);
         s->tz = malloc((size_t)m * sizeof *s->tz);
-        s->cap = s->acc && s->tx && s->tz ? m : 0;
+        s->cap = s->acc && s->acct && s->tx && s->tz ? m : 0;
         if (!s->cap) return -1;
     }
     double *acc = s->acc;
     struct taps *tx = s->tx, *tz = s->tz;
+    int spectral = 0;
     memset(acc, 0, (size_t)m * m * sizeof *acc);
     for (int c = 0; c < ncasc; c++) {
         const float *grid = g[c].data;
@@ -258,9 +266,20 @@ int tap_surface_grid(struct tap_surface *s, const struct tap_cascade_grid *g, in
         } else {
             int up = TAP_SURFACE_UPSAMPLE;
             while (up > 1 && side * up > TAP_SURFACE_MAX_FINE) up /= 2;
-            if (add_spectral(s, &g[c], up, m, x0, z0, size, tx, tz, acc) != 0) return -1;
+            if (!spectral) memset(s->acct, 0, (size_t)m * m * sizeof *s->acct);
+            if (add_spectral(s, &g[c], up, m, x0, z0, size, tx, tz, s->acct) != 0) return -1;
+            spectral = 1;
         }
     }
-    for (size_t k = 0; k < (size_t)m * m; k++) out[k] = (float)acc[k];
+    if (!spectral) {
+        for (size_t k = 0; k < (size_t)m * m; k++) out[k] = (float)acc[k];
+        return 0;
+    }
+    /* out = acc + acct transposed, in 32 x 32 blocks (both stay in the cache) */
+    for (int j0 = 0; j0 < m; j0 += 32)
+        for (int i0 = 0; i0 < m; i0 += 32)
+            for (int j = j0; j < j0 + 32 && j < m; j++)
+                for (int i = i0; i < i0 + 32 && i < m; i++)
+                    out[(size_t)j * m + i] = (float)(acc[(size_t)j * m + i] + s->acct[(size_t)i * m + j]);
     return 0;
 }
