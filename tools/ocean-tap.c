@@ -18,6 +18,7 @@
 #include <pthread.h>
 #include <getopt.h>
 #include <libwebsockets.h>
+#include <malloc.h>
 #include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -1259,6 +1260,10 @@ int main(int argc, char **argv)
     struct opts o;
     int r = parse_args(argc, argv, &o);
     if (r >= 0) return r;
+    /* A frame's copies, sums and images are megabytes, freed and made again
+     * every frame: from the heap, not each a fresh mapping the kernel zeroes. */
+    mallopt(M_MMAP_THRESHOLD, 32 << 20);
+    mallopt(M_TRIM_THRESHOLD, 64 << 20);
     struct session s = {.o = &o, .degraded_lod = -1};
     pthread_mutex_init(&s.wr.mu, NULL);
     pthread_cond_init(&s.wr.cv_put, NULL);
