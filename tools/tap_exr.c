@@ -40,7 +40,7 @@
 
 static int exr_fail(exr_result_t rv, const char *what, const char *path, char *err, size_t errlen)
 {
-    snprintf(err, errlen, "%s: %s: %s", path, what, exr_get_default_error_message(rv));
+    snprintf(err, errlen, "%.400s: %s: %s", path, what, exr_get_default_error_message(rv)); /* err: 512 bytes */
     return -1;
 }
 
@@ -236,28 +236,6 @@ out:
     if (r == 0 && rv != EXR_ERR_SUCCESS)
         r = exr_fail(rv, "finish", path, err, errlen);
     free(buf);
-    return r;
-}
-
-int tap_exr_write(const char *path, int side, const float *const rgba[4], const char *const *attrs, char *err,
-                  size_t errlen)
-{
-    size_t count = (size_t)side * side;
-    uint16_t *h = malloc(4 * count * sizeof *h);
-    struct libdeflate_compressor *z = libdeflate_alloc_compressor(TAP_EXR_ZIP_LEVEL);
-    int r = -1;
-    if (!h || !z) {
-        snprintf(err, errlen, "out of memory");
-    } else {
-        const uint16_t *planes[4];
-        for (int c = 0; c < 4; c++) {
-            planes[c] = rgba[c] ? h + (size_t)c * count : NULL;
-            if (rgba[c]) half_plane(h + (size_t)c * count, rgba[c], side);
-        }
-        r = write_halves(path, side, planes, attrs, z, err, errlen);
-    }
-    libdeflate_free_compressor(z);
-    free(h);
     return r;
 }
 

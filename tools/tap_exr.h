@@ -32,10 +32,4 @@ struct tap_exr_fields {
 int tap_exr_bake(const char *dir, int frame, int side, const struct tap_exr_fields *f, const struct tap_meta *m,
                  int cascades, char *err, size_t errlen);
 
-/* One RGBA half-float image (rgba[c] = side*side floats, row-major, NULL =
- * constant 1); rows are written last first. attrs: NULL-terminated
- * name/value pairs of string attributes. Returns 0 or -1 with err. */
-int tap_exr_write(const char *path, int side, const float *const rgba[4], const char *const *attrs, char *err,
-                  size_t errlen);
-
 #endif
