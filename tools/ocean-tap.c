@@ -18,6 +18,7 @@
 #include <pthread.h>
 #include <getopt.h>
 #include <libwebsockets.h>
+#include <malloc.h>
 #include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -57,6 +58,7 @@ enum exit_code {
 #define WRITER_QUEUE 4                      /* complete frames waiting for the file writer, at most */
 #define WRITER_BYTES ((size_t)256 << 20)    /* ... and their copies' bytes, at most (one frame always) */
 #define MAX_POINTS 256 /* of --query / --probe (the server caps probes lower) */
+#define RX_CHUNK (1 << 16) /* bytes of a message lws hands over at a time, and of one socket read */
 
 static void usage(FILE *to)
 {
@@ -391,6 +393,7 @@ struct session {
         char err[600];
         struct tap_surface *surface; /* the writer's own: */
         float *sum_buf;               /* --sum: fields on the sum grid */
+        size_t sum_bytes;             /* ... its size */
     } wr;
     int csv_header_done;
     struct stats st;
@@ -952,10 +955,14 @@ static int sum_field(struct session *s, const struct job *j, const struct sum_gr
     return 0;
 }
 
+/* Room for count fields on the m x m sum grid, kept from frame to frame. */
 static float *sum_buffers(struct session *s, int m, int count)
 {
+    size_t bytes = (size_t)count * m * m * sizeof(float);
+    if (bytes <= s->wr.sum_bytes) return s->wr.sum_buf;
     free(s->wr.sum_buf);
-    s->wr.sum_buf = malloc((size_t)count * m * m * sizeof(float));
+    s->wr.sum_buf = malloc(bytes);
+    s->wr.sum_bytes = s->wr.sum_buf ? bytes : 0;
     if (!s->wr.sum_buf) wfail(s, EXIT_OUTPUT, "out of memory for the %dx%d sum", m, m);
     return s->wr.sum_buf;
 }
@@ -1253,6 +1260,10 @@ int main(int argc, char **argv)
     struct opts o;
     int r = parse_args(argc, argv, &o);
     if (r >= 0) return r;
+    /* A frame's copies, sums and images are megabytes, freed and made again
+     * every frame: from the heap, not each a fresh mapping the kernel zeroes. */
+    mallopt(M_MMAP_THRESHOLD, 32 << 20);
+    mallopt(M_TRIM_THRESHOLD, 64 << 20);
     struct session s = {.o = &o, .degraded_lod = -1};
     pthread_mutex_init(&s.wr.mu, NULL);
     pthread_cond_init(&s.wr.cv_put, NULL);
@@ -1272,10 +1283,12 @@ int main(int argc, char **argv)
 
     lws_set_log_level(o.verbose ? LLL_ERR | LLL_WARN | LLL_NOTICE : LLL_ERR, NULL);
     static const struct lws_protocols protocols[] = {
-        {OC_SUBPROTOCOL, callback, 0, 1 << 16, 0, NULL, 0}, {NULL, NULL, 0, 0, 0, NULL, 0}};
+        {OC_SUBPROTOCOL, callback, 0, RX_CHUNK, 0, NULL, 0}, {NULL, NULL, 0, 0, 0, NULL, 0}};
+    /* pt_serv_buf_size: what one read of the socket takes. lws's default, 4 KB,
+     * costs a poll and a read per 4 KB of a bake's megabytes a frame. */
     struct lws_context_creation_info info = {
         .port = CONTEXT_PORT_NO_LISTEN, .protocols = protocols, .gid = (gid_t)-1, .uid = (uid_t)-1,
-        .options = LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT, .user = &s,
+        .options = LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT, .user = &s, .pt_serv_buf_size = RX_CHUNK,
     };
     struct lws_context *ctx = lws_create_context(&info);
     if (!ctx) {

@@ -1,7 +1,7 @@
 /* tap_exr.h — ocean-tap's OpenEXR bakes, in the layout Blender's ocean
  * modifier bakes and reads back (see docs/operations.md, "Baking for Blender").
  *
- * Per frame, three files in the output directory, numbered 1, 2, 3, ... in
+ * Per frame, four files in the output directory, numbered 1, 2, 3, ... in
  * the order written (Blender wants consecutive frame numbers):
  *   disp_NNNN.exr    R = Dx, G = height, B = Dz (m, y up), A = 1
  *   normal_NNNN.exr  R G B = unit normal (-slope_x, 1, -slope_z)/|.|, A = 1
@@ -26,15 +26,10 @@ struct tap_exr_fields {
     const float *height, *dx, *dz, *slope_x, *slope_z, *jacobian;
 };
 
-/* Write the three files and the JSON of Blender frame `frame` into dir.
+/* Write the four files and the JSON of Blender frame `frame` into dir (two
+ * threads, two files each).
  * Returns 0, or -1 with a message in err. */
 int tap_exr_bake(const char *dir, int frame, int side, const struct tap_exr_fields *f, const struct tap_meta *m,
                  int cascades, char *err, size_t errlen);
-
-/* One RGBA half-float image (rgba[c] = side*side floats, row-major, NULL =
- * constant 1); rows are written last first. attrs: NULL-terminated
- * name/value pairs of string attributes. Returns 0 or -1 with err. */
-int tap_exr_write(const char *path, int side, const float *const rgba[4], const char *const *attrs, char *err,
-                  size_t errlen);
 
 #endif

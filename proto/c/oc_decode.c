@@ -298,7 +298,11 @@ static int decode_payload(struct oc_decoder *d, const struct oc_frame_header *fh
     if (rc) return rc;
     if (th->codec == OC_CODEC_RAW_F32) {
         if (th->payload_len != count * 4) return OC_E_CORRUPT;
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+        memcpy(d->samples, p, count * 4); /* little-endian float32: the wire's layout */
+#else
         for (size_t k = 0; k < count; k++) d->samples[k] = oc_get_f32(p + 4 * k);
+#endif
         return OC_OK;
     }
     int refs_used[HIST_SLOTS] = { 0 };
