@@ -151,6 +151,16 @@ static int prepare_ocean(struct worker *w, const struct rjob *j, char *err, size
     return w->o ? 0 : -1;
 }
 
+/* A worker with no render waiting keeps nothing of the last one: the
+ * memory is given back when its clients are done (a next render of the same
+ * sea makes its simulation again, a few ms against its frames' time). */
+static void release_idle(struct worker *w)
+{
+    ocean_free(w->o);
+    w->o = NULL;
+    oc_buf_free(&w->buf);
+}
+
 /* Frame k of j into w->buf: step, then every asked tile of every layer. */
 static int render_frame(struct worker *w, const struct rjob *j, long k)
 {
@@ -307,6 +317,12 @@ static void *worker_main(void *arg)
         while (j && j->running)
             j = j->next;
         if (!j) {
+            if (w->o || w->buf.data) { /* idle: its simulation and frame buffer go back (tens of MB at N = 256) */
+                pthread_mutex_unlock(&r->lock);
+                release_idle(w);
+                pthread_mutex_lock(&r->lock);
+                continue;
+            }
             pthread_cond_wait(&r->cond, &r->lock);
             continue;
         }

@@ -1797,6 +1797,67 @@ def temporal_memory_returned(d, fig):
           % ((after[-1] - rss0) >> 10))
 
 
+@case(resolution=256, rss_slack_kb=8 * 1024)
+def render_abuse(d, fig):
+    """Exact-time renders (PROTOCOL.md §7.5) as an attacker would use them: 8
+    clients that never read each ask for 600 lossless frames of every field of
+    three cascades (megabytes a frame), more than the render budget admits, and
+    a second render while their first runs; then all vanish mid-render. The
+    live tick keeps its frames (the observer), the renders past the budget and
+    the second ones are `busy`, each client holds at most its 4-frame window,
+    and once they are gone nothing renders and the memory is given back."""
+    rss0 = d.rss_kb()
+    every = ALL_FIELDS[:6]
+    finer = [f for f in ALL_FIELDS[:5]]   # the finer cascades: no Jacobian
+    req = {"type": "render", "start": 50, "fps": 24, "frames": 600, "fields": every, "lod": 0, "bound": 0,
+           "cascades": [{"fields": finer, "lod": 0, "bound": 0}, {"fields": finer, "lod": 0, "bound": 0}]}
+    socks = []
+    replies = {}
+    for k in range(8):
+        s, _ = raw_ws(d.port, rcvbuf=4096)
+        r = Reader(s)
+        send_quiet(s, ws_frame(OP_TEXT, json.dumps(dict(req, id=k))))
+        socks.append((s, r))
+    for k, (s, r) in enumerate(socks):
+        r.until(lambda r, k=k: any(t.get("id") == k for t in r.texts), 5)
+    for k, (s, r) in enumerate(socks):   # a second render while the first runs (or was refused)
+        send_quiet(s, ws_frame(OP_TEXT, json.dumps(dict(req, id=100 + k, frames=2))))
+    t_end = time.time() + 3
+    peak = rss0
+    while time.time() < t_end:
+        for s, r in socks:
+            r.pump(0)     # reads what fits in 4 KiB: the rest waits in the daemon's window
+        peak = max(peak, d.rss_kb())
+        time.sleep(0.05)
+    for s, r in socks:
+        r.until(lambda r: any(t.get("id", -1) >= 100 for t in r.texts), 3)
+        for t in r.texts:
+            if t.get("type") in ("error", "rendering", "rendered"):
+                key = t.get("code") or t.get("type")
+                replies[key] = replies.get(key, 0) + 1
+    accepted = replies.get("rendering", 0)
+    frames_rendered = d.metric("oceand_render_frames_total")
+    for s, _ in socks:
+        rst_close(s)
+    left = wait_until(lambda: d.metric("oceand_clients") == 1, 10)
+    time.sleep(0.5)       # a frame a worker was making when its client went is finished
+    f0 = d.metric("oceand_render_frames_total")
+    time.sleep(1.0)
+    f1 = d.metric("oceand_render_frames_total")
+    after = d.rss_kb()
+    fig.update(clients=8, replies=replies, accepted=accepted, frames_rendered_while_held=frames_rendered,
+               rendered_after_leaving=f1 - f0, rss_start_kb=rss0, rss_peak_kb=peak, rss_after_kb=after)
+    log("    8 renders of 600 lossless frames x 16 layers, never read: %r; %d frames rendered while held; "
+        "RSS %d -> peak %d -> %d kB" % (replies, frames_rendered, rss0, peak, after))
+    check(left, "the render clients are still counted after they went")
+    check(accepted >= 1 and replies.get("busy", 0) >= 8, "want some renders accepted and the rest, and every "
+          "second render, busy: %r" % replies)
+    check(frames_rendered <= 8 * accepted + 8, "%d frames rendered for %d clients that read nothing: the render "
+          "does not wait at its window" % (frames_rendered, accepted))
+    check(f1 - f0 == 0, "%d frames rendered after every client left" % (f1 - f0))
+    check(set(replies) <= {"rendering", "busy"}, "unexpected replies %r" % replies)
+
+
 @case(resolution=64, changes_params=True, rss_slack_kb=16 * 1024)
 def resolution_flip_busy(d, fig):
     """One controller flips N between 64 and 512 as fast as its rate limit
