@@ -4,12 +4,16 @@
 # kernel has no netem), oceand in one, viewers in the other. Needs root; a
 # run without it says so (bench) or runs the loopback part only (test).
 #
-#   make bench-links    one JSON object per link: fps, share of ticks, latency
-#                       p50/p95, kB/frame, codec shares, rung, set round trip
-#                       (LINKS="10M:10000:50:0 ..." to choose; see bench/links/run.sh)
+#   make bench-links    one JSON object per link and role: fps, share of ticks,
+#                       latency p50/p95, kB/frame, codec shares, rung, set round
+#                       trip; each link with `--role all`, then through an edge
+#                       (`--role edge` fed by `--role sim` over nats-server;
+#                       rows NAME-edge) (LINKS="10M:10000:50:0 10M-edge:10000:50:0:edge"
+#                       to choose; see bench/links/run.sh)
 #   make test-links     behaviour, never timings: the ladder steps down on a slow
-#                       link, a stall recovers to temporal tiles that decode,
-#                       replies overtake frames, adapt:false pins (~1.5 min)
+#                       link (and through an edge), a stall recovers to temporal
+#                       tiles that decode, replies overtake frames, adapt:false
+#                       pins (~1.5 min)
 
 SHAPER := $(BUILD)/shaper
 LINKS ?=

@@ -5,15 +5,17 @@ what it saw over the measured window:
 
   fps, ticks (share of the ticks in the window it received), latency p50/p95
   (arrival minus the frame's server_time_us: both clocks are this machine's),
-  kB/frame, codec shares of its tiles, the rung (`link` messages), and the
-  round trip of a `set` that changes nothing (sent every second).
+  kB/frame, codec shares of its tiles, the rung (`link` messages), the
+  round trip of a `set` that changes nothing (sent every second), the role
+  of the daemon it reads (--role, as run.sh started it) and the load average.
 
-    viewer.py URL --seconds 20 --warmup 5 [--pinned] [--stall-log FILE]
+    viewer.py URL --seconds 20 --warmup 5 [--pinned] [--role edge]
     viewer.py URL --timeline ...   also a per-second list (fps, temporal share, rung)
 """
 import argparse
 import asyncio
 import json
+import os
 import struct
 import sys
 import time
@@ -86,7 +88,7 @@ async def run(a):
                 sets.append((now - pending.pop(j["id"])) * 1000)
     t0 = t_start + a.warmup
     win = [f for f in frames if f[0] >= t0]
-    out = {"link": a.name}
+    out = {"link": a.name, "role": a.role}
     if len(win) >= 2:
         span = win[-1][0] - win[0][0]
         seqs = win[-1][1] - win[0][1] + 1
@@ -111,6 +113,7 @@ async def run(a):
         out["link_kbps"] = links[-1][2].get("link_kbps")
     out["set_rtt_p50_ms"] = round(pct(sets, 50), 1) if sets else None
     out["set_rtt_max_ms"] = round(max(sets), 1) if sets else None
+    out["loadavg_1m"] = round(os.getloadavg()[0], 2)
     if a.timeline:
         tl = []
         for sec in range(int(a.warmup + a.seconds)):
@@ -131,6 +134,7 @@ def main():
     p = argparse.ArgumentParser()
     p.add_argument("url")
     p.add_argument("--name", default="")
+    p.add_argument("--role", default="all", help="what serves it (all, edge): written in the row")
     p.add_argument("--seconds", type=float, default=20)
     p.add_argument("--warmup", type=float, default=5)
     p.add_argument("--pinned", action="store_true")

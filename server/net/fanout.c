@@ -128,8 +128,10 @@ static void on_publish(struct net *n, const struct frame *f)
         bool catching = catching_up(n, s, f->hdr.seq);
         if (n->seen_any && s->last_seq && s->last_seq < f->hdr.seq && !catching)
             count_holes(n, s, f->index - 1);
-        /* Behind: still sending a frame older than the one before f. */
-        int lag = s->cur && f->hdr.seq > s->cur->hdr.seq + 1 ? (int)(f->hdr.seq - s->cur->hdr.seq - 1) : 0;
+        /* Behind: still sending a frame older than the one before f, or
+         * holding the next one while the link takes what is in flight. */
+        uint64_t at = s->cur ? s->cur->hdr.seq : s->lad.held ? s->last_seq + 1 : 0;
+        int lag = at && f->hdr.seq > at + 1 ? (int)(f->hdr.seq - at - 1) : 0;
         ladder_tick(n, s, f, 0, lag > 1000 ? 1000 : lag);
         if (s->eff.temporal && !s->key_wanted && s->hist_seq + 1 < f->hdr.seq && !catching)
             fanout_want_keyframes(n, s, true);
@@ -344,6 +346,11 @@ int fanout_write(struct net *n, struct session *s)
         /* max_rate: wait until a period has (almost) passed; half a tick of slack absorbs jitter. */
         if (s->eff.max_rate < n->dc.tick_rate && now - s->last_frame_t < 1.0 / s->eff.max_rate - 0.5 / n->dc.tick_rate)
             return 0;
+        int hold = ladder_hold_frame(s);
+        if (hold > 0) {
+            lws_set_timer_usecs(s->wsi, hold); /* LWS_CALLBACK_TIMER asks for the writable callback again */
+            return 0;
+        }
         struct frame *f = n->latest;
         struct frame *next = catching_up(n, s, f->hdr.seq) ? ring_find(n, s->hist_seq + 1) : NULL;
         if (next && next != f && begin_frame(n, s, next)) {

@@ -1,16 +1,19 @@
 /* ladder.c — a stream that fits each client's link (PROTOCOL.md §7.2 `link`).
  *
  * Per client: an estimate of its link (TCP_INFO: delivery rate, RTT, bytes
- * not sent yet), a short send queue (TCP_NOTSENT_LOWAT about one tick of
- * the link, so a reply waits behind at most the frame in progress), and a
- * quality ladder: rungs of (LOD, finer cascades, bound, rate) from the
+ * not sent yet, bytes in flight), a short send queue (TCP_NOTSENT_LOWAT about
+ * one tick of the link, so a reply waits behind at most the frame in
+ * progress), a bound on what is in flight and on TCP's pacing once the link
+ * is measured (ladder_hold_frame: a backlog waits here, not at the
+ * bottleneck), and a quality ladder: rungs of (LOD, finer cascades, bound, rate) from the
  * subscription as asked down to a floor. The rung in force makes s->eff,
  * the subscription served and counted in the sim's demand; clients on the
  * same rung share the same layers, so encode work stays shared.
  *
  * Signals, per window of half a second: ticks the client lost (it was
  * still sending an older frame) and how far it runs behind the newest frame
- * (temporal clients keep their chain up to LAG_MAX ticks behind, fanout.c).
+ * (temporal clients keep their chain up to LAG_MAX ticks behind, fanout.c):
+ * the most, and the least (behind at every tick: it never caught up).
  * Congested: step down at once, further when the estimate says so. Calm:
  * probe one rung up after `hold` seconds (doubled by each probe that failed,
  * back to the minimum after a long calm), sooner when the estimate says the
@@ -19,6 +22,7 @@
 
 #include "clock.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -34,10 +38,14 @@
 #define HOLD_RESET_S 20.0     /* calm this long: a failed probe is forgotten */
 #define PROBE_FAIL_S 3.0      /* a step down this soon after a step up: the probe failed */
 #define LOST_MAX_PCT 15        /* ticks lost in a window beyond which it is congested */
+#define BEHIND_S 0.1          /* behind the newest frame by this much at every tick of two windows: congested */
 #define FIT 0.8               /* a rung fits when it needs at most this share of the link */
 #define LOWAT_MIN 4096u
 #define LOWAT_MAX ((uint32_t)CHUNK_SIZE)
 #define LOWAT_START (16u * 1024)
+#define CAP_FRESH_S 10.0      /* a full-pipe sample this recent is the link */
+#define PACE_GAIN 1.25        /* TCP's pacing rate at most this times the link measured */
+#define INFLIGHT_GAIN 1.5     /* bytes in flight at most this times the link measured x the path's RTT */
 #define YOUNG_S 2.0           /* TCP's start-up: its rate samples are not the link's yet */
 
 /* The rungs, finest first. A rung that serves the same as the one before it
@@ -197,6 +205,7 @@ void ladder_open(struct net *n, struct session *s)
     l->bits_t = 1.5; /* measured at 1 cm, N = 256 (docs/codec.md); replaced by what this client's frames cost */
     l->bits_i = 4.0;
     l->win_t = l->open_t = mono_now();
+    l->win_lag_min = INT_MAX;
     l->changed_t = l->win_t; /* its first keyframes settle like a change's */
     l->lowat = LOWAT_START;
     tcp_probe_lowat(lws_get_socket_fd(s->wsi), l->lowat);
@@ -230,7 +239,9 @@ void ladder_tick(struct net *n, struct session *s, const struct frame *f, int lo
     struct ladder *l = &s->lad;
     if (f)
         l->win_ticks++;
-    if (f && s->cur) {
+    if (f && l->held) {
+        l->win_full++; /* a frame waits for the link to take what is in flight */
+    } else if (f && s->cur) {
         /* Busy with an older frame: is the socket full (the link or the
          * reader is the bottleneck) or waiting for this thread (the daemon
          * is late: a lower rung would not help)? */
@@ -242,6 +253,8 @@ void ladder_tick(struct net *n, struct session *s, const struct frame *f, int lo
     l->win_skips += lost;
     if (lag > l->win_lag)
         l->win_lag = lag;
+    if (f && lag < l->win_lag_min)
+        l->win_lag_min = lag;
 }
 
 void ladder_frame_done(struct net *n, struct session *s, size_t bytes)
@@ -264,6 +277,35 @@ size_t ladder_chunk(const struct session *s)
     return s->lad.lowat < LOWAT_MIN ? LOWAT_MIN : s->lad.lowat > CHUNK_SIZE ? CHUNK_SIZE : s->lad.lowat;
 }
 
+/* A new frame waits while the bytes in flight and unsent pass about one and
+ * a half times what the link measured holds over the path's RTT: TCP would
+ * take them (BBR's window is up to 3 times that while it believes it is
+ * starting up) and queue them at the bottleneck, where no reply can overtake
+ * them and a drop-tail queue loses them. Held here, a backlog is the
+ * ladder's lag (a lower rung gets the room back) and a reply goes first.
+ * Returns microseconds to wait (what the excess takes at the link's rate),
+ * 0 to go on; no limit without a recent measurement of the link. */
+int ladder_hold_frame(struct session *s)
+{
+    struct ladder *l = &s->lad;
+    double now = mono_now();
+    l->held = false;
+    if (l->cap_bps <= 0 || now - l->cap_t >= CAP_FRESH_S || l->min_rtt_ms <= 0)
+        return 0;
+    struct tcp_probe p;
+    tcp_probe_read(lws_get_socket_fd(s->wsi), &p);
+    if (!p.ok)
+        return 0;
+    double budget = INFLIGHT_GAIN * l->cap_bps * l->min_rtt_ms / 1000;
+    double floor = 4.0 * (double)ladder_chunk(s);
+    double over = (double)p.inflight + p.notsent - (budget > floor ? budget : floor);
+    if (over <= 0)
+        return 0;
+    double us = over / l->cap_bps * 1e6;
+    l->held = true;
+    return us < 1000 ? 1000 : us > 20000 ? 20000 : (int)us;
+}
+
 static void estimate(struct net *n, struct session *s, double now)
 {
     struct ladder *l = &s->lad;
@@ -272,6 +314,8 @@ static void estimate(struct net *n, struct session *s, double now)
     if (!p.ok)
         return;
     l->rtt_ms = l->rtt_ms > 0 ? l->rtt_ms + 0.25 * (p.rtt_ms - l->rtt_ms) : p.rtt_ms;
+    if (p.min_rtt_ms > 0)
+        l->min_rtt_ms = p.min_rtt_ms;
     l->notsent = p.notsent;
     /* An app-limited sample is a lower bound of the link (we sent less than
      * it takes); a sample of a full pipe is the link. Keep the larger of the
@@ -283,6 +327,22 @@ static void estimate(struct net *n, struct session *s, double now)
     if (p.delivery_bps > 0 && (p.delivery_bps > l->rate_bps || (!p.app_limited && now - l->rate_t > 2.0))) {
         l->rate_bps = p.delivery_bps;
         l->rate_t = now;
+    }
+    /* ...but an app-limited sample can read above the link (ACKs bunched
+     * by a repaired loss: 1.46 Mbit/s on a lossy 1 Mbit/s link), and a
+     * recent full-pipe one is the link: no more than that. */
+    bool measured = l->cap_bps > 0 && now - l->cap_t < CAP_FRESH_S;
+    if (measured && l->rate_bps > l->cap_bps)
+        l->rate_bps = l->cap_bps;
+    /* TCP paces at most a little above the link measured: BBR that never
+     * leaves its start-up (the stream is app-limited most of the time) sends
+     * a backlog at 2.9 times its estimate, overflows the bottleneck's queue
+     * and loses packets by the dozen, and every loss holds what follows it
+     * for a round trip. Lifted when no measurement is recent. */
+    double pace = measured ? PACE_GAIN * l->cap_bps : 0;
+    if ((pace == 0) != (l->pace_bps == 0) || pace > l->pace_bps * 1.1 || pace < l->pace_bps * 0.9) {
+        l->pace_bps = pace;
+        tcp_probe_pacing(lws_get_socket_fd(s->wsi), pace);
     }
     /* About one tick of the link may wait unsent: a frame that fits the
      * link leaves in its tick, and a reply waits behind no more. */
@@ -303,8 +363,10 @@ void ladder_police(struct net *n, struct session *s, double now)
     if (now - l->win_t < WINDOW_S)
         return;
     int ticks = l->win_ticks, skips = l->win_skips, lag = l->win_lag, full = l->win_full;
+    int lag_min = l->win_lag_min == INT_MAX ? 0 : l->win_lag_min;
     l->win_t = now;
     l->win_ticks = l->win_skips = l->win_lag = l->win_full = 0;
+    l->win_lag_min = INT_MAX;
     if (l->nrungs <= 1 || ticks < 3)
         return;
     /* Nothing taken for a whole window: a stall (a dead radio link, a page
@@ -312,13 +374,23 @@ void ladder_police(struct net *n, struct session *s, double now)
      * would cost the way back up: skip ticks and wait. */
     if (s->cur && now - s->progress_t > WINDOW_S) {
         l->calm = 0;
+        l->prev_lag_min = 0; /* the way out of it is judged on its own windows */
         return;
     }
-    /* Lost ticks, or running far behind and not catching up (a client
-     * working off its keyframes gets closer window after window). */
-    bool congested = full > 0 && (skips * 100 > ticks * LOST_MAX_PCT || (lag > LAG_MAX / 2 && l->prev_lag > LAG_MAX / 2 &&
-                                                         lag >= l->prev_lag));
+    /* Lost ticks; or running far behind and not catching up (a client
+     * working off its keyframes gets closer window after window); or behind
+     * at every tick for two windows: the stream leaves the link too little
+     * room to work off a delay (a lost packet holds TCP for a round trip),
+     * so the client keeps seeing the sea late. A lower rung is sent from the
+     * newest frame on and gets the room back. */
+    int behind = (int)(BEHIND_S * n->dc.tick_rate + 0.5);
+    if (behind < 2)
+        behind = 2;
+    bool late = lag_min >= behind && l->prev_lag_min >= behind;
+    bool congested = full > 0 && (skips * 100 > ticks * LOST_MAX_PCT || late ||
+                                  (lag > LAG_MAX / 2 && l->prev_lag > LAG_MAX / 2 && lag >= l->prev_lag));
     l->prev_lag = lag;
+    l->prev_lag_min = lag_min;
     bool settling = now - l->changed_t < SETTLE_S;
     if (congested && !settling && l->rung < l->nrungs - 1) {
         if (now - l->up_t < PROBE_FAIL_S)
@@ -331,8 +403,8 @@ void ladder_police(struct net *n, struct session *s, double now)
         while (r < l->nrungs - 1 && now - l->open_t > YOUNG_S && l->rate_bps > 0 &&
                need_bps(n, s, r) > FIT * l->rate_bps)
             r++;
-        snprintf(l->why, sizeof l->why, "congestion: %d of %d ticks lost, %d behind; link %.0f kbit/s",
-                 skips, ticks, lag, l->rate_bps * 8 / 1000);
+        snprintf(l->why, sizeof l->why, "congestion: %d of %d ticks lost, %d to %d behind; link %.0f kbit/s",
+                 skips, ticks, lag_min, lag, l->rate_bps * 8 / 1000);
         set_rung(n, s, r, now);
         return;
     }
@@ -347,8 +419,9 @@ void ladder_police(struct net *n, struct session *s, double now)
     double need = need_bps(n, s, l->rung - 1);
     bool fits = l->rate_bps > 0 && need <= FIT * l->rate_bps;
     /* A blind probe (the estimate is app-limited: we sent less than the
-     * link takes) unless a recent full-pipe sample says it cannot fit. */
-    bool hopeless = l->cap_bps > 0 && now - l->cap_t < 10.0 && need > l->cap_bps;
+     * link takes) unless a recent full-pipe sample says it cannot fit, with
+     * the room a rung needs to work off a delay. */
+    bool hopeless = l->cap_bps > 0 && now - l->cap_t < CAP_FRESH_S && need > FIT * l->cap_bps;
     if ((fits && calm_s >= 2.0) || (calm_s >= l->hold && !hopeless)) {
         snprintf(l->why, sizeof l->why, "probe: %.0f kbit/s for the rung above, link %.0f kbit/s%s", need * 8 / 1000,
                  l->rate_bps * 8 / 1000, fits ? "" : " (estimate app-limited)");

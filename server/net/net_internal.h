@@ -62,13 +62,18 @@ struct ladder {
     double win_t;                 /* start of the current evaluation window */
     int win_ticks, win_skips;     /* frames published / ticks this client lost, in the window */
     int win_lag;                  /* largest lag (ticks behind the newest frame) seen in the window */
+    int win_lag_min;              /* ...and the smallest: > 0 at every tick = it never caught up in the window */
     int win_full;                 /* ticks at which its socket held about a queue's worth unsent: the link (or
                                    * the reader) was the bottleneck, not this daemon being late */
     int calm;                     /* windows in a row without congestion */
     int prev_lag;                 /* win_lag of the window before */
+    int prev_lag_min;             /* win_lag_min of the window before */
     double rate_bps;              /* link estimate (bytes/s): TCP_INFO delivery rate, recent non-app-limited max */
     double rate_t;                /* when rate_bps was last raised by a sample */
     double cap_bps, cap_t;        /* the last sample of a full pipe (not app-limited): the link, measured */
+    double pace_bps;              /* SO_MAX_PACING_RATE in force (bytes/s), 0 = none */
+    double min_rtt_ms;            /* the kernel's minimum RTT: the path without queues */
+    bool held;                    /* the next frame waits for bytes in flight to leave (ladder_hold_frame) */
     double rtt_ms;                /* smoothed RTT */
     uint32_t notsent;             /* bytes written and not sent yet, last sample */
     uint32_t lowat;               /* TCP_NOTSENT_LOWAT in force */
@@ -291,11 +296,13 @@ void ladder_announce(struct net *n, struct session *s);      /* after `subscribe
 void ladder_tick(struct net *n, struct session *s, const struct frame *f, int lost, int lag); /* a frame was published */
 void ladder_frame_done(struct net *n, struct session *s, size_t bytes);
 void ladder_police(struct net *n, struct session *s, double now);  /* ~10 Hz: estimate, decide */
-size_t ladder_chunk(const struct session *s);                /* bytes to hand to one lws_write */
+size_t ladder_chunk(const struct session *s);                 /* bytes to hand to one lws_write */
+int ladder_hold_frame(struct session *s);                    /* µs to wait before starting a frame, 0 = now */
 /* tcp_probe.c: TCP_INFO without netinet/tcp.h's truncated struct */
-struct tcp_probe { double delivery_bps, rtt_ms; uint32_t notsent; bool app_limited, ok; };
+struct tcp_probe { double delivery_bps, rtt_ms, min_rtt_ms; uint32_t notsent, inflight; bool app_limited, ok; };
 void tcp_probe_read(int fd, struct tcp_probe *p);
 void tcp_probe_lowat(int fd, uint32_t bytes);
+void tcp_probe_pacing(int fd, double bytes_per_s); /* 0 = no limit */
 
 /* capacity.c: capacity in hello/params, `busy`, `degraded` (server/tick/capacity.h) */
 void net_capacity_add(struct net *n, cJSON *msg);            /* "capacity" member into msg */

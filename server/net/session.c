@@ -361,6 +361,10 @@ int cb_ws(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *i
         return on_receive(n, s, wsi, in, len);
     case LWS_CALLBACK_SERVER_WRITEABLE:
         return on_writable(n, s);
+    case LWS_CALLBACK_TIMER: /* a frame held for the link (ladder_hold_frame) */
+        if (s && s->wsi && !s->closing)
+            lws_callback_on_writable(wsi);
+        return 0;
     case LWS_CALLBACK_EVENT_WAIT_CANCELLED:
         on_sim_wakeup(n);
         return 0;

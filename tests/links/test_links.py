@@ -8,7 +8,8 @@ subscription (no step, tiles as asked); after a stall a viewer gets back to
 predicted tiles and every frame it received decodes in order (frame_check);
 a reply overtakes the frames queued for a saturated link (at most the frame
 in progress and what the short queue holds arrive before it). Without root
-(no namespaces) the emulated part says so and the loopback part runs.
+(no namespaces) the emulated part says so and the loopback part runs. One
+case runs through an edge (`--role edge`, a sim and nats-server beside it).
 
     /usr/bin/python3 tests/links/test_links.py --oceand build/oceand --shaper build/shaper \\
         --frame-check build/frame_check [-k NAME]
@@ -28,6 +29,8 @@ import traceback
 import urllib.request
 
 import websockets
+
+NATS_BIN = shutil.which("nats-server") or "/usr/sbin/nats-server"
 
 ARGS = None
 WEB_SUB = {"type": "subscribe", "id": "sub", "fields": ["height", "dx", "dz", "foam"], "field_lod": {"foam": 2},
@@ -75,8 +78,18 @@ class Lab:
     """oceand in namespace A behind the shaper; the clients run as this
     file's client mode in namespace B (client_in_b)."""
 
-    def __init__(self, kbit, rtt_ms, loss=0, extra=()):
+    def __init__(self, kbit, rtt_ms, loss=0, extra=(), role="all"):
         self.tmp = tempfile.mkdtemp(prefix="links-")
+        self.log = open(os.path.join(self.tmp, "oceand.log"), "wb")
+        self.procs, self.daemons = [], []   # started in this order, stopped in the other; the oceands
+        self.shaper = None
+        try:
+            self.setup(kbit, rtt_ms, loss, extra, role)
+        except BaseException:
+            self.close()
+            raise
+
+    def setup(self, kbit, rtt_ms, loss, extra, role):
         pid = os.getpid()
         self.a, self.b = "lnkta%d" % pid, "lnktb%d" % pid
         self.net = "10.202.%d" % (pid % 200 + 20)
@@ -92,37 +105,69 @@ class Lab:
         ip("-n", self.a, "link", "set", "lnk0", "up")
         ip("-n", self.b, "addr", "add", self.net + ".2", "peer", self.net + ".1", "dev", "lnk0")
         ip("-n", self.b, "link", "set", "lnk0", "up")
-        self.log = open(os.path.join(self.tmp, "oceand.log"), "wb")
-        self.proc = subprocess.Popen(["ip", "netns", "exec", self.a, ARGS.oceand, "--bind", self.net + ".1",
-                                      "--port", "8091", "--state-file", os.path.join(self.tmp, "state.json"),
-                                      "--web-root", os.path.join(self.tmp, "web"), "--resolution", "256",
-                                      "--plan-rigor", "0", "--wisdom-file", "none"] + list(extra),
-                                     stdout=self.log, stderr=self.log)
+        common = ["--web-root", os.path.join(self.tmp, "web"), "--resolution", "256", "--plan-rigor", "0",
+                  "--wisdom-file", "none"] + list(extra)
+        state = os.path.join(self.tmp, "state.json")
         self.url = "ws://%s.1:8091/" % self.net
+        if role == "all":
+            self.proc = self.start([ARGS.oceand, "--bind", self.net + ".1", "--port", "8091", "--state-file", state]
+                                   + common, daemon=True)
+            self.wait_health("http://%s.1:8091" % self.net, "True")
+            return
+        # an edge, fed by a sim over nats-server, all three in namespace A (the sim and NATS on its loopback)
+        nats = self.start([NATS_BIN, "-a", "127.0.0.1", "-p", "4222"])
+        deadline = time.time() + 10
+        while self.in_a(["bash", "-c", "exec 3<>/dev/tcp/127.0.0.1/4222"]).returncode != 0:
+            check(nats.poll() is None and time.time() < deadline, "nats-server did not listen")
+            time.sleep(0.1)
+        sim = self.start([ARGS.oceand, "--role", "sim", "--nats", "nats://127.0.0.1:4222", "--bind", "127.0.0.1",
+                          "--port", "8092", "--state-file", state] + common, daemon=True)
+        self.wait_health("http://127.0.0.1:8092", "True", sim)
+        self.proc = self.start([ARGS.oceand, "--role", "edge", "--nats", "nats://127.0.0.1:4222", "--bind",
+                                self.net + ".1", "--port", "8091", "--state-file", "none"] + common, daemon=True)
+        self.wait_health("http://%s.1:8091" % self.net, "j.get('cluster') == 'ok'")
+
+    def in_a(self, argv):
+        return subprocess.run(["ip", "netns", "exec", self.a] + argv, capture_output=True)
+
+    def start(self, argv, daemon=False):
+        p = subprocess.Popen(["ip", "netns", "exec", self.a] + argv, stdout=self.log, stderr=self.log)
+        self.procs.append(p)
+        if daemon:
+            self.daemons.append(p)
+        return p
+
+    def wait_health(self, base, cond, proc=None):
+        """Until base/healthz answers and cond (Python, on its JSON j) holds."""
+        proc = proc or self.proc
         deadline = time.time() + 30
-        while subprocess.run(["ip", "netns", "exec", self.a, "/usr/bin/python3", "-c",
-                              "import urllib.request;urllib.request.urlopen('http://%s.1:8091/healthz',timeout=1)"
-                              % self.net], capture_output=True).returncode != 0:
-            check(self.proc.poll() is None, "oceand exited at start")
-            check(time.time() < deadline, "oceand did not answer /healthz")
+        while self.in_a(["/usr/bin/python3", "-c", "import json,sys,urllib.request\n"
+                         "j=json.loads(urllib.request.urlopen('%s/healthz',timeout=1).read())\n"
+                         "sys.exit(0 if %s else 1)" % (base, cond)]).returncode != 0:
+            check(proc.poll() is None, "oceand exited at start")
+            check(time.time() < deadline, "oceand did not answer %s/healthz as expected" % base)
             time.sleep(0.2)
 
     def stall(self):
         self.shaper.send_signal(signal.SIGUSR1)  # toggles
 
     def close(self):
-        for p in (self.proc, self.shaper):
+        """Stop the daemons (and nats-server), last started first; returns the first non-zero
+        exit code of the oceands (0 when each exited 0) and their log."""
+        for p in self.procs[::-1] + ([self.shaper] if self.shaper else []):
             if p.poll() is None:
                 p.send_signal(signal.SIGTERM)
                 try:
                     p.wait(10)
                 except subprocess.TimeoutExpired:
                     p.kill()
-        rc = self.proc.returncode
+                    p.wait()
+        rc = next((p.returncode for p in self.daemons if p.returncode != 0), 0)
         self.log.close()
         log = open(os.path.join(self.tmp, "oceand.log"), errors="replace").read()
-        subprocess.run(["ip", "netns", "del", self.a], capture_output=True)
-        subprocess.run(["ip", "netns", "del", self.b], capture_output=True)
+        if getattr(self, "a", None):
+            subprocess.run(["ip", "netns", "del", self.a], capture_output=True)
+            subprocess.run(["ip", "netns", "del", self.b], capture_output=True)
         shutil.rmtree(self.tmp, ignore_errors=True)
         return rc, log
 
@@ -262,14 +307,10 @@ def lab_test(fn):
     return test(fn)
 
 
-@lab_test
-def test_slow_link_steps_down():
-    """1 Mbit/s, 100 ms: the web client's subscription does not fit; the server
-    steps down (`link`, rung > 0, a coarser subscription), the frames after it
-    carry the coarser tiles, and predicted tiles arrive on the lower rung."""
-    lab = Lab(1000, 100)
+def steps_down(role, seconds):
+    lab = Lab(1000, 100, role=role)
     try:
-        r = client_in_b(lab, ["--mode", "plain", "--seconds", "14"])
+        r = client_in_b(lab, ["--mode", "plain", "--seconds", str(seconds)])
     finally:
         rc, log = lab.close()
     check(rc == 0, "daemon exit %r: %s" % (rc, log[-2000:]))
@@ -287,6 +328,22 @@ def test_slow_link_steps_down():
     check(coarser, "rung %d serves as asked: %r" % (down[0]["rung"], sub))
     after = r["codec_seq"][down[-1]["at_frame"]:]
     check(any(p == n and n > 0 for _, _, p, n in after), "no all-predicted frame on the lower rung")
+
+
+@lab_test
+def test_slow_link_steps_down():
+    """1 Mbit/s, 100 ms: the web client's subscription does not fit; the server
+    steps down (`link`, rung > 0, a coarser subscription), the frames after it
+    carry the coarser tiles, and predicted tiles arrive on the lower rung."""
+    steps_down("all", 14)
+
+
+@lab_test
+def test_edge_slow_link_steps_down():
+    """The same through an edge (`--role edge`, fed by `--role sim` over
+    nats-server, all in the server's namespace): the edge's ladder steps down
+    and predicted tiles arrive on the lower rung."""
+    steps_down("edge", 12)
 
 
 @lab_test
