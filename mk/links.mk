@@ -25,7 +25,10 @@ $(SHAPER): bench/links/shaper.c
 	@mkdir -p $(dir $@)
 	$(CC) -O2 -g -std=c11 $(WARN) -o $@ $<
 
-.PHONY: bench-links test-links
+.PHONY: bench-links test-links screenshot-link
+# The web page through the 2 Mbit/s, 150 ms link, with its HUD (docs/gallery/link-2mbit.png).
+screenshot-link: $(BUILD)/oceand $(SHAPER) $(BUILD)/web/index.html
+	PAGE_SHOT=docs/gallery/link-2mbit.png WEB_ROOT=$(BUILD)/web bench/links/run.sh $(BUILD)/oceand $(SHAPER) 2M:2000:150:0
 bench-links: $(BUILD)/oceand $(SHAPER)
 	bench/links/run.sh $(BUILD)/oceand $(SHAPER) $(LINKS)
 

@@ -16,7 +16,10 @@
 # Env: SECONDS_PER_LINK (20), WARMUP (6), VIEWER_ARGS (extra viewer flags),
 # OCEAND_ARGS (extra flags of every oceand: all, sim and edge),
 # TCP_LOG=DIR (every 0.1 s, the server side's `ss -tin` of the viewer's
-# connection, to DIR/NAME.ss: a look at cwnd, bytes in flight and unsent).
+# connection, to DIR/NAME.ss: a look at cwnd, bytes in flight and unsent),
+# PAGE_SHOT=FILE.png (instead of the viewer, the web page in headless
+# chromium, tests/web/link_shot.mjs: a screenshot with the HUD after the
+# measured window, and one JSON line; the daemon serves WEB_ROOT, build/web).
 set -u
 OCEAND=$(readlink -f "$1"); SHAPER=$(readlink -f "$2"); shift 2
 HERE=$(dirname "$(readlink -f "$0")")
@@ -73,7 +76,7 @@ sys.exit(0 if $cond else 1)" 2>/dev/null && return 0
 
 # start_server ROLE: the daemon(s) the viewer connects to on $NET.1:8090
 start_server() {
-  local common=(--web-root "$TMP/web" --resolution 256 --plan-rigor 0 --wisdom-file none ${OCEAND_ARGS:-})
+  local common=(--web-root "${WEB_ROOT:-$TMP/web}" --resolution 256 --plan-rigor 0 --wisdom-file none ${OCEAND_ARGS:-})
   if [ "$1" = all ]; then
     ip netns exec "$A" "$OCEAND" --bind "$NET.1" --port 8090 --state-file "$TMP/state.json" "${common[@]}" \
       >"$TMP/oceand.log" 2>&1 &
@@ -129,9 +132,14 @@ for spec in "${LINKS[@]}"; do
         done ) >"$TCP_LOG/$name.ss" 2>/dev/null &
       bg+=($!)
     fi
-    ip netns exec "$B" /usr/bin/python3 "$HERE/viewer.py" "ws://$NET.1:8090/" --name "$name" --role "$role" \
-      --seconds "$SECS" --warmup "$WARM" "${extra[@]}" ${VIEWER_ARGS:-} ||
-      echo "{\"link\":\"$name\",\"role\":\"$role\",\"error\":\"viewer failed\"}"
+    if [ -n "${PAGE_SHOT:-}" ]; then
+      ip netns exec "$B" node "$HERE/../../tests/web/link_shot.mjs" --url "http://$NET.1:8090/" --out "$PAGE_SHOT" \
+        --seconds "$SECS" || echo "{\"link\":\"$name\",\"role\":\"$role\",\"error\":\"page failed\"}"
+    else
+      ip netns exec "$B" /usr/bin/python3 "$HERE/viewer.py" "ws://$NET.1:8090/" --name "$name" --role "$role" \
+        --seconds "$SECS" --warmup "$WARM" "${extra[@]}" ${VIEWER_ARGS:-} ||
+        echo "{\"link\":\"$name\",\"role\":\"$role\",\"error\":\"viewer failed\"}"
+    fi
     for p in "${bg[@]}"; do kill "$p" 2>/dev/null; done
   fi
   stop_procs
