@@ -49,7 +49,10 @@ struct net_cluster_hooks {
     bool no_viewers;                                   /* sim: refuse WebSocket upgrades */
     void (*on_wake)(void *user);                       /* every wake-up (cl_link_dispatch) */
     /* edge: instead of sim_demand (and sim_demand_temporal: temporal = the
-     * subscription takes the temporal codec) */
+     * subscription takes the temporal codec). It and `keyframes` only count,
+     * as the sim's counters do: they run while a client's subscription is
+     * half changed, so they never call back into the net (no frame published
+     * from them; defer it to on_wake). */
     void (*demand)(void *user, int layer_key, int delta, bool temporal);
     /* edge: instead of sim_want_keyframes: delta clients of the layer lack
      * the references of its shared tiles (PROTOCOL.md §5.9) */

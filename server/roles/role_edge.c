@@ -61,6 +61,7 @@ struct role_edge {
     int tcount[CL_KEYS];          /* those that take the temporal codec */
     int kcount[CL_KEYS];          /* temporal clients short of references (fanout_want_keyframes) */
     uint8_t want[CL_KEY_BYTES];   /* keys with count > 0: what we subscribe to */
+    bool recheck;                 /* a key left want: the pending frame may be complete now (check_pending) */
     struct cl_demand_bits demand; /* what the sim hears: want, and which keys stream / need keyframes */
     uint64_t epoch;               /* the sim process of the last frame published (cluster.h); 0 = none yet */
     uint64_t new_chains;          /* times the epoch changed under the clients (/metrics) */
@@ -211,10 +212,28 @@ static void edge_demand(void *user, int key, int delta, bool temporal)
     key_bits(r, key);
     cl_bit_set(r->want, key, after);
     cl_edge_set_demand_ex(r->link, &r->demand); /* subscribes and heartbeats at the pump's next round */
-    if (before == after)
+    if (before && !after) {
+        /* Nobody wants the key any more: the pending frame may need no more
+         * layers. Handed out at the wake-up, never from here: this hook runs
+         * while a client's subscription is half changed (the ladder's step
+         * counts the new layers before it serves them), and a frame
+         * published now would reach that client's fan-out with the old
+         * layers still in s->eff: it wished for their keyframes instead of
+         * the new ones', and waited for keyframe tiles the sim never made. */
+        r->recheck = true;
+        net_wake(r->net);
+    }
+}
+
+/* The pending frame, when a key left the wanted set since the last wake-up
+ * (edge_demand) and it lacks no other layer now. */
+static void check_pending(struct role_edge *r)
+{
+    if (!r->recheck)
         return;
+    r->recheck = false;
     struct cl_frame_set *done = cl_collector_check(r->collector, r->want);
-    if (done) { /* a viewer left: the pending frame needs no more layers */
+    if (done) {
         publish_set(r, done);
         cl_frame_set_free(done);
     }
@@ -637,6 +656,7 @@ static void edge_on_params(void *user, const char *origin, const char *by, const
 static void edge_on_wake(void *user)
 {
     struct role_edge *r = user;
+    check_pending(r);
     cl_link_dispatch(r->link);
     double now = mono_now();
     if (r->hello_needed && !r->hello_in_flight && cl_link_connected(r->link) && now - r->hello_t >= HELLO_RETRY)
