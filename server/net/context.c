@@ -11,6 +11,13 @@
 #include "frame.h"
 #include "log.h"
 
+#define NET_BEAT_MS 200
+static void net_beat(lws_sorted_usec_list_t *sul)
+{
+    struct net *n = lws_container_of(sul, struct net, beat);
+    lws_sul_schedule(n->ctx, 0, &n->beat, net_beat, NET_BEAT_MS * LWS_US_PER_MS);
+}
+
 struct net *net_create(const struct daemon_config *dc, const struct ocean_params *p, uint32_t version,
                        char *err, size_t errlen)
 {
@@ -96,6 +103,10 @@ struct net *net_create(const struct daemon_config *dc, const struct ocean_params
         free(n);
         return NULL;
     }
+    /* The tick wakes this loop every period (lws_cancel_service), but an edge
+     * with no viewer and a sim with no edge may get nothing for seconds, and
+     * main's loop sees SIGTERM's flag only when lws_service returns. */
+    lws_sul_schedule(n->ctx, 0, &n->beat, net_beat, NET_BEAT_MS * LWS_US_PER_MS);
     if (!dc->tls_cert[0])
         rx_guard_start(); /* this thread is the service thread (net_service) */
     struct lws_vhost *vh = lws_get_vhost_by_name(n->ctx, "default");

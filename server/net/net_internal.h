@@ -182,6 +182,7 @@ struct http_session {
  * except where its comment names another thread. */
 struct net {
     struct lws_context *ctx;      /* net_create writes; lws reads; the tick reads it in net_wake (lws_cancel_service) */
+    lws_sorted_usec_list_t beat;  /* lws only: a wake-up every NET_BEAT_MS, so the loop sees a signal's flag */
     struct daemon_config dc;      /* read-only after net_create */
     struct ctl_limits lim;        /* read-only after net_create */
     struct sim *sim;              /* main writes (net_attach_sim) outside the service loop; lws reads */
