@@ -1502,7 +1502,11 @@ def state_save_fsize(d, fig):
     d.proc.send_signal(signal.SIGHUP)     # save now
     warned = wait_until(lambda: not d.alive() or b"File too large" in open(d.log_path, "rb").read(), 5)
     s.close()
-    left = sorted(f for f in os.listdir(d.tmp) if f.startswith("state"))
+    # The warning seen may be the set's save; the SIGHUP's may still be writing its
+    # temporary file: what counts is what stays behind once the saves are over.
+    state_files = lambda: sorted(f for f in os.listdir(d.tmp) if f.startswith("state"))
+    wait_until(lambda: not state_files(), 3)
+    left = state_files()
     fig.update(alive=d.alive(), exit=d.proc.poll(), warned=warned and d.alive(), files=left)
     log("    save under ulimit -f 256 bytes: daemon %s, warned %s, state files %s"
         % ("running" if d.alive() else "ended (%r)" % d.proc.poll(), warned, left))
