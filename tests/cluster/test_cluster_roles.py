@@ -14,7 +14,6 @@ import json
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -365,125 +364,6 @@ def test_intra_and_temporal_viewers_share_an_edge(c):
         for ws in (i, t):
             await ws.close()
     asyncio.run(run())
-
-
-class RawViewer:
-    """A WebSocket client on a socket the test reads itself (td.raw_ws_socket): as slowly
-    as a slow link, bytes at a time. Messages as (time, kind, JSON or None); kind is
-    "frame" or the JSON type."""
-
-    def __init__(self, port, rcvbuf):
-        self.sock = td.raw_ws_socket(port, rcvbuf)
-        self.buf, self.parts, self.opcode, self.events = b"", [], 0, []
-
-    def send(self, opcode, data):
-        check(len(data) < 126, "a short message only")
-        mask = os.urandom(4)
-        self.sock.sendall(bytes([0x80 | opcode, 0x80 | len(data)]) + mask
-                          + bytes(c ^ mask[i % 4] for i, c in enumerate(data)))
-
-    def send_json(self, obj):
-        self.send(1, json.dumps(obj).encode())
-
-    def read(self, most, timeout):
-        """At most `most` bytes (waiting up to timeout s for them); the messages they complete."""
-        self.sock.settimeout(timeout)
-        try:
-            data = self.sock.recv(most)
-        except socket.timeout:
-            return
-        check(data, "the edge closed the connection")
-        self.buf += data
-        while len(self.buf) >= 2:
-            b0, b1 = self.buf[0], self.buf[1]
-            n, off = b1 & 0x7F, 2
-            if n == 126:
-                if len(self.buf) < 4:
-                    return
-                n, off = int.from_bytes(self.buf[2:4], "big"), 4
-            elif n == 127:
-                if len(self.buf) < 10:
-                    return
-                n, off = int.from_bytes(self.buf[2:10], "big"), 10
-            if len(self.buf) < off + n:
-                return
-            payload, self.buf = self.buf[off:off + n], self.buf[off + n:]
-            op = b0 & 0x0F
-            check(op != 8, "the edge closed the WebSocket")
-            if op == 9:
-                self.send(10, payload)   # pong
-            if op in (1, 2):
-                self.opcode, self.parts = op, []
-            if op in (0, 1, 2):
-                self.parts.append(payload)
-                if b0 & 0x80:
-                    m = b"".join(self.parts)
-                    if self.opcode == 2:
-                        self.events.append((time.time(), "frame", None))
-                    else:
-                        j = json.loads(m)
-                        self.events.append((time.time(), j.get("type"), j))
-
-
-@test
-@with_cluster(edges=2, sim_extra=("--tick-rate", "10"), edge_extra=("--tick-rate", "10", "--send-buffer-kb", "16"))
-def test_ladder_steps_through_an_edge_keep_frames_coming(c):
-    """A temporal viewer of each edge on a slow link (read 2 kB at a time, 20 kB/s): its
-    ladder steps it down rung after rung, the next step often while the frame of the rung
-    before is still on its way (as on a 1 Mbit/s link with 300 ms RTT). Each step serves
-    new layers, whose keyframe tiles the edge must wish for. Then it reads at full speed:
-    it gets frames at its rung, no gap over --recovery-s, and after each rung change (the
-    ladder probes back up) a frame before the next change. A frame handed out from the
-    edge's demand hook in the middle of a step reached the viewer with its old layers
-    still in force: the edge wished for their keyframes instead of the new ones', and the
-    viewer waited for keyframe tiles nobody asked the sim for, often for good. It takes
-    the edge holding part of a frame when the ladder steps: several layers per frame,
-    none kept from one rung to the next, and two edges. 10 Hz: the ladder needs 3 ticks
-    in its half-second window."""
-    vs = [RawViewer(e.port, 4096) for e in c.edges]
-    try:
-        for v in vs:
-            v.send_json({"type": "subscribe", "id": 1, "fields": ["height", "dx", "dz", "foam"], "temporal": True})
-        t0 = time.time()
-        while time.time() - t0 < 8:              # slow: 2 kB every 0.1 s
-            for v in vs:
-                v.read(2048, 0.05)
-            time.sleep(0.1)
-        tf = time.time()
-        while time.time() - tf < 7:              # full speed
-            for v in vs:
-                v.read(1 << 16, 0.02)
-        t1 = time.time()                         # the last rung change: its frame, within --recovery-s
-        while time.time() - t1 < ARGS.recovery_s and any(v.events and v.events[-1][1] == "link" for v in vs):
-            for v in vs:
-                v.read(1 << 16, 0.02)
-    finally:
-        for v in vs:
-            v.sock.close()
-    for k, v in enumerate(vs):
-        # the first second reads what the slow part left (frames and `link` queued behind them)
-        fast = [e for e in v.events if e[0] >= tf + 1 and e[1] in ("frame", "link")]
-        rungs = [e[2]["rung"] for e in v.events if e[1] == "link"]
-        print("  edge %d: rungs %r; %d frames while slow, %d at full speed"
-              % (k, rungs, sum(1 for e in v.events if e[1] == "frame" and e[0] < tf),
-                 sum(1 for e in fast if e[1] == "frame")))
-        subscribed = [e for e in v.events if e[1] == "subscribed"]
-        check(subscribed and subscribed[0][2]["subscription"].get("temporal") is True, "subscribed: %r" % subscribed)
-        downs = {e[2]["rung"] for e in v.events if e[1] == "link" and e[0] < tf + 1 and e[2]["rung"] > 0}
-        check(len(downs) >= 2, "edge %d: the slow reader was not stepped down twice (rungs %r): nothing tested"
-              % (k, sorted(downs)))
-        check(any(e[1] == "frame" for e in fast), "edge %d: no frame at full speed (rungs %r): it waited for "
-              "keyframe tiles" % (k, rungs))
-        t_prev = tf + 1
-        for i, e in enumerate(fast):
-            if e[1] == "frame":
-                check(e[0] - t_prev <= ARGS.recovery_s, "edge %d: no frame for %.1f s at full speed (until %.1f s)"
-                      % (k, e[0] - t_prev, e[0] - tf))
-                t_prev = e[0]
-                continue
-            nxt = fast[i + 1][1] if i + 1 < len(fast) else None
-            check(nxt == "frame", "edge %d: rung %d at %.1f s: no frame before %s" % (
-                k, e[2]["rung"], e[0] - tf, "the next rung change" if nxt else "the end"))
 
 
 @test
