@@ -11,6 +11,7 @@ import { dirname, join } from 'node:path';
 import { createRequire } from 'node:module';
 import {
   decodeFrame, parseFrameHeader, setZstdDecompressor, DecoderState, FIELD_NAMES, PROTO_VERSION, SUBPROTOCOL,
+  FrameJoiner, FrameError, FRAME_FLAG_PART,
 } from '../proto/js/oc_decode.js';
 import { mutateAndDecode } from './proto_js_mutate.mjs';
 
@@ -217,6 +218,85 @@ test('a longer frame header (header_size 56) is skipped; 40 is corrupt', async (
 test('random truncations and bit flips are rejected or decode', async () => {
   const frame = load(manifest.vectors.find((v) => v.name === 'v03_height_1mm').file);
   await mutateAndDecode(frame, 12345, (it) => ({ useNodeZlib: it % 4 < 2 }));
+});
+
+// Parts (PROTOCOL.md §3.4): a frame cut into messages of `counts` tiles each, as a server does.
+function splitFrame(buf, counts) {
+  const raw = new Uint8Array(buf), dv = new DataView(buf);
+  const hs = dv.getUint16(6, true);
+  const ends = [];
+  for (let pos = hs, i = 0; i < dv.getUint16(36, true); i++) { pos += 40 + dv.getUint32(pos + 32, true); ends.push(pos); }
+  const parts = [];
+  let from = hs, tile = 0;
+  counts.forEach((k, i) => {
+    const to = ends[tile + k - 1];
+    const p = new Uint8Array(hs + to - from);
+    p.set(raw.subarray(0, hs));
+    p.set(raw.subarray(from, to), hs);
+    const pv = new DataView(p.buffer);
+    pv.setUint16(36, k, true);
+    pv.setUint16(38, dv.getUint16(38, true) | (i < counts.length - 1 ? FRAME_FLAG_PART : 0), true);
+    parts.push(p.buffer);
+    from = to; tile += k;
+  });
+  return parts;
+}
+
+test('FrameJoiner: parts join to the whole frame; a whole frame passes as it is', async () => {
+  const v = manifest.vectors.find((x) => x.name === 'v04_fields');
+  const buf = load(v.file);
+  for (const counts of [[1, 1, 1, 1, 1], [2, 3], [4, 1], [5]]) {
+    const j = new FrameJoiner();
+    const parts = splitFrame(buf, counts);
+    const got = parts.map((p) => j.push(p));
+    assert.ok(got.slice(0, -1).every((x) => x === null), `held until the last part (${counts})`);
+    assert.deepEqual(new Uint8Array(got.at(-1)), new Uint8Array(buf), `joined = whole (${counts})`);
+    const frame = await decodeFrame(got.at(-1));
+    assert.equal(frame.tiles.length, v.tiles.length);
+  }
+  const j = new FrameJoiner();
+  assert.equal(j.push(buf), buf);
+});
+
+test('FrameJoiner: a part of another tick drops the unfinished one', () => {
+  const buf = load(manifest.vectors.find((x) => x.name === 'v04_fields').file);
+  const [p1] = splitFrame(buf, [2, 3]);
+  const other = splitFrame(buf, [1, 4]);
+  new DataView(other[0]).setBigUint64(8, 999n, true);
+  new DataView(other[1]).setBigUint64(8, 999n, true);
+  const j = new FrameJoiner();
+  assert.equal(j.push(p1), null);
+  assert.equal(j.push(other[0]), null);
+  const whole = j.push(other[1]);
+  assert.equal(new DataView(whole).getUint16(36, true), 5, 'the tiles of seq 999 only');
+  assert.equal(new DataView(whole).getBigUint64(8, true), 999n);
+});
+
+test('FrameJoiner: random truncations and bit flips of parts are rejected or decode', async () => {
+  const buf = load(manifest.vectors.find((x) => x.name === 'v03_height_1mm').file);
+  const parts = splitFrame(buf, [1, 2, 1]);
+  let seed = 777;
+  const rnd = (n) => { seed = (seed * 1103515245 + 12345) >>> 0; return seed % n; };
+  let joined = 0;
+  for (let it = 0; it < 400; it++) {
+    const j = new FrameJoiner();
+    let out = null;
+    try {
+      for (const p of parts) {
+        let b = new Uint8Array(p.slice(0));
+        if (rnd(3) === 0) b = b.slice(0, rnd(b.length + 1));
+        for (let k = rnd(4); k > 0 && b.length; k--) b[rnd(b.length)] ^= 1 << rnd(8);
+        out = j.push(b.buffer) ?? out;
+      }
+    } catch (e) {
+      assert.ok(e instanceof FrameError, `joiner threw ${e}`);
+      continue;
+    }
+    if (!out) continue;
+    joined++;
+    try { await decodeFrame(out); } catch (e) { assert.ok(e instanceof FrameError, `decoder threw ${e}`); }
+  }
+  assert.ok(joined > 20, `only ${joined} of 400 mutated streams came out joined`);
 });
 
 // Control messages: each example carries the members the spec requires.

@@ -136,8 +136,9 @@ for spec in "${LINKS[@]}"; do
       ip netns exec "$B" node "$HERE/../../tests/web/link_shot.mjs" --url "http://$NET.1:8090/" --out "$PAGE_SHOT" \
         --seconds "$SECS" || echo "{\"link\":\"$name\",\"role\":\"$role\",\"error\":\"page failed\"}"
     else
+      # the set round trip's bound: RTT + 2 ticks (30 Hz) + 50 ms
       ip netns exec "$B" /usr/bin/python3 "$HERE/viewer.py" "ws://$NET.1:8090/" --name "$name" --role "$role" \
-        --seconds "$SECS" --warmup "$WARM" "${extra[@]}" ${VIEWER_ARGS:-} ||
+        --seconds "$SECS" --warmup "$WARM" --set-bound-ms $((rtt + 117)) "${extra[@]}" ${VIEWER_ARGS:-} ||
         echo "{\"link\":\"$name\",\"role\":\"$role\",\"error\":\"viewer failed\"}"
     fi
     for p in "${bg[@]}"; do kill "$p" 2>/dev/null; done

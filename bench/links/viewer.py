@@ -6,10 +6,12 @@ what it saw over the measured window:
   fps, ticks (share of the ticks in the window it received), latency p50/p95
   (arrival minus the frame's server_time_us: both clocks are this machine's),
   kB/frame, codec shares of its tiles, the rung (`link` messages), the
-  round trip of a `set` that changes nothing (sent every second), the role
+  round trip of a `set` that changes nothing (sent every second: p50, p95,
+  max and how many passed --set-bound-ms in the window; the warm-up's
+  maximum apart), the role
   of the daemon it reads (--role, as run.sh started it) and the load average.
 
-    viewer.py URL --seconds 20 --warmup 5 [--pinned] [--role edge]
+    viewer.py URL --seconds 20 --warmup 5 [--pinned] [--whole-frames] [--role edge]
     viewer.py URL --timeline ...   also a per-second list (fps, temporal share, rung)
 """
 import argparse
@@ -23,12 +25,14 @@ import time
 import websockets
 
 WEB_SUB = {"type": "subscribe", "id": "sub", "fields": ["height", "dx", "dz", "foam"], "field_lod": {"foam": 2},
-           "cascades": [{"fields": ["height"], "lod": 1, "bound": 0.001}] * 3, "temporal": True}
+           "cascades": [{"fields": ["height"], "lod": 1, "bound": 0.001}] * 3, "temporal": True,
+           "parts": True}
+PART = 2  # frame header flags bit 1: more tiles of this tick follow (PROTOCOL.md §3.4)
 
 
 def frame_info(b):
     seq, = struct.unpack_from("<Q", b, 8)
-    tile_count, = struct.unpack_from("<H", b, 36)
+    tile_count, flags = struct.unpack_from("<HH", b, 36)
     server_us, = struct.unpack_from("<Q", b, 40)
     hsize, = struct.unpack_from("<H", b, 6)
     off = hsize
@@ -40,7 +44,7 @@ def frame_info(b):
         plen, = struct.unpack_from("<I", b, off + 32)
         codecs[codec] = codecs.get(codec, 0) + 1
         off += 40 + plen
-    return seq, server_us, codecs, lods
+    return seq, server_us, codecs, lods, bool(flags & PART)
 
 
 def pct(v, p):
@@ -54,10 +58,13 @@ async def run(a):
     sub = dict(WEB_SUB)
     if a.pinned:
         sub["adapt"] = False
+    if a.whole_frames:
+        del sub["parts"]
     frames = []       # (t_arrival, seq, bytes, codecs, latency_ms)
     links = []        # (t, rung, msg)
     sets = []         # round trips (ms)
     pending = {}
+    part = None       # (seq, bytes, codecs, lods) of the parts of a tick received so far
     t_start = time.time()
     async with websockets.connect(a.url, subprotocols=["oceand.v1"], max_size=None, ping_interval=None,
                                   open_timeout=20) as ws:
@@ -78,14 +85,23 @@ async def run(a):
                 continue
             now = time.time()
             if isinstance(m, bytes):
-                seq, sus, codecs, lods = frame_info(m)
-                frames.append((now, seq, len(m), codecs, (now * 1e6 - sus) / 1000, lods))
+                seq, sus, codecs, lods, more = frame_info(m)
+                size = len(m)
+                if part and part[0] == seq:  # the earlier parts of this tick
+                    size += part[1]
+                    for c, cn in part[2].items():
+                        codecs[c] = codecs.get(c, 0) + cn
+                    lods |= part[3]
+                part = (seq, size, codecs, lods) if more else None
+                if not more:  # the tick is complete with its last part
+                    frames.append((now, seq, size, codecs, (now * 1e6 - sus) / 1000, lods))
                 continue
             j = json.loads(m)
             if j.get("type") == "link":
                 links.append((now, j.get("rung"), j))
             elif j.get("id") in pending and j.get("type") in ("params", "error"):
-                sets.append((now - pending.pop(j["id"])) * 1000)
+                t_sent = pending.pop(j["id"])
+                sets.append(((now - t_sent) * 1000, t_sent - t_start))
     t0 = t_start + a.warmup
     win = [f for f in frames if f[0] >= t0]
     out = {"link": a.name, "role": a.role}
@@ -111,8 +127,19 @@ async def run(a):
     out["rung_changes"] = len(links)
     if links:
         out["link_kbps"] = links[-1][2].get("link_kbps")
-    out["set_rtt_p50_ms"] = round(pct(sets, 50), 1) if sets else None
-    out["set_rtt_max_ms"] = round(max(sets), 1) if sets else None
+    # The round trips of the sets sent in the measured window, like every figure
+    # above; those of the warm-up (the ladder's first steps down) on their own.
+    rtts = [r for r, t in sets if t >= a.warmup]
+    start = [r for r, t in sets if t < a.warmup]
+    out["set_rtt_p50_ms"] = round(pct(rtts, 50), 1) if rtts else None
+    out["set_rtt_p95_ms"] = round(pct(rtts, 95), 1) if rtts else None
+    out["set_rtt_max_ms"] = round(max(rtts), 1) if rtts else None
+    out["set_rtt_warmup_max_ms"] = round(max(start), 1) if start else None
+    if a.set_bound_ms:
+        out["set_bound_ms"] = a.set_bound_ms
+        out["sets_over_bound"] = "%d/%d" % (sum(r > a.set_bound_ms for r in rtts), len(rtts))
+    if a.set_log:
+        out["sets"] = [[round(t, 2), round(r, 1)] for r, t in sets]
     out["loadavg_1m"] = round(os.getloadavg()[0], 2)
     if a.timeline:
         tl = []
@@ -138,9 +165,12 @@ def main():
     p.add_argument("--seconds", type=float, default=20)
     p.add_argument("--warmup", type=float, default=5)
     p.add_argument("--pinned", action="store_true")
+    p.add_argument("--whole-frames", action="store_true", help="subscribe without \"parts\" (one message a tick)")
     p.add_argument("--sets", type=int, default=1)
     p.add_argument("--timeline", action="store_true")
     p.add_argument("--rungs", action="store_true")
+    p.add_argument("--set-log", action="store_true", help="every set: [seconds from start, round trip ms]")
+    p.add_argument("--set-bound-ms", type=float, default=0, help="count the sets of the window over this round trip")
     a = p.parse_args()
     asyncio.run(run(a))
 

@@ -12,7 +12,7 @@
  *   6  u16 header_size (48)           30 u16 tile_size    (samples per tile side at LOD 0)
  *   8  u64 seq                        32 f32 patch_size   (m)
  *   16 f64 sim_time (s)               36 u16 tile_count   (tiles in this frame)
- *                                     38 u16 flags        (0)
+ *                                     38 u16 flags        (bit 0 rendered, bit 1 part: more follow)
  *                                     40 u64 server_time_us (unix µs when encoded)
  * Tile header, 40 bytes:
  *   0 u8 field  1 u8 lod  2 u8 codec  3 u8 flags(0)
@@ -32,6 +32,8 @@
 #define OC_PROTO_VERSION    1
 #define OC_SUBPROTOCOL      "oceand.v1"
 #define OC_FRAME_HEADER_SIZE 48
+#define OC_FRAME_FLAG_RENDERED 0x0001u /* the answer to a render (PROTOCOL.md §7.5) */
+#define OC_FRAME_FLAG_PART 0x0002u     /* more tiles of this tick follow in the next message (§3.4) */
 #define OC_TILE_HEADER_SIZE  40
 #define OC_MAX_N            2048
 #define OC_MAX_LOD          4

@@ -358,6 +358,49 @@ function readLossyPrefix(t, bytes, start) {
   return { escWidth, escCount, coef, src, n: count + escCount * escWidth };
 }
 
+// ---- parts: one tick's frame in several messages (PROTOCOL.md §3.4) ----
+
+export const FRAME_FLAG_RENDERED = 1;
+export const FRAME_FLAG_PART = 2;
+
+/**
+ * Joins the parts of a tick's frame (subscribe "parts": true): push() every binary
+ * message; it returns the whole frame (the first part's header with the tiles of all
+ * the parts counted and bit 1 cleared, then their tiles in order) once the last part
+ * is in, a message that is not a part as it is, and null while parts are held. A
+ * part of another seq than the held ones drops them (a server never sends that).
+ */
+export class FrameJoiner {
+  constructor() { this.parts = []; this.seq = 0n; this.joined = 0; /* frames that came in 2 or more parts */ }
+  push(arrayBuffer) {
+    const bytes = asBytes(arrayBuffer);
+    const h = readFrameHeader(bytes);
+    const seq = new DataView(bytes.buffer, bytes.byteOffset).getBigUint64(8, true);
+    if (this.parts.length && seq !== this.seq) this.parts = [];
+    if (h.flags & FRAME_FLAG_PART) {
+      this.seq = seq;
+      this.parts.push({ bytes, h });
+      return null;
+    }
+    if (!this.parts.length) return arrayBuffer;
+    const parts = [...this.parts, { bytes, h }];
+    this.parts = [];
+    this.joined++;
+    const first = parts[0];
+    const tiles = parts.reduce((n, p) => n + p.h.tileCount, 0);
+    if (tiles > 0xffff) throw fail('corrupt', `${tiles} tiles in the parts of one frame`);
+    const size = first.h.headerSize + parts.reduce((n, p) => n + p.bytes.length - p.h.headerSize, 0);
+    const out = new Uint8Array(size);
+    out.set(first.bytes.subarray(0, first.h.headerSize));
+    let at = first.h.headerSize;
+    for (const p of parts) { out.set(p.bytes.subarray(p.h.headerSize), at); at += p.bytes.length - p.h.headerSize; }
+    const dv = new DataView(out.buffer);
+    dv.setUint16(36, tiles, true);
+    dv.setUint16(38, first.h.flags & ~FRAME_FLAG_PART, true);
+    return out.buffer;
+  }
+}
+
 // ---- codec 3: temporal prediction (PROTOCOL.md §5.6-5.8) ----
 
 /** The references of predicted tiles: the codes of the last frames of every tile. One per stream. */

@@ -44,6 +44,7 @@ struct subscription {
     double max_rate;        /* frames per second, 0 < r <= tick rate */
     bool temporal;          /* accepts codec 3 (predicted tiles, PROTOCOL.md §5.9); default false */
     bool pinned;            /* "adapt": false: served as asked whatever the link (no quality ladder) */
+    bool parts;             /* "parts": true: a tick's frame may come as several messages (PROTOCOL.md §3.4) */
     bool all_tiles;
     int ntiles;             /* when !all_tiles */
     uint16_t tiles[CTL_MAX_TILES][2];

@@ -39,7 +39,7 @@ int render_parse(const cJSON *root, const struct ctl_limits *lim, struct render_
     if (!cJSON_GetObjectItemCaseSensitive(root, "fields"))
         return ctl_fail(e, "bad_render", "fields", "\"render\" needs \"fields\"");
     /* Members of a live subscription that a render has no use for. */
-    static const char *const live_only[] = { "max_rate", "adapt" };
+    static const char *const live_only[] = { "max_rate", "adapt", "parts" };
     for (size_t i = 0; i < sizeof live_only / sizeof live_only[0]; i++)
         if (cJSON_GetObjectItemCaseSensitive(root, live_only[i]))
             return ctl_fail(e, "bad_render", live_only[i], "\"%s\" is for subscribe, not render", live_only[i]);

@@ -162,6 +162,11 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
             return ctl_fail(e, "bad_subscription", NULL, "\"adapt\" must be true or false");
         tmp.pinned = !cJSON_IsTrue(j);
     }
+    if ((j = cJSON_GetObjectItemCaseSensitive(msg, "parts"))) {
+        if (!cJSON_IsBool(j))
+            return ctl_fail(e, "bad_subscription", NULL, "\"parts\" must be true or false");
+        tmp.parts = cJSON_IsTrue(j);
+    }
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "codec"))) {
         /* One encoding per layer is shared by every client, so a client
          * cannot pick the entropy coder: codec 1 is the only one to ask for
@@ -250,6 +255,8 @@ cJSON *control_subscription_object(const struct subscription *s)
     cJSON_AddBoolToObject(o, "temporal", s->temporal);
     if (s->pinned) /* the default (adapt) is not written: replies stay as they were for clients that never pin */
         cJSON_AddBoolToObject(o, "adapt", false);
+    if (s->parts) /* likewise: only a client that asked for parts sees the member */
+        cJSON_AddBoolToObject(o, "parts", true);
     if (s->ncascades > 1) { /* only when asked for: a client that knows no cascades sees what it always saw */
         cJSON *cs = cJSON_AddArrayToObject(o, "cascades");
         for (int c = 1; c < s->ncascades && c < CTL_MAX_CASCADES; c++) {

@@ -253,13 +253,7 @@ static bool begin_frame(struct net *n, struct session *s, struct frame *f)
     }
     s->lad.frame_samples = samples_per_tile * (uint64_t)s->ntiles;
     s->lad.frame_shared = nf > 0 && nshared == nf;
-    struct oc_frame_header h = f->hdr;
-    h.tile_count = (uint16_t)(nf * s->ntiles);
-    oc_frame_header_write(s->hdr, &h);
-    s->total = OC_FRAME_HEADER_SIZE;
-    for (int fi = 0; fi < OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT; fi++)
-        for (int i = 0; s->layers[fi] && i < s->ntiles; i++)
-            s->total += s->loff[fi][s->tiles[i] + 1] - s->loff[fi][s->tiles[i]];
+    s->fhdr = f->hdr;
     if (s->eff.temporal) {
         atomic_fetch_add(&g_metrics.sent_shared_tiles, (uint64_t)(nshared * s->ntiles));
         atomic_fetch_add(&g_metrics.sent_key_tiles, (uint64_t)((nf - nshared) * s->ntiles));
@@ -270,6 +264,7 @@ static bool begin_frame(struct net *n, struct session *s, struct frame *f)
     frame_ref(f);
     s->cur = f;
     s->sent = 0;
+    s->part_left = 0;
     s->hdr_off = 0;
     s->fi = 0;
     s->ti = 0;
@@ -313,21 +308,56 @@ static size_t fill(struct session *s, unsigned char *dst, size_t cap)
     return n;
 }
 
+/* Start the next part of the client's frame at the current tile: as many
+ * tiles as fit in `cap` bytes with the header (at least one). A client that
+ * subscribed with "parts" gets its frame in parts of about one tick of its
+ * link (ladder_chunk), so that a reply waits behind one part, not a whole
+ * keyframe (a text message cannot come between the fragments of one binary
+ * message); any other client gets the frame as one part (PROTOCOL.md §3.4). */
+static void begin_part(struct session *s, size_t cap)
+{
+    size_t bytes = OC_FRAME_HEADER_SIZE;
+    int count = 0;
+    bool more = false;
+    for (int fi = s->fi, ti = s->ti; fi < OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT && !more; fi++, ti = 0)
+        for (; s->layers[fi] && ti < s->ntiles; ti++) {
+            size_t size = s->loff[fi][s->tiles[ti] + 1] - s->loff[fi][s->tiles[ti]];
+            if (count && bytes + size > cap) {
+                more = true;
+                break;
+            }
+            bytes += size;
+            count++;
+        }
+    struct oc_frame_header h = s->fhdr;
+    h.tile_count = (uint16_t)count;
+    h.flags = (uint16_t)(h.flags | (more ? OC_FRAME_FLAG_PART : 0));
+    oc_frame_header_write(s->hdr, &h);
+    s->hdr_off = 0;
+    s->part_left = bytes;
+    s->part_more = more;
+}
+
 static int send_chunk(struct net *n, struct session *s)
 {
     if (!s->chunk && !(s->chunk = malloc(LWS_PRE + CHUNK_SIZE)))
         return -1;
-    size_t len = fill(s, s->chunk + LWS_PRE, ladder_chunk(s));
-    bool first = s->sent == 0, last = s->sent + len >= s->total;
+    if (s->part_left == 0)
+        begin_part(s, s->eff.parts ? ladder_chunk(s) : SIZE_MAX);
+    bool first = s->hdr_off == 0;
+    size_t want = ladder_chunk(s);
+    size_t len = fill(s, s->chunk + LWS_PRE, want < s->part_left ? want : s->part_left);
+    s->part_left -= len;
+    bool last = s->part_left == 0;
     int flags = lws_write_ws_flags(LWS_WRITE_BINARY, first, last);
     if (lws_write(s->wsi, s->chunk + LWS_PRE, len, (enum lws_write_protocol)flags) < (int)len)
         return -1;
     s->sent += len;
     s->progress_t = mono_now();
-    if (last) {
+    if (last && !s->part_more) {
         atomic_fetch_add(&g_metrics.frames_sent, 1);
-        atomic_fetch_add(&g_metrics.bytes_sent, s->total);
-        ladder_frame_done(n, s, s->total);
+        atomic_fetch_add(&g_metrics.bytes_sent, s->sent);
+        ladder_frame_done(n, s, s->sent);
         frame_unref(s->cur);
         s->cur = NULL;
     }
@@ -339,6 +369,13 @@ static int send_chunk(struct net *n, struct session *s)
  * something was written, 0 if not, -1 to close. */
 int fanout_write(struct net *n, struct session *s)
 {
+    if (s->cur && s->part_left == 0) { /* between parts: the next one waits for the link like a frame */
+        int hold = ladder_hold_frame(s);
+        if (hold > 0) {
+            lws_set_timer_usecs(s->wsi, hold);
+            return 0;
+        }
+    }
     if (!s->cur) {
         if (!fanout_want_write(n, s))
             return 0;

@@ -44,6 +44,7 @@
 #define LOWAT_MAX ((uint32_t)CHUNK_SIZE)
 #define LOWAT_START (16u * 1024)
 #define CAP_FRESH_S 10.0      /* a full-pipe sample this recent is the link */
+#define HOPELESS_S 60.0       /* no blind probe up to a rung that a full-pipe sample this recent says cannot fit */
 #define PACE_GAIN 1.25        /* TCP's pacing rate at most this times the link measured */
 #define INFLIGHT_GAIN 1.5     /* bytes in flight at most this times the link measured x the path's RTT */
 #define YOUNG_S 2.0           /* TCP's start-up: its rate samples are not the link's yet */
@@ -277,31 +278,37 @@ size_t ladder_chunk(const struct session *s)
     return s->lad.lowat < LOWAT_MIN ? LOWAT_MIN : s->lad.lowat > CHUNK_SIZE ? CHUNK_SIZE : s->lad.lowat;
 }
 
-/* A new frame waits while the bytes in flight and unsent pass about one and
- * a half times what the link measured holds over the path's RTT: TCP would
- * take them (BBR's window is up to 3 times that while it believes it is
- * starting up) and queue them at the bottleneck, where no reply can overtake
- * them and a drop-tail queue loses them. Held here, a backlog is the
- * ladder's lag (a lower rung gets the room back) and a reply goes first.
- * Returns microseconds to wait (what the excess takes at the link's rate),
- * 0 to go on; no limit without a recent measurement of the link. */
+/* A new frame (or part) waits while the bytes in flight and unsent pass
+ * about one and a half times what the link holds over the path's RTT: TCP
+ * would take them (BBR's window is up to 3 times that while it believes it
+ * is starting up) and queue them at the bottleneck, where no reply can
+ * overtake them and a drop-tail queue loses them. Held here, a backlog is
+ * the ladder's lag (a lower rung gets the room back) and a reply goes first.
+ * The link: a recent full-pipe measurement, else the largest recent sample
+ * (a lower bound: what is in flight may then grow by half each round trip,
+ * so a link that got faster is found; without this, a probe's keyframes
+ * after a long calm went out at BBR's start-up rate and queued replies for
+ * a quarter of a second at 2 Mbit/s). Returns microseconds to wait (what
+ * the excess takes at that rate), 0 to go on; no limit in TCP's start-up. */
 int ladder_hold_frame(struct session *s)
 {
     struct ladder *l = &s->lad;
     double now = mono_now();
     l->held = false;
-    if (l->cap_bps <= 0 || now - l->cap_t >= CAP_FRESH_S || l->min_rtt_ms <= 0)
+    double link = l->cap_bps > 0 && now - l->cap_t < CAP_FRESH_S ? l->cap_bps
+                  : now - l->open_t > YOUNG_S ? l->rate_bps : 0;
+    if (link <= 0 || l->min_rtt_ms <= 0)
         return 0;
     struct tcp_probe p;
     tcp_probe_read(lws_get_socket_fd(s->wsi), &p);
     if (!p.ok)
         return 0;
-    double budget = INFLIGHT_GAIN * l->cap_bps * l->min_rtt_ms / 1000;
+    double budget = INFLIGHT_GAIN * link * l->min_rtt_ms / 1000;
     double floor = 4.0 * (double)ladder_chunk(s);
     double over = (double)p.inflight + p.notsent - (budget > floor ? budget : floor);
     if (over <= 0)
         return 0;
-    double us = over / l->cap_bps * 1e6;
+    double us = over / link * 1e6;
     l->held = true;
     return us < 1000 ? 1000 : us > 20000 ? 20000 : (int)us;
 }
@@ -421,7 +428,7 @@ void ladder_police(struct net *n, struct session *s, double now)
     /* A blind probe (the estimate is app-limited: we sent less than the
      * link takes) unless a recent full-pipe sample says it cannot fit, with
      * the room a rung needs to work off a delay. */
-    bool hopeless = l->cap_bps > 0 && now - l->cap_t < CAP_FRESH_S && need > FIT * l->cap_bps;
+    bool hopeless = l->cap_bps > 0 && now - l->cap_t < HOPELESS_S && need > FIT * l->cap_bps;
     if ((fits && calm_s >= 2.0) || (calm_s >= l->hold && !hopeless)) {
         snprintf(l->why, sizeof l->why, "probe: %.0f kbit/s for the rung above, link %.0f kbit/s%s", need * 8 / 1000,
                  l->rate_bps * 8 / 1000, fits ? "" : " (estimate app-limited)");

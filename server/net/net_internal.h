@@ -117,14 +117,17 @@ struct session {
 
     /* transmit: the frame being sent (fanout.c) */
     struct frame *cur;            /* one reference while sending, else NULL */
-    uint8_t hdr[OC_FRAME_HEADER_SIZE]; /* its header, with this client's tile count */
+    struct oc_frame_header fhdr;  /* its header; each part's copy has the part's tile count and flag */
+    uint8_t hdr[OC_FRAME_HEADER_SIZE]; /* the header of the part being sent */
     const struct layer *layers[OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT]; /* [cascade * FIELDS + field], NULL = not sent */
     const uint8_t *lbuf[OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT];  /* per slot: the tiles this client gets (buf or shared) */
     const uint32_t *loff[OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT]; /* ... and their offsets */
     uint16_t tiles[CTL_MAX_TILES]; /* the frame's tiles this client gets, in order */
     int ntiles;
-    size_t total, sent;           /* bytes of this client's frame, and sent so far */
-    int hdr_off, fi, ti;          /* position: header bytes, field, tile... */
+    size_t sent;                  /* bytes of this client's frame (all its parts) sent so far */
+    size_t part_left;             /* bytes of the part being sent not written yet; 0 = between parts */
+    bool part_more;               /* the part being sent is not the frame's last */
+    int hdr_off, fi, ti;          /* position: the part's header bytes, field, tile... */
     size_t off;                   /* ...and byte within the tile */
     uint64_t first_seq;           /* frames older than this are never sent (tick at join) */
     uint64_t last_seq;            /* seq of the last frame started, 0 = none yet */

@@ -288,7 +288,7 @@ static int on_writable(struct net *n, struct session *s)
     int rc;
     if (!s->cur && s->rq && s->rq_sent > 0 && !s->closing) {
         rc = renders_write(n, s);
-    } else if (!s->cur && s->tq.count) {
+    } else if ((!s->cur || s->part_left == 0) && s->tq.count) { /* before a frame, or between its parts */
         rc = write_text(s);
     } else if (!s->cur && s->closing) {
         lws_close_reason(s->wsi, (enum lws_close_status)s->closing, (unsigned char *)s->close_reason,

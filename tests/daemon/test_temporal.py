@@ -15,6 +15,7 @@ import asyncio
 import json
 import os
 import socket
+import struct
 import sys
 import time
 
@@ -557,6 +558,72 @@ def test_temporal_group_served_intra_at_full_detail():
         check(rc == 0, "exit code %r" % rc)
     finally:
         d.kill()
+
+
+PART = 2  # frame header flags bit 1 (PROTOCOL.md §3.4)
+
+
+def join_parts(messages):
+    """The ticks of a stream of binary messages, the parts of each joined as §3.4
+    says (written here from the text, not taken from a library): [(seq, frame)].
+    Checks each part's shape on the way."""
+    out, held = [], []
+    for m in messages:
+        h = parse_header(m)
+        flags, = struct.unpack_from("<H", m, 38)
+        if held:
+            h0 = parse_header(held[0])
+            check(h["seq"] == h0["seq"], "a part of seq %d follows an unfinished tick %d" % (h["seq"], h0["seq"]))
+            check(m[:36] == held[0][:36] and m[40:48] == held[0][40:48],
+                  "parts of one tick differ in more than tile_count and flags")
+        if flags & PART:
+            check(h["tile_count"] >= 1, "a part with no tile")
+            held.append(m)
+            continue
+        parts = held + [m]
+        held = []
+        whole = bytearray(parts[0][:48])
+        struct.pack_into("<HH", whole, 36, sum(parse_header(x)["tile_count"] for x in parts), flags)
+        out.append((h["seq"], bytes(whole) + b"".join(x[48:] for x in parts), len(parts)))
+    return out
+
+
+@test
+def test_parts_join_to_the_whole_frame(d):
+    """subscribe "parts": a client gets a tick's frame in several messages (flags bit
+    1 on all but the last, the same header but tile_count); joined, they are byte for
+    byte the frame a client without parts gets at that seq (lossless: the same tiles
+    for everyone). A temporal client's joined frames decode in order within the bound.
+    "parts" must be a bool, and subscribed shows it."""
+    async def run():
+        a, hello = await connect(d)
+        b, _ = await connect(d)
+        c, _ = await connect(d)
+        sa = await subscribe(a, fields=["height", "dx", "dz"], bound=0, parts=True)
+        check(sa.get("parts") is True, "subscribed does not show parts: %r" % sa)
+        sb = await subscribe(b, fields=["height", "dx", "dz"], bound=0)
+        check("parts" not in sb, "subscribed shows parts to a client that did not ask: %r" % sb)
+        await c.send(json.dumps({"type": "subscribe", "id": 4, "parts": 1}))
+        e = await recv_json(c, lambda j: j.get("id") == 4)
+        check(e["type"] == "error" and e["code"] == "bad_subscription", "parts: 1 accepted: %r" % e)
+        await subscribe(c, temporal=True, parts=True)
+        fa, fb, fc = await asyncio.gather(collect(a, 2.0), collect(b, 2.0), collect(c, 2.0))
+        for w in (a, b, c):
+            await w.close()
+        return hello, fa, fb, fc
+    hello, fa, fb, fc = asyncio.run(run())
+    ja, jb = join_parts(fa), join_parts(fb)
+    check(all(k == 1 for _, _, k in jb), "a client without parts got a part")
+    multi = [k for _, _, k in ja if k > 1]
+    check(multi, "no tick came in parts (%d messages, %d ticks)" % (len(fa), len(ja)))
+    whole = {seq: f for seq, f, _ in jb}
+    same = [(f, whole[seq]) for seq, f, _ in ja if seq in whole]
+    print("    lossless: %d messages = %d ticks (up to %d parts), %d seqs in common" % (len(fa), len(ja), max(multi), len(same)))
+    check(len(same) >= 3, "only %d ticks in common between the two clients" % len(same))
+    check(all(x == y for x, y in same), "joined parts differ from the whole frame of the same tick")
+    jc = join_parts(fc)
+    check(len(jc) >= 10, "the temporal client with parts got %d ticks" % len(jc))
+    check_stream(d, hello["params"], [f for _, f, _ in jc], 0.01, "temporal stream joined from parts")
 
 
 if __name__ == "__main__":

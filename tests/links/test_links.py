@@ -190,7 +190,10 @@ async def client_main(url, mode, seconds, pinned, frames_dir):
         del sub["field_lod"]
     if pinned:
         sub["adapt"] = False
-    out = {"links": [], "frames": 0, "codecs_after": {}, "lods": [], "pings": []}
+    if mode == "ping-parts":
+        sub["parts"] = True
+    out = {"links": [], "frames": 0, "codecs_after": {}, "lods": [], "pings": [], "messages": 0, "mid_tick_pongs": 0}
+    in_tick = False   # the last binary message was a part with more to come (PROTOCOL.md §3.4)
     async with websockets.connect(url, subprotocols=["oceand.v1"], max_size=None, ping_interval=None,
                                   open_timeout=20) as ws:
         hello = json.loads(await ws.recv())
@@ -202,7 +205,7 @@ async def client_main(url, mode, seconds, pinned, frames_dir):
         next_ping = t0 + 4
         k = 0
         while time.time() - t0 < seconds:
-            if mode == "ping" and time.time() >= next_ping and k < 5:
+            if mode.startswith("ping") and time.time() >= next_ping and k < 5:
                 k += 1
                 ping_at[k] = out["frames"]
                 await ws.send(json.dumps({"type": "ping", "id": k}))
@@ -212,6 +215,10 @@ async def client_main(url, mode, seconds, pinned, frames_dir):
             except asyncio.TimeoutError:
                 continue
             if isinstance(m, bytes):
+                out["messages"] += 1
+                in_tick = bool(struct.unpack_from("<H", m, 38)[0] & 2)
+                if in_tick:
+                    continue
                 out["frames"] += 1
                 ts = tiles(m)
                 out["lods"].append(sorted(set((c, l) for _, l, _, c in ts)))
@@ -232,6 +239,7 @@ async def client_main(url, mode, seconds, pinned, frames_dir):
                 out["subscribed"] = j["subscription"]
             elif j.get("type") == "pong":
                 out["pings"].append(out["frames"] - ping_at[j["id"]])
+                out["mid_tick_pongs"] += in_tick
     print(json.dumps(out))
 
 
@@ -401,19 +409,41 @@ def test_stall_recovers_to_temporal():
     check(any(p == n and n > 0 for _, _, p, n in cs[after:]), "no all-predicted frame after the stall")
 
 
+def pings_over_2mbit(mode):
+    """The ping client (pinned at full detail) 13 s over 2 Mbit/s, 100 ms; the
+    daemon must exit cleanly."""
+    lab = Lab(2000, 100)
+    try:
+        r = client_in_b(lab, ["--mode", mode, "--seconds", "13", "--pinned"])
+    finally:
+        rc, _ = lab.close()
+    check(rc == 0, "daemon exit %r" % rc)
+    return r
+
+
 @lab_test
 def test_replies_overtake_frames():
     """2 Mbit/s, 100 ms, pinned at full detail (the link is saturated): a ping's
     answer waits behind the frame in progress and the short queue only, not
     behind a queue of frames: few frames arrive between ping and pong."""
-    lab = Lab(2000, 100)
-    try:
-        r = client_in_b(lab, ["--mode", "ping", "--seconds", "13", "--pinned"])
-    finally:
-        rc, log = lab.close()
-    check(rc == 0, "daemon exit %r" % rc)
+    r = pings_over_2mbit("ping")
     check(len(r["pings"]) >= 3, "pongs: %r" % r["pings"])
     check(max(r["pings"]) <= 3, "frames received between ping and pong: %r" % r["pings"])
+
+
+@lab_test
+def test_replies_go_between_parts():
+    """As above, with "parts": the frames (about 100 kB at full detail, intra: 0.4 s
+    of the link each) come in parts of about a tick of the link, and a pong goes
+    between two parts of one tick instead of after the whole frame."""
+    r = pings_over_2mbit("ping-parts")
+    print("    %d messages for %d ticks; pongs after %r ticks, %d of %d between two parts of one tick"
+          % (r["messages"], r["frames"], r["pings"], r["mid_tick_pongs"], len(r["pings"])))
+    check(r["messages"] >= 2 * r["frames"], "frames did not come in parts: %d messages, %d ticks"
+          % (r["messages"], r["frames"]))
+    check(len(r["pings"]) >= 3, "pongs: %r" % r["pings"])
+    check(r["mid_tick_pongs"] >= 1, "no pong came between two parts of a tick")
+    check(max(r["pings"]) <= 3, "ticks received between ping and pong: %r" % r["pings"])
 
 
 def main():

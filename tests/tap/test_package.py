@@ -8,6 +8,7 @@ SITE_DIR: where `pip install --target` put the package (else proto/python).
 """
 import asyncio
 import os
+import struct
 import sys
 
 import numpy as np
@@ -60,6 +61,39 @@ for c, tiles in by_cascade.items():
         check(not np.array_equal(region, u.samples) or np.array_equal(u.samples, t.samples),
               f"cascade {c}'s Assembler took a tile of cascade {u.cascade}")
 ok(f"Assembler(cascade=c) keeps only cascade c's tiles ({len(by_cascade)} cascades in v12_cascades.bin)")
+
+
+# ---- FrameJoiner: a tick's parts (PROTOCOL.md §3.4) join to the whole frame ----
+def split(buf, counts):
+    """buf's tiles in messages of counts[i] tiles, flags bit 1 on all but the last."""
+    ends, pos = [], 48
+    for _ in range(struct.unpack_from("<H", buf, 36)[0]):
+        pos += 40 + struct.unpack_from("<I", buf, pos + 32)[0]
+        ends.append(pos)
+    out, start, tile = [], 48, 0
+    for i, k in enumerate(counts):
+        end = ends[tile + k - 1]
+        part = bytearray(buf[:48] + buf[start:end])
+        struct.pack_into("<HH", part, 36, k, oceand.frames.FLAG_PART if i < len(counts) - 1 else 0)
+        out.append(bytes(part))
+        start, tile = end, tile + k
+    return out
+
+
+ntiles = struct.unpack_from("<H", vec, 36)[0]
+for counts in ([1] * ntiles, [ntiles - 1, 1], [ntiles]):
+    j = oceand.FrameJoiner()
+    got = [j.push(p) for p in split(vec, counts)]
+    check(all(g is None for g in got[:-1]) and got[-1] == vec, f"parts {counts} do not join to the whole frame")
+other = split(vec, [1, ntiles - 1])
+other = [o[:8] + struct.pack("<Q", 999) + o[16:] for o in other]
+j = oceand.FrameJoiner()
+j.push(split(vec, [1, ntiles - 1])[0])
+j.push(other[0])
+joined = j.push(other[1])
+check(struct.unpack_from("<Q", joined, 8)[0] == 999 and struct.unpack_from("<H", joined, 36)[0] == ntiles,
+      "a part of another tick did not drop the unfinished one")
+ok(f"FrameJoiner joins parts to the whole frame ({ntiles} tiles, split 3 ways)")
 
 # ---- the sync client: surface against query ----
 with oceand.Client(url) as sea:

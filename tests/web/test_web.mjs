@@ -551,6 +551,12 @@ try {
     // fell a second behind on a loaded machine): the server never breaks the chain.
     assert(s.stats.lastError === null && (s.stats.referenceErrors === 0 || s.stats.localDrops > 0),
       `decode errors: ${s.stats.referenceErrors} reference (${s.stats.localDrops} dropped by the page), last ${JSON.stringify(s.stats.lastError)}`);
+    if (!args.fake) {
+      // The page asks for parts (PROTOCOL.md §3.4): its first frames, keyframes of ~100 kB, come
+      // in parts of at most 64 kB, which it joins (the decode checks above saw the result).
+      assert(s.subscription && s.subscription.parts === true, `subscription in force ${JSON.stringify(s.subscription)}`);
+      assert(s.stats.framesInParts > 0, 'no frame came in parts');
+    }
     if (!args.fake) { // the daemon sent it predicted (shared) tiles, not only keyframes...
       const m = await (await fetch(`http://127.0.0.1:${port}/metrics`)).text();
       const num = (re) => Number((m.match(re) || [])[1]);

@@ -1,6 +1,6 @@
 // WebSocket link to oceand: JSON control messages + binary frames, with
 // automatic reconnect (exponential backoff). Knows nothing about rendering.
-import { SUBPROTOCOL } from '../../proto/js/oc_decode.js';
+import { SUBPROTOCOL, FrameJoiner } from '../../proto/js/oc_decode.js';
 
 const BACKOFF_MIN_MS = 500;
 const BACKOFF_MAX_MS = 10000;
@@ -46,6 +46,8 @@ export class Connection {
     ws.binaryType = 'arraybuffer';
     this.ws = ws;
     let opened = false;
+    const joiner = new FrameJoiner(); // a tick's frame may come in parts, with replies between them
+    this.joiner = joiner;
     ws.onopen = () => {
       opened = true;
       if (ws.protocol !== SUBPROTOCOL) {
@@ -63,7 +65,9 @@ export class Connection {
         if (msg.type === 'error' && msg.id === undefined) this.refusal = `${msg.code}: ${msg.message}`;
         this.h.onMessage?.(msg);
       } else {
-        this.h.onFrame?.(ev.data);
+        let frame;
+        try { frame = joiner.push(ev.data); } catch { frame = ev.data; } // the decoder reports what is wrong
+        if (frame) this.h.onFrame?.(frame);
       }
     };
     ws.onclose = (ev) => {

@@ -111,7 +111,9 @@ const MAX_IN_FLIGHT = 300;
 // give the temporal codec up. The grace ends GRACE_MS after the first frame is drawn.
 const GRACE_MS = 10000;
 let graceEnd = Infinity;
-const wantedSub = temporal ? { temporal: true } : {}; // kept across reconnects, with the panel's changes
+// parts: a tick's frame may come in several messages, so a reply (the panel's `set`) need not
+// wait behind a whole keyframe on a slow link (PROTOCOL.md §3.4; connection.js joins them).
+const wantedSub = temporal ? { temporal: true, parts: true } : { parts: true }; // kept across reconnects, with the panel's changes
 let lastResync = -Infinity;
 // Cascades 1..3 (PROTOCOL.md §4.1): their height, at LOD 1 (each holds waves up to half its
 // Nyquist wavenumber, so LOD 1 loses nothing) and 1 mm (their heights are centimetres).
@@ -414,6 +416,7 @@ window.oceand = Object.freeze({
       fps: stats.fps, framesPerSec: stats.framesPerSec, kBps: stats.kBps, latencyMs: stats.latencyMs,
       dropped: stats.dropped, decodeMs: stats.decodeMs, uploadMs: stats.uploadMs, inflater: stats.inflater, n: st.n, lod: st.lod,
       temporal, referenceErrors: st.referenceErrors, resyncs: st.resyncs, localDrops: st.localDrops,
+      framesInParts: conn.joiner ? conn.joiner.joined : 0, // this connection's ticks that came in parts (§3.4)
       fallback: snapshot(st.fallback), firstDrawnMs: st.firstDrawnMs, graceMs: GRACE_MS,
       lastError: snapshot(st.lastError), serverError: snapshot(st.serverError),
       ...(bench ? { timings: snapshot(timings) } : {}),

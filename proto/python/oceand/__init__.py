@@ -10,10 +10,11 @@
 Modules: frames (the binary frame decoder), surface (cascades summed and
 interpolated), client (AsyncClient, Client).
 """
-from .frames import FIELDS, SUBPROTOCOL, VERSION, Assembler, DecoderState, Frame, ProtocolError, Tile, decode_frame
+from .frames import (FIELDS, SUBPROTOCOL, VERSION, Assembler, DecoderState, Frame, FrameJoiner, ProtocolError, Tile,
+                     decode_frame)
 from .surface import Surface
 from .client import AsyncClient, Client, ServerError
 
 __version__ = "0.1.0"
-__all__ = ["FIELDS", "SUBPROTOCOL", "VERSION", "Assembler", "DecoderState", "Frame", "ProtocolError", "Tile",
+__all__ = ["FIELDS", "SUBPROTOCOL", "VERSION", "Assembler", "DecoderState", "Frame", "FrameJoiner", "ProtocolError", "Tile",
            "decode_frame", "Surface", "AsyncClient", "Client", "ServerError"]

@@ -56,6 +56,7 @@ class AsyncClient:
         self._ids = itertools.count(1)
         self._waiting = {}                    # id -> Future of the reply
         self._state = fr.DecoderState()
+        self._joiner = fr.FrameJoiner()
         self._assemblers = {}                 # cascade -> Assembler
         self._surface, self._surface_event = None, asyncio.Event()
         self._probe_queue = asyncio.Queue(maxsize=256)
@@ -101,7 +102,12 @@ class AsyncClient:
                         if self._render_id is not None:   # else a cancelled render's: dropped
                             await self._render_q.put(msg)  # waits for render() to take one
                     else:
-                        self._on_frame(msg)
+                        try:
+                            whole = self._joiner.push(msg)   # a tick may come in parts (§3.4)
+                        except fr.ProtocolError:
+                            whole = msg                      # the decoder says what is wrong
+                        if whole is not None:
+                            self._on_frame(whole)
                 else:
                     m = json.loads(msg)
                     if self._render_id is not None and m.get("id") == self._render_id and \
@@ -197,7 +203,9 @@ class AsyncClient:
         §4.1); cascades=None: cascade 0 only; a list: the `cascades` member as is.
         temporal=True asks for predicted frames (codec 3, fewer bytes), which must all
         be decoded in order: only for a reader as fast as the stream."""
-        msg = {"type": "subscribe", "fields": list(fields), "lod": lod, "tiles": "all", "temporal": temporal}
+        # parts: replies (query, set) need not wait behind a whole frame on a slow link
+        msg = {"type": "subscribe", "fields": list(fields), "lod": lod, "tiles": "all", "temporal": temporal,
+               "parts": True}
         if bound is not None:
             msg["bound"] = bound
         if max_rate is not None:

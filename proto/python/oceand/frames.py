@@ -268,6 +268,47 @@ def _temporal(payload, key, offset, scale, bound, height, width, state):
     return _wrap32(q[0] + (s + 2048) // 4096 + r.reshape(height, width))
 
 
+# ---- parts (§3.4) ---------------------------------------------------------------------
+
+FLAG_RENDERED = 1   # frame header flags bit 0: a rendered frame (§7.5)
+FLAG_PART = 2       # bit 1: more tiles of this tick follow in the next message (§3.4)
+
+
+class FrameJoiner:
+    """Joins the parts of a tick's frame (subscribe "parts": true). push() every
+    binary message: it returns the whole frame (the first part's header with the
+    tiles of all the parts counted and bit 1 cleared, then their tiles in order)
+    once the last part is in, a message that is not a part as it is, and None while
+    parts are held. A part of another seq than the held ones drops them."""
+
+    def __init__(self):
+        self.parts, self.seq = [], None
+
+    def push(self, data):
+        if len(data) < FRAME_HEADER.size:
+            raise ProtocolError("truncated", "shorter than a frame header")
+        header_size, seq = struct.unpack_from("<HQ", data, 6)
+        tile_count, flags = struct.unpack_from("<HH", data, 36)
+        if header_size < FRAME_HEADER.size or header_size % 8 or header_size > len(data):
+            raise ProtocolError("corrupt", f"header_size {header_size}")
+        if self.parts and seq != self.seq:
+            self.parts = []
+        if flags & FLAG_PART:
+            self.seq = seq
+            self.parts.append((bytes(data), header_size, tile_count))
+            return None
+        if not self.parts:
+            return data
+        parts, self.parts = self.parts + [(bytes(data), header_size, tile_count)], []
+        tiles = sum(p[2] for p in parts)
+        if tiles > 0xFFFF:
+            raise ProtocolError("corrupt", f"{tiles} tiles in the parts of one frame")
+        first, first_size, _ = parts[0]
+        head = bytearray(first[:first_size])
+        struct.pack_into("<HH", head, 36, tiles, flags & ~FLAG_PART)
+        return bytes(head) + b"".join(p[0][p[1]:] for p in parts)
+
+
 # ---- frames (§3) -------------------------------------------------------------------
 
 def decode_frame(data, state=None):
