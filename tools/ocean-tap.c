@@ -1286,9 +1286,11 @@ int main(int argc, char **argv)
         {OC_SUBPROTOCOL, callback, 0, RX_CHUNK, 0, NULL, 0}, {NULL, NULL, 0, 0, 0, NULL, 0}};
     /* pt_serv_buf_size: what one read of the socket takes. lws's default, 4 KB,
      * costs a poll and a read per 4 KB of a bake's megabytes a frame. */
+    /* TLS (and its certificate store, tens of milliseconds to load) only for wss:// and https:// */
+    int tls = !strncmp(o.url, "wss:", 4) || !strncmp(o.url, "https:", 6);
     struct lws_context_creation_info info = {
         .port = CONTEXT_PORT_NO_LISTEN, .protocols = protocols, .gid = (gid_t)-1, .uid = (uid_t)-1,
-        .options = LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT, .user = &s, .pt_serv_buf_size = RX_CHUNK,
+        .options = tls ? LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT : 0, .user = &s, .pt_serv_buf_size = RX_CHUNK,
     };
     struct lws_context *ctx = lws_create_context(&info);
     if (!ctx) {

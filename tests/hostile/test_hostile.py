@@ -1713,20 +1713,23 @@ ALL_FIELDS = ["height", "dx", "dz", "slope_x", "slope_z", "jacobian", "foam"]
 FINE_FIELDS = ALL_FIELDS[:6]     # foam lives on cascade 0 only
 HEAVY_SUB = json.dumps({"type": "subscribe", "id": "s", "fields": ALL_FIELDS, "lod": 0, "bound": 0,
                         "cascades": [{"fields": FINE_FIELDS, "lod": 0, "bound": 0}] * 2})
+# The same in parts (PROTOCOL.md §3.4): a client stalled between two parts of a tick holds its frame alike.
+HEAVY_SUB_PARTS = HEAVY_SUB[:-1] + ', "parts": true}'
 
 
 @case(resolution=256, rss_slack_kb=80 * 1024)
 def stalled_pinned_frames(d, fig):
     """150 clients with a 1 KiB receive window that never read, each subscribed
-    to every field of three cascades at LOD 0, lossless (MBs a frame): each
+    to every field of three cascades at LOD 0, lossless (MBs a frame; half of
+    them in parts, so they stall between two parts of a tick): each
     pinned a whole frame of its own (about 1 frame per client, RSS +300 MB).
     The frames held by clients that do not read are bounded now (48 MB, the
     oldest holders closed with 1008), and RSS stays within 64 MB of the start."""
     rss0 = d.rss_kb()
     socks = []
-    for _ in range(150):
+    for i in range(150):
         s, _ = raw_ws(d.port, rcvbuf=1024)
-        send_quiet(s, ws_frame(OP_TEXT, HEAVY_SUB))
+        send_quiet(s, ws_frame(OP_TEXT, HEAVY_SUB_PARTS if i % 2 else HEAVY_SUB))
         socks.append(s)
         time.sleep(0.03)       # one by one, so that each pins a different frame
     peak = rss0
