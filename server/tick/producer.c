@@ -124,6 +124,11 @@ static void produce(struct sim *s, const struct prod_job *pj)
         LOGE("out of memory preparing frame %llu", (unsigned long long)pj->seq);
         return;
     }
+    int keyframed = 0;
+    for (int k = 0; k < pj->want.nkeys; k++)
+        keyframed += pj->want.intra[pj->want.keys[k]] != 0;
+    atomic_fetch_add(&g_metrics.layers_encoded, (uint64_t)pj->want.nkeys);
+    atomic_fetch_add(&g_metrics.layers_keyframed, (uint64_t)keyframed);
     s->job_t_tick = pj->t_tick;
     s->job_t_enc = mono_now();
     s->job_samples = frame_job_samples(s->job);
