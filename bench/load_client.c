@@ -21,7 +21,8 @@
  * after the other would take 0.6 s apiece).
  * Every client reads the `link` messages (PROTOCOL.md §7.2) for its rung;
  * the JSON has the rungs' spread, and with LOAD_PER_CLIENT=1 also per client
- * arrays: "client_fps", "client_rung" (at the end), "client_rung_max". */
+ * arrays: "client_fps", "client_rung" (at the end), "client_rung_max".
+ * LOAD_LINK_LOG=FILE: every `link` message received, "seconds client json". */
 #include <arpa/inet.h>
 #include <errno.h>
 #include <netinet/in.h>
@@ -133,6 +134,9 @@ static void on_frame(struct client *c)
 }
 
 /* End of a ws frame's payload. */
+static FILE *link_log; /* LOAD_LINK_LOG=FILE: every `link` message, "seconds client json" a line */
+static double t_origin;
+
 static void text_done(struct client *c)
 {
     c->txt[c->txt_len < sizeof c->txt ? c->txt_len : sizeof c->txt - 1] = 0;
@@ -142,6 +146,8 @@ static void text_done(struct client *c)
         if (c->rung > c->rung_max)
             c->rung_max = c->rung;
         c->rung_changes++;
+        if (link_log)
+            fprintf(link_log, "%.3f %d %s\n", now_s() - t_origin, c->idx, c->txt);
         if (strstr(c->txt, "\"reason\":\"congestion"))
             c->downs++;
         else if (strstr(c->txt, "\"reason\":\"probe"))
@@ -313,6 +319,9 @@ int main(int argc, char **argv)
     if (getenv("LOAD_BIND") && *getenv("LOAD_BIND"))
         bind_addr = getenv("LOAD_BIND");
     sub_json = argc > 5 ? argv[5] : NULL;
+    t_origin = now_s();
+    if (getenv("LOAD_LINK_LOG") && *getenv("LOAD_LINK_LOG"))
+        link_log = fopen(getenv("LOAD_LINK_LOG"), "w");
     if (nclients > 65536)
         return 2;
     pthread_t *th = calloc((size_t)nclients, sizeof *th);
@@ -425,6 +434,8 @@ int main(int argc, char **argv)
     printf("}\n");
     free(rv);
     free(rmax);
+    if (link_log)
+        fclose(link_log);
     for (int i = 0; i < nclients; i++)
         if (clients[i].fd > 0)
             close(clients[i].fd);

@@ -98,20 +98,21 @@ class Lab:
         for ns in (self.ns_a, self.ns_b):
             sh("ip", "-n", ns, "link", "set", "lo", "up")
         flows = []
-        for i, (_, kbit, rtt, loss) in enumerate(LINKS):
+        for i, (_, kbit, rtt, loss) in enumerate(self.a.link_list):
             q = max(32768, kbit * 1000 // 8 // 10)      # 100 ms at the rate, at least 32 kB (run.sh)
             flows += ["--flow", "%s.%d:%d:%g:%g:%d" % (self.net, 2 + i, kbit, rtt / 2, loss, q)]
         # the shared link (anything else): fast, 0.1 ms
         self.shaper = subprocess.Popen([self.a.shaper, self.ns_a, self.ns_b, "10000000", "0.1", "0", "16777216", "1"]
-                                       + flows, stdout=subprocess.PIPE, stderr=open(os.path.join(self.tmp, "shaper.err"), "w"),
+                                       + flows, preexec_fn=lambda: os.nice(self.a.shaper_nice), stdout=subprocess.PIPE, stderr=open(os.path.join(self.tmp, "shaper.err"), "w"),
                                        text=True)
         if self.shaper.stdout.readline().strip() != "ready":
             raise RuntimeError("the shaper did not start: " + open(os.path.join(self.tmp, "shaper.err")).read())
         sh("ip", "-n", self.ns_a, "addr", "add", self.net + ".1/24", "dev", "lnk0")
-        sh("ip", "-n", self.ns_a, "link", "set", "lnk0", "up", "mtu", "1500")
-        for i in range(len(LINKS)):
+        # a long device queue: packets are dropped by the links' own queues, not before the shaper reads them
+        sh("ip", "-n", self.ns_a, "link", "set", "lnk0", "up", "mtu", "1500", "txqueuelen", "10000")
+        for i in range(len(self.a.link_list)):
             sh("ip", "-n", self.ns_b, "addr", "add", "%s.%d/24" % (self.net, 2 + i), "dev", "lnk0")
-        sh("ip", "-n", self.ns_b, "link", "set", "lnk0", "up", "mtu", "1500")
+        sh("ip", "-n", self.ns_b, "link", "set", "lnk0", "up", "mtu", "1500", "txqueuelen", "10000")
         # This process joins A (its /metrics polls); `ip netns exec B` still reaches B.
         fd = os.open("/var/run/netns/" + self.ns_a, os.O_RDONLY)
         if ctypes.CDLL("libc.so.6", use_errno=True).setns(fd, CLONE_NEWNET) != 0:
@@ -168,6 +169,17 @@ class Lab:
                 self.daemon.wait()
         self.daemon = None
 
+    def tun_dropped(self):
+        """Packets the two TUN devices dropped before the shaper read them (its queue was full)."""
+        n = 0
+        for ns in (self.ns_a, self.ns_b):
+            out = subprocess.run(["ip", "-n", ns, "-j", "-s", "link", "show", "lnk0"], capture_output=True, text=True).stdout
+            try:
+                n += json.loads(out)[0]["stats64"]["tx"]["dropped"]
+            except (ValueError, LookupError):
+                pass
+        return n
+
     def metrics(self):
         text = urllib.request.urlopen("http://%s.1:%d/metrics" % (self.net, PORT), timeout=2).read().decode()
         return {k: float(v) for k, v in METRIC_RE.findall(text)}
@@ -184,14 +196,20 @@ class Lab:
         a = self.a
         sub = json.dumps(WEB_SUB, separators=(",", ":"))
         clients = []
-        for i, (lname, _, _, _) in enumerate(LINKS):
+        for i, (lname, _, _, _) in enumerate(a.link_list):
             env = dict(os.environ, LOAD_HOST=self.net + ".1", LOAD_SET_INTERVAL_S="0", LOAD_PER_CLIENT="1")
+            if a.link_log:   # every `link` message, per row, run and group
+                os.makedirs(a.link_log, exist_ok=True)
+                env["LOAD_LINK_LOG"] = os.path.join(a.link_log, "%s-%d-%d.log" % (name, run, i))
             cmd = [a.load_client, str(PORT), str(a.per_link), str(a.warmup), str(a.window), sub]
             if name.startswith("links"):
                 env["LOAD_BIND"] = "%s.%d" % (self.net, 2 + i)
                 cmd = ["ip", "netns", "exec", self.ns_b] + cmd
             p = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-            clients.append((lname if name.startswith("links") else "lo%d" % i, p))
+            gname = lname if name.startswith("links") else "lo%d" % i
+            if any(g == gname for g, _ in clients):
+                gname += "-%d" % i
+            clients.append((gname, p))
         # each process says "measuring" when its window starts (its clients connected + warm-up)
         starts = []
         for _, p in clients:
@@ -205,6 +223,7 @@ class Lab:
         while time.monotonic() < max(starts):
             time.sleep(0.01)
         m0, c0, w0, t0 = self.metrics(), cpu_split(pid), runq_wait_seconds(pid), time.monotonic()
+        td0 = self.tun_dropped()
         sc0, sw0 = cpu_seconds(self.shaper.pid), runq_wait_seconds(self.shaper.pid)
         cc0 = sum(cpu_seconds(p.pid) for _, p in clients)
         enc, tick = [], []
@@ -221,6 +240,7 @@ class Lab:
             intra.append(m.get("oceand_intra_groups", 0))
             prev = m
         m1, c1, w1, t1 = prev, cpu_split(pid), runq_wait_seconds(pid), time.monotonic()
+        td1 = self.tun_dropped()
         sc1, sw1 = cpu_seconds(self.shaper.pid), runq_wait_seconds(self.shaper.pid)
         cc1 = sum(cpu_seconds(p.pid) for _, p in clients)
         dt = t1 - t0
@@ -258,6 +278,8 @@ class Lab:
                "overruns": int(d("oceand_tick_overruns_total")),
                "layers_per_frame": round(d('oceand_layers_encoded_total{kind="all"}') / max(1, frames), 2),
                "keyframe_layers_per_frame": round(d('oceand_layers_encoded_total{kind="keyframe"}') / max(1, frames), 2),
+               "ksamples_per_frame": round(d('oceand_samples_encoded_total{kind="all"}') / max(1, frames) / 1000, 1),
+               "keyframe_ksamples_per_frame": round(d('oceand_samples_encoded_total{kind="keyframe"}') / max(1, frames) / 1000, 1),
                "tiles_per_frame": {k: round(d('oceand_stream_tiles_total{kind="%s"}' % k) / max(1, frames), 1)
                                    for k in ("predicted", "key", "demand_key")},
                "degraded_groups_max": max(degraded or [0]), "intra_groups_max": max(intra or [0]),
@@ -269,6 +291,7 @@ class Lab:
                "rung_changes": int(d("oceand_rung_changes_total")),
                "shaper_cpu": round((sc1 - sc0) / dt, 3),
                "shaper_runq_wait": round((sw1 - sw0) / dt, 3),
+               "tun_dropped": td1 - td0,
                "clients_cpu": round((cc1 - cc0) / dt, 3),
                "loadavg_1m": round(os.getloadavg()[0], 2),
                "groups": groups}
@@ -278,7 +301,8 @@ class Lab:
 def median_row(rows):
     out = {"bench": "links-load", "row": rows[0]["row"], "median_of": len(rows)}
     for k in ("daemon_cpu", "daemon_cpu_user", "daemon_cpu_sys", "daemon_runq_wait", "encode_ms_p50", "encode_ms_mean", "tick_ms_p50", "frames_per_s",
-              "overruns", "layers_per_frame", "keyframe_layers_per_frame", "mbytes_per_s", "shaper_cpu", "loadavg_1m"):
+              "overruns", "layers_per_frame", "keyframe_layers_per_frame", "ksamples_per_frame",
+              "keyframe_ksamples_per_frame", "mbytes_per_s", "shaper_cpu", "loadavg_1m"):
         v = [r[k] for r in rows if r.get(k) is not None]
         out[k] = round(statistics.median(v), 3) if v else None
     out["groups"] = {}
@@ -298,9 +322,15 @@ def main():
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--warmup", type=float, default=10)
     ap.add_argument("--window", type=float, default=20)
-    ap.add_argument("--per-link", type=int, default=40, help="viewers per link (5 links)")
+    ap.add_argument("--per-link", type=int, default=40, help="viewers per link")
+    ap.add_argument("--links", default=",".join(n for n, _, _, _ in LINKS),
+                    help="the links' groups, by name (a name may repeat: e.g. 50M,50M,50M,50M,50M puts every group on 50M)")
     ap.add_argument("--rows", default="loopback-200,links-200")
     ap.add_argument("--oceand-args", default="")
+    ap.add_argument("--shaper-nice", type=int, default=-10,
+                    help="the shaper's niceness: it stands for the network, so it should not queue for a CPU "
+                         "behind the daemon or other work (one process carries all 200 links)")
+    ap.add_argument("--link-log", default="", help="a folder: the `link` messages each viewer got (load_client LOAD_LINK_LOG)")
     a = ap.parse_args()
     for k in ("oceand", "shaper", "load_client"):
         setattr(a, k, os.path.abspath(getattr(a, k)))
@@ -309,9 +339,12 @@ def main():
         print(json.dumps({"skipped": "the link lab needs root and network namespaces"}), flush=True)
         return 0
     sh("ip", "netns", "del", "mlprobe%d" % os.getpid(), check=False)
+    byname = {x[0]: x for x in LINKS}
+    a.link_list = [byname[n] for n in a.links.split(",") if n]
     names = [r for r in a.rows.split(",") if r]
-    if a.per_link != 40:
-        names = [n.replace("-200", "-%d" % (5 * a.per_link)) for n in names]
+    total = len(a.link_list) * a.per_link
+    if total != 200:
+        names = [n.replace("-200", "-%d" % total) for n in names]
     lab = Lab(a)
     # SIGTERM / SIGINT: through the finally below (daemon, clients, shaper, namespaces)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(130))
@@ -335,7 +368,8 @@ def main():
     if len(names) == 2 and all(rows[n] for n in names):
         lo, li = names[0], names[1]
         ratio = {"bench": "links-load", "row": "ratio", "of": "%s / %s" % (li, lo)}
-        for k in ("encode_ms_p50", "encode_ms_mean", "tick_ms_p50", "daemon_cpu", "daemon_cpu_user", "layers_per_frame"):
+        for k in ("encode_ms_p50", "encode_ms_mean", "tick_ms_p50", "daemon_cpu", "daemon_cpu_user", "layers_per_frame",
+                  "ksamples_per_frame"):
             per = [round(b[k] / x[k], 3) for x, b in zip(rows[lo], rows[li]) if x.get(k) and b.get(k) is not None]
             ratio[k + "_runs"] = per
             ratio[k] = round(statistics.median(per), 3) if per else None
