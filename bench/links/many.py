@@ -91,6 +91,19 @@ class Lab:
         self.shaper = None
         self.daemon = None
 
+    def shaper_priority(self):
+        """The shaper stands for the network: it should not wait for a CPU behind the daemon or other
+        work (one process carries all 200 links, and its delays are every viewer's RTT). SCHED_RR at
+        the lowest real-time priority (it sleeps in ppoll between packets; the kernel's real-time
+        throttling still leaves 5 % to the rest), or only a niceness with --shaper-rt 0."""
+        if self.a.shaper_rt:
+            try:
+                os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(1))
+                return
+            except OSError:
+                pass
+        os.nice(self.a.shaper_nice)
+
     # ---- set-up and clean-up
     def up(self):
         sh("ip", "netns", "add", self.ns_a)
@@ -103,7 +116,7 @@ class Lab:
             flows += ["--flow", "%s.%d:%d:%g:%g:%d" % (self.net, 2 + i, kbit, rtt / 2, loss, q)]
         # the shared link (anything else): fast, 0.1 ms
         self.shaper = subprocess.Popen([self.a.shaper, self.ns_a, self.ns_b, "10000000", "0.1", "0", "16777216", "1"]
-                                       + flows, preexec_fn=lambda: os.nice(self.a.shaper_nice), stdout=subprocess.PIPE, stderr=open(os.path.join(self.tmp, "shaper.err"), "w"),
+                                       + flows, preexec_fn=self.shaper_priority, stdout=subprocess.PIPE, stderr=open(os.path.join(self.tmp, "shaper.err"), "w"),
                                        text=True)
         if self.shaper.stdout.readline().strip() != "ready":
             raise RuntimeError("the shaper did not start: " + open(os.path.join(self.tmp, "shaper.err")).read())
@@ -150,6 +163,7 @@ class Lab:
                                         "--state-file", "none", "--web-root", web, "--resolution", "256",
                                         "--plan-rigor", "0", "--wisdom-file", "none", "--max-clients", "400",
                                         "--log-level", "warn"] + self.a.oceand_args.split(),
+                                       preexec_fn=(lambda: os.nice(self.a.daemon_nice)) if self.a.daemon_nice else None,
                                        stdout=log, stderr=log)
         for _ in range(200):
             try:
@@ -210,6 +224,7 @@ class Lab:
             if any(g == gname for g, _ in clients):
                 gname += "-%d" % i
             clients.append((gname, p))
+            self.procs.append((p, gname))
         # each process says "measuring" when its window starts (its clients connected + warm-up)
         starts = []
         for _, p in clients:
@@ -295,6 +310,7 @@ class Lab:
                "clients_cpu": round((cc1 - cc0) / dt, 3),
                "loadavg_1m": round(os.getloadavg()[0], 2),
                "groups": groups}
+        self.procs = []
         return res
 
 
@@ -327,9 +343,11 @@ def main():
                     help="the links' groups, by name (a name may repeat: e.g. 50M,50M,50M,50M,50M puts every group on 50M)")
     ap.add_argument("--rows", default="loopback-200,links-200")
     ap.add_argument("--oceand-args", default="")
+    ap.add_argument("--shaper-rt", type=int, default=1, help="1: the shaper runs SCHED_RR (priority 1); 0: at --shaper-nice")
     ap.add_argument("--shaper-nice", type=int, default=-10,
                     help="the shaper's niceness: it stands for the network, so it should not queue for a CPU "
                          "behind the daemon or other work (one process carries all 200 links)")
+    ap.add_argument("--daemon-nice", type=int, default=0, help="the daemon's niceness (a diagnostic: e.g. -10 on a busy machine)")
     ap.add_argument("--link-log", default="", help="a folder: the `link` messages each viewer got (load_client LOAD_LINK_LOG)")
     a = ap.parse_args()
     for k in ("oceand", "shaper", "load_client"):
