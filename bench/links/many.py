@@ -21,7 +21,11 @@ and their medians.
 Daemon figures come from /proc (CPU) and /metrics, polled every 20 ms through the window:
 an interval in which exactly one frame was published gives that frame's encode and tick
 time exactly (oceand_encode_duration_seconds / oceand_tick_duration_seconds sums), hence
-their medians per tick; layers per frame from oceand_layers_encoded_total.
+their medians per tick; layers and samples per frame from oceand_layers_encoded_total and
+oceand_samples_encoded_total. The shaper runs SCHED_RR (--shaper-rt): one process carries all
+200 links, and when it waited for a CPU its delays read as congestion to every viewer's ladder.
+Each row also has the shaper's and the viewers' CPU, and the daemon's time runnable but
+waiting for a CPU (/proc schedstat): this machine may be shared.
 
     many.py --oceand build/oceand --shaper build/shaper --load-client build/load_client
             [--runs 3] [--warmup 10] [--window 20] [--rows loopback-200,links-200]
