@@ -14,11 +14,20 @@
  * SUBSCRIBE_JSON (at most 4096 bytes) is sent by every client after the
  * handshake, e.g. {"type":"subscribe","fields":["height"]}.
  * Environment LOAD_SET_INTERVAL_S: seconds between client 0's wind sets
- * (default 0.3, someone steering; 0 = no sets, the sea left alone). */
+ * (default 0.3, someone steering; 0 = no sets, the sea left alone).
+ * LOAD_HOST: the daemon's IPv4 address (default 127.0.0.1); LOAD_BIND: the
+ * clients' source address (default: the kernel's choice). The clients connect
+ * in parallel (one thread each for the handshake: over a 300 ms link, one
+ * after the other would take 0.6 s apiece).
+ * Every client reads the `link` messages (PROTOCOL.md §7.2) for its rung;
+ * the JSON has the rungs' spread, and with LOAD_PER_CLIENT=1 also per client
+ * arrays: "client_fps", "client_rung" (at the end), "client_rung_max".
+ * LOAD_LINK_LOG=FILE: every `link` message received, "seconds client json". */
 #include <arpa/inet.h>
 #include <errno.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdbool.h>
 #include <stdint.h>
@@ -43,6 +52,11 @@ struct client {
     bool fin;
     bool in_binary;         /* inside a binary message */
     uint64_t msg_off;
+    bool in_text;           /* inside a text message */
+    char txt[1024];         /* its first bytes (a `link` message's rung and reason) */
+    size_t txt_len;
+    int rung, rung_max, rung_changes, downs, ups;
+    int port;
     uint8_t hdr[48];
     uint8_t ping[125];
     int ping_len;
@@ -120,6 +134,27 @@ static void on_frame(struct client *c)
 }
 
 /* End of a ws frame's payload. */
+static FILE *link_log; /* LOAD_LINK_LOG=FILE: every `link` message, "seconds client json" a line */
+static double t_origin;
+
+static void text_done(struct client *c)
+{
+    c->txt[c->txt_len < sizeof c->txt ? c->txt_len : sizeof c->txt - 1] = 0;
+    const char *r;
+    if (strstr(c->txt, "\"type\":\"link\"") && (r = strstr(c->txt, "\"rung\":"))) {
+        c->rung = atoi(r + 7);
+        if (c->rung > c->rung_max)
+            c->rung_max = c->rung;
+        c->rung_changes++;
+        if (link_log)
+            fprintf(link_log, "%.3f %d %s\n", now_s() - t_origin, c->idx, c->txt);
+        if (strstr(c->txt, "\"reason\":\"congestion"))
+            c->downs++;
+        else if (strstr(c->txt, "\"reason\":\"probe"))
+            c->ups++;
+    }
+}
+
 static void frame_done(struct client *c)
 {
     if (c->opcode == 9)
@@ -130,6 +165,10 @@ static void frame_done(struct client *c)
         if (c->msg_off >= 48)
             on_frame(c);
         c->in_binary = false;
+    }
+    if ((c->opcode == 1 || c->opcode == 0) && c->in_text && c->fin) {
+        text_done(c);
+        c->in_text = false;
     }
 }
 
@@ -161,6 +200,10 @@ static void consume(struct client *c, const uint8_t *p, size_t n)
                 c->in_binary = true;
                 c->msg_off = 0;
             }
+            if (c->opcode == 1) {
+                c->in_text = true;
+                c->txt_len = 0;
+            }
             if (len == 0)
                 frame_done(c);
             continue;
@@ -172,6 +215,12 @@ static void consume(struct client *c, const uint8_t *p, size_t n)
                 memcpy(c->hdr + c->msg_off, p, h);
             }
             c->msg_off += take;
+        } else if (c->in_text && (c->opcode == 1 || c->opcode == 0)) {
+            if (c->txt_len < sizeof c->txt - 1) {
+                size_t h = sizeof c->txt - 1 - c->txt_len < take ? sizeof c->txt - 1 - c->txt_len : take;
+                memcpy(c->txt + c->txt_len, p, h);
+            }
+            c->txt_len += take;
         } else if (c->opcode == 9 && c->ping_len + take <= sizeof c->ping) {
             memcpy(c->ping + c->ping_len, p, take);
             c->ping_len += (int)take;
@@ -184,20 +233,28 @@ static void consume(struct client *c, const uint8_t *p, size_t n)
     }
 }
 
+static const char *host = "127.0.0.1", *bind_addr;
+
 static int open_client(struct client *c, int port)
 {
     c->fd = socket(AF_INET, SOCK_STREAM, 0);
     struct sockaddr_in a = { .sin_family = AF_INET, .sin_port = htons((uint16_t)port) };
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (inet_pton(AF_INET, host, &a.sin_addr) != 1)
+        return -1;
+    if (c->fd >= 0 && bind_addr) {
+        struct sockaddr_in b = { .sin_family = AF_INET };
+        if (inet_pton(AF_INET, bind_addr, &b.sin_addr) != 1 || bind(c->fd, (struct sockaddr *)&b, sizeof b) != 0)
+            return -1;
+    }
     if (c->fd < 0 || connect(c->fd, (struct sockaddr *)&a, sizeof a) != 0)
         return -1;
     int one = 1;
     setsockopt(c->fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
     char req[512];
     int n = snprintf(req, sizeof req,
-                     "GET / HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                     "GET / HTTP/1.1\r\nHost: %s:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
                      "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
-                     "Sec-WebSocket-Protocol: oceand.v1\r\n\r\n", port);
+                     "Sec-WebSocket-Protocol: oceand.v1\r\n\r\n", host, port);
     if (send(c->fd, req, (size_t)n, MSG_NOSIGNAL) != n)
         return -1;
     /* Read the response header byte by byte so no WebSocket data is swallowed. */
@@ -215,6 +272,18 @@ static int open_client(struct client *c, int port)
         return -1;
     c->open = true;
     return 0;
+}
+
+static const char *sub_json;
+static int open_rc[65536];
+
+static void *open_thread(void *arg)
+{
+    struct client *c = arg;
+    open_rc[c->idx] = open_client(c, c->port);
+    if (open_rc[c->idx] == 0 && sub_json)
+        send_frame(c, 1, sub_json, strlen(sub_json));
+    return NULL;
 }
 
 /* Nearest-rank percentile (p50 included: the rank's value, as the JSON
@@ -245,15 +314,35 @@ int main(int argc, char **argv)
     if (!clients || !lat || !sizes || ep < 0)
         return 1;
     int connected = 0, errors = 0;
+    if (getenv("LOAD_HOST") && *getenv("LOAD_HOST"))
+        host = getenv("LOAD_HOST");
+    if (getenv("LOAD_BIND") && *getenv("LOAD_BIND"))
+        bind_addr = getenv("LOAD_BIND");
+    sub_json = argc > 5 ? argv[5] : NULL;
+    t_origin = now_s();
+    if (getenv("LOAD_LINK_LOG") && *getenv("LOAD_LINK_LOG"))
+        link_log = fopen(getenv("LOAD_LINK_LOG"), "w");
+    if (nclients > 65536)
+        return 2;
+    pthread_t *th = calloc((size_t)nclients, sizeof *th);
+    if (!th)
+        return 1;
     for (int i = 0; i < nclients; i++) {
         clients[i].idx = i;
-        if (open_client(&clients[i], port) != 0) {
+        clients[i].port = port;
+        if (pthread_create(&th[i], NULL, open_thread, &clients[i]) != 0)
+            open_rc[i] = -2;
+    }
+    for (int i = 0; i < nclients; i++)
+        if (open_rc[i] != -2)
+            pthread_join(th[i], NULL);
+    free(th);
+    for (int i = 0; i < nclients; i++) {
+        if (open_rc[i] != 0) {
             errors++;
             continue;
         }
         connected++;
-        if (argc > 5)
-            send_frame(&clients[i], 1, argv[5], strlen(argv[5]));
         struct epoll_event ev = { .events = EPOLLIN, .data.ptr = &clients[i] };
         epoll_ctl(ep, EPOLL_CTL_ADD, clients[i].fd, &ev);
     }
@@ -280,7 +369,7 @@ int main(int argc, char **argv)
             measuring = true;
             seq_start = seq_max;
             next_set = t + 0.25;
-            fprintf(stderr, "measuring\n"); /* the driver samples daemon CPU from here */
+            fprintf(stderr, "measuring %.6f\n", t); /* the driver samples daemon CPU from here (t: CLOCK_MONOTONIC) */
             fflush(stderr);
         }
         if (set_interval > 0 && measuring && clients[0].open && t >= next_set && !set_waiting) {
@@ -308,12 +397,45 @@ int main(int argc, char **argv)
     printf("{\"connected\":%d,\"errors\":%d,\"open_at_end\":%d,\"window_s\":%g,\"frames_made\":%llu,\"fps_median\":%.2f,"
            "\"fps_min\":%.2f,\"delivered\":%.4f,\"delivered_median\":%.4f,\"lat_p50_ms\":%.2f,\"lat_p99_ms\":%.2f,"
            "\"set_latency_ticks_p50\":%.1f,\"set_latency_ticks_p99\":%.1f,\"set_samples\":%d,\"mbytes_per_s\":%.3f,"
-           "\"frame_kb\":%.1f,\"frame_kb_p50\":%.1f}\n",
+           "\"frame_kb\":%.1f,\"frame_kb_p50\":%.1f",
            connected, errors, still_open, window, (unsigned long long)made, pct(fps, (size_t)nclients, 0.5),
            pct(fps, (size_t)nclients, 0), pct(share, (size_t)nclients, 0), pct(share, (size_t)nclients, 0.5),
            pct(lat, nlat, 0.5), pct(lat, nlat, 0.99), pct(set_samples, (size_t)nset, 0.5),
            pct(set_samples, (size_t)nset, 0.99), nset, (double)bytes / window / 1e6,
            nlat ? (double)bytes / (double)nlat / 1024 : 0, pct(sizes, nlat, 0.5) / 1024);
+    /* The rungs: at the end of the window (median, max), the highest reached. */
+    double *rv = malloc(sizeof(double) * (size_t)nclients), *rmax = malloc(sizeof(double) * (size_t)nclients);
+    int changes = 0, downs = 0, ups = 0;
+    for (int i = 0; i < nclients && rv && rmax; i++) {
+        rv[i] = clients[i].rung;
+        rmax[i] = clients[i].rung_max;
+        changes += clients[i].rung_changes;
+        downs += clients[i].downs;
+        ups += clients[i].ups;
+    }
+    bool per = getenv("LOAD_PER_CLIENT") && atoi(getenv("LOAD_PER_CLIENT"));
+    if (rv && rmax) {
+        printf(",\"rungs\":{\"end_median\":%g,\"end_max\":%g,\"max_reached\":%g,\"link_messages\":%d,\"congestion\":%d,\"probe\":%d}",
+               pct(rv, (size_t)nclients, 0.5), pct(rv, (size_t)nclients, 1), pct(rmax, (size_t)nclients, 1), changes,
+               downs, ups);
+        if (per) {
+            printf(",\"client_fps\":[");
+            for (int i = 0; i < nclients; i++)
+                printf("%s%.2f", i ? "," : "", (double)clients[i].frames / window);
+            printf("],\"client_rung\":[");
+            for (int i = 0; i < nclients; i++)
+                printf("%s%d", i ? "," : "", clients[i].rung);
+            printf("],\"client_rung_max\":[");
+            for (int i = 0; i < nclients; i++)
+                printf("%s%d", i ? "," : "", clients[i].rung_max);
+            printf("]");
+        }
+    }
+    printf("}\n");
+    free(rv);
+    free(rmax);
+    if (link_log)
+        fclose(link_log);
     for (int i = 0; i < nclients; i++)
         if (clients[i].fd > 0)
             close(clients[i].fd);

@@ -176,6 +176,19 @@ size_t metrics_render(char *buf, size_t cap)
             "oceand_temporal_tiles_sent_total{kind=\"shared\"} %llu\n"
             "oceand_temporal_tiles_sent_total{kind=\"key\"} %llu\n",
         (unsigned long long)atomic_load(&m->sent_shared_tiles), (unsigned long long)atomic_load(&m->sent_key_tiles));
+    put(&o, "# HELP oceand_layers_encoded_total Layers encoded, summed over the frames (one per field, LOD, bound "
+            "and cascade subscribed by someone, per frame; clients on the same ladder rung share them): all, and "
+            "those that also encoded keyframe or intra tiles (a client needed them that tick).\n"
+            "# TYPE oceand_layers_encoded_total counter\n"
+            "oceand_layers_encoded_total{kind=\"all\"} %llu\n"
+            "oceand_layers_encoded_total{kind=\"keyframe\"} %llu\n",
+        (unsigned long long)atomic_load(&m->layers_encoded), (unsigned long long)atomic_load(&m->layers_keyframed));
+    put(&o, "# HELP oceand_samples_encoded_total Samples of those layers (N / 2^lod squared each): all, and those "
+            "of the layers that also encoded keyframe or intra tiles.\n"
+            "# TYPE oceand_samples_encoded_total counter\n"
+            "oceand_samples_encoded_total{kind=\"all\"} %llu\n"
+            "oceand_samples_encoded_total{kind=\"keyframe\"} %llu\n",
+        (unsigned long long)atomic_load(&m->samples_encoded), (unsigned long long)atomic_load(&m->samples_keyframed));
     counter(&o, "oceand_frames_waited_keyframe_total", "Frames a temporal client was not sent because it lacked "
             "their references and they carried no keyframe tiles (it gets the next one).",
             atomic_load(&m->frames_waited_keyframe));

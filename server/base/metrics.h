@@ -42,6 +42,8 @@ struct metrics {
     /* temporal layers (codec 3, layer_stream.c, fanout.c) */
     atomic_uint_least64_t stream_key_tiles, stream_predicted_tiles, stream_demand_key_tiles;
     atomic_uint_least64_t sent_shared_tiles, sent_key_tiles, frames_waited_keyframe;
+    /* layers (and their samples) per encoded frame (producer.c): all, and those that also carry keyframe tiles */
+    atomic_uint_least64_t layers_encoded, layers_keyframed, samples_encoded, samples_keyframed;
     /* per-client ladder (server/net/ladder.c) */
     atomic_uint_least64_t link_sent, rung_changes, frames_caught_up;
 };

@@ -124,6 +124,20 @@ static void produce(struct sim *s, const struct prod_job *pj)
         LOGE("out of memory preparing frame %llu", (unsigned long long)pj->seq);
         return;
     }
+    /* What this frame encodes (/metrics: encode work against the number of ladder rungs in use). */
+    int keyframed = 0, n = ocean_resolution(s->ocean);
+    uint64_t samples = 0, samples_key = 0;
+    for (int k = 0; k < pj->want.nkeys; k++) {
+        uint64_t side = (uint64_t)(n >> pj->want.lod[k]), sk = side * side;
+        bool key = pj->want.intra[pj->want.keys[k]] != 0;
+        keyframed += key;
+        samples += sk;
+        samples_key += key ? sk : 0;
+    }
+    atomic_fetch_add(&g_metrics.layers_encoded, (uint64_t)pj->want.nkeys);
+    atomic_fetch_add(&g_metrics.layers_keyframed, (uint64_t)keyframed);
+    atomic_fetch_add(&g_metrics.samples_encoded, samples);
+    atomic_fetch_add(&g_metrics.samples_keyframed, samples_key);
     s->job_t_tick = pj->t_tick;
     s->job_t_enc = mono_now();
     s->job_samples = frame_job_samples(s->job);
