@@ -243,7 +243,8 @@ bool net_host_allowed(struct net *n, struct lws *wsi);      /* the request's Hos
 int upgrade_confirm(struct net *n, struct lws *wsi, const char *upgrade); /* 0 = go on, 1 = refused (answered) */
 bool upgrade_allowed(struct net *n, struct lws *wsi);
 
-/* rx_guard.c: RFC 6455 §5.1 masking, which lws 4.1 does not check (plain sockets) */
+/* rx_guard.c: RFC 6455 §5.1 masking, which lws 4.1 does not check, and a client's end of
+ * stream, on which lws 4.1 can spin (plain sockets) */
 void rx_guard_start(void);                                   /* net_create, plain ws only */
 void rx_guard_stop(void);
 void rx_guard_accept(int fd);                                /* a new client connection */

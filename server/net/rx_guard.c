@@ -18,7 +18,22 @@
  * reads them with SSL_read; masking guards proxies' caches, which cannot see
  * into TLS anyway). Remove this file when lws >= the release with the
  * upstream check is the minimum. Only the lws service thread's reads are
- * looked at; every other recv passes straight through. */
+ * looked at; every other recv passes straight through.
+ *
+ * The end of a client's stream, for the same reason (an lws 4.1 defect,
+ * fixed upstream in 4.2 by "adopt: rejection should not loop with listen
+ * adoption", lib/plat/unix/unix-service.c): when a read returns 0 (the
+ * client's FIN) or fails, lws closes the connection, but while it still
+ * holds the unsent tail of a partial write it only marks it "flushing
+ * before close" and reports it closed; the service loop then services the
+ * same pollfd again without polling, reads 0 again, and spins there for
+ * ever (the lws thread never returns to main, SIGTERM's flag is never
+ * seen). A viewer whose send buffer is full (the ladder's low-water mark,
+ * pacing, --send-buffer-kb) that closes or half-closes its side does it.
+ * So the first end is handed on, the socket is shut down both ways, and
+ * every later read of it says EAGAIN: lws leaves the loop, and its next
+ * poll sees the socket writable (and hung up), where the flush fails and
+ * lws closes the connection at once. */
 #include "net_internal.h"
 
 #include <errno.h>
@@ -44,6 +59,7 @@ struct rx_guard {
     uint64_t clen;              /* HEAD: Content-Length of this request */
     uint64_t left;              /* BODY: bytes of body left; WS: payload bytes left */
     uint64_t plen;              /* WS: payload length of the frame whose header is being read */
+    bool ended;                 /* lws was handed the stream's end (0 or an error): later reads are EAGAIN */
 };
 
 /* Empty masked frame completing the header lws has begun, then a masked
@@ -253,9 +269,22 @@ bool rx_guard_tripped(int fd)
 /* The process' recv(2): lws' reads of client sockets pass through guard_feed. */
 ssize_t recv(int fd, void *buf, size_t len, int flags)
 {
+    struct rx_guard *g = (flags & MSG_PEEK) ? NULL : guard_of(fd);
+    if (g && g->ended) { /* lws 4.1 reads an ended stream again without polling, for ever: see the top */
+        errno = EAGAIN;
+        return -1;
+    }
     ssize_t r = recvfrom(fd, buf, len, flags, NULL, NULL);
-    struct rx_guard *g;
-    if (r <= 0 || (flags & MSG_PEEK) || !(g = guard_of(fd)))
+    if (!g)
+        return r;
+    if (r == 0 || (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) {
+        int e = errno;
+        g->ended = true;
+        shutdown(fd, SHUT_RDWR); /* its next poll: writable and hung up, so a pending flush fails at once */
+        errno = e;
+        return r;
+    }
+    if (r < 0)
         return r;
     if (g->phase == G_DEAD) { /* after the injected close: drop what follows */
         errno = EAGAIN;

@@ -753,6 +753,39 @@ def vanish_mid_frame(d, fig):
     check(ok, "vanished clients still counted: %g" % d.metric("oceand_clients"))
 
 
+@case(resolution=256, args=("--send-buffer-kb", "16"))
+def half_close_full_buffer(d, fig):
+    """Clients that read nothing until the daemon's socket buffers are full (lws then keeps
+    the unsent tail of a write) and then half-close (FIN, their socket kept open): each is
+    hung up, and the lws thread goes on serving. lws 4.1 spun on such a connection for ever,
+    reading its end again and again without polling (server/net/rx_guard.c): no frame, no
+    answer, no shutdown (an edge of the cluster suite was killed by the 3 s alarm)."""
+    socks = [raw_ws(d.port, rcvbuf=4096)[0] for _ in range(5)]
+    time.sleep(1.5)                                   # frames fill both sides' buffers
+    for s in socks:
+        s.shutdown(socket.SHUT_WR)
+    t0 = time.time()
+    hung_up = []
+    for s in socks:                                   # what the daemon still sends, then its close
+        s.settimeout(max(0.1, t0 + 5 - time.time()))
+        try:
+            while s.recv(1 << 16):
+                pass
+            hung_up.append(round(time.time() - t0, 2))
+        except OSError:                               # timeout, or a reset: not a clean close
+            pass
+        finally:
+            s.close()
+    gauge_ok = wait_until(lambda: d.metric("oceand_clients") == 1, 5)
+    fig.update(half_closed=len(socks), hung_up=len(hung_up), hung_up_within_s=max(hung_up, default=None),
+               gauge_after=d.metric("oceand_clients"))
+    log("    %d half-closed clients with full buffers: %d hung up (within %s s); clients gauge %g"
+        % (len(socks), len(hung_up), fig["hung_up_within_s"], fig["gauge_after"]))
+    check(len(hung_up) == len(socks), "%d of %d half-closed clients never hung up" % (len(socks) - len(hung_up),
+                                                                                      len(socks)))
+    check(gauge_ok, "half-closed clients still counted: %g" % d.metric("oceand_clients"))
+
+
 @case(rss_slack_kb=1024)
 def churn(d, fig):
     """1000 connect/subscribe/disconnect cycles in four rounds after a warm-up: a leak grows
