@@ -327,11 +327,19 @@ static void estimate(struct net *n, struct session *s, double now)
     /* An app-limited sample is a lower bound of the link (we sent less than
      * it takes); a sample of a full pipe is the link. Keep the larger of the
      * recent ones, and let a full-pipe sample lower it after 2 s. */
-    if (p.delivery_bps > 0 && !p.app_limited && now - l->open_t > YOUNG_S) {
+    /* TCP's restart after a stall (a retransmission timeout, then slow
+     * start) samples less than the link: such a sample may raise the
+     * estimate, not lower it (TCP's start-up sets no measurement at all).
+     * Its samples once read 0.5 Mbit/s on a 10 Mbit/s link, and the step
+     * down after the stall went to the rung that fitted them, rung 7. */
+    bool restarting = l->stalled_t > 0 && now - l->stalled_t < YOUNG_S;
+    if (p.delivery_bps > 0 && !p.app_limited && now - l->open_t > YOUNG_S &&
+        (!restarting || p.delivery_bps > l->cap_bps)) {
         l->cap_bps = p.delivery_bps;
         l->cap_t = now;
     }
-    if (p.delivery_bps > 0 && (p.delivery_bps > l->rate_bps || (!p.app_limited && now - l->rate_t > 2.0))) {
+    if (p.delivery_bps > 0 &&
+        (p.delivery_bps > l->rate_bps || (!p.app_limited && !restarting && now - l->rate_t > 2.0))) {
         l->rate_bps = p.delivery_bps;
         l->rate_t = now;
     }
@@ -382,6 +390,7 @@ void ladder_police(struct net *n, struct session *s, double now)
     if (s->cur && now - s->progress_t > WINDOW_S) {
         l->calm = 0;
         l->prev_lag_min = 0; /* the way out of it is judged on its own windows */
+        l->stalled_t = now;
         return;
     }
     /* Lost ticks; or running far behind and not catching up (a client
@@ -426,8 +435,8 @@ void ladder_police(struct net *n, struct session *s, double now)
     double need = need_bps(n, s, l->rung - 1);
     bool fits = l->rate_bps > 0 && need <= FIT * l->rate_bps;
     /* A blind probe (the estimate is app-limited: we sent less than the
-     * link takes) unless a recent full-pipe sample says it cannot fit, with
-     * the room a rung needs to work off a delay. */
+     * link takes) unless a full-pipe sample of the last minute says it
+     * cannot fit, with the room a rung needs to work off a delay. */
     bool hopeless = l->cap_bps > 0 && now - l->cap_t < HOPELESS_S && need > FIT * l->cap_bps;
     if ((fits && calm_s >= 2.0) || (calm_s >= l->hold && !hopeless)) {
         snprintf(l->why, sizeof l->why, "probe: %.0f kbit/s for the rung above, link %.0f kbit/s%s", need * 8 / 1000,

@@ -57,6 +57,7 @@ struct ladder {
     int rung, nrungs;             /* rung in force (0 = as asked), rungs of this subscription */
     double open_t;                /* when the client connected */
     double changed_t;             /* mono time of the last change of rung */
+    double stalled_t;             /* the last window in which nothing was taken (a stall), 0 = none */
     double up_t;                  /* ...of the last step up (a step down soon after it is a failed probe) */
     double hold;                  /* seconds without congestion before the next probe up */
     double win_t;                 /* start of the current evaluation window */
