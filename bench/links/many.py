@@ -42,12 +42,15 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 import urllib.request
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+from load import cpu_seconds, cpu_split, runq_wait_seconds  # noqa: E402 (bench/load.py: /proc readers)
+
 WEB_SUB = {"type": "subscribe", "id": "sub", "fields": ["height", "dx", "dz", "foam"], "field_lod": {"foam": 2},
            "cascades": [{"fields": ["height"], "lod": 1, "bound": 0.001}] * 3, "temporal": True}
+# (bench/links/viewer.py's without "parts": load_client counts every binary message as a frame)
 # name, kbit/s, RTT ms, loss %: the five links of bench-links (bench/links/run.sh)
 LINKS = [("50M", 50000, 20, 0), ("10M", 10000, 50, 0), ("4M", 4000, 80, 1), ("2M", 2000, 150, 0),
          ("1M", 1000, 300, 2)]
@@ -59,26 +62,15 @@ def sh(*cmd, check=True):
     return subprocess.run(cmd, check=check, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
 
 
-def cpu_split(pid):
-    """(user, system) CPU seconds of a process."""
-    with open("/proc/%d/stat" % pid) as f:
-        fields = f.read().rsplit(")", 1)[1].split()
-    return int(fields[11]) / os.sysconf("SC_CLK_TCK"), int(fields[12]) / os.sysconf("SC_CLK_TCK")
-
-
-def cpu_seconds(pid):
-    return sum(cpu_split(pid))
-
-
-def runq_wait_seconds(pid):
-    total = 0
-    for tid in os.listdir("/proc/%d/task" % pid):
+def stop(p, timeout):
+    """Terminate a process; kill it if it is still there after `timeout` s."""
+    if p and p.poll() is None:
+        p.terminate()
         try:
-            with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
-                total += int(f.read().split()[1])
-        except OSError:
-            pass
-    return total / 1e9
+            p.wait(timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
 
 
 METRIC_RE = re.compile(r"^(oceand_[a-z_]+(?:\{[^}]*\})?) (\S+)$", re.M)
@@ -139,21 +131,9 @@ class Lab:
     def down(self):
         self.stop_daemon()
         for p, _ in reversed(self.procs):
-            if p.poll() is None:
-                p.terminate()
-                try:
-                    p.wait(5)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
+            stop(p, 5)
         self.procs = []
-        if self.shaper and self.shaper.poll() is None:
-            self.shaper.terminate()
-            try:
-                self.shaper.wait(5)
-            except subprocess.TimeoutExpired:
-                self.shaper.kill()
-                self.shaper.wait()
+        stop(self.shaper, 5)
         for ns in (self.ns_a, self.ns_b):
             sh("ip", "netns", "del", ns, check=False)
         shutil.rmtree(self.tmp, ignore_errors=True)
@@ -178,13 +158,7 @@ class Lab:
         raise RuntimeError("the daemon did not start: " + open(os.path.join(self.tmp, "oceand.log")).read()[-500:])
 
     def stop_daemon(self):
-        if self.daemon and self.daemon.poll() is None:
-            self.daemon.terminate()
-            try:
-                self.daemon.wait(10)
-            except subprocess.TimeoutExpired:
-                self.daemon.kill()
-                self.daemon.wait()
+        stop(self.daemon, 10)
         self.daemon = None
 
     def tun_dropped(self):

@@ -55,6 +55,26 @@ struct params {
     double rate_bps, delay_s, loss, qmax;
 };
 
+/* The queue and the delay line are FIFOs of packets (head, tail). */
+static void fifo_push(struct pkt **head, struct pkt **tail, struct pkt *p)
+{
+    p->next = NULL;
+    if (*tail)
+        (*tail)->next = p;
+    else
+        *head = p;
+    *tail = p;
+}
+
+static struct pkt *fifo_pop(struct pkt **head, struct pkt **tail)
+{
+    struct pkt *p = *head;
+    *head = p->next;
+    if (!*head)
+        *tail = NULL;
+    return p;
+}
+
 /* One direction of one link: a drop-tail queue, the wire, a delay line. */
 struct dir {
     const struct params *pa;
@@ -183,13 +203,8 @@ static void take(int fd, bool to_b, double now)
         if (!p)
             return;
         p->len = (size_t)r;
-        p->next = NULL;
         memcpy(p->data, buf, (size_t)r);
-        if (x->qt)
-            x->qt->next = p;
-        else
-            x->qh = p;
-        x->qt = p;
+        fifo_push(&x->qh, &x->qt, p);
         x->qn++;
         x->qbytes += (size_t)r;
         x->next = now; /* pump it */
@@ -205,30 +220,19 @@ static double pump(struct dir *x, int out, double now)
         if (x->tx_free < now)
             x->tx_free = now;
         while (x->qn && x->tx_free <= now && x->dn < RING) {
-            struct pkt *p = x->qh;
-            x->qh = p->next;
-            if (!x->qh)
-                x->qt = NULL;
+            struct pkt *p = fifo_pop(&x->qh, &x->qt);
             x->qn--;
             x->qbytes -= p->len;
             x->tx_free += p->len * 8.0 / x->pa->rate_bps;
             p->due = x->tx_free + x->pa->delay_s;
-            p->next = NULL;
-            if (x->dt)
-                x->dt->next = p;
-            else
-                x->dh = p;
-            x->dt = p;
+            fifo_push(&x->dh, &x->dt, p);
             x->dn++;
         }
         if (x->qn && x->tx_free < next)
             next = x->tx_free;
     }
     while (x->dn && x->dh->due <= now && !stall_flag) {
-        struct pkt *p = x->dh;
-        x->dh = p->next;
-        if (!x->dh)
-            x->dt = NULL;
+        struct pkt *p = fifo_pop(&x->dh, &x->dt);
         x->dn--;
         if (write(out, p->data, p->len) == (ssize_t)p->len)
             x->passed++;
