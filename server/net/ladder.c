@@ -44,6 +44,8 @@
 #define LOWAT_MAX ((uint32_t)CHUNK_SIZE)
 #define LOWAT_START (16u * 1024)
 #define CAP_FRESH_S 10.0      /* a full-pipe sample this recent is the link */
+#define HOLD_RTT_MIN_MS 1.0   /* below this path RTT (loopback, a LAN) no bottleneck queue to keep short without a measurement:
+                                 a slow local reader's low samples only throttled it once it read again */
 #define HOPELESS_S 60.0       /* no blind probe up to a rung that a full-pipe sample this recent says cannot fit */
 #define PACE_GAIN 1.25        /* TCP's pacing rate at most this times the link measured */
 #define INFLIGHT_GAIN 1.5     /* bytes in flight at most this times the link measured x the path's RTT */
@@ -288,15 +290,16 @@ size_t ladder_chunk(const struct session *s)
  * (a lower bound: what is in flight may then grow by half each round trip,
  * so a link that got faster is found; without this, a probe's keyframes
  * after a long calm went out at BBR's start-up rate and queued replies for
- * a quarter of a second at 2 Mbit/s). Returns microseconds to wait (what
- * the excess takes at that rate), 0 to go on; no limit in TCP's start-up. */
+ * a quarter of a second at 2 Mbit/s; not on a path of under a millisecond).
+ * Returns microseconds to wait (what the excess takes at that rate), 0 to
+ * go on; no limit in TCP's start-up. */
 int ladder_hold_frame(struct session *s)
 {
     struct ladder *l = &s->lad;
     double now = mono_now();
     l->held = false;
     double link = l->cap_bps > 0 && now - l->cap_t < CAP_FRESH_S ? l->cap_bps
-                  : now - l->open_t > YOUNG_S ? l->rate_bps : 0;
+                  : now - l->open_t > YOUNG_S && l->min_rtt_ms >= HOLD_RTT_MIN_MS ? l->rate_bps : 0;
     if (link <= 0 || l->min_rtt_ms <= 0)
         return 0;
     struct tcp_probe p;
