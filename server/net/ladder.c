@@ -440,7 +440,8 @@ void ladder_police(struct net *n, struct session *s, double now)
     /* A blind probe (the estimate is app-limited: we sent less than the
      * link takes) unless a full-pipe sample of the last minute says it
      * cannot fit, with the room a rung needs to work off a delay. */
-    bool hopeless = l->cap_bps > 0 && now - l->cap_t < HOPELESS_S && need > FIT * l->cap_bps;
+    double memory = l->min_rtt_ms >= HOLD_RTT_MIN_MS ? HOPELESS_S : CAP_FRESH_S; /* a local reader is slow for its CPU, not a link */
+    bool hopeless = l->cap_bps > 0 && now - l->cap_t < memory && need > FIT * l->cap_bps;
     if ((fits && calm_s >= 2.0) || (calm_s >= l->hold && !hopeless)) {
         snprintf(l->why, sizeof l->why, "probe: %.0f kbit/s for the rung above, link %.0f kbit/s%s", need * 8 / 1000,
                  l->rate_bps * 8 / 1000, fits ? "" : " (estimate app-limited)");
