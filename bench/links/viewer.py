@@ -6,8 +6,12 @@ what it saw over the measured window:
   fps, ticks (share of the ticks in the window it received), latency p50/p95
   (arrival minus the frame's server_time_us: both clocks are this machine's),
   kB/frame, codec shares of its tiles, the rung (`link` messages), the
-  round trip of a `set` that changes nothing (sent every second: p50, p95,
-  max and how many passed --set-bound-ms in the window; the warm-up's
+  round trip of a `set` (sent every second, like the web page on a control
+  connection of its own, ?frames=0, unless --one-connection; it moves
+  time_scale by 1e-4 and back, which no frame shows; the reply is the first
+  `params` of its version on either connection, as the page takes it; --noop-sets:
+  sets that change nothing, answered on the control connection only:
+  p50, p95, max and how many passed --set-bound-ms in the window; the warm-up's
   maximum apart), the role
   of the daemon it reads (--role, as run.sh started it) and the load average.
 
@@ -66,18 +70,40 @@ async def run(a):
     pending = {}
     part = None       # (seq, bytes, codecs, lods) of the parts of a tick received so far
     t_start = time.time()
+    first_seen = {}   # params_version -> when the first copy of it arrived (either connection)
+
+    def replied(j, now):
+        if j.get("type") == "params":
+            now = first_seen.setdefault(j.get("params_version"), now)
+        if j.get("id") in pending and j.get("type") in ("params", "error"):
+            t_sent = pending.pop(j["id"])
+            sets.append(((now - t_sent) * 1000, t_sent - t_start))
+
+    async def read_control(cws):
+        async for m in cws:
+            if isinstance(m, str):
+                replied(json.loads(m), time.time())
+
     async with websockets.connect(a.url, subprotocols=["oceand.v1"], max_size=None, ping_interval=None,
                                   open_timeout=20) as ws:
         hello = json.loads(await ws.recv())
-        wind = hello["params"]["wind_speed"]
+        scale = hello["params"]["time_scale"]
         await ws.send(json.dumps(sub))
+        cws = reader = None
+        if not a.one_connection:
+            sep = "&" if "?" in a.url else "?"
+            cws = await websockets.connect(a.url + sep + "frames=0", subprotocols=["oceand.v1"], ping_interval=None,
+                                           open_timeout=20)
+            json.loads(await cws.recv())  # its hello
+            reader = asyncio.ensure_future(read_control(cws))
         next_set = time.time() + 1
         k = 0
         while time.time() - t_start < a.warmup + a.seconds:
             if a.sets and time.time() >= next_set:
                 k += 1
                 pending["s%d" % k] = time.time()
-                await ws.send(json.dumps({"type": "set", "id": "s%d" % k, "params": {"wind_speed": wind}}))
+                value = scale if a.noop_sets or k % 2 == 0 else scale + 1e-4
+                await (cws or ws).send(json.dumps({"type": "set", "id": "s%d" % k, "params": {"time_scale": value}}))
                 next_set += 1
             try:
                 m = await asyncio.wait_for(ws.recv(), 0.2)
@@ -99,9 +125,11 @@ async def run(a):
             j = json.loads(m)
             if j.get("type") == "link":
                 links.append((now, j.get("rung"), j))
-            elif j.get("id") in pending and j.get("type") in ("params", "error"):
-                t_sent = pending.pop(j["id"])
-                sets.append(((now - t_sent) * 1000, t_sent - t_start))
+            else:
+                replied(j, now)
+        if cws:
+            reader.cancel()
+            await cws.close()
     t0 = t_start + a.warmup
     win = [f for f in frames if f[0] >= t0]
     out = {"link": a.name, "role": a.role}
@@ -167,6 +195,9 @@ def main():
     p.add_argument("--pinned", action="store_true")
     p.add_argument("--whole-frames", action="store_true", help="subscribe without \"parts\" (one message a tick)")
     p.add_argument("--sets", type=int, default=1)
+    p.add_argument("--noop-sets", action="store_true", help="sets that change nothing (the sender alone is answered)")
+    p.add_argument("--one-connection", action="store_true",
+                   help="send the sets on the frame connection, not on a control connection (?frames=0)")
     p.add_argument("--timeline", action="store_true")
     p.add_argument("--rungs", action="store_true")
     p.add_argument("--set-log", action="store_true", help="every set: [seconds from start, round trip ms]")

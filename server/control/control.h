@@ -78,6 +78,9 @@ struct ctl_msg {
 };
 
 void subscription_default(struct subscription *s, double tick_rate);
+/* No frames at all ("fields": []): a session for control messages only. */
+void subscription_none(struct subscription *s);
+bool subscription_has_frames(const struct subscription *s);
 /* The fields, LOD and bound a subscription asks for cascade c: 0 fields
  * when it does not ask for that cascade. For cascade 0, *lod is the
  * subscription's LOD; a field may override it (subscription_lod). */

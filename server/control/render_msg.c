@@ -53,6 +53,8 @@ int render_parse(const cJSON *root, const struct ctl_limits *lim, struct render_
         e->code = "bad_render";
         return -1;
     }
+    if (!r->sub.fields) /* "no frames" is a live session's choice; a render is its frames */
+        return ctl_fail(e, "bad_render", "fields", "\"fields\" must be a non-empty array of names");
     return 0;
 }
 

@@ -27,6 +27,22 @@ void subscription_default(struct subscription *s, double tick_rate)
 
 _Static_assert(CTL_MAX_CASCADES == OCEAN_MAX_CASCADES, "subscriptions address every cascade");
 
+void subscription_none(struct subscription *s)
+{
+    s->fields = 0;
+    s->ncascades = 1;
+    memset(&s->cascade[1], 0, sizeof s->cascade - sizeof s->cascade[0]);
+}
+
+bool subscription_has_frames(const struct subscription *s)
+{
+    int lod, bound_index;
+    for (int c = 0; c < s->ncascades && c < CTL_MAX_CASCADES; c++)
+        if (subscription_cascade(s, c, &lod, &bound_index))
+            return true;
+    return false;
+}
+
 unsigned subscription_cascade(const struct subscription *s, int c, int *lod, int *bound_index)
 {
     if (c == 0) {
@@ -49,7 +65,8 @@ static int parse_layer(const cJSON *msg, unsigned *fields, int *lod, signed char
 {
     const cJSON *j;
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "fields"))) {
-        if (!cJSON_IsArray(j) || cJSON_GetArraySize(j) == 0)
+        /* [] is "no frames" at the top level (control_apply_subscribe), never in a cascade. */
+        if (!cJSON_IsArray(j) || (cJSON_GetArraySize(j) == 0 && !field_lod))
             return ctl_fail(e, "bad_subscription", NULL, "\"fields\" must be a non-empty array of names");
         unsigned mask = 0;
         const cJSON *f;
@@ -117,6 +134,13 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
     const cJSON *j;
     if (parse_layer(msg, &tmp.fields, &tmp.lod, tmp.field_lod, &tmp.bound_index, e) != 0)
         return -1;
+    /* "fields": [] subscribes to no frames at all: a session for control
+     * messages only (a second connection that keeps replies off the frame
+     * stream's TCP queue, PROTOCOL.md §7.1). No finer cascade then either. */
+    if (!tmp.fields && cJSON_GetObjectItemCaseSensitive(msg, "cascades"))
+        return ctl_fail(e, "bad_subscription", NULL, "\"cascades\" need top-level \"fields\": with \"fields\": [] there are no frames");
+    if (!tmp.fields)
+        subscription_none(&tmp);
     if ((j = cJSON_GetObjectItemCaseSensitive(msg, "cascades"))) {
         /* The finer cascades 1, 2, ...: each {fields, lod, bound}, any member
          * omitted taken from cascade 0's (the top level's, as now in force). */

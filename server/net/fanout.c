@@ -125,6 +125,8 @@ static void on_publish(struct net *n, const struct frame *f)
 {
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {
         struct session *s = session_of(d);
+        if (!subscription_has_frames(&s->eff))
+            continue; /* a control connection: no frames, no holes, nothing for its ladder */
         bool catching = catching_up(n, s, f->hdr.seq);
         if (n->seen_any && s->last_seq && s->last_seq < f->hdr.seq && !catching)
             count_holes(n, s, f->index - 1);
@@ -195,7 +197,7 @@ void net_stream_new_chains(struct net *n)
 bool fanout_want_write(const struct net *n, const struct session *s)
 {
     const struct frame *f = n->latest;
-    return f && f->hdr.seq > s->last_seq && f->hdr.seq >= s->first_seq;
+    return f && f->hdr.seq > s->last_seq && f->hdr.seq >= s->first_seq && subscription_has_frames(&s->eff);
 }
 
 /* Prepare s->cur = f for this client: header, layers, tile list. false if the

@@ -104,7 +104,7 @@ static int rungs_of(const struct subscription *a, double tick_rate, signed char 
     int n = 0;
     /* Raw float32 (bound 0) asks for exact samples: a checker, not a
      * viewer; no rung of it is exact, so it is served as asked. */
-    bool pinned = a->pinned || a->bound_index == 0;
+    bool pinned = a->pinned || a->bound_index == 0 || !subscription_has_frames(a); /* nothing to adapt */
     for (int i = 0; i < NDEFS && n < (pinned ? 1 : LADDER_MAX_RUNGS); i++) {
         apply_def(a, &DEFS[i], tick_rate, &cur);
         if (n && same_service(&prev, &cur))

@@ -163,6 +163,12 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
      * frame built may be minutes old (PROTOCOL.md §3.1). */
     s->first_seq = n->sim ? sim_seq(n->sim) : net_latest_seq(n);
     subscription_default(&s->sub, n->dc.tick_rate);
+    /* ws://host/?frames=0: a connection for control messages only, with no
+     * frame ever queued ahead of its replies (PROTOCOL.md §1). */
+    char arg[16];
+    const char *frames = lws_get_urlarg_by_name(wsi, "frames=", arg, (int)sizeof arg);
+    if (frames && strcmp(frames, "0") == 0)
+        subscription_none(&s->sub);
     ladder_open(n, s); /* s->eff = s->sub: the first rung until the link says otherwise */
     dispatch_demand(n, &s->eff, +1);
     lws_dll2_add_tail(&s->list, &n->sessions);

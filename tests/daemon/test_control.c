@@ -112,7 +112,17 @@ static void test_subscribe(void)
           "subscribed text %s", s);
     free(s);
     cJSON_Delete(m);
-    const char *bad[] = { "{\"fields\":[]}", "{\"fields\":[\"spray\"]}", "{\"lod\":5}", "{\"lod\":1.5}",
+    /* "fields": [] is no frames at all (a control connection): no cascade either. */
+    m = cJSON_Parse("{\"fields\":[]}");
+    CHECK(control_apply_subscribe(m, &cur, &lim, &out, &e) == 0 && out.fields == 0 && out.ncascades == 1 &&
+              !subscription_has_frames(&out), "fields [] is not a subscription to no frames");
+    s = control_print(control_subscribed_msg(&out, NULL));
+    CHECK(s && strstr(s, "\"fields\":[]"), "subscribed text %s", s ? s : "(null)");
+    free(s);
+    cJSON_Delete(m);
+    CHECK(subscription_has_frames(&cur), "the default subscription has no frames");
+    const char *bad[] = { "{\"fields\":[],\"cascades\":[]}", "{\"cascades\":[{\"fields\":[]}]}",
+                          "{\"fields\":[\"spray\"]}", "{\"lod\":5}", "{\"lod\":1.5}",
                           "{\"bound\":0.002}", "{\"max_rate\":0}", "{\"tiles\":\"some\"}", "{\"tiles\":[[0,40]]}",
                           "{\"tiles\":[[0]]}", "{\"field_lod\":[2]}", "{\"field_lod\":{\"spray\":1}}",
                           "{\"field_lod\":{\"foam\":5}}", "{\"field_lod\":{\"foam\":\"2\"}}",

@@ -100,6 +100,18 @@ async def recv_json(ws, pred=lambda m: True, timeout=5.0):
                 return j
 
 
+async def drain(ws, seconds):
+    """Every message received in the next `seconds`."""
+    got = []
+    t_end = time.time() + seconds
+    while time.time() < t_end:
+        try:
+            got.append(await asyncio.wait_for(ws.recv(), t_end - time.time()))
+        except asyncio.TimeoutError:
+            break
+    return got
+
+
 async def recv_frame(ws, pred=lambda h, b: True, timeout=5.0):
     """Next binary frame satisfying pred; returns (header dict, bytes)."""
     deadline = time.time() + timeout
@@ -545,6 +557,45 @@ def test_subscribe_fields_lod_tiles(d):
                           [(await recv_frame(a, lambda h, m: h["tile_count"] == tiles_per_frame(BASE_N, 2)))[1]])
         check(res[0]["max_err"] <= 0.05, "bound 0.05")
         await a.close()
+    asyncio.run(run())
+
+
+@test
+def test_control_connection_gets_no_frames(d):
+    """ws://host/?frames=0 opens a session that is sent no frame (hello shows "fields": []),
+    can set and is answered there; "fields": [] stops a viewer's frames and a field list
+    brings them back; "cascades" without fields is refused and changes nothing."""
+    async def run():
+        v, hv = await connect(d)
+        c, hc = await connect(d, url=d.url + "?frames=0")
+        check(hc["subscription"]["fields"] == [], "hello of ?frames=0 subscribes to %r" % hc["subscription"])
+        check(hv["subscription"]["fields"] == ["height", "dx", "dz"], "a plain URL lost its default fields")
+        await c.send(json.dumps({"type": "set", "id": 5, "params": {"wind_speed": hv["params"]["wind_speed"] + 1}}))
+        got = await drain(c, 1.5)
+        check(not any(isinstance(m, bytes) for m in got), "the control session got %d frames"
+              % sum(isinstance(m, bytes) for m in got))
+        mine = [json.loads(m) for m in got if isinstance(m, str)]
+        check(any(m["type"] == "params" and m.get("id") == 5 for m in mine), "no params reply: %r" % mine)
+        p = await recv_json(v, lambda m: m["type"] == "params")
+        check(p["by"] == hc["client_id"], "the viewer sees the set by %r, not the control session" % p.get("by"))
+        # A viewer turns its frames off and on again.
+        await v.send(json.dumps({"type": "subscribe", "id": 6, "fields": []}))
+        s = await recv_json(v, lambda m: m.get("id") == 6)
+        check(s["type"] == "subscribed" and s["subscription"]["fields"] == [], "fields [] refused: %r" % s)
+        await v.send(json.dumps({"type": "subscribe", "id": 7, "cascades": [{"fields": ["height"]}]}))
+        e = await recv_json(v, lambda m: m.get("id") == 7)
+        check(e["type"] == "error" and e["code"] == "bad_subscription", "cascades without fields: %r" % e)
+        await drain(v, 0.5)  # what was in flight at the subscribe
+        quiet = await drain(v, 1.0)
+        check(not any(isinstance(m, bytes) for m in quiet), "frames after \"fields\": []")
+        await v.send(json.dumps({"type": "subscribe", "id": 8, "fields": ["height"]}))
+        h, _ = await recv_frame(v)
+        check(h["tile_count"] > 0, "no tiles after fields came back")
+        await c.send(json.dumps({"type": "subscribe", "id": 9, "fields": [], "cascades": []}))
+        e = await recv_json(c, lambda m: m.get("id") == 9)
+        check(e["type"] == "error" and e["code"] == "bad_subscription", "fields [] with cascades: %r" % e)
+        for w in (v, c):
+            await w.close()
     asyncio.run(run())
 
 

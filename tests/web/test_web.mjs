@@ -674,6 +674,11 @@ try {
     const shown = await b.locator('[data-param=wind_speed] input').first().inputValue();
     assert(Number(shown) === target, `page B panel shows ${shown}, want ${target}`);
     const idA = (await state(a)).clientId;
+    // The set went over page A's control connection (no frames on it, PROTOCOL.md §1), and
+    // both pages took the change once, from whichever connection brought it first.
+    const ctlA = await a.evaluate(() => window.oceand.controlId);
+    assert(ctlA && ctlA !== idA, `page A has no control connection (${ctlA})`);
+    assert(sb.paramsBy === ctlA, `the change came from ${sb.paramsBy}, not page A's control connection ${ctlA}`);
     const note = await b.locator('[data-ui=last-change]').innerText();
     assert(/^Ana set Wind speed/.test(note) && note.includes(String(target)) && !note.includes(idA), `page B does not say who changed what: "${note}"`);
     const own = await a.locator('[data-ui=last-change]').innerText();

@@ -13,6 +13,15 @@ export function serverUrl(loc = window.location) {
   return `${scheme}//${loc.host || '127.0.0.1:8080'}/`;
 }
 
+// The same server, for a session that carries control messages only (no frames: PROTOCOL.md §1).
+export function controlUrl(url) {
+  try {
+    const u = new URL(url);
+    u.searchParams.set('frames', '0');
+    return u.toString();
+  } catch { return url; } // a bad address: the frame connection reports it
+}
+
 export class Connection {
   // handlers: { onState(state, detail), onMessage(obj), onFrame(arrayBuffer) }
   constructor(url, handlers) {

@@ -2,7 +2,7 @@
 // the panel and the HUD together, and exposes read-only state as window.oceand.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
-import { Connection, serverUrl } from './connection.js';
+import { Connection, serverUrl, controlUrl } from './connection.js';
 import { Ocean } from './ocean.js';
 import { Panel } from './panel.js';
 import { Hud, Stats } from './hud.js';
@@ -74,6 +74,7 @@ if (query.get('ui') === '0') document.body.classList.add('oc-no-ui'); // ?ui=0: 
 // Everything a test or a curious user may read; window.oceand hands out copies.
 const st = {
   connected: false, connectionState: 'idle', clientId: null, role: null,
+  controlState: 'idle', controlId: null, paramsBy: null, // the control connection (sets and their replies)
   framesReceived: 0, lastSeq: null, paramsVersion: null, params: null,
   rendered: 0, n: null, lod: null, frameParamsVersion: null, frameSimTime: null, lastError: null, serverError: null,
   name: null, subscription: null, foamLod: null, foamM: 0,
@@ -160,6 +161,7 @@ const conn = new Connection(serverUrl(), {
         if (panel.me.name) conn.send({ type: 'name', name: panel.me.name }); // our display name, every session
         ocean.setWind(msg.params?.wind_speed, msg.params?.wind_direction);
         lastHello = msg;
+        if (msg.role === 'controller' && control.state === 'idle') control.start(); // only a controller sets
         // After a reconnect, ask again for what the user had chosen; the finer cascades,
         // where the server has them (hello.cascade_patch_sizes); and the foam field.
         {
@@ -179,14 +181,7 @@ const conn = new Connection(serverUrl(), {
         break;
       }
       case 'params':
-        st.params = msg.params; st.paramsVersion = msg.params_version;
-        panel.update(msg);
-        ocean.setWind(msg.params?.wind_speed, msg.params?.wind_direction);
-        // A new N: keep the foam grid at about 64×64.
-        if ((msg.changed || []).includes('resolution') && lastHello) {
-          const foam = foamSubscription(lastHello, msg.params.resolution);
-          if (foam) conn.send({ type: 'subscribe', field_lod: foam.field_lod });
-        }
+        onParams(msg);
         break;
       case 'named': // our display name as the server now has it
         st.name = msg.name;
@@ -226,12 +221,51 @@ const conn = new Connection(serverUrl(), {
   },
 });
 
+// A `params` from either connection, applied once: both carry every change (the frame
+// connection's copy may wait behind a lost segment of a frame; the control connection's not).
+function onParams(msg) {
+  if (st.paramsVersion !== null && msg.params_version <= st.paramsVersion) return; // seen, or a set that changed nothing
+  st.params = msg.params; st.paramsVersion = msg.params_version; st.paramsBy = msg.by ?? null;
+  panel.update(msg);
+  ocean.setWind(msg.params?.wind_speed, msg.params?.wind_direction);
+  // A new N: keep the foam grid at about 64×64.
+  if ((msg.changed || []).includes('resolution') && lastHello) {
+    const foam = foamSubscription(lastHello, msg.params.resolution);
+    if (foam) conn.send({ type: 'subscribe', field_lod: foam.field_lod });
+  }
+}
+
+// The panel's sets go on a second connection that carries no frames (?frames=0, PROTOCOL.md
+// §1): over one TCP connection a reply waits behind any lost segment of the frames sent
+// before it (a round trip or more on a lossy link); on its own connection it waits for
+// nothing. Opened once this page is a controller; until it is open, sets use the frame
+// connection. Its session has its own client id, which is "you" too.
+const control = new Connection(controlUrl(serverUrl()), {
+  onState(state) {
+    st.controlState = state;
+    if (state !== 'open') { st.controlId = null; panel.controlId = null; }
+  },
+  onMessage(msg) {
+    switch (msg.type) {
+      case 'hello':
+        st.controlId = msg.client_id;
+        panel.controlId = msg.client_id;
+        if (panel.me.name) control.send({ type: 'name', name: panel.me.name }); // shown with our changes
+        break;
+      case 'params': onParams(msg); break;
+      case 'error': if (msg.id !== undefined) { st.serverError = msg; panel.error(msg); } break; // a refused set
+      default: break; // named, capacity, status: the frame connection says them
+    }
+  },
+});
+const setConnection = () => (st.controlId ? control : conn);
+
 // Double-click the sea to drop a buoy (point probe + exact query, probe.js).
 const probe = new ProbeMarker({ scene: ocean.scene, camera, canvas, send: (m) => conn.send(m) });
 
 const panel = new Panel({
-  set: (params) => conn.send({ type: 'set', params }),
-  name: (name) => conn.send({ type: 'name', name }),
+  set: (params) => setConnection().send({ type: 'set', params }),
+  name: (name) => { conn.send({ type: 'name', name }); control.send({ type: 'name', name }); },
   subscribe: (sub) => { Object.assign(wantedSub, sub); conn.send({ type: 'subscribe', ...sub }); },
   view,
   onView(key, v) {
@@ -402,6 +436,8 @@ window.oceand = Object.freeze({
   get params() { return snapshot(st.params); },
   get rendered() { return st.rendered; },
   get clientId() { return st.clientId; },
+  get controlId() { return st.controlId; }, // the control connection's client id (null: not open)
+  get paramsBy() { return st.paramsBy; },   // `by` of the last change applied
   get name() { return st.name; },  // our display name in force on the server (null: none yet)
   get subscription() { return snapshot(st.subscription); },
   // Where the foam drawn comes from: the server's field (at lod, F×F) or the Jacobian.

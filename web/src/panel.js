@@ -139,6 +139,7 @@ export class Panel {
     this.schema = {};          // name -> schema entry
     this.params = null;
     this.myId = null;
+    this.controlId = null; // our control connection's client id (main.js): its changes are ours too
     this.connected = false;
     this.folders = {};
     this.note = document.createElement('div');
@@ -394,7 +395,7 @@ export class Panel {
 
   // Who a change came from: "you", the changer's display name, or its id.
   who(msg) {
-    if (msg.by && msg.by === this.myId) return 'you';
+    if (msg.by && (msg.by === this.myId || msg.by === this.controlId)) return 'you';
     return msg.by_name || msg.by || 'the server';
   }
 
