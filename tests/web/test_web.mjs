@@ -15,7 +15,7 @@ import { glitterRatio, twilightRatio, skyColour } from './light.mjs';
 const { devices } = createRequire(path.join(ROOT, 'web', 'package.json'))('playwright-core');
 
 // --only REGEX: run only the checks whose name matches (the pages they share still open).
-// --serial: run the side groups (stillGroup, capGroup) after the main one instead of beside it.
+// --serial: run the side groups (seamGroup, lightGroup, capGroup) after the main one instead of beside it.
 const args = parseArgs(process.argv, { oceand: 'build/oceand', webRoot: 'build/web', out: 'build/web-test', fake: false, only: '', serial: false });
 const only = args.only ? new RegExp(args.only) : null;
 fs.mkdirSync(args.out, { recursive: true });
@@ -269,11 +269,12 @@ async function openPage(query = QUERY) {
 }
 
 // Light, foam and seams on a sea that holds still (--paused: t = 0, seed 1), so every variant
-// sees the same waves, all on ONE page of their own daemon (a new page costs a load, a shader
-// compile and the wait for the full subscription; views change with setView): the seams on
-// the daemon's own sea, a fresh breeze for the sky and glitter, a storm for the camera and
-// the foam.
-async function stillGroup(check, br) {
+// sees the same waves, each group on ONE page of its own daemon (a new page costs a load, a
+// shader compile and the wait for the full subscription; views change with setView): the
+// seams on the daemon's own sea (seamGroup); a fresh breeze for the sky and glitter, a storm
+// for the camera and the foam (lightGroup). The two run in browsers of their own, so that
+// both cores draw once the main group is done.
+async function withStillPage(br, fn) {
   const port5 = await freePort();
   const still = await startServer({ ...srvOpts, port: port5, extra: ['--paused', 'true'] });
   let p = null;
@@ -282,6 +283,15 @@ async function stillGroup(check, br) {
     p.on('pageerror', (e) => pageErrors.push(e.message));
     await p.goto(`http://127.0.0.1:${port5}/?test=1&aa=0&detail=0.5&ui=0&scale=0.5`, { timeout: 120000 });
     await settle(p, 0, true); // the seams are counted on the surface at full detail
+    await fn(p, port5);
+  } finally {
+    if (p) await p.close().catch(() => {});
+    await still.stop();
+  }
+}
+
+async function seamGroup(check, br) {
+  await withStillPage(br, async (p) => {
 
     // Seen from above, choppy waves move patch edges sideways; where a fine patch meets a
     // coarser one the edges used to part: the sky showed through (without skirts), or the
@@ -299,6 +309,11 @@ async function stillGroup(check, br) {
       assert(c.normal <= c.old / 2, `skirts show in the stitched seams: ${c.normal} pixels (unstitched ${c.old})`);
     });
 
+  });
+}
+
+async function lightGroup(check, br) {
+  await withStillPage(br, async (p, port5) => {
     const fresh = SEA_PRESETS.find((q) => q.name === 'fresh').params, storm = SEA_PRESETS.find((q) => q.name === 'storm').params;
     let version = await setParams(port5, { ...fresh, paused: true });
     await settle(p, version);
@@ -389,10 +404,7 @@ async function stillGroup(check, br) {
       assert(placed.squeeze > 0.2 && placed.height > 0.05, `foam does not follow the crests: ${JSON.stringify(placed)}`);
       assert(placed.squeeze > random.squeeze + 0.15, `foam placed at random correlates as well: ${JSON.stringify(random)}`);
     });
-  } finally {
-    if (p) await p.close().catch(() => {});
-    await still.stop();
-  }
+  });
 }
 
 // Servers of their own that refuse or cap: a full one, one with a small memory cap.
@@ -463,14 +475,17 @@ async function capGroup(check, br) {
 // once its timing checks are done (the 1 s stall check wants the machine to itself), one after
 // the other; their lines carry their tag. --serial: after the main group, in the same browser.
 let side = null;
-async function sideGroups(br) {
+async function sideGroups(br, groups) {
   try {
-    for (const [tag, group] of [['[still] ', stillGroup], ['[caps] ', capGroup]]) {
+    for (const [tag, group] of groups) {
       try { await group((name, fn) => check(name, fn, tag), br); } catch (e) { failed++; console.log(`${tag}FAIL harness: ${e.stack || e}`); }
     }
   } finally { if (br !== browser) await br.close().catch(() => {}); }
 }
-const startSide = () => { if (!side && !args.serial) side = launchBrowser().then(sideGroups); };
+const SIDE = [[['[seams] ', seamGroup]], [['[light] ', lightGroup], ['[caps] ', capGroup]]];
+const startSide = () => {
+  if (!side && !args.serial) side = Promise.all(SIDE.map((groups) => launchBrowser().then((br) => sideGroups(br, groups))));
+};
 
 try {
   await check('display names are checked as the server does (no browser)', async () => {
@@ -858,7 +873,7 @@ try {
     } finally { await ctx.close(); }
   });
 
-  if (side) await side; else await sideGroups(browser);
+  if (side) await side; else for (const groups of SIDE) await sideGroups(browser, groups);
 
   await check('no uncaught errors in the pages', async () => {
     assert(pageErrors.length === 0, pageErrors.join('; '));
