@@ -7,7 +7,8 @@ what it saw over the measured window:
   (arrival minus the frame's server_time_us: both clocks are this machine's),
   kB/frame, codec shares of its tiles, the rung (`link` messages), the
   round trip of a `set` (sent every second, like the web page on a control
-  connection of its own, ?frames=0, unless --one-connection; it moves
+  connection of its own, ?frames=0, and a copy under the same "once" key on
+  the frame connection, unless --no-once or --one-connection; it moves
   time_scale by 1e-4 and back, which no frame shows; the reply is the first
   `params` of its version on either connection, as the page takes it; --noop-sets:
   sets that change nothing, answered on the control connection only:
@@ -75,6 +76,8 @@ async def run(a):
     def replied(j, now):
         if j.get("type") == "params":
             now = first_seen.setdefault(j.get("params_version"), now)
+        if j.get("type") == "error" and j.get("code") == "duplicate":
+            return  # the copy on the other connection was applied
         if j.get("id") in pending and j.get("type") in ("params", "error"):
             t_sent = pending.pop(j["id"])
             sets.append(((now - t_sent) * 1000, t_sent - t_start))
@@ -103,7 +106,11 @@ async def run(a):
                 k += 1
                 pending["s%d" % k] = time.time()
                 value = scale if a.noop_sets or k % 2 == 0 else scale + 1e-4
-                await (cws or ws).send(json.dumps({"type": "set", "id": "s%d" % k, "params": {"time_scale": value}}))
+                msg = {"type": "set", "id": "s%d" % k, "params": {"time_scale": value}}
+                if cws and not a.no_once:  # like the page: on both connections, applied once
+                    msg["once"] = os.urandom(12).hex()
+                    await ws.send(json.dumps(msg))
+                await (cws or ws).send(json.dumps(msg))
                 next_set += 1
             try:
                 m = await asyncio.wait_for(ws.recv(), 0.2)
@@ -196,6 +203,7 @@ def main():
     p.add_argument("--whole-frames", action="store_true", help="subscribe without \"parts\" (one message a tick)")
     p.add_argument("--sets", type=int, default=1)
     p.add_argument("--noop-sets", action="store_true", help="sets that change nothing (the sender alone is answered)")
+    p.add_argument("--no-once", action="store_true", help="sets on the control connection only, not also on the frame one")
     p.add_argument("--one-connection", action="store_true",
                    help="send the sets on the frame connection, not on a control connection (?frames=0)")
     p.add_argument("--timeline", action="store_true")

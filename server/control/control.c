@@ -179,6 +179,18 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
             rc = -1;
         m->name = cJSON_GetStringValue(nm);
     }
+    if (!rc && (m->type == CTL_SET || m->type == CTL_PAUSE || m->type == CTL_RESUME)) {
+        const cJSON *once = cJSON_GetObjectItemCaseSensitive(root, "once");
+        const char *k = cJSON_GetStringValue(once);
+        size_t klen = k ? strlen(k) : 0;
+        bool printable = k != NULL;
+        for (size_t i = 0; printable && i < klen; i++)
+            printable = k[i] > 0x20 && k[i] < 0x7f;
+        if (once && (!printable || klen < CTL_ONCE_MIN || klen > CTL_ONCE_MAX))
+            rc = ctl_fail(e, "bad_message", NULL, "\"once\" must be a string of %d to %d printable ASCII characters",
+                          CTL_ONCE_MIN, CTL_ONCE_MAX);
+        m->once = k;
+    }
     if (rc) {
         if (id_out && id)
             *id_out = cJSON_Duplicate(id, 1);

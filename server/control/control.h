@@ -74,8 +74,14 @@ struct ctl_msg {
     double t;               /* CTL_PING: echoed "t" */
     const char *name;       /* CTL_NAME, or a `set`'s optional "name": a checked display name
                              * ("" = none), inside root; NULL when not given */
+    const char *once;       /* CTL_SET/PAUSE/RESUME: optional "once" (a checked key), inside root, or NULL */
     bool has_t;
 };
+
+/* "once" on set/pause/resume (PROTOCOL.md §7.1): the same request sent on two
+ * connections is applied once. CTL_ONCE_MIN..CTL_ONCE_MAX printable ASCII characters. */
+#define CTL_ONCE_MIN 8
+#define CTL_ONCE_MAX 64
 
 void subscription_default(struct subscription *s, double tick_rate);
 /* No frames at all ("fields": []): a session for control messages only. */

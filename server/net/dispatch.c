@@ -154,6 +154,23 @@ static bool replan_allowed(struct net *n, struct session *s, const struct remote
     return false;
 }
 
+/* Has a set/pause/resume with this "once" key come in within NET_ONCE_TTL_S?
+ * If not, remember it (in the oldest slot). A client that sends one change
+ * on both its connections (PROTOCOL.md §1.2) has it applied once, whichever
+ * copy a lost packet delays. */
+static bool once_seen(struct net *n, const char *key)
+{
+    double now = mono_now();
+    for (int i = 0; i < NET_ONCE_SLOTS; i++)
+        if (n->once[i].key[0] && now - n->once[i].t < NET_ONCE_TTL_S && strcmp(n->once[i].key, key) == 0)
+            return true;
+    struct once_seen *o = &n->once[n->once_next];
+    n->once_next = (n->once_next + 1) % NET_ONCE_SLOTS;
+    snprintf(o->key, sizeof o->key, "%s", key);
+    o->t = now;
+    return false;
+}
+
 /* A checked change: out is the view after it, changed the rows it changes. */
 static void submit_change(struct net *n, struct session *s, const struct remote *rm, const struct ocean_params *out,
                           uint64_t changed, const char *name, const cJSON *id)
@@ -625,6 +642,12 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         if (!s->controller && !(m.token && n->dc.control_token[0] && control_token_equal(m.token, n->dc.control_token))) {
             struct ctl_error f = { .code = "forbidden", .message = "this client may not change parameters (token needed)" };
             session_send_error(s, &f, m.id);
+            break;
+        }
+        if (m.once && once_seen(n, m.once)) { /* its copy on the client's other connection came first */
+            struct ctl_error d = { .code = "duplicate", .message = "this \"once\" was received already, on another "
+                                                                  "connection: applied once" };
+            session_send_error(s, &d, m.id);
             break;
         }
         if (n->cluster.forward) { /* edge: the sim validates and applies it */

@@ -48,7 +48,8 @@
                                  a slow local reader's low samples only throttled it once it read again */
 #define HOPELESS_S 60.0       /* no blind probe up to a rung that a full-pipe sample this recent says cannot fit */
 #define PACE_GAIN 1.25        /* TCP's pacing rate at most this times the link measured */
-#define INFLIGHT_GAIN 1.5     /* bytes in flight at most this times the link measured x the path's RTT */
+#define INFLIGHT_GAIN 1.5     /* bytes in flight at most this times the link measured x the path's RTT, */
+#define QUEUE_MAX_S 0.05      /* but at most this much more: what a reply may wait behind at the bottleneck */
 #define YOUNG_S 2.0           /* TCP's start-up: its rate samples are not the link's yet */
 
 /* The rungs, finest first. A rung that serves the same as the one before it
@@ -306,7 +307,8 @@ int ladder_hold_frame(struct session *s)
     tcp_probe_read(lws_get_socket_fd(s->wsi), &p);
     if (!p.ok)
         return 0;
-    double budget = INFLIGHT_GAIN * link * l->min_rtt_ms / 1000;
+    double rtt_s = l->min_rtt_ms / 1000;
+    double budget = link * (rtt_s + fmin((INFLIGHT_GAIN - 1) * rtt_s, QUEUE_MAX_S));
     double floor = 4.0 * (double)ladder_chunk(s);
     double over = (double)p.inflight + p.notsent - (budget > floor ? budget : floor);
     if (over <= 0)

@@ -36,6 +36,8 @@
 #define CHUNK_SIZE (64 * 1024)    /* bytes per lws_write of a frame, at most: ladder_chunk writes about one tick of the link */
 #define NET_RING 18               /* recent frames kept for temporal clients a few ticks behind (fanout.c) */
 #define NET_RING_MAX_BYTES ((size_t)16 << 20) /* ...and their bytes at most (large N: fewer frames) */
+#define NET_ONCE_SLOTS 256        /* "once" keys remembered: a flood of keys pushes out the oldest */
+#define NET_ONCE_TTL_S 30.0       /* ...for this long: far past any TCP retransmission */
 #define LAG_MAX 15                /* ticks a temporal client may run behind the newest frame to keep its chain:
                                    * its 4 keyframe ticks at ~3x a shared frame's bytes, on a link that fits the shared ones */
 #define LADDER_MAX_RUNGS 12
@@ -202,6 +204,11 @@ struct net {
     uint64_t next_serial;         /* last session serial handed out */
     char instance_tag[8];         /* 4 random letters/digits drawn at start: in every client id */
     lws_dll2_owner_t requests;    /* struct request: sets sent to the sim, not answered yet */
+    struct once_seen {            /* lws only: the "once" keys of recent changes (dispatch_once_seen) */
+        char key[CTL_ONCE_MAX + 1];
+        double t;
+    } once[NET_ONCE_SLOTS];
+    int once_next;                /* lws only: the slot the next key takes (oldest first) */
     uint64_t next_tag;            /* last struct sim_set tag handed out */
     struct ocean_params applied;  /* in force (from the sim's answers) */
     uint32_t applied_version;     /* its params_version */

@@ -95,6 +95,38 @@ static void test_sets(void)
     cJSON_Delete(obj);
 }
 
+/* "once" on the requests that change the sea: 8..64 printable ASCII characters. */
+static void test_once(void)
+{
+    static const struct { const char *text; const char *code; const char *once; } cases[] = {
+        { "{\"type\":\"set\",\"params\":{},\"once\":\"0123456789abcdef\"}", NULL, "0123456789abcdef" },
+        { "{\"type\":\"pause\",\"once\":\"aaaaaaaa\"}", NULL, "aaaaaaaa" },
+        { "{\"type\":\"set\",\"params\":{}}", NULL, NULL },
+        { "{\"type\":\"set\",\"params\":{},\"once\":\"short\"}", "bad_message", NULL },
+        { "{\"type\":\"set\",\"params\":{},\"once\":12345678}", "bad_message", NULL },
+        { "{\"type\":\"set\",\"params\":{},\"once\":\"with space in it\"}", "bad_message", NULL },
+        { "{\"type\":\"resume\",\"once\":\"\u00e9\u00e9\u00e9\u00e9\u00e9\u00e9\u00e9\u00e9\"}", "bad_message", NULL },
+        { "{\"type\":\"set\",\"params\":{},\"once\":\"xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx\"}", "bad_message", NULL },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        struct ctl_msg m;
+        struct ctl_error e;
+        cJSON *id = NULL;
+        int rc = control_parse(cases[i].text, strlen(cases[i].text), &m, &id, &e);
+        cJSON_Delete(id);
+        if (cases[i].code) {
+            CHECK(rc != 0 && strcmp(e.code, cases[i].code) == 0, "%s: rc %d", cases[i].text, rc);
+            continue;
+        }
+        CHECK(rc == 0, "%s refused: %s", cases[i].text, rc ? e.message : "");
+        if (rc == 0) {
+            CHECK(cases[i].once ? m.once && strcmp(m.once, cases[i].once) == 0 : m.once == NULL, "%s: once %s",
+                  cases[i].text, m.once ? m.once : "(none)");
+            ctl_msg_free(&m);
+        }
+    }
+}
+
 static void test_subscribe(void)
 {
     struct subscription cur, out;
@@ -1198,6 +1230,7 @@ int main(void)
     test_capacity_band();
     test_capacity_codec_rung();
     test_sets();
+    test_once();
     test_subscribe();
     test_subscribe_field_lod();
     test_strict_json();

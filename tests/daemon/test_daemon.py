@@ -600,6 +600,43 @@ def test_control_connection_gets_no_frames(d):
 
 
 @test
+def test_once_applies_a_change_once(d):
+    """A set sent on two connections under one "once" key is applied once: the later copy
+    gets error "duplicate" and changes nothing, not even after another client's change
+    (it must not undo it). A new key applies again; a bad key is bad_message."""
+    async def run():
+        a, ha = await connect(d)
+        b, _ = await connect(d, url=d.url + "?frames=0")
+        o, _ = await connect(d, url=d.url + "?frames=0")
+        w0 = ha["params"]["wind_speed"]
+        set1 = {"type": "set", "id": 1, "params": {"wind_speed": w0 + 1}, "once": "k1-0123456789"}
+        await b.send(json.dumps(set1))
+        p1 = await recv_json(b, lambda m: m.get("id") == 1)
+        check(p1["type"] == "params" and p1["params"]["wind_speed"] == w0 + 1, "first copy: %r" % p1)
+        await o.send(json.dumps({"type": "set", "id": 2, "params": {"wind_speed": w0 + 2}}))
+        p2 = await recv_json(o, lambda m: m.get("id") == 2)
+        await a.send(json.dumps(set1))      # the copy, late, after another client's change
+        e = await recv_json(a, lambda m: m.get("id") == 1 and m["type"] in ("error", "params"))
+        check(e["type"] == "error" and e["code"] == "duplicate", "the late copy: %r" % e)
+        await a.send(json.dumps({"type": "set", "id": 3, "params": {"wind_speed": w0 + 2}, "once": "k1-0123456789"}))
+        e = await recv_json(a, lambda m: m.get("id") == 3)
+        check(e["type"] == "error" and e["code"] == "duplicate", "the same key with other values: %r" % e)
+        await a.send(json.dumps({"type": "ping", "id": 4}))
+        await recv_json(a, lambda m: m.get("id") == 4)
+        await a.send(json.dumps({"type": "set", "id": 5, "params": {"wind_speed": w0 + 3}, "once": "k2-0123456789"}))
+        p5 = await recv_json(a, lambda m: m.get("id") == 5)
+        check(p5["type"] == "params" and p5["params_version"] == p2["params_version"] + 1 and
+              p5["changed"] == ["wind_speed"], "a new key after the duplicates: %r (the other client's was v%d)"
+              % (p5, p2["params_version"]))
+        await a.send(json.dumps({"type": "set", "id": 6, "params": {"wind_speed": w0}, "once": "short"}))
+        e = await recv_json(a, lambda m: m.get("id") == 6)
+        check(e["type"] == "error" and e["code"] == "bad_message", "a short key: %r" % e)
+        for w in (a, b, o):
+            await w.close()
+    asyncio.run(run())
+
+
+@test
 def test_ping_and_rate_limit(d):
     async def run():
         a, _ = await connect(d)

@@ -205,5 +205,16 @@ async def async_checks():
     ok("AsyncClient.render: closing it early cancels; the next render follows")
 
 
+async def control_only_checks():
+    # A program that only sets, queries or probes: ?frames=0 (PROTOCOL.md §1.2), no frames.
+    async with await oceand.AsyncClient.connect(url + "/?frames=0") as sea:
+        check(sea.subscription.get("fields") == [], f"hello subscription {sea.subscription}")
+        q = await sea.query([[5, 6]])
+        await asyncio.sleep(0.5)           # 5 ticks at 10 Hz
+        check(q["points"] and sea._latest is None, f"a frame reached the control-only client: {sea._latest is not None}")
+    ok("AsyncClient on ?frames=0: queries answered, no frame")
+
+
 asyncio.run(async_checks())
+asyncio.run(control_only_checks())
 print("PASS: test_package.py")

@@ -199,6 +199,7 @@ const conn = new Connection(serverUrl(), {
         hud.message(msg.state === 'ok' ? '' : (msg.message || 'simulation unavailable'));
         break;
       case 'error': // a rejected request: the panel says why (decode errors go to the HUD)
+        if (msg.code === 'duplicate') break; // a change's copy that the control connection brought first
         st.serverError = msg;
         panel.error(msg);
         break;
@@ -253,18 +254,30 @@ const control = new Connection(controlUrl(serverUrl()), {
         if (panel.me.name) control.send({ type: 'name', name: panel.me.name }); // shown with our changes
         break;
       case 'params': onParams(msg); break;
-      case 'error': if (msg.id !== undefined) { st.serverError = msg; panel.error(msg); } break; // a refused set
+      case 'error': // a refused set; `duplicate`: its copy on the frame connection came first
+        if (msg.id !== undefined && msg.code !== 'duplicate') { st.serverError = msg; panel.error(msg); }
+        break;
       default: break; // named, capacity, status: the frame connection says them
     }
   },
 });
-const setConnection = () => (st.controlId ? control : conn);
+// A change goes out on both connections, under one random "once" key (PROTOCOL.md §7.1): the
+// server applies the copy that arrives first and answers the other with `duplicate`, so a lost
+// packet on either connection does not delay it. Without the control connection: one copy.
+function sendChange(msg) {
+  if (!st.controlId) return conn.send(msg);
+  const bytes = crypto.getRandomValues(new Uint8Array(12)); // randomUUID needs a secure context
+  const once = Array.from(bytes, (b) => b.toString(16).padStart(2, '0')).join('');
+  const id = control.send({ ...msg, once });
+  conn.send({ ...msg, once });
+  return id;
+}
 
 // Double-click the sea to drop a buoy (point probe + exact query, probe.js).
 const probe = new ProbeMarker({ scene: ocean.scene, camera, canvas, send: (m) => conn.send(m) });
 
 const panel = new Panel({
-  set: (params) => setConnection().send({ type: 'set', params }),
+  set: (params) => sendChange({ type: 'set', params }),
   name: (name) => { conn.send({ type: 'name', name }); control.send({ type: 'name', name }); },
   subscribe: (sub) => { Object.assign(wantedSub, sub); conn.send({ type: 'subscribe', ...sub }); },
   view,
