@@ -398,6 +398,13 @@ void ladder_police(struct net *n, struct session *s, double now)
         l->stalled_t = now;
         return;
     }
+    /* The window a stall ended in and the next: their lost ticks are the
+     * stall's, and the client then works off what the stall held back. */
+    double since_stall = l->stalled_t > 0 ? now - l->stalled_t : INFINITY;
+    if (since_stall < 2 * WINDOW_S + 0.01) {
+        l->prev_lag = l->prev_lag_min = 0;
+        return;
+    }
     /* Lost ticks; or running far behind and not catching up (a client
      * working off its keyframes gets closer window after window); or behind
      * at every tick for two windows: the stream leaves the link too little
@@ -421,7 +428,7 @@ void ladder_police(struct net *n, struct session *s, double now)
          * start-up is over (its early samples are not the link's). The
          * estimate is the largest recent sample: one sample of a pipe full for
          * another reason (a busy reader, a lost packet) does not lower it. */
-        while (r < l->nrungs - 1 && now - l->open_t > YOUNG_S && l->rate_bps > 0 &&
+        while (r < l->nrungs - 1 && now - l->open_t > YOUNG_S && since_stall > YOUNG_S && l->rate_bps > 0 &&
                need_bps(n, s, r) > FIT * l->rate_bps)
             r++;
         snprintf(l->why, sizeof l->why, "congestion: %d of %d ticks lost, %d to %d behind; link %.0f kbit/s",
