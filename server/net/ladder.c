@@ -392,7 +392,11 @@ void ladder_police(struct net *n, struct session *s, double now)
     /* Nothing taken for a whole window: a stall (a dead radio link, a page
      * that stopped reading), not a rate. A lower rung would not help and
      * would cost the way back up: skip ticks and wait. */
-    if (s->cur && now - s->progress_t > WINDOW_S) {
+    /* A frame waits (in progress, held for what is in flight, or not begun
+     * because the socket takes nothing) and no byte left for a window, plus
+     * the client's own frame interval. */
+    bool waiting = s->cur || l->held || fanout_want_write(n, s);
+    if (waiting && now - s->progress_t > WINDOW_S + 1.0 / s->eff.max_rate) {
         l->calm = 0;
         l->prev_lag_min = 0; /* the way out of it is judged on its own windows */
         l->stalled_t = now;
@@ -414,7 +418,8 @@ void ladder_police(struct net *n, struct session *s, double now)
     int behind = (int)(BEHIND_S * n->dc.tick_rate + 0.5);
     if (behind < 2)
         behind = 2;
-    bool late = lag_min >= behind && l->prev_lag_min >= behind;
+    bool late = lag_min >= behind && l->prev_lag_min >= behind &&
+                since_stall > YOUNG_S; /* after a stall, a client catching up on the ring is behind by design */
     bool congested = full > 0 && (skips * 100 > ticks * LOST_MAX_PCT || late ||
                                   (lag > LAG_MAX / 2 && l->prev_lag > LAG_MAX / 2 && lag >= l->prev_lag));
     l->prev_lag = lag;
