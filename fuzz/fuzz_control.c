@@ -42,6 +42,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         cJSON_Delete(id);
         return 0;
     }
+    if (m.once) { /* the key a change is applied once under: 8..64 printable ASCII */
+        size_t k = strlen(m.once);
+        check(k >= CTL_ONCE_MIN && k <= CTL_ONCE_MAX);
+        for (size_t i = 0; i < k; i++)
+            check(m.once[i] > 0x20 && m.once[i] < 0x7f);
+    }
     if (m.type == CTL_SET) {
         uint64_t changed = 0;
         if (control_apply_params(m.params, &cur, &lim, &next, &changed, &e) == 0) {
@@ -57,7 +63,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         check(s != NULL);
         subscription_default(&s[0], lim.tick_rate);
         if (control_apply_subscribe(m.root, &s[0], &lim, &s[1], &e) == 0) {
-            check(s[1].fields != 0 && s[1].lod >= 0 && s[1].lod <= CTL_MAX_LOD);
+            check(s[1].lod >= 0 && s[1].lod <= CTL_MAX_LOD);
+            /* No top-level fields is "no frames" (a control connection): no cascade either. */
+            check(s[1].fields != 0 || (s[1].ncascades == 1 && !subscription_has_frames(&s[1])));
+            check(s[1].ncascades >= 1 && s[1].ncascades <= CTL_MAX_CASCADES);
             check(s[1].bound_index >= 0 && s[1].bound_index < CTL_BOUND_COUNT);
             check(s[1].max_rate > 0 && s[1].max_rate <= lim.tick_rate);
             check(s[1].all_tiles || (s[1].ntiles >= 0 && s[1].ntiles <= CTL_MAX_TILES));

@@ -136,7 +136,7 @@ int control_apply_subscribe(const cJSON *msg, const struct subscription *cur, co
         return -1;
     /* "fields": [] subscribes to no frames at all: a session for control
      * messages only (a second connection that keeps replies off the frame
-     * stream's TCP queue, PROTOCOL.md §7.1). No finer cascade then either. */
+     * stream's TCP queue, PROTOCOL.md §1.2). No finer cascade then either. */
     if (!tmp.fields && cJSON_GetObjectItemCaseSensitive(msg, "cascades"))
         return ctl_fail(e, "bad_subscription", NULL, "\"cascades\" need top-level \"fields\": with \"fields\": [] there are no frames");
     if (!tmp.fields)

@@ -389,12 +389,11 @@ void ladder_police(struct net *n, struct session *s, double now)
     l->win_lag_min = INT_MAX;
     if (l->nrungs <= 1 || ticks < 3)
         return;
-    /* Nothing taken for a whole window: a stall (a dead radio link, a page
+    /* A frame waits (in progress, held for what is in flight, or not begun
+     * because the socket takes nothing) and no byte left for a window plus
+     * the client's own frame interval: a stall (a dead radio link, a page
      * that stopped reading), not a rate. A lower rung would not help and
      * would cost the way back up: skip ticks and wait. */
-    /* A frame waits (in progress, held for what is in flight, or not begun
-     * because the socket takes nothing) and no byte left for a window, plus
-     * the client's own frame interval. */
     bool waiting = s->cur || l->held || fanout_want_write(n, s);
     if (waiting && now - s->progress_t > WINDOW_S + 1.0 / s->eff.max_rate) {
         l->calm = 0;

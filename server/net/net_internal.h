@@ -204,7 +204,7 @@ struct net {
     uint64_t next_serial;         /* last session serial handed out */
     char instance_tag[8];         /* 4 random letters/digits drawn at start: in every client id */
     lws_dll2_owner_t requests;    /* struct request: sets sent to the sim, not answered yet */
-    struct once_seen {            /* lws only: the "once" keys of recent changes (dispatch_once_seen) */
+    struct once_seen {            /* lws only: the "once" keys of recent changes (once_seen, dispatch.c) */
         char key[CTL_ONCE_MAX + 1];
         double t;
     } once[NET_ONCE_SLOTS];

@@ -164,7 +164,7 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
     s->first_seq = n->sim ? sim_seq(n->sim) : net_latest_seq(n);
     subscription_default(&s->sub, n->dc.tick_rate);
     /* ws://host/?frames=0: a connection for control messages only, with no
-     * frame ever queued ahead of its replies (PROTOCOL.md §1). */
+     * frame ever queued ahead of its replies (PROTOCOL.md §1.2). */
     char arg[16];
     const char *frames = lws_get_urlarg_by_name(wsi, "frames=", arg, (int)sizeof arg);
     if (frames && strcmp(frames, "0") == 0)

@@ -13,7 +13,7 @@ export function serverUrl(loc = window.location) {
   return `${scheme}//${loc.host || '127.0.0.1:8080'}/`;
 }
 
-// The same server, for a session that carries control messages only (no frames: PROTOCOL.md §1).
+// The same server, for a session that carries control messages only (no frames: PROTOCOL.md §1.2).
 export function controlUrl(url) {
   try {
     const u = new URL(url);

@@ -237,10 +237,10 @@ function onParams(msg) {
 }
 
 // The panel's sets go on a second connection that carries no frames (?frames=0, PROTOCOL.md
-// §1): over one TCP connection a reply waits behind any lost segment of the frames sent
+// §1.2): over one TCP connection a reply waits behind any lost segment of the frames sent
 // before it (a round trip or more on a lossy link); on its own connection it waits for
 // nothing. Opened once this page is a controller; until it is open, sets use the frame
-// connection. Its session has its own client id, which is "you" too.
+// connection only. Its session has its own client id, which is "you" too.
 const control = new Connection(controlUrl(serverUrl()), {
   onState(state) {
     st.controlState = state;
