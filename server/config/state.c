@@ -4,7 +4,6 @@
 #include <cjson/cJSON.h>
 #include <errno.h>
 #include <fcntl.h>
-#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -120,23 +119,18 @@ int state_load(const char *path, struct ocean_params *p, uint32_t *version, doub
         return -1;
     }
     *p = np;
-    /* Versions count changes from 0; the next change must still fit a u32. */
+    /* The same rules as the running daemon's (control.h): every version it
+     * can reach, up to CTL_VERSION_MAX (where sets stop), and every clock
+     * time, up to OCEAN_TIME_MAX (where the clock stops), load again. */
     const cJSON *v = cJSON_GetObjectItemCaseSensitive(root, "params_version");
     uint32_t ver = 0;
-    if (cJSON_IsNumber(v) && v->valuedouble >= 0 && v->valuedouble < (double)UINT32_MAX &&
-        v->valuedouble == floor(v->valuedouble))
-        ver = (uint32_t)v->valuedouble;
-    else if (v)
-        LOGW("%s: params_version is not a whole number in 0..%u; starting from 0", path, UINT32_MAX - 1);
+    if (v && !control_json_version(v, &ver))
+        LOGW("%s: params_version is not a whole number in 0..%u; starting from 0", path, CTL_VERSION_MAX);
     if (version)
         *version = ver;
-    /* Phases are accurate up to OCEAN_TIME_MAX (ocean.h); beyond it the sea
-     * would freeze or blow up, so a saved time outside is not used. */
     const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "sim_time");
     double st = 0;
-    if (cJSON_IsNumber(t) && t->valuedouble >= 0 && t->valuedouble <= OCEAN_TIME_MAX)
-        st = t->valuedouble;
-    else if (t)
+    if (t && !control_json_sim_time(t, &st))
         LOGW("%s: sim_time is not a number in [0, %.0f] s; starting from 0", path, OCEAN_TIME_MAX);
     if (sim_time)
         *sim_time = st;

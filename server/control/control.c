@@ -479,3 +479,32 @@ int control_check_name(const char *s, struct ctl_error *e)
         return ctl_fail(e, "bad_name", NULL, "\"%s\" is reserved: the page uses it for its own words", s);
     return 0;
 }
+
+bool control_json_whole(const cJSON *item, double max, uint64_t *out)
+{
+    if (!cJSON_IsNumber(item))
+        return false;
+    double v = item->valuedouble;
+    /* Written so that NaN fails every test. */
+    if (!(v >= 0 && v <= max && v == floor(v)))
+        return false;
+    *out = (uint64_t)v;
+    return true;
+}
+
+bool control_json_version(const cJSON *item, uint32_t *out)
+{
+    uint64_t v;
+    if (!control_json_whole(item, (double)CTL_VERSION_MAX, &v))
+        return false;
+    *out = (uint32_t)v;
+    return true;
+}
+
+bool control_json_sim_time(const cJSON *item, double *out)
+{
+    if (!cJSON_IsNumber(item) || !(item->valuedouble >= 0 && item->valuedouble <= OCEAN_TIME_MAX))
+        return false;
+    *out = item->valuedouble;
+    return true;
+}

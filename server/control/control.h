@@ -198,4 +198,23 @@ cJSON *control_named_msg(const char *name, const cJSON *id);
 /* Print and delete: returns malloc'd text (free()), NULL on no memory. */
 char *control_print(cJSON *msg);
 
+/* The counters and the clock that cross a file or the wire have ONE rule
+ * each, for what is loaded (state file, the cluster's record, the sim's
+ * hello) and for what the daemon reaches while running, so whatever it
+ * saves it can restore (PROTOCOL.md §7.6):
+ * - params_version: a u32 in every frame header; a set that would take it
+ *   past CTL_VERSION_MAX is refused (`version_limit`), never wrapped;
+ * - sim_time: [0, OCEAN_TIME_MAX]; the clock stops there (ocean.h);
+ * - integers kept in JSON (seq and wall_us in the record): at most 2^53,
+ *   the largest a JSON number (a double) holds exactly. */
+#define CTL_VERSION_MAX UINT32_MAX
+#define CTL_JSON_EXACT_MAX 9007199254740992.0
+/* A whole number in [0, max] into *out; false (out untouched) for anything
+ * else: not a number, negative, fractional, NaN, beyond max. */
+bool control_json_whole(const cJSON *item, double max, uint64_t *out);
+/* A params_version as saved or sent: control_json_whole up to CTL_VERSION_MAX. */
+bool control_json_version(const cJSON *item, uint32_t *out);
+/* A sim time the clock can be at: a number in [0, OCEAN_TIME_MAX]. */
+bool control_json_sim_time(const cJSON *item, double *out);
+
 #endif

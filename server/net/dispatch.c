@@ -292,7 +292,9 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
         else
             cJSON_Delete(mine);
     } else if (origin || r->reply) {
-        struct ctl_error e = { .code = a->status == SIM_SET_INVALID ? "invalid" : "internal" }; /* out of memory, not saved */
+        struct ctl_error e = { .code = a->status == SIM_SET_INVALID         ? "invalid"
+                                       : a->status == SIM_SET_VERSION_LIMIT ? "version_limit"
+                                                                            : "internal" }; /* out of memory, not saved */
         snprintf(e.message, sizeof e.message, "%s", a->message);
         respond_error(origin, &rm, &e, r->id);
     }

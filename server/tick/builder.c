@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "clock.h"
+#include "control.h"
 #include "log.h"
 #include "metrics.h"
 
@@ -42,12 +43,26 @@ static struct ocean_prepared *build_state(struct sim *s, const struct ocean_para
 static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
 {
     struct ocean_params cur = s->build_base;
+    uint32_t version = s->build_version; /* the number each set would take */
     char err[200];
     for (struct sim_set *set = sets; set; set = set->next) {
         struct ocean_params next = params_with(&cur, &set->values, set->mask);
         if (params_validate(&next, err, sizeof err) != 0) {
             set_failed(set, SIM_SET_INVALID, err);
             continue;
+        }
+        /* A version names one sea, and frames carry it as a u32: at the
+         * last number sets stop, rather than wrap to numbers already used
+         * (PROTOCOL.md §7.6). A take-over brings its own, already durable. */
+        if (set->adopt) {
+            version = set->adopt_version;
+        } else if (version == CTL_VERSION_MAX) {
+            snprintf(err, sizeof err, "params_version is at its limit (%u): no change can be numbered any more",
+                     CTL_VERSION_MAX);
+            set_failed(set, SIM_SET_VERSION_LIMIT, err);
+            continue;
+        } else {
+            version++;
         }
         set->prev = cur;
         cur = next;
@@ -186,8 +201,7 @@ static void adopt_clock(struct sim *s, const struct sim_set *set)
     if (since < 0)
         since = 0;
     double t = set->adopt_time + (s->params.paused ? 0 : s->params.time_scale * since);
-    if (t >= 0 && t <= OCEAN_TIME_MAX)
-        s->sim_time = t;
+    s->sim_time = ocean_time_clamp(t); /* as the holder's own clock would have: stopped at the limit */
     uint64_t seq = set->adopt_seq + (uint64_t)(since * s->cfg.tick_rate);
     if (seq > s->seq)
         s->seq = seq;

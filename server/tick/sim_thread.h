@@ -32,6 +32,7 @@ enum sim_set_status {
     SIM_SET_INVALID,        /* refused at apply time: whole-set check or the build refused it */
     SIM_SET_NO_MEMORY,      /* the build ran out of memory; nothing changed */
     SIM_SET_NOT_SAVED,      /* it could not be made durable (sim_config.persist failed); nothing changed */
+    SIM_SET_VERSION_LIMIT,  /* params_version is at CTL_VERSION_MAX: no number left for it; nothing changed */
 };
 
 /* A parameter change accepted by the network thread. The same object comes

@@ -212,8 +212,12 @@ void *tick_main(void *arg)
         double t0 = mono_now();
         /* The clock runs under the parameters that were in force during the
          * interval, with or without clients (PROTOCOL.md §3.1). */
-        if (!s->params.paused)
-            s->sim_time += s->params.time_scale * elapsed;
+        if (!s->params.paused && s->sim_time < OCEAN_TIME_MAX) {
+            s->sim_time = ocean_time_clamp(s->sim_time + s->params.time_scale * elapsed);
+            if (s->sim_time == OCEAN_TIME_MAX) /* once: the loader takes this time back (ocean.h) */
+                LOGW("the simulation clock reached its limit of %.0f s and stops there (the sea stands still)",
+                     OCEAN_TIME_MAX);
+        }
         tick(s, t0);
         /* Always wake lws: answers (params) may be waiting even without a frame. */
         if (s->cfg.wake)

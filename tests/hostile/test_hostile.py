@@ -2502,6 +2502,125 @@ def state_over_memory_cap(d, fig):
     check(not problems, "; ".join(problems))
 
 
+# ---------------------------------------------------------------- limits: what the daemon reaches, it restores
+# (issue 40, items 2 and 3). Each case starts daemons of its own from a state file it writes.
+
+VERSION_MAX = 2 ** 32 - 1       # params_version is a u32 in every frame header (PROTOCOL.md §7.6)
+TIME_MAX = 1e9                  # OCEAN_TIME_MAX: the sea's clock stops there
+
+
+def alone_from_state(state, *args):
+    """oceand_alone at N = 64 from a state file holding `state`: (process, port, log, dir, state path)."""
+    tmpd = tempfile.mkdtemp(prefix="oceand-limit-")
+    sp = os.path.join(tmpd, "state.json")
+    with open(sp, "w") as f:
+        json.dump(state, f)
+    p, port, logp, tmp = oceand_alone(["--state-file", sp, "--resolution", "64"] + list(args))
+    return p, port, logp, tmp, tmpd, sp
+
+
+def hello_of(port):
+    s, _ = raw_ws(port)
+    r = Reader(s)
+    check(r.until(lambda r: any(t.get("type") == "hello" for t in r.texts), 10), "no hello")
+    return s, r, [t for t in r.texts if t.get("type") == "hello"][0]
+
+
+@case()
+def version_at_its_limit(d, fig):
+    """A state file at params_version 2^32 - 2 was accepted, and the next three sets were
+    acknowledged as 2^32 - 1, 0, 1 (frames too): a version used for two seas. Now the last
+    number is used once, further changes get `version_limit` and change nothing, and a
+    restart from the file the daemon saved there loads that version again (the loader's
+    limit is the running daemon's)."""
+    p, port, logp, tmp, tmpd, sp = alone_from_state(
+        {"params": {"wind_speed": 10}, "params_version": VERSION_MAX - 1, "sim_time": 5})
+    got = {}
+    try:
+        check(port is not None, "the daemon did not start from version %d" % (VERSION_MAX - 1))
+        s, r, h = hello_of(port)
+        check(h["params_version"] == VERSION_MAX - 1, "hello version %r" % h["params_version"])
+        m = ask(s, r, '{"type":"set","id":1,"params":{"wind_speed":11}}')
+        check(m and m.get("type") == "params" and m["params_version"] == VERSION_MAX, "last set: %r" % m)
+        for i, text in enumerate(('{"type":"set","id":2,"params":{"wind_speed":12}}', '{"type":"pause","id":3}',
+                                  '{"type":"set","id":4,"params":{"seed":9}}')):
+            m = ask(s, r, text)
+            got[text] = m.get("code") if m else None
+            check(m and m.get("type") == "error" and m.get("code") == "version_limit",
+                  "a change past the last version: %r" % m)
+        m = ask(s, r, '{"type":"set","id":5,"params":{"wind_speed":11}}')   # changes nothing: needs no number
+        check(m and m.get("type") == "params" and m["params_version"] == VERSION_MAX and m["changed"] == [],
+              "a set that changes nothing: %r" % m)
+        s.close()
+        s, r, h = hello_of(port)
+        s.close()
+        check(h["params_version"] == VERSION_MAX and h["params"]["wind_speed"] == 11 and not h["params"]["paused"],
+              "after the refused changes: version %r wind %r" % (h["params_version"], h["params"]["wind_speed"]))
+        with open(sp) as f:
+            saved = json.load(f)
+        check(saved["params_version"] == VERSION_MAX, "state file version %r" % saved["params_version"])
+        stop_alone(p, tmp)
+        p, port, logp, tmp = oceand_alone(["--state-file", sp, "--resolution", "64"])
+        check(port is not None, "the daemon did not start again from the file it saved")
+        s, r, h = hello_of(port)
+        got["restarted"] = h["params_version"]
+        check(h["params_version"] == VERSION_MAX and h["params"]["wind_speed"] == 11,
+              "restarted from the saved file: version %r wind %r" % (h["params_version"], h["params"]["wind_speed"]))
+        m = ask(s, r, '{"type":"set","id":6,"params":{"wind_speed":13}}')
+        check(m and m.get("code") == "version_limit", "a set after the restart: %r" % m)
+        s.close()
+    finally:
+        stop_alone(p, tmp)
+        shutil.rmtree(tmpd, ignore_errors=True)
+    fig.update(got)
+    log("    %s" % got)
+
+
+@case()
+def clock_at_its_limit(d, fig):
+    """A valid state (sim_time 999999998.5, time_scale 16) passed the clock's limit of 1e9 s
+    within a second; the daemon saved 1000000030.5 and the next start refused that file and
+    began at t = 0. Now the clock stops at 1e9 s (frames keep coming, of a sea standing
+    still), the daemon saves 1e9, and a restart goes on from there."""
+    p, port, logp, tmp, tmpd, sp = alone_from_state(
+        {"params": {"time_scale": 16}, "params_version": 3, "sim_time": TIME_MAX - 1.5})
+    times = []
+    try:
+        check(port is not None, "the daemon did not start")
+        metrics = lambda: urllib.request.urlopen("http://127.0.0.1:%d/metrics" % port, timeout=5).read().decode()
+
+        def sim_time():
+            line = [l for l in metrics().splitlines() if l.startswith("oceand_sim_time_seconds ")][0]
+            return float(line.split()[1])
+        s, r, h = hello_of(port)
+        t_end = time.time() + 1.5
+        while time.time() < t_end:
+            times.append(sim_time())
+            time.sleep(0.1)
+        n0 = r.binary
+        r.until(lambda r: r.binary >= n0 + 10, 5)
+        s.close()
+        fig["sim_time_max"] = max(times)
+        check(max(times) <= TIME_MAX, "the clock ran past %g s: %r" % (TIME_MAX, max(times)))
+        check(times[-1] == TIME_MAX, "the clock did not reach its limit: %r" % times[-1])
+        check(r.binary >= n0 + 10, "frames stopped at the clock's limit (%d)" % (r.binary - n0))
+        p.send_signal(signal.SIGHUP)                     # save now
+        check(wait_until(lambda: json.load(open(sp)).get("sim_time") == TIME_MAX, 5),
+              "saved sim_time %r" % json.load(open(sp)).get("sim_time"))
+        stop_alone(p, tmp)
+        p, port, logp, tmp = oceand_alone(["--state-file", sp, "--resolution", "64"])
+        check(port is not None, "the daemon did not start again from the file it saved")
+        with open(logp, "rb") as f:
+            text = f.read().decode(errors="replace")
+        check("ignoring" not in text and "starting from 0" not in text, "the saved clock was refused: %s" % text[-300:])
+        fig["restarted_at"] = sim_time()
+        check(sim_time() == TIME_MAX, "restarted at sim time %r, saved %g" % (sim_time(), TIME_MAX))
+    finally:
+        stop_alone(p, tmp)
+        shutil.rmtree(tmpd, ignore_errors=True)
+    log("    clock %.1f .. %.1f s; restarted at %r" % (min(times or [0]), max(times or [0]), fig.get("restarted_at")))
+
+
 def nats_alone():
     """A nats-server on a free 127.0.0.1 port: (process, url), or (None, reason)."""
     exe = shutil.which("nats-server") or "/usr/sbin/nats-server"

@@ -36,6 +36,10 @@ enum ocean_field {
  * t = 1e9 s stays below 1e-4 rad for every w up to N = 2048 on a 1 m patch.
  * Callers (the daemon's state file) must refuse times outside [0, max]. */
 #define OCEAN_TIME_MAX 1.0e9
+/* The clock's one rule (the daemon's tick, a take-over, the state file):
+ * it runs within [0, OCEAN_TIME_MAX] and stops at the end, so every time it
+ * reaches can be saved and restored. NaN reads as 0. */
+static inline double ocean_time_clamp(double t) { return t >= 0 ? (t < OCEAN_TIME_MAX ? t : OCEAN_TIME_MAX) : 0; }
 
 /* Cascades (docs/simulation.md, "Cascades"). A simulation sums
  * p.cascades periodic patches on grids of the same N: cascade c has side
