@@ -154,10 +154,16 @@ static bool replan_allowed(struct net *n, struct session *s, const struct remote
     return false;
 }
 
+static const struct ctl_error once_duplicate = {
+    .code = "duplicate", .message = "this \"once\" was received already, on another connection: applied once"
+};
+
 /* Has a set/pause/resume with this "once" key come in within NET_ONCE_TTL_S?
  * If not, remember it (in the oldest slot). A client that sends one change
  * on both its connections (PROTOCOL.md §1.2) has it applied once, whichever
- * copy a lost packet delays. */
+ * copy a lost packet delays. Kept where sets are applied: a --role all
+ * daemon, or the sim of a cluster for every edge's clients (the key rides
+ * in the forwarded text), so two copies through two edges count as one. */
 static bool once_seen(struct net *n, const char *key)
 {
     double now = mono_now();
@@ -618,6 +624,8 @@ void net_remote_control(struct net *n, const char *origin, const char *by, const
     if (!n->sim || (m.type != CTL_SET && m.type != CTL_PAUSE && m.type != CTL_RESUME)) {
         struct ctl_error f = { .code = "bad_message", .message = "only set, pause and resume go to the simulation" };
         respond_error(NULL, &rm, &f, m.id);
+    } else if (m.once && once_seen(n, m.once)) { /* the client's other copy came first, through any edge */
+        respond_error(NULL, &rm, &once_duplicate, m.id);
     } else {
         submit_control(n, NULL, &rm, &m); /* the token was checked where the client is (its edge) */
     }
@@ -646,10 +654,10 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
             session_send_error(s, &f, m.id);
             break;
         }
-        if (m.once && once_seen(n, m.once)) { /* its copy on the client's other connection came first */
-            struct ctl_error d = { .code = "duplicate", .message = "this \"once\" was received already, on another "
-                                                                  "connection: applied once" };
-            session_send_error(s, &d, m.id);
+        /* Its copy on the client's other connection came first. On an edge the
+         * sim decides (net_remote_control): the two copies may reach two edges. */
+        if (m.once && !n->cluster.forward && once_seen(n, m.once)) {
+            session_send_error(s, &once_duplicate, m.id);
             break;
         }
         if (n->cluster.forward) { /* edge: the sim validates and applies it */

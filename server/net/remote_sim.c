@@ -83,8 +83,9 @@ cJSON *net_hello_capacity(struct net *n, cJSON *hello)
 static int adopt_params(struct net *n, const cJSON *root, uint64_t *changed)
 {
     const cJSON *obj = cJSON_GetObjectItemCaseSensitive(root, "params");
-    const cJSON *ver = cJSON_GetObjectItemCaseSensitive(root, "params_version");
-    if (!cJSON_IsObject(obj) || !cJSON_IsNumber(ver) || ver->valuedouble < 0 || ver->valuedouble > 4294967295.0)
+    uint32_t version;
+    if (!cJSON_IsObject(obj) ||
+        !control_json_version(cJSON_GetObjectItemCaseSensitive(root, "params_version"), &version))
         return -1;
     struct ocean_params out;
     struct ctl_error e;
@@ -94,7 +95,7 @@ static int adopt_params(struct net *n, const cJSON *root, uint64_t *changed)
         return -1;
     }
     n->applied = n->view = out;
-    n->applied_version = (uint32_t)ver->valuedouble;
+    n->applied_version = version;
     return 0;
 }
 

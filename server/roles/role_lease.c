@@ -86,28 +86,27 @@ static char *record_text(struct role_lease *ls, const struct ocean_params *p, ui
     return t;
 }
 
-/* Checked as a state file is: parameters through the same rules, numbers in range. */
+/* Checked as a state file is, by the same rules (control.h): parameters as a
+ * set's, the version and the clock in what the running sim can reach (a
+ * holder's clock at its limit is a valid record), seq and wall_us whole
+ * numbers JSON holds exactly. */
 static int record_parse(const char *text, size_t len, const struct ocean_params *base, struct record *out)
 {
     cJSON *root = cJSON_ParseWithLength(text, len);
     const cJSON *h = cJSON_GetObjectItemCaseSensitive(root, "holder");
     const cJSON *p = cJSON_GetObjectItemCaseSensitive(root, "params");
-    const cJSON *v = cJSON_GetObjectItemCaseSensitive(root, "params_version");
-    const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "sim_time");
-    const cJSON *w = cJSON_GetObjectItemCaseSensitive(root, "wall_us");
-    const cJSON *q = cJSON_GetObjectItemCaseSensitive(root, "seq");
     struct ctl_error e;
+    struct record r = { 0 };
     int rc = -1;
-    if (cJSON_IsString(h) && cJSON_IsObject(p) && cJSON_IsNumber(v) && v->valuedouble >= 0 &&
-        v->valuedouble < 4294967295.0 && cJSON_IsNumber(t) && t->valuedouble >= 0 && t->valuedouble <= OCEAN_TIME_MAX &&
-        cJSON_IsNumber(w) && w->valuedouble >= 0 && cJSON_IsNumber(q) && q->valuedouble >= 0 &&
-        control_apply_params(p, base, NULL, &out->params, NULL, &e) == 0) {
-        snprintf(out->holder, sizeof out->holder, "%s", h->valuestring);
-        out->released = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(root, "released"));
-        out->version = (uint32_t)v->valuedouble;
-        out->sim_time = t->valuedouble;
-        out->wall_us = (uint64_t)w->valuedouble;
-        out->seq = (uint64_t)q->valuedouble;
+    if (cJSON_IsString(h) && cJSON_IsObject(p) &&
+        control_json_version(cJSON_GetObjectItemCaseSensitive(root, "params_version"), &r.version) &&
+        control_json_sim_time(cJSON_GetObjectItemCaseSensitive(root, "sim_time"), &r.sim_time) &&
+        control_json_whole(cJSON_GetObjectItemCaseSensitive(root, "wall_us"), CTL_JSON_EXACT_MAX, &r.wall_us) &&
+        control_json_whole(cJSON_GetObjectItemCaseSensitive(root, "seq"), CTL_JSON_EXACT_MAX, &r.seq) &&
+        control_apply_params(p, base, NULL, &r.params, NULL, &e) == 0) {
+        snprintf(r.holder, sizeof r.holder, "%s", h->valuestring);
+        r.released = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(root, "released"));
+        *out = r;
         rc = 0;
     }
     cJSON_Delete(root);
@@ -201,9 +200,7 @@ static void take_over(struct role_lease *ls, const struct record *rec, uint64_t 
     if (theirs) { /* its clock, carried on to now */
         double since = ((double)now.wall_us - (double)rec->wall_us) * 1e-6;
         since = since > 0 ? since : 0;
-        now.sim_time = rec->sim_time + (p.paused ? 0 : p.time_scale * since);
-        if (now.sim_time > OCEAN_TIME_MAX)
-            now.sim_time = rec->sim_time;
+        now.sim_time = ocean_time_clamp(rec->sim_time + (p.paused ? 0 : p.time_scale * since));
         uint64_t their_seq = rec->seq + (uint64_t)(since * ls->tick_rate);
         now.seq = their_seq > seq ? their_seq : seq;
     }
@@ -245,8 +242,10 @@ static void standby_round(struct role_lease *ls, double now)
             ls->seen_t = now;
             /* Hot: follow the holder's sea, so a take-over builds nothing. A
              * version names one sea (durable before use, never reused), so
-             * the renewals (same version, new clock) cost nothing here. */
-            if (ok && rec.version != mine && strcmp(rec.holder, cl_link_instance(ls->link)) != 0)
+             * the renewals (same version, new clock) cost nothing here. Only
+             * a newer one: a record older than our state (written by a stale
+             * copy, a restored bucket) never takes the version back. */
+            if (ok && rec.version > mine && strcmp(rec.holder, cl_link_instance(ls->link)) != 0)
                 adopt(ls, &rec);
         }
         if (!ok) {

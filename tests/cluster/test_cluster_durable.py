@@ -66,9 +66,12 @@ async def set_until_acked(ws, i, wind, after):
 class JsCluster(Cluster):
     """JetStream, sims sims (the first active, the others standbys) and edges edges."""
 
-    def __init__(self, sims=2, edges=1, sim_extra=()):
+    def __init__(self, sims=2, edges=1, sim_extra=(), state=None):
         self.tmp = tempfile.mkdtemp(prefix="oceand-durable-")
         self.nodes = []
+        if state is not None:   # the first sim's state file
+            with open(os.path.join(self.tmp, "sim0-state.json"), "w") as f:
+                json.dump(state, f)
         self.nats = oceand_proc.Nats(self.tmp, store=True, error=TestFailure)  # JetStream, its store in tmp
         try:
             self.sims = []
@@ -538,6 +541,98 @@ def test_nats_and_edge_kill9_lose_no_acknowledged_set(c):
         hx = await hello_at(c.edges[0], m2["params_version"], "restarted edge")
         check(hx["params"]["wind_speed"] == 18.25, "restarted edge's hello %r" % hx["params"])
         await other.close()
+    asyncio.run(run())
+
+
+# ---------------------------------------------------------------- records ordered by version, clocks at their limit
+# (issue 40, items 4 and 5)
+
+TIME_MAX = 1e9   # OCEAN_TIME_MAX: the sea's clock stops there
+
+
+def metric_of(node, name):
+    return node.metric(name)
+
+
+@test
+@with_js_cluster(sims=2, edges=1, state={"params": {"time_scale": 16}, "params_version": 5,
+                                         "sim_time": TIME_MAX - 1.5})
+def test_standby_follows_a_holder_whose_clock_is_at_its_limit(c):
+    """The holder's clock passed 1e9 s (999999998.5 at time_scale 16) and the standby's record
+    parser, whose limit is 1e9, refused every record from then on: after a kill -9 of the
+    holder it took over with its own older state, and the acknowledged set was lost. The
+    clock stops at its limit now, the parser takes every record the holder can write, and
+    the standby follows and takes over with the acknowledged set."""
+    async def run():
+        standby = c.sims[1]
+        await asyncio.sleep(1.0)                     # the holder's clock is at its limit by now
+        check(metric_of(c.sim, "oceand_sim_time_seconds") == TIME_MAX,
+              "the holder's clock: %r" % metric_of(c.sim, "oceand_sim_time_seconds"))
+        ws, h = await connect(c.edges[0])
+        m = await set_and_ack(ws, 1, 13.5)
+        check(m["type"] == "params", "set: %r" % m)
+        v = m["params_version"]
+        await ws.close()
+        wait_for(lambda: metric_of(standby, "oceand_params_version") == v, "the standby follows version %d" % v)
+        c.sim.kill()
+        wait_for(lambda: standby.health()["lease"] == "active", "the standby takes over")
+        hx = await hello_at(c.edges[0], v, "after the take-over")
+        check(hx["params_version"] == v and hx["params"]["wind_speed"] == 13.5,
+              "after the take-over: version %r wind %r, acknowledged %d wind 13.5"
+              % (hx["params_version"], hx["params"]["wind_speed"], v))
+        check(metric_of(standby, "oceand_sim_time_seconds") == TIME_MAX,
+              "the new holder's clock: %r" % metric_of(standby, "oceand_sim_time_seconds"))
+    asyncio.run(run())
+
+
+@test
+@with_js_cluster(sims=2, edges=1)
+def test_an_older_record_never_takes_the_version_back(c):
+    """A record of version 1 written into the bucket after version 3 was acknowledged (a
+    stale copy, a restored bucket, anyone who may write it) was adopted by both sims, as
+    any version other than their own: frames went from 3 back to 1 and later sets reused 2
+    and 3. A sim adopts only a newer record; the holder that finds its lease taken by the
+    older record steps down, and then the one that takes the lease keeps its own state."""
+    import test_cluster_hostile as tch
+    async def run():
+        ws, h = await connect(c.edges[0])
+        for i in range(3):
+            m = await set_and_ack(ws, 1 + i, 9.5 + i)
+            check(m["type"] == "params", "set: %r" % m)
+        v = m["params_version"]
+        wait_for(lambda: metric_of(c.sims[1], "oceand_params_version") == v, "the standby follows version %d" % v)
+        rogue = tch.RawNats(c.nats.url)
+        try:
+            old = {"holder": "rogue-1", "name": "rogue", "released": False, "params": {"wind_speed": 4.5},
+                   "params_version": v - 2, "sim_time": 100.0, "wall_us": int(time.time() * 1e6), "seq": 1,
+                   "tick_rate": 30}
+            rogue.sub("_INBOX.rogue")
+            rogue.pub("$KV.OCEAND_oceand.sim", json.dumps(old).encode(), reply="_INBOX.rogue")
+            _, _, ack = rogue.next_msg(5)
+            check(b'"stream"' in ack, "JetStream did not store the old record: %r" % ack)
+        finally:
+            rogue.close()
+        versions = []
+        t_end = time.time() + 4.0                    # the step-down, the lease's expiry, the take-over
+        while time.time() < t_end:
+            try:
+                fh, _ = await recv_frame(ws, timeout=1.0)
+                versions.append(fh["params_version"])
+            except (TestFailure, asyncio.TimeoutError):
+                pass
+        check(versions and min(versions) >= v, "frames went back to version %r (acknowledged %d)"
+              % (min(versions or [None]), v))
+        wait_for(lambda: c.active() is not None, "a sim holds the lease")
+        one_active(c)
+        for n in c.sims:
+            check(metric_of(n, "oceand_params_version") >= v, "%s went back to version %r"
+                  % (n.name, metric_of(n, "oceand_params_version")))
+        hx = await hello_at(c.edges[0], v, "after the old record")
+        check(hx["params_version"] == v and hx["params"]["wind_speed"] == 11.5,
+              "after the old record: version %r wind %r" % (hx["params_version"], hx["params"]["wind_speed"]))
+        m = await set_until_acked(ws, 10, 12.5, v)
+        check(m["params_version"] == v + 1, "the next set got version %r, want %d" % (m["params_version"], v + 1))
+        await ws.close()
     asyncio.run(run())
 
 

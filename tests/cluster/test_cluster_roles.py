@@ -206,6 +206,48 @@ def test_set_reaches_both_edges_and_frames_are_identical(c):
     check(c.sim.metric("oceand_cluster_layers_published_total") > 0, "no layers published")
 
 
+@test
+@with_cluster(edges=2)
+def test_once_is_honoured_across_edges(c):
+    """PROTOCOL.md §7.1 `once` across two edges (issue 40, item 6): X sets wind 21 with key K
+    on edge A, Y sets 22, and X's hedged copy with K arrives on edge B. Each edge kept its own
+    keys, so B applied it and the wind went back to 21. The sim applies sets, so it keeps
+    the keys for every edge: the copy gets `duplicate` (through B) and changes nothing.
+    Two copies through one edge are applied once too."""
+    async def run():
+        xa, _ = await connect(c.edges[0])
+        xb, _ = await connect(c.edges[1], url=c.edges[1].url + "?frames=0")   # X's control connection
+        y, _ = await connect(c.edges[1], url=c.edges[1].url + "?frames=0")
+
+        async def send(ws, i, wind, once=None):
+            msg = {"type": "set", "id": i, "params": {"wind_speed": wind}}
+            if once:
+                msg["once"] = once
+            await ws.send(json.dumps(msg))
+            return await recv_json(ws, lambda m: m["type"] in ("params", "error") and m.get("id") == i, timeout=10)
+        key = "k40-%012x" % int(time.time() * 1e6)
+        m = await send(xa, 1, 21, key)
+        check(m["type"] == "params", "X's first copy through edge A: %r" % m)
+        m = await send(y, 2, 22)
+        check(m["type"] == "params", "Y's set: %r" % m)
+        v = m["params_version"]
+        m = await send(xb, 3, 21, key)
+        check(m["type"] == "error" and m["code"] == "duplicate", "X's copy through edge B: %r" % m)
+        for e in c.edges:
+            ws, h = await connect(e)
+            check(h["params"]["wind_speed"] == 22 and h["params_version"] == v,
+                  "after the copy: wind %r version %r, want 22 at %d"
+                  % (h["params"]["wind_speed"], h["params_version"], v))
+            await ws.close()
+        key2 = key + "-2"                           # both copies through one edge (B)
+        m1, m2 = await send(xb, 4, 23, key2), await send(y, 5, 23, key2)
+        check(sorted((m1["type"], m2.get("code", m2["type"]))) == ["duplicate", "params"],
+              "two copies through edge B: %r, %r" % (m1, m2))
+        for ws in (xa, xb, y):
+            await ws.close()
+    asyncio.run(run())
+
+
 # The web client's subscription (web/src/main.js): cascade 0's height/dx/dz plus the
 # foam field at its own LOD, and the finer cascades' height at LOD 1 and 1 mm.
 # Pinned (adapt false): the edge's frames are compared byte for byte with --role all's, so
