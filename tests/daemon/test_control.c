@@ -695,7 +695,9 @@ static void test_state_values(void)
         { "{\"params\":{},\"params_version\":12,\"sim_time\":1000000000.5}", 0, 12, "sim_time" },
         { "{\"params\":{},\"params_version\":12,\"sim_time\":-1}", 0, 12, "sim_time" },
         { "{\"params\":{},\"params_version\":12,\"sim_time\":\"soon\"}", 0, 12, "sim_time" },
-        { "{\"params\":{},\"params_version\":4294967295,\"sim_time\":2}", 2, 0, "params_version" },
+        /* The last version a running daemon can reach (sets stop there) loads again; beyond it, no. */
+        { "{\"params\":{},\"params_version\":4294967295,\"sim_time\":2}", 2, 4294967295u, NULL },
+        { "{\"params\":{},\"params_version\":4294967296,\"sim_time\":2}", 2, 0, "params_version" },
         { "{\"params\":{},\"params_version\":4294967294,\"sim_time\":2}", 2, 4294967294u, NULL },
         { "{\"params\":{},\"params_version\":1e30,\"sim_time\":2}", 2, 0, "params_version" },
         { "{\"params\":{},\"params_version\":-7,\"sim_time\":2}", 2, 0, "params_version" },
@@ -776,6 +778,48 @@ static void fuzz(void)
 
 /* capacity.c: the plan of a tick (docs/daemon.md, "Capacity"), from a model
  * with fixed numbers: behaviour only, no clock. */
+/* The one rule per counter and clock (control.h) that the state file, the
+ * cluster's record and the edge's hello share: the limits the running daemon
+ * reaches are inside, anything else (NaN too) outside. */
+static void test_counter_limits(void)
+{
+    static const struct { const char *json; bool version_ok; uint32_t version; bool time_ok; bool exact_ok; } cases[] = {
+        { "0", true, 0, true, true },
+        { "4294967295", true, 4294967295u, false, true },
+        { "4294967296", false, 0, false, true },
+        { "1e9", true, 1000000000u, true, true },
+        { "1000000000.5", false, 0, false, false },
+        { "7.5", false, 0, true, false },
+        { "-1", false, 0, false, false },
+        { "9007199254740992", false, 0, false, true },
+        { "9007199254740994", false, 0, false, false },
+        { "1e400", false, 0, false, false },
+        { "\"7\"", false, 0, false, false },
+        { "null", false, 0, false, false },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        cJSON *j = cJSON_Parse(cases[i].json);
+        uint32_t v = 77;
+        double t = -5;
+        uint64_t w = 0;
+        bool vok = control_json_version(j, &v), tok = control_json_sim_time(j, &t);
+        bool wok = control_json_whole(j, CTL_JSON_EXACT_MAX, &w);
+        CHECK(vok == cases[i].version_ok && v == (vok ? cases[i].version : 77u), "version of %s: %d %u", cases[i].json,
+              vok, v);
+        CHECK(tok == cases[i].time_ok && (tok || t == -5), "sim_time of %s: %d %g", cases[i].json, tok, t);
+        CHECK(wok == cases[i].exact_ok, "whole number of %s: %d", cases[i].json, wok);
+        cJSON_Delete(j);
+    }
+    cJSON nan_item = { .type = cJSON_Number, .valuedouble = NAN };
+    uint32_t v;
+    double t;
+    uint64_t w;
+    CHECK(!control_json_version(&nan_item, &v) && !control_json_sim_time(&nan_item, &t) &&
+          !control_json_whole(&nan_item, CTL_JSON_EXACT_MAX, &w), "NaN passed a limit");
+    CHECK(ocean_time_clamp(OCEAN_TIME_MAX + 30.5) == OCEAN_TIME_MAX && ocean_time_clamp(-1) == 0 &&
+          ocean_time_clamp(NAN) == 0 && ocean_time_clamp(12.5) == 12.5, "ocean_time_clamp");
+}
+
 static void test_capacity_plan(void)
 {
     struct cost_model m = {
@@ -1246,6 +1290,7 @@ int main(void)
     test_short_frames();
     test_config_file_limits();
     test_state_values();
+    test_counter_limits();
     test_display_names();
     test_render();
     fuzz();
