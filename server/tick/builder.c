@@ -229,6 +229,8 @@ void apply_prepared(struct sim *s)
          * (docs/simulation.md "Easing"), in sim time: from the previous tick
          * on, so this tick's frame is 1/K of the way. Paused: at once. */
         double dt = b.params.paused ? 0 : b.params.time_scale / s->cfg.tick_rate;
+        if (s->sim_time + (s->cfg.ease_ticks - 1) * dt > OCEAN_TIME_MAX)
+            dt = 0; /* a ramp the clock would stop in (at its limit) would never end: at once, as paused */
         commit_rc = ocean_commit_eased(s->ocean, b.prepared, s->sim_time - dt, s->cfg.ease_ticks * dt);
         if (commit_rc == 0 && b.surface && ocean_surface_ease(b.surface, s->ocean) != 0)
             LOGW("point queries: the snapshot of version %u misses the easing", (unsigned)(s->version + 1));

@@ -2526,6 +2526,16 @@ def hello_of(port):
     return s, r, [t for t in r.texts if t.get("type") == "hello"][0]
 
 
+def query_height(s, r, i):
+    """The height at (10, 20) now, by a query (PROTOCOL.md §7.4)."""
+    n0 = len(r.texts)
+    check(send_quiet(s, ws_frame(OP_TEXT, '{"type":"query","id":%d,"points":[[10,20]]}' % (100 + i))), "query not sent")
+    r.until(lambda r: any(t.get("id") == 100 + i for t in r.texts[n0:]), 10)
+    ans = [t for t in r.texts[n0:] if t.get("id") == 100 + i]
+    check(ans and ans[0].get("type") == "query_result", "query: %r" % (ans[:1],))
+    return ans[0]["points"][0]["height"]
+
+
 @case()
 def version_at_its_limit(d, fig):
     """A state file at params_version 2^32 - 2 was accepted, and the next three sets were
@@ -2599,11 +2609,20 @@ def clock_at_its_limit(d, fig):
             time.sleep(0.1)
         n0 = r.binary
         r.until(lambda r: r.binary >= n0 + 10, 5)
-        s.close()
         fig["sim_time_max"] = max(times)
         check(max(times) <= TIME_MAX, "the clock ran past %g s: %r" % (TIME_MAX, max(times)))
         check(times[-1] == TIME_MAX, "the clock did not reach its limit: %r" % times[-1])
         check(r.binary >= n0 + 10, "frames stopped at the clock's limit (%d)" % (r.binary - n0))
+        # A change of the waves' amplitudes eases in over sim time (8 ticks): with the clock
+        # stopped it must apply at once, not stay 1/8 of the way for ever. The sea then is
+        # the one a restart from the saved state shows (no easing at start).
+        h_before = query_height(s, r, 1)
+        m = ask(s, r, '{"type":"set","id":2,"params":{"wind_speed":20}}')
+        check(m and m.get("type") == "params", "a set at the clock's limit: %r" % m)
+        time.sleep(0.5)
+        h_after = query_height(s, r, 3)
+        s.close()
+        check(abs(h_after - h_before) > 1e-4, "the wind change did not reach the sea: %r -> %r" % (h_before, h_after))
         p.send_signal(signal.SIGHUP)                     # save now
         check(wait_until(lambda: json.load(open(sp)).get("sim_time") == TIME_MAX, 5),
               "saved sim_time %r" % json.load(open(sp)).get("sim_time"))
@@ -2615,6 +2634,12 @@ def clock_at_its_limit(d, fig):
         check("ignoring" not in text and "starting from 0" not in text, "the saved clock was refused: %s" % text[-300:])
         fig["restarted_at"] = sim_time()
         check(sim_time() == TIME_MAX, "restarted at sim time %r, saved %g" % (sim_time(), TIME_MAX))
+        s, r, h = hello_of(port)
+        h_restarted = query_height(s, r, 4)
+        s.close()
+        fig["heights"] = [h_before, h_after, h_restarted]
+        check(abs(h_after - h_restarted) < 1e-6, "the eased sea at the limit %r is not the saved one's %r"
+              % (h_after, h_restarted))
     finally:
         stop_alone(p, tmp)
         shutil.rmtree(tmpd, ignore_errors=True)
