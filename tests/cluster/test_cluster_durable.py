@@ -545,7 +545,6 @@ def test_nats_and_edge_kill9_lose_no_acknowledged_set(c):
 
 
 # ---------------------------------------------------------------- records ordered by version, clocks at their limit
-# (issue 40, items 4 and 5)
 
 TIME_MAX = 1e9   # OCEAN_TIME_MAX: the sea's clock stops there
 

@@ -209,7 +209,7 @@ def test_set_reaches_both_edges_and_frames_are_identical(c):
 @test
 @with_cluster(edges=2)
 def test_once_is_honoured_across_edges(c):
-    """PROTOCOL.md §7.1 `once` across two edges (issue 40, item 6): X sets wind 21 with key K
+    """PROTOCOL.md §7.1 `once` across two edges: X sets wind 21 with key K
     on edge A, Y sets 22, and X's hedged copy with K arrives on edge B. Each edge kept its own
     keys, so B applied it and the wind went back to 21. The sim applies sets, so it keeps
     the keys for every edge: the copy gets `duplicate` (through B) and changes nothing.
