@@ -68,7 +68,8 @@ enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING,
 struct ctl_msg {
     enum ctl_type type;
     cJSON *root;            /* owned: the parsed message */
-    const cJSON *id;        /* inside root, or NULL */
+    const cJSON *id;        /* inside root, or NULL; a number is a raw node of its text as sent
+                             * (cJSON's double would change 2^53 + 1), so copies print it exactly */
     const cJSON *params;    /* CTL_SET: the "params" object */
     const char *token;      /* CTL_SET: optional "token", or NULL */
     double t;               /* CTL_PING: echoed "t" */
@@ -103,6 +104,21 @@ static inline int subscription_lod(const struct subscription *s, int f)
  * (caller frees with cJSON_Delete). */
 int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_out, struct ctl_error *e);
 void ctl_msg_free(struct ctl_msg *m);
+
+/* The one strict reading of JSON text, for every parser of JSON from the
+ * wire or a file (control messages, the config and state files, cluster
+ * records): raw control bytes (NUL included), a "\u" without four hex
+ * digits and "\u0000" are refused, since cJSON would skip or decode them and
+ * its C strings would then cut the text at the NUL. Returns 0, or -1 with e
+ * filled (code bad_json, the message names what and where). */
+int control_json_prescan(const char *text, size_t len, struct ctl_error *e);
+/* text[0..len) as one JSON object and nothing but whitespace after it,
+ * under control_json_prescan: the object (cJSON_Delete), or NULL with e filled (bad_json). */
+cJSON *control_parse_object(const char *text, size_t len, struct ctl_error *e);
+/* The "id" of a message not otherwise parsed (a refusal), as control_parse
+ * keeps it: a detached copy (cJSON_Delete) that prints as sent, or NULL
+ * (none, or the message is not a strict JSON object). */
+cJSON *control_message_id(const char *text, size_t len);
 
 /* Apply a JSON object of parameters onto *cur, all or nothing: every member
  * is checked (name, JSON type, range, power of two), then the whole set
