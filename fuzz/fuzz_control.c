@@ -42,6 +42,11 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         cJSON_Delete(id);
         return 0;
     }
+    if (cJSON_IsRaw(m.id)) { /* a numeric id kept as its text: a JSON number, so every reply stays JSON */
+        cJSON *num = cJSON_Parse(m.id->valuestring);
+        check(cJSON_IsNumber(num));
+        cJSON_Delete(num);
+    }
     if (m.once) { /* the key a change is applied once under: 8..64 printable ASCII */
         size_t k = strlen(m.once);
         check(k >= CTL_ONCE_MIN && k <= CTL_ONCE_MAX);

@@ -1223,7 +1223,7 @@ static void test_render(void)
     ctl_msg_free(&c);
 }
 
-/* ---- issue 40 (a): ids echoed as sent; every file loader as strict as a message ---- */
+/* ---- ids echoed as sent; every file loader as strict as a message ---- */
 
 /* The "id" of a reply as printed, e.g. `9007199254740993` of {"id":9007199254740993,...}. */
 static const char *printed_id(const char *reply, char *out, size_t cap)

@@ -2582,7 +2582,7 @@ def healthz_many_layers(d, fig):
 SOLO.update({"state_over_memory_cap", "healthz_many_layers"})
 
 
-# ---------------------------------------------------------------- issue 40 (a): ids as sent, render counts, strict files
+# ---------------------------------------------------------------- ids as sent, render counts, strict files, warm-ups
 
 def warmed_up(fig, rss_kb):
     """A case's RSS after its own warm-up: run_case judges "flat" from here, not from before
