@@ -45,7 +45,7 @@ int ctl_fail(struct ctl_error *e, const char *code, const char *param, const cha
 
 static bool is_scalar(const cJSON *j)
 {
-    /* raw: a number kept as its text (keep_id_text) */
+    /* raw: a number kept as its text (keep_number_text) */
     return cJSON_IsString(j) || cJSON_IsNumber(j) || cJSON_IsRaw(j) || cJSON_IsBool(j) || cJSON_IsNull(j);
 }
 
@@ -90,12 +90,12 @@ static bool id_fits(const cJSON *id)
     return cJSON_PrintPreallocated((cJSON *)id, buf, (int)sizeof buf, 0) && strlen(buf) <= CTL_MAX_ID_BYTES;
 }
 
-/* ---- the request id, exactly as sent ----
+/* ---- the request id (and a ping's t), exactly as sent ----
  * cJSON holds a number as a double, so 9007199254740993 would come back as
  * 9.00719925474099e+15 and 1e400 as null. A numeric id is therefore echoed
- * from its own text: the scan below finds the top-level "id" member in the
+ * from its own text: the scan below finds the top-level member in the
  * message (text cJSON has accepted, so it only has to find where values
- * end) and the id becomes a raw cJSON node holding that text. */
+ * end) and the member becomes a raw cJSON node holding that text. */
 
 /* cJSON's whitespace: every byte up to 0x20 (stays in step with its parse). */
 static const char *skip_blank(const char *s, const char *end)
@@ -139,11 +139,13 @@ static const char *skip_value(const char *s, const char *end)
     return s;
 }
 
-/* s at a member name's opening quote: whether it reads "id" once decoded
- * (cJSON compares decoded names: "\u0069d" is "id" too); *after = past it. */
-static bool name_is_id(const char *s, const char *end, const char **after)
+/* s at a member name's opening quote: whether it reads `want` (a short ASCII
+ * name) once decoded (cJSON compares decoded names: "\u0069d" is "id" too);
+ * *after = past it. */
+static bool name_is(const char *s, const char *end, const char *want, const char **after)
 {
-    char got[3];
+    char got[8];
+    const size_t wlen = strlen(want); /* < sizeof got */
     size_t n = 0;
     bool fits = true;
     const char *p = s + 1;
@@ -159,17 +161,17 @@ static bool name_is_id(const char *s, const char *end, const char **after)
                 p += 4;
             }
         }
-        if (n < 2)
+        if (n < wlen)
             got[n] = c;
-        fits = ++n <= 2;
+        fits = ++n <= wlen;
     }
     *after = p < end ? p + 1 : end;
-    return fits && n == 2 && got[0] == 'i' && got[1] == 'd';
+    return fits && n == wlen && memcmp(got, want, wlen) == 0;
 }
 
-/* The text of the first top-level "id" member's value (as cJSON's lookup
+/* The text of the first top-level member `name`'s value (as cJSON's lookup
  * finds the first), or false when the object has none. */
-static bool find_id_text(const char *text, size_t len, const char **tok, size_t *toklen)
+static bool find_member_text(const char *text, size_t len, const char *name, const char **tok, size_t *toklen)
 {
     const char *end = text + len, *p = skip_blank(text, end);
     if (p >= end || *p != '{')
@@ -177,14 +179,14 @@ static bool find_id_text(const char *text, size_t len, const char **tok, size_t 
     p = skip_blank(p + 1, end);
     while (p < end && *p == '"') {
         const char *after;
-        bool is_id = name_is_id(p, end, &after);
+        bool match = name_is(p, end, name, &after);
         p = skip_blank(after, end);
         if (p >= end || *p != ':')
             return false;
         p = skip_blank(p + 1, end);
         const char *v = p;
         p = skip_value(p, end);
-        if (is_id) {
+        if (match) {
             *tok = v;
             *toklen = (size_t)(p - v);
             return true;
@@ -232,20 +234,19 @@ static bool is_json_number(const char *s, size_t len)
     return i == len;
 }
 
-/* A numeric "id" of root (parsed from text) replaced by a raw node of its
- * own text, so every reply that copies it prints it as sent. 0, or -1 with
- * e filled (bad_json: not an RFC 8259 number). */
-static int keep_id_text(cJSON *root, const char *text, size_t len, struct ctl_error *e)
+/* A numeric member `name` of root (parsed from text) replaced by a raw node
+ * of its own text, so every reply that copies it prints it as sent. 0, or -1
+ * with e filled (bad_json: not an RFC 8259 number). */
+static int keep_number_text(cJSON *root, const char *text, size_t len, const char *name, struct ctl_error *e)
 {
-    const cJSON *id = cJSON_GetObjectItemCaseSensitive(root, "id");
-    if (!cJSON_IsNumber(id))
+    if (!cJSON_IsNumber(cJSON_GetObjectItemCaseSensitive(root, name)))
         return 0;
     const char *tok;
     size_t toklen;
-    if (!find_id_text(text, len, &tok, &toklen))
-        return ctl_fail(e, "internal", NULL, "the \"id\" number was not found in the message");
+    if (!find_member_text(text, len, name, &tok, &toklen))
+        return ctl_fail(e, "internal", NULL, "the \"%s\" number was not found in the message", name);
     if (!is_json_number(tok, toklen))
-        return ctl_fail(e, "bad_json", NULL, "\"id\" %.*s is not a JSON number (RFC 8259)",
+        return ctl_fail(e, "bad_json", NULL, "\"%s\" %.*s is not a JSON number (RFC 8259)", name,
                         toklen > 40 ? 40 : (int)toklen, tok);
     char *raw = malloc(toklen + 1);
     if (!raw)
@@ -254,7 +255,7 @@ static int keep_id_text(cJSON *root, const char *text, size_t len, struct ctl_er
     raw[toklen] = '\0';
     cJSON *node = cJSON_CreateRaw(raw);
     free(raw);
-    if (!node || !cJSON_ReplaceItemInObjectCaseSensitive(root, "id", node)) {
+    if (!node || !cJSON_ReplaceItemInObjectCaseSensitive(root, name, node)) {
         cJSON_Delete(node);
         return ctl_fail(e, "internal", NULL, "out of memory");
     }
@@ -294,7 +295,7 @@ cJSON *control_message_id(const char *text, size_t len)
 {
     struct ctl_error e;
     cJSON *root = control_parse_object(text, len, &e);
-    if (!root || keep_id_text(root, text, len, &e) != 0) {
+    if (!root || keep_number_text(root, text, len, "id", &e) != 0) {
         cJSON_Delete(root);
         return NULL;
     }
@@ -311,7 +312,7 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
     cJSON *root = control_parse_object(text, len, e);
     if (!root)
         return -1;
-    if (keep_id_text(root, text, len, e) != 0) { /* not echoed: it is what is wrong */
+    if (keep_number_text(root, text, len, "id", e) != 0) { /* not echoed: it is what is wrong */
         cJSON_Delete(root);
         return -1;
     }
@@ -366,8 +367,9 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
         const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "t");
         if (t && !cJSON_IsNumber(t))
             rc = ctl_fail(e, "bad_message", NULL, "\"t\" must be a number");
-        m->has_t = t != NULL;
-        m->t = t ? t->valuedouble : 0;
+        else if (t) /* echoed in pong as sent, like the id */
+            rc = keep_number_text(root, text, len, "t", e);
+        m->t = cJSON_GetObjectItemCaseSensitive(root, "t");
     } else {
         rc = ctl_fail(e, "unknown_type", NULL, "unknown message type \"%.40s\"", ts);
     }

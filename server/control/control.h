@@ -72,11 +72,10 @@ struct ctl_msg {
                              * (cJSON's double would change 2^53 + 1), so copies print it exactly */
     const cJSON *params;    /* CTL_SET: the "params" object */
     const char *token;      /* CTL_SET: optional "token", or NULL */
-    double t;               /* CTL_PING: echoed "t" */
+    const cJSON *t;         /* CTL_PING: "t" to echo, inside root (a raw node of its text), or NULL */
     const char *name;       /* CTL_NAME, or a `set`'s optional "name": a checked display name
                              * ("" = none), inside root; NULL when not given */
     const char *once;       /* CTL_SET/PAUSE/RESUME: optional "once" (a checked key), inside root, or NULL */
-    bool has_t;
 };
 
 /* "once" on set/pause/resume (PROTOCOL.md §7.1): the same request sent on two
@@ -156,7 +155,8 @@ cJSON *control_error_msg(const struct ctl_error *e, const cJSON *id);
 cJSON *control_params_msg(const struct ocean_params *p, uint32_t version, uint64_t changed,
                           const char *by, const cJSON *id);
 cJSON *control_subscribed_msg(const struct subscription *s, const cJSON *id);
-cJSON *control_pong_msg(const cJSON *id, bool has_t, double t, uint64_t server_time_us);
+/* t: the ping's "t" (ctl_msg.t), echoed as sent; NULL = none */
+cJSON *control_pong_msg(const cJSON *id, const cJSON *t, uint64_t server_time_us);
 /* What this daemon can do (server/tick/capacity.h): announced in hello and
  * params as "capacity" (PROTOCOL.md). */
 #define CAPACITY_MAX_SIZES 8

@@ -700,7 +700,7 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         break;
     }
     case CTL_PING:
-        session_queue_json(s, control_pong_msg(m.id, m.has_t, m.t, unix_us()));
+        session_queue_json(s, control_pong_msg(m.id, m.t, unix_us()));
         break;
     case CTL_NAME: /* anyone may name themselves: the name only labels their own changes */
         snprintf(s->name, sizeof s->name, "%s", m.name);

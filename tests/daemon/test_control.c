@@ -524,7 +524,7 @@ static void test_pong_integer(void)
         { UINT64_MAX, "\"server_time_us\":18446744073709551615" },
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
-        char *s = control_print(control_pong_msg(NULL, false, 0, cases[i].us));
+        char *s = control_print(control_pong_msg(NULL, NULL, cases[i].us));
         const char *at = s ? strstr(s, cases[i].text) : NULL;
         CHECK(at && at[strlen(cases[i].text)] == '}', "pong %s, want %s", s ? s : "(null)", cases[i].text);
         free(s);
@@ -1257,9 +1257,21 @@ static void test_exact_ids(void)
         CHECK(control_parse(text, strlen(text), &m, &bad, &e) == 0, "%s: %s", text, e.message);
         if (!m.root)
             continue;
-        char *pong = control_print(control_pong_msg(m.id, false, 0, 1));
+        char *pong = control_print(control_pong_msg(m.id, m.t, 1));
         CHECK(pong && strcmp(printed_id(pong, got, sizeof got), ids[i]) == 0, "pong id %s, want %s", got, ids[i]);
         free(pong);
+        /* a ping's "t" is echoed as sent too */
+        struct ctl_msg tm;
+        snprintf(text, sizeof text, "{\"type\":\"ping\",\"t\":%s}", ids[i]);
+        CHECK(control_parse(text, strlen(text), &tm, NULL, &e) == 0, "%s: %s", text, e.message);
+        if (tm.root) {
+            pong = control_print(control_pong_msg(tm.id, tm.t, 1));
+            const char *tt = pong ? strstr(pong, "\"t\":") : NULL;
+            CHECK(tt && strncmp(tt + 4, ids[i], strlen(ids[i])) == 0 && tt[4 + strlen(ids[i])] == ',',
+                  "pong %s, want t %s", pong ? pong : "-", ids[i]);
+            free(pong);
+            ctl_msg_free(&tm);
+        }
         struct ctl_error oops = { .code = "invalid", .message = "x" };
         char *err = control_print(control_error_msg(&oops, m.id));
         CHECK(err && strcmp(printed_id(err, got, sizeof got), ids[i]) == 0, "error id %s, want %s", got, ids[i]);
