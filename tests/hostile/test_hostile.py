@@ -2783,5 +2783,55 @@ def nul_in_files(d, fig):
     check(not problems, "; ".join(problems))
 
 
+@case()
+def ids_as_sent_through_an_edge(d, fig):
+    """The same through a cluster: an edge forwards set, query and probe to the sim (a set with
+    the client's display name added, re-printed), the sim answers, the edge relays the answer's
+    text. The ids come back as sent on each, and on what the edge answers itself."""
+    nats, url = nats_alone()
+    check(nats is not None, url)
+    sim = edge = None
+    bad, n = [], 0
+    try:
+        sim = Daemon(ARGS.oceand, "--role", "sim", "--nats", url)
+        edge = Daemon(ARGS.oceand, "--role", "edge", "--nats", url, *LIBERAL)
+        s, r = attacker(edge)
+        ask(s, r, '{"type":"name","name":"Ana"}')   # so the edge adds it to each forwarded set
+        requests = [
+            ('{"type":"ping","id":%s,"t":1}', "pong"),
+            ('{"type":"set","id":%s,"params":{"wind_speed":75}}', "error"),       # refused at the edge
+            ('{"type":"set","id":%s,"params":{"wind_speed":WIND}}', "params"),    # applied by the sim
+            ('{"type":"query","id":%s,"points":[[1,2]]}', "query_result"),
+            ('{"type":"probe","id":%s,"points":[[0,0]]}', "probing"),
+            ('{"type":"probe","id":%s,"points":[]}', "probing"),
+        ]
+        for k, token in enumerate(EXACT_IDS[:7]):
+            for req, want in requests:
+                text = req.replace("WIND", "%g" % (11 + k % 3)) % token
+                n0 = len(r.raw)
+                send_quiet(s, ws_frame(OP_TEXT, text))
+                n += 1
+                r.until(lambda r: any(t.get("type") == want for t in r.texts[n0:]), 10)
+                got = [x for x, t in zip(r.raw[n0:], r.texts[n0:]) if t.get("type") == want]
+                if not got:
+                    bad.append("%s: replies %s" % (text[:60], [t.get("type") for t in r.texts[n0:]]))
+                elif reply_id_text(got[0]) != token:
+                    bad.append("%s: id came back as %r" % (text[:60], reply_id_text(got[0])))
+        s.close()
+    finally:
+        for dmn in (edge, sim):
+            if dmn:
+                dmn.stop()
+                shutil.rmtree(dmn.tmp, ignore_errors=True)
+        nats.kill()
+        nats.wait()
+    fig.update(requests=n, wrong=len(bad))
+    log("    %d requests through an edge: %d wrong" % (n, len(bad)))
+    check(not bad, "; ".join(bad[:6]) + (" (%d in all)" % len(bad) if len(bad) > 6 else ""))
+
+
+SOLO.add("ids_as_sent_through_an_edge")   # a sim, an edge and a nats-server of its own
+
+
 if __name__ == "__main__":
     main()
