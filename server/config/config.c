@@ -212,20 +212,15 @@ static const char *flag_value(int argc, char **argv, int *i)
     return NULL;
 }
 
-/* One JSON object and nothing but whitespace after it (as for messages).
- * Returns the object, or NULL with a message naming `what`. */
+/* One JSON object and nothing but whitespace after it, read as strictly as
+ * a control message (a NUL would cut a string: "abc\u0000def" as the token
+ * "abc"). Returns the object, or NULL with a message naming `what`. */
 static cJSON *parse_config_text(const char *text, size_t len, const char *what, char *err, size_t errlen)
 {
-    const char *end = NULL;
-    cJSON *cfg = cJSON_ParseWithLengthOpts(text, len, &end, 0);
-    while (cfg && end < text + len && (*end == ' ' || *end == '\t' || *end == '\n' || *end == '\r'))
-        end++;
-    bool trailing = cfg && end != text + len;
-    if (!cJSON_IsObject(cfg) || trailing) {
-        snprintf(err, errlen, "%s: not a JSON object%s", what, trailing ? " (data after it)" : "");
-        cJSON_Delete(cfg);
-        return NULL;
-    }
+    struct ctl_error e;
+    cJSON *cfg = control_parse_object(text, len, &e);
+    if (!cfg)
+        snprintf(err, errlen, "%s: not a config file (%s: %s)", what, e.code, e.message);
     return cfg;
 }
 

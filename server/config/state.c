@@ -96,6 +96,14 @@ int state_load(const char *path, struct ocean_params *p, uint32_t *version, doub
         return 0;
     if (rc != 0)
         return rc;
+    /* Under the control path's strict scan: a NUL (raw or \u0000) would cut
+     * a string where cJSON hands it out ("phillips\u0000x" read as phillips). */
+    struct ctl_error pe;
+    if (control_json_prescan(buf, len, &pe) != 0) {
+        snprintf(err, errlen, "%s: not a state file (%s: %s)", path, pe.code, pe.message);
+        free(buf);
+        return -1;
+    }
     const char *end = NULL;
     cJSON *root = cJSON_ParseWithLengthOpts(buf, len, &end, 0);
     const cJSON *params = cJSON_GetObjectItemCaseSensitive(root, "params");

@@ -45,7 +45,8 @@ int ctl_fail(struct ctl_error *e, const char *code, const char *param, const cha
 
 static bool is_scalar(const cJSON *j)
 {
-    return cJSON_IsString(j) || cJSON_IsNumber(j) || cJSON_IsBool(j) || cJSON_IsNull(j);
+    /* raw: a number kept as its text (keep_number_text) */
+    return cJSON_IsString(j) || cJSON_IsNumber(j) || cJSON_IsRaw(j) || cJSON_IsBool(j) || cJSON_IsNull(j);
 }
 
 /* JSON's four blanks (RFC 8259), not isspace(): that also takes \v and \f. */
@@ -56,7 +57,7 @@ static bool is_json_space(char c) { return c == ' ' || c == '\t' || c == '\n' ||
  * (decoded as 0) and "\u0000" (cJSON hands out C strings, so a NUL would
  * silently truncate a name: "set\u0000x" would act as "set"). A backslash
  * outside a string fails the parse anyway, so one flat scan is enough. */
-static int prescan(const char *text, size_t len, struct ctl_error *e)
+int control_json_prescan(const char *text, size_t len, struct ctl_error *e)
 {
     for (size_t i = 0; i < len; i++) {
         unsigned char c = (unsigned char)text[i];
@@ -71,7 +72,7 @@ static int prescan(const char *text, size_t len, struct ctl_error *e)
                 !isxdigit((unsigned char)text[i + 4]) || !isxdigit((unsigned char)text[i + 5]))
                 return ctl_fail(e, "bad_json", NULL, "invalid \\u escape at offset %zu", i);
             if (memcmp(text + i + 2, "0000", 4) == 0)
-                return ctl_fail(e, "bad_json", NULL, "\\u0000 (NUL) in a string is not accepted");
+                return ctl_fail(e, "bad_json", NULL, "\\u0000 (NUL) in a string at offset %zu is not accepted", i);
             i += 5;
         } else {
             i++; /* skip the escaped character, so "\\\\u0000" is a backslash then text */
@@ -89,30 +90,231 @@ static bool id_fits(const cJSON *id)
     return cJSON_PrintPreallocated((cJSON *)id, buf, (int)sizeof buf, 0) && strlen(buf) <= CTL_MAX_ID_BYTES;
 }
 
+/* ---- the request id (and a ping's t), exactly as sent ----
+ * cJSON holds a number as a double, so 9007199254740993 would come back as
+ * 9.00719925474099e+15 and 1e400 as null. A numeric id is therefore echoed
+ * from its own text: the scan below finds the top-level member in the
+ * message (text cJSON has accepted, so it only has to find where values
+ * end) and the member becomes a raw cJSON node holding that text. */
+
+/* cJSON's whitespace: every byte up to 0x20 (stays in step with its parse). */
+static const char *skip_blank(const char *s, const char *end)
+{
+    while (s < end && (unsigned char)*s <= 0x20)
+        s++;
+    return s;
+}
+
+/* s at a string's opening quote: just past its closing one. */
+static const char *skip_string(const char *s, const char *end)
+{
+    for (s++; s < end && *s != '"'; s++)
+        if (*s == '\\' && s + 1 < end)
+            s++; /* the escaped character, which may be a quote */
+    return s < end ? s + 1 : end;
+}
+
+/* s at a value: just past it. */
+static const char *skip_value(const char *s, const char *end)
+{
+    if (s < end && *s == '"')
+        return skip_string(s, end);
+    if (s < end && (*s == '{' || *s == '[')) {
+        int depth = 0;
+        while (s < end) {
+            if (*s == '"') {
+                s = skip_string(s, end);
+                continue;
+            }
+            if (*s == '{' || *s == '[')
+                depth++;
+            else if ((*s == '}' || *s == ']') && --depth == 0)
+                return s + 1;
+            s++;
+        }
+        return end;
+    }
+    while (s < end && (unsigned char)*s > 0x20 && *s != ',' && *s != '}' && *s != ']')
+        s++; /* a number, true, false or null */
+    return s;
+}
+
+/* s at a member name's opening quote: whether it reads `want` (a short ASCII
+ * name) once decoded (cJSON compares decoded names: "\u0069d" is "id" too);
+ * *after = past it. */
+static bool name_is(const char *s, const char *end, const char *want, const char **after)
+{
+    char got[8];
+    const size_t wlen = strlen(want); /* < sizeof got */
+    size_t n = 0;
+    bool fits = true;
+    const char *p = s + 1;
+    while (p < end && *p != '"') {
+        char c = *p++;
+        if (c == '\\' && p < end) {
+            char esc = *p++;
+            c = '\x01'; /* an escape decodes to neither 'i' nor 'd'... */
+            if (esc == 'u' && end - p >= 4) {
+                char hex[5] = { p[0], p[1], p[2], p[3], 0 };
+                long v = strtol(hex, NULL, 16);
+                c = v > 0 && v < 0x80 ? (char)v : '\x01'; /* ...unless it is \u00XX of one */
+                p += 4;
+            }
+        }
+        if (n < wlen)
+            got[n] = c;
+        fits = ++n <= wlen;
+    }
+    *after = p < end ? p + 1 : end;
+    return fits && n == wlen && memcmp(got, want, wlen) == 0;
+}
+
+/* The text of the first top-level member `name`'s value (as cJSON's lookup
+ * finds the first), or false when the object has none. */
+static bool find_member_text(const char *text, size_t len, const char *name, const char **tok, size_t *toklen)
+{
+    const char *end = text + len, *p = skip_blank(text, end);
+    if (p >= end || *p != '{')
+        return false;
+    p = skip_blank(p + 1, end);
+    while (p < end && *p == '"') {
+        const char *after;
+        bool match = name_is(p, end, name, &after);
+        p = skip_blank(after, end);
+        if (p >= end || *p != ':')
+            return false;
+        p = skip_blank(p + 1, end);
+        const char *v = p;
+        p = skip_value(p, end);
+        if (match) {
+            *tok = v;
+            *toklen = (size_t)(p - v);
+            return true;
+        }
+        p = skip_blank(p, end);
+        if (p >= end || *p != ',')
+            return false;
+        p = skip_blank(p + 1, end);
+    }
+    return false;
+}
+
+/* RFC 8259's number: -? (0 | [1-9][0-9]*) (. [0-9]+)? ([eE] [+-]? [0-9]+)?.
+ * cJSON also takes "01", "1." and ".5"-like forms; echoed verbatim they
+ * would make the reply invalid JSON, so such an id is refused. */
+static bool is_json_number(const char *s, size_t len)
+{
+    size_t i = 0;
+    if (i < len && s[i] == '-')
+        i++;
+    if (i < len && s[i] == '0')
+        i++;
+    else if (i < len && s[i] >= '1' && s[i] <= '9')
+        while (i < len && isdigit((unsigned char)s[i]))
+            i++;
+    else
+        return false;
+    if (i < len && s[i] == '.') {
+        size_t d = ++i;
+        while (i < len && isdigit((unsigned char)s[i]))
+            i++;
+        if (i == d)
+            return false;
+    }
+    if (i < len && (s[i] == 'e' || s[i] == 'E')) {
+        i++;
+        if (i < len && (s[i] == '+' || s[i] == '-'))
+            i++;
+        size_t d = i;
+        while (i < len && isdigit((unsigned char)s[i]))
+            i++;
+        if (i == d)
+            return false;
+    }
+    return i == len;
+}
+
+/* A numeric member `name` of root (parsed from text) replaced by a raw node
+ * of its own text, so every reply that copies it prints it as sent. 0, or -1
+ * with e filled (bad_json: not an RFC 8259 number). */
+static int keep_number_text(cJSON *root, const char *text, size_t len, const char *name, struct ctl_error *e)
+{
+    if (!cJSON_IsNumber(cJSON_GetObjectItemCaseSensitive(root, name)))
+        return 0;
+    const char *tok;
+    size_t toklen;
+    if (!find_member_text(text, len, name, &tok, &toklen))
+        return ctl_fail(e, "internal", NULL, "the \"%s\" number was not found in the message", name);
+    if (!is_json_number(tok, toklen))
+        return ctl_fail(e, "bad_json", NULL, "\"%s\" %.*s is not a JSON number (RFC 8259)", name,
+                        toklen > 40 ? 40 : (int)toklen, tok);
+    char *raw = malloc(toklen + 1);
+    if (!raw)
+        return ctl_fail(e, "internal", NULL, "out of memory");
+    memcpy(raw, tok, toklen);
+    raw[toklen] = '\0';
+    cJSON *node = cJSON_CreateRaw(raw);
+    free(raw);
+    if (!node || !cJSON_ReplaceItemInObjectCaseSensitive(root, name, node)) {
+        cJSON_Delete(node);
+        return ctl_fail(e, "internal", NULL, "out of memory");
+    }
+    return 0;
+}
+
+cJSON *control_parse_object(const char *text, size_t len, struct ctl_error *e)
+{
+    if (control_json_prescan(text, len, e) != 0)
+        return NULL;
+    /* The whole text must be one JSON value: cJSON stops after the first
+     * value, so check what follows it ourselves (require_null_terminated
+     * would need a NUL inside len, which the wire does not give us). */
+    const char *end = NULL;
+    cJSON *root = cJSON_ParseWithLengthOpts(text, len, &end, 0);
+    if (!root) {
+        ctl_fail(e, "bad_json", NULL, "not valid JSON");
+        return NULL;
+    }
+    while (end && end < text + len && is_json_space(*end))
+        end++;
+    if (end != text + len) {
+        cJSON_Delete(root);
+        ctl_fail(e, "bad_json", NULL, "trailing data after the JSON value (offset %zu)",
+                 end ? (size_t)(end - text) : (size_t)0);
+        return NULL;
+    }
+    if (!cJSON_IsObject(root)) {
+        cJSON_Delete(root);
+        ctl_fail(e, "bad_json", NULL, "not a JSON object");
+        return NULL;
+    }
+    return root;
+}
+
+cJSON *control_message_id(const char *text, size_t len)
+{
+    struct ctl_error e;
+    cJSON *root = control_parse_object(text, len, &e);
+    if (!root || keep_number_text(root, text, len, "id", &e) != 0) {
+        cJSON_Delete(root);
+        return NULL;
+    }
+    cJSON *id = cJSON_DetachItemFromObjectCaseSensitive(root, "id");
+    cJSON_Delete(root);
+    return id;
+}
+
 int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_out, struct ctl_error *e)
 {
     memset(m, 0, sizeof *m);
     if (id_out)
         *id_out = NULL;
-    if (prescan(text, len, e) != 0)
-        return -1;
-    /* The whole message must be one JSON value: cJSON stops after the first
-     * value, so check what follows it ourselves (require_null_terminated
-     * would need a NUL inside len, which the wire does not give us). */
-    const char *end = NULL;
-    cJSON *root = cJSON_ParseWithLengthOpts(text, len, &end, 0);
+    cJSON *root = control_parse_object(text, len, e);
     if (!root)
-        return ctl_fail(e, "bad_json", NULL, "message is not valid JSON");
-    while (end && end < text + len && is_json_space(*end))
-        end++;
-    if (end != text + len) {
+        return -1;
+    if (keep_number_text(root, text, len, "id", e) != 0) { /* not echoed: it is what is wrong */
         cJSON_Delete(root);
-        return ctl_fail(e, "bad_json", NULL, "trailing data after the JSON value (offset %zu)",
-                    end ? (size_t)(end - text) : (size_t)0);
-    }
-    if (!cJSON_IsObject(root)) {
-        cJSON_Delete(root);
-        return ctl_fail(e, "bad_json", NULL, "message is not a JSON object");
+        return -1;
     }
     const cJSON *id = cJSON_GetObjectItemCaseSensitive(root, "id");
     if (id && !is_scalar(id)) {
@@ -165,8 +367,9 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
         const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "t");
         if (t && !cJSON_IsNumber(t))
             rc = ctl_fail(e, "bad_message", NULL, "\"t\" must be a number");
-        m->has_t = t != NULL;
-        m->t = t ? t->valuedouble : 0;
+        else if (t) /* echoed in pong as sent, like the id */
+            rc = keep_number_text(root, text, len, "t", e);
+        m->t = cJSON_GetObjectItemCaseSensitive(root, "t");
     } else {
         rc = ctl_fail(e, "unknown_type", NULL, "unknown message type \"%.40s\"", ts);
     }

@@ -68,14 +68,14 @@ enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING,
 struct ctl_msg {
     enum ctl_type type;
     cJSON *root;            /* owned: the parsed message */
-    const cJSON *id;        /* inside root, or NULL */
+    const cJSON *id;        /* inside root, or NULL; a number is a raw node of its text as sent
+                             * (cJSON's double would change 2^53 + 1), so copies print it exactly */
     const cJSON *params;    /* CTL_SET: the "params" object */
     const char *token;      /* CTL_SET: optional "token", or NULL */
-    double t;               /* CTL_PING: echoed "t" */
+    const cJSON *t;         /* CTL_PING: "t" to echo, inside root (a raw node of its text), or NULL */
     const char *name;       /* CTL_NAME, or a `set`'s optional "name": a checked display name
                              * ("" = none), inside root; NULL when not given */
     const char *once;       /* CTL_SET/PAUSE/RESUME: optional "once" (a checked key), inside root, or NULL */
-    bool has_t;
 };
 
 /* "once" on set/pause/resume (PROTOCOL.md §7.1): the same request sent on two
@@ -103,6 +103,21 @@ static inline int subscription_lod(const struct subscription *s, int f)
  * (caller frees with cJSON_Delete). */
 int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_out, struct ctl_error *e);
 void ctl_msg_free(struct ctl_msg *m);
+
+/* The one strict reading of JSON text, for every parser of JSON from the
+ * wire or a file (control messages, the config and state files, cluster
+ * records): raw control bytes (NUL included), a "\u" without four hex
+ * digits and "\u0000" are refused, since cJSON would skip or decode them and
+ * its C strings would then cut the text at the NUL. Returns 0, or -1 with e
+ * filled (code bad_json, the message names what and where). */
+int control_json_prescan(const char *text, size_t len, struct ctl_error *e);
+/* text[0..len) as one JSON object and nothing but whitespace after it,
+ * under control_json_prescan: the object (cJSON_Delete), or NULL with e filled (bad_json). */
+cJSON *control_parse_object(const char *text, size_t len, struct ctl_error *e);
+/* The "id" of a message not otherwise parsed (a refusal), as control_parse
+ * keeps it: a detached copy (cJSON_Delete) that prints as sent, or NULL
+ * (none, or the message is not a strict JSON object). */
+cJSON *control_message_id(const char *text, size_t len);
 
 /* Apply a JSON object of parameters onto *cur, all or nothing: every member
  * is checked (name, JSON type, range, power of two), then the whole set
@@ -140,7 +155,8 @@ cJSON *control_error_msg(const struct ctl_error *e, const cJSON *id);
 cJSON *control_params_msg(const struct ocean_params *p, uint32_t version, uint64_t changed,
                           const char *by, const cJSON *id);
 cJSON *control_subscribed_msg(const struct subscription *s, const cJSON *id);
-cJSON *control_pong_msg(const cJSON *id, bool has_t, double t, uint64_t server_time_us);
+/* t: the ping's "t" (ctl_msg.t), echoed as sent; NULL = none */
+cJSON *control_pong_msg(const cJSON *id, const cJSON *t, uint64_t server_time_us);
 /* What this daemon can do (server/tick/capacity.h): announced in hello and
  * params as "capacity" (PROTOCOL.md). */
 #define CAPACITY_MAX_SIZES 8

@@ -134,13 +134,13 @@ cJSON *control_subscribed_msg(const struct subscription *s, const cJSON *id)
     return o;
 }
 
-cJSON *control_pong_msg(const cJSON *id, bool has_t, double t, uint64_t server_time_us)
+cJSON *control_pong_msg(const cJSON *id, const cJSON *t, uint64_t server_time_us)
 {
     cJSON *o = cJSON_CreateObject();
     cJSON_AddStringToObject(o, "type", "pong");
     add_id(o, id);
-    if (has_t)
-        cJSON_AddNumberToObject(o, "t", t);
+    if (t)
+        cJSON_AddItemToObject(o, "t", cJSON_Duplicate(t, 1));
     /* An exact integer, never "1.7637192001234e+15": cJSON prints numbers
      * as doubles (%.15g/%.17g), so print it ourselves and add it raw. */
     char us[24];

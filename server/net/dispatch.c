@@ -335,7 +335,7 @@ void dispatch_answers(struct net *n)
 
 /* ---- messages ---- */
 
-#define RATE_LIMITED_ID_MAX 256 /* bytes of a string id echoed in rate_limited (no amplification) */
+#define RATE_LIMITED_ID_MAX 256 /* bytes of a string (or number) id echoed in rate_limited (no amplification) */
 #define REFUSED_PARSE_MAX 1024  /* bytes of a refused message parsed for its id: no more work than a unit */
 #define BUDGET_BURST_S 0.1      /* --control-budget: a burst of at most 0.1 s of it (3 ticks at 30 Hz), */
 #define BUDGET_DEBT_S 1.0       /* and a debt of at most 1 s of it (fair shares spent past it) */
@@ -350,13 +350,14 @@ static cJSON *request_id(const char *text, size_t len)
 {
     if (!text || len > REFUSED_PARSE_MAX)
         return NULL;
-    cJSON *root = cJSON_ParseWithLength(text, len);
-    cJSON *id = cJSON_IsObject(root) ? cJSON_GetObjectItemCaseSensitive(root, "id") : NULL;
+    cJSON *id = control_message_id(text, len); /* a number as sent, as in every other reply */
     bool echo = id && !cJSON_IsArray(id) && !cJSON_IsObject(id) &&
-                !(cJSON_IsString(id) && strlen(id->valuestring) > RATE_LIMITED_ID_MAX);
-    cJSON *copy = echo ? cJSON_Duplicate(id, 0) : NULL;
-    cJSON_Delete(root);
-    return copy;
+                !((cJSON_IsString(id) || cJSON_IsRaw(id)) && strlen(id->valuestring) > RATE_LIMITED_ID_MAX);
+    if (!echo) {
+        cJSON_Delete(id);
+        return NULL;
+    }
+    return id;
 }
 
 /* What a message costs, in control units: 1, plus 1 per full KiB. Parsing
@@ -709,7 +710,7 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         break;
     }
     case CTL_PING:
-        session_queue_json(s, control_pong_msg(m.id, m.has_t, m.t, unix_us()));
+        session_queue_json(s, control_pong_msg(m.id, m.t, unix_us()));
         break;
     case CTL_NAME: /* anyone may name themselves: the name only labels their own changes */
         snprintf(s->name, sizeof s->name, "%s", m.name);

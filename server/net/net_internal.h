@@ -148,6 +148,8 @@ struct session {
     struct render_out *rq, *rq_tail; /* oldest first; a frame is sent whole before anything else */
     int rq_frames;                /* frames in rq (at most RENDER_WINDOW: the worker waits for room) */
     size_t rq_sent;               /* bytes of rq's head written, 0 = not started */
+    uint64_t rq_render;           /* the render whose frames rq_written counts */
+    long rq_written;              /* its frames written whole: what its `rendered` says */
 };
 
 /* A set sent to the sim and not answered yet: the sim knows it only by tag. */

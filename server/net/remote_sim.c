@@ -137,7 +137,8 @@ cJSON *net_sim_message(const char *text, size_t len, size_t cap, const char *con
 {
     if (!text || len > cap || !control_valid_utf8(text, len))
         return NULL;
-    cJSON *root = cJSON_ParseWithLength(text, len);
+    struct ctl_error e; /* strict, as a client's message: no NUL to cut a string, nothing after the object */
+    cJSON *root = control_parse_object(text, len, &e);
     const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "type");
     for (int i = 0; cJSON_IsString(t) && types[i]; i++)
         if (strcmp(t->valuestring, types[i]) == 0)

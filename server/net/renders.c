@@ -64,8 +64,13 @@ static void drop_frames(struct session *s)
 
 void renders_cancel(struct net *n, struct session *s)
 {
-    if (n->renders && render_cancel(n->renders, s->serial))
+    if (n->renders && render_cancel(n->renders, s->serial)) {
+        /* Frames posted before the cancel and not taken yet would come after
+         * the drop and be sent after a gap: take them first. None is posted
+         * after render_cancel returns. */
+        renders_take(n);
         drop_frames(s);
+    }
 }
 
 void renders_session_free(struct net *n, struct session *s)
@@ -112,6 +117,9 @@ int renders_write(struct net *n, struct session *s)
     size_t len;
     int flags;
     if (!o->frame) {
+        /* `rendered` counts the frames written whole, here, not those the worker made */
+        if (render_out_print(o, o->render == s->rq_render ? s->rq_written : 0) != 0)
+            return -1;
         unsigned char *buf = o->len <= CHUNK_SIZE ? s->chunk : malloc(LWS_PRE + o->len);
         if (!buf)
             return -1;
@@ -137,6 +145,11 @@ int renders_write(struct net *n, struct session *s)
     if (s->rq_sent >= o->len) {
         if (o->frame) {
             atomic_fetch_add(&g_metrics.bytes_sent, o->len);
+            if (s->rq_render != o->render) { /* the first frame of a new render */
+                s->rq_render = o->render;
+                s->rq_written = 0;
+            }
+            s->rq_written++;
             s->rq_frames--;
             if (n->renders)
                 render_frame_sent(n->renders, o);

@@ -92,6 +92,20 @@ static struct render_out *text_out(uint64_t serial, cJSON *msg)
     return o;
 }
 
+/* The closing `rendered` of render `render`, printed when it is sent (render_out_print). */
+static struct render_out *rendered_out(uint64_t serial, uint64_t render, cJSON *msg)
+{
+    struct render_out *o = msg ? calloc(1, sizeof *o) : NULL;
+    if (!o) {
+        cJSON_Delete(msg);
+        return NULL;
+    }
+    o->serial = serial;
+    o->render = render;
+    o->rendered = msg;
+    return o;
+}
+
 /* CPU time of the calling thread, s: a frame's cost whatever else runs on the machine. */
 static double thread_cpu_s(void)
 {
@@ -279,7 +293,7 @@ static void run_job(struct worker *w, struct rjob *j)
     } else {
         end = render_rendered_msg(j->id, k, cancelled || k < j->req.frames ? "cancelled" : NULL);
     }
-    struct render_out *o = text_out(j->serial, end);
+    struct render_out *o = fail ? text_out(j->serial, end) : rendered_out(j->serial, j->number, end);
     /* Off the books before its client hears `rendered`: a next render may follow at once. */
     pthread_mutex_lock(&r->lock);
     r->outstanding -= (double)(j->req.frames - j->posted) * j->frame_units; /* what it did not render */
@@ -484,7 +498,7 @@ bool render_cancel(struct render_service *r, uint64_t serial)
         r->outstanding -= (double)j->req.frames * j->frame_units;
         if (r->outstanding < 1e-6)
             r->outstanding = 0;
-        struct render_out *o = text_out(serial, render_rendered_msg(j->id, 0, "cancelled"));
+        struct render_out *o = rendered_out(serial, j->number, render_rendered_msg(j->id, 0, "cancelled"));
         if (o)
             post(r, o);
         cJSON_Delete(j->id);
@@ -524,10 +538,29 @@ void render_out_free(struct render_out *o)
 {
     while (o) {
         struct render_out *next = o->next;
+        cJSON_Delete(o->rendered);
         free(o->data);
         free(o);
         o = next;
     }
+}
+
+int render_out_print(struct render_out *o, long written)
+{
+    if (!o->rendered)
+        return 0;
+    cJSON *frames = cJSON_CreateNumber((double)written);
+    if (!frames || !cJSON_ReplaceItemInObjectCaseSensitive(o->rendered, "frames", frames)) {
+        cJSON_Delete(frames);
+        return -1;
+    }
+    char *text = control_print(o->rendered); /* deletes the tree */
+    o->rendered = NULL;
+    if (!text)
+        return -1;
+    o->data = (uint8_t *)text;
+    o->len = strlen(text);
+    return 0;
 }
 
 int render_active(struct render_service *r)

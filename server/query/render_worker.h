@@ -71,9 +71,15 @@ struct render_out {
     bool frame;                 /* a binary frame; else a JSON text message */
     size_t len;                 /* bytes of data (text: without the NUL) */
     uint8_t *data;
+    cJSON *rendered;            /* the closing `rendered`, not printed yet (data NULL): only the lws
+                                 * thread knows how many frames reached the socket (render_out_print) */
 };
 struct render_out *render_take_results(struct render_service *r);
 void render_out_free(struct render_out *o);
+/* Print a `rendered` o into its data, with "frames" = `written`, the frames of its
+ * render written whole to the client (not those posted: a cancel drops the ones
+ * not started). 0, or -1 out of memory. Other messages are left as they are. */
+int render_out_print(struct render_out *o, long written);
 /* Renders queued or running (for /metrics and tests). */
 int render_active(struct render_service *r);
 

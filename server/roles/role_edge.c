@@ -320,7 +320,8 @@ static void reply_type(const char *text, size_t len, char *type, size_t cap, cha
 {
     type[0] = code[0] = '\0';
     *points = false;
-    cJSON *root = cJSON_ParseWithLength(text, len);
+    struct ctl_error e; /* read as relay() reads it: a "probing\u0000x" is no type at all */
+    cJSON *root = control_parse_object(text, len, &e);
     const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "type");
     const cJSON *c = cJSON_GetObjectItemCaseSensitive(root, "code");
     const cJSON *p = cJSON_GetObjectItemCaseSensitive(root, "points");

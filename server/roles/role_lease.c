@@ -92,6 +92,9 @@ static char *record_text(struct role_lease *ls, const struct ocean_params *p, ui
  * numbers JSON holds exactly. */
 static int record_parse(const char *text, size_t len, const struct ocean_params *base, struct record *out)
 {
+    struct ctl_error pe; /* strict, as the state file: a NUL would cut a string */
+    if (control_json_prescan(text, len, &pe) != 0)
+        return -1;
     cJSON *root = cJSON_ParseWithLength(text, len);
     const cJSON *h = cJSON_GetObjectItemCaseSensitive(root, "holder");
     const cJSON *p = cJSON_GetObjectItemCaseSensitive(root, "params");

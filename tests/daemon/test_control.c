@@ -524,7 +524,7 @@ static void test_pong_integer(void)
         { UINT64_MAX, "\"server_time_us\":18446744073709551615" },
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
-        char *s = control_print(control_pong_msg(NULL, false, 0, cases[i].us));
+        char *s = control_print(control_pong_msg(NULL, NULL, cases[i].us));
         const char *at = s ? strstr(s, cases[i].text) : NULL;
         CHECK(at && at[strlen(cases[i].text)] == '}', "pong %s, want %s", s ? s : "(null)", cases[i].text);
         free(s);
@@ -1203,7 +1203,8 @@ static void test_display_names(void)
     for (size_t i = 0; i < sizeof refused / sizeof refused[0]; i++) {
         id = NULL;
         int rc = control_parse(refused[i], strlen(refused[i]), &m, &id, &e);
-        CHECK(rc != 0 && strcmp(e.code, "bad_name") == 0 && cJSON_IsNumber(id) && id->valuedouble == 7,
+        /* a numeric id is kept as its text (test_exact_ids) */
+        CHECK(rc != 0 && strcmp(e.code, "bad_name") == 0 && cJSON_IsRaw(id) && strcmp(id->valuestring, "7") == 0,
               "%s: rc %d code %s", refused[i], rc, rc ? e.code : "-");
         cJSON_Delete(id);
     }
@@ -1266,6 +1267,166 @@ static void test_render(void)
     ctl_msg_free(&c);
 }
 
+/* ---- ids echoed as sent; every file loader as strict as a message ---- */
+
+/* The "id" of a reply as printed, e.g. `9007199254740993` of {"id":9007199254740993,...}. */
+static const char *printed_id(const char *reply, char *out, size_t cap)
+{
+    const char *p = strstr(reply, "\"id\":");
+    size_t n = 0;
+    if (p)
+        for (p += 5; *p && *p != ',' && *p != '}' && n + 1 < cap; p++)
+            out[n++] = *p;
+    out[n] = '\0';
+    return out;
+}
+
+/* cJSON holds numbers as doubles: 2^53 + 1 came back as 9.00719925474099e+15,
+ * 1e400 as null. Every reply built from a parsed message's id (or from a
+ * refused one's) prints the id's own text; a number that is not RFC 8259
+ * JSON (cJSON takes "01") is refused rather than echoed as invalid JSON. */
+static void test_exact_ids(void)
+{
+    static const char *const ids[] = { "9007199254740993", "9223372036854775807", "18446744073709551615",
+                                       "-9223372036854775809", "123456789012345678901234567890", "1e400", "-1e400",
+                                       "1.0", "1E+2", "-0", "0.1", "2.5e-3", "7" };
+    for (size_t i = 0; i < sizeof ids / sizeof ids[0]; i++) {
+        char text[256], got[128];
+        struct ctl_msg m;
+        struct ctl_error e;
+        cJSON *bad = NULL;
+        /* the id anywhere among the members, once with an escaped name ("\u0069d" is "id") */
+        snprintf(text, sizeof text, i % 2 ? "{\"type\":\"ping\",\"x\":[1,{\"id\":2}],\"id\":%s}"
+                                          : "{\"\\u0069d\" : %s , \"type\":\"ping\"}", ids[i]);
+        CHECK(control_parse(text, strlen(text), &m, &bad, &e) == 0, "%s: %s", text, e.message);
+        if (!m.root)
+            continue;
+        char *pong = control_print(control_pong_msg(m.id, m.t, 1));
+        CHECK(pong && strcmp(printed_id(pong, got, sizeof got), ids[i]) == 0, "pong id %s, want %s", got, ids[i]);
+        free(pong);
+        /* a ping's "t" is echoed as sent too */
+        struct ctl_msg tm;
+        snprintf(text, sizeof text, "{\"type\":\"ping\",\"t\":%s}", ids[i]);
+        CHECK(control_parse(text, strlen(text), &tm, NULL, &e) == 0, "%s: %s", text, e.message);
+        if (tm.root) {
+            pong = control_print(control_pong_msg(tm.id, tm.t, 1));
+            const char *tt = pong ? strstr(pong, "\"t\":") : NULL;
+            CHECK(tt && strncmp(tt + 4, ids[i], strlen(ids[i])) == 0 && tt[4 + strlen(ids[i])] == ',',
+                  "pong %s, want t %s", pong ? pong : "-", ids[i]);
+            free(pong);
+            ctl_msg_free(&tm);
+        }
+        struct ctl_error oops = { .code = "invalid", .message = "x" };
+        char *err = control_print(control_error_msg(&oops, m.id));
+        CHECK(err && strcmp(printed_id(err, got, sizeof got), ids[i]) == 0, "error id %s, want %s", got, ids[i]);
+        free(err);
+        ctl_msg_free(&m);
+        /* a refused message echoes it as sent too */
+        snprintf(text, sizeof text, "{\"type\":\"jump\",\"id\":%s}", ids[i]);
+        CHECK(control_parse(text, strlen(text), &m, &bad, &e) != 0 && bad, "%s: no id for the error", text);
+        err = control_print(control_error_msg(&e, bad));
+        CHECK(err && strcmp(printed_id(err, got, sizeof got), ids[i]) == 0, "unknown_type id %s, want %s", got, ids[i]);
+        free(err);
+        cJSON_Delete(bad);
+        cJSON *rid = control_message_id(text, strlen(text));
+        err = control_print(control_error_msg(&e, rid));
+        CHECK(err && strcmp(printed_id(err, got, sizeof got), ids[i]) == 0, "refusal id %s, want %s", got, ids[i]);
+        free(err);
+        cJSON_Delete(rid);
+    }
+    static const char *const not_json[] = { "01", "-01", "1.", "1.e5", "00", "1e", "-" };
+    for (size_t i = 0; i < sizeof not_json / sizeof not_json[0]; i++) {
+        char text[128];
+        snprintf(text, sizeof text, "{\"type\":\"ping\",\"id\":%s}", not_json[i]);
+        struct ctl_msg m;
+        struct ctl_error e;
+        cJSON *bad = NULL;
+        int rc = control_parse(text, strlen(text), &m, &bad, &e);
+        CHECK(rc != 0 && strcmp(e.code, "bad_json") == 0 && bad == NULL, "id %s: rc %d code %s, echoed %s",
+              not_json[i], rc, rc ? e.code : "-", bad ? "yes" : "no");
+        if (rc == 0)
+            ctl_msg_free(&m);
+        cJSON_Delete(bad);
+    }
+}
+
+static void write_bytes(const char *path, const char *bytes, size_t len)
+{
+    FILE *f = fopen(path, "wb");
+    if (f) {
+        fwrite(bytes, 1, len, f);
+        fclose(f);
+    }
+}
+
+/* A NUL in the config or state file cut strings: the token "abc\u0000def..."
+ * acted as "abc", a saved "phillips\u0000junk" as phillips. Both files now
+ * go through the control path's scan: the config file is refused (the daemon
+ * does not start), the state file is ignored with a warning (as any bad
+ * one), naming the NUL either way. */
+static void test_files_strict(void)
+{
+    char dir[] = "/tmp/oceand-ctl-XXXXXX";
+    if (!mkdtemp(dir)) {
+        CHECK(0, "mkdtemp");
+        return;
+    }
+    char cfg[128], state[128], err[512];
+    snprintf(cfg, sizeof cfg, "%s/c.json", dir);
+    snprintf(state, sizeof state, "%s/state.json", dir);
+    struct daemon_config dc;
+    struct config_result res;
+    struct ocean_params q;
+    static const char escaped[] = "{\"control_token\":\"abc\\u0000defghijklmnopqrstuvwxyz0123456789\"}";
+    static const char raw[] = "{\"control_token\":\"abc\0defghijklmnopqrstuvwxyz0123456789\"}";
+    static const char whole[] = "{\"control_token\":\"abcdefghijklmnopqrstuvwxyz0123456789\"}";
+    char *argv[] = { "oceand", "--state-file", "none", "--config", cfg, NULL };
+    write_bytes(cfg, escaped, sizeof escaped - 1);
+    CHECK(config_load(5, argv, &dc, &q, &res, err, sizeof err) != 0 && strstr(err, "NUL") && strstr(err, "bad_json"),
+          "config with \\u0000 in the token: %s (token \"%s\")", err, dc.control_token);
+    write_bytes(cfg, raw, sizeof raw - 1);
+    CHECK(config_load(5, argv, &dc, &q, &res, err, sizeof err) != 0 && strstr(err, "0x00"),
+          "config with a raw NUL in the token: %s (token \"%s\")", err, dc.control_token);
+    write_bytes(cfg, whole, sizeof whole - 1); /* the case can fail: the same file without the NUL loads */
+    CHECK(config_load(5, argv, &dc, &q, &res, err, sizeof err) == 0 &&
+              strcmp(dc.control_token, "abcdefghijklmnopqrstuvwxyz0123456789") == 0,
+          "config without the NUL: %s", err);
+    CHECK(config_apply_text(&dc, &q, escaped, sizeof escaped - 1, err, sizeof err) != 0, "config_apply_text took \\u0000");
+
+    static const char st_escaped[] = "{\"params\":{\"spectrum\":\"phillips\\u0000-not-a-spectrum\",\"wind_speed\":13},"
+                                     "\"params_version\":5,\"sim_time\":3}";
+    static const char st_raw[] = "{\"params\":{\"spectrum\":\"phillips\0-not-a-spectrum\",\"wind_speed\":13},"
+                                 "\"params_version\":5,\"sim_time\":3}";
+    static const char st_good[] = "{\"params\":{\"spectrum\":\"phillips\",\"wind_speed\":13},\"params_version\":5,"
+                                  "\"sim_time\":3}";
+    char *sargv[] = { "oceand", "--state-file", state, NULL };
+    struct ocean_params defs;
+    params_defaults(&defs);
+    const struct { const char *bytes; size_t len; const char *says; } bad[] = {
+        { st_escaped, sizeof st_escaped - 1, "NUL" },
+        { st_raw, sizeof st_raw - 1, "0x00" },
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        write_bytes(state, bad[i].bytes, bad[i].len);
+        capture_begin();
+        int rc = config_load(3, sargv, &dc, &q, &res, err, sizeof err);
+        const char *log = capture_end();
+        CHECK(rc == 0 && !res.state_loaded && q.spectrum == defs.spectrum && q.wind_speed == defs.wind_speed &&
+                  res.params_version == 0,
+              "state %zu with a NUL: rc %d, loaded %d, spectrum %d, wind %g, version %u", i, rc, res.state_loaded,
+              q.spectrum, q.wind_speed, res.params_version);
+        CHECK(strstr(log, "ignoring saved state") && strstr(log, bad[i].says) && strstr(log, "bad_json"),
+              "state %zu with a NUL: the warning does not say why: %s", i, log);
+    }
+    write_bytes(state, st_good, sizeof st_good - 1);
+    CHECK(config_load(3, sargv, &dc, &q, &res, err, sizeof err) == 0 && res.state_loaded &&
+              q.spectrum == SPECTRUM_PHILLIPS && q.wind_speed == 13,
+          "the same state without the NUL: %s", err);
+    unlink(cfg);
+    unlink(state);
+    rmdir(dir);
+}
+
 int main(void)
 {
     test_capacity_plan();
@@ -1293,6 +1454,8 @@ int main(void)
     test_counter_limits();
     test_display_names();
     test_render();
+    test_exact_ids();
+    test_files_strict();
     fuzz();
     return check_done();
 }

@@ -232,6 +232,7 @@ class Reader:
         self.s = s
         self.buf = b""
         self.texts = []          # JSON objects received
+        self.raw = []            # ...and their text as received (bytes): what json.loads would round
         self.bin_at = []         # self.binary when each of them arrived
         self.binary = 0          # binary frames (or final fragments) received
         self.close_code = None   # code from the server's close frame
@@ -262,6 +263,7 @@ class Reader:
             self.buf = b[off + n:]
             if op == OP_TEXT:
                 self.bin_at.append(self.binary)
+                self.raw.append(payload)
                 try:
                     self.texts.append(json.loads(payload))
                 except ValueError:
