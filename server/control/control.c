@@ -153,11 +153,11 @@ static bool name_is(const char *s, const char *end, const char *want, const char
         char c = *p++;
         if (c == '\\' && p < end) {
             char esc = *p++;
-            c = '\x01'; /* an escape decodes to neither 'i' nor 'd'... */
+            c = '\x01'; /* \" \\ \/ \b \f \n \r \t decode to no letter, and the names are letters... */
             if (esc == 'u' && end - p >= 4) {
                 char hex[5] = { p[0], p[1], p[2], p[3], 0 };
                 long v = strtol(hex, NULL, 16);
-                c = v > 0 && v < 0x80 ? (char)v : '\x01'; /* ...unless it is \u00XX of one */
+                c = v > 0 && v < 0x80 ? (char)v : '\x01'; /* ...but a \u00XX may be one */
                 p += 4;
             }
         }
