@@ -9,7 +9,7 @@
  *
  * Deterministic: the same launches, steering and steps (the same dt
  * sequence and the same sea) give the same states bit for bit, whatever
- * the machine's thread count, so a standby given body_world_save's states
+ * the machine's thread count, so a standby given body_world_get's states
  * continues the same motion.
  *
  * Frames (stated once, docs/simulation.md "Bodies"): world axes as the sea's,
@@ -29,6 +29,7 @@
 #define BODY_MAX_WORLD      4096          /* most bodies one world can hold */
 #define BODY_WATER_DENSITY  1025.0        /* kg/m^3, sea water */
 #define BODY_GRAVITY        9.81          /* m/s^2, as the sea's */
+#define BODY_STEP_MAX_S     60.0          /* longest dt one body_world_step takes */
 
 enum body_hull {
     BODY_HULL_CYLINDER, /* vertical cylinder: diameter = beam = length, height */
@@ -52,6 +53,10 @@ struct body_kind {
     bool   powered;           /* has thrust and a rudder */
     double top_speed;         /* m/s at full throttle in still water (0 when not powered) */
     double turning_diameter;  /* m, steady turning circle at full rudder and top speed (0 when not powered) */
+    /* Added after the first version (fields at the end, so existing
+     * initialisers stay valid; 0 means the hull's default): */
+    double kg;                /* m, centre of mass above the keel; 0 = the hull's default
+                               * (box 1/2, sphere 0.4, cylinder 1/4, ship 0.45 of height) */
 };
 
 /* The table: BODY_KIND_COUNT rows, in a stable order. */
@@ -66,7 +71,7 @@ struct body_control {
     double rudder;   /* -1 (full to port) .. 1 (full to starboard) */
 };
 
-/* Everything a body is: what body_world_save hands out and body_world_restore
+/* Everything a body is: what body_world_get hands out and body_world_restore
  * takes back (restoring it continues the same motion bit for bit). */
 struct body_state {
     uint32_t id;                 /* >= 1, unique in its world, never reused */
@@ -119,7 +124,11 @@ enum body_error body_steer(struct body_world *w, uint32_t id, const struct body_
 enum body_error body_remove(struct body_world *w, uint32_t id);
 
 /* Advance every body by dt >= 0 s of sim time ending at sim time t, in
- * ceil(dt / BODY_SUBSTEP_S) equal substeps. A body that sank is removed:
+ * ceil(dt / BODY_SUBSTEP_S) equal substeps (a dt within 1e-9 of a whole
+ * number of substeps counts as that number: 1/30 s is 4 substeps). Substep
+ * k samples the sea at t - dt + k dt/n. A dt that is not finite, negative
+ * or above BODY_STEP_MAX_S, or a t that is not finite, does nothing
+ * (returns 0). A body that sank is removed:
  * its id and why are appended to gone (up to max_gone; more are still
  * removed) and the count written is returned. */
 int body_world_step(struct body_world *w, const struct body_sea *sea, double t, double dt, uint32_t *gone_ids,
@@ -134,7 +143,9 @@ int body_world_get(const struct body_world *w, int i, struct body_state *out);
  * use, or the state is not finite, not a unit quaternion or out of bounds.
  * Ids issued later are above every id restored. */
 enum body_error body_world_restore(struct body_world *w, const struct body_state *s);
-/* The next id body_launch would give (ids only grow). */
+/* The next id body_launch would give (ids only grow); 0 once ids are
+ * exhausted (the last id, UINT32_MAX, was issued or restored: launches are
+ * then refused with BODY_ERR_FULL). */
 uint32_t body_world_next_id(const struct body_world *w);
 
 /* Heading (degrees clockwise from north, 0..360), pitch (degrees, bow up
