@@ -319,12 +319,14 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
     f[0] = 0, f[1] = -m->mass * G, f[2] = 0;
     tq[0] = tq[1] = tq[2] = 0;
     double axis_y = r[1][1]; /* the vertical component of the body's +y */
+    double acc_mean = 0;     /* the water's vertical acceleration under the hull, by plan area */
     for (int i = 0; i < m->n; i++) {
         const struct body_elem *e = &m->e[i];
         /* The water's vertical acceleration here, from its velocity at the
          * previous sample. */
         double acc = (dhdt[i] - b->prev_dhdt[i]) / h_step;
         b->prev_dhdt[i] = dhdt[i];
+        acc_mean += e->area / area_sum * acc;
         if (frac[i] <= 0)
             continue;
         const double *c = cen[i];
@@ -333,12 +335,9 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
          * part; its gradient is rho g (-d eta/dx, 1, -d eta/dz), so a
          * sloping surface also pushes the part down the slope. */
         double fy = RHO * G * vol, fx = -RHO * G * vol * gx, fz = -RHO * G * vol * gz;
-        /* The water accelerating around it: the pressure that accelerates
-         * the displaced water (Froude-Krylov, rho V a) and the added mass
-         * it drags along (a33 a, shared by plan area). With both, a body in
-         * a wave much longer than itself moves with the water: the heave
-         * resonance of the added mass is not excited. */
-        fy += (RHO * vol + am * m->added[1] * e->area / area_sum) * acc;
+        /* The pressure that accelerates the displaced water with the
+         * wave (Froude-Krylov, rho V a). */
+        fy += RHO * vol * acc;
         /* Vertical drag against the water's vertical velocity at the
          * centroid; it grows to full over wet_ref of wetted length. */
         double vc[3];
@@ -355,6 +354,11 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
         for (int k = 0; k < 3; k++)
             tq[k] += te[k];
     }
+    /* The added mass the water drags along moves with it (a33 a, at the
+     * centre of mass: the heave added mass belongs to the whole hull). With
+     * the Froude-Krylov part, a body in a wave much longer than itself
+     * moves with the water: the heave resonance is not excited by it. */
+    f[1] += am * m->added[1] * acc_mean;
     *wet_out = vsub;
 
     /* Horizontal forces and yaw in the body frame, lumped at the centre of
@@ -368,6 +372,8 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
     fb[2] = -(m->surge_lin + m->surge_quad * fabs(u)) * u;
     fb[0] = -(m->sway_lin * fabs(u) + m->sway_quad * fabs(v)) * v;
     tb[1] = -(m->yaw_lin * fabs(u) + m->yaw_quad * fabs(yaw)) * yaw;
+    tb[0] = -m->rock_quad[0] * fabs(wb[0]) * wb[0];
+    tb[2] = -m->rock_quad[2] * fabs(wb[2]) * wb[2];
     if (b->s.kind->powered) {
         double th = s->control.throttle;
         fb[2] += m->thrust * (th >= 0 ? th : 0.5 * th);
@@ -432,11 +438,10 @@ static void quat_advance(double q[4], const double o[3], double h)
 
 /* One semi-implicit Euler substep of length h at sim time t. The mass
  * (with added mass) is diagonal in the body frame, so what is integrated is
- * the world momentum P = R M R^T v and angular momentum L = R I R^T omega:
- * P += h F, L += h tau, then the velocities from them through the new
- * orientation. That carries the terms a rotating anisotropic mass brings
- * (omega x (M v), the gyroscopic omega x (I omega)); stepping the
- * accelerations F / M instead makes a rolling ship drift sideways. */
+ * the world momentum P = R M R^T v: P += h F, then the velocity from it
+ * through the new orientation. That carries the term a rotating
+ * anisotropic mass brings (omega x (M v)); stepping the accelerations
+ * F / M instead makes a rolling ship drift sideways. */
 static bool body_substep(struct body *b, const struct body_sea *sea, double t, double h)
 {
     double f[3], tq[3], vsub;
@@ -450,19 +455,26 @@ static bool body_substep(struct body *b, const struct body_sea *sea, double t, d
         mb[k] = m->mass + am * m->added[k];
         ib[k] = m->inertia[k] + am * m->added_rot[k];
     }
-    double r[3][3], p[3], l[3];
+    double r[3][3], p[3], wb[3], tb[3], iw[3], gyro[3];
     quat_matrix(s->quat, r);
     body_diag_mul(r, mb, s->vel, p);
-    body_diag_mul(r, ib, s->omega, l);
-    for (int k = 0; k < 3; k++) {
+    for (int k = 0; k < 3; k++)
         p[k] += h * f[k];
-        l[k] += h * tq[k];
-    }
-    double omega[3];
-    body_diag_solve(r, ib, l, omega);
-    quat_advance(s->quat, omega, h);
+    /* Rotation: Euler's equations in the body frame with the dry inertia's
+     * gyroscopic term; the added inertia only resists angular acceleration.
+     * (Carried in the gyroscopic term, strip theory's large added inertia
+     * in pitch turned pitch and yaw into roll: a boat at speed in a rough
+     * sea rolled past 50 degrees.) */
+    mat_t_vec(r, s->omega, wb);
+    mat_t_vec(r, tq, tb);
+    for (int k = 0; k < 3; k++)
+        iw[k] = m->inertia[k] * wb[k];
+    cross(wb, iw, gyro);
+    for (int k = 0; k < 3; k++)
+        wb[k] += h * (tb[k] - gyro[k]) / ib[k];
+    mat_vec(r, wb, s->omega);
+    quat_advance(s->quat, s->omega, h);
     quat_matrix(s->quat, r);
-    body_diag_solve(r, ib, l, s->omega);
     body_diag_solve(r, mb, p, s->vel);
     for (int k = 0; k < 3; k++)
         s->pos[k] += h * s->vel[k];
@@ -478,6 +490,27 @@ static bool body_substep(struct body *b, const struct body_sea *sea, double t, d
         }
     }
     return sunk;
+}
+
+/* body_launch, then placed on the sea (the samples a step would take). */
+enum body_error body_launch_on(struct body_world *w, const struct body_kind *kind, double x, double z,
+                               double heading_deg, const struct body_sea *sea, double t, uint32_t *id)
+{
+    uint32_t got;
+    enum body_error e = !isfinite(t) ? BODY_ERR_NOT_FINITE : body_launch(w, kind, x, z, heading_deg, &got);
+    if (e != BODY_OK)
+        return e;
+    struct body *b = &w->b[w->count - 1]; /* the newest is last: ids ascend */
+    double r[3][3], xz[BODY_ELEMS_MAX][2], eta[BODY_ELEMS_MAX], dhdt[BODY_ELEMS_MAX], se = 0, sd = 0;
+    quat_matrix(b->s.quat, r);
+    sample_sea(b, r, sea, t, xz, eta, dhdt);
+    for (int i = 0; i < b->m.n; i++)
+        se += eta[i], sd += dhdt[i];
+    b->s.pos[1] += se / b->m.n;
+    b->s.vel[1] = sd / b->m.n;
+    if (id)
+        *id = got;
+    return BODY_OK;
 }
 
 int body_world_step(struct body_world *w, const struct body_sea *sea, double t, double dt, uint32_t *gone_ids,

@@ -48,6 +48,7 @@ struct body_model {
     double surge_lin, surge_quad;   /* N s/m, N s^2/m^2: resistance along the bow */
     double sway_lin, sway_quad;     /* N s^2/m^2 (times |u|), N s^2/m^2: resistance across */
     double yaw_lin, yaw_quad;       /* N m s (times |u|), N m s^2: yaw damping */
+    double rock_quad[3];            /* N m s^2: cross-flow drag of the hull's sides in pitch ([0]) and roll ([2]) */
     double thrust;                  /* N, full ahead (astern: half) */
     double rudder;                  /* N s^2/m^2: side force at the rudder per (rudder * u|u|) */
     double rudder_arm;              /* m, rudder aft of the centre of mass */

@@ -27,7 +27,7 @@ static const struct body_kind kinds[BODY_KIND_COUNT] = {
         .hull = BODY_HULL_SPHERE,
         .length = 1.0, .beam = 1.0, .height = 1.0,
         .mass = 150.0,
-        .draft = 0.3591,
+        .draft = 0.3412,
         .kg = 0.3,
     },
     {
@@ -37,7 +37,7 @@ static const struct body_kind kinds[BODY_KIND_COUNT] = {
         .hull = BODY_HULL_SHIP,
         .length = 3.0, .beam = 1.4, .height = 0.6,
         .mass = 220.0,
-        .draft = 0.1463,
+        .draft = 0.1462,
         .powered = true, .top_speed = 3.0, .turning_diameter = 8.0,
         .kg = 0.25,
     },

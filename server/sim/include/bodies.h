@@ -120,6 +120,14 @@ void body_world_free(struct body_world *w);
  * it must outlive the body. */
 enum body_error body_launch(struct body_world *w, const struct body_kind *kind, double x, double z,
                             double heading_deg, uint32_t *id);
+/* Added: body_launch on a known sea. The body rests level at its draft
+ * below the mean surface over its hull at sim time t (the sea sampled at
+ * its columns as a step would), rising or falling with that surface's mean
+ * dhdt; in waves a still-water launch starts it under a crest or above a
+ * trough and it jumps. Same refusals as body_launch; a failing sea is
+ * still water (then it is body_launch). */
+enum body_error body_launch_on(struct body_world *w, const struct body_kind *kind, double x, double z,
+                               double heading_deg, const struct body_sea *sea, double t, uint32_t *id);
 enum body_error body_steer(struct body_world *w, uint32_t id, const struct body_control *c);
 enum body_error body_remove(struct body_world *w, uint32_t id);
 
