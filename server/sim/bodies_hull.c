@@ -136,10 +136,10 @@ static double rest_height(const struct body_model *m, double v_want)
     return 0.5 * (ylo + yhi);
 }
 
-/* Strip theory over the length for the box and the ship (Newman 1977,
- * Table 4.1: a flat plate of half-width a moving normal to itself has
- * rho pi a^2 per unit length; at the free surface only the water side
- * counts, half of it):
+/* Strip theory over the length for the box and the ship (a flat plate of
+ * half-width a moving normal to itself has rho pi a^2 per unit length:
+ * Newman 1977 ch. 4, DNV-RP-H103 Table A-1; at the free surface only the
+ * water side counts, half of it):
  *   heave  per length rho pi b^2 / 2   (a plate of half-width b, the half-beam)
  *   sway   per length rho pi T^2 / 2   (a plate of half-width T, the local draft)
  * and their moments about the centre of mass for pitch and yaw. */
@@ -238,8 +238,8 @@ int body_model_build(const struct body_kind *k, struct body_model *m)
     switch (k->hull) {
     case BODY_HULL_SPHERE:
         m->inertia[0] = m->inertia[1] = m->inertia[2] = 0.4 * mass * r * r;
-        /* Half a sphere's 1/2 rho V in infinite fluid per half (Newman 1977 §4.13), on what is wet at rest;
-         * no added inertia in rotation (a turning sphere moves no water in potential flow). */
+        /* A sphere's 1/2 rho V (Newman 1977 ch. 4), of what is wet at rest; no added
+         * inertia in rotation (a turning sphere moves no water in potential flow). */
         m->added[0] = m->added[1] = m->added[2] = 0.5 * RHO * m->v_rest;
         drag_cd = 0.5; /* Hoerner 1965: a sphere, subcritical */
         front = side = PI / 4 * beam * draft;
@@ -247,8 +247,8 @@ int body_model_build(const struct body_kind *k, struct body_model *m)
     case BODY_HULL_CYLINDER:
         m->inertia[0] = m->inertia[2] = mass * (3 * r * r + height * height) / 12;
         m->inertia[1] = 0.5 * mass * r * r;
-        /* Sideways: a circle's rho pi r^2 per unit length over the draft (Newman 1977, Table 4.1);
-         * heave: the keel, half of a disc's 8/3 rho r^3 (DNV-RP-C205 Table A-2). */
+        /* Sideways: a circle's rho pi r^2 per unit length over the draft (DNV-RP-H103 Table A-1);
+         * heave: the keel, half of a disc's 8/3 rho r^3 (Table A-2; Newman 1977 ch. 4). */
         m->added[0] = m->added[2] = RHO * PI * r * r * draft;
         m->added[1] = 4.0 / 3.0 * RHO * r * r * r;
         m->added_rot[0] = m->added_rot[2] = RHO * PI * r * r * (m->wl_y * m->wl_y * m->wl_y + m->kg * m->kg * m->kg) / 3;

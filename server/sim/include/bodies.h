@@ -86,7 +86,14 @@ struct body_state {
 /* The water a body meets. sample fills height[i] (m, y of the displaced
  * surface above world point xz[i]) and dhdt[i] (m/s, its vertical velocity
  * there) for n points at sim time t; returns 0, or -1 (the step is then
- * done in still water at y = 0). NULL sample = still water at y = 0. */
+ * done in still water at y = 0). NULL sample = still water at y = 0.
+ * It must honour t: the water's vertical acceleration (the Froude-Krylov
+ * and added-mass forces of accelerating water) is taken from how dhdt
+ * changes between samples, and a step also samples once at t - dt - dt/n.
+ * A sampler that gives one tick's grid for every t gives no acceleration:
+ * large hulls then heave too much near their heave resonance (docs). It is
+ * called once per body per substep, in ascending id order, with that
+ * body's column points (at most 64). */
 struct body_sea {
     int (*sample)(void *ctx, double t, int n, const double (*xz)[2], double *height, double *dhdt);
     void *ctx;
