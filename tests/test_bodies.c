@@ -106,6 +106,20 @@ static struct swell swell_one(double amp, double wavelength)
     return s;
 }
 
+/* A sea that fails, and one that gives NaN: both must be still water. */
+static int failing_sample(void *ctx, double t, int n, const double (*xz)[2], double *height, double *dhdt)
+{
+    for (int i = 0; i < n; i++)
+        height[i] = dhdt[i] = 1e3; /* garbage the step must not read */
+    return -1;
+}
+static int nan_sample(void *ctx, double t, int n, const double (*xz)[2], double *height, double *dhdt)
+{
+    for (int i = 0; i < n; i++)
+        height[i] = dhdt[i] = NAN;
+    return 0;
+}
+
 /* ---- the table --------------------------------------------------------------- */
 
 static void test_table(void)
@@ -733,6 +747,27 @@ static void test_api(void)
           "dt NaN, negative, too long, t NaN: nothing");
     after = state_of(w, d);
     CHECK(memcmp(&before, &after, sizeof before) == 0, "... and nothing changed");
+    /* A failing sea and a NaN sea are still water, bit for bit. */
+    struct body_sea bad_seas[2] = {{failing_sample, NULL}, {nan_sample, NULL}};
+    struct body_world *ws[3];
+    for (int k = 0; k < 3; k++) {
+        ws[k] = body_world_new(4);
+        uint32_t i1, i2;
+        body_launch(ws[k], dinghy, 0, 0, 10, &i1);
+        body_launch(ws[k], ball, 10, 0, 0, &i2);
+        struct body_state st = state_of(ws[k], i2);
+        body_remove(ws[k], i2);
+        st.pos[1] += 0.3; /* dropped, so that something moves */
+        body_world_restore(ws[k], &st);
+        struct body_control go = {1, 0.3};
+        body_steer(ws[k], i1, &go);
+        for (int i = 1; i <= 90; i++)
+            body_world_step(ws[k], k ? &bad_seas[k - 1] : NULL, i / 30.0, 1.0 / 30, NULL, NULL, 0);
+    }
+    CHECK(states_equal(ws[0], ws[1]) && states_equal(ws[0], ws[2]), "a failing sea and a NaN sea are still water, bit "
+          "for bit");
+    for (int k = 0; k < 3; k++)
+        body_world_free(ws[k]);
     CHECK(strcmp(body_error_name(BODY_OK), "ok") == 0 && strcmp(body_error_name(BODY_ERR_NO_MEMORY), "no_memory") == 0,
           "error names");
     body_world_free(w);

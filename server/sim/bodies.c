@@ -25,6 +25,7 @@ struct body {
     /* Scratch of one body_world_step (not state): the water's vertical
      * velocity at each column at the previous sample, for its acceleration. */
     double prev_dhdt[BODY_ELEMS_MAX];
+    bool prev_ok;
 };
 
 struct body_world {
@@ -254,8 +255,9 @@ static void surface_slope(int n, const double (*xz)[2], const double *eta, const
 
 /* Where each column meets the water at rest (its sample point), and the
  * sea there at time t; still water when there is no sea or it fails, and
- * in place of values that are not finite. */
-static void sample_sea(const struct body *b, const double r[3][3], const struct body_sea *sea, double t,
+ * in place of values that are not finite. Returns whether the sea gave
+ * its values (a still-water stand-in has no acceleration to tell). */
+static bool sample_sea(const struct body *b, const double r[3][3], const struct body_sea *sea, double t,
                        double (*xz)[2], double *eta, double *dhdt)
 {
     const struct body_model *m = &b->m;
@@ -266,15 +268,14 @@ static void sample_sea(const struct body *b, const double r[3][3], const struct 
         xz[i][0] = b->s.pos[0] + pw[0];
         xz[i][1] = b->s.pos[2] + pw[2];
     }
-    if (!sea || !sea->sample || sea->sample(sea->ctx, t, m->n, (const double (*)[2])xz, eta, dhdt) != 0)
-        for (int i = 0; i < m->n; i++)
-            eta[i] = dhdt[i] = 0;
+    bool ok = sea && sea->sample && sea->sample(sea->ctx, t, m->n, (const double (*)[2])xz, eta, dhdt) == 0;
     for (int i = 0; i < m->n; i++) {
-        if (!isfinite(eta[i]))
+        if (!ok || !isfinite(eta[i]))
             eta[i] = 0;
-        if (!isfinite(dhdt[i]))
+        if (!ok || !isfinite(dhdt[i]))
             dhdt[i] = 0;
     }
+    return ok;
 }
 
 /* The forces of one substep on body b at sim time t: world force f and
@@ -288,7 +289,8 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
     quat_matrix(s->quat, r);
 
     double xz[BODY_ELEMS_MAX][2], eta[BODY_ELEMS_MAX], dhdt[BODY_ELEMS_MAX];
-    sample_sea(b, r, sea, t, xz, eta, dhdt);
+    bool sea_ok = sample_sea(b, r, sea, t, xz, eta, dhdt), acc_ok = sea_ok && b->prev_ok;
+    b->prev_ok = sea_ok;
     double gx, gz;
     surface_slope(m->n, xz, eta, s->pos, &gx, &gz);
 
@@ -296,7 +298,7 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
      * lower end up (a capsized body's columns are upside down) and its
      * centroid on the axis, relative to the centre of mass. */
     double frac[BODY_ELEMS_MAX], cen[BODY_ELEMS_MAX][3];
-    double vsub = 0, deepest_dry = -INFINITY, area_sum = 0; /* deepest_dry: the column top least far under */
+    double vsub = 0, highest_top = -INFINITY, area_sum = 0; /* highest_top: above the surface at its column */
     bool all_under = true;
     for (int i = 0; i < m->n; i++) {
         const struct body_elem *e = &m->e[i];
@@ -310,7 +312,7 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
         for (int k = 0; k < 3; k++)
             cen[i][k] = rlo[k] + 0.5 * frac[i] * (rhi[k] - rlo[k]);
         all_under = all_under && frac[i] >= 1;
-        deepest_dry = fmax(deepest_dry, hi - eta[i]);
+        highest_top = fmax(highest_top, hi - eta[i]);
         vsub += e->area * (e->y1 - e->y0) * frac[i];
         area_sum += e->area;
     }
@@ -323,8 +325,9 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
     for (int i = 0; i < m->n; i++) {
         const struct body_elem *e = &m->e[i];
         /* The water's vertical acceleration here, from its velocity at the
-         * previous sample. */
-        double acc = (dhdt[i] - b->prev_dhdt[i]) / h_step;
+         * previous sample; none across a sample the sea did not give, and at
+         * most g (real waves break first: a glitch must not throw a body). */
+        double acc = acc_ok ? clampd((dhdt[i] - b->prev_dhdt[i]) / h_step, -G, G) : 0;
         b->prev_dhdt[i] = dhdt[i];
         acc_mean += e->area / area_sum * acc;
         if (frac[i] <= 0)
@@ -363,7 +366,6 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
 
     /* Horizontal forces and yaw in the body frame, lumped at the centre of
      * mass, in proportion to how much of the body is in the water. */
-    double wet = am;
     double vb[3], wb[3];
     mat_t_vec(r, s->vel, vb);
     mat_t_vec(r, s->omega, wb);
@@ -384,8 +386,8 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
         tb[1] -= m->rudder_arm * side;
     }
     for (int k = 0; k < 3; k++) {
-        fb[k] *= wet;
-        tb[k] *= wet;
+        fb[k] *= am;
+        tb[k] *= am;
     }
     double fw[3], tw[3];
     mat_vec(r, fb, fw);
@@ -394,7 +396,7 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
         f[k] += fw[k];
         tq[k] += tw[k];
     }
-    return !m->can_float && all_under && deepest_dry < -m->sink_margin;
+    return !m->can_float && all_under && highest_top < -m->sink_margin;
 }
 
 /* v = R diag(d)^-1 R^T p: a world vector through a body-diagonal inverse. */
@@ -529,7 +531,7 @@ int body_world_step(struct body_world *w, const struct body_sea *sea, double t, 
         struct body *b = &w->b[i];
         double r[3][3], xz[BODY_ELEMS_MAX][2], eta[BODY_ELEMS_MAX];
         quat_matrix(b->s.quat, r);
-        sample_sea(b, r, sea, t0 - h, xz, eta, b->prev_dhdt);
+        b->prev_ok = sample_sea(b, r, sea, t0 - h, xz, eta, b->prev_dhdt);
     }
     int gone = 0;
     for (int k = 0; k < n; k++) {
