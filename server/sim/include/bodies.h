@@ -155,8 +155,10 @@ int body_world_count(const struct body_world *w);
 int body_world_get(const struct body_world *w, int i, struct body_state *out);
 /* Put a saved body back (a standby, a restart): its id, kind, state and
  * control exactly. Refused (BODY_ERR_RANGE) when the id is 0 or already in
- * use, or the state is not finite, not a unit quaternion or out of bounds.
- * Ids issued later are above every id restored. */
+ * use, or the state is not finite, not a unit quaternion or out of bounds
+ * (also: its control outside -1..1); BODY_ERR_KIND when its kind is NULL
+ * or unusable, BODY_ERR_FULL when the world is full. Ids issued later are
+ * above every id restored. */
 enum body_error body_world_restore(struct body_world *w, const struct body_state *s);
 /* The next id body_launch would give (ids only grow); 0 once ids are
  * exhausted (the last id, UINT32_MAX, was issued or restored: launches are
