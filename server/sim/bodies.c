@@ -2,10 +2,12 @@
  * and the fixed-substep integration (docs/simulation.md, "Bodies").
  *
  * Per substep and body, in ascending id order: sample the sea at every
- * column's waterline point; per column, buoyancy of its submerged part at
- * that part's centroid and vertical drag against the water's vertical
- * velocity; gravity; the lumped horizontal forces (resistance, lateral
- * resistance, yaw damping, thrust, rudder) in the body frame; then
+ * column's waterline point; per column, the hydrostatic pressure on its
+ * submerged part (buoyancy, and the push down the surface's slope) at that
+ * part's centroid, the pressure of the accelerating water and vertical drag
+ * against the water's vertical velocity; the added mass moved by the water;
+ * gravity; the lumped horizontal forces (resistance, lateral resistance,
+ * yaw and rocking damping, thrust, rudder) in the body frame; then
  * semi-implicit Euler (velocities first, positions from the new ones) with
  * the mass and inertia plus added mass along the body axes, and the
  * quaternion renormalised. Plain sequential double arithmetic, + - * / and
@@ -15,6 +17,14 @@
 #include <string.h>
 
 #include "bodies_internal.h"
+
+/* No fused multiply-add: a*b + c rounded twice, on every compiler and
+ * -march, so a standby built elsewhere continues the same bits. GCC in ISO
+ * C mode does not contract (and does not know the pragma); clang does by
+ * default where the target has FMA. */
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#endif
 
 #define RHO BODY_WATER_DENSITY
 #define G   BODY_GRAVITY
@@ -279,9 +289,10 @@ static bool sample_sea(const struct body *b, const double r[3][3], const struct 
 }
 
 /* The forces of one substep on body b at sim time t: world force f and
- * torque tq about the centre of mass; returns whether it is gone (sunk). */
+ * torque tq about the centre of mass, and *am_out the share of its added
+ * mass in force; returns whether it is gone (sunk). */
 static bool body_forces(struct body *b, const struct body_sea *sea, double t, double h_step, double f[3],
-                        double tq[3], double *wet_out)
+                        double tq[3], double *am_out)
 {
     const struct body_model *m = &b->m;
     const struct body_state *s = &b->s;
@@ -316,7 +327,9 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
         vsub += e->area * (e->y1 - e->y0) * frac[i];
         area_sum += e->area;
     }
-    double am = clampd(2 * vsub / m->v_rest, 0, 1); /* the share of added mass in force */
+    /* The share of the added mass in force: full from half the rest
+     * displacement wet, none in the air. */
+    double am = clampd(2 * vsub / m->v_rest, 0, 1);
 
     f[0] = 0, f[1] = -m->mass * G, f[2] = 0;
     tq[0] = tq[1] = tq[2] = 0;
@@ -362,7 +375,7 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
      * the Froude-Krylov part, a body in a wave much longer than itself
      * moves with the water: the heave resonance is not excited by it. */
     f[1] += am * m->added[1] * acc_mean;
-    *wet_out = vsub;
+    *am_out = am;
 
     /* Horizontal forces and yaw in the body frame, lumped at the centre of
      * mass, in proportion to how much of the body is in the water. */
@@ -446,13 +459,13 @@ static void quat_advance(double q[4], const double o[3], double h)
  * F / M instead makes a rolling ship drift sideways. */
 static bool body_substep(struct body *b, const struct body_sea *sea, double t, double h)
 {
-    double f[3], tq[3], vsub;
-    bool sunk = body_forces(b, sea, t, h, f, tq, &vsub);
+    double f[3], tq[3], am;
+    bool sunk = body_forces(b, sea, t, h, f, tq, &am);
     struct body_state *s = &b->s;
     const struct body_model *m = &b->m;
     /* Added mass and inertia along the body axes, full from half the rest
      * displacement wet down to none in the air. */
-    double am = clampd(2 * vsub / m->v_rest, 0, 1), mb[3], ib[3];
+    double mb[3], ib[3];
     for (int k = 0; k < 3; k++) {
         mb[k] = m->mass + am * m->added[k];
         ib[k] = m->inertia[k] + am * m->added_rot[k];

@@ -10,6 +10,14 @@
 
 #include "bodies_internal.h"
 
+/* No fused multiply-add: a*b + c rounded twice, on every compiler and
+ * -march, so a standby built elsewhere continues the same bits. GCC in ISO
+ * C mode does not contract (and does not know the pragma); clang does by
+ * default where the target has FMA. */
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#endif
+
 #define RHO BODY_WATER_DENSITY
 #define G   BODY_GRAVITY
 #define PI  3.14159265358979323846
