@@ -785,6 +785,31 @@ static void test_api(void)
           "error names");
     body_world_free(w);
 
+    /* The frames: heading 90 is east (-x); bow up is positive pitch, starboard
+     * down positive roll. */
+    struct body_world *wf = body_world_new(2);
+    uint32_t fe;
+    body_launch(wf, dinghy, 0, 0, 90, &fe);
+    struct body_control ahead = {1, 0};
+    body_steer(wf, fe, &ahead);
+    double tf = 0;
+    step_for(wf, NULL, &tf, 10, 1.0 / 30);
+    struct body_state sf = state_of(wf, fe);
+    CHECK(sf.pos[0] < -5 && fabs(sf.pos[2]) < 1e-6, "heading 90 runs east (-x): at x = %.2f m, z = %.2g m after 10 s",
+          sf.pos[0], sf.pos[2]);
+    struct body_state tilt = sf;
+    double half = 5 / DEG / 2;
+    /* -5 deg about +x: bow up */
+    tilt.quat[0] = cos(half), tilt.quat[1] = -sin(half), tilt.quat[2] = 0, tilt.quat[3] = 0;
+    double th, tp, tr;
+    body_attitude(&tilt, &th, &tp, &tr);
+    CHECK(fabs(tp - 5) < 1e-9 && fabs(tr) < 1e-9 && fabs(th) < 1e-9, "bow up 5 deg: pitch %+.6f, roll %+.2g", tp, tr);
+    /* +5 deg about the bow: port up */
+    tilt.quat[0] = cos(half), tilt.quat[1] = 0, tilt.quat[3] = sin(half);
+    body_attitude(&tilt, &th, &tp, &tr);
+    CHECK(fabs(tr - 5) < 1e-9 && fabs(tp) < 1e-9, "starboard down 5 deg: roll %+.6f, pitch %+.2g", tr, tp);
+    body_world_free(wf);
+
     /* The world's edge holds a body: a dinghy at full ahead toward west
      * (+x) from 20 m inside stops at the edge, still inside. */
     struct body_world *we = body_world_new(1);
