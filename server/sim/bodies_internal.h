@@ -10,9 +10,8 @@
 
 #include "bodies.h"
 
-/* Most volume elements one hull has: 64 columns keep a 60 m ship's
- * stations 3.75 m apart (a 40 m wave gets 10 per wavelength) at a sampler
- * cost of 64 points per body and substep. */
+/* Most volume elements one hull has (the box's grid uses up to 48, a ship
+ * 32, a buoy 12): each is one sea sample per substep. */
 #define BODY_ELEMS_MAX 64
 
 /* One volume element: a prism whose axis is the body's y axis, through
