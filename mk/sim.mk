@@ -93,3 +93,30 @@ bench-query: $(BUILD)/bench_query
 # The query's per-mode sums are reductions: OpenMP's simd pragma (no
 # runtime, no threads) lets them vectorise without -ffast-math.
 $(BUILD)/obj/server/sim/ocean_query.o $(BUILD)/san/server/sim/ocean_query.o: CFLAGS += -fopenmp-simd
+
+# Bodies (server/sim/bodies*.c): rigid bodies floating on the sea, no networking.
+#   make test-bodies            physics against theory, determinism, the API (tests/test_bodies.c)
+#   make test-bodies-asan       the same with ASan+UBSan
+#   make test-bodies-valgrind   a reduced run (OCEAN_TEST_QUICK=1) under valgrind
+#   make bench-bodies-step      us per body per 30 Hz tick, 64 bodies of mixed kinds, JSON lines
+BINS    += $(BUILD)/test_bodies $(BUILD)/bench_bodies
+TESTS   += test-bodies test-bodies-asan test-bodies-valgrind
+BENCHES += bench-bodies-step
+$(BUILD)/obj/tests/test_bodies.o $(BUILD)/san/tests/test_bodies.o $(BUILD)/obj/bench/bench_bodies.o: \
+  INC := -Iserver/sim/include -Iserver/sim
+$(BUILD)/test_bodies: $(BUILD)/obj/tests/test_bodies.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/san/test_bodies: $(BUILD)/san/tests/test_bodies.o $(OCEAN_SAN_LIB)
+	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/bench_bodies: $(BUILD)/obj/bench/bench_bodies.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+.PHONY: test-bodies test-bodies-asan test-bodies-valgrind bench-bodies-step
+test-bodies: $(BUILD)/test_bodies
+	$(BUILD)/test_bodies
+test-bodies-asan: $(BUILD)/san/test_bodies
+	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 $(BUILD)/san/test_bodies
+test-bodies-valgrind: $(BUILD)/test_bodies
+	OCEAN_TEST_QUICK=1 valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
+	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_bodies
+bench-bodies-step: $(BUILD)/bench_bodies
+	$(BUILD)/bench_bodies
