@@ -330,18 +330,21 @@ static void test_sea_statistics(void)
  * no aliasing), the heave rate by central differences; each series' DFT at
  * the record's frequencies j / T; co-spectra summed over the bins of each
  * band and over the points; a1..b2 as above. */
-static void dft_bins(const double *x, int m, int bins, double complex *out)
+/* The record's DFT at bins 1 .. bins (frequencies j / T), by FFTW. */
+struct series_dft {
+    int m;
+    float *in;
+    fftwf_complex *out;
+    fftwf_plan plan;
+};
+
+static void dft_bins(struct series_dft *d, const double *x, int bins, double complex *out)
 {
-    for (int j = 1; j <= bins; j++) {
-        double complex w = cexp(-2 * M_PI * I * j / m), e = 1, sum = 0;
-        for (int i = 0; i < m; i++) {
-            sum += x[i] * e;
-            e *= w;
-            if ((i & 255) == 255) /* keep the rotation on the unit circle */
-                e /= cabs(e);
-        }
-        out[j - 1] = sum;
-    }
+    for (int i = 0; i < d->m; i++)
+        d->in[i] = (float)x[i];
+    fftwf_execute(d->plan);
+    for (int j = 1; j <= bins; j++)
+        out[j - 1] = d->out[j];
 }
 
 static void buoy(const struct sea_spectrum *s, int seeds, int points_side, int m, struct band_sums *acc)
@@ -352,6 +355,9 @@ static void buoy(const struct sea_spectrum *s, int seeds, int points_side, int m
     double *rec = malloc((size_t)3 * P * (m + 2) * sizeof *rec);
     double *x = malloc((size_t)m * sizeof *x);
     double complex *X = malloc((size_t)4 * bins * sizeof *X);
+    struct series_dft dft = {m, fftwf_malloc((size_t)m * sizeof(float)),
+                             fftwf_malloc((size_t)(m / 2 + 1) * sizeof(fftwf_complex)), NULL};
+    dft.plan = fftwf_plan_dft_r2c_1d(m, dft.in, dft.out, FFTW_ESTIMATE);
     for (int seed = 1; seed <= seeds; seed++) {
         struct ocean *o = make_sea(s, n, L, 100 + seed);
         if (!o)
@@ -375,12 +381,12 @@ static void buoy(const struct sea_spectrum *s, int seeds, int points_side, int m
             const double *r = rec + (size_t)3 * pi * (m + 2);
             for (int i = 0; i < m; i++)
                 x[i] = (r[i + 2] - r[i]) / (2 * dt);
-            dft_bins(x, m, bins, X);
+            dft_bins(&dft, x, bins, X);
             for (int k = 1; k <= 3; k++) {
                 const double *src = k == 3 ? r : r + (size_t)k * (m + 2);
                 for (int i = 0; i < m; i++)
                     x[i] = src[i + 1];
-                dft_bins(x, m, bins, X + (size_t)k * bins);
+                dft_bins(&dft, x, bins, X + (size_t)k * bins);
             }
             for (int j = 1; j <= bins; j++) {
                 int b = band_of(s, j / (m * dt));
@@ -398,6 +404,9 @@ static void buoy(const struct sea_spectrum *s, int seeds, int points_side, int m
             }
         }
     }
+    fftwf_destroy_plan(dft.plan);
+    fftwf_free(dft.in);
+    fftwf_free(dft.out);
     free(rec);
     free(x);
     free(X);
@@ -620,6 +629,31 @@ static void test_paths(void)
           "five fields, N = 32: rel err %.2g (limit 1e-5): %s", worst, err);
     ocean_free(a);
     ocean_free(b);
+
+    /* Cascades: the finer ones carry the tail (f^-4 here) and nothing without one (the
+     * fixture's last band ends at 0.49 Hz, inside cascade 0's 1.5 Hz on 24 m). */
+    double var_tail[3] = {0, 0, 0}, var_none[3] = {0, 0, 0};
+    for (int t = 0; t < 2; t++) {
+        s->tail = t ? SEA_TAIL_NONE : SEA_TAIL_F4;
+        sea_params(&p, 32, 24, 9);
+        p.cascades = 3;
+        struct ocean *e = ocean_create_sea(&p, s, &opt, err, sizeof err);
+        if (!e)
+            break;
+        ocean_step(e, 1.0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+        for (int c = 0; c < 3; c++) {
+            const float *h = ocean_cascade_field(e, c, OCEAN_HEIGHT);
+            double v = 0;
+            for (int i = 0; i < 32 * 32; i++)
+                v += (double)h[i] * h[i];
+            (t ? var_none : var_tail)[c] = v / (32 * 32);
+        }
+        ocean_free(e);
+    }
+    s->tail = SEA_TAIL_F4;
+    CHECK(var_tail[1] > 0 && var_tail[2] > 0 && var_none[1] == 0 && var_none[2] == 0 && var_none[0] > 0,
+          "sea.cascades: finer cascades' height variance with the f^-4 tail %.3g, %.3g m^2, without %.3g, %.3g "
+          "(cascade 0: %.3g)", var_tail[1], var_tail[2], var_none[1], var_none[2], var_none[0]);
 
     /* A jonswap ocean reconfigured to the measured sea equals a fresh one, bit for bit. */
     sea_params(&p, 64, 400, 2);

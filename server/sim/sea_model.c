@@ -209,15 +209,17 @@ enum sea_error sea_capture(const struct sea_spectrum *s, const struct ocean_para
         snprintf(err, errlen, "sea: no parameters or no report");
         return SEA_ERR_FORM;
     }
+    struct ocean_params q = *p;
+    q.spectrum = SPECTRUM_MEASURED;
+    q.amplitude = 1; /* the fit, not the user's scale */
+    if (params_validate_sea(&q, true, err, errlen) != 0)
+        return SEA_ERR_PARAMS;
     struct sea_model *model = sea_model_new(s);
     if (!model) {
         snprintf(err, errlen, "sea: out of memory");
         return SEA_ERR_MEMORY;
     }
-    struct ocean_params q = *p;
-    q.spectrum = SPECTRUM_MEASURED;
-    q.amplitude = 1; /* the fit, not the user's scale */
-    int cascades = q.cascades < 1 ? 1 : q.cascades > OCEAN_MAX_CASCADES ? OCEAN_MAX_CASCADES : q.cascades;
+    const int cascades = q.cascades;
     struct sea_capture c;
     memset(&c, 0, sizeof c);
     c.m0_source = sea_spectrum_m0(s);

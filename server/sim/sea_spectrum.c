@@ -13,13 +13,13 @@
 static const char *const error_names[] = {
     "ok", "sea_form", "sea_size", "sea_text", "sea_not_finite", "sea_frequency", "sea_order",
     "sea_bandwidth", "sea_negative", "sea_coefficient", "sea_direction", "sea_duplicate", "sea_energy",
-    "sea_depth", "sea_memory",
+    "sea_depth", "sea_memory", "sea_params",
 };
-_Static_assert(sizeof error_names / sizeof error_names[0] == SEA_ERR_MEMORY + 1, "a name per sea_error");
+_Static_assert(sizeof error_names / sizeof error_names[0] == SEA_ERR_PARAMS + 1, "a name per sea_error");
 
 const char *sea_error_name(enum sea_error e)
 {
-    return (unsigned)e <= SEA_ERR_MEMORY ? error_names[e] : "sea_unknown";
+    return (unsigned)e <= SEA_ERR_PARAMS ? error_names[e] : "sea_unknown";
 }
 
 void sea_spectrum_init(struct sea_spectrum *s, enum sea_form form)
