@@ -603,32 +603,48 @@ static void test_paths(void)
 {
     struct sea_spectrum *s = fixture(SEA_FORM_MOMENTS, SEA_DIR_MEM, SEA_TAIL_F4);
     struct ocean_params p;
-    sea_params(&p, 32, 150, 5);
-    p.choppiness = 1;
     struct ocean_options opt = {1, NULL, 0};
     char err[256] = "";
-    struct ocean *a = ocean_create_sea(&p, s, &opt, err, sizeof err);
-    p.transform = TRANSFORM_DFT;
-    struct ocean *b = ocean_create_sea(&p, s, &opt, err, sizeof err);
-    double worst = 0, top = 0;
-    if (a && b) {
-        ocean_step(a, 3.0, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
-        ocean_step(b, 3.0, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
-        for (int f = 0; f < OCEAN_JACOBIAN; f++) {
-            const float *x = ocean_field(a, f), *y = ocean_field(b, f);
-            double m = 0, d = 0;
-            for (int i = 0; i < 32 * 32; i++) {
-                m = fmax(m, fabs(y[i]));
-                d = fmax(d, fabs(x[i] - y[i]));
+    /* On 60 m the grid reaches 0.62 Hz: the last bands and the tail (f^-4, or the wind sea) too. */
+    const enum sea_tail tails[2] = {SEA_TAIL_F4, SEA_TAIL_WIND};
+    for (int ti = 0; ti < 2; ti++) {
+        s->tail = tails[ti];
+        sea_params(&p, 32, 60, 5);
+        p.choppiness = 1;
+        struct ocean *a = ocean_create_sea(&p, s, &opt, err, sizeof err);
+        p.transform = TRANSFORM_DFT;
+        struct ocean *b = ocean_create_sea(&p, s, &opt, err, sizeof err);
+        double worst = 0, top = 0;
+        if (a && b) {
+            ocean_step(a, 3.0, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
+            ocean_step(b, 3.0, OCEAN_ALL_FIELDS & ~OCEAN_FIELD_BIT(OCEAN_FOAM));
+            for (int f = 0; f < OCEAN_JACOBIAN; f++) {
+                const float *x = ocean_field(a, f), *y = ocean_field(b, f);
+                double m = 0, d = 0;
+                for (int i = 0; i < 32 * 32; i++) {
+                    m = fmax(m, fabs(y[i]));
+                    d = fmax(d, fabs(x[i] - y[i]));
+                }
+                worst = fmax(worst, m > 0 ? d / m : d);
+                top = fmax(top, m);
             }
-            worst = fmax(worst, m > 0 ? d / m : d);
-            top = fmax(top, m);
         }
+        CHECK(a && b && worst <= 1e-5 && top > 0, "sea.fft_eq_dft.%s: the FFT path against the brute-force sum "
+              "over five fields, N = 32 on 60 m: rel err %.2g (limit 1e-5) %s", ti ? "wind_tail" : "f-4", worst, err);
+        ocean_free(a);
+        ocean_free(b);
     }
-    CHECK(a && b && worst <= 1e-5 && top > 0, "sea.fft_eq_dft: the FFT path against the brute-force sum over "
-          "five fields, N = 32: rel err %.2g (limit 1e-5): %s", worst, err);
-    ocean_free(a);
-    ocean_free(b);
+    /* The wind tail is the parameters' wind sea: none without wind. */
+    double var[2];
+    for (int w = 0; w < 2; w++) {
+        sea_params(&p, 32, 60, 5);
+        p.wind_speed = w ? 0 : 15;
+        struct sea_capture cap;
+        var[w] = sea_capture(s, &p, &cap, err, sizeof err) == SEA_OK ? cap.m0_tail : -1;
+    }
+    CHECK(var[0] > 0 && var[1] == 0, "sea.tail.wind: the wind tail's m0 on 60 m: %.3g m^2 at 15 m/s, %.3g calm",
+          var[0], var[1]);
+    s->tail = SEA_TAIL_F4;
 
     /* Cascades: the finer ones carry the tail (f^-4 here) and nothing without one (the
      * fixture's last band ends at 0.49 Hz, inside cascade 0's 1.5 Hz on 24 m). */
