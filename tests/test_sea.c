@@ -698,6 +698,21 @@ static void test_paths(void)
     }
     CHECK(kept, "sea.kept: measured -> jonswap -> measured (no sea given) is the same sea again: %s",
           kept ? "yes" : err);
+    /* Point queries (and so the daemon's probes) answer the measured sea: at grid nodes
+     * with no choppiness the query's height is the stepped field's. */
+    {
+        struct ocean_point pt[4];
+        const double xz[4][2] = {{0, 0}, {6.25 * 3, 6.25 * 5}, {6.25 * 17, 6.25 * 60}, {6.25 * 63, 6.25 * 1}};
+        const int idx[4] = {0, 5 * 64 + 3, 60 * 64 + 17, 1 * 64 + 63};
+        double worst = 1;
+        if (c && ocean_query(c, 2.0, xz, 4, pt) == 0) {
+            ocean_step(c, 2.0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
+            worst = 0;
+            for (int i = 0; i < 4; i++)
+                worst = fmax(worst, fabs(pt[i].height - ocean_field(c, OCEAN_HEIGHT)[idx[i]]));
+        }
+        CHECK(worst <= 1e-5, "sea.query_equals_step: 4 grid nodes, |query - field| <= %.2g m (limit 1e-5)", worst);
+    }
     /* A change of sea alone eases like any amplitude change. */
     struct sea_spectrum *s2 = fixture(SEA_FORM_SPECTRUM2D, SEA_DIR_LH_CLIPPED, SEA_TAIL_F5);
     struct ocean_prepared *pr = c ? ocean_prepare_sea(c, &p, s2, err, sizeof err) : NULL;
@@ -775,6 +790,7 @@ static void test_refused(void)
         {"energy2d_over_cap", 1, SEA_ERR_ENERGY, "cap"},
     };
     const int ncases = (int)(sizeof cases / sizeof cases[0]);
+    int creates = 0;
     for (int c = 0; c < ncases; c++) {
         *bad = cases[c].form2d ? *good2 : *good;
         switch (c) {
@@ -807,11 +823,15 @@ static void test_refused(void)
         ocean_step(o, 1.0, OCEAN_FIELD_BIT(OCEAN_HEIGHT));
         int same = rr == -1 && memcmp(ocean_sea(o), good, sizeof *good) == 0 &&
                    memcmp(h0, ocean_field(o, OCEAN_HEIGHT), 32 * 32 * sizeof *h0) == 0;
+        struct ocean *none = ocean_create_sea(&p, bad, &opt, err2, sizeof err2);
+        creates += none == NULL;
+        ocean_free(none);
         CHECK(e == cases[c].code && strstr(err, cases[c].names) && untouched && same && strcmp(err, err2) == 0,
               "sea.check.%s: %s (code %d, want %d), input untouched %d, the ocean refused it and kept its sea and "
               "heights %d: \"%s\"", cases[c].what, sea_error_name(e), (int)e, (int)cases[c].code, untouched, same,
               err);
     }
+    CHECK(creates == ncases, "sea.check.create: ocean_create_sea refused %d of the %d bad seas", creates, ncases);
     free(h0);
     free(bad);
     free(copy);
