@@ -96,7 +96,7 @@ $(BUILD)/obj/server/sim/ocean_query.o $(BUILD)/san/server/sim/ocean_query.o: CFL
 
 # Measured seas (server/sim/sea_spectrum.c, sea_model.c): spectrum "measured" against the
 # targets of issue 39, measured from the simulated surface (tests/test_sea.c).
-#   make test-sea               the whole suite, ~30 s (figures on every line)
+#   make test-sea               the whole suite, ~8 s (figures on every line)
 #   make test-sea-asan          the same with ASan+UBSan
 #   make test-sea-valgrind      a reduced run (OCEAN_TEST_QUICK=1) under valgrind
 BINS    += $(BUILD)/test_sea
