@@ -120,3 +120,23 @@ test-bodies-valgrind: $(BUILD)/test_bodies
 	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_bodies
 bench-bodies-step: $(BUILD)/bench_bodies
 	$(BUILD)/bench_bodies
+# Measured seas (server/sim/sea_spectrum.c, sea_model.c): spectrum "measured" against the
+# targets of issue 39, measured from the simulated surface (tests/test_sea.c).
+#   make test-sea               the whole suite, ~8 s (figures on every line)
+#   make test-sea-asan          the same with ASan+UBSan
+#   make test-sea-valgrind      a reduced run (OCEAN_TEST_QUICK=1) under valgrind
+BINS    += $(BUILD)/test_sea
+TESTS   += test-sea test-sea-asan test-sea-valgrind
+$(BUILD)/obj/tests/test_sea.o $(BUILD)/san/tests/test_sea.o: INC := -Iserver/sim/include -Itests
+$(BUILD)/test_sea: $(BUILD)/obj/tests/test_sea.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/san/test_sea: $(BUILD)/san/tests/test_sea.o $(OCEAN_SAN_LIB)
+	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
+.PHONY: test-sea test-sea-asan test-sea-valgrind
+test-sea: $(BUILD)/test_sea
+	$(BUILD)/test_sea
+test-sea-asan: $(BUILD)/san/test_sea
+	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 OCEAN_TEST_QUICK=1 $(BUILD)/san/test_sea
+test-sea-valgrind: $(BUILD)/test_sea
+	OCEAN_TEST_QUICK=1 valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
+	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_sea

@@ -75,6 +75,12 @@ double ocean_phase_time(const struct ocean *o, double t)
 struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_options *opt, char *err,
                            size_t errlen)
 {
+    return ocean_create_sea(p, NULL, opt, err, errlen);
+}
+
+struct ocean *ocean_create_sea(const struct ocean_params *p, const struct sea_spectrum *sea,
+                               const struct ocean_options *opt, char *err, size_t errlen)
+{
     struct ocean_options o_opt = {1, NULL, 0};
     if (opt)
         o_opt = *opt;
@@ -83,7 +89,9 @@ struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_opti
         snprintf(err, errlen, "no parameters");
         return NULL;
     }
-    if (params_validate(p, err, errlen) != 0)
+    if (params_validate_sea(p, sea != NULL, err, errlen) != 0)
+        return NULL;
+    if (sea && sea_spectrum_check(sea, err, errlen) != SEA_OK)
         return NULL;
     struct ocean *o = calloc(1, sizeof *o);
     if (!o) {
@@ -101,7 +109,7 @@ struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_opti
         o->opt.wisdom_path = o->wisdom_path;
     }
     o->pool = ocean_pool_new(o->opt.threads); /* NULL (one thread) is fine: slower, same result */
-    struct ocean_prepared *pr = ocean_prepare_on(o, p, o->pool, o->opt.threads, err, errlen);
+    struct ocean_prepared *pr = ocean_prepare_on(o, p, sea, o->pool, o->opt.threads, err, errlen);
     if (!pr) {
         pool_free(o->pool);
         free(o->wisdom_path);
@@ -115,11 +123,17 @@ struct ocean *ocean_create(const struct ocean_params *p, const struct ocean_opti
 
 int ocean_reconfigure(struct ocean *o, const struct ocean_params *p, char *err, size_t errlen)
 {
+    return ocean_reconfigure_sea(o, p, NULL, err, errlen);
+}
+
+int ocean_reconfigure_sea(struct ocean *o, const struct ocean_params *p, const struct sea_spectrum *sea, char *err,
+                          size_t errlen)
+{
     if (!o || !p) {
         snprintf(err, errlen, "no simulation or no parameters");
         return -1;
     }
-    struct ocean_prepared *pr = ocean_prepare_on(o, p, o->pool, o->opt.threads, err, errlen);
+    struct ocean_prepared *pr = ocean_prepare_on(o, p, sea, o->pool, o->opt.threads, err, errlen);
     if (!pr)
         return -1;
     ocean_commit(o, pr); /* cannot fail: prepared against o->g just now */
@@ -209,6 +223,11 @@ const float *ocean_field(const struct ocean *o, enum ocean_field f)
     return o->g->out[f];
 }
 
+const struct sea_spectrum *ocean_sea(const struct ocean *o)
+{
+    return o && o->sea ? &o->sea->doc : NULL;
+}
+
 const struct ocean_params *ocean_get_params(const struct ocean *o)
 {
     return o ? &o->p : NULL;
@@ -228,6 +247,7 @@ void ocean_free(struct ocean *o)
     ocean_grid_free(o->g);
     for (int c = 1; c < OCEAN_MAX_CASCADES; c++)
         ocean_grid_free(o->fine[c]);
+    sea_model_free(o->sea);
     free(o->wisdom_path);
     free(o);
 }

@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "ocean_internal.h"
+#include "sea_model.h"
 
 /* Per mode of the half spectrum, the standard normals of h~0(k) and
  * h~0(-k): a pure function of (seed, integer k), cached because the hash,
@@ -107,7 +108,7 @@ static void amp_tiles(void *arg, int b0, int b1, int worker)
             const int x0 = t * AMP_TILE, x1 = x0 + AMP_TILE < nh ? x0 + AMP_TILE : nh;
             for (int iz = z0; iz < z0 + rows; iz++) {
                 int mz = iz > n / 2 ? iz - n : iz;
-                /* The radial table is larger than the cache at large N (40 B
+                /* The radial table is larger than the cache at large N (48 B
                  * per ring, ~400 k rings at N = 2048) and the rings of a
                  * tile's modes lie far apart in it: ask for the entries
                  * AMP_AHEAD rows on now (past the block: the next tile's
@@ -134,8 +135,17 @@ static void amp_tiles(void *arg, int b0, int b1, int worker)
                         const struct spectrum_radial *r = &c->radial[g->ring[i]];
                         double len = sqrt((double)mx * mx + (double)mz * mz);
                         double cs = len > 0 ? (mx * wx + mz * wz) / len : 0; /* cos(angle of k - wind) */
-                        double psi_p = r->psi_k > 0 ? r->psi_k * spectrum_spreading_cos(m, r, cs) : 0;
-                        double psi_m = r->psi_k > 0 ? r->psi_k * spectrum_spreading_cos(m, r, -cs) : 0;
+                        double psi_p = 0, psi_m = 0;
+                        if (m->sea && r->band != SEA_BAND_WIND) {
+                            /* A measured sea is one-sided: k and -k each from its own direction. */
+                            if (r->psi_k > 0) {
+                                psi_p = r->psi_k * sea_model_direction(m->sea, r->band, mx, mz);
+                                psi_m = r->psi_k * sea_model_direction(m->sea, r->band, -mx, -mz);
+                            }
+                        } else if (r->psi_k > 0) {
+                            psi_p = r->psi_k * spectrum_spreading_cos(m, r, cs);
+                            psi_m = r->psi_k * spectrum_spreading_cos(m, r, -cs);
+                        }
                         double ap = psi_p > 0 ? half_dk * sqrt(psi_p) : 0, am = psi_m > 0 ? half_dk * sqrt(psi_m) : 0;
                         const float *q = c->gauss + 4 * i;
                         /* p = h~0(k), conj(h~0(-k)) = mr - i mi */

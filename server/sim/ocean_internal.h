@@ -10,6 +10,7 @@
 
 #include "ocean.h"
 #include "ocean_spectrum.h"
+#include "sea_model.h"
 #include "pool.h"
 
 /* The real fields that go through an inverse FFT. Output fields map onto
@@ -187,7 +188,7 @@ static inline struct pool *ocean_pool_new(int threads)
 }
 
 /* Who writes and who reads: opt, wisdom_path, pool: ocean_create, then
- * read only. p, model, g, ncascades, fine*, generation: written only by
+ * read only. p, model, g, ncascades, fine*, sea, generation: written only by
  * ocean_create and the commit (stepping thread); read by the step and by
  * the preparing thread (ocean_prepare, never during a commit). prep_pool:
  * the preparing thread's alone. foam_*: the step's (ocean_foam.c); the
@@ -209,6 +210,11 @@ struct ocean {
                                 * ocean_create; used by the stepping thread (step, commit's easing) */
     struct pool *prep_pool;    /* ocean_prepare's own (the preparing thread's), made on its first call */
     unsigned long generation;  /* commits so far: a prepare made before the last one is stale */
+    /* The measured sea in force (ocean_create_sea, ocean_prepare_sea), immutable; NULL if none
+     * was given. Kept while another spectrum is in force (a later "measured" reuses it);
+     * replaced only by the commit of a change that brings a new one. The models of a
+     * "measured" sea point at it. */
+    struct sea_model *sea;
     /* Foam (ocean_foam.c): the state is g->out[OCEAN_FOAM] itself. */
     double foam_time;          /* t of the last foam step */
     bool foam_warm;            /* g->out[OCEAN_FOAM] holds history up to foam_time */
@@ -341,8 +347,9 @@ void ocean_set_k_tables(struct ocean_grid *g, double patch);
 /* ocean_prepare.c: everything new parameters need, made beside the live
  * grids (read only) on `pool` (ocean_create and ocean_reconfigure use the
  * stepping pool, ocean_prepare its own). */
-struct ocean_prepared *ocean_prepare_on(const struct ocean *o, const struct ocean_params *p, struct pool *pool,
-                                        int threads, char *err, size_t errlen);
+struct ocean_prepared *ocean_prepare_on(const struct ocean *o, const struct ocean_params *p,
+                                        const struct sea_spectrum *sea, struct pool *pool, int threads, char *err,
+                                        size_t errlen);
 /* The live grid of cascade c, or NULL. */
 static inline struct ocean_grid *ocean_cascade_grid(const struct ocean *o, int c)
 {

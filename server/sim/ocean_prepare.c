@@ -28,6 +28,8 @@ struct ocean_prepared {
     struct ocean_params p;
     int ncascades;             /* p.cascades */
     struct cascade_prep c[OCEAN_MAX_CASCADES];
+    struct sea_model *sea;     /* a new measured sea, made from ocean_prepare_sea's document (after
+                                * commit: the one it replaced); NULL: the sea in force stays */
     unsigned long generation;  /* o->generation prepared against */
     bool easable;              /* only the amplitudes h~0 (and choppiness) change: ocean_commit_eased may ease */
 };
@@ -42,15 +44,17 @@ void ocean_prepared_free(struct ocean_prepared *pr)
         free(pr->c[c].gauss);
         free(pr->c[c].ease_from);
     }
+    sea_model_free(pr->sea);
     free(pr);
 }
 
 /* One cascade's share of ocean_prepare_on(): beside its live grid g (read only; NULL
  * for a cascade the change adds). */
-static bool prepare_cascade(const struct ocean *o, const struct ocean_params *p, int c, struct cascade_prep *cp,
-                            struct pool *pool, int threads, char *err, size_t errlen)
+static bool prepare_cascade(const struct ocean *o, const struct ocean_params *p, const struct sea_model *sea, int c,
+                            struct cascade_prep *cp, struct pool *pool, int threads, char *err, size_t errlen)
 {
     spectrum_model_cascade(&cp->model, p, c);
+    cp->model.sea = p->spectrum == SPECTRUM_MEASURED ? sea : NULL;
     cp->seed = cp->model.seed;
     const struct ocean_grid *g = ocean_cascade_grid(o, c);
     if (!g || g->n != p->resolution) {
@@ -127,21 +131,26 @@ static bool prepare_ease(const struct ocean *o, struct ocean_prepared *pr)
 }
 
 /* Everything new parameters need, beside the live grids (read only). */
-struct ocean_prepared *ocean_prepare_on(const struct ocean *o, const struct ocean_params *p, struct pool *pool,
-                                      int threads, char *err, size_t errlen)
+struct ocean_prepared *ocean_prepare_on(const struct ocean *o, const struct ocean_params *p,
+                                        const struct sea_spectrum *sea, struct pool *pool, int threads, char *err,
+                                        size_t errlen)
 {
-    if (params_validate(p, err, errlen) != 0)
+    if (params_validate_sea(p, sea || o->sea, err, errlen) != 0)
+        return NULL;
+    if (sea && sea_spectrum_check(sea, err, errlen) != SEA_OK)
         return NULL;
     struct ocean_prepared *pr = calloc(1, sizeof *pr);
-    if (!pr) {
+    if (!pr || (sea && !(pr->sea = sea_model_new(sea)))) {
+        free(pr);
         snprintf(err, errlen, "out of memory");
         return NULL;
     }
     pr->p = *p;
     pr->ncascades = p->cascades;
     pr->generation = o->generation;
+    const struct sea_model *in_force = pr->sea ? pr->sea : o->sea; /* o->sea is immutable, swapped only by a commit */
     for (int c = 0; c < pr->ncascades; c++)
-        if (!prepare_cascade(o, p, c, &pr->c[c], pool, threads, err, errlen)) {
+        if (!prepare_cascade(o, p, in_force, c, &pr->c[c], pool, threads, err, errlen)) {
             ocean_prepared_free(pr);
             return NULL;
         }
@@ -155,6 +164,12 @@ struct ocean_prepared *ocean_prepare_on(const struct ocean *o, const struct ocea
 
 struct ocean_prepared *ocean_prepare(struct ocean *o, const struct ocean_params *p, char *err, size_t errlen)
 {
+    return ocean_prepare_sea(o, p, NULL, err, errlen);
+}
+
+struct ocean_prepared *ocean_prepare_sea(struct ocean *o, const struct ocean_params *p,
+                                         const struct sea_spectrum *sea, char *err, size_t errlen)
+{
     if (!o || !p) {
         snprintf(err, errlen, "no simulation or no parameters");
         return NULL;
@@ -163,7 +178,7 @@ struct ocean_prepared *ocean_prepare(struct ocean *o, const struct ocean_params 
      * (only this function touches it; prepares must not overlap). */
     if (!o->prep_pool && o->opt.threads > 1)
         o->prep_pool = ocean_pool_new(o->opt.threads);
-    return ocean_prepare_on(o, p, o->prep_pool, o->opt.threads, err, errlen);
+    return ocean_prepare_on(o, p, sea, o->prep_pool, o->opt.threads, err, errlen);
 }
 
 /* The start of an easing at t0 on grid g, before its amplitudes are
@@ -229,6 +244,11 @@ int ocean_commit_eased(struct ocean *o, struct ocean_prepared *pr, double t0, do
         }
     }
     o->p = pr->p;
+    if (pr->sea) { /* the models below point at it; the one it replaces leaves with pr */
+        struct sea_model *old = o->sea;
+        o->sea = pr->sea;
+        pr->sea = old;
+    }
     for (int c = 0; c < pr->ncascades; c++) {
         struct cascade_prep *cp = &pr->c[c];
         struct ocean_grid **slot = c == 0 ? &o->g : &o->fine[c];

@@ -7,6 +7,7 @@
  * N and L once the spectrum is resolved. */
 #include "ocean_spectrum.h"
 #include "ocean.h"
+#include "sea_model.h"
 
 #include <limits.h>
 #include <math.h>
@@ -38,9 +39,11 @@ void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p)
     m->seed = (uint32_t)p->seed;
     m->band = 0;
     m->band_top = INT_MAX;
+    m->sea = NULL; /* the caller attaches a measured sea */
     m->alpha = PM_ALPHA;
     m->omega_p = m->calm ? 1.0 : PM_PEAK * g / U;
-    if (!m->calm && (m->kind == SPECTRUM_JONSWAP || m->kind == SPECTRUM_TMA)) {
+    /* A measured sea's wind tail (SEA_TAIL_WIND) is this JONSWAP sea. */
+    if (!m->calm && (m->kind == SPECTRUM_JONSWAP || m->kind == SPECTRUM_TMA || m->kind == SPECTRUM_MEASURED)) {
         /* Hasselmann et al. 1973 fetch laws, capped at the fully developed
          * sea: the fetch (about 18770 U^2/g) where the JONSWAP w_p falls
          * to the PM one, 0.855 g/U. */
@@ -189,8 +192,41 @@ double spectrum_spreading(const struct spectrum_model *m, double w, double theta
     return (1.0 - m->blend) * d_cos2 + m->blend * d_h;
 }
 
+/* The parametric JONSWAP sea of a measured sea's wind tail. */
+static struct spectrum_model wind_sea_of(const struct spectrum_model *m)
+{
+    struct spectrum_model w = *m;
+    w.kind = SPECTRUM_JONSWAP;
+    w.sea = NULL;
+    return w;
+}
+
+/* A measured sea: E(f, theta) df dtheta = Psi(kx, kz) dkx dkz, with dkx dkz =
+ * k dk dtheta and df = c_g dk / (2 pi), so Psi = E(f, theta) c_g / (2 pi k)
+ * (docs/simulation.md, "Measured seas"). */
+static double measured_directional(const struct spectrum_model *m, double kx, double kz)
+{
+    double k = hypot(kx, kz);
+    if (!(k > 0))
+        return 0.0;
+    int band;
+    double w = dispersion_omega(k, m->depth);
+    double s = sea_model_frequency(m->sea, w / (2.0 * M_PI), &band);
+    if (band == SEA_BAND_WIND) {
+        struct spectrum_model wind = wind_sea_of(m);
+        return spectrum_directional(&wind, kx, kz);
+    }
+    if (!(s > 0))
+        return 0.0;
+    double damp = m->cutoff > 0 ? exp(-pow(k * m->cutoff / (2.0 * M_PI), 2)) : 1.0;
+    return m->amplitude * s * dispersion_domega_dk(k, m->depth) / (2.0 * M_PI * k) *
+           sea_model_direction(m->sea, band, kx, kz) * damp;
+}
+
 double spectrum_directional(const struct spectrum_model *m, double kx, double kz)
 {
+    if (m->sea)
+        return measured_directional(m, kx, kz);
     double k = hypot(kx, kz);
     if (m->calm || !(k > 0))
         return 0.0;
@@ -210,11 +246,37 @@ double displacement_over_k(double k, double depth)
     return 1.0 / (k * tanh(k * depth));
 }
 
+/* spectrum_radial_at of a measured sea: S(f) c_g / (2 pi k) per ring, the
+ * band whose D the modes take; the wind tail's rings are the JONSWAP sea's. */
+static void measured_radial_at(const struct spectrum_model *m, double k, struct spectrum_radial *r)
+{
+    if (!(k > 0))
+        return;
+    int band;
+    double s = sea_model_frequency(m->sea, dispersion_omega(k, m->depth) / (2.0 * M_PI), &band);
+    if (band == SEA_BAND_WIND) {
+        struct spectrum_model wind = wind_sea_of(m);
+        spectrum_radial_at(&wind, k, r);
+        r->band = SEA_BAND_WIND;
+        return;
+    }
+    r->band = band;
+    if (!(s > 0))
+        return;
+    double damp = m->cutoff > 0 ? exp(-pow(k * m->cutoff / (2.0 * M_PI), 2)) : 1.0;
+    r->psi_k = m->amplitude * s * dispersion_domega_dk(k, m->depth) / (2.0 * M_PI * k) * damp;
+}
+
 void spectrum_radial_at(const struct spectrum_model *m, double k, struct spectrum_radial *r)
 {
     r->psi_k = r->s = r->q = 0.0;
+    r->band = SEA_BAND_NONE;
     r->omega = spectrum_mode_omega(m, k);
     r->disp = displacement_over_k(k, m->depth);
+    if (m->sea) {
+        measured_radial_at(m, k, r);
+        return;
+    }
     if (m->calm || !(k > 0))
         return;
     double damp = m->cutoff > 0 ? exp(-pow(k * m->cutoff / (2.0 * M_PI), 2)) : 1.0;

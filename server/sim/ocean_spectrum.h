@@ -14,6 +14,8 @@
 
 #define OCEAN_G 9.81 /* m/s^2 */
 
+struct sea_model; /* sea_model.h: a measured sea ready for the amplitudes */
+
 /* Constants derived once from the parameters. */
 struct spectrum_model {
     int kind;              /* enum spectrum_kind */
@@ -33,6 +35,8 @@ struct spectrum_model {
     uint32_t seed;         /* of this cascade */
     int band, band_top;    /* cascade >= 1: only modes with band <= max(|mx|, |mz|) <= band_top are
                             * non-zero (ocean_cascade_band); cascade 0: 0, INT_MAX (all) */
+    const struct sea_model *sea; /* SPECTRUM_MEASURED: the sea in force (immutable, owned by the ocean
+                                  * or the prepared change); NULL for the parametric spectra */
 };
 
 void spectrum_model_init(struct spectrum_model *m, const struct ocean_params *p);
@@ -65,7 +69,8 @@ double spectrum_spreading(const struct spectrum_model *m, double omega, double t
  * the integral of Psi over the plane. Includes amplitude and cutoff. */
 double spectrum_directional(const struct spectrum_model *m, double kx, double kz);
 
-/* Psi(k) split for the fast amplitude path (ocean_amplitudes.c): everything but the
+/* Psi(k) split for the fast amplitude path (for SPECTRUM_MEASURED the angle
+ * part is sea_model_direction of r->band, except in the wind tail) (ocean_amplitudes.c): everything but the
  * spreading's angle depends on |k| alone, so it is evaluated once per
  * distinct |k| ("ring") instead of twice per mode:
  *   Psi(kx, kz) = psi_k * spectrum_spreading_cos(m, r, cos theta). */
@@ -74,6 +79,8 @@ struct spectrum_radial {
     double s, q;    /* Mitsuyasu exponent s(w) and normaliser Q(s) (0 when unused) */
     double omega;   /* spectrum_mode_omega(k) */
     double disp;    /* displacement_over_k(k) */
+    int band;       /* SPECTRUM_MEASURED: the sea's part at this |k| (sea_model.h: a band, the
+                     * power tail, SEA_BAND_WIND: the parametric terms above apply); else unused */
 };
 void spectrum_radial_at(const struct spectrum_model *m, double k, struct spectrum_radial *r);
 /* D(w, theta) of spectrum_spreading from c = cos(theta) (theta relative to

@@ -14,7 +14,7 @@
 #include <string.h>
 #include <strings.h>
 
-static const char *const spectrum_names[] = {"phillips", "pierson_moskowitz", "jonswap", "tma", NULL};
+static const char *const spectrum_names[] = {"phillips", "pierson_moskowitz", "jonswap", "tma", "measured", NULL};
 static const char *const transform_names[] = {"fft", "dft", NULL};
 
 /* Every sea parameter may change live (a JSON `set`). */
@@ -45,9 +45,10 @@ const struct param_def param_table[] = {
      "direction the wind blows toward: 0 = +x, 90 = +z", wind_direction, 0),
     P("amplitude", PARAM_FLOAT, "", 0, 10, 1, NULL,
      "multiplier of the spectrum (wave heights scale with its square root)", amplitude, 0),
-    P("spectrum", PARAM_ENUM, "", 0, 3, SPECTRUM_JONSWAP, spectrum_names,
+    P("spectrum", PARAM_ENUM, "", 0, SPECTRUM_MEASURED, SPECTRUM_JONSWAP, spectrum_names,
      "wave spectrum: phillips (Tessendorf), pierson_moskowitz (fully developed), "
-     "jonswap (fetch limited), tma (jonswap in finite depth)",
+     "jonswap (fetch limited), tma (jonswap in finite depth), measured (a buoy's or a forecast's "
+     "directional spectrum, sent as a sea; docs/simulation.md, Measured seas)",
      spectrum, 0),
     P("fetch", PARAM_FLOAT, "km", 0.1, 10000, 100, NULL,
      "open water upwind (jonswap, tma); long fetches saturate at the fully developed sea",
@@ -367,6 +368,11 @@ void setting_default_text(const struct param_def *d, char *buf, size_t len)
 
 int params_validate(const struct ocean_params *p, char *err, size_t errlen)
 {
+    return params_validate_sea(p, false, err, errlen);
+}
+
+int params_validate_sea(const struct ocean_params *p, bool have_sea, char *err, size_t errlen)
+{
     if (!p) {
         snprintf(err, errlen, "no parameters");
         return -1;
@@ -384,6 +390,12 @@ int params_validate(const struct ocean_params *p, char *err, size_t errlen)
         snprintf(err, errlen,
                  "loop_period: %g s is too short (0 = no loop, else >= 1 s, or all waves "
                  "would share one frequency)", p->loop_period);
+        return -1;
+    }
+    if (p->spectrum == SPECTRUM_MEASURED && !have_sea) {
+        snprintf(err, errlen,
+                 "spectrum: measured needs a measured sea (a buoy's or a forecast's spectrum), and none is "
+                 "attached: send the sea first");
         return -1;
     }
     return 0;

@@ -172,6 +172,35 @@ void ocean_free(struct ocean *o);
 /* Stable lowercase names: "height", "dx", "dz", "slope_x", "slope_z", "jacobian", "foam". */
 const char *ocean_field_name(enum ocean_field f);
 
+/* ---- measured seas (sea_spectrum.h; docs/simulation.md "Measured seas") ----
+ *
+ * Spectrum "measured" takes its amplitudes from a measured directional
+ * spectrum attached to the ocean. The _sea variants below are the plain
+ * calls with a sea document: a non-NULL `sea` is checked
+ * (sea_spectrum_check; refused with its message, nothing changes), copied,
+ * and becomes the ocean's sea with the commit of that change, whatever
+ * p->spectrum says; NULL keeps the sea in force. "measured" without a sea
+ * in force or given is refused ("spectrum: measured needs a measured
+ * sea ..."). A change of the sea alone is an amplitude change: it eases
+ * like any other (ocean_commit_eased). The parameters still apply:
+ * depth (the dispersion: a mode of wavenumber k takes the sea's energy at
+ * its frequency in this depth; set p->depth from the sea's depth), patch
+ * size and resolution (what the grid holds: sea_capture), amplitude,
+ * small_wave_cutoff, choppiness, seed, loop_period, cascades, and for the
+ * wind tail the wind. Threads: exactly those of the plain calls (the sea
+ * is copied into the prepared change; the live one is only read by a
+ * prepare and replaced by a commit). */
+struct sea_spectrum;
+struct ocean *ocean_create_sea(const struct ocean_params *p, const struct sea_spectrum *sea,
+                               const struct ocean_options *opt, char *err, size_t errlen);
+int ocean_reconfigure_sea(struct ocean *o, const struct ocean_params *p, const struct sea_spectrum *sea, char *err,
+                          size_t errlen);
+struct ocean_prepared *ocean_prepare_sea(struct ocean *o, const struct ocean_params *p,
+                                         const struct sea_spectrum *sea, char *err, size_t errlen);
+/* The sea in force as it was given (the state file, hello), or NULL; valid
+ * until the next commit, reconfigure or free. Same threads as ocean_get_params. */
+const struct sea_spectrum *ocean_sea(const struct ocean *o);
+
 /* ---- point queries (ocean_query.c) ---------------------------------------
  *
  * Exact values of the displaced surface at any world point (x, z), from the

@@ -12,7 +12,10 @@
 #include <stddef.h>
 #include <stdint.h>
 
-enum spectrum_kind { SPECTRUM_PHILLIPS, SPECTRUM_PIERSON_MOSKOWITZ, SPECTRUM_JONSWAP, SPECTRUM_TMA };
+/* SPECTRUM_MEASURED: a buoy's or a forecast's spectrum (sea_spectrum.h), attached to the
+ * ocean with ocean_create_sea / ocean_prepare_sea; params_validate alone refuses it. */
+enum spectrum_kind { SPECTRUM_PHILLIPS, SPECTRUM_PIERSON_MOSKOWITZ, SPECTRUM_JONSWAP, SPECTRUM_TMA,
+                     SPECTRUM_MEASURED };
 enum transform_kind { TRANSFORM_FFT, TRANSFORM_DFT };
 
 /* All lengths in metres, times in seconds, angles in degrees unless named. */
@@ -138,8 +141,12 @@ uint64_t params_diff(const struct ocean_params *a, const struct ocean_params *b)
 /* Whether a and b give different seas (anything but playback differs). */
 bool params_physics_differ(const struct ocean_params *a, const struct ocean_params *b);
 /* Whole-set checks that no single range can express (e.g. DFT only for
- * small N). Returns 0, or -1 with a message in err. */
+ * small N). Returns 0, or -1 with a message in err. spectrum "measured"
+ * is refused here (no sea is attached to bare parameters): the ocean's
+ * own checks use params_validate_sea. */
 int params_validate(const struct ocean_params *p, char *err, size_t errlen);
+/* The same, where a measured sea is (have_sea) or is not attached. */
+int params_validate_sea(const struct ocean_params *p, bool have_sea, char *err, size_t errlen);
 
 /* The checks and setters behind all of the above, for any table of this
  * shape: base is the struct the table's offsets point into. Each returns
