@@ -71,7 +71,8 @@ deps:
 TESTS_CONCURRENT := test-cluster-roles test-daemon test-tap test-ops test-python test-blender test-cluster-durable
 TESTS_PAIRED     := test-fuzz test-proto-valgrind test-sim-asan test-query-valgrind test-sim-valgrind \
                     test-daemon-valgrind test-sim test-cluster-valgrind test-proto-asan test-query \
-                    test-cluster test-proto test-proto-js test-sim-tsan test-query-asan test-layout test-wording
+                    test-cluster test-proto test-proto-js test-sim-tsan test-query-asan test-layout test-wording \
+                    test-sea-readers
 TEST_LOGS        := $(BUILD)/test-logs
 test: deps
 	@$(MAKE) --no-print-directory -j$$(nproc) build-all

@@ -7,6 +7,7 @@
 #   test-ops                  docker/ <-> apt list, install, configuration reference
 #   test-python               the Python package proto/python (pip install, cascades vs query)
 #   test-blender              the Blender add-on tools/blender/ in Debian's Blender, headless
+#   test-sea-readers          the readers of measured seas (ocean-tap sea, oceand.sea) on tests/sea/fixtures
 
 PROTO_LIB  ?= $(BUILD)/liboc_proto.a
 OCEAN_LIB  ?= $(BUILD)/libocean.a
@@ -72,6 +73,12 @@ test-tap: $(BUILD)/ocean-tap $(BUILD)/oceand $(BUILD)/exr-read
 
 test-ops: $(BUILD)/gen-config-doc $(BUILD)/oceand $(BUILD)/ocean-tap $(WEB_BUILD)/index.html
 	@tests/tap/ops.sh $(BUILD)
+
+# budget: < 30 s (about 2 s: no daemon; a local HTTP server the test starts itself)
+TESTS += test-sea-readers
+.PHONY: test-sea-readers
+test-sea-readers: $(BUILD)/ocean-tap
+	@/usr/bin/python3 tests/sea/test_readers.py $(BUILD)
 
 config-doc: $(BUILD)/gen-config-doc $(BUILD)/oceand
 	@scripts/gen-config-doc.sh --update --daemon $(BUILD)/oceand $(BUILD)/gen-config-doc

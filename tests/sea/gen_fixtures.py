@@ -28,6 +28,7 @@ Files, as the real services write them (sea.h and docs/operations.md describe th
 Run with /usr/bin/python3 (numpy). `--realtime-days D --out DIR` writes a realtime set of D
 days (24 rows a day) into DIR instead, for timing the readers on a file of real size."""
 import argparse
+import functools
 import gzip
 import json
 import math
@@ -53,11 +54,16 @@ def jonswap(f, hs, tp, gamma=3.3):
         sig = np.where(f <= fp, 0.07, 0.09)
         shape = f ** -5.0 * np.exp(-1.25 * (fp / f) ** 4) * gamma ** np.exp(-((f - fp) ** 2) / (2 * sig ** 2 * fp ** 2))
         shape = np.where(f > 0, shape, 0.0)
+    return shape * (hs / 4) ** 2 / _jonswap_m0(tp, gamma)
+
+
+@functools.lru_cache(maxsize=None)
+def _jonswap_m0(tp, gamma):
+    fp = 1.0 / tp
     fine = np.linspace(0.001, 5.0, 200000)
     sig_f = np.where(fine <= fp, 0.07, 0.09)
     ref = fine ** -5.0 * np.exp(-1.25 * (fp / fine) ** 4) * gamma ** np.exp(-((fine - fp) ** 2) / (2 * sig_f ** 2 * fp ** 2))
-    m0 = np.trapz(ref, fine)
-    return shape * (hs / 4) ** 2 / m0
+    return float(np.trapz(ref, fine))
 
 
 def gauss(f, hs, fp, sigma):

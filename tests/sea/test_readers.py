@@ -1,0 +1,262 @@
+#!/usr/bin/env python3
+"""test-sea-readers: the readers of measured seas, in C (`ocean-tap sea`) and in Python
+(`oceand.sea`), on the fixtures of tests/sea/gen_fixtures.py (its known sea is in
+fixtures/truth.json).
+
+  1. every reader on every good fixture gives back the sea's Hs (4 sqrt(m0)) within 1 %,
+     its peak in the band the generator says, the direction at the peak within 2 deg,
+     and the right time (the newest in all five NDBC files, or --time);
+  2. every broken fixture gives its coded error, naming the file, the line and the band,
+     and prints no document;
+  3. the same fixtures fetched over HTTP from a server this test starts on 127.0.0.1
+     (and stops) give the same documents; a missing URL is an io error;
+  4. the C and the Python readers give the same documents (numbers to 1e-12);
+  5. reading a realtime set of 45 days (the size NDBC serves) is timed and printed.
+The checks must be able to fail: the decoy rows (another sea at the other times) are
+read with --time and must be off by more than the tolerance.
+Usage: tests/sea/test_readers.py BUILD_DIR   (make test-sea-readers)"""
+import functools
+import http.server
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+FIX = os.path.join(HERE, "fixtures")
+sys.path.insert(0, os.path.join(ROOT, "proto", "python"))
+from oceand import sea  # noqa: E402
+
+BUILD = sys.argv[1] if len(sys.argv) > 1 else "build"
+TAP = os.path.join(BUILD, "ocean-tap")
+TRUTH = json.load(open(os.path.join(FIX, "truth.json")))
+failures = []
+
+
+def check(cond, what):
+    if not cond:
+        failures.append(what)
+        print(f"  FAIL {what}")
+    return cond
+
+
+def tap(*args):
+    p = subprocess.run([TAP, "sea", *args], capture_output=True, text=True, timeout=60)
+    return p.returncode, p.stdout, p.stderr
+
+
+def c_read(source, *extra):
+    rc, out, err = tap(source, "--print", *extra)
+    if rc != 0:
+        raise RuntimeError(f"ocean-tap sea {source} exited {rc}: {err.strip()}")
+    return json.loads(out), err
+
+
+def py_read(source, **kw):
+    got = sea.read(source, **kw)
+    return [sea.public(d) for d in got] if isinstance(got, list) else sea.public(got)
+
+
+def angle_diff(a, b):
+    return abs((a - b + 180) % 360 - 180)
+
+
+def against_truth(label, doc, t, hs=None):
+    st = sea.stats(doc)
+    want_hs = hs if hs is not None else t["hs"]
+    ok = check(abs(st["hs"] / want_hs - 1) < 0.01, f"{label}: Hs {st['hs']:.4f}, the sea's {want_hs:.4f} (1 %)")
+    if hs is None:
+        ok &= check(t["peak_band_low"] - 1e-9 <= st["fp"] <= t["peak_band_high"] + 1e-9,
+                    f"{label}: peak {st['fp']:.4f} Hz outside the band {t['peak_band_low']:.4f}..{t['peak_band_high']:.4f}")
+        ok &= check(angle_diff(st["direction_at_peak"], t["direction_at_peak"]) < 2,
+                    f"{label}: from {st['direction_at_peak']:.2f} deg at the peak, the sea's {t['direction_at_peak']:.2f}")
+    ok &= check(doc["time"] == t["time"], f"{label}: time {doc['time']}, expected {t['time']}")
+    return st, ok
+
+
+def same(a, b, path=""):
+    """Where documents a and b differ (numbers to 1e-12 relative), or None."""
+    if isinstance(a, list) or isinstance(b, list):
+        if not (isinstance(a, list) and isinstance(b, list)) or len(a) != len(b):
+            return f"{path}: lengths differ"
+        for i, (x, y) in enumerate(zip(a, b)):
+            d = same(x, y, f"{path}[{i}]")
+            if d:
+                return d
+        return None
+    if isinstance(a, dict) or isinstance(b, dict):
+        if not (isinstance(a, dict) and isinstance(b, dict)) or list(a) != list(b):
+            return f"{path}: members differ: {list(a) if isinstance(a, dict) else a} / {list(b) if isinstance(b, dict) else b}"
+        for k in a:
+            d = same(a[k], b[k], f"{path}.{k}")
+            if d:
+                return d
+        return None
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
+        return None if abs(a - b) <= 1e-12 * max(abs(a), abs(b)) else f"{path}: {a!r} != {b!r}"
+    return None if a == b else f"{path}: {a!r} != {b!r}"
+
+
+GOOD = [("ndbc realtime", "ndbc-rt/46026.data_spec", "ndbc-rt"),
+        ("ndbc realtime (named by .swr2)", "ndbc-rt/46026.swr2", "ndbc-rt"),
+        ("ndbc historical 2025", "ndbc-hist/46026w2025.txt", "ndbc-hist-2025"),
+        ("ndbc historical 1998 (.gz, no minutes, r x100)", "ndbc-hist/46026k1998.txt.gz", "ndbc-hist-1998"),
+        ("cdip", "cdip/100p1_rt.ascii", "cdip")]
+
+
+def part1_and_4(base=FIX, tag=""):
+    print(f"-- good fixtures{tag}: Hs, peak band, direction, time; C and Python agree")
+    results = {}
+    for label, rel, key in GOOD + [("ww3", "ww3/storm.spec", "ww3")]:
+        src = os.path.join(base, rel) if not base.startswith("http") else f"{base}/{rel}"
+        c_doc, summary = c_read(src)
+        p_doc = py_read(src)
+        results[rel] = c_doc
+        d = same(c_doc, p_doc)
+        check(d is None, f"{label}{tag}: C and Python differ: {d}")
+        if key == "ww3":
+            check(isinstance(c_doc, list) and len(c_doc) == 3, f"ww3{tag}: {len(c_doc)} documents, expected 3")
+            times = [x["time"] for x in c_doc]
+            check(times == sorted(times), f"ww3{tag}: times not in order: {times}")
+            for k, (doc, t) in enumerate(zip(c_doc, TRUTH["ww3"])):
+                st, _ = against_truth(f"ww3 time {k}{tag}", doc, t)
+                check(doc["form"] == "spectrum2d" and doc["depth"] == 52, f"ww3{tag}: form/depth {doc['form']} {doc['depth']}")
+                print(f"  ok  ww3 {doc['time']}: Hs {st['hs']:.4f} (sea {t['hs']:.4f}, {100 * (st['hs'] / t['hs'] - 1):+.2f} %), "
+                      f"peak {st['fp']:.4f} Hz, from {st['direction_at_peak']:.2f} (sea {t['direction_at_peak']:.2f})")
+        else:
+            t = TRUTH[key]
+            st, _ = against_truth(f"{label}{tag}", c_doc, t)
+            check(c_doc["form"] == "moments", f"{label}: form {c_doc['form']}")
+            check(summary.count("\n") == 1 and "Hs " in summary and " from " in summary, f"{label}: summary {summary!r}")
+            print(f"  ok  {label}: Hs {st['hs']:.4f} (sea {t['hs']:.4f}, {100 * (st['hs'] / t['hs'] - 1):+.2f} %), "
+                  f"peak {st['fp']:.4f} Hz, from {st['direction_at_peak']:.2f} (sea {t['direction_at_peak']:.2f}), {c_doc['time']}")
+    return results
+
+
+def part1_time():
+    print("-- --time, and the checks can fail (the decoy rows hold another sea)")
+    t = TRUTH["ndbc-hist-2025-first"]
+    for who, doc in (("C", c_read(os.path.join(FIX, "ndbc-hist/46026d2025.txt"), "--time", t["time"])[0]),
+                     ("Python", py_read(os.path.join(FIX, "ndbc-hist/46026d2025.txt"), when=t["time"]))):
+        st = sea.stats(doc)
+        check(doc["time"] == t["time"] and abs(st["hs"] / t["hs"] - 1) < 0.01,
+              f"{who} --time {t['time']}: {doc['time']} Hs {st['hs']:.3f}, expected {t['hs']:.3f}")
+        check(abs(st["hs"] / TRUTH["ndbc-hist-2025"]["hs"] - 1) > 0.01, f"{who}: the decoy row is within 1 % of the sea")
+    decoy, _ = c_read(os.path.join(FIX, "ndbc-rt/46026.data_spec"), "--time", "2026-12-01T18:40Z")
+    st = sea.stats(decoy)
+    check(abs(st["hs"] / TRUTH["ndbc-rt"]["hs"] - 1) > 0.01
+          and angle_diff(st["direction_at_peak"], TRUTH["ndbc-rt"]["direction_at_peak"]) > 2,
+          "the realtime decoy row (18:40) passes the checks: they cannot tell seas apart")
+    rc, out, err = tap(os.path.join(FIX, "ndbc-rt/46026.data_spec"), "--print", "--time", "2026-12-01T21:40Z")
+    check(rc == 8 and "error no_time" in err and not out, f"a time not in the files: {rc} {err.strip()}")
+    one, _ = c_read(os.path.join(FIX, "ww3/storm.spec"), "--time", "2026-12-02T06:00Z")
+    check(len(one) == 1 and one[0]["time"] == "2026-12-02T06:00:00Z", "ww3 --time: one document of that time")
+    print(f"  ok  --time reads the row asked for (historical, realtime, WW3); the decoy rows are off by "
+          f"{100 * (st['hs'] / TRUTH['ndbc-rt']['hs'] - 1):+.0f} % and "
+          f"{angle_diff(st['direction_at_peak'], TRUTH['ndbc-rt']['direction_at_peak']):.0f} deg")
+
+
+def part2():
+    print("-- broken fixtures: the coded error, the file, the line, the band; no document")
+    cases = json.load(open(os.path.join(FIX, "broken", "expected.json")))
+    for c in cases:
+        src = os.path.join(FIX, c["source"])
+        rc, out, err = tap(src, "--print")
+        where = f"{c['file']}:{c['line']}: " + (f"band {c['band']}: " if c["band"] else "")
+        check(rc == 8 and not out and f"error {c['code']}: {where}" in err,
+              f"{c['name']} (C): exit {rc}, stdout {len(out)} bytes, stderr {err.strip()!r}; expected "
+              f"\"error {c['code']}: {where}\"")
+        try:
+            sea.read(src)
+            check(False, f"{c['name']} (Python): no error")
+        except sea.SeaError as e:
+            check((e.code, e.file, e.line, e.band) == (c["code"], c["file"], c["line"], c["band"]),
+                  f"{c['name']} (Python): {e}; expected {c['code']} {c['file']}:{c['line']} band {c['band']}")
+        print(f"  ok  {c['name']}: {err.strip().split(': ', 1)[1]}")
+    rc, out, err = tap(os.path.join(FIX, "no-such-file.data_spec"), "--print")
+    check(rc == 8 and "error io: " in err and "no-such-file.data_spec: cannot open" in err and not out,
+          f"a missing file: {rc} {err.strip()}")
+    rc, out, err = tap("--print")
+    check(rc == 1, f"no SOURCE: exit {rc}")
+    rc, out, err = tap(os.path.join(FIX, "ww3/storm.spec"), "ws://127.0.0.1:9")
+    check(rc == 1 and "sea message" in err, f"sending: exit {rc}: {err.strip()}")
+    rc, out, err = tap(os.path.join(FIX, "truth.json"), "--print")
+    check(rc == 8 and "error bad_header" in err, f"an unknown format: {rc} {err.strip()}")
+    print(f"  ok  {len(cases)} broken fixtures; a missing file (io), no SOURCE (1), ws:// refused until the daemon "
+          f"has a sea message (1), an unknown format (bad_header)")
+
+
+def part3(from_files):
+    print("-- over HTTP from a server on 127.0.0.1 (started and stopped here)")
+    handler = functools.partial(QuietHandler, directory=FIX)
+    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    th = threading.Thread(target=srv.serve_forever, daemon=True)
+    th.start()
+    try:
+        base = f"http://127.0.0.1:{srv.server_address[1]}"
+        got = part1_and_4(base, " (http)")
+        for rel, doc in from_files.items():
+            d = same(doc, got[rel])
+            check(d is None, f"{rel}: the URL's document differs from the file's: {d}")
+        rc, out, err = tap(f"{base}/ndbc-rt/nothing.data_spec", "--print")
+        check(rc == 8 and "error io" in err and "404" in err, f"a missing URL (C): {rc} {err.strip()}")
+        try:
+            sea.read(f"{base}/ndbc-rt/nothing.data_spec")
+            check(False, "a missing URL (Python): no error")
+        except sea.SeaError as e:
+            check(e.code == "io", f"a missing URL (Python): {e}")
+        print(f"  ok  {len(from_files)} sources over HTTP equal to the files; 404 -> io; {QuietHandler.requests} requests served")
+    finally:
+        srv.shutdown()
+        srv.server_close()
+        th.join(5)
+
+
+class QuietHandler(http.server.SimpleHTTPRequestHandler):
+    requests = 0
+
+    def log_message(self, *a):
+        QuietHandler.requests += 1
+
+
+def part5():
+    print("-- time to read a realtime set of NDBC's size (45 days, 24 rows a day, five files)")
+    with tempfile.TemporaryDirectory() as d:
+        subprocess.run(["/usr/bin/python3", os.path.join(HERE, "gen_fixtures.py"), "--realtime-days", "45", "--out", d],
+                       check=True)
+        src = os.path.join(d, "46026.data_spec")
+        size = sum(os.path.getsize(os.path.join(d, f)) for f in os.listdir(d))
+        t0 = time.perf_counter()
+        doc, _ = c_read(src)
+        t_c = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        pdoc = py_read(src)
+        t_py = time.perf_counter() - t0
+        against_truth("45-day realtime set", doc, dict(TRUTH["ndbc-rt"], time="2026-12-01T20:40:00Z"))
+        check(same(doc, pdoc) is None, "45-day set: C and Python differ")
+        print(f"  ok  {size / 1e6:.1f} MB in five files: ocean-tap sea (the whole process) {1000 * t_c:.0f} ms, "
+              f"oceand.sea.read {1000 * t_py:.0f} ms (not asserted; the target is well under 1 s)")
+
+
+def main():
+    if not os.access(TAP, os.X_OK):
+        sys.exit(f"{TAP} is not built")
+    files = part1_and_4()
+    part1_time()
+    part2()
+    part3(files)
+    part5()
+    if failures:
+        print(f"FAIL: {len(failures)} checks failed")
+        return 1
+    print("PASS: test_readers.py")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
