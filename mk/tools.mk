@@ -74,7 +74,7 @@ test-tap: $(BUILD)/ocean-tap $(BUILD)/oceand $(BUILD)/exr-read
 test-ops: $(BUILD)/gen-config-doc $(BUILD)/oceand $(BUILD)/ocean-tap $(WEB_BUILD)/index.html
 	@tests/tap/ops.sh $(BUILD)
 
-# budget: < 30 s (about 2 s: no daemon; a local HTTP server the test starts itself)
+# budget: < 60 s (2 s, and 10-25 s more under valgrind; no daemon, a local HTTP server the test starts itself)
 TESTS += test-sea-readers
 .PHONY: test-sea-readers
 test-sea-readers: $(BUILD)/ocean-tap

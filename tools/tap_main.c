@@ -94,10 +94,12 @@ void usage(FILE *to)
         "  -v, --verbose       libwebsockets notices on stderr\n"
         "  -h, --help          this text\n"
         "Without --frames/--out/--stats/--set/--watch, prints the server's hello as JSON.\n"
+        "Measured seas: ocean-tap sea SOURCE --print (NDBC, CDIP, WAVEWATCH III; ocean-tap sea --help)\n"
         "Exit codes: 0 ok, 1 usage, 2 connect failed, 3 protocol error,\n"
         "  4 server rejected the request (its error code is printed), 5 output write failed,\n"
         "  6 timeout, 7 connection closed by the server, 130 interrupted before the\n"
-        "  stream started (Ctrl-C during a stream or --watch exits 0).\n");
+        "  stream started (Ctrl-C during a stream or --watch exits 0); ocean-tap sea: 8, the\n"
+        "  source is unreadable or not a valid sea.\n");
 }
 
 /* ---- options ------------------------------------------------------------ */

@@ -22,7 +22,7 @@
 #define EXIT_SEA 8 /* the source could not be read, or is not a valid sea */
 
 static const char *const RT_EXT[5] = {".data_spec", ".swdir", ".swdir2", ".swr1", ".swr2"};
-static const char HIST_LETTER[5] = {'w', 'd', 'i', 'j', 'k'};
+static const char HIST_LETTER[] = "wdijk";
 #define NDBC_RT "https://www.ndbc.noaa.gov/data/realtime2/"
 #define CDIP_RT "https://thredds.cdip.ucsd.edu/thredds/dodsC/cdip/realtime/"
 #define CDIP_VARS "waveTime%s,waveFrequency,waveBandwidth,waveEnergyDensity%s,waveA1Value%s,waveB1Value%s," \
@@ -183,9 +183,17 @@ int tap_sea_main(int argc, char **argv)
         }
     int at = kind < 0 ? hist_letter_at(one) : -1;
     if (at >= 0) {
+        /* NDBC's own server keeps each kind in a folder of its own: .../swden/46026w2023.txt.gz,
+         * .../swdir/46026d2023.txt.gz, ...: that folder changes with the letter. */
+        static const char *const folder[5] = {"/swden/", "/swdir/", "/swdir2/", "/swr1/", "/swr2/"};
+        int kf = (int)(strchr(HIST_LETTER, one[at]) - HIST_LETTER), fl = (int)strlen(folder[kf]);
+        int in_folder = at - 5 >= fl && !strncmp(one + at - 5 - fl, folder[kf], (size_t)fl);
         for (int j = 0; j < 5; j++) {
-            snprintf(names[j], sizeof names[j], "%s", one);
-            names[j][at] = HIST_LETTER[j];
+            if (in_folder)
+                snprintf(names[j], sizeof names[j], "%.*s%s%s", at - 5 - fl, one, folder[j], one + at - 5);
+            else
+                snprintf(names[j], sizeof names[j], "%s", one);
+            names[j][strlen(names[j]) - strlen(one + at)] = HIST_LETTER[j];
         }
         snprintf(station, sizeof station, "%.5s", one + at - 5);
         kind = 1;

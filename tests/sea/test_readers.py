@@ -20,6 +20,7 @@ import http.server
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -193,12 +194,23 @@ def part2():
 
 def part3(from_files):
     print("-- over HTTP from a server on 127.0.0.1 (started and stopped here)")
-    handler = functools.partial(QuietHandler, directory=FIX)
+    # The served folder: the fixtures, and NDBC's historical layout (a folder per kind)
+    root = tempfile.mkdtemp()
+    os.symlink(FIX, os.path.join(root, "f"))
+    for folder, letter in zip(("swden", "swdir", "swdir2", "swr1", "swr2"), "wdijk"):
+        os.makedirs(os.path.join(root, "historical", folder))
+        shutil.copy(os.path.join(FIX, "ndbc-hist", f"46026{letter}1998.txt.gz"), os.path.join(root, "historical", folder))
+    handler = functools.partial(QuietHandler, directory=root)
     srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
     th = threading.Thread(target=srv.serve_forever, daemon=True)
     th.start()
     try:
-        base = f"http://127.0.0.1:{srv.server_address[1]}"
+        host = f"http://127.0.0.1:{srv.server_address[1]}"
+        base = f"{host}/f"
+        url = f"{host}/historical/swdir2/46026i1998.txt.gz"
+        for who, doc in (("C", c_read(url)[0]), ("Python", py_read(url))):
+            check(same(doc, from_files["ndbc-hist/46026k1998.txt.gz"]) is None,
+                  f"{who}: NDBC's historical layout (a folder per kind) read other files")
         got = part1_and_4(base, " (http)")
         for rel, doc in from_files.items():
             d = same(doc, got[rel])
@@ -210,11 +222,29 @@ def part3(from_files):
             check(False, "a missing URL (Python): no error")
         except sea.SeaError as e:
             check(e.code == "io", f"a missing URL (Python): {e}")
-        print(f"  ok  {len(from_files)} sources over HTTP equal to the files; 404 -> io; {QuietHandler.requests} requests served")
+        print(f"  ok  {len(from_files)} sources over HTTP equal to the files, and NDBC's historical folders; 404 -> io; {QuietHandler.requests} requests served")
+        memory(base)
     finally:
         srv.shutdown()
         srv.server_close()
         th.join(5)
+        shutil.rmtree(root)
+
+
+def memory(base):
+    """Every reader's paths that allocate, good and refused, a file, a .gz and a URL, under valgrind."""
+    if not shutil.which("valgrind"):
+        print("  skip: valgrind not installed")
+        return
+    vg = ["valgrind", "-q", "--error-exitcode=99", "--leak-check=full", "--errors-for-leak-kinds=definite,indirect"]
+    runs = [os.path.join(FIX, s) for s in ("ndbc-rt/46026.data_spec", "ndbc-hist/46026k1998.txt.gz", "ww3/storm.spec",
+                                           "cdip/100p1_rt.ascii", "broken/rt-999/46026.swdir",
+                                           "broken/ww3-truncated/storm.spec", "broken/cdip-fill/100p1_rt.ascii")]
+    runs.append(f"{base}/ndbc-rt/46026.swdir")
+    for src in runs:
+        p = subprocess.run(vg + [TAP, "sea", src, "--print"], capture_output=True, text=True, timeout=120)
+        check(p.returncode in (0, 8), f"valgrind: ocean-tap sea {src}: exit {p.returncode}: {p.stderr[-800:]}")
+    print(f"  ok  no memory errors or leaks in ocean-tap sea ({len(runs)} sources: each reader, refused ones, a URL)")
 
 
 class QuietHandler(http.server.SimpleHTTPRequestHandler):

@@ -746,7 +746,14 @@ def read(source, when=None, point=None):
                 return ndbc_realtime(texts, [_base(n) for n in names], station, when)
         at = _hist_at(one)
         if at >= 0:
-            names = [one[:at] + c + one[at + 1:] for c in HIST_LETTERS]
+            # NDBC's own server keeps each kind in a folder of its own (.../swden/46026w2023.txt.gz)
+            folders = ("/swden/", "/swdir/", "/swdir2/", "/swr1/", "/swr2/")
+            mine = folders[HIST_LETTERS.index(one[at])]
+            head, tail = one[:at - 5], one[at - 5:]
+            if head.endswith(mine):
+                names = [head[:-len(mine)] + fo + tail[:5] + c + tail[6:] for fo, c in zip(folders, HIST_LETTERS)]
+            else:
+                names = [one[:at] + c + one[at + 1:] for c in HIST_LETTERS]
             texts = [load(n) for n in names]
             return ndbc_historical(texts, [_base(n) for n in names], one[at - 5:at], when)
     text = load(one)
