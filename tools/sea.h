@@ -80,7 +80,7 @@ int sea_ndbc_realtime(const struct sea_text f[5], const char *station, const cha
 int sea_ndbc_historical(const struct sea_text f[5], const char *station, const char *want_time,
                         struct sea_doc *d, struct sea_err *e);
 /* WAVEWATCH III point spectra: every time (at most SEA_MAX_TIMES) of point `point`
- * (NULL: the first) into *docs[0..*n-1], in the file's order; free(*docs). */
+ * (NULL: the first) into *docs[0..*n-1], in the file's order; free(*docs) whatever it returns. */
 int sea_ww3(const struct sea_text *f, const char *point, struct sea_doc **docs, int *n, struct sea_err *e);
 /* CDIP OPeNDAP ascii: the newest record, or the one at want_time. */
 int sea_cdip(const struct sea_text *f, const char *station, const char *want_time, struct sea_doc *d,
@@ -95,6 +95,10 @@ struct sea_stats { double m0, hs, tp, fp, dir_peak; int peak; };
 void sea_doc_stats(const struct sea_doc *d, struct sea_stats *st);
 /* "NDBC 46026 2026-12-01T20:40:00Z: Hs 2.31 m, Tp 12.50 s, from 271.3 deg at the peak (0.080 Hz)" */
 void sea_doc_summary(const struct sea_doc *d, char *buf, size_t n);
+/* strtod for the decimal numbers these files hold, [+-](digits[.digits] | .digits)[(e|E)[+-]digits],
+ * and nothing else: no hex, inf, nan or leading blanks, which strtod would take (and the Python
+ * readers would not). *end = s when s does not start with one. */
+double sea_strtod(const char *s, char **end);
 /* "YYYY-MM-DDThh:mm[:ss][Z]" -> canonical "YYYY-MM-DDThh:mm:ssZ"; -1 if not a time. */
 int sea_time_canon(const char *in, char out[24]);
 

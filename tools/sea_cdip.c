@@ -68,7 +68,14 @@ static int values(const char *s, struct var *v, long line, const char *file, str
         while (*s == ' ' || *s == '\t' || *s == '\r') s++;
         if (!*s) break;
         char *end;
-        double x = strtod(s, &end);
+        double x = sea_strtod(s, &end);
+        /* OPeNDAP writes a NaN as such: a missing value, not a bad number */
+        static const char *const words[4] = {"nan", "NaN", "inf", "Inf"};
+        for (int w = 0; w < 4 && end == s; w++)
+            if (!strncmp(s, words[w], 3)) {
+                x = w < 2 ? NAN : INFINITY;
+                end = (char *)s + 3;
+            }
         const char *after = end;
         while (*after == ' ' || *after == '\t' || *after == '\r') after++;
         if (end == s || (*after && *after != ','))

@@ -2,6 +2,7 @@
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "sea.h"
@@ -166,6 +167,30 @@ cJSON *sea_doc_json(const struct sea_doc *d)
         for (int i = 0; i < d->nf; i++) cJSON_AddItemToArray(rows, array(d->e2[i], d->nd));
     }
     return j;
+}
+
+double sea_strtod(const char *s, char **end)
+{
+    const char *p = s + (*s == '+' || *s == '-');
+    int digits = 0;
+    while (*p >= '0' && *p <= '9') { p++; digits++; }
+    if (*p == '.') {
+        p++;
+        while (*p >= '0' && *p <= '9') { p++; digits++; }
+    }
+    if (!digits) { *end = (char *)s; return 0; }
+    if (*p == 'e' || *p == 'E') {
+        const char *q = p + 1 + (p[1] == '+' || p[1] == '-');
+        if (*q >= '0' && *q <= '9') {
+            while (*q >= '0' && *q <= '9') q++;
+            p = q;
+        }
+    }
+    char *e2;
+    double v = strtod(s, &e2);
+    if (e2 != p) { *end = (char *)s; return 0; } /* cannot happen: strtod reads the same grammar */
+    *end = (char *)p;
+    return v;
 }
 
 int sea_time_canon(const char *in, char out[24])

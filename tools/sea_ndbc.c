@@ -57,8 +57,8 @@ static int parse_num(const char *t, double *v)
 {
     char *end;
     if (!*t) return -1;
-    *v = strtod(t, &end);
-    return *end || !isfinite(*v) ? -1 : 0;
+    *v = sea_strtod(t, &end);
+    return *end || end == t || !isfinite(*v) ? -1 : 0;
 }
 
 static int parse_int(const char *t, int *v)

@@ -8,7 +8,7 @@
  * Directions are where waves go TO, written as mod(2.5 pi - theta, 2 pi): the compass
  * bearing (clockwise from north) of the going-to direction. The document's direction is
  * where they come FROM: bearing + 180 deg. Fortran's fixed columns can join numbers
- * ("37.75-122.83"), so numbers are read one after the other with strtod, not split at
+ * ("37.75-122.83"), so numbers are read one after the other (sea_strtod), not split at
  * blanks. Band widths: the file's frequencies are geometric (factor r, 1.1 in WW3's
  * usual set-up) and band i spans f_i (r - 1/r) / 2; otherwise from neighbouring centres. */
 #include <ctype.h>
@@ -41,7 +41,7 @@ static int num(struct cur *c, double *v, int band, struct sea_err *e)
     if (c->pos >= c->f->len) return 1;
     const char *s = c->f->data + c->pos;
     char *end;
-    *v = strtod(s, &end);
+    *v = sea_strtod(s, &end);
     size_t k = (size_t)(end - s);
     if (!k || (end < c->f->data + c->f->len && *end && !isspace((unsigned char)*end) && *end != '-' && *end != '+')
         || !isfinite(*v)) {
@@ -160,8 +160,16 @@ int sea_ww3(const struct sea_text *f, const char *point, struct sea_doc **docs, 
             if (rest_of_line(&c, line, sizeof line))
                 return sea_fail(e, "truncated", f->name, pline, 0, "the file ends before point %d of %s", ip + 1, when);
             const char *after = quoted(line, pname, sizeof pname);
-            double lat, lon, depth = NAN;
-            int got = after ? sscanf(after, "%lf%lf%lf", &lat, &lon, &depth) : 0;
+            double ll[3] = {NAN, NAN, NAN}, depth; /* lat lon depth, one after the other */
+            int got = 0;
+            for (const char *q = after; q && got < 3; got++) {
+                char *end;
+                while (isspace((unsigned char)*q)) q++;
+                ll[got] = sea_strtod(q, &end);
+                if (end == q) break;
+                q = end;
+            }
+            depth = ll[2];
             if (got < 3)
                 return sea_fail(e, "bad_header", f->name, pline, 0, "expected 'NAME' lat lon depth ..., got \"%.40s\"",
                                 line);

@@ -10,7 +10,8 @@ fixtures/truth.json).
      and prints no document;
   3. the same fixtures fetched over HTTP from a server this test starts on 127.0.0.1
      (and stops) give the same documents; a missing URL is an io error;
-  4. the C and the Python readers give the same documents (numbers to 1e-12);
+  4. the C and the Python readers give the same documents (numbers to 1e-12), and on 200
+     damaged copies of the fixtures the same document or the same error;
   5. reading a realtime set of 45 days (the size NDBC serves) is timed and printed.
 The checks must be able to fail: the decoy rows (another sea at the other times) are
 read with --time and must be off by more than the tolerance.
@@ -273,6 +274,48 @@ def part5():
               f"oceand.sea.read {1000 * t_py:.0f} ms (not asserted; the target is well under 1 s)")
 
 
+def mutations(count=200, seed=7):
+    """C and Python on the same damaged files: the same document, or the same error (code, file,
+    line, band). Deterministic: the same damage every run."""
+    import random
+    import re
+    print(f"-- C and Python on {count} damaged copies of the fixtures (seed {seed})")
+    rnd = random.Random(seed)
+    sets = [("ndbc-rt", [f"46026.{e}" for e in ("data_spec", "swdir", "swdir2", "swr1", "swr2")]),
+            ("ndbc-hist", [f"46026{c}2025.txt" for c in "wdijk"]), ("ww3", ["storm.spec"]), ("cdip", ["100p1_rt.ascii"])]
+    toks = ["MM", "999.0", "-999", "x", "", "(0.1)", "1e400", "nan", "0x1p3", "0.5", "\n", " ", "[0], ", "'", "-1", "99"]
+    refused, before = 0, len(failures)
+    for _ in range(count):
+        kind, files = rnd.choice(sets)
+        with tempfile.TemporaryDirectory() as d:
+            for f in files:
+                shutil.copy(os.path.join(FIX, kind, f), d)
+            p = os.path.join(d, rnd.choice(files))
+            s = open(p).read()
+            for _ in range(rnd.randint(1, 3)):
+                i = rnd.randrange(len(s))
+                s = s[:i] + rnd.choice(toks) + s[min(len(s), i + rnd.randint(0, 8)):]
+            open(p, "w").write(s)
+            src = os.path.join(d, files[0])
+            rc, out, err = tap(src, "--print")
+            try:
+                got, perr = py_read(src), None
+            except sea.SeaError as e:
+                got, perr = None, e
+            if rc == 0:
+                check(perr is None and same(json.loads(out), got) is None,
+                      f"{kind}: C read a document, Python {perr or same(json.loads(out), got)}")
+                continue
+            refused += 1
+            m = re.search(r"error (\w+): (?:(\S+?):(\d+): |(\S+): )?(?:band (\d+): )?", err)
+            c_err = (m.group(1), m.group(2) or m.group(4) or "", int(m.group(3) or 0), int(m.group(5) or 0)) if m else err
+            p_err = (perr.code, perr.file, perr.line, perr.band) if perr else None
+            check(c_err == p_err, f"{kind}: C {err.strip()[:160]!r}, Python {str(perr)[:160]!r}")
+    if len(failures) == before:
+        print(f"  ok  the same verdict on all {count}: {refused} refused with the same code, file, line and band, "
+              f"{count - refused} read to the same document")
+
+
 def main():
     if not os.access(TAP, os.X_OK):
         sys.exit(f"{TAP} is not built")
@@ -280,6 +323,7 @@ def main():
     part1_time()
     part2()
     part3(files)
+    mutations()
     part5()
     if failures:
         print(f"FAIL: {len(failures)} checks failed")

@@ -226,16 +226,15 @@ def _value(tok, miss99):
 def _scan_times(text, name, ntime):
     rows = {}
     order = []
-    last = 0
     for no, toks in _lines(text):
-        last = no
         if toks[0][0] == "#" or toks[0][0].isalpha():
             continue
         t = _row_time(no, toks, ntime, name)
         if t not in rows:       # the first row of a time, as the C reader finds it
             rows[t] = (no, toks)
         order.append(t)
-    if not order:
+    if not order:       # named at the file's last line, as the C reader counts them
+        last = text.count("\n") + (0 if not text or text.endswith("\n") else 1)
         raise SeaError("truncated", name, last, 0, "no data rows")
     return rows, order
 
@@ -535,7 +534,13 @@ def ww3(text, name, point=None):
             if line is None:
                 raise SeaError("truncated", name, pline, 0, f"the file ends before point {ip + 1} of {when}")
             q = _quoted(line)
-            nums = re.findall(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", q[1]) if q else []
+            nums, at = [], 0
+            while q and len(nums) < 3:      # lat lon depth, one after the other (as sscanf reads them)
+                m = re.compile(r"\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)").match(q[1], at)
+                if not m:
+                    break
+                nums.append(m.group(1))
+                at = m.end()
             if q is None or len(nums) < 3:
                 raise SeaError("bad_header", name, pline, 0, f"expected 'NAME' lat lon depth ..., got \"{line[:40]}\"")
             mine = not found and (point is None or point == q[0])
@@ -586,7 +591,7 @@ def _cdip_values(s, var, no, name):
         p = part.strip(" \t\r")
         if not p and idx == len(parts) - 1:
             break           # a trailing comma, or an empty row
-        m = re.fullmatch(r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|NaN|inf|Inf)", p)
+        m = re.fullmatch(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|NaN|inf|Inf", p)
         if not m:
             raise SeaError("bad_number", name, no, len(var) + 1, f'"{p[:40]}" is not a number')
         var.append((float(p), no))
@@ -623,7 +628,8 @@ def cdip(text, name, station, when=None):
         if cur:
             _cdip_values(t, v[cur], no, name)
     if not body:
-        raise SeaError("bad_header", name, len(lines), 0, "no values after the dataset description")
+        last = text.count("\n") + (0 if not text or text.endswith("\n") else 1)   # as the C reader counts
+        raise SeaError("bad_header", name, last, 0, "no values after the dataset description")
     for k in _CDIP[:8]:
         if not v[k]:
             raise SeaError("bad_header", name, 0, 0, f"no {k} in the answer")
