@@ -25,6 +25,14 @@ static const char *const RT_EXT[5] = {".data_spec", ".swdir", ".swdir2", ".swr1"
 static const char HIST_LETTER[] = "wdijk";
 #define NDBC_RT "https://www.ndbc.noaa.gov/data/realtime2/"
 #define CDIP_RT "https://thredds.cdip.ucsd.edu/thredds/dodsC/cdip/realtime/"
+
+/* The shortcuts' servers; OCEAND_SEA_NDBC / OCEAND_SEA_CDIP name others (a mirror, or the
+ * test's local server: the shortcuts are tested without leaving the machine). */
+static const char *server(const char *env, const char *dflt)
+{
+    const char *v = getenv(env);
+    return v && *v ? v : dflt;
+}
 #define CDIP_VARS "waveTime%s,waveFrequency,waveBandwidth,waveEnergyDensity%s,waveA1Value%s,waveB1Value%s," \
                   "waveA2Value%s,waveB2Value%s,waveHs%s,waveFlagPrimary%s,metaWaterDepth"
 
@@ -115,7 +123,8 @@ static int cdip_url(const char *id, char *url, size_t n, struct sea_err *e)
 {
     char dds[512], *text;
     size_t len;
-    snprintf(dds, sizeof dds, CDIP_RT "%sp1_rt.nc.dds", id);
+    const char *base = server("OCEAND_SEA_CDIP", CDIP_RT);
+    snprintf(dds, sizeof dds, "%.400s%.60sp1_rt.nc.dds", base, id);
     if (sea_load(dds, &text, &len, e)) return -1;
     const char *p = strstr(text, "[waveTime = "), *q = strstr(text, "[waveFrequency = ");
     long nt = p ? strtol(p + 12, NULL, 10) : 0, nf = q ? strtol(q + 17, NULL, 10) : 0;
@@ -127,7 +136,7 @@ static int cdip_url(const char *id, char *url, size_t n, struct sea_err *e)
     snprintf(ix, sizeof ix, "[%ld]", nt - 1);
     snprintf(ixf, sizeof ixf, "[%ld][0:1:%ld]", nt - 1, nf - 1);
     snprintf(vars, sizeof vars, CDIP_VARS, ix, ixf, ixf, ixf, ixf, ixf, ix, ix);
-    snprintf(url, n, CDIP_RT "%sp1_rt.nc.ascii?%s", id, vars);
+    snprintf(url, n, "%.400s%.60sp1_rt.nc.ascii?%s", base, id, vars);
     return 0;
 }
 
@@ -167,7 +176,7 @@ int tap_sea_main(int argc, char **argv)
     snprintf(one, sizeof one, "%s", src);
     if (!strncmp(src, "ndbc:", 5)) {
         snprintf(station, sizeof station, "%.60s", src + 5);
-        snprintf(one, sizeof one, NDBC_RT "%s.data_spec", station);
+        snprintf(one, sizeof one, "%.1000s%s.data_spec", server("OCEAND_SEA_NDBC", NDBC_RT), station);
     } else if (!strncmp(src, "cdip:", 5)) {
         snprintf(station, sizeof station, "%.60s", src + 5);
         if (cdip_url(station, one, sizeof one, &e)) goto out;

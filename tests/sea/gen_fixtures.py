@@ -25,7 +25,8 @@ Files, as the real services write them (sea.h and docs/operations.md describe th
   broken/...                                          one fault each (BROKEN below), with
       the error each reader must give in broken/expected.json
 
-Run with /usr/bin/python3 (numpy). `--realtime-days D --out DIR` writes a realtime set of D
+Run with /usr/bin/python3 (numpy); `--fixtures DIR` writes them elsewhere (the test does, and
+wants the committed ones byte for byte). `--realtime-days D --out DIR` writes a realtime set of D
 days (24 rows a day) into DIR instead, for timing the readers on a file of real size."""
 import argparse
 import functools
@@ -443,7 +444,10 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--realtime-days", type=int, help="write a realtime set of this many days to --out instead")
     ap.add_argument("--out", help="the folder for --realtime-days")
+    ap.add_argument("--fixtures", default=OUT, help="where to write the fixtures (default: tests/sea/fixtures; "
+                    "the test writes them elsewhere and compares)")
     a = ap.parse_args()
+    out = a.fixtures
     from datetime import datetime, timedelta
     if a.realtime_days:
         newest = datetime(2026, 12, 1, 20, 40)
@@ -451,8 +455,8 @@ def main():
         seas = [known_sea() if h == 0 else other_sea() for h in range(len(stamps))]
         realtime(a.out, stamps, seas)
         return
-    if os.path.isdir(OUT):
-        shutil.rmtree(OUT)
+    if os.path.isdir(out):
+        shutil.rmtree(out)
     sea, other = known_sea(), other_sea()
     t = {"sea": {"wind_sea": {"spectrum": "jonswap", "hs": 2.0, "tp": 7.0, "gamma": 3.3, "from": 225, "s": 8},
                  "swell": {"spectrum": "gauss", "hs": 1.5, "tp": 13.5, "sigma_hz": 0.008, "from": 270, "s": 20},
@@ -460,7 +464,7 @@ def main():
     # realtime
     s0 = datetime(2026, 12, 1, 20, 40)
     stamps = [s0, s0 - timedelta(hours=1), s0 - timedelta(hours=2)]
-    realtime(os.path.join(OUT, "ndbc-rt"), stamps, [other, sea, other], skip={(4, s0)})
+    realtime(os.path.join(out, "ndbc-rt"), stamps, [other, sea, other], skip={(4, s0)})
     fr = np.array([float(half_up(f, 3)) for f in NDBC_BANDS])
     e, al1, al2, r1, r2 = ndbc_values(sea, NDBC_BANDS)
     e = np.array([float(half_up(x, 3)) for x in e])
@@ -468,7 +472,7 @@ def main():
     b1 = np.sin(np.radians(al1)) * r1
     t["ndbc-rt"] = dict(truth(sea, fr, widths(fr), e, a1, b1, "ndbc-rt"), time="2026-12-01T19:40:00Z")
     # historical
-    h = os.path.join(OUT, "ndbc-hist")
+    h = os.path.join(out, "ndbc-hist")
     last = datetime(2025, 12, 31, 23, 40)
     historical(h, 2025, [datetime(2025, 6, 1, 0, 40), datetime(2025, 12, 31, 22, 40), last], [other, other, sea], False)
     fb = np.array(NDBC_HIST_BANDS)
@@ -484,18 +488,18 @@ def main():
     t["ndbc-hist-1998"] = dict(truth(sea, fo, widths(fo), e, np.cos(np.radians(al1)) * r1,
                                      np.sin(np.radians(al1)) * r1, "hist 1998"), time="1998-03-01T01:00:00Z")
     # WW3
-    t["ww3"] = ww3(os.path.join(OUT, "ww3", "storm.spec"))
+    t["ww3"] = ww3(os.path.join(out, "ww3", "storm.spec"))
     # CDIP: the newest record (the second) is the known sea
     times = [1764619200, 1764621000]     # 2025-12-01 20:00 and 20:30 UTC
-    rows, f, bw = cdip(os.path.join(OUT, "cdip", "100p1_rt.ascii"), [other, sea], times)
+    rows, f, bw = cdip(os.path.join(out, "cdip", "100p1_rt.ascii"), [other, sea], times)
     t["cdip"] = dict(truth(sea, f, bw, np.array(rows["e"][1]), np.array(rows["a1"][1]), np.array(rows["b1"][1]),
                            "cdip"), time="2025-12-01T20:30:00Z")
-    cases = broken(os.path.join(OUT, "broken"), os.path.join(OUT, "ndbc-rt"), h, os.path.join(OUT, "ww3", "storm.spec"),
-                   os.path.join(OUT, "cdip", "100p1_rt.ascii"))
-    with open(os.path.join(OUT, "truth.json"), "w") as fh:
+    cases = broken(os.path.join(out, "broken"), os.path.join(out, "ndbc-rt"), h, os.path.join(out, "ww3", "storm.spec"),
+                   os.path.join(out, "cdip", "100p1_rt.ascii"))
+    with open(os.path.join(out, "truth.json"), "w") as fh:
         json.dump(t, fh, indent=1)
         fh.write("\n")
-    print(f"fixtures in {OUT}: the known sea Hs {sea.hs():.4f} m; {len(cases)} broken cases")
+    print(f"fixtures in {out}: the known sea Hs {sea.hs():.4f} m; {len(cases)} broken cases")
     for k in ("ndbc-rt", "ndbc-hist-2025", "ndbc-hist-1998", "cdip"):
         print(f"  {k:16s} Hs of the bands {t[k]['hs_of_the_bands']:.4f}  peak {t[k]['peak_frequency']:.4f} Hz  "
               f"from {t[k]['direction_at_peak']:.2f}")

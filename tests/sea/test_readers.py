@@ -208,6 +208,20 @@ def part3(from_files):
     try:
         host = f"http://127.0.0.1:{srv.server_address[1]}"
         base = f"{host}/f"
+        # The shortcuts, pointed at this server: ndbc:46026 reads ndbc-rt/46026.*; cdip:100 asks for the
+        # dataset's size (a .dds written here) and then its newest record (the server ignores the query)
+        with open(os.path.join(root, "100p1_rt.nc.dds"), "w") as fh:
+            fh.write("Dataset {\n    Int32 waveTime[waveTime = 2];\n    Float32 waveFrequency[waveFrequency = 64];\n}\n")
+        shutil.copy(os.path.join(FIX, "cdip", "100p1_rt.ascii"), os.path.join(root, "100p1_rt.nc.ascii"))
+        os.environ["OCEAND_SEA_NDBC"] = f"{base}/ndbc-rt/"
+        os.environ["OCEAND_SEA_CDIP"] = f"{host}/"
+        try:
+            for short, rel in (("ndbc:46026", "ndbc-rt/46026.data_spec"), ("cdip:100", "cdip/100p1_rt.ascii")):
+                for who, doc in (("C", c_read(short)[0]), ("Python", py_read(short))):
+                    want = dict(from_files[rel], source="CDIP 100") if short.startswith("cdip") else from_files[rel]
+                    check(same(doc, want) is None, f"{who} {short}: {same(doc, want)}")
+        finally:
+            del os.environ["OCEAND_SEA_NDBC"], os.environ["OCEAND_SEA_CDIP"]
         url = f"{host}/historical/swdir2/46026i1998.txt.gz"
         for who, doc in (("C", c_read(url)[0]), ("Python", py_read(url))):
             check(same(doc, from_files["ndbc-hist/46026k1998.txt.gz"]) is None,
@@ -223,7 +237,7 @@ def part3(from_files):
             check(False, "a missing URL (Python): no error")
         except sea.SeaError as e:
             check(e.code == "io", f"a missing URL (Python): {e}")
-        print(f"  ok  {len(from_files)} sources over HTTP equal to the files, and NDBC's historical folders; 404 -> io; {QuietHandler.requests} requests served")
+        print(f"  ok  {len(from_files)} sources over HTTP equal to the files, and NDBC's historical folders; ndbc:46026 and cdip:100 (pointed at this server); 404 -> io; {QuietHandler.requests} requests served")
         memory(base)
     finally:
         srv.shutdown()
@@ -316,9 +330,35 @@ def mutations(count=200, seed=7):
               f"{count - refused} read to the same document")
 
 
+def regenerated():
+    print("-- the committed fixtures are the generator's")
+    import filecmp
+    with tempfile.TemporaryDirectory() as d:
+        subprocess.run(["/usr/bin/python3", os.path.join(HERE, "gen_fixtures.py"), "--fixtures", d], check=True,
+                       stdout=subprocess.DEVNULL)
+        bad = []
+        def walk(cmp, rel=""):
+            bad.extend(os.path.join(rel, n) for n in cmp.left_only + cmp.right_only + cmp.diff_files + cmp.funny_files)
+            for n, sub in cmp.subdirs.items():
+                walk(sub, os.path.join(rel, n))
+        filecmp.clear_cache()
+        cmp = filecmp.dircmp(FIX, d)
+        walk(cmp)
+        # dircmp compares by size and time first: compare every file's bytes as well
+        for dp, _, fs in os.walk(d):
+            for f in fs:
+                rel = os.path.relpath(os.path.join(dp, f), d)
+                a = os.path.join(FIX, rel)
+                if os.path.exists(a) and open(a, "rb").read() != open(os.path.join(dp, f), "rb").read():
+                    bad.append(rel)
+        if check(not bad, f"fixtures differ from what gen_fixtures.py writes: {sorted(set(bad))[:8]}"):
+            print("  ok  tests/sea/fixtures is what tests/sea/gen_fixtures.py writes, byte for byte")
+
+
 def main():
     if not os.access(TAP, os.X_OK):
         sys.exit(f"{TAP} is not built")
+    regenerated()
     files = part1_and_4()
     part1_time()
     part2()
