@@ -25,14 +25,15 @@
 /* A line of a file, split at white space in a scratch copy. */
 struct line {
     long no;
+    int cut;        /* longer than buf: refused (sea_line_ok) rather than read in part */
     int ntok;
     char *tok[MAX_TOK];
     char buf[16384];
 };
 
 /* Next non-empty line from *pos; 0 at the end. A line longer than the
- * buffer or with more than MAX_TOK tokens is cut; the caller's band count
- * check rejects it (more than SEA_MAX_FREQ bands). */
+ * buffer is marked cut (line_ok refuses it); one with more than MAX_TOK
+ * tokens holds more than SEA_MAX_FREQ bands, which the band count refuses. */
 static int next_line(const struct sea_text *f, size_t *pos, long *lineno, struct line *l)
 {
     while (*pos < f->len) {
@@ -40,7 +41,8 @@ static int next_line(const struct sea_text *f, size_t *pos, long *lineno, struct
         size_t n = nl ? (size_t)(nl - s) : f->len - *pos;
         *pos += n + (nl ? 1 : 0);
         (*lineno)++;
-        if (n >= sizeof l->buf) n = sizeof l->buf - 1;
+        l->cut = n >= sizeof l->buf;
+        if (l->cut) n = sizeof l->buf - 1;
         memcpy(l->buf, s, n);
         l->buf[n] = 0;
         l->no = *lineno;
@@ -50,6 +52,12 @@ static int next_line(const struct sea_text *f, size_t *pos, long *lineno, struct
             l->tok[l->ntok++] = t;
         if (l->ntok) return 1;
     }
+    return 0;
+}
+
+static int line_ok(const struct line *l, const char *file, struct sea_err *e)
+{
+    if (l->cut) return sea_fail(e, "bad_number", file, l->no, 0, "a line of more than %zu bytes", sizeof l->buf - 1);
     return 0;
 }
 
@@ -64,6 +72,7 @@ static int parse_num(const char *t, double *v)
 static int parse_int(const char *t, int *v)
 {
     char *end;
+    if (!*t || strspn(t, "0123456789") != strlen(t)) return -1; /* digits only: no sign, no blanks */
     long x = strtol(t, &end, 10);
     if (*end || end == t || x < 0 || x > 99999) return -1;
     *v = (int)x;
@@ -224,6 +233,7 @@ static int scan_times(const struct sea_text *f, int ntime, struct times *t, stru
         size_t at = pos;
         long at_no = no;
         if (!next_line(f, &pos, &no, l)) break;
+        if (line_ok(l, f->name, e)) return -1;
         if (l->tok[0][0] == '#' || isalpha((unsigned char)l->tok[0][0])) continue; /* headers */
         if (t->n == t->cap) {
             int cap = t->cap ? 2 * t->cap : 256;
@@ -328,6 +338,7 @@ static int hist_header(const struct sea_text *f, struct line *l, int *ntime, dou
     size_t pos = 0;
     long no = 0;
     if (!next_line(f, &pos, &no, l)) return sea_fail(e, "bad_header", f->name, 1, 0, "the file is empty");
+    if (line_ok(l, f->name, e)) return -1;
     int k = 0;
     double v;
     while (k < l->ntok && parse_num(l->tok[k], &v)) k++;

@@ -297,7 +297,8 @@ def mutations(count=200, seed=7):
     rnd = random.Random(seed)
     sets = [("ndbc-rt", [f"46026.{e}" for e in ("data_spec", "swdir", "swdir2", "swr1", "swr2")]),
             ("ndbc-hist", [f"46026{c}2025.txt" for c in "wdijk"]), ("ww3", ["storm.spec"]), ("cdip", ["100p1_rt.ascii"])]
-    toks = ["MM", "999.0", "-999", "x", "", "(0.1)", "1e400", "nan", "0x1p3", "0.5", "\n", " ", "[0], ", "'", "-1", "99"]
+    toks = ["MM", "999.0", "-999", "x", "", "(0.1)", "1e400", "nan", "0x1p3", "0.5", "\n", " ", "[0], ", "'", "-1", "99",
+            "\t", "+", "\u00e9", "0"]
     refused, before = 0, len(failures)
     for _ in range(count):
         kind, files = rnd.choice(sets)

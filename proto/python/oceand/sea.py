@@ -36,8 +36,8 @@ NDBC_RT = "https://www.ndbc.noaa.gov/data/realtime2/"
 CDIP_RT = "https://thredds.cdip.ucsd.edu/thredds/dodsC/cdip/realtime/"
 RT_EXT = (".data_spec", ".swdir", ".swdir2", ".swr1", ".swr2")
 HIST_LETTERS = "wdijk"
-_NUM = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
-_INT = re.compile(r"\d+")
+_NUM = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_INT = re.compile(r"[0-9]+")
 
 
 class SeaError(Exception):
@@ -54,6 +54,11 @@ class SeaError(Exception):
         return f"error {self.code}: {where}{band}{self.msg}"
 
 
+def _alpha(c):
+    """C's isalpha in the C locale: ASCII letters only."""
+    return ("a" <= c <= "z") or ("A" <= c <= "Z")
+
+
 def _num(tok):
     """A number token (all of it), or None."""
     if _NUM.fullmatch(tok) is None:
@@ -63,7 +68,7 @@ def _num(tok):
 
 
 def time_canon(text):
-    m = re.fullmatch(r"(\d{4})-(\d{1,2})-(\d{1,2})T(\d{1,2}):(\d{1,2})(?::(\d{1,2}))?Z?", text)
+    m = re.fullmatch(r"([0-9]{4})-([0-9]{1,2})-([0-9]{1,2})T([0-9]{1,2}):([0-9]{1,2})(?::([0-9]{1,2}))?Z?", text)
     if not m:
         return None
     y, mo, d, h, mi = (int(g) for g in m.groups()[:5])
@@ -187,11 +192,16 @@ def public(doc):
 
 # ---- NDBC ----------------------------------------------------------------------
 
-def _lines(text):
+LINE_MAX = 16383    # the C reader's line buffer: a longer line is refused, not read in part
+
+
+def _lines(text, name):
     """(line number, tokens) of every non-empty line."""
     for no, line in enumerate(text.split("\n"), 1):
         toks = [t for t in re.split(r"[ \t\r]+", line) if t]
         if toks:
+            if len(line) > LINE_MAX:
+                raise SeaError("bad_number", name, no, 0, f"a line of more than {LINE_MAX} bytes")
             yield no, toks
 
 
@@ -226,8 +236,8 @@ def _value(tok, miss99):
 def _scan_times(text, name, ntime):
     rows = {}
     order = []
-    for no, toks in _lines(text):
-        if toks[0][0] == "#" or toks[0][0].isalpha():
+    for no, toks in _lines(text, name):
+        if toks[0][0] == "#" or _alpha(toks[0][0]):
             continue
         t = _row_time(no, toks, ntime, name)
         if t not in rows:       # the first row of a time, as the C reader finds it
@@ -353,7 +363,7 @@ def ndbc_realtime(texts, names, station, when=None):
 
 
 def _hist_header(text, name):
-    for no, toks in _lines(text):
+    for no, toks in _lines(text, name):
         k = 0
         while k < len(toks) and _num(toks[k]) is None:
             k += 1
@@ -416,7 +426,7 @@ def ndbc_historical(texts, names, station, when=None):
 
 class _Cursor:
     """Numbers one after the other, as Fortran's columns may join them ("37.75-122.83")."""
-    _ANY = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+    _ANY = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 
     def __init__(self, text, name):
         self.t, self.name, self.pos, self.line, self.last = text, name, 0, 1, 1
@@ -436,8 +446,8 @@ class _Cursor:
         m = self._ANY.match(self.t, self.pos)
         end = m.end() if m else self.pos
         nxt = self.t[end] if end < len(self.t) else ""
-        if not m or (nxt and not nxt.isspace() and nxt not in "+-") or not math.isfinite(float(m.group())):
-            tok = re.match(r"\S{0,40}", self.t[self.pos:]).group()
+        if not m or (nxt and nxt not in " \t\r\n\f\v+-") or not math.isfinite(float(m.group())):
+            tok = re.match(r"[^ \t\r\n\f\v]{0,40}", self.t[self.pos:]).group()
             raise SeaError("bad_number", self.name, self.line, band, f'"{tok}" is not a number')
         self.pos = end
         self.last = self.line
@@ -473,7 +483,7 @@ def ww3(text, name, point=None):
     q = _quoted(head)
     if q is None or q[0] != "WAVEWATCH III SPECTRA":
         raise SeaError("bad_header", name, 1, 0, "not a WAVEWATCH III spectrum file (no 'WAVEWATCH III SPECTRA' at its start)")
-    m = re.match(r"\s*([+-]?\d+)\s+([+-]?\d+)\s+([+-]?\d+)\s*", q[1])
+    m = re.match(r"[ \t\r\n\f\v]*([+-]?[0-9]+)[ \t\r\n\f\v]+([+-]?[0-9]+)[ \t\r\n\f\v]+([+-]?[0-9]+)[ \t\r\n\f\v]*", q[1])
     if not m or _quoted(q[1][m.end():]) is None:
         raise SeaError("bad_header", name, 1, 0, "expected NF ND NP 'grid' after the title")
     nf, nd, np_ = (int(g) for g in m.groups())
@@ -518,7 +528,7 @@ def ww3(text, name, point=None):
         line = c.rest_of_line()
         if line is None:
             break
-        m = re.fullmatch(r"\s*([+-]?\d{1,8})\s+([+-]?\d{1,6})", line)
+        m = re.fullmatch(r"[ \t\r\n\f\v]*([+-]?[0-9]{1,8})[ \t\r\n\f\v]*([+-]?[0-9]{1,6})", line)
         if not m:
             raise SeaError("bad_header", name, tline, 0, f'expected a time "YYYYMMDD HHMMSS", got "{line[:40]}"')
         ymd, hms = int(m.group(1)), int(m.group(2))
@@ -536,7 +546,7 @@ def ww3(text, name, point=None):
             q = _quoted(line)
             nums, at = [], 0
             while q and len(nums) < 3:      # lat lon depth, one after the other (as sscanf reads them)
-                m = re.compile(r"\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)").match(q[1], at)
+                m = re.compile(r"[ \t\r\n\f\v]*([+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)").match(q[1], at)
                 if not m:
                     break
                 nums.append(m.group(1))
@@ -591,7 +601,7 @@ def _cdip_values(s, var, no, name):
         p = part.strip(" \t\r")
         if not p and idx == len(parts) - 1:
             break           # a trailing comma, or an empty row
-        m = re.fullmatch(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|NaN|inf|Inf", p)
+        m = re.fullmatch(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|nan|NaN|inf|Inf", p)
         if not m:
             raise SeaError("bad_number", name, no, len(var) + 1, f'"{p[:40]}" is not a number')
         var.append((float(p), no))
@@ -604,6 +614,8 @@ def cdip(text, name, station, when=None):
     body = seen_dds = False
     cur = None
     for no, raw in enumerate(lines, 1):
+        if len(raw) >= 65536:
+            raise SeaError("bad_number", name, no, 0, "a line of more than 65536 bytes")
         t = raw.lstrip(" \t").rstrip("\r ")
         if not body:
             if t.startswith("Dataset"):
@@ -617,7 +629,7 @@ def cdip(text, name, station, when=None):
         if not t:
             cur = None
             continue
-        if t[0].isalpha():
+        if _alpha(t[0]):
             head = re.split(r"[\[,]", t, 1)[0]
             vn = head.split(".", 1)[1] if "." in head else head
             cur = vn if vn in v and not v[vn] else None
@@ -700,7 +712,8 @@ def load(source):
             raise SeaError("io", source, 0, 0, "not a whole gzip stream") from None
     if b"\0" in data:
         raise SeaError("bad_header", source, 0, 0, "a NUL byte: not text")
-    return data.decode("utf-8", "replace")
+    # latin-1: one character per byte, as the C readers see them (line lengths, what is a letter)
+    return data.decode("latin-1")
 
 
 def _base(s):
@@ -710,7 +723,7 @@ def _base(s):
 
 def _hist_at(name):
     b = _base(name)
-    m = re.fullmatch(r"(.{5})([wdijk])(\d{4})\.txt(\.gz)?", b)
+    m = re.fullmatch(r"(.{5})([wdijk])([0-9]{4})\.txt(\.gz)?", b)
     return len(name.split("?", 1)[0]) - len(b) + 5 if m else -1
 
 
@@ -718,8 +731,8 @@ def cdip_url(station):
     """The URL of a CDIP station's newest record (its size asked first, the dataset's .dds)."""
     base = os.environ.get("OCEAND_SEA_CDIP") or CDIP_RT     # another server (a mirror, the tests' own)
     dds = load(f"{base}{station}p1_rt.nc.dds")
-    nt = re.search(r"\[waveTime = (\d+)\]", dds)
-    nf = re.search(r"\[waveFrequency = (\d+)\]", dds)
+    nt = re.search(r"\[waveTime = ([0-9]+)\]", dds)
+    nf = re.search(r"\[waveFrequency = ([0-9]+)\]", dds)
     if not nt or not nf or not 1 <= int(nf.group(1)) <= MAX_FREQ:
         raise SeaError("bad_header", f"{base}{station}p1_rt.nc.dds", 0, 0,
                        f"no waveTime and waveFrequency dimensions (1..{MAX_FREQ} bands) in the dataset's description")
