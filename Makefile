@@ -73,7 +73,7 @@ TESTS_PAIRED     := test-fuzz test-proto-valgrind test-sim-asan test-query-valgr
                     test-daemon-valgrind test-sim test-cluster-valgrind test-proto-asan test-query \
                     test-cluster test-proto test-proto-js test-sim-tsan test-query-asan test-layout test-wording \
                     test-bodies test-bodies-asan test-bodies-valgrind \
-                    test-sea test-sea-asan test-sea-valgrind
+                    test-sea test-sea-asan test-sea-valgrind test-sea-readers
 TEST_LOGS        := $(BUILD)/test-logs
 test: deps
 	@$(MAKE) --no-print-directory -j$$(nproc) build-all

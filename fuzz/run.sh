@@ -11,6 +11,8 @@ if compgen -G "fuzz/regressions/$t/*" >/dev/null; then
     || { tail -30 "$build/fuzz/regress-$t.log"; echo "fuzz $t: a regression input fails again"; exit 1; }
 fi
 maxlen=16384; { [ "$t" = frame ] || [ "$t" = grid ]; } && maxlen=65536
+# A sea reader's seed is a whole set of files (five NDBC files of three rows: 15-30 KB).
+case $t in sea_*) maxlen=65536 ;; esac
 # The config loader: an execution costs in proportion to its input (a JSON
 # document), and libFuzzer's length control lets inputs grow to max_len.
 # All 56 keys of the settings tables set at once (20-character strings) take

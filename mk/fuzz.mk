@@ -1,10 +1,11 @@
-# mk/fuzz.mk — libFuzzer targets (clang, ASan+UBSan) for the three parsers a
-# stranger can reach: JSON control messages, binary frames, the config file.
+# mk/fuzz.mk — libFuzzer targets (clang, ASan+UBSan) for the parsers a stranger
+# can reach: JSON control messages, binary frames, the config file, ..., and
+# ocean-tap's readers of measured seas (text from any URL).
 #
 #   make fuzz                  run each target for FUZZ_SECONDS (default 60)
 #   make fuzz FUZZ_SECONDS=600 a longer local run
 # `make test` runs test-fuzz: every regression input once, then each target
-# for FUZZ_CI_SECONDS (10 s each, under CI too: nine targets, and
+# for FUZZ_CI_SECONDS (10 s each, under CI too: one per FUZZ_TARGETS entry, and
 # make test must stay under 20 minutes on 2 cores; longer runs: make fuzz).
 
 FUZZ_CC      := clang
@@ -22,6 +23,8 @@ FUZZ_TARGETS += grid
 # A measured sea (server/sim/sea_spectrum.c, sea_model.c): the validator, the directional
 # reconstruction and the capture of whatever it accepts.
 FUZZ_TARGETS += sea
+# ocean-tap's readers of measured seas (tools/sea_*.c): text from any server a URL names.
+FUZZ_TARGETS += sea_ndbc sea_ww3 sea_cdip
 
 # The config loader's input is JSON text: the operands of integer compares
 # (trace-cmp) are parsed binary values that libFuzzer cannot splice back into
@@ -48,6 +51,16 @@ $(BUILD)/fuzz/fuzz_netwire: $(wildcard server/net/*.[ch])
 FUZZ_SRCS_inflate = fuzz/fuzz_inflate.c proto/wasm/oc_inflate.c
 FUZZ_FLAGS_inflate := -Iproto/wasm
 $(BUILD)/fuzz/fuzz_inflate: $(wildcard proto/wasm/*.[ch])
+FUZZ_SRCS_sea_ndbc = fuzz/fuzz_sea_ndbc.c tools/sea_ndbc.c tools/sea_doc.c
+FUZZ_SRCS_sea_ww3  = fuzz/fuzz_sea_ww3.c tools/sea_ww3.c tools/sea_doc.c
+FUZZ_SRCS_sea_cdip = fuzz/fuzz_sea_cdip.c tools/sea_cdip.c tools/sea_doc.c
+FUZZ_FLAGS_sea_ndbc := -Itools
+FUZZ_FLAGS_sea_ww3  := -Itools
+FUZZ_FLAGS_sea_cdip := -Itools
+$(BUILD)/fuzz/fuzz_sea_ndbc $(BUILD)/fuzz/fuzz_sea_ww3 $(BUILD)/fuzz/fuzz_sea_cdip: tools/sea.h tools/sea_doc.c
+$(BUILD)/fuzz/fuzz_sea_ndbc: tools/sea_ndbc.c
+$(BUILD)/fuzz/fuzz_sea_ww3: tools/sea_ww3.c
+$(BUILD)/fuzz/fuzz_sea_cdip: tools/sea_cdip.c
 
 $(BUILD)/fuzz/fuzz_%: fuzz/fuzz_%.c $(wildcard server/*/*.[ch] server/sim/include/*.h proto/c/*.c proto/c/*.h)
 	@mkdir -p $(dir $@)

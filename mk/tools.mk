@@ -7,6 +7,7 @@
 #   test-ops                  docker/ <-> apt list, install, configuration reference
 #   test-python               the Python package proto/python (pip install, cascades vs query)
 #   test-blender              the Blender add-on tools/blender/ in Debian's Blender, headless
+#   test-sea-readers          the readers of measured seas (ocean-tap sea, oceand.sea) on tests/sea/fixtures
 
 PROTO_LIB  ?= $(BUILD)/liboc_proto.a
 OCEAN_LIB  ?= $(BUILD)/libocean.a
@@ -19,7 +20,10 @@ WEBDIR     = $(PREFIX)/share/oceand/web
 UNITDIR    = $(PREFIX)/lib/systemd/system
 WEB_BUILD  := $(BUILD)/web
 
-TAP_OBJS := $(addprefix $(BUILD)/obj/tools/,ocean-tap.o tap_write.o tap_exr.o tap_surface.o)
+# ocean-tap, split by verb (tools/tap.h says which file holds what).
+TAP_OBJS := $(addprefix $(BUILD)/obj/tools/,tap_main.o tap_session.o tap_watch.o tap_query.o tap_bake.o \
+              tap_sea.o tap_write.o tap_exr.o tap_surface.o \
+              sea_doc.o sea_ndbc.o sea_ww3.o sea_cdip.o sea_fetch.o)
 # OpenEXR 3.1 (Debian libopenexr-dev) for --format exr: its C API
 # (OpenEXRCore) and Imath's half floats; --as-needed drops its C++ libraries.
 EXR_CFLAGS = $(shell pkg-config --cflags OpenEXR 2>/dev/null)
@@ -69,6 +73,12 @@ test-tap: $(BUILD)/ocean-tap $(BUILD)/oceand $(BUILD)/exr-read
 
 test-ops: $(BUILD)/gen-config-doc $(BUILD)/oceand $(BUILD)/ocean-tap $(WEB_BUILD)/index.html
 	@tests/tap/ops.sh $(BUILD)
+
+# budget: < 60 s (2 s, and 10-25 s more under valgrind; no daemon, a local HTTP server the test starts itself)
+TESTS += test-sea-readers
+.PHONY: test-sea-readers
+test-sea-readers: $(BUILD)/ocean-tap
+	@/usr/bin/python3 tests/sea/test_readers.py $(BUILD)
 
 config-doc: $(BUILD)/gen-config-doc $(BUILD)/oceand
 	@scripts/gen-config-doc.sh --update --daemon $(BUILD)/oceand $(BUILD)/gen-config-doc
