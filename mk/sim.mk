@@ -120,8 +120,8 @@ test-bodies-valgrind: $(BUILD)/test_bodies
 	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_bodies
 bench-bodies-step: $(BUILD)/bench_bodies
 	$(BUILD)/bench_bodies
-# Measured seas (server/sim/sea_spectrum.c, sea_model.c): spectrum "measured" against the
-# targets of issue 39, measured from the simulated surface (tests/test_sea.c).
+# Measured seas (server/sim/sea_spectrum.c, sea_model.c): spectrum "measured" against its
+# targets, measured from the simulated surface (tests/test_sea.c).
 #   make test-sea               the whole suite, ~8 s (figures on every line)
 #   make test-sea-asan          the same with ASan+UBSan
 #   make test-sea-valgrind      a reduced run (OCEAN_TEST_QUICK=1) under valgrind
