@@ -58,7 +58,8 @@ struct ctl_limits {
 
 enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING,
                 CTL_QUERY, CTL_PROBE /* members checked by query_msg.c */, CTL_NAME,
-                CTL_RENDER /* members checked by render_msg.c */, CTL_RENDER_CANCEL };
+                CTL_RENDER /* members checked by render_msg.c */, CTL_RENDER_CANCEL,
+                CTL_LAUNCH, CTL_STEER, CTL_REMOVE, CTL_CLAIM /* floating bodies: members checked by body_msg.c */ };
 
 /* Display names (PROTOCOL.md §7.1 `name`): at most CTL_NAME_MAX_CHARS code
  * points of printable Unicode, UTF-8; CTL_NAME_BYTES holds any valid one. */

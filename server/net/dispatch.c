@@ -704,6 +704,7 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
     case CTL_NAME: /* anyone may name themselves: the name only labels their own changes */
         snprintf(s->name, sizeof s->name, "%s", m.name);
         session_queue_json(s, control_named_msg(s->name, m.id));
+        body_net_renamed(n, s); /* its bodies show the new name */
         break;
     case CTL_QUERY:
         dispatch_query(n, s, m.root, m.id, text, len);
@@ -716,6 +717,12 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         break;
     case CTL_RENDER_CANCEL:
         renders_cancel(n, s);
+        break;
+    case CTL_LAUNCH:
+    case CTL_STEER:
+    case CTL_REMOVE:
+    case CTL_CLAIM: /* floating bodies (body_net.c) */
+        body_net_dispatch(n, s, &m);
         break;
     }
     ctl_msg_free(&m);

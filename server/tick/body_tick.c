@@ -1,0 +1,502 @@
+/* body_tick.c — the floating bodies in the tick pipeline (bodies.h does the
+ * physics). The producer owns the world: right after ocean_step of a tick it
+ * applies the requests that came in (sim_body_submit), steps every body on
+ * that tick's grids of every cascade, and publishes the tick's bodies (struct
+ * body_snap: full states for the lws thread and the state file, and the BODY
+ * section for the tick's frame, PROTOCOL.md §3.5). docs/threads.md has the
+ * contract. */
+#include "tick_internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <cjson/cJSON.h>
+
+#include "body_msg.h"
+#include "clock.h"
+#include "log.h"
+#include "metrics.h"
+#include "oc_proto.h"
+#include "probe.h"
+
+/* A body step after a long pause of the producer (a change of N, the
+ * machine stalling) integrates at most this much sim time: the bodies then
+ * lag the sea's clock by the rest, which nobody sees, instead of one tick
+ * paying for hundreds of substeps. */
+#define BODY_MAX_STEP_S 0.5
+#define BODY_MAX_GONE 64    /* bodies reported sunk per tick (more are still removed, and reported later as gone) */
+
+struct body_sim {
+    struct body_world *w;
+    double t_last;              /* sim time the bodies were last stepped to */
+    bool had_bodies;            /* the last tick published some: an empty world is published once */
+    uint32_t *adrift;           /* ids whose owner is gone (the record's adrift flag), unordered */
+    int nadrift, capacity;
+    /* The previous tick's height of every cascade (one block): the substeps
+     * between two ticks see the sea move from one to the other. */
+    float *prev;
+    size_t prev_cap;
+    struct probe_grids prev_g;
+    double prev_t;
+    bool have_prev;
+};
+
+/* ---- snapshots ---- */
+
+void body_snap_ref(struct body_snap *b) { atomic_fetch_add(&b->refs, 1); }
+
+void body_snap_unref(struct body_snap *b)
+{
+    if (b && atomic_fetch_sub(&b->refs, 1) == 1)
+        free(b); /* one block: the struct, its states and its section */
+}
+
+/* ---- the network side's calls ---- */
+
+void sim_body_submit(struct sim *s, struct sim_body_cmd *c)
+{
+    c->next = NULL;
+    pthread_mutex_lock(&s->lock);
+    *s->body_cmds_tail = c;
+    s->body_cmds_tail = &c->next;
+    pthread_mutex_unlock(&s->lock);
+}
+
+struct sim_body_cmd *sim_body_take_answers(struct sim *s)
+{
+    pthread_mutex_lock(&s->lock);
+    struct sim_body_cmd *a = s->body_answers;
+    s->body_answers = NULL;
+    s->body_answers_tail = &s->body_answers;
+    pthread_mutex_unlock(&s->lock);
+    return a;
+}
+
+struct body_snap *sim_bodies_latest(struct sim *s)
+{
+    pthread_mutex_lock(&s->lock);
+    struct body_snap *b = s->bodies_latest;
+    if (b)
+        body_snap_ref(b);
+    pthread_mutex_unlock(&s->lock);
+    return b;
+}
+
+int sim_bodies_restored(struct sim *s) { return s->bodies_restored; }
+
+bool body_wanted_locked(struct sim *s) { return atomic_load(&s->body_count) > 0 || s->body_cmds; }
+
+/* What the bodies read of a tick: the height of every cascade, and the
+ * displacement of cascade 0 only. A finer cascade's displacement is
+ * millimetres to centimetres (PROTOCOL.md §4.1), below what bilinear
+ * interpolation on a 1 m grid resolves, and stepping it would cost the tick
+ * four more inverse FFTs (measured: 2 ms of a 5.4 ms tick at N = 256 with one
+ * viewer of cascade 0); the fine heights are stepped anyway whenever a web
+ * page watches (it subscribes to them). A fixed rule, not "whatever was
+ * stepped": the bodies' motion must not depend on who watches. */
+#define BODY_FIELDS_0 (OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_DX) | OCEAN_FIELD_BIT(OCEAN_DZ))
+#define BODY_FIELDS_FINE OCEAN_FIELD_BIT(OCEAN_HEIGHT)
+
+void body_want(struct frame_want *w)
+{
+    w->cfields[0] |= BODY_FIELDS_0;
+    for (int c = 1; c < OCEAN_MAX_CASCADES; c++)
+        w->cfields[c] |= BODY_FIELDS_FINE;
+    w->fields |= BODY_FIELDS_0;
+}
+
+/* ---- the world ---- */
+
+static void adrift_set(struct body_sim *b, uint32_t id, bool on)
+{
+    for (int i = 0; i < b->nadrift; i++)
+        if (b->adrift[i] == id) {
+            if (!on)
+                b->adrift[i] = b->adrift[--b->nadrift];
+            return;
+        }
+    if (on && b->nadrift < b->capacity)
+        b->adrift[b->nadrift++] = id;
+}
+
+static bool is_adrift(const struct body_sim *b, uint32_t id)
+{
+    for (int i = 0; i < b->nadrift; i++)
+        if (b->adrift[i] == id)
+            return true;
+    return false;
+}
+
+/* Restore every saved body, or none: a state file with one bad body must
+ * not start half a scene. */
+static int restore_all(struct body_sim *b, const struct sim_config *cfg, char *err, size_t errlen)
+{
+    for (int i = 0; i < cfg->nrestore; i++) {
+        enum body_error e = body_world_restore(b->w, &cfg->restore[i]);
+        if (e != BODY_OK) {
+            snprintf(err, errlen, "saved body %u refused (%s)", cfg->restore[i].id, body_error_name(e));
+            return -1;
+        }
+        adrift_set(b, cfg->restore[i].id, true); /* its owner has to claim it again */
+    }
+    /* Ids are never reused across restarts, even those of bodies removed
+     * before it. The library issues ids above every restored one, so a
+     * placeholder with the last id issued, removed at once, moves its
+     * counter on (bodies.h has no call to set it). */
+    uint64_t want = cfg->restore_next_id, next = body_world_next_id(b->w);
+    if (want > 1 && next != 0 && next < want) {
+        struct body_state ph = { .id = (uint32_t)(want - 1), .kind = &body_kinds()[0], .quat = { 1, 0, 0, 0 } };
+        if (body_world_restore(b->w, &ph) == BODY_OK)
+            body_remove(b->w, ph.id);
+    }
+    return 0;
+}
+
+struct body_sim *body_sim_new(const struct sim_config *cfg, int *restored, char *err, size_t errlen)
+{
+    *restored = 0;
+    int cap = cfg->max_bodies > 0 ? cfg->max_bodies : 1;
+    struct body_sim *b = calloc(1, sizeof *b);
+    if (b) {
+        b->capacity = cap;
+        b->adrift = calloc((size_t)cap, sizeof *b->adrift);
+        b->w = body_world_new(cap);
+    }
+    if (!b || !b->adrift || !b->w) {
+        body_sim_free(b);
+        snprintf(err, errlen, "out of memory (bodies)");
+        return NULL;
+    }
+    if (cfg->nrestore > cap) {
+        LOGW("bodies: the state holds %d bodies, more than --max-bodies %d: none restored", cfg->nrestore, cap);
+    } else if (restore_all(b, cfg, err, errlen) != 0) {
+        LOGW("bodies: %s: none restored", err);
+        body_world_free(b->w);
+        b->nadrift = 0;
+        if (!(b->w = body_world_new(cap))) {
+            body_sim_free(b);
+            snprintf(err, errlen, "out of memory (bodies)");
+            return NULL;
+        }
+    } else {
+        *restored = cfg->nrestore;
+    }
+    b->t_last = cfg->start_time;
+    return b;
+}
+
+void body_sim_free(struct body_sim *b)
+{
+    if (!b)
+        return;
+    body_world_free(b->w);
+    free(b->adrift);
+    free(b->prev);
+    free(b);
+}
+
+/* ---- the sea the bodies meet ---- */
+
+/* Bilinear interpolation of an n x n periodic grid (n a power of two) at
+ * grid coordinates (u, v): u along x (columns), v along z (rows). */
+static inline double bilinear(const float *g, int n, double u, double v)
+{
+    double fu = floor(u), fv = floor(v), a = u - fu, c = v - fv;
+    int m = n - 1, i0 = (int)fu & m, j0 = (int)fv & m, i1 = (i0 + 1) & m, j1 = (j0 + 1) & m;
+    const float *r0 = g + (size_t)j0 * n, *r1 = g + (size_t)j1 * n;
+    return (1 - c) * ((1 - a) * r0[i0] + a * r0[i1]) + c * ((1 - a) * r1[i0] + a * r1[i1]);
+}
+
+struct sea_ctx {
+    const struct probe_grids *cur, *prev; /* prev NULL: no earlier tick of the same grids */
+    double t_cur, t_prev;
+};
+
+/* The displaced surface above each world point, the heights of every
+ * cascade summed: bilinear on the tick's grids (probe_eval's Lanczos-3 costs
+ * 9x the taps, too much for every hull point of 64 bodies at every substep),
+ * the source point found by three fixed-point steps x0 = x - D(x0) on
+ * cascade 0's displacement (body_want says why only its). dhdt is a finite difference with the previous tick's grids
+ * at the same source point: the substeps of one step lie between those two
+ * ticks, so the height is interpolated linearly in time and dhdt is the
+ * slope of that line, which keeps the water a body sees consistent with its
+ * own velocity (an exact time derivative would need one more inverse FFT per
+ * cascade and tick; the drift of the source point itself is left out, a
+ * second-order term). */
+static int sea_sample(void *ctx, double t, int n, const double (*xz)[2], double *height, double *dhdt)
+{
+    const struct sea_ctx *c = ctx;
+    const struct probe_grids *g = c->cur, *p = c->prev;
+    const int N = g->n;
+    double span = c->t_cur - c->t_prev, a = 1;
+    if (p && span > 0)
+        a = fmin(fmax((t - c->t_prev) / span, 0), 1);
+    double scale[OCEAN_MAX_CASCADES];
+    for (int k = 0; k < g->ncasc; k++)
+        scale[k] = N / g->patch[k];
+    for (int i = 0; i < n; i++) {
+        const double x = xz[i][0], z = xz[i][1];
+        double x0 = x, z0 = z;
+        for (int it = 0; it < 3; it++) {
+            x0 = x - bilinear(g->dx[0], N, x0 * scale[0], z0 * scale[0]);
+            z0 = z - bilinear(g->dz[0], N, x0 * scale[0], z0 * scale[0]);
+        }
+        double hc = 0, hp = 0;
+        for (int k = 0; k < g->ncasc; k++) {
+            hc += bilinear(g->h[k], N, x0 * scale[k], z0 * scale[k]);
+            if (p)
+                hp += bilinear(p->h[k], N, x0 * scale[k], z0 * scale[k]);
+        }
+        if (!p)
+            hp = hc;
+        height[i] = hp + a * (hc - hp);
+        dhdt[i] = p && span > 0 ? (hc - hp) / span : 0;
+    }
+    return 0;
+}
+
+/* This tick's grids, as the library left them after the step (before the
+ * frame job takes them): every cascade must have been stepped for height,
+ * dx and dz (a tick planned before the first request came may not be). */
+static bool tick_grids(const struct sim *s, const struct prod_job *pj, struct probe_grids *g)
+{
+    memset(g, 0, sizeof *g);
+    g->n = ocean_resolution(s->ocean);
+    g->ncasc = ocean_cascades(s->ocean);
+    for (int c = 0; c < g->ncasc; c++) {
+        unsigned need = c == 0 ? BODY_FIELDS_0 : BODY_FIELDS_FINE;
+        if ((pj->want.cfields[c] & need) != need)
+            return false;
+        g->patch[c] = ocean_cascade_patch(pj->patch_size, c);
+        g->h[c] = ocean_cascade_field(s->ocean, c, OCEAN_HEIGHT);
+        if (!g->h[c])
+            return false;
+    }
+    g->dx[0] = ocean_cascade_field(s->ocean, 0, OCEAN_DX);
+    g->dz[0] = ocean_cascade_field(s->ocean, 0, OCEAN_DZ);
+    return g->n > 0 && g->ncasc > 0 && g->dx[0] && g->dz[0];
+}
+
+/* Keep this tick's heights for the next one's dhdt (one copy of N^2 floats
+ * per cascade: the displacement of the previous tick is not read). */
+static void keep_grids(struct body_sim *b, const struct probe_grids *g, double t)
+{
+    size_t side = (size_t)g->n * g->n, need = side * (size_t)g->ncasc;
+    if (b->prev_cap < need) {
+        free(b->prev);
+        b->prev = malloc(need * sizeof(float));
+        b->prev_cap = b->prev ? need : 0;
+    }
+    b->have_prev = b->prev != NULL;
+    if (!b->have_prev)
+        return;
+    b->prev_g = *g;
+    for (int c = 0; c < g->ncasc; c++) {
+        float *h = b->prev + (size_t)c * side;
+        memcpy(h, g->h[c], side * sizeof(float));
+        b->prev_g.h[c] = h;
+        b->prev_g.dx[c] = b->prev_g.dz[c] = NULL;
+    }
+    b->prev_t = t;
+}
+
+static bool same_grids(const struct probe_grids *a, const struct probe_grids *b)
+{
+    if (a->n != b->n || a->ncasc != b->ncasc)
+        return false;
+    for (int c = 0; c < a->ncasc; c++)
+        if (a->patch[c] != b->patch[c])
+            return false;
+    return true;
+}
+
+/* ---- one tick ---- */
+
+/* The control now in force of body id (a steer that gives one member keeps the other). */
+static bool current_control(const struct body_world *w, uint32_t id, struct body_control *out)
+{
+    struct body_state st;
+    for (int i = 0, n = body_world_count(w); i < n; i++)
+        if (body_world_get(w, i, &st) == 0 && st.id == id) {
+            *out = st.control;
+            return true;
+        }
+    return false;
+}
+
+static void apply(struct body_sim *b, struct sim_body_cmd *c)
+{
+    struct body_control ctl;
+    switch (c->op) {
+    case SIM_BODY_LAUNCH:
+        c->status = body_launch(b->w, c->kind, c->x, c->z, c->heading, &c->body);
+        break;
+    case SIM_BODY_STEER:
+        if (!current_control(b->w, c->body, &ctl)) {
+            c->status = BODY_ERR_NOT_FOUND;
+            break;
+        }
+        if (c->has_throttle)
+            ctl.throttle = c->control.throttle;
+        if (c->has_rudder)
+            ctl.rudder = c->control.rudder;
+        c->status = body_steer(b->w, c->body, &ctl);
+        break;
+    case SIM_BODY_REMOVE:
+        c->status = body_remove(b->w, c->body);
+        if (c->status == BODY_OK)
+            adrift_set(b, c->body, false);
+        break;
+    case SIM_BODY_ADRIFT:
+        if (!current_control(b->w, c->body, &ctl)) {
+            c->status = BODY_ERR_NOT_FOUND;
+            break;
+        }
+        adrift_set(b, c->body, c->adrift);
+        c->status = c->stop ? body_steer(b->w, c->body, &(struct body_control){ 0, 0 }) : BODY_OK;
+        break;
+    case SIM_BODY_GONE:
+        c->status = BODY_OK;
+        break;
+    }
+}
+
+static int8_t steer_byte(double v)
+{
+    double r = round(fmin(fmax(v, -1), 1) * 127);
+    return (int8_t)r;
+}
+
+/* The tick's bodies in one block: the struct, the states, the BODY section. */
+static struct body_snap *snapshot(const struct body_sim *b, const struct prod_job *pj)
+{
+    int n = body_world_count(b->w);
+    size_t states = (size_t)n * sizeof(struct body_state), section = n ? oc_body_section_size(n) : 0;
+    size_t head = (sizeof(struct body_snap) + 15) & ~(size_t)15;
+    struct body_snap *snap = malloc(head + states + section + (size_t)n * sizeof(struct oc_body_record));
+    if (!snap)
+        return NULL;
+    atomic_init(&snap->refs, 1);
+    snap->seq = pj->seq;
+    snap->sim_time = pj->sim_time;
+    uint32_t next = body_world_next_id(b->w);
+    snap->next_id = next ? next : (uint64_t)UINT32_MAX + 1; /* 0: the last id was issued */
+    snap->count = n;
+    snap->states = (struct body_state *)((char *)snap + head);
+    snap->section = n ? (uint8_t *)snap->states + states : NULL;
+    snap->section_len = section;
+    /* The records are built in the block's tail, then written out (the tail
+     * is spare room afterwards: freed with the rest). */
+    struct oc_body_record *rec = (struct oc_body_record *)((uint8_t *)snap->states + states + section);
+    for (int i = 0; i < n; i++) {
+        struct body_state *st = &snap->states[i];
+        body_world_get(b->w, i, st);
+        int kind = body_kind_index(st->kind);
+        rec[i] = (struct oc_body_record){
+            .id = st->id,
+            .kind = (uint8_t)(kind < 0 ? 255 : kind),
+            .flags = (uint8_t)((is_adrift(b, st->id) ? OC_BODY_FLAG_ADRIFT : 0) |
+                               (st->kind->powered ? OC_BODY_FLAG_POWERED : 0)),
+            .throttle = steer_byte(st->control.throttle),
+            .rudder = steer_byte(st->control.rudder),
+        };
+        for (int k = 0; k < 3; k++) {
+            rec[i].pos[k] = (float)st->pos[k];
+            rec[i].vel[k] = (float)st->vel[k];
+        }
+        for (int k = 0; k < 4; k++)
+            rec[i].quat[k] = (float)st->quat[k];
+    }
+    if (n)
+        oc_body_section_write(snap->section, rec, n);
+    return snap;
+}
+
+struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
+{
+    struct body_sim *b = s->bodies;
+    if (!b)
+        return NULL;
+    pthread_mutex_lock(&s->lock);
+    struct sim_body_cmd *cmds = s->body_cmds;
+    s->body_cmds = NULL;
+    s->body_cmds_tail = &s->body_cmds;
+    pthread_mutex_unlock(&s->lock);
+    if (!cmds && body_world_count(b->w) == 0 && !b->had_bodies) {
+        b->t_last = pj->sim_time;
+        return NULL;
+    }
+    double t0 = mono_now();
+    if (body_world_count(b->w) == 0)
+        b->t_last = pj->sim_time; /* a first body starts now, not where the last one stopped */
+    struct sim_body_cmd *answers = cmds, **tail = &answers;
+    for (struct sim_body_cmd *c = cmds; c; c = c->next) {
+        apply(b, c);
+        c->seq = pj->seq;
+        tail = &c->next;
+    }
+
+    struct probe_grids g;
+    if (body_world_count(b->w) > 0 && tick_grids(s, pj, &g)) {
+        double dt = fmin(fmax(pj->sim_time - b->t_last, 0), BODY_MAX_STEP_S);
+        bool prev = b->have_prev && same_grids(&b->prev_g, &g) && b->prev_t < pj->sim_time;
+        struct sea_ctx ctx = { .cur = &g, .prev = prev ? &b->prev_g : NULL, .t_cur = pj->sim_time, .t_prev = b->prev_t };
+        struct body_sea sea = { .sample = sea_sample, .ctx = &ctx };
+        uint32_t ids[BODY_MAX_GONE];
+        enum body_gone why[BODY_MAX_GONE];
+        int gone = body_world_step(b->w, &sea, pj->sim_time, dt, ids, why, BODY_MAX_GONE);
+        for (int i = 0; i < gone; i++) {
+            adrift_set(b, ids[i], false);
+            struct sim_body_cmd *c = calloc(1, sizeof *c);
+            if (!c) {
+                LOGE("bodies: out of memory reporting body %u sunk", ids[i]);
+                continue;
+            }
+            c->op = SIM_BODY_GONE;
+            c->body = ids[i];
+            c->seq = pj->seq;
+            *tail = c;
+            tail = &c->next;
+        }
+        b->t_last = pj->sim_time;
+        keep_grids(b, &g, pj->sim_time);
+    } else if (body_world_count(b->w) > 0) {
+        b->have_prev = false; /* this tick's grids are not all there: the next step is a longer one */
+    }
+
+    struct body_snap *snap = snapshot(b, pj);
+    int count = body_world_count(b->w);
+    b->had_bodies = count > 0;
+    atomic_store(&s->body_count, count);
+    atomic_store(&g_metrics.bodies, count);
+    histogram_observe(&g_metrics.body_step_seconds, mono_now() - t0);
+    pthread_mutex_lock(&s->lock);
+    struct body_snap *old = s->bodies_latest;
+    s->bodies_latest = snap;
+    if (snap)
+        body_snap_ref(snap); /* one for the frame */
+    *s->body_answers_tail = answers;
+    if (answers)
+        s->body_answers_tail = tail;
+    pthread_mutex_unlock(&s->lock);
+    body_snap_unref(old);
+    if (answers && s->cfg.wake) /* a tick without a frame wakes lws only before its step: say it now */
+        s->cfg.wake(s->cfg.wake_user);
+    if (snap && !snap->count) {
+        body_snap_unref(snap); /* no section for the frame */
+        return NULL;
+    }
+    return snap;
+}
+
+void body_cmds_free(struct sim_body_cmd *c)
+{
+    while (c) {
+        struct sim_body_cmd *next = c->next;
+        cJSON_Delete(c->reply_id);
+        free(c);
+        c = next;
+    }
+}
