@@ -80,7 +80,7 @@ async def phase(d, name, bodies, windows, counts):
 
 
 async def run(args):
-    d = oceand_proc.Oceand(args.oceand, "--resolution", "256", "--state-file", "none", "--bodies-per-session", "64",
+    d = oceand_proc.Oceand(args.oceand, "--resolution", "256", "--state-file", "none", *args.extra, "--bodies-per-session", "64",
                            "--max-bodies", "64", "--launch-rate", "600", "--control-rate", "1000",
                            "--control-burst", "1000")
     try:
@@ -133,6 +133,7 @@ def main():
     ap.add_argument("--bodies", type=int, default=64)
     ap.add_argument("--windows", type=int, default=15, help="1 s windows per phase")
     ap.add_argument("--warm", type=float, default=2.0, help="s before each phase")
+    ap.add_argument("extra", nargs="*", help="more daemon options, after --, e.g. -- --cascades 1")
     args = ap.parse_args()
     asyncio.run(run(args))
 

@@ -199,14 +199,41 @@ void body_sim_free(struct body_sim *b)
 
 /* ---- the sea the bodies meet ---- */
 
-/* Bilinear interpolation of an n x n periodic grid (n a power of two) at
- * grid coordinates (u, v): u along x (columns), v along z (rows). */
-static inline double bilinear(const float *g, int n, double u, double v)
+/* Bilinear interpolation of n x n periodic grids (n a power of two) at grid
+ * coordinates (u, v): u along x (columns), v along z (rows). The taps and
+ * weights are found once (tap_at) and read from every grid of the same
+ * cascade (tap_get): dx and dz, this tick's height and the last one's. */
+struct tap {
+    int i0, i1;                 /* columns */
+    size_t r0, r1;              /* offsets of the two rows */
+    double a, c;                /* weights along x and z */
+};
+
+static inline void tap_at(struct tap *t, int n, double u, double v)
 {
-    double fu = floor(u), fv = floor(v), a = u - fu, c = v - fv;
-    int m = n - 1, i0 = (int)fu & m, j0 = (int)fv & m, i1 = (i0 + 1) & m, j1 = (j0 + 1) & m;
-    const float *r0 = g + (size_t)j0 * n, *r1 = g + (size_t)j1 * n;
-    return (1 - c) * ((1 - a) * r0[i0] + a * r0[i1]) + c * ((1 - a) * r1[i0] + a * r1[i1]);
+    /* An offset of whole periods keeps both positive, so the conversion to
+     * an integer is the floor (cheaper than floor() on hot paths); points
+     * further than 65536 patches out are clamped there (bodies stay within
+     * a few km). */
+    const double off = (double)n * 65536.0;
+    u = fmin(fmax(u + off, 0), 2 * off);
+    v = fmin(fmax(v + off, 0), 2 * off);
+    long iu = (long)u, iv = (long)v;
+    int m = n - 1, i0 = (int)(iu & m), j0 = (int)(iv & m);
+    t->a = u - (double)iu;
+    t->c = v - (double)iv;
+    t->i0 = i0;
+    t->i1 = (i0 + 1) & m;
+    t->r0 = (size_t)j0 * (size_t)n;
+    t->r1 = (size_t)((j0 + 1) & m) * (size_t)n;
+}
+
+static inline double tap_get(const struct tap *t, const float *g)
+{
+    const float *p0 = g + t->r0, *p1 = g + t->r1;
+    double top = p0[t->i0] + t->a * (p0[t->i1] - p0[t->i0]);
+    double bot = p1[t->i0] + t->a * (p1[t->i1] - p1[t->i0]);
+    return top + t->c * (bot - top);
 }
 
 struct sea_ctx {
@@ -216,38 +243,42 @@ struct sea_ctx {
 
 /* The displaced surface above each world point, the heights of every
  * cascade summed: bilinear on the tick's grids (probe_eval's Lanczos-3 costs
- * 9x the taps, too much for every hull point of 64 bodies at every substep),
- * the source point found by three fixed-point steps x0 = x - D(x0) on
- * cascade 0's displacement (body_want says why only its). dhdt is a finite difference with the previous tick's grids
- * at the same source point: the substeps of one step lie between those two
- * ticks, so the height is interpolated linearly in time and dhdt is the
- * slope of that line, which keeps the water a body sees consistent with its
- * own velocity (an exact time derivative would need one more inverse FFT per
- * cascade and tick; the drift of the source point itself is left out, a
- * second-order term). */
+ * 9x the taps, too much for up to 64 hull points of each of 64 bodies at
+ * every substep), the source point found by two fixed-point steps
+ * x0 = x - D(x0) on cascade 0's displacement (body_want says why only its).
+ * dhdt is a finite difference with the previous tick's grids at the same
+ * source point: the substeps of one step lie between those two ticks, so
+ * the height is interpolated linearly in time and dhdt is the slope of that
+ * line, which keeps the water a body sees consistent with its own velocity
+ * (an exact time derivative would need one more inverse FFT per cascade and
+ * tick; the drift of the source point itself is left out, a second-order
+ * term). */
 static int sea_sample(void *ctx, double t, int n, const double (*xz)[2], double *height, double *dhdt)
 {
     const struct sea_ctx *c = ctx;
     const struct probe_grids *g = c->cur, *p = c->prev;
-    const int N = g->n;
+    const int N = g->n, nc = g->ncasc;
     double span = c->t_cur - c->t_prev, a = 1;
     if (p && span > 0)
         a = fmin(fmax((t - c->t_prev) / span, 0), 1);
     double scale[OCEAN_MAX_CASCADES];
-    for (int k = 0; k < g->ncasc; k++)
+    for (int k = 0; k < nc; k++)
         scale[k] = N / g->patch[k];
     for (int i = 0; i < n; i++) {
         const double x = xz[i][0], z = xz[i][1];
         double x0 = x, z0 = z;
-        for (int it = 0; it < 3; it++) {
-            x0 = x - bilinear(g->dx[0], N, x0 * scale[0], z0 * scale[0]);
-            z0 = z - bilinear(g->dz[0], N, x0 * scale[0], z0 * scale[0]);
+        struct tap tp;
+        for (int it = 0; it < 2; it++) {
+            tap_at(&tp, N, x0 * scale[0], z0 * scale[0]);
+            x0 = x - tap_get(&tp, g->dx[0]);
+            z0 = z - tap_get(&tp, g->dz[0]);
         }
         double hc = 0, hp = 0;
-        for (int k = 0; k < g->ncasc; k++) {
-            hc += bilinear(g->h[k], N, x0 * scale[k], z0 * scale[k]);
+        for (int k = 0; k < nc; k++) {
+            tap_at(&tp, N, x0 * scale[k], z0 * scale[k]);
+            hc += tap_get(&tp, g->h[k]);
             if (p)
-                hp += bilinear(p->h[k], N, x0 * scale[k], z0 * scale[k]);
+                hp += tap_get(&tp, p->h[k]);
         }
         if (!p)
             hp = hc;
