@@ -1293,6 +1293,47 @@ static void test_bodies(void)
           "bodies: %s", t);
     free(t);
     cJSON_Delete(id);
+    /* proto/vectors/control: each request parses, each reply is what the builders make. */
+    static const char *const requests[] = { "16_launch.json", "18_steer.json", "20_remove.json", "22_claim.json" };
+    for (size_t i = 0; i < sizeof requests / sizeof requests[0]; i++) {
+        char vpath[128], verr[256], *vt;
+        size_t vlen;
+        snprintf(vpath, sizeof vpath, "proto/vectors/control/%s", requests[i]);
+        if (file_read_all(vpath, 1 << 16, &vt, &vlen, verr, sizeof verr) != 0) {
+            CHECK(0, "vector: %s", verr);
+            continue;
+        }
+        struct ctl_msg m;
+        struct ctl_error ve;
+        struct body_req r;
+        CHECK(control_parse(vt, vlen, &m, NULL, &ve) == 0 && body_parse(m.root, m.type, &r, &ve) == 0, "%s: %s",
+              requests[i], ve.message);
+        ctl_msg_free(&m);
+        free(vt);
+    }
+    cJSON *vid[4] = { cJSON_CreateNumber(1), cJSON_CreateNumber(2), cJSON_CreateNumber(3), cJSON_CreateNumber(4) };
+    struct body_entry ve12 = { .body = 12, .kind = body_kind_find("boat"), .owner = "c7-k3qf", .name = "Ana" };
+    struct body_gone_entry vg5 = { .body = 5, .reason = "sunk" };
+    struct { const char *file; cJSON *msg; } replies[] = {
+        { "17_launched.json", body_launched_msg(vid[0], 12, "9f86d081884c7d659a2feaa0c55ad015") },
+        { "19_steered.json", body_ack_msg("steered", vid[1], 12) },
+        { "21_removed.json", body_ack_msg("removed", vid[2], 12) },
+        { "23_claimed.json", body_ack_msg("claimed", vid[3], 12) },
+        { "24_bodies.json", bodies_msg(4711, 1, &ve12, 1, &vg5) },
+    };
+    for (size_t i = 0; i < sizeof replies / sizeof replies[0]; i++) {
+        char vpath[128], verr[256], *vt;
+        size_t vlen;
+        snprintf(vpath, sizeof vpath, "proto/vectors/control/%s", replies[i].file);
+        cJSON *want = file_read_all(vpath, 1 << 16, &vt, &vlen, verr, sizeof verr) == 0 ? cJSON_Parse(vt) : NULL;
+        CHECK(want && cJSON_Compare(want, replies[i].msg, 1), "%s is not what the server sends", replies[i].file);
+        if (want)
+            free(vt);
+        cJSON_Delete(want);
+        cJSON_Delete(replies[i].msg);
+    }
+    for (int i = 0; i < 4; i++)
+        cJSON_Delete(vid[i]);
     cJSON *kinds = body_kinds_array();
     CHECK(cJSON_GetArraySize(kinds) == BODY_KIND_COUNT, "body_kinds rows");
     cJSON_Delete(kinds);
