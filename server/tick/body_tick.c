@@ -34,13 +34,18 @@ struct body_sim {
     bool had_bodies;            /* the last tick published some: an empty world is published once */
     uint32_t *adrift;           /* ids whose owner is gone (the record's adrift flag), unordered */
     int nadrift, capacity;
-    /* The previous tick's height of every cascade (one block): the substeps
-     * between two ticks see the sea move from one to the other. */
-    float *prev;
-    size_t prev_cap;
-    struct probe_grids prev_g;
-    double prev_t;
-    bool have_prev;
+    /* Every cascade's height of this tick and of the previous one, side by
+     * side ([2i] now, [2i + 1] the tick before, one block): the substeps
+     * between two ticks see the sea move from one to the other, and a lookup
+     * finds both in one cache line (the fine cascades' points are far apart
+     * on their grids: their misses were most of the step). */
+    float *pair;
+    size_t pair_cap;
+    struct probe_grids pair_g;  /* the grids they came from (n, cascades, patches) */
+    double pair_t;              /* the sim time of the [2i] heights */
+    double pair_t_prev;         /* ...and of the [2i + 1] ones */
+    bool have_pair;
+    bool pair_moving;           /* the two halves are two ticks (else both this one) */
 };
 
 /* ---- snapshots ---- */
@@ -193,7 +198,7 @@ void body_sim_free(struct body_sim *b)
         return;
     body_world_free(b->w);
     free(b->adrift);
-    free(b->prev);
+    free(b->pair);
     free(b);
 }
 
@@ -236,8 +241,21 @@ static inline double tap_get(const struct tap *t, const float *g)
     return top + t->c * (bot - top);
 }
 
+/* The same on a grid of pairs (body_sim.pair): out[0] of [2i], out[1] of [2i + 1]. */
+static inline void tap_get2(const struct tap *t, const float *g, double out[2])
+{
+    for (int k = 0; k < 2; k++) {
+        const float *p0 = g + 2 * t->r0 + k, *p1 = g + 2 * t->r1 + k;
+        double top = p0[2 * t->i0] + t->a * (p0[2 * t->i1] - p0[2 * t->i0]);
+        double bot = p1[2 * t->i0] + t->a * (p1[2 * t->i1] - p1[2 * t->i0]);
+        out[k] = top + t->c * (bot - top);
+    }
+}
+
 struct sea_ctx {
-    const struct probe_grids *cur, *prev; /* prev NULL: no earlier tick of the same grids */
+    const struct probe_grids *g;          /* this tick's grids: cascade 0's dx, dz; the patches */
+    const float *pair[OCEAN_MAX_CASCADES]; /* each cascade's heights, now and the tick before */
+    bool moving;                          /* the pairs hold two ticks (else both halves are now) */
     double t_cur, t_prev;
 };
 
@@ -256,11 +274,11 @@ struct sea_ctx {
 static int sea_sample(void *ctx, double t, int n, const double (*xz)[2], double *height, double *dhdt)
 {
     const struct sea_ctx *c = ctx;
-    const struct probe_grids *g = c->cur, *p = c->prev;
+    const struct probe_grids *g = c->g;
     const int N = g->n, nc = g->ncasc;
-    double span = c->t_cur - c->t_prev, a = 1;
-    if (p && span > 0)
-        a = fmin(fmax((t - c->t_prev) / span, 0), 1);
+    const double span = c->t_cur - c->t_prev;
+    const bool moving = c->moving && span > 0;
+    const double a = moving ? fmin(fmax((t - c->t_prev) / span, 0), 1) : 1;
     double scale[OCEAN_MAX_CASCADES];
     for (int k = 0; k < nc; k++)
         scale[k] = N / g->patch[k];
@@ -273,17 +291,15 @@ static int sea_sample(void *ctx, double t, int n, const double (*xz)[2], double 
             x0 = x - tap_get(&tp, g->dx[0]);
             z0 = z - tap_get(&tp, g->dz[0]);
         }
-        double hc = 0, hp = 0;
+        double hc = 0, hp = 0, v[2];
         for (int k = 0; k < nc; k++) {
             tap_at(&tp, N, x0 * scale[k], z0 * scale[k]);
-            hc += tap_get(&tp, g->h[k]);
-            if (p)
-                hp += tap_get(&tp, p->h[k]);
+            tap_get2(&tp, c->pair[k], v);
+            hc += v[0];
+            hp += v[1];
         }
-        if (!p)
-            hp = hc;
         height[i] = hp + a * (hc - hp);
-        dhdt[i] = p && span > 0 ? (hc - hp) / span : 0;
+        dhdt[i] = moving ? (hc - hp) / span : 0;
     }
     return 0;
 }
@@ -310,27 +326,33 @@ static bool tick_grids(const struct sim *s, const struct prod_job *pj, struct pr
     return g->n > 0 && g->ncasc > 0 && g->dx[0] && g->dz[0];
 }
 
-/* Keep this tick's heights for the next one's dhdt (one copy of N^2 floats
- * per cascade: the displacement of the previous tick is not read). */
-static void keep_grids(struct body_sim *b, const struct probe_grids *g, double t)
+/* This tick's heights into the pairs, last tick's moved beside them (one
+ * pass over N^2 floats per cascade). moving = false: the pairs start afresh
+ * (the first tick, or new grids: N, cascades, patch), both halves now. */
+static bool update_pairs(struct body_sim *b, const struct probe_grids *g, bool moving)
 {
-    size_t side = (size_t)g->n * g->n, need = side * (size_t)g->ncasc;
-    if (b->prev_cap < need) {
-        free(b->prev);
-        b->prev = malloc(need * sizeof(float));
-        b->prev_cap = b->prev ? need : 0;
+    size_t side = (size_t)g->n * g->n, need = 2 * side * (size_t)g->ncasc;
+    if (b->pair_cap < need) {
+        free(b->pair);
+        b->pair = malloc(need * sizeof(float));
+        b->pair_cap = b->pair ? need : 0;
+        moving = false;
     }
-    b->have_prev = b->prev != NULL;
-    if (!b->have_prev)
-        return;
-    b->prev_g = *g;
+    if (!b->pair)
+        return false;
     for (int c = 0; c < g->ncasc; c++) {
-        float *h = b->prev + (size_t)c * side;
-        memcpy(h, g->h[c], side * sizeof(float));
-        b->prev_g.h[c] = h;
-        b->prev_g.dx[c] = b->prev_g.dz[c] = NULL;
+        float *q = b->pair + 2 * side * (size_t)c;
+        const float *h = g->h[c];
+        if (moving)
+            for (size_t i = 0; i < side; i++) {
+                q[2 * i + 1] = q[2 * i];
+                q[2 * i] = h[i];
+            }
+        else
+            for (size_t i = 0; i < side; i++)
+                q[2 * i] = q[2 * i + 1] = h[i];
     }
-    b->prev_t = t;
+    return true;
 }
 
 static bool same_grids(const struct probe_grids *a, const struct probe_grids *b)
@@ -470,10 +492,25 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
     }
 
     struct probe_grids g;
-    if (body_world_count(b->w) > 0 && tick_grids(s, pj, &g)) {
+    bool grids = body_world_count(b->w) > 0 && tick_grids(s, pj, &g);
+    if (grids) {
+        /* The pairs move on only from the bodies' last step (not from a tick long
+         * ago, before the world was empty) and only forward (paused: still). */
+        bool moving = b->have_pair && same_grids(&b->pair_g, &g) && b->pair_t == b->t_last &&
+                      b->pair_t < pj->sim_time;
+        double t_prev = moving ? b->pair_t : pj->sim_time;
+        /* Out of memory: no step this tick (the next one is longer). */
+        grids = b->have_pair = update_pairs(b, &g, moving);
+        b->pair_g = g;
+        b->pair_t = pj->sim_time;
+        b->pair_moving = moving;
+        b->pair_t_prev = t_prev;
+    }
+    if (grids) {
         double dt = fmin(fmax(pj->sim_time - b->t_last, 0), BODY_MAX_STEP_S);
-        bool prev = b->have_prev && same_grids(&b->prev_g, &g) && b->prev_t < pj->sim_time;
-        struct sea_ctx ctx = { .cur = &g, .prev = prev ? &b->prev_g : NULL, .t_cur = pj->sim_time, .t_prev = b->prev_t };
+        struct sea_ctx ctx = { .g = &g, .moving = b->pair_moving, .t_cur = pj->sim_time, .t_prev = b->pair_t_prev };
+        for (int c = 0; c < g.ncasc; c++)
+            ctx.pair[c] = b->pair + 2 * (size_t)g.n * g.n * (size_t)c;
         struct body_sea sea = { .sample = sea_sample, .ctx = &ctx };
         uint32_t ids[BODY_MAX_GONE];
         enum body_gone why[BODY_MAX_GONE];
@@ -492,9 +529,8 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
             tail = &c->next;
         }
         b->t_last = pj->sim_time;
-        keep_grids(b, &g, pj->sim_time);
     } else if (body_world_count(b->w) > 0) {
-        b->have_prev = false; /* this tick's grids are not all there: the next step is a longer one */
+        b->have_pair = false; /* this tick's grids are not all there: the next step is a longer one */
     }
 
     struct body_snap *snap = snapshot(b, pj);
