@@ -177,8 +177,10 @@ static void submit_change(struct net *n, struct session *s, const struct remote 
 {
     if (!replan_allowed(n, s, rm, changed, id))
         return;
-    if (name && s)
+    if (name && s) {
         snprintf(s->name, sizeof s->name, "%s", name);
+        body_net_renamed(n, s); /* its bodies show the new name */
+    }
     const char *by_name = name ? name : s ? s->name : "";
     if (!changed) {
         respond(s, rm, with_name(control_params_msg(&n->view, n->applied_version, 0, s ? s->client_id : rm->by, id),
