@@ -37,8 +37,9 @@ struct body_sim {
     /* Every cascade's height of this tick and of the previous one, side by
      * side ([2i] now, [2i + 1] the tick before, one block): the substeps
      * between two ticks see the sea move from one to the other, and a lookup
-     * finds both in one cache line (the fine cascades' points are far apart
-     * on their grids: their misses were most of the step). */
+     * finds both in one cache line (the fine cascades' hull points lie far
+     * apart on their grids). Measured against two separate grids: the same
+     * CPU time within this machine's noise (bench-bodies). */
     float *pair;
     size_t pair_cap;
     struct probe_grids pair_g;  /* the grids they came from (n, cascades, patches) */
