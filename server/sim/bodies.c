@@ -2,10 +2,12 @@
  * and the fixed-substep integration (docs/simulation.md, "Bodies").
  *
  * Per substep and body, in ascending id order: sample the sea at every
- * column's waterline point; per column, buoyancy of its submerged part at
- * that part's centroid and vertical drag against the water's vertical
- * velocity; gravity; the lumped horizontal forces (resistance, lateral
- * resistance, yaw damping, thrust, rudder) in the body frame; then
+ * column's waterline point; per column, the hydrostatic pressure on its
+ * submerged part (buoyancy, and the push down the surface's slope) at that
+ * part's centroid, the pressure of the accelerating water and vertical drag
+ * against the water's vertical velocity; the added mass moved by the water;
+ * gravity; the lumped horizontal forces (resistance, lateral resistance,
+ * yaw and rocking damping, thrust, rudder) in the body frame; then
  * semi-implicit Euler (velocities first, positions from the new ones) with
  * the mass and inertia plus added mass along the body axes, and the
  * quaternion renormalised. Plain sequential double arithmetic, + - * / and
@@ -16,6 +18,14 @@
 
 #include "bodies_internal.h"
 
+/* No fused multiply-add: a*b + c rounded twice, on every compiler and
+ * -march, so a standby built elsewhere continues the same bits. GCC in ISO
+ * C mode does not contract (and does not know the pragma); clang does by
+ * default where the target has FMA. */
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#endif
+
 #define RHO BODY_WATER_DENSITY
 #define G   BODY_GRAVITY
 
@@ -25,6 +35,7 @@ struct body {
     /* Scratch of one body_world_step (not state): the water's vertical
      * velocity at each column at the previous sample, for its acceleration. */
     double prev_dhdt[BODY_ELEMS_MAX];
+    bool prev_ok;
 };
 
 struct body_world {
@@ -254,8 +265,9 @@ static void surface_slope(int n, const double (*xz)[2], const double *eta, const
 
 /* Where each column meets the water at rest (its sample point), and the
  * sea there at time t; still water when there is no sea or it fails, and
- * in place of values that are not finite. */
-static void sample_sea(const struct body *b, const double r[3][3], const struct body_sea *sea, double t,
+ * in place of values that are not finite. Returns whether the sea gave
+ * its values (a still-water stand-in has no acceleration to tell). */
+static bool sample_sea(const struct body *b, const double r[3][3], const struct body_sea *sea, double t,
                        double (*xz)[2], double *eta, double *dhdt)
 {
     const struct body_model *m = &b->m;
@@ -266,21 +278,21 @@ static void sample_sea(const struct body *b, const double r[3][3], const struct 
         xz[i][0] = b->s.pos[0] + pw[0];
         xz[i][1] = b->s.pos[2] + pw[2];
     }
-    if (!sea || !sea->sample || sea->sample(sea->ctx, t, m->n, (const double (*)[2])xz, eta, dhdt) != 0)
-        for (int i = 0; i < m->n; i++)
-            eta[i] = dhdt[i] = 0;
+    bool ok = sea && sea->sample && sea->sample(sea->ctx, t, m->n, (const double (*)[2])xz, eta, dhdt) == 0;
     for (int i = 0; i < m->n; i++) {
-        if (!isfinite(eta[i]))
+        if (!ok || !isfinite(eta[i]))
             eta[i] = 0;
-        if (!isfinite(dhdt[i]))
+        if (!ok || !isfinite(dhdt[i]))
             dhdt[i] = 0;
     }
+    return ok;
 }
 
 /* The forces of one substep on body b at sim time t: world force f and
- * torque tq about the centre of mass; returns whether it is gone (sunk). */
+ * torque tq about the centre of mass, and *am_out the share of its added
+ * mass in force; returns whether it is gone (sunk). */
 static bool body_forces(struct body *b, const struct body_sea *sea, double t, double h_step, double f[3],
-                        double tq[3], double *wet_out)
+                        double tq[3], double *am_out)
 {
     const struct body_model *m = &b->m;
     const struct body_state *s = &b->s;
@@ -288,7 +300,8 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
     quat_matrix(s->quat, r);
 
     double xz[BODY_ELEMS_MAX][2], eta[BODY_ELEMS_MAX], dhdt[BODY_ELEMS_MAX];
-    sample_sea(b, r, sea, t, xz, eta, dhdt);
+    bool sea_ok = sample_sea(b, r, sea, t, xz, eta, dhdt), acc_ok = sea_ok && b->prev_ok;
+    b->prev_ok = sea_ok;
     double gx, gz;
     surface_slope(m->n, xz, eta, s->pos, &gx, &gz);
 
@@ -296,7 +309,7 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
      * lower end up (a capsized body's columns are upside down) and its
      * centroid on the axis, relative to the centre of mass. */
     double frac[BODY_ELEMS_MAX], cen[BODY_ELEMS_MAX][3];
-    double vsub = 0, deepest_dry = -INFINITY, area_sum = 0; /* deepest_dry: the column top least far under */
+    double vsub = 0, highest_top = -INFINITY, area_sum = 0; /* highest_top: above the surface at its column */
     bool all_under = true;
     for (int i = 0; i < m->n; i++) {
         const struct body_elem *e = &m->e[i];
@@ -310,21 +323,26 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
         for (int k = 0; k < 3; k++)
             cen[i][k] = rlo[k] + 0.5 * frac[i] * (rhi[k] - rlo[k]);
         all_under = all_under && frac[i] >= 1;
-        deepest_dry = fmax(deepest_dry, hi - eta[i]);
+        highest_top = fmax(highest_top, hi - eta[i]);
         vsub += e->area * (e->y1 - e->y0) * frac[i];
         area_sum += e->area;
     }
-    double am = clampd(2 * vsub / m->v_rest, 0, 1); /* the share of added mass in force */
+    /* The share of the added mass in force: full from half the rest
+     * displacement wet, none in the air. */
+    double am = clampd(2 * vsub / m->v_rest, 0, 1);
 
     f[0] = 0, f[1] = -m->mass * G, f[2] = 0;
     tq[0] = tq[1] = tq[2] = 0;
     double axis_y = r[1][1]; /* the vertical component of the body's +y */
+    double acc_mean = 0;     /* the water's vertical acceleration under the hull, by plan area */
     for (int i = 0; i < m->n; i++) {
         const struct body_elem *e = &m->e[i];
         /* The water's vertical acceleration here, from its velocity at the
-         * previous sample. */
-        double acc = (dhdt[i] - b->prev_dhdt[i]) / h_step;
+         * previous sample; none across a sample the sea did not give, and at
+         * most g (real waves break first: a glitch must not throw a body). */
+        double acc = acc_ok ? clampd((dhdt[i] - b->prev_dhdt[i]) / h_step, -G, G) : 0;
         b->prev_dhdt[i] = dhdt[i];
+        acc_mean += e->area / area_sum * acc;
         if (frac[i] <= 0)
             continue;
         const double *c = cen[i];
@@ -333,12 +351,9 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
          * part; its gradient is rho g (-d eta/dx, 1, -d eta/dz), so a
          * sloping surface also pushes the part down the slope. */
         double fy = RHO * G * vol, fx = -RHO * G * vol * gx, fz = -RHO * G * vol * gz;
-        /* The water accelerating around it: the pressure that accelerates
-         * the displaced water (Froude-Krylov, rho V a) and the added mass
-         * it drags along (a33 a, shared by plan area). With both, a body in
-         * a wave much longer than itself moves with the water: the heave
-         * resonance of the added mass is not excited. */
-        fy += (RHO * vol + am * m->added[1] * e->area / area_sum) * acc;
+        /* The pressure that accelerates the displaced water with the
+         * wave (Froude-Krylov, rho V a). */
+        fy += RHO * vol * acc;
         /* Vertical drag against the water's vertical velocity at the
          * centroid; it grows to full over wet_ref of wetted length. */
         double vc[3];
@@ -355,11 +370,15 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
         for (int k = 0; k < 3; k++)
             tq[k] += te[k];
     }
-    *wet_out = vsub;
+    /* The added mass the water drags along moves with it (a33 a, at the
+     * centre of mass: the heave added mass belongs to the whole hull). With
+     * the Froude-Krylov part, a body in a wave much longer than itself
+     * moves with the water: the heave resonance is not excited by it. */
+    f[1] += am * m->added[1] * acc_mean;
+    *am_out = am;
 
     /* Horizontal forces and yaw in the body frame, lumped at the centre of
      * mass, in proportion to how much of the body is in the water. */
-    double wet = am;
     double vb[3], wb[3];
     mat_t_vec(r, s->vel, vb);
     mat_t_vec(r, s->omega, wb);
@@ -368,6 +387,8 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
     fb[2] = -(m->surge_lin + m->surge_quad * fabs(u)) * u;
     fb[0] = -(m->sway_lin * fabs(u) + m->sway_quad * fabs(v)) * v;
     tb[1] = -(m->yaw_lin * fabs(u) + m->yaw_quad * fabs(yaw)) * yaw;
+    tb[0] = -m->rock_quad[0] * fabs(wb[0]) * wb[0];
+    tb[2] = -m->rock_quad[2] * fabs(wb[2]) * wb[2];
     if (b->s.kind->powered) {
         double th = s->control.throttle;
         fb[2] += m->thrust * (th >= 0 ? th : 0.5 * th);
@@ -378,8 +399,8 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
         tb[1] -= m->rudder_arm * side;
     }
     for (int k = 0; k < 3; k++) {
-        fb[k] *= wet;
-        tb[k] *= wet;
+        fb[k] *= am;
+        tb[k] *= am;
     }
     double fw[3], tw[3];
     mat_vec(r, fb, fw);
@@ -388,7 +409,7 @@ static bool body_forces(struct body *b, const struct body_sea *sea, double t, do
         f[k] += fw[k];
         tq[k] += tw[k];
     }
-    return !m->can_float && all_under && deepest_dry < -m->sink_margin;
+    return !m->can_float && all_under && highest_top < -m->sink_margin;
 }
 
 /* v = R diag(d)^-1 R^T p: a world vector through a body-diagonal inverse. */
@@ -432,37 +453,43 @@ static void quat_advance(double q[4], const double o[3], double h)
 
 /* One semi-implicit Euler substep of length h at sim time t. The mass
  * (with added mass) is diagonal in the body frame, so what is integrated is
- * the world momentum P = R M R^T v and angular momentum L = R I R^T omega:
- * P += h F, L += h tau, then the velocities from them through the new
- * orientation. That carries the terms a rotating anisotropic mass brings
- * (omega x (M v), the gyroscopic omega x (I omega)); stepping the
- * accelerations F / M instead makes a rolling ship drift sideways. */
+ * the world momentum P = R M R^T v: P += h F, then the velocity from it
+ * through the new orientation. That carries the term a rotating
+ * anisotropic mass brings (omega x (M v)); stepping the accelerations
+ * F / M instead makes a rolling ship drift sideways. */
 static bool body_substep(struct body *b, const struct body_sea *sea, double t, double h)
 {
-    double f[3], tq[3], vsub;
-    bool sunk = body_forces(b, sea, t, h, f, tq, &vsub);
+    double f[3], tq[3], am;
+    bool sunk = body_forces(b, sea, t, h, f, tq, &am);
     struct body_state *s = &b->s;
     const struct body_model *m = &b->m;
     /* Added mass and inertia along the body axes, full from half the rest
      * displacement wet down to none in the air. */
-    double am = clampd(2 * vsub / m->v_rest, 0, 1), mb[3], ib[3];
+    double mb[3], ib[3];
     for (int k = 0; k < 3; k++) {
         mb[k] = m->mass + am * m->added[k];
         ib[k] = m->inertia[k] + am * m->added_rot[k];
     }
-    double r[3][3], p[3], l[3];
+    double r[3][3], p[3], wb[3], tb[3], iw[3], gyro[3];
     quat_matrix(s->quat, r);
     body_diag_mul(r, mb, s->vel, p);
-    body_diag_mul(r, ib, s->omega, l);
-    for (int k = 0; k < 3; k++) {
+    for (int k = 0; k < 3; k++)
         p[k] += h * f[k];
-        l[k] += h * tq[k];
-    }
-    double omega[3];
-    body_diag_solve(r, ib, l, omega);
-    quat_advance(s->quat, omega, h);
+    /* Rotation: Euler's equations in the body frame with the dry inertia's
+     * gyroscopic term; the added inertia only resists angular acceleration.
+     * (Carried in the gyroscopic term, strip theory's large added inertia
+     * in pitch turned pitch and yaw into roll: a boat at speed in a rough
+     * sea rolled past 50 degrees.) */
+    mat_t_vec(r, s->omega, wb);
+    mat_t_vec(r, tq, tb);
+    for (int k = 0; k < 3; k++)
+        iw[k] = m->inertia[k] * wb[k];
+    cross(wb, iw, gyro);
+    for (int k = 0; k < 3; k++)
+        wb[k] += h * (tb[k] - gyro[k]) / ib[k];
+    mat_vec(r, wb, s->omega);
+    quat_advance(s->quat, s->omega, h);
     quat_matrix(s->quat, r);
-    body_diag_solve(r, ib, l, s->omega);
     body_diag_solve(r, mb, p, s->vel);
     for (int k = 0; k < 3; k++)
         s->pos[k] += h * s->vel[k];
@@ -478,6 +505,27 @@ static bool body_substep(struct body *b, const struct body_sea *sea, double t, d
         }
     }
     return sunk;
+}
+
+/* body_launch, then placed on the sea (the samples a step would take). */
+enum body_error body_launch_on(struct body_world *w, const struct body_kind *kind, double x, double z,
+                               double heading_deg, const struct body_sea *sea, double t, uint32_t *id)
+{
+    uint32_t got;
+    enum body_error e = !isfinite(t) ? BODY_ERR_NOT_FINITE : body_launch(w, kind, x, z, heading_deg, &got);
+    if (e != BODY_OK)
+        return e;
+    struct body *b = &w->b[w->count - 1]; /* the newest is last: ids ascend */
+    double r[3][3], xz[BODY_ELEMS_MAX][2], eta[BODY_ELEMS_MAX], dhdt[BODY_ELEMS_MAX], se = 0, sd = 0;
+    quat_matrix(b->s.quat, r);
+    sample_sea(b, r, sea, t, xz, eta, dhdt);
+    for (int i = 0; i < b->m.n; i++)
+        se += eta[i], sd += dhdt[i];
+    b->s.pos[1] += se / b->m.n;
+    b->s.vel[1] = sd / b->m.n;
+    if (id)
+        *id = got;
+    return BODY_OK;
 }
 
 int body_world_step(struct body_world *w, const struct body_sea *sea, double t, double dt, uint32_t *gone_ids,
@@ -496,7 +544,7 @@ int body_world_step(struct body_world *w, const struct body_sea *sea, double t, 
         struct body *b = &w->b[i];
         double r[3][3], xz[BODY_ELEMS_MAX][2], eta[BODY_ELEMS_MAX];
         quat_matrix(b->s.quat, r);
-        sample_sea(b, r, sea, t0 - h, xz, eta, b->prev_dhdt);
+        b->prev_ok = sample_sea(b, r, sea, t0 - h, xz, eta, b->prev_dhdt);
     }
     int gone = 0;
     for (int k = 0; k < n; k++) {

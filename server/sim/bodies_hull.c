@@ -10,6 +10,14 @@
 
 #include "bodies_internal.h"
 
+/* No fused multiply-add: a*b + c rounded twice, on every compiler and
+ * -march, so a standby built elsewhere continues the same bits. GCC in ISO
+ * C mode does not contract (and does not know the pragma); clang does by
+ * default where the target has FMA. */
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#endif
+
 #define RHO BODY_WATER_DENSITY
 #define G   BODY_GRAVITY
 #define PI  3.14159265358979323846
@@ -27,9 +35,11 @@ static void add_elem(struct body_model *m, double bx, double bz, double y0, doub
     m->e[m->n++] = (struct body_elem){bx, bz, y0, y1, area};
 }
 
-/* A 6 x 6 grid of square cells over the disc of radius r; the 32 cells
- * whose centre lies inside make the columns (the corners fall outside). */
-enum { DISC_CELLS = 6 };
+/* A 4 x 4 grid of square cells over the disc of radius r; the 12 cells
+ * whose centre lies inside make the columns (the corners fall outside).
+ * Buoys are small beside the waves that move them: 12 points see the
+ * surface's height and slope under them, and cost the sampler little. */
+enum { DISC_CELLS = 4 };
 static void disc_columns(struct body_model *m, double r, bool sphere, double centre_y, double y0, double y1)
 {
     double cell = 2 * r / DISC_CELLS;
@@ -66,17 +76,26 @@ static double ship_rise(double height, double xb, double zeta)
     return height * (0.3 * xb * xb + 0.25 * a * a * a);
 }
 #define SHIP_VOLUME_FRACTION (0.9 - 0.0625 - 0.9 / 3.5 + 0.25 / 6.5)
-enum { SHIP_STATIONS = 16, SHIP_STRIPS = 4 };
+/* Stations along the length: 16 for a ship (3.75 m apart at 60 m, ten
+ * to a 40 m wave), 12 for small craft (waves much shorter than them carry
+ * little energy). Across, each station is two strips at the Gauss points
+ * x = +-b/sqrt(3), each of half the station's width: two-point Gauss
+ * quadrature integrates polynomials up to x^3 exactly, so the strips carry
+ * the section's area, its quadratic bottom and the waterplane's second
+ * moment (b^2/3 per unit area: the roll stiffness) exactly, at half the
+ * columns and sea samples of four strips. */
+static int ship_stations(double len) { return len >= 20 ? 16 : 12; }
 
 static void ship_columns(struct body_model *m, double len, double beam, double height, double keel)
 {
-    double dz = len / SHIP_STATIONS;
-    for (int i = 0; i < SHIP_STATIONS; i++) {
+    int stations = ship_stations(len);
+    double dz = len / stations, gauss = 1 / sqrt(3.0);
+    for (int i = 0; i < stations; i++) {
         double z = -0.5 * len + (i + 0.5) * dz, zeta = z / (0.5 * len);
-        double b = ship_half_beam(beam, zeta), w = 2 * b / SHIP_STRIPS;
-        for (int j = 0; j < SHIP_STRIPS; j++) {
-            double xb = -1 + (j + 0.5) * 2.0 / SHIP_STRIPS; /* x / b */
-            add_elem(m, xb * b, z, keel + ship_rise(height, xb, zeta), keel + height, w * dz);
+        double b = ship_half_beam(beam, zeta);
+        for (int j = 0; j < 2; j++) {
+            double xb = j ? gauss : -gauss; /* x / b */
+            add_elem(m, xb * b, z, keel + ship_rise(height, xb, zeta), keel + height, b * dz);
         }
     }
 }
@@ -129,10 +148,10 @@ static double rest_height(const struct body_model *m, double v_want)
     return 0.5 * (ylo + yhi);
 }
 
-/* Strip theory over the length for the box and the ship (Newman 1977,
- * Table 4.1: a flat plate of half-width a moving normal to itself has
- * rho pi a^2 per unit length; at the free surface only the water side
- * counts, half of it):
+/* Strip theory over the length for the box and the ship (a flat plate of
+ * half-width a moving normal to itself has rho pi a^2 per unit length:
+ * Newman 1977 ch. 4, DNV-RP-H103 Table A-1; at the free surface only the
+ * water side counts, half of it):
  *   heave  per length rho pi b^2 / 2   (a plate of half-width b, the half-beam)
  *   sway   per length rho pi T^2 / 2   (a plate of half-width T, the local draft)
  * and their moments about the centre of mass for pitch and yaw. */
@@ -231,8 +250,8 @@ int body_model_build(const struct body_kind *k, struct body_model *m)
     switch (k->hull) {
     case BODY_HULL_SPHERE:
         m->inertia[0] = m->inertia[1] = m->inertia[2] = 0.4 * mass * r * r;
-        /* Half a sphere's 1/2 rho V in infinite fluid per half (Newman 1977 §4.13), on what is wet at rest;
-         * no added inertia in rotation (a turning sphere moves no water in potential flow). */
+        /* A sphere's 1/2 rho V (Newman 1977 ch. 4), of what is wet at rest; no added
+         * inertia in rotation (a turning sphere moves no water in potential flow). */
         m->added[0] = m->added[1] = m->added[2] = 0.5 * RHO * m->v_rest;
         drag_cd = 0.5; /* Hoerner 1965: a sphere, subcritical */
         front = side = PI / 4 * beam * draft;
@@ -240,8 +259,8 @@ int body_model_build(const struct body_kind *k, struct body_model *m)
     case BODY_HULL_CYLINDER:
         m->inertia[0] = m->inertia[2] = mass * (3 * r * r + height * height) / 12;
         m->inertia[1] = 0.5 * mass * r * r;
-        /* Sideways: a circle's rho pi r^2 per unit length over the draft (Newman 1977, Table 4.1);
-         * heave: the keel, half of a disc's 8/3 rho r^3 (DNV-RP-C205 Table A-2). */
+        /* Sideways: a circle's rho pi r^2 per unit length over the draft (DNV-RP-H103 Table A-1);
+         * heave: the keel, half of a disc's 8/3 rho r^3 (Table A-2; Newman 1977 ch. 4). */
         m->added[0] = m->added[2] = RHO * PI * r * r * draft;
         m->added[1] = 4.0 / 3.0 * RHO * r * r * r;
         m->added_rot[0] = m->added_rot[2] = RHO * PI * r * r * (m->wl_y * m->wl_y * m->wl_y + m->kg * m->kg * m->kg) / 3;
@@ -277,6 +296,14 @@ int body_model_build(const struct body_kind *k, struct body_model *m)
     m->surge_quad = 0.5 * RHO * drag_cd * front;
     m->sway_quad = 0.5 * RHO * drag_cd * side;
     m->yaw_quad = RHO * drag_cd * draft * len * len * len * len / 64;
+    /* Pitching and rolling, the wet sides move sideways through the water
+     * at omega y: cross-flow drag int 1/2 rho C_d width |omega y| omega y y dy
+     * from the keel to the waterline (the beam meets it in pitch, the
+     * lateral profile in roll). */
+    double lo = -m->kg, hi = m->wl_y < height - m->kg ? m->wl_y : height - m->kg;
+    double cube = (hi * fabs(hi) * hi * hi - lo * fabs(lo) * lo * lo) / 4; /* int |y|^3 dy */
+    m->rock_quad[0] = 0.5 * RHO * drag_cd * (front / fmax(draft, 1e-9)) * cube;
+    m->rock_quad[2] = 0.5 * RHO * drag_cd * (side / fmax(draft, 1e-9)) * cube;
     m->sink_margin = fmax(1.0, height);
 
     if (k->powered) {

@@ -10,9 +10,8 @@
 
 #include "bodies.h"
 
-/* Most volume elements one hull has: 64 columns keep a 60 m ship's
- * stations 3.75 m apart (a 40 m wave gets 10 per wavelength) at a sampler
- * cost of 64 points per body and substep. */
+/* Most volume elements one hull has (the box's grid uses up to 48, a ship
+ * 32, a buoy 12): each is one sea sample per substep. */
 #define BODY_ELEMS_MAX 64
 
 /* One volume element: a prism whose axis is the body's y axis, through
@@ -48,6 +47,7 @@ struct body_model {
     double surge_lin, surge_quad;   /* N s/m, N s^2/m^2: resistance along the bow */
     double sway_lin, sway_quad;     /* N s^2/m^2 (times |u|), N s^2/m^2: resistance across */
     double yaw_lin, yaw_quad;       /* N m s (times |u|), N m s^2: yaw damping */
+    double rock_quad[3];            /* N m s^2: cross-flow drag of the hull's sides in pitch ([0]) and roll ([2]) */
     double thrust;                  /* N, full ahead (astern: half) */
     double rudder;                  /* N s^2/m^2: side force at the rudder per (rudder * u|u|) */
     double rudder_arm;              /* m, rudder aft of the centre of mass */

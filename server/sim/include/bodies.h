@@ -86,7 +86,14 @@ struct body_state {
 /* The water a body meets. sample fills height[i] (m, y of the displaced
  * surface above world point xz[i]) and dhdt[i] (m/s, its vertical velocity
  * there) for n points at sim time t; returns 0, or -1 (the step is then
- * done in still water at y = 0). NULL sample = still water at y = 0. */
+ * done in still water at y = 0). NULL sample = still water at y = 0.
+ * It must honour t: the water's vertical acceleration (the Froude-Krylov
+ * and added-mass forces of accelerating water) is taken from how dhdt
+ * changes between samples, and a step also samples once at t - dt - dt/n.
+ * A sampler that gives one tick's grid for every t gives no acceleration:
+ * large hulls then heave too much near their heave resonance (docs). It is
+ * called once per body per substep, in ascending id order, with that
+ * body's column points (at most 64). */
 struct body_sea {
     int (*sample)(void *ctx, double t, int n, const double (*xz)[2], double *height, double *dhdt);
     void *ctx;
@@ -120,6 +127,14 @@ void body_world_free(struct body_world *w);
  * it must outlive the body. */
 enum body_error body_launch(struct body_world *w, const struct body_kind *kind, double x, double z,
                             double heading_deg, uint32_t *id);
+/* Added: body_launch on a known sea. The body rests level at its draft
+ * below the mean surface over its hull at sim time t (the sea sampled at
+ * its columns as a step would), rising or falling with that surface's mean
+ * dhdt; in waves a still-water launch starts it under a crest or above a
+ * trough and it jumps. Same refusals as body_launch; a failing sea is
+ * still water (then it is body_launch). */
+enum body_error body_launch_on(struct body_world *w, const struct body_kind *kind, double x, double z,
+                               double heading_deg, const struct body_sea *sea, double t, uint32_t *id);
 enum body_error body_steer(struct body_world *w, uint32_t id, const struct body_control *c);
 enum body_error body_remove(struct body_world *w, uint32_t id);
 
@@ -140,8 +155,10 @@ int body_world_count(const struct body_world *w);
 int body_world_get(const struct body_world *w, int i, struct body_state *out);
 /* Put a saved body back (a standby, a restart): its id, kind, state and
  * control exactly. Refused (BODY_ERR_RANGE) when the id is 0 or already in
- * use, or the state is not finite, not a unit quaternion or out of bounds.
- * Ids issued later are above every id restored. */
+ * use, or the state is not finite, not a unit quaternion or out of bounds
+ * (also: its control outside -1..1); BODY_ERR_KIND when its kind is NULL
+ * or unusable, BODY_ERR_FULL when the world is full. Ids issued later are
+ * above every id restored. */
 enum body_error body_world_restore(struct body_world *w, const struct body_state *s);
 /* The next id body_launch would give (ids only grow); 0 once ids are
  * exhausted (the last id, UINT32_MAX, was issued or restored: launches are
