@@ -34,19 +34,16 @@ struct body_sim {
     bool had_bodies;            /* the last tick published some: an empty world is published once */
     uint32_t *adrift;           /* ids whose owner is gone (the record's adrift flag), unordered */
     int nadrift, capacity;
-    /* Every cascade's height of this tick and of the previous one, side by
-     * side ([2i] now, [2i + 1] the tick before, one block): the substeps
-     * between two ticks see the sea move from one to the other, and a lookup
-     * finds both in one cache line (the fine cascades' hull points lie far
-     * apart on their grids). Measured against two separate grids: the same
-     * CPU time within this machine's noise (bench-bodies). */
-    float *pair;
-    size_t pair_cap;
-    struct probe_grids pair_g;  /* the grids they came from (n, cascades, patches) */
-    double pair_t;              /* the sim time of the [2i] heights */
-    double pair_t_prev;         /* ...and of the [2i + 1] ones */
-    bool have_pair;
-    bool pair_moving;           /* the two halves are two ticks (else both this one) */
+    /* Every cascade's height of this tick and of the two before, side by
+     * side ([3i] now, [3i + 1] the tick before, [3i + 2] the one before that;
+     * one block): the substeps see the sea move through the ticks, and a
+     * lookup finds all three in one cache line (the fine cascades' hull
+     * points lie far apart on their grids). */
+    float *hist;
+    size_t hist_cap;
+    struct probe_grids hist_g;  /* the grids they came from (n, cascades, patches) */
+    double hist_t[3];           /* the sim times of the three */
+    int hist_n;                 /* how many of them are real ticks (1..3; 0 = none kept) */
 };
 
 /* ---- snapshots ---- */
@@ -199,7 +196,7 @@ void body_sim_free(struct body_sim *b)
         return;
     body_world_free(b->w);
     free(b->adrift);
-    free(b->pair);
+    free(b->hist);
     free(b);
 }
 
@@ -242,44 +239,70 @@ static inline double tap_get(const struct tap *t, const float *g)
     return top + t->c * (bot - top);
 }
 
-/* The same on a grid of pairs (body_sim.pair): out[0] of [2i], out[1] of [2i + 1]. */
-static inline void tap_get2(const struct tap *t, const float *g, double out[2])
+/* The same on a grid of triples (body_sim.hist): out[k] of [3i + k]. */
+static inline void tap_get3(const struct tap *t, const float *g, double out[3])
 {
-    for (int k = 0; k < 2; k++) {
-        const float *p0 = g + 2 * t->r0 + k, *p1 = g + 2 * t->r1 + k;
-        double top = p0[2 * t->i0] + t->a * (p0[2 * t->i1] - p0[2 * t->i0]);
-        double bot = p1[2 * t->i0] + t->a * (p1[2 * t->i1] - p1[2 * t->i0]);
+    for (int k = 0; k < 3; k++) {
+        const float *p0 = g + 3 * t->r0 + k, *p1 = g + 3 * t->r1 + k;
+        double top = p0[3 * t->i0] + t->a * (p0[3 * t->i1] - p0[3 * t->i0]);
+        double bot = p1[3 * t->i0] + t->a * (p1[3 * t->i1] - p1[3 * t->i0]);
         out[k] = top + t->c * (bot - top);
     }
 }
 
 struct sea_ctx {
     const struct probe_grids *g;          /* this tick's grids: cascade 0's dx, dz; the patches */
-    const float *pair[OCEAN_MAX_CASCADES]; /* each cascade's heights, now and the tick before */
-    bool moving;                          /* the pairs hold two ticks (else both halves are now) */
-    double t_cur, t_prev;
+    const float *hist[OCEAN_MAX_CASCADES]; /* each cascade's heights, now and the two ticks before */
+    int nt;                               /* how many of the three are real ticks */
+    double t[3];                          /* their sim times, newest first */
 };
+
+/* Weights of the three ticks' heights for the height at t (w) and for its
+ * time derivative (d): the parabola through the three ticks (a line through
+ * two, a constant for one), so the water's vertical velocity changes
+ * smoothly between substeps and the library sees its acceleration. */
+static void time_weights(const struct sea_ctx *c, double t, double w[3], double d[3])
+{
+    const double *T = c->t;
+    w[1] = w[2] = d[0] = d[1] = d[2] = 0;
+    w[0] = 1;
+    if (c->nt >= 3) {
+        double a = (T[0] - T[1]) * (T[0] - T[2]), b = (T[1] - T[0]) * (T[1] - T[2]), e = (T[2] - T[0]) * (T[2] - T[1]);
+        w[0] = (t - T[1]) * (t - T[2]) / a;
+        w[1] = (t - T[0]) * (t - T[2]) / b;
+        w[2] = (t - T[0]) * (t - T[1]) / e;
+        d[0] = (2 * t - T[1] - T[2]) / a;
+        d[1] = (2 * t - T[0] - T[2]) / b;
+        d[2] = (2 * t - T[0] - T[1]) / e;
+    } else if (c->nt == 2) {
+        double span = T[0] - T[1], f = fmin(fmax((t - T[1]) / span, 0), 1);
+        w[0] = f;
+        w[1] = 1 - f;
+        d[0] = 1 / span;
+        d[1] = -1 / span;
+    }
+}
 
 /* The displaced surface above each world point, the heights of every
  * cascade summed: bilinear on the tick's grids (probe_eval's Lanczos-3 costs
  * 9x the taps, too much for up to 64 hull points of each of 64 bodies at
  * every substep), the source point found by two fixed-point steps
  * x0 = x - D(x0) on cascade 0's displacement (body_want says why only its).
- * dhdt is a finite difference with the previous tick's grids at the same
- * source point: the substeps of one step lie between those two ticks, so
- * the height is interpolated linearly in time and dhdt is the slope of that
- * line, which keeps the water a body sees consistent with its own velocity
- * (an exact time derivative would need one more inverse FFT per cascade and
- * tick; the drift of the source point itself is left out, a second-order
- * term). */
+ * In time the height follows the parabola through the last three ticks'
+ * heights at the same source point (time_weights), and dhdt is its
+ * derivative: the substeps of a step (and its first sample, a substep
+ * earlier) lie between those ticks, the water a body sees moves smoothly
+ * and consistently with its dhdt, and dhdt changes between substeps, which
+ * the library needs for the water's acceleration (an exact time derivative
+ * would need more inverse FFTs per cascade and tick; the drift of the source
+ * point itself is left out, a second-order term). */
 static int sea_sample(void *ctx, double t, int n, const double (*xz)[2], double *height, double *dhdt)
 {
     const struct sea_ctx *c = ctx;
     const struct probe_grids *g = c->g;
     const int N = g->n, nc = g->ncasc;
-    const double span = c->t_cur - c->t_prev;
-    const bool moving = c->moving && span > 0;
-    const double a = moving ? fmin(fmax((t - c->t_prev) / span, 0), 1) : 1;
+    double w[3], d[3];
+    time_weights(c, t, w, d);
     double scale[OCEAN_MAX_CASCADES];
     for (int k = 0; k < nc; k++)
         scale[k] = N / g->patch[k];
@@ -292,15 +315,16 @@ static int sea_sample(void *ctx, double t, int n, const double (*xz)[2], double 
             x0 = x - tap_get(&tp, g->dx[0]);
             z0 = z - tap_get(&tp, g->dz[0]);
         }
-        double hc = 0, hp = 0, v[2];
+        double h[3] = { 0, 0, 0 }, v[3];
         for (int k = 0; k < nc; k++) {
             tap_at(&tp, N, x0 * scale[k], z0 * scale[k]);
-            tap_get2(&tp, c->pair[k], v);
-            hc += v[0];
-            hp += v[1];
+            tap_get3(&tp, c->hist[k], v);
+            h[0] += v[0];
+            h[1] += v[1];
+            h[2] += v[2];
         }
-        height[i] = hp + a * (hc - hp);
-        dhdt[i] = moving ? (hc - hp) / span : 0;
+        height[i] = w[0] * h[0] + w[1] * h[1] + w[2] * h[2];
+        dhdt[i] = d[0] * h[0] + d[1] * h[1] + d[2] * h[2];
     }
     return 0;
 }
@@ -327,32 +351,40 @@ static bool tick_grids(const struct sim *s, const struct prod_job *pj, struct pr
     return g->n > 0 && g->ncasc > 0 && g->dx[0] && g->dz[0];
 }
 
-/* This tick's heights into the pairs, last tick's moved beside them (one
- * pass over N^2 floats per cascade). moving = false: the pairs start afresh
- * (the first tick, or new grids: N, cascades, patch), both halves now. */
-static bool update_pairs(struct body_sim *b, const struct probe_grids *g, bool moving)
+/* This tick's heights into the history, the older ones moved along (one
+ * pass over N^2 floats per cascade). keep: how many older ticks stay valid
+ * (0: the history starts afresh: the first tick, new grids, a gap). */
+static bool update_history(struct body_sim *b, const struct probe_grids *g, double t, int keep)
 {
-    size_t side = (size_t)g->n * g->n, need = 2 * side * (size_t)g->ncasc;
-    if (b->pair_cap < need) {
-        free(b->pair);
-        b->pair = malloc(need * sizeof(float));
-        b->pair_cap = b->pair ? need : 0;
-        moving = false;
+    size_t side = (size_t)g->n * g->n, need = 3 * side * (size_t)g->ncasc;
+    if (b->hist_cap < need) {
+        free(b->hist);
+        b->hist = malloc(need * sizeof(float));
+        b->hist_cap = b->hist ? need : 0;
+        keep = 0;
     }
-    if (!b->pair)
+    if (!b->hist) {
+        b->hist_n = 0;
         return false;
+    }
     for (int c = 0; c < g->ncasc; c++) {
-        float *q = b->pair + 2 * side * (size_t)c;
+        float *q = b->hist + 3 * side * (size_t)c;
         const float *h = g->h[c];
-        if (moving)
+        if (keep > 0)
             for (size_t i = 0; i < side; i++) {
-                q[2 * i + 1] = q[2 * i];
-                q[2 * i] = h[i];
+                q[3 * i + 2] = q[3 * i + 1];
+                q[3 * i + 1] = q[3 * i];
+                q[3 * i] = h[i];
             }
         else
             for (size_t i = 0; i < side; i++)
-                q[2 * i] = q[2 * i + 1] = h[i];
+                q[3 * i] = q[3 * i + 1] = q[3 * i + 2] = h[i];
     }
+    b->hist_t[2] = keep > 0 ? b->hist_t[1] : t;
+    b->hist_t[1] = keep > 0 ? b->hist_t[0] : t;
+    b->hist_t[0] = t;
+    b->hist_n = keep + 1 > 3 ? 3 : keep + 1;
+    b->hist_g = *g;
     return true;
 }
 
@@ -380,12 +412,14 @@ static bool current_control(const struct body_world *w, uint32_t id, struct body
     return false;
 }
 
-static void apply(struct body_sim *b, struct sim_body_cmd *c)
+/* sea: this tick's (a launch settles on it), or NULL when its grids are not all there (still water). */
+static void apply(struct body_sim *b, struct sim_body_cmd *c, const struct body_sea *sea, double t)
 {
     struct body_control ctl;
     switch (c->op) {
     case SIM_BODY_LAUNCH:
-        c->status = body_launch(b->w, c->kind, c->x, c->z, c->heading, &c->body);
+        c->status = sea ? body_launch_on(b->w, c->kind, c->x, c->z, c->heading, sea, t, &c->body)
+                        : body_launch(b->w, c->kind, c->x, c->z, c->heading, &c->body);
         break;
     case SIM_BODY_STEER:
         if (!current_control(b->w, c->body, &ctl)) {
@@ -485,34 +519,40 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
     double t0 = mono_now();
     if (body_world_count(b->w) == 0)
         b->t_last = pj->sim_time; /* a first body starts now, not where the last one stopped */
+
+    /* This tick's sea, for the launches (a body settles on the waves it is
+     * put on) and the step. */
+    struct probe_grids g;
+    struct sea_ctx ctx = { .g = &g };
+    struct body_sea sea = { .sample = sea_sample, .ctx = &ctx };
+    bool grids = tick_grids(s, pj, &g), frozen = false;
+    if (grids) {
+        /* The history goes on only from the bodies' last step (not from a tick
+         * long ago, before the world was empty) on the same grids; a tick at
+         * the same sim time (paused) adds nothing. Out of memory: no step this
+         * tick (the next one is longer). */
+        bool goes_on = b->hist_n > 0 && same_grids(&b->hist_g, &g) && b->hist_t[0] == b->t_last;
+        frozen = goes_on && b->hist_t[0] >= pj->sim_time;
+        if (!frozen)
+            grids = update_history(b, &g, pj->sim_time, goes_on ? b->hist_n : 0);
+    } else {
+        b->hist_n = 0; /* this tick's grids are not all there: the history starts again */
+    }
+    if (grids) {
+        ctx.nt = frozen ? 1 : b->hist_n; /* paused: the water stands still */
+        memcpy(ctx.t, b->hist_t, sizeof ctx.t);
+        for (int c = 0; c < g.ncasc; c++)
+            ctx.hist[c] = b->hist + 3 * (size_t)g.n * g.n * (size_t)c;
+    }
     struct sim_body_cmd *answers = cmds, **tail = &answers;
     for (struct sim_body_cmd *c = cmds; c; c = c->next) {
-        apply(b, c);
+        apply(b, c, grids ? &sea : NULL, pj->sim_time);
         c->seq = pj->seq;
         tail = &c->next;
     }
 
-    struct probe_grids g;
-    bool grids = body_world_count(b->w) > 0 && tick_grids(s, pj, &g);
-    if (grids) {
-        /* The pairs move on only from the bodies' last step (not from a tick long
-         * ago, before the world was empty) and only forward (paused: still). */
-        bool moving = b->have_pair && same_grids(&b->pair_g, &g) && b->pair_t == b->t_last &&
-                      b->pair_t < pj->sim_time;
-        double t_prev = moving ? b->pair_t : pj->sim_time;
-        /* Out of memory: no step this tick (the next one is longer). */
-        grids = b->have_pair = update_pairs(b, &g, moving);
-        b->pair_g = g;
-        b->pair_t = pj->sim_time;
-        b->pair_moving = moving;
-        b->pair_t_prev = t_prev;
-    }
-    if (grids) {
+    if (grids && body_world_count(b->w) > 0) {
         double dt = fmin(fmax(pj->sim_time - b->t_last, 0), BODY_MAX_STEP_S);
-        struct sea_ctx ctx = { .g = &g, .moving = b->pair_moving, .t_cur = pj->sim_time, .t_prev = b->pair_t_prev };
-        for (int c = 0; c < g.ncasc; c++)
-            ctx.pair[c] = b->pair + 2 * (size_t)g.n * g.n * (size_t)c;
-        struct body_sea sea = { .sample = sea_sample, .ctx = &ctx };
         uint32_t ids[BODY_MAX_GONE];
         enum body_gone why[BODY_MAX_GONE];
         int gone = body_world_step(b->w, &sea, pj->sim_time, dt, ids, why, BODY_MAX_GONE);
@@ -530,8 +570,6 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
             tail = &c->next;
         }
         b->t_last = pj->sim_time;
-    } else if (body_world_count(b->w) > 0) {
-        b->have_pair = false; /* this tick's grids are not all there: the next step is a longer one */
     }
 
     struct body_snap *snap = snapshot(b, pj);
