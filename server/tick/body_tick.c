@@ -35,11 +35,13 @@ struct body_sim {
     uint32_t *adrift;           /* ids whose owner is gone (the record's adrift flag), unordered */
     int nadrift, capacity;
     /* Every cascade's height of this tick and of the two before, side by
-     * side ([3i] now, [3i + 1] the tick before, [3i + 2] the one before that;
-     * one block): the substeps see the sea move through the ticks, and a
+     * side ([3i + k], one block; k = hist_slot is this tick's, the slot after
+     * it the oldest): the substeps see the sea move through the ticks, a
      * lookup finds all three in one cache line (the fine cascades' hull
-     * points lie far apart on their grids). */
+     * points lie far apart on their grids), and a tick writes one float of
+     * each three. */
     float *hist;
+    int hist_slot;
     size_t hist_cap;
     struct probe_grids hist_g;  /* the grids they came from (n, cascades, patches) */
     double hist_t[3];           /* the sim times of the three */
@@ -253,6 +255,7 @@ static inline void tap_get3(const struct tap *t, const float *g, double out[3])
 struct sea_ctx {
     const struct probe_grids *g;          /* this tick's grids: cascade 0's dx, dz; the patches */
     const float *hist[OCEAN_MAX_CASCADES]; /* each cascade's heights, now and the two ticks before */
+    int slot[3];                          /* where in each triple: now, the tick before, the one before */
     int nt;                               /* how many of the three are real ticks */
     double t[3];                          /* their sim times, newest first */
 };
@@ -319,9 +322,9 @@ static int sea_sample(void *ctx, double t, int n, const double (*xz)[2], double 
         for (int k = 0; k < nc; k++) {
             tap_at(&tp, N, x0 * scale[k], z0 * scale[k]);
             tap_get3(&tp, c->hist[k], v);
-            h[0] += v[0];
-            h[1] += v[1];
-            h[2] += v[2];
+            h[0] += v[c->slot[0]];
+            h[1] += v[c->slot[1]];
+            h[2] += v[c->slot[2]];
         }
         height[i] = w[0] * h[0] + w[1] * h[1] + w[2] * h[2];
         dhdt[i] = d[0] * h[0] + d[1] * h[1] + d[2] * h[2];
@@ -367,19 +370,18 @@ static bool update_history(struct body_sim *b, const struct probe_grids *g, doub
         b->hist_n = 0;
         return false;
     }
+    int slot = keep > 0 ? (b->hist_slot + 1) % 3 : 0; /* the oldest makes room for this tick */
     for (int c = 0; c < g->ncasc; c++) {
         float *q = b->hist + 3 * side * (size_t)c;
         const float *h = g->h[c];
         if (keep > 0)
-            for (size_t i = 0; i < side; i++) {
-                q[3 * i + 2] = q[3 * i + 1];
-                q[3 * i + 1] = q[3 * i];
-                q[3 * i] = h[i];
-            }
+            for (size_t i = 0; i < side; i++)
+                q[3 * i + (size_t)slot] = h[i];
         else
             for (size_t i = 0; i < side; i++)
                 q[3 * i] = q[3 * i + 1] = q[3 * i + 2] = h[i];
     }
+    b->hist_slot = slot;
     b->hist_t[2] = keep > 0 ? b->hist_t[1] : t;
     b->hist_t[1] = keep > 0 ? b->hist_t[0] : t;
     b->hist_t[0] = t;
@@ -540,6 +542,8 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
     }
     if (grids) {
         ctx.nt = frozen ? 1 : b->hist_n; /* paused: the water stands still */
+        for (int k = 0; k < 3; k++)
+            ctx.slot[k] = (b->hist_slot + 3 - k) % 3;
         memcpy(ctx.t, b->hist_t, sizeof ctx.t);
         for (int c = 0; c < g.ncasc; c++)
             ctx.hist[c] = b->hist + 3 * (size_t)g.n * g.n * (size_t)c;
