@@ -17,7 +17,7 @@ PROTO_SAN_LIB ?= $(BUILD)/san/liboc_proto.a
 
 BINS += $(BUILD)/oceand
 TESTS += test-daemon test-daemon-asan test-daemon-valgrind
-BENCHES += bench-load bench-capacity bench-layer-flood
+BENCHES += bench-load bench-capacity bench-layer-flood bench-bodies
 
 # The cluster roles (--role sim|edge) link the NATS transport (mk/cluster.mk).
 $(BUILD)/oceand: $(DAEMON_OBJ) $(OCEAN_LIB) $(PROTO_LIB) $(CLUSTER_LIB)
@@ -61,6 +61,7 @@ test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	$(BUILD)/test_probe
 	/usr/bin/python3 tests/daemon/test_query.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check --query-ref $(BUILD)/query_ref
 	/usr/bin/python3 tests/daemon/test_render.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
+	/usr/bin/python3 tests/daemon/test_bodies.py --oceand $(BUILD)/oceand
 
 # Same integration tests against an ASan+UBSan build (slower: frames at a lower N).
 test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(DAEMON_TEST_DEPS)
@@ -74,6 +75,8 @@ test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(DAEMON_TEST_DE
 	  --query-ref $(BUILD)/query_ref --sanitized
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/daemon/test_render.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check --sanitized
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  /usr/bin/python3 tests/daemon/test_bodies.py --oceand $(BUILD)/san/oceand --sanitized
 
 test-daemon-valgrind: $(BUILD)/test_control
 	$(VALGRIND) $(BUILD)/test_control
@@ -90,6 +93,12 @@ bench-capacity: $(BUILD)/oceand $(BUILD)/load_client
 # admitted/refused, observer frames/s, overruns, encode/tick time, RSS; one JSON line (~15 s).
 bench-layer-flood: $(BUILD)/oceand
 	/usr/bin/python3 bench/layer_flood.py --oceand $(BUILD)/oceand
+
+# Floating bodies' cost on the tick: a real daemon at N = 256 with 64 bodies launched against none,
+# the tick and bodies-step durations from /metrics, JSON lines with the ratio (~1 min).
+.PHONY: bench-bodies
+bench-bodies: $(BUILD)/oceand
+	/usr/bin/python3 bench/bodies.py --oceand $(BUILD)/oceand $(BENCH_BODIES_ARGS)
 
 run: deps
 	@$(MAKE) --no-print-directory build-all

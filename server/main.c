@@ -16,6 +16,7 @@
 #include "render_worker.h"
 #include "roles.h"
 #include "sim_thread.h"
+#include "state.h"
 #include "state_saver.h"
 
 /* Only a flag: the sim thread wakes the service loop every tick anyway
@@ -195,10 +196,25 @@ int main(int argc, char **argv)
     state_saver_init(&saver, dc.state_file, &params, res.params_version);
     sc.persist = state_saver_persist;
     sc.persist_user = &saver;
+    /* The floating bodies saved with the sea: all of them or none. */
+    struct state_bodies saved = { 0 };
+    if (res.state_loaded && state_load_bodies(dc.state_file, &saved, err, sizeof err) < 0)
+        LOGW("%s: %s; starting without bodies", dc.state_file, err);
+    sc.max_bodies = dc.max_bodies;
+    sc.restore_next_id = saved.next_id;
+    sc.nrestore = saved.n;
+    struct body_state *restore = saved.n ? calloc((size_t)saved.n, sizeof *restore) : NULL;
+    for (int i = 0; restore && i < saved.n; i++)
+        restore[i] = saved.b[i].st;
+    sc.restore = restore;
+    if (!restore)
+        sc.nrestore = 0;
     /* --role sim: the NATS link feeds demand in and takes frames out. */
     struct role_sim *cluster = NULL;
     if (strcmp(dc.role, "sim") == 0 && !(cluster = role_sim_open(&dc, net, &sc, err, sizeof err))) {
         LOGE("%s", err);
+        free(restore);
+        state_bodies_free(&saved);
         query_service_free(queries);
         net_attach_renders(net, NULL);
         render_service_free(renders);
@@ -208,6 +224,8 @@ int main(int argc, char **argv)
     }
     struct sim *sim = sim_start(&params, &sc, err, sizeof err);
     if (!sim) {
+        free(restore);
+        state_bodies_free(&saved);
         LOGE("simulation: %s", err);
         query_service_free(queries);
         role_sim_close(cluster);
@@ -217,6 +235,14 @@ int main(int argc, char **argv)
         state_saver_destroy(&saver);
         return 1;
     }
+    free(restore); /* sim_start copied them */
+    if (saved.n && sim_bodies_restored(sim) == saved.n) {
+        net_bodies_restore(net, &saved);
+        state_saver_set_bodies(&saver, &saved);
+        LOGI("restored %d floating bodies", saved.n);
+    }
+    state_bodies_free(&saved);
+    net_attach_saver(net, &saver);
     net_attach_sim(net, sim);
     net_attach_queries(net, queries);
     if (role_sim_attach(cluster, sim, &params, res.params_version) != 0)

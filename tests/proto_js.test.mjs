@@ -38,6 +38,29 @@ test('constants', () => {
   assert.deepEqual([...FIELD_NAMES], ['height', 'dx', 'dz', 'slope_x', 'slope_z', 'jacobian', 'foam']);
 });
 
+test('floating bodies: the BODY section of v13_bodies, exactly; none in the other vectors (PROTOCOL.md §3.5)', async () => {
+  for (const v of manifest.vectors) {
+    const header = parseFrameHeader(load(v.file));
+    const want = v.bodies || [];
+    assert.equal(header.bodies.length, want.length, `${v.name}: bodies`);
+    header.bodies.forEach((b, i) => {
+      const w = want[i];
+      assert.equal(b.id, w.id); assert.equal(b.kind, w.kind); assert.equal(b.flags, w.flags);
+      assert.equal(Math.round(b.throttle * 127), w.throttle); assert.equal(Math.round(b.rudder * 127), w.rudder);
+      assert.equal(b.adrift, (w.flags & 1) !== 0); assert.equal(b.powered, (w.flags & 2) !== 0);
+      for (const k of ['pos', 'quat', 'vel']) w[k].forEach((x, j) => assert.equal(b[k][j], Math.fround(x), `${k}[${j}]`));
+    });
+  }
+  const v = manifest.vectors.find((x) => x.name === 'v13_bodies');
+  assert.ok(v, 'no v13_bodies vector');
+  const frame = await decodeFrame(load(v.file));
+  assert.equal(frame.header.bodies.length, 3);
+  assert.equal(frame.tiles.length, 1);
+  const bad = new Uint8Array(load(v.file));
+  bad[52] = 4; // four records in a section of three
+  assert.throws(() => parseFrameHeader(bad), (e) => e.code === 'corrupt');
+});
+
 for (const [v, useNodeZlib] of manifest.vectors.flatMap((x) => [[x, true], [x, false]])) {
   const usesZstd = v.tiles.some((t) => t.codec === 2);
   test(`vector ${v.name} (${useNodeZlib ? 'node zlib' : 'DecompressionStream'})`, async () => {
@@ -318,6 +341,15 @@ const required = {
   rendering: ['frames', 'start', 'fps', 'params_version', 'n', 'cascades', 'units', 'layers'],
   rendered: ['frames'],
   render_cancel: [],
+  launch: ['kind', 'x', 'z'],
+  launched: ['body', 'resume'],
+  steer: ['body'],
+  steered: ['body'],
+  remove: ['body'],
+  removed: ['body'],
+  claim: ['body', 'resume'],
+  claimed: ['body'],
+  bodies: ['seq', 'bodies', 'removed'],
 };
 const cdir = join(vdir, 'control');
 for (const f of readdirSync(cdir).filter((n) => n.endsWith('.json')).sort()) {

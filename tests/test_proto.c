@@ -13,6 +13,7 @@
 #include "oc_proto.h"
 
 #include <cjson/cJSON.h>
+#include <stdbool.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -108,6 +109,25 @@ static void test_vectors(const char *dir)
               && fh.sim_time == cJSON_GetObjectItem(h, "simTime")->valuedouble
               && fh.params_version == (uint32_t)cJSON_GetObjectItem(h, "paramsVersion")->valuedouble,
               "%s: frame header differs from manifest", name);
+        /* Floating bodies in the header (PROTOCOL.md §3.5): every record exactly; none in the others. */
+        cJSON *bodies = cJSON_GetObjectItem(v, "bodies");
+        struct oc_body_record rec[8];
+        int nb = oc_body_section_read(bin, blen, rec, 8);
+        CHECK(nb == (bodies ? cJSON_GetArraySize(bodies) : 0), "%s: %d bodies read", name, nb);
+        for (int i = 0; bodies && i < nb && i < 8; i++) {
+            cJSON *b = cJSON_GetArrayItem(bodies, i);
+            bool same = rec[i].id == (uint32_t)cJSON_GetObjectItem(b, "id")->valuedouble &&
+                        rec[i].kind == cJSON_GetObjectItem(b, "kind")->valueint &&
+                        rec[i].flags == cJSON_GetObjectItem(b, "flags")->valueint &&
+                        rec[i].throttle == cJSON_GetObjectItem(b, "throttle")->valueint &&
+                        rec[i].rudder == cJSON_GetObjectItem(b, "rudder")->valueint;
+            for (int k = 0; k < 3; k++)
+                same = same && rec[i].pos[k] == (float)cJSON_GetArrayItem(cJSON_GetObjectItem(b, "pos"), k)->valuedouble &&
+                       rec[i].vel[k] == (float)cJSON_GetArrayItem(cJSON_GetObjectItem(b, "vel"), k)->valuedouble;
+            for (int k = 0; k < 4; k++)
+                same = same && rec[i].quat[k] == (float)cJSON_GetArrayItem(cJSON_GetObjectItem(b, "quat"), k)->valuedouble;
+            CHECK(same, "%s: body record %d differs from the manifest", name, i);
+        }
         free(bin); free(exp); free(in);
         nvec++;
     }

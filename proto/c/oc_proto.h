@@ -101,6 +101,40 @@ void oc_buf_free(struct oc_buf *b);
 void oc_frame_header_write(uint8_t dst[OC_FRAME_HEADER_SIZE], const struct oc_frame_header *h);
 int  oc_frame_header_read(const uint8_t *src, size_t len, struct oc_frame_header *h);
 
+/* The BODY header extension (PROTOCOL.md §3.5): the floating bodies' state
+ * of the frame's tick, at offset 48 of the frame header (header_size =
+ * 48 + OC_BODY_SECTION_HEAD + count * OC_BODY_RECORD_SIZE). A frame without
+ * it (header_size 48, or another tag) has no bodies; readers that do not know
+ * it skip it with the rest of the header (§3.1). */
+#define OC_BODY_TAG            "BODY"
+#define OC_BODY_SECTION_HEAD   16   /* u8[4] tag, u16 count, u16 record_size, u8[8] reserved */
+#define OC_BODY_RECORD_SIZE    48
+#define OC_BODY_MAX_RECORDS    1364 /* (65535 - 48 - 16) / 48: header_size is a u16 */
+#define OC_BODY_FLAG_ADRIFT    0x01u /* no session owns it now: its owner is gone */
+#define OC_BODY_FLAG_POWERED   0x02u /* its kind has thrust and a rudder */
+struct oc_body_record {
+    uint32_t id;
+    uint8_t  kind;            /* index into hello.body_kinds */
+    uint8_t  flags;           /* OC_BODY_FLAG_* */
+    int8_t   throttle, rudder; /* x 127, -127..127 */
+    float    pos[3];          /* m, world, centre of mass */
+    float    quat[4];         /* w, x, y, z: body -> world */
+    float    vel[3];          /* m/s */
+};
+/* Bytes of a section of count records (a multiple of 8). */
+static inline size_t oc_body_section_size(int count)
+{
+    return OC_BODY_SECTION_HEAD + (size_t)count * OC_BODY_RECORD_SIZE;
+}
+/* Write the section (oc_body_section_size(count) bytes) into dst. */
+void oc_body_section_write(uint8_t *dst, const struct oc_body_record *r, int count);
+/* Read the BODY section of a frame message (or of its header alone: len
+ * bytes from the frame start). Returns the number of records (0: the frame
+ * has none) and writes at most max of them to out (out may be NULL to count);
+ * OC_E_TRUNCATED / OC_E_CORRUPT on a bad frame header or a section that does
+ * not fit header_size, OC_E_MAGIC / OC_E_VERSION as oc_frame_header_read. */
+int oc_body_section_read(const uint8_t *frame, size_t len, struct oc_body_record *out, int max);
+
 /* Encoder: owns compressor state and scratch; one per thread. */
 struct oc_encoder;
 struct oc_encoder *oc_encoder_new(void);

@@ -104,10 +104,39 @@ function readFrameHeader(bytes) {
   if (!isPow2(h.n) || !isPow2(h.tileSize) || h.tileSize > h.n) throw fail('corrupt', `n ${h.n}, tile_size ${h.tileSize}`);
   if (!Number.isFinite(h.simTime) || !(h.patchSize > 0) || !Number.isFinite(h.patchSize))
     throw fail('corrupt', 'sim_time or patch_size not finite');
+  h.bodies = readBodies(bytes, dv, headerSize);
   return h;
 }
 
-/** Parse and validate the 48-byte frame header only (synchronous). */
+/** Body record flags (PROTOCOL.md §3.5). */
+export const BODY_ADRIFT = 1;
+export const BODY_POWERED = 2;
+
+/* The floating bodies of the frame's tick: the BODY section of the header
+ * (PROTOCOL.md §3.5), [] when there is none. Each: { id, kind (index into
+ * hello.body_kinds), flags, adrift, powered, throttle, rudder (-1..1),
+ * pos [x, y, z], quat [w, x, y, z], vel [vx, vy, vz] }. */
+function readBodies(bytes, dv, headerSize) {
+  const room = headerSize - FRAME_HEADER_SIZE;
+  if (room < 16 || bytes[48] !== 0x42 || bytes[49] !== 0x4f || bytes[50] !== 0x44 || bytes[51] !== 0x59) return [];
+  const count = dv.getUint16(52, true), rsize = dv.getUint16(54, true);
+  if (rsize < 48 || rsize % 8 || count * rsize > room - 16)
+    throw fail('corrupt', `BODY section of ${count} x ${rsize} bytes in a header of ${headerSize}`);
+  const out = [];
+  for (let i = 0, p = 64; i < count; i++, p += rsize) {
+    const f = (k) => dv.getFloat32(p + k, true);
+    const flags = bytes[p + 5];
+    out.push({
+      id: dv.getUint32(p, true), kind: bytes[p + 4], flags,
+      adrift: (flags & BODY_ADRIFT) !== 0, powered: (flags & BODY_POWERED) !== 0,
+      throttle: dv.getInt8(p + 6) / 127, rudder: dv.getInt8(p + 7) / 127,
+      pos: [f(8), f(12), f(16)], quat: [f(20), f(24), f(28), f(32)], vel: [f(36), f(40), f(44)],
+    });
+  }
+  return out;
+}
+
+/** Parse and validate the frame header only (synchronous): the 48 bytes, and `bodies` from its BODY section (§3.5). */
 export function parseFrameHeader(arrayBuffer) {
   return readFrameHeader(asBytes(arrayBuffer));
 }

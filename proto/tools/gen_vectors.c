@@ -44,6 +44,11 @@ static void write_file(const char *name, const void *p, size_t len)
     if (!f || fwrite(p, 1, len, f) != len || fclose(f)) { perror(path); exit(1); }
 }
 
+/* Floating bodies for the next emit (PROTOCOL.md §3.5): its header gets a
+ * BODY section and its manifest entry the records a decoder must read. */
+static const struct oc_body_record *emit_bodies;
+static int emit_nbodies;
+
 static void emit(const char *name, const char *desc, int n, int ts, const struct tile_req *reqs, int count,
                  struct oc_buf *keep)
 {
@@ -53,9 +58,15 @@ static void emit(const char *name, const char *desc, int n, int ts, const struct
                                   .n = (uint16_t)n, .tile_size = (uint16_t)ts, .patch_size = 256.0f,
                                   .tile_count = (uint16_t)count, .flags = 0,
                                   .server_time_us = 1763719200000000ull };
-    oc_buf_reserve(&buf, OC_FRAME_HEADER_SIZE);
+    size_t hs = OC_FRAME_HEADER_SIZE + (emit_nbodies ? oc_body_section_size(emit_nbodies) : 0);
+    oc_buf_reserve(&buf, hs);
     oc_frame_header_write(buf.data, &fh);
-    buf.len = OC_FRAME_HEADER_SIZE;
+    if (emit_nbodies) { /* header_size covers the section */
+        buf.data[6] = (uint8_t)hs;
+        buf.data[7] = (uint8_t)(hs >> 8);
+        oc_body_section_write(buf.data + OC_FRAME_HEADER_SIZE, emit_bodies, emit_nbodies);
+    }
+    buf.len = hs;
     /* Input samples gathered the way the encoder does, for the bound check. */
     size_t total = 0;
     for (int i = 0; i < count; i++) total += (size_t)(ts >> reqs[i].lod) * (ts >> reqs[i].lod);
@@ -90,7 +101,19 @@ static void emit(const char *name, const char *desc, int n, int ts, const struct
                 th[2], r->tx, r->tz, side, side, bnd, off, sc, r->cascade, at);
         at += (size_t)side * side;
     }
-    fprintf(manifest, "]}");
+    fprintf(manifest, "]");
+    if (emit_nbodies) {
+        fprintf(manifest, ",\n     \"headerSize\":%zu,\"bodies\":[", hs);
+        for (int i = 0; i < emit_nbodies; i++) {
+            const struct oc_body_record *b = &emit_bodies[i];
+            fprintf(manifest, "%s\n       {\"id\":%u,\"kind\":%u,\"flags\":%u,\"throttle\":%d,\"rudder\":%d,"
+                    "\"pos\":[%.9g,%.9g,%.9g],\"quat\":[%.9g,%.9g,%.9g,%.9g],\"vel\":[%.9g,%.9g,%.9g]}", i ? "," : "",
+                    b->id, b->kind, b->flags, b->throttle, b->rudder, b->pos[0], b->pos[1], b->pos[2], b->quat[0],
+                    b->quat[1], b->quat[2], b->quat[3], b->vel[0], b->vel[1], b->vel[2]);
+        }
+        fprintf(manifest, "]");
+    }
+    fprintf(manifest, "}");
     /* Expected output = what this library's decoder produces; the tests check it against input. */
     struct oc_decoder *d = oc_decoder_new();
     struct oc_frame_header out;
@@ -454,6 +477,21 @@ int main(int argc, char **argv)
                               { h16, 0, 0, 1, 0, 0.001f, 1, 2 }, { noise64, 1, 0, 1, 3, 0.001f, 1, 1 } };
       emit("v12_cascades", "cascades: the same tile (1, 0) of cascade 0 (LOD 0), 1 (LOD 1, height and slope_x) "
            "and 2 (LOD 1), cascade in the tile flags", 64, 32, r, 4, NULL); }
+    { /* floating bodies in the header (PROTOCOL.md §3.5): decoders that know nothing of them skip the section */
+      static const struct oc_body_record bodies[] = {
+          { .id = 5, .kind = 1, .flags = 0, .pos = { 12.5f, -0.25f, -3.0f }, .quat = { 1, 0, 0, 0 },
+            .vel = { 0.125f, -0.5f, 0 } },
+          { .id = 12, .kind = 3, .flags = 2, .throttle = 64, .rudder = -25, .pos = { 10.0f, 0.375f, -20.0f },
+            .quat = { 0.70710677f, 0, -0.70710677f, 0 }, .vel = { -4.0f, 0.0625f, 0.5f } },
+          { .id = 4294967295u, .kind = 4, .flags = 3, .throttle = -127, .rudder = 127, .pos = { -2500, 1.5f, 2500 },
+            .quat = { 0.5f, 0.5f, -0.5f, 0.5f }, .vel = { 0, 0, 0 } },
+      };
+      struct tile_req r[] = { { h16, 0, 0, 0, 0, 0.001f, 1, 0 } };
+      emit_bodies = bodies;
+      emit_nbodies = 3;
+      emit("v13_bodies", "a BODY section of three floating bodies in the frame header (header_size 208), "
+           "then one tile", 16, 16, r, 1, NULL);
+      emit_nbodies = 0; }
     emit_crafted();
     fprintf(manifest, "\n ],\n \"bad\":[");
 

@@ -198,6 +198,18 @@ size_t metrics_render(char *buf, size_t cap)
             "oceand_log_lines_dropped_total{reason=\"rate\"} %llu\n"
             "oceand_log_lines_dropped_total{reason=\"blocked\"} %llu\n",
         log_dropped(false), log_dropped(true));
+    gauge(&o, "oceand_bodies", "Floating bodies in the world.", atomic_load(&m->bodies));
+    counter(&o, "oceand_body_launches_total", "Bodies launched.", atomic_load(&m->body_launches));
+    put(&o, "# HELP oceand_body_removals_total Bodies that left the world: removed by their owner, sunk, or "
+            "abandoned (the owner gone for twice --body-grace).\n"
+            "# TYPE oceand_body_removals_total counter\n"
+            "oceand_body_removals_total{reason=\"removed\"} %llu\n"
+            "oceand_body_removals_total{reason=\"sunk\"} %llu\n"
+            "oceand_body_removals_total{reason=\"abandoned\"} %llu\n",
+        (unsigned long long)atomic_load(&m->body_removed[0]), (unsigned long long)atomic_load(&m->body_removed[1]),
+        (unsigned long long)atomic_load(&m->body_removed[2]));
+    hist(&o, "oceand_body_step_duration_seconds", "The bodies step of one tick on the producer (requests, "
+         "physics on the tick's grids, the BODY section).", &m->body_step_seconds);
     gauge(&o, "oceand_params_version", "Current parameter version.", atomic_load(&m->params_version));
     gauge(&o, "oceand_resolution", "Current simulation resolution N.", atomic_load(&m->resolution));
     gauge(&o, "oceand_sim_time_seconds", "Current simulation time.", atomic_load(&m->sim_time));

@@ -46,6 +46,11 @@ struct metrics {
     atomic_uint_least64_t layers_encoded, layers_keyframed, samples_encoded, samples_keyframed;
     /* per-client ladder (server/net/ladder.c) */
     atomic_uint_least64_t link_sent, rung_changes, frames_caught_up;
+    /* floating bodies (server/tick/body_tick.c, server/net/body_net.c) */
+    struct histogram body_step_seconds;   /* the producer's bodies step of one tick (requests, physics, snapshot) */
+    atomic_int bodies;                    /* bodies in the world */
+    atomic_uint_least64_t body_launches;  /* launches accepted */
+    atomic_uint_least64_t body_removed[3]; /* bodies gone, by reason: removed, sunk, abandoned */
 };
 extern struct metrics g_metrics;
 

@@ -107,6 +107,14 @@ static const struct param_def opt_table[] = {
       "--bind address (comma list, e.g. ocean.example.org); other Host headers get 421 (DNS rebinding); \"*\" = any"),
     OPT("output_limit_kb", PARAM_INT, output_limit_kb, 16, 1 << 20, 1024, NULL, 0, "JSON replies queued for one "
       "client (KiB); a client over it is closed with 1008 (it is not reading)"),
+    OPT("bodies_per_session", PARAM_INT, bodies_per_session, 0, 1024, 4, NULL, 0, "floating bodies one client may own "
+        "at once; more: too_many_bodies"),
+    OPT("max_bodies", PARAM_INT, max_bodies, 1, 1024, 64, NULL, 0, "floating bodies in the world at once (each adds "
+        "48 bytes to every frame); more: too_many_bodies"),
+    OPT("launch_rate", PARAM_FLOAT, launch_rate, 1, 600, 12, NULL, 0, "launches per minute per client (a bucket of "
+        "that many, refilled over a minute); more: rate_limited"),
+    OPT("body_grace", PARAM_FLOAT, body_grace, 0.1, 86400, 60, NULL, 0, "seconds a body waits for its owner to "
+        "come back (claim with its resume key) before it drifts unpowered; as long again and it is removed"),
 };
 
 #undef OPT

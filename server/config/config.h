@@ -69,6 +69,11 @@ struct daemon_config {
     char   nats_tls_key[512];  /* ... and its key */
     char   server_name[512];   /* extra Host names accepted (comma list); "*" = any Host */
     int    output_limit_kb;    /* JSON replies queued per client (KiB) before it is closed */
+    /* floating bodies (PROTOCOL.md §7.6) */
+    int    bodies_per_session; /* bodies one session may own at once */
+    int    max_bodies;         /* bodies in the world at once */
+    double launch_rate;        /* launches per minute per session */
+    double body_grace;         /* s an owner may be gone before its body drifts unpowered (and as long again: removed) */
 };
 
 /* What config_load found besides the values. */

@@ -16,12 +16,14 @@
 #include "ocean.h"
 
 int state_save(const char *path, const struct ocean_params *p, uint32_t version, double sim_time,
-               char *err, size_t errlen)
+               const struct state_bodies *bodies, char *err, size_t errlen)
 {
     cJSON *o = cJSON_CreateObject();
     cJSON_AddItemToObject(o, "params", control_params_object(p));
     cJSON_AddNumberToObject(o, "params_version", version);
     cJSON_AddNumberToObject(o, "sim_time", sim_time);
+    if (bodies && (bodies->n > 0 || bodies->next_id > 1))
+        cJSON_AddItemToObject(o, "bodies", state_bodies_json(bodies)); /* state_bodies.c */
     char *text = cJSON_Print(o);
     cJSON_Delete(o);
     if (!text) {

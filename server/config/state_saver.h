@@ -12,12 +12,14 @@
 #include <stdint.h>
 
 #include "params.h"
+#include "state.h"
 
 struct state_saver {
     const char *path;           /* "" = do not save */
     pthread_mutex_t lock;       /* one save at a time; guards the fields below */
     struct ocean_params params; /* the last saved (or restored) */
     uint32_t version;
+    struct state_bodies bodies; /* the bodies as the lws thread last handed them (state_saver_set_bodies) */
 };
 
 void state_saver_init(struct state_saver *sv, const char *path, const struct ocean_params *p, uint32_t version);
@@ -26,6 +28,8 @@ void state_saver_destroy(struct state_saver *sv);
  * folder); 0, or -1 with err (nothing was replaced). */
 int state_saver_persist(void *saver, const struct ocean_params *p, uint32_t version, double sim_time, char *err,
                         size_t errlen);
+/* The floating bodies every later save writes (a copy; any thread). */
+void state_saver_set_bodies(struct state_saver *sv, const struct state_bodies *b);
 /* At shutdown: the last saved state with the final clock. */
 void state_saver_final(struct state_saver *sv, double sim_time);
 

@@ -362,6 +362,10 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
         m->type = CTL_RENDER;
     } else if (strcmp(ts, "render_cancel") == 0) {
         m->type = CTL_RENDER_CANCEL;
+    } else if (strcmp(ts, "launch") == 0 || strcmp(ts, "steer") == 0 || strcmp(ts, "remove") == 0 ||
+               strcmp(ts, "claim") == 0) {
+        /* Floating bodies (PROTOCOL.md §7.6): body_parse checks the members. */
+        m->type = ts[0] == 'l' ? CTL_LAUNCH : ts[0] == 's' ? CTL_STEER : ts[0] == 'r' ? CTL_REMOVE : CTL_CLAIM;
     } else if (strcmp(ts, "ping") == 0) {
         m->type = CTL_PING;
         const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "t");

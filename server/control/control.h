@@ -58,7 +58,8 @@ struct ctl_limits {
 
 enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING,
                 CTL_QUERY, CTL_PROBE /* members checked by query_msg.c */, CTL_NAME,
-                CTL_RENDER /* members checked by render_msg.c */, CTL_RENDER_CANCEL };
+                CTL_RENDER /* members checked by render_msg.c */, CTL_RENDER_CANCEL,
+                CTL_LAUNCH, CTL_STEER, CTL_REMOVE, CTL_CLAIM /* floating bodies: members checked by body_msg.c */ };
 
 /* Display names (PROTOCOL.md §7.1 `name`): at most CTL_NAME_MAX_CHARS code
  * points of printable Unicode, UTF-8; CTL_NAME_BYTES holds any valid one. */
@@ -217,7 +218,7 @@ char *control_print(cJSON *msg);
 /* The counters and the clock that cross a file or the wire have ONE rule
  * each, for what is loaded (state file, the cluster's record, the sim's
  * hello) and for what the daemon reaches while running, so whatever it
- * saves it can restore (PROTOCOL.md §7.6):
+ * saves it can restore (PROTOCOL.md §7.7):
  * - params_version: a u32 in every frame header; a set that would take it
  *   past CTL_VERSION_MAX is refused (`version_limit`), never wrapped;
  * - sim_time: [0, OCEAN_TIME_MAX]; the clock stops there (ocean.h);

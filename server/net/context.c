@@ -137,6 +137,7 @@ void net_destroy(struct net *n)
     fanout_free_ring(n);
     frame_unref(n->latest);
     dispatch_free_requests(n);
+    body_net_free(n);
     free(n->status_text);
     cJSON_Delete(n->sim_capacity);
     free(n);

@@ -183,8 +183,10 @@ static void submit_change(struct net *n, struct session *s, const struct remote 
 {
     if (!replan_allowed(n, s, rm, changed, id))
         return;
-    if (name && s)
+    if (name && s) {
         snprintf(s->name, sizeof s->name, "%s", name);
+        body_net_renamed(n, s); /* its bodies show the new name */
+    }
     const char *by_name = name ? name : s ? s->name : "";
     if (!changed) {
         respond(s, rm, with_name(control_params_msg(&n->view, n->applied_version, 0, s ? s->client_id : rm->by, id),
@@ -715,6 +717,7 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
     case CTL_NAME: /* anyone may name themselves: the name only labels their own changes */
         snprintf(s->name, sizeof s->name, "%s", m.name);
         session_queue_json(s, control_named_msg(s->name, m.id));
+        body_net_renamed(n, s); /* its bodies show the new name */
         break;
     case CTL_QUERY:
         dispatch_query(n, s, m.root, m.id, text, len);
@@ -727,6 +730,12 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
         break;
     case CTL_RENDER_CANCEL:
         renders_cancel(n, s);
+        break;
+    case CTL_LAUNCH:
+    case CTL_STEER:
+    case CTL_REMOVE:
+    case CTL_CLAIM: /* floating bodies (body_net.c) */
+        body_net_dispatch(n, s, &m);
         break;
     }
     ctl_msg_free(&m);

@@ -265,6 +265,9 @@ static bool begin_frame(struct net *n, struct session *s, struct frame *f)
     }
     frame_ref(f);
     s->cur = f;
+    /* The tick's bodies: a header extension of its first part (PROTOCOL.md §3.5). */
+    s->ext = f->bodies ? f->bodies->section : NULL;
+    s->ext_len = f->bodies ? f->bodies->section_len : 0;
     s->sent = 0;
     s->part_left = 0;
     s->hdr_off = 0;
@@ -284,6 +287,14 @@ static size_t fill(struct session *s, unsigned char *dst, size_t cap)
             take = cap;
         memcpy(dst, s->hdr + s->hdr_off, take);
         s->hdr_off += (int)take;
+        n += take;
+    }
+    if (n < cap && s->ext_off < s->ext_len) { /* the header extension (the BODY section) */
+        size_t take = s->ext_len - s->ext_off;
+        if (take > cap - n)
+            take = cap - n;
+        memcpy(dst + n, s->ext + s->ext_off, take);
+        s->ext_off += take;
         n += take;
     }
     while (n < cap && s->fi < OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT) {
@@ -318,7 +329,11 @@ static size_t fill(struct session *s, unsigned char *dst, size_t cap)
  * message); any other client gets the frame as one part (PROTOCOL.md §3.4). */
 static void begin_part(struct session *s, size_t cap)
 {
-    size_t bytes = OC_FRAME_HEADER_SIZE;
+    /* Only the first part carries the tick's BODY section (PROTOCOL.md §3.5). */
+    if (s->sent > 0)
+        s->ext_len = 0;
+    s->ext_off = 0;
+    size_t bytes = OC_FRAME_HEADER_SIZE + s->ext_len;
     int count = 0;
     bool more = false;
     for (int fi = s->fi, ti = s->ti; fi < OCEAN_MAX_CASCADES * OCEAN_FIELD_COUNT && !more; fi++, ti = 0)
@@ -335,6 +350,11 @@ static void begin_part(struct session *s, size_t cap)
     h.tile_count = (uint16_t)count;
     h.flags = (uint16_t)(h.flags | (more ? OC_FRAME_FLAG_PART : 0));
     oc_frame_header_write(s->hdr, &h);
+    if (s->ext_len) { /* header_size (offset 6, u16 LE) covers the extension */
+        size_t hs = OC_FRAME_HEADER_SIZE + s->ext_len;
+        s->hdr[6] = (uint8_t)hs;
+        s->hdr[7] = (uint8_t)(hs >> 8);
+    }
     s->hdr_off = 0;
     s->part_left = bytes;
     s->part_more = more;

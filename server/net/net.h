@@ -30,6 +30,13 @@ void net_attach_queries(struct net *n, struct query_service *q);
  * before the service loop, NULL before they are freed. */
 struct render_service;
 void net_attach_renders(struct net *n, struct render_service *r);
+/* The state saver (state_saver.h) the floating bodies are handed to for every
+ * later save, and the bodies a restart put back (sim_bodies_restored: all
+ * of them). Before the service loop. */
+struct state_saver;
+struct state_bodies;
+void net_attach_saver(struct net *n, struct state_saver *sv);
+void net_bodies_restore(struct net *n, const struct state_bodies *b);
 /* Called on the service thread for every parameter change the sim applied. */
 typedef void (*net_params_fn)(void *user, const struct ocean_params *p, uint32_t version);
 void net_on_params(struct net *n, net_params_fn fn, void *user);

@@ -26,6 +26,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "body_msg.h"
 #include "capacity.h"
 #include "config.h"
 #include "control.h"
@@ -150,6 +151,38 @@ struct session {
     size_t rq_sent;               /* bytes of rq's head written, 0 = not started */
     uint64_t rq_render;           /* the render whose frames rq_written counts */
     long rq_written;              /* its frames written whole: what its `rendered` says */
+    /* floating bodies (body_net.c) */
+    int launching;                /* its launches not answered yet (they count against --bodies-per-session) */
+    double launch_tokens, launch_t; /* --launch-rate bucket and its last refill (0 = never: full) */
+    const uint8_t *ext;           /* the BODY section of the frame being sent (its header extension), or NULL */
+    size_t ext_len, ext_off;      /* its bytes in the part being sent (only the first part), and sent so far */
+};
+
+/* One floating body as the lws thread knows it (body_net.c): who owns it. */
+struct body_own {
+    uint32_t id;
+    const struct body_kind *kind;
+    uint64_t owner;               /* serial of the session that owns it, 0 = none connected */
+    char owner_id[32];            /* the owner's client id (the last one it had) */
+    char name[CTL_NAME_BYTES];    /* its display name, "" = none */
+    char resume[33];              /* the key that claims it back */
+    double left_t;                /* mono time its owner went, 0 while owned */
+    bool stopped;                 /* the grace passed: its controls were zeroed (it drifts) */
+    bool removing;                /* a remove is on its way to the sim */
+};
+/* Every body the lws thread knows of, and what the clients were told. */
+struct body_book {
+    struct body_own *b;           /* ascending id */
+    int n, cap;
+    int launching;                /* launches submitted and not answered (they count against --max-bodies) */
+    struct body_gone_entry *gone; /* left since the last `bodies` message */
+    int ngone, gone_cap;
+    bool dirty;                   /* the list changed: `bodies` to everyone (body_net_flush) */
+    uint64_t seq;                 /* the tick of the last change */
+    struct body_snap *snap;       /* the newest bodies taken from the sim (one reference), or NULL */
+    double kept_t;                /* when they were last handed to the state saver */
+    bool save_due;                /* the set of bodies changed since the last save */
+    double saved_t;               /* when the last save was asked for */
 };
 
 /* A set sent to the sim and not answered yet: the sim knows it only by tag. */
@@ -240,6 +273,8 @@ struct net {
     lws_dll2_owner_t remote_queries; /* sim: struct remote_query, queries of edges' clients in the workers */
     uint64_t next_remote;         /* sim: last remote query / probe serial handed out (net_remote_serial) */
     uint64_t published;           /* edge: frames handed to net_publish_frame (frame.index) */
+    struct body_book bodies;      /* floating bodies and their owners (body_net.c) */
+    struct state_saver *saver;    /* main writes (net_attach_saver) before the loop; the bodies are handed to it */
 };
 
 static inline struct net *net_of(struct lws *wsi) { return lws_context_user(lws_get_context(wsi)); }
@@ -324,6 +359,14 @@ void net_capacity_add(struct net *n, cJSON *msg);            /* "capacity" membe
 bool net_capacity_admit(struct net *n, struct session *s, const struct subscription *want, struct ctl_error *e);
 void net_capacity_tell(struct net *n, struct session *s);    /* `degraded` if s's group is degraded now */
 void net_capacity_wake(struct net *n);                       /* after a wake-up: tell plan changes */
+
+/* body_net.c: floating bodies (PROTOCOL.md §7.6): requests, owners, `bodies` */
+void body_net_dispatch(struct net *n, struct session *s, const struct ctl_msg *m); /* launch/steer/remove/claim */
+void body_net_wake(struct net *n);                           /* after a wake-up: answers, grace, the sim's bodies */
+cJSON *body_net_hello(struct net *n, cJSON *hello);          /* body_kinds, body_limits, world_half_size, bodies */
+void body_net_session_gone(struct net *n, struct session *s); /* its bodies wait for a claim */
+void body_net_renamed(struct net *n, struct session *s);     /* its bodies carry its new name */
+void body_net_free(struct net *n);
 
 /* http.c */
 int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len);

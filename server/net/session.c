@@ -183,7 +183,7 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
         sim_capacity(n->sim, &ci);
         h.capacity = &ci;
     }
-    session_queue_json(s, net_hello_capacity(n, control_hello_msg(&h))); /* edge: the sim's capacity */
+    session_queue_json(s, body_net_hello(n, net_hello_capacity(n, control_hello_msg(&h)))); /* edge: the sim's capacity */
     if (n->status_text)
         session_queue_text(s, n->status_text, false); /* cluster trouble: the banner at once */
     net_capacity_tell(n, s);
@@ -198,6 +198,8 @@ static void session_close(struct net *n, struct session *s)
     fanout_want_keyframes(n, s, false);
     dispatch_demand(n, &s->eff, -1);
     query_client_gone(n->queries, s->serial);
+    if (n->sim)
+        body_net_session_gone(n, s); /* its bodies wait for a claim (--body-grace) */
     renders_session_free(n, s);
     if (n->cluster.client_gone) /* edge: its probe at the sim ends */
         n->cluster.client_gone(n->cluster.user, s->serial);
@@ -330,6 +332,7 @@ static void on_sim_wakeup(struct net *n)
     if (sim_take_trim(n->sim) && n->trim_due == 0)
         n->trim_due = mono_now(); /* temporal streams were freed: give their pages back */
     dispatch_answers(n);
+    body_net_wake(n); /* before the writes: a new body's `bodies` goes out ahead of its first frame */
     dispatch_query_results(n);
     net_capacity_wake(n);
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next) {

@@ -53,7 +53,7 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
         }
         /* A version names one sea, and frames carry it as a u32: at the
          * last number sets stop, rather than wrap to numbers already used
-         * (PROTOCOL.md §7.6). A take-over brings its own, already durable. */
+         * (PROTOCOL.md §7.7). A take-over brings its own, already durable. */
         if (set->adopt) {
             version = set->adopt_version;
         } else if (version == CTL_VERSION_MAX) {

@@ -2,6 +2,8 @@
  * lookup of their layers (frame_job.c builds them). */
 #include "frame.h"
 
+#include "body_snap.h"
+
 #include <stdlib.h>
 #include <string.h>
 
@@ -41,6 +43,7 @@ void frame_unref(struct frame *f)
         free(f->layers[i].shared_off);
     }
     free(f->layers);
+    body_snap_unref(f->bodies);
     free(f);
 }
 

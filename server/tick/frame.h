@@ -17,6 +17,8 @@
 #include "oc_proto.h"
 #include "ocean.h"
 
+struct body_snap;
+
 /* The tile side frames use at resolution n: the configured size, or n when
  * the grid is smaller. hello and params announce this value too. */
 static inline int frame_tile_size(int configured, int n) { return configured < n ? configured : n; }
@@ -48,6 +50,8 @@ struct frame {
     int ncascades;              /* cascades in force when it was built (layers of higher ones never come) */
     int nlayers;
     struct layer *layers;
+    struct body_snap *bodies;   /* the floating bodies of this tick (one reference), NULL = none: its
+                                   BODY section follows the 48-byte header (PROTOCOL.md §3.5) */
 };
 
 /* Which layers to build: the keys due this tick, the encoded LOD of each,

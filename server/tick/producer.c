@@ -29,6 +29,12 @@ static void encode_done(void *ctx)
     struct sim *s = ctx;
     struct frame *f = frame_job_finish(s->job);
     double now = mono_now();
+    if (f) { /* the tick's bodies travel in its frame's header (PROTOCOL.md §3.5) */
+        f->bodies = s->job_bodies;
+        s->job_bodies = NULL;
+    }
+    body_snap_unref(s->job_bodies); /* no frame came of it */
+    s->job_bodies = NULL;
     if (f) {
         f->index = s->published++;
         frame_ref(f); /* for on_frame: publish() may hand the last reference on at once */
@@ -94,8 +100,12 @@ static void produce(struct sim *s, const struct prod_job *pj)
     histogram_observe(&g_metrics.step_seconds, t_step);
     /* probes: copies 3 grids per cascade */
     query_tick(s->cfg.queries, s->ocean, pj->want.cfields, pj->seq, pj->sim_time, pj->version);
-    if (!pj->want.nkeys)
-        return; /* stepped for the probes only: no frame */
+    /* The bodies on this tick's grids, before the frame job takes them. */
+    struct body_snap *bodies = body_tick(s, pj);
+    if (!pj->want.nkeys) {
+        body_snap_unref(bodies);
+        return; /* stepped for the probes or the bodies only: no frame */
+    }
     pthread_mutex_lock(&s->lock);
     struct cost_model base = s->model; /* the prediction without the live corrections */
     base.step_scale = 1;
@@ -120,7 +130,9 @@ static void produce(struct sim *s, const struct prod_job *pj)
     size_t streams_before = s->streams.used;
     int items = frame_job_begin(s->job, s->ocean, s->cfg.tile_size, &pj->want, &h);
     streams_freed(s, streams_before);
+    s->job_bodies = items < 0 ? NULL : bodies; /* the encode before is done: encode_done took its own */
     if (items < 0) {
+        body_snap_unref(bodies);
         LOGE("out of memory preparing frame %llu", (unsigned long long)pj->seq);
         return;
     }

@@ -129,6 +129,11 @@ static void sim_free_parts(struct sim *s)
     frame_job_free(s->job);
     layer_streams_free(&s->streams);
     ocean_free(s->ocean);
+    body_sim_free(s->bodies);
+    body_cmds_free(s->body_cmds);
+    body_cmds_free(s->body_answers);
+    body_snap_unref(s->bodies_latest);
+    body_snap_unref(s->job_bodies);
     pthread_cond_destroy(&s->prod_cond);
     pthread_cond_destroy(&s->cond);
     pthread_mutex_destroy(&s->lock);
@@ -151,6 +156,8 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     s->seq = cfg->start_seq;
     s->pending_tail = &s->pending;
     s->answers_tail = &s->answers;
+    s->body_cmds_tail = &s->body_cmds;
+    s->body_answers_tail = &s->body_answers;
     layer_streams_init(&s->streams, cfg->keyframe_interval, cfg->stream_budget);
     const char *hook = getenv("OCEAND_TEST_FAIL_BUILD_SEED");
     s->test_fail_seed = hook && *hook ? atoi(hook) : -1;
@@ -185,6 +192,12 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
         sim_free_parts(s);
         return NULL;
     }
+    if (!(s->bodies = body_sim_new(cfg, &s->bodies_restored, err, errlen))) {
+        sim_free_parts(s);
+        return NULL;
+    }
+    s->cfg.restore = NULL; /* copied into the world: the caller's array may go */
+    s->cfg.nrestore = 0;
     calibrate_cost_model(s);
     s->model.temporal_budget = s->cfg.temporal_budget;
     frame_job_set_streams(s->job, &s->streams); /* after the start-up measurement: intra only */

@@ -20,6 +20,8 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "bodies.h"
+#include "body_snap.h"
 #include "capacity.h"
 #include "frame.h"
 #include "ocean.h"
@@ -65,6 +67,49 @@ struct sim_set {
 void sim_set_free(struct sim_set *set);
 
 
+struct sim;
+
+/* ---- floating bodies (bodies.h, PROTOCOL.md §7.6; docs/threads.md) ----
+ * The producer owns the world: it steps it right after ocean_step, on that
+ * tick's grids. Requests cross like sets: the lws thread appends them under
+ * the lock (sim_body_submit), the producer applies them at the start of its
+ * next tick's bodies step, and hands each back with its outcome
+ * (sim_body_take_answers); bodies that sank come back the same way, as
+ * SIM_BODY_GONE answers nobody asked for. The same object makes the whole
+ * round trip. */
+enum sim_body_op {
+    SIM_BODY_LAUNCH,            /* kind, x, z, heading -> body */
+    SIM_BODY_STEER,             /* body, control (has_throttle / has_rudder: the others keep theirs) */
+    SIM_BODY_REMOVE,            /* body */
+    SIM_BODY_ADRIFT,            /* body: the record's adrift flag = adrift; stop: controls to 0 as well */
+    SIM_BODY_GONE,              /* answer only: body sank (body_world_step removed it) */
+};
+struct sim_body_cmd {
+    struct sim_body_cmd *next;
+    enum sim_body_op op;
+    /* Written by lws before sim_body_submit, read by the producer. */
+    const struct body_kind *kind;
+    double x, z, heading;
+    uint32_t body;              /* the body (a launch: its new id, from the producer) */
+    struct body_control control;
+    bool has_throttle, has_rudder;
+    bool adrift, stop;
+    /* Written by the producer, read by lws after sim_body_take_answers. */
+    enum body_error status;
+    uint64_t seq;               /* the tick it was applied at */
+    /* lws only (the sim never reads them): who asked and how to answer. */
+    uint64_t serial;            /* the sender's session, 0 = the daemon itself (grace, abandonment) */
+    void *reply_id;             /* a cJSON copy of the request's id, or NULL */
+    bool reply;                 /* answer success too (launch, remove, a steer that had an id) */
+    char resume[33];            /* launch: the resume key handed out with `launched` */
+    const char *reason;         /* remove: "removed" or "abandoned" */
+};
+void sim_body_submit(struct sim *s, struct sim_body_cmd *c);  /* takes ownership */
+struct sim_body_cmd *sim_body_take_answers(struct sim *s);    /* in order applied; caller frees each */
+struct body_snap *sim_bodies_latest(struct sim *s);           /* the last tick's bodies (new reference), or NULL */
+/* How many saved bodies sim_start put back (sim_config.restore): all of them, or 0 when one was refused. */
+int sim_bodies_restored(struct sim *s);
+
 struct sim_config {
     double tick_rate;
     int tile_size;              /* configured; frames use frame_tile_size(tile_size, N) */
@@ -109,6 +154,12 @@ struct sim_config {
     int (*persist)(void *user, const struct ocean_params *p, uint32_t version, double sim_time, char *err,
                    size_t errlen);
     void *persist_user;
+    /* Floating bodies: the world's capacity (--max-bodies) and the bodies a
+     * restart puts back (the state file; copied by sim_start: all or none). */
+    int max_bodies;
+    const struct body_state *restore;
+    int nrestore;
+    uint64_t restore_next_id;   /* ids below it are never issued again (2^32: none is; 0 = no rule) */
 };
 #define SIM_DEMAND_BYTES 128        /* bitmap of layer keys (every cascade) handed to remote_demand */
 _Static_assert(LAYER_KEYS_ALL <= SIM_DEMAND_BYTES * 8, "layer keys fit the remote demand bitmap");

@@ -156,6 +156,7 @@ static void tick(struct sim *s, double t_tick)
 {
     pthread_mutex_lock(&s->lock);
     bool idle = !s->prod_busy && !s->prod_has_job, queued = s->prod_has_job, set_ready = s->ready_full;
+    bool bodies = body_wanted_locked(s); /* bodies float on the sea with or without viewers */
     pthread_mutex_unlock(&s->lock);
     apply_if_idle(s, idle);
     int n = ocean_resolution(s->ocean);
@@ -174,7 +175,7 @@ static void tick(struct sim *s, double t_tick)
             queue_release(s);
             return;
         }
-        if (!probe_fields)
+        if (!probe_fields && !bodies)
             return;
     } else {
         s->had_demand = true;
@@ -186,7 +187,9 @@ static void tick(struct sim *s, double t_tick)
     bool due[PLAN_GROUPS];
     groups_due(s, due);
     frame_want_build(&s->plan, due, &d, probe_fields, &pj.want);
-    if (!pj.want.nkeys && !probe_fields)
+    if (bodies)
+        body_want(&pj.want);
+    if (!pj.want.nkeys && !probe_fields && !bodies)
         return; /* a degraded group's off tick */
     if (!idle && set_ready)
         return; /* let the producer drain so that the parameter change applies next tick */

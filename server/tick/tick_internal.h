@@ -89,6 +89,11 @@ struct sim {
     struct ocean_params build_base;
     uint32_t build_version;       /* builder only: the version persisted for build_base (>= the tick's) */
 
+    /* floating bodies (body_tick.c) */
+    struct body_sim *bodies;          /* producer only (sim_start creates it before the threads, sim_stop frees) */
+    struct body_snap *job_bodies;     /* producer writes before the encode starts; encode_done puts it on the frame */
+    int bodies_restored;              /* sim_start writes; lws reads (sim_bodies_restored) */
+
     pthread_mutex_t lock;             /* guards the fields below up to the atomics */
     pthread_cond_t cond;              /* tick and lws signal, builder waits */
     struct frame *latest;             /* tick writes (publish); lws reads (sim_latest) */
@@ -116,6 +121,9 @@ struct sim {
     } pj;
     uint64_t penalized_seq;           /* tick: the queued job (seq) the penalty was last raised for... */
     int penalized_ticks;              /* ...and on how many ticks */
+    struct sim_body_cmd *body_cmds, **body_cmds_tail;       /* lws appends (sim_body_submit); producer takes */
+    struct sim_body_cmd *body_answers, **body_answers_tail; /* producer appends; lws takes (sim_body_take_answers) */
+    struct body_snap *bodies_latest;  /* producer writes (each tick with bodies); lws reads (sim_bodies_latest) */
     struct cost_model model;          /* producer and encode_done update (EWMA); tick and lws read */
     struct plan plan_pub;             /* tick writes; lws reads (sim_plan) */
     uint32_t plan_gen;                /* +1 per change of plan_pub */
@@ -127,6 +135,7 @@ struct sim {
     atomic_uint_least64_t now_seq;    /* atomic: tick writes; lws reads (a new client's first frame) */
     atomic_int now_n;                 /* atomic: tick writes; lws reads (capacity at the N in force) */
     atomic_bool trim_wanted;          /* atomic: producer sets after freeing streams; lws takes (sim_take_trim) */
+    atomic_int body_count;            /* atomic: producer writes (bodies in the world); tick reads (step the sea for them) */
 };
 
 /* What the tick reads of the demand at one moment: local subscriptions
@@ -157,6 +166,21 @@ void apply_prepared(struct sim *s);     /* tick thread, producer idle: swap in w
 void *producer_main(void *arg);         /* the producer thread */
 void publish(struct sim *s, struct frame *f); /* the newest frame replaces the previous one (any thread) */
 void encode_item(void *ctx, int item, int worker); /* encode pool: one item of s->job */
+
+/* body_tick.c: the floating bodies, stepped by the producer. */
+struct body_sim *body_sim_new(const struct sim_config *cfg, int *restored, char *err, size_t errlen);
+void body_sim_free(struct body_sim *b);
+/* Whether this tick steps bodies: the world holds some, or requests wait.
+ * Tick thread, with s->lock held (it reads body_cmds). */
+bool body_wanted_locked(struct sim *s);
+/* The fields the bodies read, added to a tick's want (every cascade's
+ * height, cascade 0's displacement). */
+void body_want(struct frame_want *w);
+/* Producer, right after ocean_step of pj: apply the waiting requests, step
+ * the world on this tick's grids, publish the tick's bodies; returns a new
+ * reference to them for the tick's frame (NULL: no bodies). */
+struct body_snap *body_tick(struct sim *s, const struct prod_job *pj);
+void body_cmds_free(struct sim_body_cmd *c); /* a list, with the lws side's id copies */
 
 /* tick.c */
 void *tick_main(void *arg);             /* the tick thread */

@@ -12,6 +12,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "body_msg.h"
 #include "capacity.h"
 #include "config.h"
 #include "control.h"
@@ -330,7 +331,7 @@ static void test_state_and_config(void)
     params_defaults(&p);
     p.wind_speed = 7;
     p.seed = 42;
-    CHECK(state_save(state, &p, 9, 12.5, err, sizeof err) == 0, "state_save: %s", err);
+    CHECK(state_save(state, &p, 9, 12.5, NULL, err, sizeof err) == 0, "state_save: %s", err);
     FILE *f = fopen(cfg, "w");
     fputs("{\"wind_speed\": 8, \"port\": 9999}", f);
     fclose(f);
@@ -1427,6 +1428,214 @@ static void test_files_strict(void)
     rmdir(dir);
 }
 
+/* Floating bodies: the request parser's codes (PROTOCOL.md §7.6), the BODY
+ * section's round trip (§3.5), the bodies in the state file. */
+static void test_bodies(void)
+{
+    static const struct { const char *text, *code, *param; } cases[] = {
+        { "{\"type\":\"launch\",\"kind\":\"boat\",\"x\":10,\"z\":-20,\"heading\":450}", "ok", "" },
+        { "{\"type\":\"launch\",\"kind\":\"boat\",\"x\":2500,\"z\":-2500}", "ok", "" },
+        { "{\"type\":\"launch\",\"kind\":\"boat\",\"x\":2500.001,\"z\":0}", "out_of_range", "x" },
+        { "{\"type\":\"launch\",\"kind\":\"boat\",\"x\":0,\"z\":-1e6}", "out_of_range", "z" },
+        { "{\"type\":\"launch\",\"kind\":\"Boat\",\"x\":0,\"z\":0}", "unknown_kind", "kind" },
+        { "{\"type\":\"launch\",\"kind\":[],\"x\":0,\"z\":0}", "bad_type", "kind" },
+        { "{\"type\":\"launch\",\"x\":0,\"z\":0}", "bad_message", "kind" },
+        { "{\"type\":\"launch\",\"kind\":\"ball\",\"z\":0}", "bad_message", "x" },
+        { "{\"type\":\"launch\",\"kind\":\"ball\",\"x\":true,\"z\":0}", "bad_type", "x" },
+        { "{\"type\":\"launch\",\"kind\":\"ball\",\"x\":1e999,\"z\":0}", "bad_type", "x" },
+        { "{\"type\":\"launch\",\"kind\":\"ball\",\"x\":0,\"z\":0,\"heading\":\"north\"}", "bad_type", "heading" },
+        { "{\"type\":\"launch\",\"kind\":\"ball\",\"x\":0,\"z\":0,\"token\":7}", "bad_message", "token" },
+        { "{\"type\":\"steer\",\"body\":12,\"throttle\":0.5,\"rudder\":-0.2}", "ok", "" },
+        { "{\"type\":\"steer\",\"body\":12}", "ok", "" },
+        { "{\"type\":\"steer\",\"body\":12,\"throttle\":-1,\"rudder\":1}", "ok", "" },
+        { "{\"type\":\"steer\",\"body\":12,\"throttle\":1.0001}", "out_of_range", "throttle" },
+        { "{\"type\":\"steer\",\"body\":12,\"rudder\":-2}", "out_of_range", "rudder" },
+        { "{\"type\":\"steer\",\"body\":12,\"rudder\":-1e999}", "bad_type", "rudder" },
+        { "{\"type\":\"steer\",\"body\":12,\"throttle\":null}", "bad_type", "throttle" },
+        { "{\"type\":\"steer\",\"throttle\":0}", "bad_message", "body" },
+        { "{\"type\":\"steer\",\"body\":\"12\"}", "bad_type", "body" },
+        { "{\"type\":\"steer\",\"body\":12.5}", "bad_type", "body" },
+        { "{\"type\":\"steer\",\"body\":0}", "out_of_range", "body" },
+        { "{\"type\":\"steer\",\"body\":4294967296}", "out_of_range", "body" },
+        { "{\"type\":\"remove\",\"body\":4294967295}", "ok", "" },
+        { "{\"type\":\"remove\"}", "bad_message", "body" },
+        { "{\"type\":\"claim\",\"body\":3,\"resume\":\"0123456789abcdef0123456789abcdef\"}", "ok", "" },
+        { "{\"type\":\"claim\",\"body\":3,\"resume\":\"0123456789ABCDEF0123456789abcdef\"}", "bad_message", "resume" },
+        { "{\"type\":\"claim\",\"body\":3,\"resume\":\"0123456789abcdef0123456789abcde\"}", "bad_message", "resume" },
+        { "{\"type\":\"claim\",\"body\":3}", "bad_message", "resume" },
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        struct ctl_msg m;
+        struct ctl_error e = { 0 };
+        CHECK(control_parse(cases[i].text, strlen(cases[i].text), &m, NULL, &e) == 0 &&
+                  (m.type == CTL_LAUNCH || m.type == CTL_STEER || m.type == CTL_REMOVE || m.type == CTL_CLAIM),
+              "%s does not parse as a body request", cases[i].text);
+        struct body_req r;
+        const char *code = body_parse(m.root, m.type, &r, &e) == 0 ? "ok" : e.code;
+        CHECK(strcmp(code, cases[i].code) == 0, "%s -> %s (%s), want %s", cases[i].text, code, e.message, cases[i].code);
+        if (strcmp(code, "ok") != 0)
+            CHECK(strcmp(e.param, cases[i].param) == 0, "%s: param \"%s\", want \"%s\"", cases[i].text, e.param,
+                  cases[i].param);
+        if (i == 0)
+            CHECK(r.kind == body_kind_find("boat") && r.x == 10 && r.z == -20 && r.heading == 90, "launch values");
+        if (i == 12)
+            CHECK(r.body == 12 && r.has_throttle && r.has_rudder && r.throttle == 0.5 && r.rudder == -0.2, "steer");
+        if (i == 13)
+            CHECK(!r.has_throttle && !r.has_rudder, "a steer of nothing");
+        ctl_msg_free(&m);
+    }
+    /* The replies print and carry what they should. */
+    cJSON *id = cJSON_CreateNumber(7);
+    char *t = control_print(body_launched_msg(id, 12, "0123456789abcdef0123456789abcdef"));
+    CHECK(t && strcmp(t, "{\"type\":\"launched\",\"id\":7,\"body\":12,\"resume\":\"0123456789abcdef0123456789abcdef\"}") == 0,
+          "launched: %s", t);
+    free(t);
+    struct body_entry be = { .body = 12, .kind = body_kind_find("boat"), .owner = "c7-k3qf", .name = "Ana" };
+    struct body_gone_entry bg = { .body = 5, .reason = "sunk" };
+    t = control_print(bodies_msg(99, 1, &be, 1, &bg));
+    CHECK(t && strcmp(t, "{\"type\":\"bodies\",\"seq\":99,\"bodies\":[{\"body\":12,\"kind\":\"boat\",\"owner\":\"c7-k3qf\","
+                         "\"name\":\"Ana\",\"adrift\":false}],\"removed\":[{\"body\":5,\"reason\":\"sunk\"}]}") == 0,
+          "bodies: %s", t);
+    free(t);
+    cJSON_Delete(id);
+    /* proto/vectors/control: each request parses, each reply is what the builders make. */
+    static const char *const requests[] = { "16_launch.json", "18_steer.json", "20_remove.json", "22_claim.json" };
+    for (size_t i = 0; i < sizeof requests / sizeof requests[0]; i++) {
+        char vpath[128], verr[256], *vt;
+        size_t vlen;
+        snprintf(vpath, sizeof vpath, "proto/vectors/control/%s", requests[i]);
+        if (file_read_all(vpath, 1 << 16, &vt, &vlen, verr, sizeof verr) != 0) {
+            CHECK(0, "vector: %s", verr);
+            continue;
+        }
+        struct ctl_msg m;
+        struct ctl_error ve;
+        struct body_req r;
+        CHECK(control_parse(vt, vlen, &m, NULL, &ve) == 0 && body_parse(m.root, m.type, &r, &ve) == 0, "%s: %s",
+              requests[i], ve.message);
+        ctl_msg_free(&m);
+        free(vt);
+    }
+    cJSON *vid[4] = { cJSON_CreateNumber(1), cJSON_CreateNumber(2), cJSON_CreateNumber(3), cJSON_CreateNumber(4) };
+    struct body_entry ve12 = { .body = 12, .kind = body_kind_find("boat"), .owner = "c7-k3qf", .name = "Ana" };
+    struct body_gone_entry vg5 = { .body = 5, .reason = "sunk" };
+    struct { const char *file; cJSON *msg; } replies[] = {
+        { "17_launched.json", body_launched_msg(vid[0], 12, "9f86d081884c7d659a2feaa0c55ad015") },
+        { "19_steered.json", body_ack_msg("steered", vid[1], 12) },
+        { "21_removed.json", body_ack_msg("removed", vid[2], 12) },
+        { "23_claimed.json", body_ack_msg("claimed", vid[3], 12) },
+        { "24_bodies.json", bodies_msg(4711, 1, &ve12, 1, &vg5) },
+    };
+    for (size_t i = 0; i < sizeof replies / sizeof replies[0]; i++) {
+        char vpath[128], verr[256], *vt;
+        size_t vlen;
+        snprintf(vpath, sizeof vpath, "proto/vectors/control/%s", replies[i].file);
+        cJSON *want = file_read_all(vpath, 1 << 16, &vt, &vlen, verr, sizeof verr) == 0 ? cJSON_Parse(vt) : NULL;
+        CHECK(want && cJSON_Compare(want, replies[i].msg, 1), "%s is not what the server sends", replies[i].file);
+        if (want)
+            free(vt);
+        cJSON_Delete(want);
+        cJSON_Delete(replies[i].msg);
+    }
+    for (int i = 0; i < 4; i++)
+        cJSON_Delete(vid[i]);
+    cJSON *kinds = body_kinds_array();
+    CHECK(cJSON_GetArraySize(kinds) == BODY_KIND_COUNT, "body_kinds rows");
+    cJSON_Delete(kinds);
+
+    /* The BODY section: written, read back exactly; a frame without one has none. */
+    struct oc_body_record rec[3] = {
+        { .id = 1, .kind = 0, .flags = 0, .throttle = 0, .rudder = 0, .pos = { 1, -2, 3 }, .quat = { 1, 0, 0, 0 } },
+        { .id = 12, .kind = 3, .flags = OC_BODY_FLAG_POWERED, .throttle = 64, .rudder = -25, .pos = { -10.5f, 0.25f, 2500 },
+          .quat = { 0.7071f, 0, -0.7071f, 0 }, .vel = { 0.5f, -0.1f, 4 } },
+        { .id = 4294967295u, .kind = 4, .flags = OC_BODY_FLAG_ADRIFT | OC_BODY_FLAG_POWERED, .throttle = -127, .rudder = 127 },
+    };
+    size_t hs = OC_FRAME_HEADER_SIZE + oc_body_section_size(3);
+    CHECK(hs % 8 == 0 && oc_body_section_size(3) == 16 + 3 * 48, "section size");
+    uint8_t frame[OC_FRAME_HEADER_SIZE + 16 + 3 * 48];
+    struct oc_frame_header fh = { .seq = 5, .n = 64, .tile_size = 64, .patch_size = 100 };
+    oc_frame_header_write(frame, &fh);
+    frame[6] = (uint8_t)hs;
+    frame[7] = (uint8_t)(hs >> 8);
+    oc_body_section_write(frame + OC_FRAME_HEADER_SIZE, rec, 3);
+    struct oc_body_record back[3];
+    CHECK(oc_body_section_read(frame, sizeof frame, back, 3) == 3, "read the section");
+    for (int i = 0; i < 3; i++)
+        CHECK(back[i].id == rec[i].id && back[i].kind == rec[i].kind && back[i].flags == rec[i].flags &&
+                  back[i].throttle == rec[i].throttle && back[i].rudder == rec[i].rudder &&
+                  memcmp(back[i].pos, rec[i].pos, sizeof rec[i].pos) == 0 &&
+                  memcmp(back[i].quat, rec[i].quat, sizeof rec[i].quat) == 0 &&
+                  memcmp(back[i].vel, rec[i].vel, sizeof rec[i].vel) == 0,
+              "record %d changed on the way", i);
+    CHECK(oc_body_section_read(frame, sizeof frame - 1, back, 3) == OC_E_TRUNCATED, "a cut header");
+    CHECK(oc_body_section_read(frame, sizeof frame, NULL, 0) == 3, "count only");
+    frame[52] = 4; /* count 4 in a section of 3 */
+    CHECK(oc_body_section_read(frame, sizeof frame, back, 3) == OC_E_CORRUPT, "more records than header_size holds");
+    frame[52] = 3;
+    oc_frame_header_write(frame, &fh); /* header_size 48 again: no section */
+    CHECK(oc_body_section_read(frame, sizeof frame, back, 3) == 0, "a 48-byte header has no bodies");
+
+    /* The state file: every body exactly, and a bad entry refuses them all. */
+    char dir[] = "/tmp/oceand-test-bodies-XXXXXX";
+    CHECK(mkdtemp(dir) != NULL, "mkdtemp");
+    char path[128], err[300];
+    snprintf(path, sizeof path, "%s/state.json", dir);
+    struct ocean_params p;
+    params_defaults(&p);
+    struct state_body sb[2] = {
+        { .st = { .id = 3, .kind = body_kind_find("ball"), .pos = { 0.1, -0.3333333333333333, 1e-17 },
+                  .quat = { 1, 0, 0, 0 }, .vel = { 1.0 / 3, 0, 0 }, .omega = { 0, 2e-300, 0 } },
+          .owner = "c7-k3qf", .name = "Ana", .resume = "0123456789abcdef0123456789abcdef" },
+        { .st = { .id = 9, .kind = body_kind_find("ship"), .pos = { -2500, 0, 2500 }, .quat = { 0.6, 0, 0.8, 0 },
+                  .control = { 0.75, -1 } },
+          .owner = "c1-x82m", .resume = "ffffffffffffffffffffffffffffffff" },
+    };
+    struct state_bodies in = { .n = 2, .cap = 2, .next_id = 12, .b = sb }, out;
+    CHECK(state_save(path, &p, 1, 2.5, &in, err, sizeof err) == 0, "state_save: %s", err);
+    CHECK(state_load_bodies(path, &out, err, sizeof err) == 1 && out.n == 2 && out.next_id == 12, "load: %s", err);
+    for (int i = 0; i < 2; i++)
+        CHECK(memcmp(&out.b[i].st, &sb[i].st, sizeof sb[i].st) == 0 && strcmp(out.b[i].owner, sb[i].owner) == 0 &&
+                  strcmp(out.b[i].name, sb[i].name) == 0 && strcmp(out.b[i].resume, sb[i].resume) == 0,
+              "body %d is not the one saved", i);
+    state_bodies_free(&out);
+    sb[1].st.kind = NULL; /* saved with an unknown kind's name below */
+    static const char *const bad[] = {
+        "\"kind\":\"ship\"", "\"kind\":\"submarine\"",
+        "\"throttle\":0.75", "\"throttle\":1.5",
+        "\"owner\":\"c1-x82m\"", "\"owner\":\"c1 x82m\"",
+        "\"resume\":\"ffffffffffffffffffffffffffffffff\"", "\"resume\":\"fff\"",
+        "\"id\":9", "\"id\":3",
+    };
+    sb[1].st.kind = body_kind_find("ship");
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i += 2) {
+        CHECK(state_save(path, &p, 1, 2.5, &in, err, sizeof err) == 0, "state_save: %s", err);
+        char *text;
+        size_t len;
+        CHECK(file_read_all(path, 1 << 20, &text, &len, err, sizeof err) == 0, "read back");
+        /* cJSON prints "key":<tab>value: compare without the blanks. */
+        char *flat = malloc(len + 1), *o = flat;
+        for (size_t k = 0; k < len; k++)
+            if (text[k] != '\t' && text[k] != '\n')
+                *o++ = text[k];
+        *o = 0;
+        free(text);
+        char *at = strstr(flat, bad[i]);
+        const char *last = NULL;
+        for (char *q = at; q; q = strstr(q + 1, bad[i]))
+            last = q; /* the second body's member */
+        CHECK(last != NULL, "%s not in the saved file", bad[i]);
+        size_t off = (size_t)(last - flat);
+        FILE *f = fopen(path, "w");
+        fprintf(f, "%.*s%s%s", (int)off, flat, bad[i + 1], flat + off + strlen(bad[i]));
+        fclose(f);
+        free(flat);
+        CHECK(state_load_bodies(path, &out, err, sizeof err) == -1 && out.n == 0 && strstr(err, "bad_body"),
+              "%s accepted (%s)", bad[i + 1], err);
+    }
+    unlink(path);
+    rmdir(dir);
+}
+
 int main(void)
 {
     test_capacity_plan();
@@ -1456,6 +1665,7 @@ int main(void)
     test_render();
     test_exact_ids();
     test_files_strict();
+    test_bodies();
     fuzz();
     return check_done();
 }

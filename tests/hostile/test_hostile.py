@@ -2522,7 +2522,7 @@ def state_over_memory_cap(d, fig):
 # ---------------------------------------------------------------- limits: what the daemon reaches, it restores
 # Each case starts daemons of its own from a state file it writes.
 
-VERSION_MAX = 2 ** 32 - 1       # params_version is a u32 in every frame header (PROTOCOL.md §7.6)
+VERSION_MAX = 2 ** 32 - 1       # params_version is a u32 in every frame header (PROTOCOL.md §7.7)
 TIME_MAX = 1e9                  # OCEAN_TIME_MAX: the sea's clock stops there
 
 

@@ -215,6 +215,52 @@ async def control_only_checks():
     ok("AsyncClient on ?frames=0: queries answered, no frame")
 
 
+# ---- floating bodies (PROTOCOL.md §3.5, §7.6) ----
+import json  # noqa: E402
+manifest = json.load(open(os.path.join(here, "..", "..", "proto", "vectors", "manifest.json")))
+vb = next(v for v in manifest["vectors"] if v["name"] == "v13_bodies")
+raw = open(os.path.join(here, "..", "..", "proto", "vectors", vb["file"]), "rb").read()
+got = oceand.decode_bodies(raw)
+check([b.id for b in got] == [b["id"] for b in vb["bodies"]], f"v13_bodies ids {[b.id for b in got]}")
+for b, w in zip(got, vb["bodies"]):
+    check(b.kind == w["kind"] and b.flags == w["flags"] and round(b.throttle * 127) == w["throttle"] and
+          round(b.rudder * 127) == w["rudder"] and np.allclose(b.pos, w["pos"]) and np.allclose(b.quat, w["quat"]) and
+          np.allclose(b.vel, w["vel"]), f"body {b.id}: {b} against {w}")
+check(oceand.decode_frame(raw).bodies == got and oceand.decode_bodies(vec) == [], "bodies of a frame")
+ok("decode_bodies: v13_bodies' three records exactly; a frame without a BODY section has none")
+
+
+async def body_checks():
+    async with await oceand.AsyncClient.connect(url) as sea:
+        kinds = [k["name"] for k in sea.body_kinds]
+        check("boat" in kinds and "ship" in kinds, f"body_kinds {kinds}")
+        m = await sea.launch("boat", 10, -20, heading=90)
+        body = m["body"]
+        check(sea.resume.get(body) == m["resume"], "resume key not kept")
+        await sea.steer(body, throttle=1.0, rudder=0.25)
+        seq, now = await sea.bodies_now()
+        seq2, now = await sea.bodies_now(newer_than=seq)
+        while not any(b.id == body and b.throttle == 1.0 for b in now):
+            seq2, now = await sea.bodies_now(newer_than=seq2)
+        b = next(b for b in now if b.id == body)
+        check(b.powered and not b.adrift and kinds[b.kind] == "boat", f"record {b}")
+        await asyncio.sleep(0.3)
+        check(body in sea.bodies and sea.bodies[body]["kind"] == "boat", f"bodies list {sea.bodies}")
+        key = m["resume"]
+    async with await oceand.AsyncClient.connect(url + "/?frames=0") as other:
+        try:
+            await other.steer(body, throttle=0)
+            check(False, "another client steered the boat")
+        except oceand.ServerError as e:
+            check(e.reply["code"] == "not_owner", f"steer by another: {e.reply}")
+        c = await other.claim(body, key)
+        check(c["type"] == "claimed", f"claim {c}")
+        r = await other.remove(body)
+        check(r["type"] == "removed" and body not in other.resume, f"remove {r}")
+    ok("AsyncClient: launch, steer, bodies_now (the frame's records), claim with the key, remove; not_owner")
+
+
 asyncio.run(async_checks())
 asyncio.run(control_only_checks())
+asyncio.run(body_checks())
 print("PASS: test_package.py")

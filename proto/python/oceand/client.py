@@ -21,6 +21,7 @@ Uses Debian's python3-websockets (10.x) and python3-numpy only.
 import asyncio
 import itertools
 import json
+import struct
 import threading
 
 import websockets
@@ -66,6 +67,12 @@ class AsyncClient:
         self._temporal, self._latest = False, None
         self._render_q = asyncio.Queue(maxsize=4)   # rendered frames, then the render's end message
         self._render_id = None
+        # Floating bodies (§7.6): the list (`bodies` messages), the keys that claim ours
+        # back, and the newest frame's records.
+        self.body_kinds = list(hello.get("body_kinds", []))
+        self.bodies = {b["body"]: b for b in hello.get("bodies", [])}
+        self.resume = {}                      # body -> resume key of the bodies this client launched
+        self._bodies_now, self._bodies_event = None, asyncio.Event()
         self._reader = asyncio.get_running_loop().create_task(self._read())
 
     @classmethod
@@ -134,6 +141,8 @@ class AsyncClient:
             self.params_version = m.get("params_version", self.params_version)
             if m.get("cascade_patch_sizes"):
                 self.cascade_patch_sizes = list(m["cascade_patch_sizes"])
+        elif t == "bodies":
+            self.bodies = {b["body"]: b for b in m.get("bodies", [])}
         elif t == "probe_data":
             if self._probe_queue.full():      # a reader that does not keep up loses the oldest
                 self._probe_queue.get_nowait()
@@ -146,6 +155,11 @@ class AsyncClient:
                 f.set_result(m)
 
     def _on_frame(self, data):
+        try:   # the header alone: cheap, every frame
+            self._bodies_now = (struct.unpack_from("<Q", data, 8)[0], fr.decode_bodies(data))
+            self._bodies_event.set()
+        except (fr.ProtocolError, struct.error):
+            pass
         if not self._temporal:
             # Intra frames decode alone: keep the latest and decode it when asked, so
             # the reader never falls behind the replies (numpy decodes ~10 frames/s of
@@ -326,6 +340,54 @@ class AsyncClient:
             self._render_id = None
             while not self._render_q.empty():   # what was on its way: the reader drops the rest
                 self._render_q.get_nowait()
+
+    # ---- floating bodies (§7.6) -------------------------------------------
+
+    async def _body_request(self, msg, token):
+        if token:
+            msg["token"] = token
+        return await self.request(msg)
+
+    async def launch(self, kind, x, z, heading=0.0, token=None):
+        """Launch a body of `kind` (a name of self.body_kinds) at world (x, z): the
+        `launched` reply ({"body": id, "resume": key}); the key is kept in self.resume."""
+        m = await self._body_request({"type": "launch", "kind": kind, "x": x, "z": z, "heading": heading}, token)
+        self.resume[m["body"]] = m["resume"]
+        return m
+
+    async def steer(self, body, throttle=None, rudder=None, token=None):
+        """Steer one of our bodies (-1..1 each; None keeps it): the `steered` reply."""
+        msg = {"type": "steer", "body": body}
+        if throttle is not None:
+            msg["throttle"] = throttle
+        if rudder is not None:
+            msg["rudder"] = rudder
+        return await self._body_request(msg, token)
+
+    async def remove(self, body, token=None):
+        """Remove one of our bodies: the `removed` reply."""
+        m = await self._body_request({"type": "remove", "body": body}, token)
+        self.resume.pop(body, None)
+        return m
+
+    async def claim(self, body, resume=None, token=None):
+        """Take a body back with its resume key (after a reconnect, within the grace):
+        the `claimed` reply. resume defaults to the key this client got at launch."""
+        key = resume or self.resume[body]
+        m = await self._body_request({"type": "claim", "body": body, "resume": key}, token)
+        self.resume[body] = key
+        return m
+
+    async def bodies_now(self, newer_than=None):
+        """(seq, [Body]) of the newest frame, or of the first one after seq newer_than
+        (the client must receive frames: a ?frames=0 connection gets none)."""
+        while self._bodies_now is None or (newer_than is not None and self._bodies_now[0] <= newer_than):
+            if self._frame_error is not None and isinstance(self._frame_error, Exception) and \
+                    not isinstance(self._frame_error, fr.ProtocolError):
+                raise self._frame_error
+            self._bodies_event.clear()
+            await asyncio.wait_for(self._bodies_event.wait(), self.timeout)
+        return self._bodies_now
 
     async def set(self, token=None, **params):
         """Change sea parameters (controller role): the `params` reply."""

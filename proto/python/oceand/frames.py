@@ -61,6 +61,61 @@ class Tile:
     cascade: int = 0     # tile header flags bits 0-1 (§3.2): which cascade's patch (§4.1)
 
 
+BODY_SECTION = struct.Struct("<4sHH8x")            # 16 bytes: tag, count, record_size (§3.5)
+BODY_RECORD = struct.Struct("<IBBbb3f4f3f")         # 48 bytes
+BODY_ADRIFT, BODY_POWERED = 1, 2                    # record flags
+
+
+@dataclass
+class Body:
+    """One floating body's record of a tick (§3.5)."""
+    id: int
+    kind: int            # index into hello["body_kinds"]
+    flags: int
+    throttle: float      # -1..1 (the byte / 127)
+    rudder: float
+    pos: tuple           # (x, y, z) m, world, centre of mass
+    quat: tuple          # (w, x, y, z), body -> world
+    vel: tuple           # (vx, vy, vz) m/s
+
+    @property
+    def adrift(self):
+        return bool(self.flags & BODY_ADRIFT)
+
+    @property
+    def powered(self):
+        return bool(self.flags & BODY_POWERED)
+
+
+def decode_bodies(data):
+    """The floating bodies in a frame's header (§3.5): a list of Body in ascending
+    id, [] for a frame without a BODY section. Raises ProtocolError on a bad header
+    or a section that does not fit it."""
+    data = memoryview(data)
+    if len(data) < FRAME_HEADER.size:
+        raise ProtocolError("truncated", "shorter than a frame header")
+    magic, version, header_size = struct.unpack_from("<4sHH", data, 0)
+    if magic != MAGIC:
+        raise ProtocolError("magic", f"magic {bytes(magic)!r}")
+    if version != VERSION:
+        raise ProtocolError("version", f"frame version {version}")
+    if header_size < FRAME_HEADER.size or header_size % 8:
+        raise ProtocolError("corrupt", f"header_size {header_size}")
+    if header_size > len(data):
+        raise ProtocolError("truncated", "shorter than its header_size")
+    room = header_size - FRAME_HEADER.size
+    if room < BODY_SECTION.size or bytes(data[48:52]) != b"BODY":
+        return []
+    _tag, count, rsize = BODY_SECTION.unpack_from(data, 48)
+    if rsize < BODY_RECORD.size or rsize % 8 or count * rsize > room - BODY_SECTION.size:
+        raise ProtocolError("corrupt", f"BODY section of {count} x {rsize} bytes in a header of {header_size}")
+    out = []
+    for i in range(count):
+        r = BODY_RECORD.unpack_from(data, 64 + i * rsize)
+        out.append(Body(r[0], r[1], r[2], r[3] / 127.0, r[4] / 127.0, r[5:8], r[8:12], r[12:15]))
+    return out
+
+
 @dataclass
 class Frame:
     seq: int
@@ -71,6 +126,7 @@ class Frame:
     patch_size: float
     server_time_us: int
     tiles: list = field(default_factory=list)
+    bodies: list = field(default_factory=list)   # the tick's floating bodies (Body, §3.5)
 
 
 def _pow2(v):
@@ -334,6 +390,7 @@ def decode_frame(data, state=None):
             and math.isfinite(patch_size) and patch_size > 0):
         raise ProtocolError("corrupt", f"bad frame header (n={n}, tile_size={tile_size})")
     frame = Frame(seq, sim_time, params_version, n, tile_size, patch_size, server_time_us)
+    frame.bodies = decode_bodies(data)
     grid_tiles = n // tile_size
 
     # Pass 1: headers, raw tiles, and the residuals of lossy tiles.
