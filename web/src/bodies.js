@@ -23,6 +23,7 @@ const LOOKS = {
   boat: { top: 0xf7f7f5, bottom: 0x14233b, deck: 0xb58d5a, house: 0xf0f0ee },
   ship: { top: 0x1f2f48, bottom: 0x8f2418, deck: 0x6b6f72, house: 0xeeeeea, funnel: 0xd04a1c },
 };
+const HISTORY = 150;            // frames whose records are kept (5 s at 30 Hz)
 const STEER_HZ = 10;            // steering messages per second at most, while something changes
 const THROTTLE_STEP = 0.1;      // per key press (held keys repeat)
 const RESUME_KEY = 'oceand.bodies.resume'; // sessionStorage: {body: resume} of this tab's bodies
@@ -87,7 +88,7 @@ function box(w, h, d, x, y, z, color) {
 export function kindMesh(kind) {
   const look = LOOKS[kind.name] || LOOKS.boat, g = new THREE.Group();
   const L = kind.length, B = kind.beam, H = kind.height;
-  const keel = -(kind.keel_to_com ?? H / 2);             // keel below the centre of mass
+  const keel = -(kind.kg ?? H / 2);                      // keel below the centre of mass (hello's kg)
   const wl = keel + (kind.draft ?? H / 2);                // the still-water line in the body frame
   const lambert = (extra = {}) => new THREE.MeshLambertMaterial({ vertexColors: true, ...extra });
   if (kind.hull === 'cylinder') {
@@ -151,11 +152,11 @@ export function kindMesh(kind) {
 
 // ---- state ----------------------------------------------------------------------------------
 
-// A record from the frame header (proto/js decodeBodies) as plain numbers.
+// A record of the frame header's BODY section (proto/js oc_decode.js header.bodies) as three.js values.
 function stateOf(r) {
   return { id: r.id, kind: r.kind, adrift: !!r.adrift, powered: !!r.powered, throttle: r.throttle, rudder: r.rudder,
-    pos: new THREE.Vector3(...r.position), quat: new THREE.Quaternion(r.orientation[1], r.orientation[2], r.orientation[3], r.orientation[0]),
-    vel: new THREE.Vector3(...r.velocity) };
+    pos: new THREE.Vector3(...r.pos), quat: new THREE.Quaternion(r.quat[1], r.quat[2], r.quat[3], r.quat[0]),
+    vel: new THREE.Vector3(...r.vel) };
 }
 
 export class Bodies {
@@ -174,6 +175,7 @@ export class Bodies {
     this.info = new Map();       // body id -> { kind, owner, name, adrift } from `bodies`
     this.a = new Map(); this.b = new Map(); // body id -> state, in the two frames the sea blends
     this.mine = new Set(); this.myIds = [];
+    this.history = new Map();    // seq -> that frame's records
     this.selected = null;        // the body steered and followed
     this.follow = false;
     this.control = { throttle: 0, rudder: 0 };
@@ -246,10 +248,14 @@ export class Bodies {
   remove() { if (this.selected !== null) this.send({ type: 'remove', body: this.selected }); }
 
   // A new frame shown by the sea (its header's bodies): the newer slot becomes the older.
-  setFrame(records) {
+  setFrame(records, seq) {
     this.a = this.b;
     this.b = new Map();
     for (const r of records || []) this.b.set(r.id, stateOf(r));
+    this.seq = seq;
+    // The records of the last frames shown, by seq (tests compare two pages tick for tick).
+    this.history.set(seq, records || []);
+    if (this.history.size > HISTORY) this.history.delete(this.history.keys().next().value);
     for (const id of this.b.keys()) if (!this.meshes.has(id)) this.make(id);
     for (const id of [...this.meshes.keys()]) if (!this.b.has(id) && !this.info.has(id)) this.drop(id);
     if (this.pendingSelect !== undefined && this.mine.has(this.pendingSelect)) { this.select(this.pendingSelect); this.pendingSelect = undefined; }

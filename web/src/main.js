@@ -525,6 +525,12 @@ if (query.has('test')) {
       return [(v.x + 1) / 2 * canvas.clientWidth, (1 - v.y) / 2 * canvas.clientHeight];
     },
     slopeVariance() { return ocean.slopeVar || null; },
+    // Bodies: the records of the frame of tick seq as this page received them (null: not kept),
+    // the drawn surface's height at (x, z), and a raw message on the frame connection.
+    bodyRecords(seq) { const r = bodies.history.get(seq); return r ? structuredClone(r) : null; },
+    bodySeqs() { return [...bodies.history.keys()]; },
+    surfaceHeight(x, z, slot = null) { return ocean.surfaceHeight(x, z, slot); },
+    send(msg) { return conn.send(msg); },
     // The foam field drawn: size, and the share of samples at >= 0.5 and > 0.1.
     foamStats() {
       const f = ocean.foam[1]?.image.data;
