@@ -13,12 +13,16 @@ $(BUILD)/web/index.html: $(WEB_SRC) web/node_modules/.package-lock.json
 web/node_modules/.package-lock.json: web/package-lock.json
 	@scripts/deps.sh && touch $@
 
-.PHONY: test-web bench-web
-TESTS   += test-web
+.PHONY: test-web test-web-bodies bench-web
+TESTS   += test-web test-web-bodies
 BENCHES += bench-web
 
 test-web: $(BUILD)/web/index.html $(BUILD)/oceand
 	node tests/web/test_web.mjs --oceand $(BUILD)/oceand --web-root $(BUILD)/web --out $(BUILD)/web-test
+
+# Bodies on the shared sea: two pages, one boat (tests/web/test_bodies.mjs; writes bodies.png).
+test-web-bodies: $(BUILD)/web/index.html $(BUILD)/oceand
+	node tests/web/test_bodies.mjs --oceand $(BUILD)/oceand --web-root $(BUILD)/web --out $(BUILD)/web-test
 
 bench-web: $(BUILD)/web/index.html $(BUILD)/oceand
 	node bench/web_bench.mjs --oceand $(BUILD)/oceand --web-root $(BUILD)/web

@@ -7,6 +7,7 @@ import { Ocean } from './ocean.js';
 import { Panel } from './panel.js';
 import { Hud, Stats } from './hud.js';
 import { ProbeMarker } from './probe.js';
+import { Bodies } from './bodies.js';
 import { SkyModel } from './sky.js';
 import { DEFAULT_HOUR } from './presets.js';
 
@@ -157,6 +158,8 @@ const conn = new Connection(serverUrl(), {
         worker.postMessage({ type: 'reset' }); // its references belong to the old session
         st.params = msg.params; st.paramsVersion = msg.params_version;
         panel.build(msg);
+        bodies.hello(msg, [msg.client_id, st.controlId]);
+        bodies.buildPanel(panel.gui);
         if (msg.subscription) panel.subscribed(msg.subscription);
         if (panel.me.name) conn.send({ type: 'name', name: panel.me.name }); // our display name, every session
         ocean.setWind(msg.params?.wind_speed, msg.params?.wind_direction);
@@ -183,6 +186,12 @@ const conn = new Connection(serverUrl(), {
       case 'params':
         onParams(msg);
         break;
+      case 'bodies': // who owns which body, under what name; bodies gone (PROTOCOL.md §7.6)
+        bodies.list(msg);
+        break;
+      case 'launched': case 'claimed': // our body (a launch, or one claimed back after a reload)
+        bodies.launched(msg);
+        break;
       case 'named': // our display name as the server now has it
         st.name = msg.name;
         panel.named(msg.name);
@@ -200,6 +209,7 @@ const conn = new Connection(serverUrl(), {
         break;
       case 'error': // a rejected request: the panel says why (decode errors go to the HUD)
         if (msg.code === 'duplicate') break; // a change's copy that the control connection brought first
+        if (bodies.claimRefused(msg)) break;  // a body of this tab's that is gone: forget it quietly
         st.serverError = msg;
         panel.error(msg);
         break;
@@ -251,6 +261,7 @@ const control = new Connection(controlUrl(serverUrl()), {
       case 'hello':
         st.controlId = msg.client_id;
         panel.controlId = msg.client_id;
+        bodies.setMyIds([st.clientId, st.controlId]);
         if (panel.me.name) control.send({ type: 'name', name: panel.me.name }); // shown with our changes
         break;
       case 'params': onParams(msg); break;
@@ -275,6 +286,11 @@ function sendChange(msg) {
 
 // Double-click the sea to drop a buoy (point probe + exact query, probe.js).
 const probe = new ProbeMarker({ scene: ocean.scene, camera, canvas, send: (m) => conn.send(m) });
+// Bodies on the shared sea (bodies.js): launched and removed on the frame connection (its
+// client id owns them); steering on the control connection when it is open (a reply-free
+// stream of absolute values: one connection, so a late copy never overtakes a newer one).
+const bodies = new Bodies({ scene: ocean.scene, camera, controls, send: (m) => conn.send(m),
+  steer: (m) => (control.state === 'open' ? control.send(m) : conn.send(m)) });
 
 const panel = new Panel({
   set: (params) => sendChange({ type: 'set', params }),
@@ -412,6 +428,7 @@ function frameLoop() {
     pendingFrame = null;
     const { uploadMs, released } = ocean.setFrame(f, now, bench);
     stats.shownFrames++;
+    bodies.setFrame(f.header.bodies, f.header.seq);
     stats.uploadMs = uploadMs;
     if (bench && timings.decode.length < 10000) { timings.decode.push(f.decodeMs); timings.assemble.push(f.assembleMs); timings.upload.push(uploadMs); }
     const buffers = released.map((a) => ({ buffer: a.buffer, channels: a.length === f.m * f.m * 4 ? 4 : a.length === f.m * f.m * 2 ? 2 : 1 }));
@@ -427,6 +444,8 @@ function frameLoop() {
   keepAboveWaves();
   // Sky, sun and light follow the local hour and the shared sea's wind; haze thickens with it.
   if (sky.update(view.hour, st.params?.wind_speed ?? 10)) ocean.uniforms.uFogDensity.value = 0.00009 * (1 + 4 * sky.state.overcast ** 2);
+  // The bodies are blended between the same two frames as the sea, by the same amount.
+  bodies.update(ocean.lastArrival ? Math.min(Math.max((now - ocean.lastArrival) / ocean.interval, 0), 1) : 1, sky.uniforms, now);
   if (draw) ocean.render(camera, now);
   if (ocean.hasData) st.rendered++;
   flatNotice();
@@ -453,6 +472,8 @@ window.oceand = Object.freeze({
   get paramsBy() { return st.paramsBy; },   // `by` of the last change applied
   get name() { return st.name; },  // our display name in force on the server (null: none yet)
   get subscription() { return snapshot(st.subscription); },
+  get bodies() { return snapshot(bodies.snapshot()); }, // every body drawn: kind, owner, name, mine, pose
+  get selectedBody() { return bodies.selected; },
   // Where the foam drawn comes from: the server's field (at lod, F×F) or the Jacobian.
   get foam() { return snapshot({ source: ocean.uniforms.uFoamField.value ? 'field' : 'jacobian', lod: st.foamLod, size: st.foamM }); },
   get wireframe() { return ocean.wireframe; },
@@ -504,6 +525,12 @@ if (query.has('test')) {
       return [(v.x + 1) / 2 * canvas.clientWidth, (1 - v.y) / 2 * canvas.clientHeight];
     },
     slopeVariance() { return ocean.slopeVar || null; },
+    // Bodies: the records of the frame of tick seq as this page received them (null: not kept),
+    // the drawn surface's height at (x, z), and a raw message on the frame connection.
+    bodyRecords(seq) { const r = bodies.history.get(seq); return r ? structuredClone(r) : null; },
+    bodySeqs() { return [...bodies.history.keys()]; },
+    surfaceHeight(x, z, slot = null) { return ocean.surfaceHeight(x, z, slot); },
+    send(msg) { return conn.send(msg); },
     // The foam field drawn: size, and the share of samples at >= 0.5 and > 0.1.
     foamStats() {
       const f = ocean.foam[1]?.image.data;

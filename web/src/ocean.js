@@ -177,7 +177,8 @@ export class Ocean {
   // two being blended, and the finer cascades' heights): the undisplaced point whose
   // displacement lands on (x, z) is found by fixed-point iteration (horizontal
   // displacement is smooth and smaller than the wavelength, so it converges in a few steps).
-  surfaceHeight(x, z) {
+  // slot 0 or 1: that frame only (1 = the newer, drawn alone once the blend reaches it).
+  surfaceHeight(x, z, slot = null) {
     if (!this.hasData) return 0;
     const m = this.m, L = this.patch;
     const bilinear = (data, mm, LL, px, pz, ch) => {
@@ -187,7 +188,7 @@ export class Ocean {
       return (at(i0, j0) * (1 - tx) + at(i1, j0) * tx) * (1 - tz) + (at(i0, j1) * (1 - tx) + at(i1, j1) * tx) * tz;
     };
     let best = -Infinity;
-    for (const t of this.disp) {
+    for (const t of slot === null ? this.disp : [this.disp[slot]]) {
       const d = t?.image.data;
       if (!d || d.length !== m * m * 4) continue;
       let px = x, pz = z;
@@ -195,10 +196,10 @@ export class Ocean {
       best = Math.max(best, bilinear(d, m, L, px, pz, 1));
     }
     for (let c = 1; c < 4; c++) {
-      const slot = this.cascades[c];
-      if (!slot || !(this.uniforms.uCOn.value.getComponent(c - 1) > 0)) continue;
+      const cs = this.cascades[c];
+      if (!cs || !(this.uniforms.uCOn.value.getComponent(c - 1) > 0)) continue;
       const Lc = this.uniforms.uCPatch.value.getComponent(c - 1);
-      best += Math.max(...slot.tex.map((t) => bilinear(t.image.data, slot.m, Lc, x, z, 1)));
+      best += Math.max(...(slot === null ? cs.tex : [cs.tex[slot]]).map((t) => bilinear(t.image.data, cs.m, Lc, x, z, 1)));
     }
     return Number.isFinite(best) ? best : 0;
   }

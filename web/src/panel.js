@@ -248,7 +248,8 @@ export class Panel {
     this.schema[name] = { ...s, ...info };
     if (!(name in obj)) obj[name] = s.default;
     let c;
-    if (s.type === 'enum') c = folder.add(obj, name, s.choices);
+    // "measured" is a sea a buoy or a forecast gives (ocean-tap sea): offered only while in force.
+    if (s.type === 'enum') c = folder.add(obj, name, s.choices.filter((v) => v !== 'measured' || obj[name] === 'measured'));
     else if (s.type === 'bool') c = folder.add(obj, name);
     else if (s.type === 'int' && s.pow2) {
       const opts = [];
