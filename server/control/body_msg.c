@@ -201,6 +201,7 @@ cJSON *body_kinds_array(void)
         cJSON_AddNumberToObject(o, "height", k->height);
         cJSON_AddNumberToObject(o, "mass", k->mass);
         cJSON_AddNumberToObject(o, "draft", k->draft);
+        cJSON_AddNumberToObject(o, "kg", body_kind_kg(k));
         cJSON_AddBoolToObject(o, "powered", k->powered);
         cJSON_AddNumberToObject(o, "top_speed", k->top_speed);
         cJSON_AddNumberToObject(o, "turning_diameter", k->turning_diameter);

@@ -172,6 +172,16 @@ static void strip_added_mass(struct body_model *m, const struct body_kind *k, bo
     }
 }
 
+double body_kind_kg(const struct body_kind *k)
+{
+    static const double default_kg[] = {
+        [BODY_HULL_CYLINDER] = 0.25, [BODY_HULL_SPHERE] = 0.4, [BODY_HULL_BOX] = 0.5, [BODY_HULL_SHIP] = 0.45,
+    };
+    if ((unsigned)k->hull > BODY_HULL_SHIP)
+        return 0.5 * k->height;
+    return k->kg > 0 ? k->kg : default_kg[k->hull] * k->height;
+}
+
 int body_model_build(const struct body_kind *k, struct body_model *m)
 {
     if (!k || !finite_pos(k->length) || !finite_pos(k->beam) || !finite_pos(k->height) || !finite_pos(k->mass))
@@ -185,10 +195,7 @@ int body_model_build(const struct body_kind *k, struct body_model *m)
         return -1;
     memset(m, 0, sizeof *m);
     double len = k->length, beam = k->beam, height = k->height, mass = k->mass;
-    static const double default_kg[] = {
-        [BODY_HULL_CYLINDER] = 0.25, [BODY_HULL_SPHERE] = 0.4, [BODY_HULL_BOX] = 0.5, [BODY_HULL_SHIP] = 0.45,
-    };
-    m->kg = k->kg > 0 ? k->kg : default_kg[k->hull] * height;
+    m->kg = body_kind_kg(k);
     m->mass = mass;
     double keel = -m->kg, deck = height - m->kg, r = 0.5 * beam;
 

@@ -63,10 +63,11 @@ try {
   }), port);
 
   await check('the panel lists every kind the server has, and launches one', async () => {
-    const options = await A.$$eval('[data-ui=body-kind] select option', (os) => os.map((o) => o.value));
+    const options = await A.$$eval('[data-ui=body-kind] select option', (os) => os.map((o) => o.textContent));
     assert(kinds && kinds.length >= 5, `hello.body_kinds: ${JSON.stringify(kinds)}`);
-    assert(JSON.stringify(options) === JSON.stringify(kinds.map((k) => k.name)), `panel offers ${options}, server has ${kinds.map((k) => k.name)}`);
-    await A.selectOption('[data-ui=body-kind] select', 'boat');
+    const labels = kinds.map((k) => k.label || k.name);
+    assert(JSON.stringify(options) === JSON.stringify(labels), `panel offers ${options}, server has ${labels}`);
+    await A.selectOption('[data-ui=body-kind] select', { label: kinds.find((k) => k.name === 'boat').label });
     await A.click('[data-ui=launch] button');
     await waitFor(A, 'A draws its own boat', () => window.oceand.bodies.some((b) => b.mine && b.kind === 'boat'));
     boat = (await bodiesOf(A)).find((b) => b.mine && b.kind === 'boat');
@@ -128,21 +129,29 @@ try {
       const seqs = window.oceandTest.bodySeqs(), r = (window.oceandTest.bodyRecords(seqs[seqs.length - 1]) || []).find((x) => x.id === id);
       return r && r.rudder > 0.9;
     }, boat.body, 15000);
-    await sleep(3000);
+    await sleep(5000);
     const r1 = await newestRecord(B, boat.body);
     await A.keyboard.up('d');
-    const heading = (r) => Math.atan2(-r.vel[0], r.vel[2]) * 180 / Math.PI; // bearing of the course: north = +z, east = -x
+    // The bow's bearing from the orientation (the course through waves wanders with the sway):
+    // bow = q (0, 0, 1) q*, bearing clockwise from north = atan2(-x, z) (north = +z, east = -x).
+    const heading = (r) => {
+      const [w, x, y, z] = r.quat;
+      const bx = 2 * (x * z + w * y), bz = 1 - 2 * (x * x + y * y);
+      return Math.atan2(-bx, bz) * 180 / Math.PI;
+    };
     const turned = ((heading(r1) - heading(r0)) % 360 + 540) % 360 - 180;
-    assert(turned > 10, `the course turned ${turned.toFixed(1)}° with the rudder to starboard (want clockwise, > 10°)`);
+    assert(turned > 10, `the bow turned ${turned.toFixed(1)}° in 5 s with the rudder to starboard (want clockwise, > 10°)`);
+    console.log(`     the bow turned ${turned.toFixed(1)}° in 5 s at ${Math.hypot(r0.vel[0], r0.vel[2]).toFixed(1)} m/s`);
   });
 
   await check("another page cannot steer or remove it (not_owner), and nothing changes", async () => {
     const before = await newestRecord(B, boat.body);
-    await B.evaluate((id) => window.oceandTest.send({ type: 'steer', id: 'b-steer', body: id, throttle: -1 }), boat.body);
-    await waitFor(B, 'an error for the steer', () => window.oceand.stats.serverError?.id === 'b-steer');
+    // (the page's connection numbers its requests: the error carries the number send returned)
+    const steerId = await B.evaluate((id) => window.oceandTest.send({ type: 'steer', body: id, throttle: -1 }), boat.body);
+    await waitFor(B, 'an error for the steer', (rid) => window.oceand.stats.serverError?.id === rid, steerId);
     assert((await stats(B)).serverError.code === 'not_owner', `B's steer: ${JSON.stringify((await stats(B)).serverError)}`);
-    await B.evaluate((id) => window.oceandTest.send({ type: 'remove', id: 'b-remove', body: id }), boat.body);
-    await waitFor(B, 'an error for the remove', () => window.oceand.stats.serverError?.id === 'b-remove');
+    const removeId = await B.evaluate((id) => window.oceandTest.send({ type: 'remove', body: id }), boat.body);
+    await waitFor(B, 'an error for the remove', (rid) => window.oceand.stats.serverError?.id === rid, removeId);
     assert((await stats(B)).serverError.code === 'not_owner', `B's remove: ${JSON.stringify((await stats(B)).serverError)}`);
     await sleep(500);
     const after = await newestRecord(B, boat.body);
@@ -161,15 +170,16 @@ try {
       await A.evaluate(() => window.oceandTest.freeze(true));
       await sleep(400); // the blend reaches the newer frame: it alone is drawn, with its records
       const g = await A.evaluate(({ id, kg, draft }) => {
-        const seqs = window.oceandTest.bodySeqs(), r = window.oceandTest.bodyRecords(seqs[seqs.length - 1]).find((x) => x.id === id);
+        const r = (window.oceandTest.bodyRecords(window.oceandTest.drawnBodySeq()) || []).find((x) => x.id === id);
+        if (!r) return null;
         const surface = window.oceandTest.surfaceHeight(r.pos[0], r.pos[2], 1);
         return { waterline: r.pos[1] - kg + draft, surface };
       }, { id: ball.body, kg: k.kg ?? k.height / 2, draft: k.draft });
-      gaps.push(Math.abs(g.waterline - g.surface));
-      swell.push(g.surface);
+      if (g) { gaps.push(Math.abs(g.waterline - g.surface)); swell.push(g.surface); }
       await A.evaluate(() => window.oceandTest.freeze(false));
       await sleep(300 + 97 * i);
     }
+    assert(gaps.length >= 8, `only ${gaps.length} of 12 held frames had the ball's record`);
     const range = Math.max(...swell) - Math.min(...swell);
     assert(range > 0.1, `the surface under the ball hardly moved (${range.toFixed(3)} m): the check would prove nothing`);
     assert(median(gaps) < 0.12, `the ball's waterline is ${median(gaps).toFixed(3)} m (median) from the drawn surface (waves ${range.toFixed(2)} m)`);
@@ -201,11 +211,11 @@ try {
   await check('a picture: a boat under way and a ball, seen from 25 m', async () => {
     const C = await browser.newPage({ viewport: { width: 900, height: 560 } });
     C.on('pageerror', (e) => pageErrors.push(e.message));
-    await C.goto(`http://127.0.0.1:${port}/?test=1&aa=0&hour=15`, { timeout: 120000 });
+    await C.goto(`http://127.0.0.1:${port}/?test=1&aa=0&hour=15&scale=0.75`, { timeout: 120000 });
     await waitFor(C, 'frames', () => window.oceand?.connected && window.oceand.framesReceived > 3, null, 60000);
     await C.evaluate(() => window.oceandTest.send({ type: 'launch', id: 'p1', kind: 'boat', x: 0, z: 0, heading: 300 }));
     await C.evaluate(() => window.oceandTest.send({ type: 'launch', id: 'p2', kind: 'ball', x: -14, z: 10 }));
-    await waitFor(C, 'two bodies drawn', () => window.oceand.bodies.length >= 2, null, 30000);
+    await waitFor(C, 'two bodies drawn (software GL draws slowly)', () => window.oceand.bodies.length >= 2, null, 120000);
     await sleep(4000);
     await C.evaluate(() => window.oceandTest.look([22, 9, -20], [0, 0, 2]));
     await sleep(2500);

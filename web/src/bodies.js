@@ -139,11 +139,14 @@ export function kindMesh(kind) {
       g.add(funnel);
     }
   }
-  // The ring that marks your own body: at the waterline, a little wider than the hull.
+  // The ring that marks your own body, a little wider than the hull.
   const r = 0.62 * Math.max(L, B) + 0.3;
-  const ring = new THREE.Mesh(new THREE.TorusGeometry(r, Math.max(0.04, 0.012 * r), 6, 48), new THREE.MeshBasicMaterial({ color: col(0x6ff0ff) }));
+  // It floats a little above the waterline (a ring at the waterline disappears into every wave
+  // that passes the pitching hull) and half transparent, so the water shows through it.
+  const ring = new THREE.Mesh(new THREE.TorusGeometry(r, Math.max(0.05, 0.015 * r), 6, 48),
+    new THREE.MeshBasicMaterial({ color: col(0x6ff0ff), transparent: true, opacity: 0.75 }));
   ring.rotation.x = Math.PI / 2;
-  ring.position.y = wl + 0.05;
+  ring.position.y = wl + 0.15 + 0.03 * r;
   ring.visible = false;
   ring.name = 'mine';
   g.add(ring);
@@ -160,9 +163,9 @@ function stateOf(r) {
 }
 
 export class Bodies {
-  // opts: { scene, camera, controls, canvas, send(msg), steer(msg) }
-  constructor({ scene, camera, controls, send, steer }) {
-    this.scene = scene; this.camera = camera; this.controls = controls; this.send = send; this.steerSend = steer || send;
+  // opts: { scene, camera, controls, send(msg) -> request id }
+  constructor({ scene, camera, controls, send }) {
+    this.scene = scene; this.camera = camera; this.controls = controls; this.send = send;
     this.group = new THREE.Group();
     this.group.name = 'bodies';
     scene.add(this.group);
@@ -199,7 +202,8 @@ export class Bodies {
     for (const { mesh, label } of this.meshes.values()) { this.group.remove(mesh); label.remove(); }
     this.meshes.clear(); this.a.clear(); this.b.clear();
     this.list(msg);
-    for (const [id, resume] of Object.entries(this.resume)) this.send({ type: 'claim', id: `claim:${id}`, body: Number(id), resume });
+    this.claims = new Map();     // request id -> the body it claims (the connection numbers requests)
+    for (const [id, resume] of Object.entries(this.resume)) this.claims.set(this.send({ type: 'claim', body: Number(id), resume }), Number(id));
   }
   setMyIds(ids) { this.myIds = ids.filter(Boolean); this.refreshMine(); }
 
@@ -225,12 +229,12 @@ export class Bodies {
     this.bar.hidden = this.selected === null;
   }
 
-  // An error that answers one of our claims (its id is "claim:<body>"): that body is gone or
-  // no longer ours to claim, so its resume key is dropped. True when it was one.
+  // An error that answers one of our claims: that body is gone or no longer ours to claim,
+  // so its resume key is dropped. True when it was one.
   claimRefused(msg) {
-    const m = typeof msg.id === 'string' && /^claim:(\d+)$/.exec(msg.id);
-    if (!m) return false;
-    this.forget(Number(m[1]));
+    if (!this.claims?.has(msg.id)) return false;
+    this.forget(this.claims.get(msg.id));
+    this.claims.delete(msg.id);
     return true;
   }
   launched(msg) { // our launch's answer: keep its resume key for a reload, steer it
@@ -247,15 +251,19 @@ export class Bodies {
   }
   remove() { if (this.selected !== null) this.send({ type: 'remove', body: this.selected }); }
 
+  // A frame decoded (whether or not it is shown): its records, kept by seq for a few seconds
+  // (tests compare two pages tick for tick; a page in the background draws nothing).
+  record(seq, records) {
+    this.history.set(seq, records || []);
+    if (this.history.size > HISTORY) this.history.delete(this.history.keys().next().value);
+  }
+
   // A new frame shown by the sea (its header's bodies): the newer slot becomes the older.
   setFrame(records, seq) {
     this.a = this.b;
     this.b = new Map();
     for (const r of records || []) this.b.set(r.id, stateOf(r));
     this.seq = seq;
-    // The records of the last frames shown, by seq (tests compare two pages tick for tick).
-    this.history.set(seq, records || []);
-    if (this.history.size > HISTORY) this.history.delete(this.history.keys().next().value);
     for (const id of this.b.keys()) if (!this.meshes.has(id)) this.make(id);
     for (const id of [...this.meshes.keys()]) if (!this.b.has(id) && !this.info.has(id)) this.drop(id);
     if (this.pendingSelect !== undefined && this.mine.has(this.pendingSelect)) { this.select(this.pendingSelect); this.pendingSelect = undefined; }
@@ -311,7 +319,7 @@ export class Bodies {
     if (!this.steerDirty || this.selected === null || now - this.lastSteer < 1000 / STEER_HZ) return;
     this.steerDirty = false;
     this.lastSteer = now;
-    this.steerSend({ type: 'steer', body: this.selected, throttle: this.control.throttle, rudder: this.control.rudder });
+    this.send({ type: 'steer', body: this.selected, throttle: this.control.throttle, rudder: this.control.rudder });
   }
 
   // Phones: hold ◀ ▶ for the rudder, tap ▲ ▼ for the throttle; ◎ follows the boat.

@@ -286,11 +286,9 @@ function sendChange(msg) {
 
 // Double-click the sea to drop a buoy (point probe + exact query, probe.js).
 const probe = new ProbeMarker({ scene: ocean.scene, camera, canvas, send: (m) => conn.send(m) });
-// Bodies on the shared sea (bodies.js): launched and removed on the frame connection (its
-// client id owns them); steering on the control connection when it is open (a reply-free
-// stream of absolute values: one connection, so a late copy never overtakes a newer one).
-const bodies = new Bodies({ scene: ocean.scene, camera, controls, send: (m) => conn.send(m),
-  steer: (m) => (control.state === 'open' ? control.send(m) : conn.send(m)) });
+// Bodies on the shared sea (bodies.js): every body request goes on the frame connection, whose
+// session owns what it launches (the control connection is another session, PROTOCOL.md §7.6).
+const bodies = new Bodies({ scene: ocean.scene, camera, controls, send: (m) => conn.send(m) });
 
 const panel = new Panel({
   set: (params) => sendChange({ type: 'set', params }),
@@ -355,6 +353,7 @@ worker.onmessage = (ev) => {
   if (st.lastSeq !== null && h.seq <= st.lastSeq) { recycle(msg); return; }
   if (st.lastSeq !== null && h.seq > st.lastSeq + 1) stats.dropped += h.seq - st.lastSeq - 1;
   st.lastSeq = h.seq;
+  bodies.record(h.seq, h.bodies);
   stats.decodeMs = msg.decodeMs;
   stats.inflater = msg.inflater; // 'wasm' or 'fflate' (the worker's raw-DEFLATE inflater)
   if (pendingFrame) recycle(pendingFrame); // superseded before it was shown
@@ -529,6 +528,7 @@ if (query.has('test')) {
     // the drawn surface's height at (x, z), and a raw message on the frame connection.
     bodyRecords(seq) { const r = bodies.history.get(seq); return r ? structuredClone(r) : null; },
     bodySeqs() { return [...bodies.history.keys()]; },
+    drawnBodySeq() { return bodies.seq ?? null; }, // the tick whose records are drawn (the newer of the two frames)
     surfaceHeight(x, z, slot = null) { return ocean.surfaceHeight(x, z, slot); },
     send(msg) { return conn.send(msg); },
     // The foam field drawn: size, and the share of samples at >= 0.5 and > 0.1.

@@ -64,6 +64,9 @@ enum { BODY_KIND_COUNT = 5 };
 const struct body_kind *body_kinds(void);
 /* The row named name, or NULL. */
 const struct body_kind *body_kind_find(const char *name);
+/* The centre of mass above the keel (m) a body of kind k has: k->kg, or the
+ * hull's default when k->kg is 0. A client draws the hull from it (hello's kg). */
+double body_kind_kg(const struct body_kind *k);
 
 /* Steering. Powered kinds only; an unpowered body ignores it. */
 struct body_control {
