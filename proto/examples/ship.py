@@ -3,7 +3,7 @@
 it, every viewer sees it, and this script holds a course with its rudder.
 
     /usr/bin/python3 proto/examples/ship.py ws://127.0.0.1:8080 --kind ship \\
-        --x 0 --z 0 --course 45 --throttle 0.8 [--seconds 60] [--name Ana]
+        --x 0 --z 0 --heading 0 --course 45 --throttle 0.8 [--seconds 60] [--name Ana]
 
 Each second it prints the ship's heave (y), pitch, roll, speed and heading,
 decoded from the records in the frame headers (§3.5). Frames: north = +z,
@@ -19,6 +19,7 @@ import asyncio
 import json
 import math
 import os
+import signal
 import sys
 
 try:
@@ -57,7 +58,7 @@ async def get_ship(sea, args):
         return saved["body"]
     except (OSError, ValueError, KeyError, oceand.ServerError):
         pass
-    m = await sea.launch(args.kind, args.x, args.z, heading=args.course)
+    m = await sea.launch(args.kind, args.x, args.z, heading=args.heading)
     with open(args.key_file, "w") as f:
         json.dump({"body": m["body"], "resume": m["resume"]}, f)
     print(f"ship: launched {args.kind} body {m['body']}", flush=True)
@@ -110,7 +111,8 @@ def main():
     ap.add_argument("--kind", default="ship", help="a name of hello's body_kinds (default ship)")
     ap.add_argument("--x", type=float, default=0.0, help="launch point, m (east = -x)")
     ap.add_argument("--z", type=float, default=0.0, help="launch point, m (north = +z)")
-    ap.add_argument("--course", type=float, default=0.0, help="degrees clockwise from north to hold")
+    ap.add_argument("--heading", type=float, default=0.0, help="the bow at launch, degrees clockwise from north")
+    ap.add_argument("--course", type=float, default=0.0, help="degrees clockwise from north to steer to and hold")
     ap.add_argument("--throttle", type=float, default=0.5, help="-1 (astern) .. 1 (full ahead)")
     ap.add_argument("--name", default="", help="display name other viewers see")
     ap.add_argument("--seconds", type=float, default=0, help="stop (and remove the ship) after this many s")
@@ -118,6 +120,8 @@ def main():
     ap.add_argument("--timeout", type=float, default=10.0)
     args = ap.parse_args()
     args.key_file = args.key_file or f".ship-{args.kind}.key"
+    for sig in (signal.SIGINT, signal.SIGTERM):   # Ctrl-C or kill: remove the ship, then exit
+        signal.signal(sig, signal.default_int_handler)
     try:
         asyncio.run(sail(args))
     except KeyboardInterrupt:

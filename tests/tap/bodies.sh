@@ -14,7 +14,9 @@ trap 'stop_daemons; rm -rf "$tmp"' EXIT
 port=$(free_port)
 URL=ws://127.0.0.1:$port
 start_daemon "$port" --port "$port" --bind 127.0.0.1 --state-file "$tmp/state.json" \
-  --web-root "$BUILD/web" --resolution 64 || fail "oceand did not start"
+  --web-root "$BUILD/web" --resolution 64 --wind-speed 5 || fail "oceand did not start"
+# A moderate sea (wind 5 m/s): the bodies heave and roll, and the waves do not yaw a boat
+# far off its heading in 5 s (at the default 10 m/s they may, by 15 degrees).
 
 # run EXPECTED_RC LABEL CMD... : run, keep stdout/stderr in $tmp/out, $tmp/err.
 run() {
@@ -106,8 +108,8 @@ grep -q "\"claimed\":$kid" "$tmp/out" || fail "no claimed line: $(cat "$tmp/out"
 ok "steer of another's body: exit 4 not_owner; a wrong key: not_owner; the key claims it and it is removed at the end"
 
 section "proto/examples/ship.py: a ship on the shared sea"
-( cd "$tmp" && exec $PY "$OLDPWD/proto/examples/ship.py" "$URL" --kind boat --x 30 --z 40 --course 45 \
-    --throttle 1 --seconds 5 --name shiptest ) >"$tmp/ship.out" 2>"$tmp/ship.err" &
+( cd "$tmp" && exec $PY "$OLDPWD/proto/examples/ship.py" "$URL" --kind boat --x 30 --z 40 --heading 0 \
+    --course 90 --throttle 1 --seconds 5 --name shiptest ) >"$tmp/ship.out" 2>"$tmp/ship.err" &
 ship_pid=$!
 for _ in $(seq 60); do grep -q 'launched' "$tmp/ship.out" && break; sleep 0.1; done
 sid=$(sed -n 's/^ship: launched boat body \([0-9]*\)$/\1/p' "$tmp/ship.out")
@@ -128,11 +130,36 @@ rows = [l.split() for l in open(sys.argv[1]) if l.split() and l.split()[0].isdig
 assert len(rows) >= 3, f"{len(rows)} state lines in 5 s"
 speed = [float(r[6]) for r in rows]
 assert speed[-1] > speed[0] and speed[-1] > 0.5, f"speeds {speed}"
-head = float(rows[-1][7])
-assert abs((head - 45 + 180) % 360 - 180) < 20, f"heading {head}, course 45"
-print(f"  ok  {len(rows)} lines: speed {speed[0]:.2f} -> {speed[-1]:.2f} m/s, heading {head:.1f} (course 45)")
+head = [float(r[7]) for r in rows]
+rudder = [float(r[8]) for r in rows]
+# Launched bow north, course 90 (east): the controller puts the rudder to starboard
+# (+) and the bow turns clockwise toward the course.
+assert rudder[0] > 0.5, f"rudder {rudder[0]} at 90 degrees off course"
+assert 2 < head[-1] <= 95, f"headings {head}: the bow does not turn toward the course 90"
+print(f"  ok  {len(rows)} lines: speed {speed[0]:.2f} -> {speed[-1]:.2f} m/s, heading {head[0]:.1f} -> {head[-1]:.1f} "
+      f"(course 90, rudder {rudder[0]:+.2f})")
 EOF
 ok "ship.py's body $sid is seen by another client, named, and removed after"
+
+section "Ctrl-C removes the body (ocean-tap --follow, ship.py)"
+"$TAP" "$URL" --launch ball --at 1,2 --follow >"$tmp/int.out" 2>"$tmp/int.err" &
+tap_pid=$!
+for _ in $(seq 50); do grep -q '"seq"' "$tmp/int.out" && break; sleep 0.1; done
+bid=$(sed -n 's/^{"launched":\([0-9]*\),.*/\1/p' "$tmp/int.out")
+[ -n "$bid" ] && [ -n "$(body_line "$bid")" ] || fail "ocean-tap --follow: no body listed: $(cat "$tmp/int.out" "$tmp/int.err")"
+kill -INT "$tap_pid"; wait "$tap_pid"; rc=$?
+[ "$rc" -eq 0 ] || fail "Ctrl-C during --follow exited $rc: $(cat "$tmp/int.err")"
+[ -z "$(body_line "$bid")" ] || fail "Ctrl-C: ocean-tap left body $bid on the sea"
+( cd "$tmp" && exec $PY "$OLDPWD/proto/examples/ship.py" "$URL" --kind spar --seconds 60 ) >"$tmp/ship0.out" 2>&1 &
+ship_pid=$!
+for _ in $(seq 60); do grep -q '^ *[0-9]' "$tmp/ship0.out" && break; sleep 0.1; done
+sid=$(sed -n 's/^ship: launched spar body \([0-9]*\)$/\1/p' "$tmp/ship0.out")
+[ -n "$sid" ] || fail "ship.py did not launch: $(cat "$tmp/ship0.out")"
+kill -INT "$ship_pid"; wait "$ship_pid"; rc=$?
+[ "$rc" -eq 0 ] || fail "ship.py exited $rc on Ctrl-C: $(cat "$tmp/ship0.out")"
+grep -q "ship: removed body $sid" "$tmp/ship0.out" || fail "ship.py did not remove body $sid on Ctrl-C: $(cat "$tmp/ship0.out")"
+[ -z "$(body_line "$sid")" ] || fail "body $sid is still listed after ship.py's Ctrl-C"
+ok "Ctrl-C: ocean-tap exits 0 and removes body $bid; ship.py removes body $sid"
 
 section "ship.py claims its ship back after a restart"
 ( cd "$tmp" && exec $PY "$OLDPWD/proto/examples/ship.py" "$URL" --kind dinghy --seconds 60 ) \
