@@ -81,7 +81,7 @@ TESTS += test-sea-readers
 test-sea-readers: $(BUILD)/ocean-tap
 	@/usr/bin/python3 tests/sea/test_readers.py $(BUILD)
 
-# budget: < 40 s (~20 s: a boat followed for 5 s, ship.py for 5 + 2 s, a dozen requests)
+# budget: < 45 s (~25 s: a boat followed for 5 s, ship.py for 8 + 2 s and a Ctrl-C, a dozen requests)
 TESTS += test-tap-bodies
 .PHONY: test-tap-bodies
 test-tap-bodies: $(BUILD)/ocean-tap $(BUILD)/oceand

@@ -67,6 +67,7 @@ async def get_ship(sea, args):
 
 async def sail(args):
     sea = await oceand.AsyncClient.connect(args.url, args.timeout)
+    body = None
     try:
         if args.name:
             await sea.ws.send(json.dumps({"type": "name", "name": args.name}))
@@ -95,7 +96,7 @@ async def sail(args):
             if args.seconds and now - start >= args.seconds:
                 break
     finally:
-        if 'body' in locals():
+        if body is not None:
             try:
                 await sea.remove(body)
                 os.unlink(args.key_file)

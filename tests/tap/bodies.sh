@@ -108,13 +108,13 @@ grep -q "\"claimed\":$kid" "$tmp/out" || fail "no claimed line: $(cat "$tmp/out"
 ok "steer of another's body: exit 4 not_owner; a wrong key: not_owner; the key claims it and it is removed at the end"
 
 section "proto/examples/ship.py: a ship on the shared sea"
-( cd "$tmp" && exec $PY "$OLDPWD/proto/examples/ship.py" "$URL" --kind boat --x 30 --z 40 --heading 0 \
-    --course 90 --throttle 1 --seconds 5 --name shiptest ) >"$tmp/ship.out" 2>"$tmp/ship.err" &
+( cd "$tmp" && exec $PY "$OLDPWD/proto/examples/ship.py" "$URL" --kind dinghy --x 30 --z 40 --heading 0 \
+    --course 90 --throttle 1 --seconds 8 --name shiptest ) >"$tmp/ship.out" 2>"$tmp/ship.err" &
 ship_pid=$!
 for _ in $(seq 60); do grep -q 'launched' "$tmp/ship.out" && break; sleep 0.1; done
-sid=$(sed -n 's/^ship: launched boat body \([0-9]*\)$/\1/p' "$tmp/ship.out")
+sid=$(sed -n 's/^ship: launched dinghy body \([0-9]*\)$/\1/p' "$tmp/ship.out")
 [ -n "$sid" ] || fail "ship.py did not launch: $(cat "$tmp/ship.out" "$tmp/ship.err")"
-[ -f "$tmp/.ship-boat.key" ] || fail "ship.py kept no key file"
+[ -f "$tmp/.ship-dinghy.key" ] || fail "ship.py kept no key file"
 sleep 1.5
 seen=$(body_line "$sid")
 [ -n "$seen" ] || fail "another client does not see ship.py's body $sid"
@@ -123,19 +123,19 @@ wait "$ship_pid"; rc=$?
 [ "$rc" -eq 0 ] || fail "ship.py exited $rc: $(cat "$tmp/ship.err")"
 grep -q "ship: removed body $sid" "$tmp/ship.out" || fail "ship.py did not remove its body: $(cat "$tmp/ship.out")"
 [ -z "$(body_line "$sid")" ] || fail "body $sid is still listed after ship.py ended"
-[ ! -f "$tmp/.ship-boat.key" ] || fail "ship.py left its key file after removing the ship"
+[ ! -f "$tmp/.ship-dinghy.key" ] || fail "ship.py left its key file after removing the ship"
 $PY - "$tmp/ship.out" <<'EOF' || fail "ship.py's lines are wrong: $(cat "$tmp/ship.out")"
 import sys
 rows = [l.split() for l in open(sys.argv[1]) if l.split() and l.split()[0].isdigit()]
-assert len(rows) >= 3, f"{len(rows)} state lines in 5 s"
+assert len(rows) >= 5, f"{len(rows)} state lines in 8 s"
 speed = [float(r[6]) for r in rows]
 assert speed[-1] > speed[0] and speed[-1] > 0.5, f"speeds {speed}"
 head = [float(r[7]) for r in rows]
 rudder = [float(r[8]) for r in rows]
 # Launched bow north, course 90 (east): the controller puts the rudder to starboard
-# (+) and the bow turns clockwise toward the course.
+# (+) and the bow turns clockwise toward the course (slowly while it gathers way: ~20 degrees in 8 s).
 assert rudder[0] > 0.5, f"rudder {rudder[0]} at 90 degrees off course"
-assert 2 < head[-1] <= 95, f"headings {head}: the bow does not turn toward the course 90"
+assert 10 < head[-1] < 135, f"headings {head}: the bow does not turn toward the course 90"
 print(f"  ok  {len(rows)} lines: speed {speed[0]:.2f} -> {speed[-1]:.2f} m/s, heading {head[0]:.1f} -> {head[-1]:.1f} "
       f"(course 90, rudder {rudder[0]:+.2f})")
 EOF
