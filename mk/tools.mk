@@ -4,6 +4,7 @@
 #   make install              PREFIX (default /usr/local) and DESTDIR honoured
 #   make config-doc           rewrite the configuration reference (docs/configuration.md)
 #   test-tap                  ocean-tap + the Python example against a real daemon
+#   test-tap-bodies           floating bodies: ocean-tap --launch/--follow/--bodies, ship.py
 #   test-ops                  docker/ <-> apt list, install, configuration reference
 #   test-python               the Python package proto/python (pip install, cascades vs query)
 #   test-blender              the Blender add-on tools/blender/ in Debian's Blender, headless
@@ -21,7 +22,7 @@ UNITDIR    = $(PREFIX)/lib/systemd/system
 WEB_BUILD  := $(BUILD)/web
 
 # ocean-tap, split by verb (tools/tap.h says which file holds what).
-TAP_OBJS := $(addprefix $(BUILD)/obj/tools/,tap_main.o tap_session.o tap_watch.o tap_query.o tap_bake.o \
+TAP_OBJS := $(addprefix $(BUILD)/obj/tools/,tap_main.o tap_session.o tap_watch.o tap_query.o tap_bake.o tap_body.o \
               tap_sea.o tap_write.o tap_exr.o tap_surface.o \
               sea_doc.o sea_ndbc.o sea_ww3.o sea_cdip.o sea_fetch.o)
 # OpenEXR 3.1 (Debian libopenexr-dev) for --format exr: its C API
@@ -79,6 +80,12 @@ TESTS += test-sea-readers
 .PHONY: test-sea-readers
 test-sea-readers: $(BUILD)/ocean-tap
 	@/usr/bin/python3 tests/sea/test_readers.py $(BUILD)
+
+# budget: < 45 s (~25 s: a boat followed for 5 s, ship.py for 8 + 2 s and a Ctrl-C, a dozen requests)
+TESTS += test-tap-bodies
+.PHONY: test-tap-bodies
+test-tap-bodies: $(BUILD)/ocean-tap $(BUILD)/oceand
+	@tests/tap/bodies.sh $(BUILD)
 
 config-doc: $(BUILD)/gen-config-doc $(BUILD)/oceand
 	@scripts/gen-config-doc.sh --update --daemon $(BUILD)/oceand $(BUILD)/gen-config-doc

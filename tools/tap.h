@@ -6,6 +6,7 @@
  *   tap_query.c    --query and --probe
  *   tap_bake.c     sums of the cascades and Blender bakes (--format exr, --bake)
  *   tap_sea.c      `ocean-tap sea SOURCE`: measured seas (sea.h readers)
+ *   tap_body.c     floating bodies: --launch, --body/--resume, --follow, --bodies
  * Not an API: one program's files. */
 #ifndef OCEAND_TAP_H
 #define OCEAND_TAP_H
@@ -31,6 +32,7 @@ enum exit_code {
     EXIT_OUTPUT = 5,      /* could not write an output file */
     EXIT_TIMEOUT = 6,     /* no answer / no frame within --timeout */
     EXIT_CLOSED = 7,      /* server closed the connection before we were done */
+    EXIT_BODY_GONE = 9,   /* the followed body left the sea (sunk, abandoned, removed) */
     EXIT_INTERRUPTED = 130, /* Ctrl-C before the first frame / answer (shell convention) */
 };
 
@@ -41,6 +43,10 @@ enum exit_code {
 #define ID_QUERY 4
 #define ID_PROBE 5
 #define ID_RENDER 6
+#define ID_LAUNCH 7    /* the body requests (tap_body.c) */
+#define ID_CLAIM 8
+#define ID_STEER 9
+#define ID_REMOVE 10
 /* The `render` request (exact-time frames for bakes, PROTOCOL.md §7.5): its
  * frames carry this bit in the frame header's flags and their index k in
  * seq; sim_time = start + k / fps. */
@@ -78,11 +84,20 @@ struct opts {
     int bake;             /* --bake: exact-time frames through the render request */
     double fps, start;    /* --fps, --start */
     int has_start;
+    /* floating bodies (tap_body.c) */
+    const char *launch_kind; /* --launch KIND */
+    double at[2];         /* --at X,Z */
+    double heading;       /* --heading, degrees clockwise from north */
+    double throttle, rudder;
+    int has_throttle, has_rudder, has_at;
+    unsigned long body;   /* --body ID, 0 = not given */
+    const char *resume;   /* --resume KEY */
+    int follow, list_bodies, keep;
 };
 
 struct job;
 
-enum stage { ST_HELLO, ST_SET, ST_SUBSCRIBE, ST_QUERY, ST_PROBE, ST_RENDER, ST_RUN, ST_DONE };
+enum stage { ST_HELLO, ST_SET, ST_SUBSCRIBE, ST_QUERY, ST_PROBE, ST_RENDER, ST_BODY, ST_STEER, ST_REMOVE, ST_RUN, ST_DONE };
 
 struct stats {
     double t0, last_report;
@@ -128,6 +143,11 @@ struct session {
     int csv_header_done;
     struct stats st;
     struct lws *wsi;
+    uint32_t body_id;     /* the body we launched, claimed, steer or follow */
+    int own;              /* ... ours: removed at the end unless --keep */
+    int body_code;        /* the exit code once the removal is answered */
+    uint64_t last_seq;    /* the last tick followed */
+    char client_id[64];   /* hello's: the owner of what we launch */
 };
 struct job {
     struct oc_frame_header fh;
@@ -178,6 +198,15 @@ int sum_field(struct session *s, const struct job *j, const struct sum_grid *sg,
               int only0, float *out, float *bound);
 float *sum_buffers(struct session *s, int m, int count);
 int write_bake(struct session *s, const struct job *j);
+void print_error(cJSON *msg, const char *what);
+/* tap_body.c */
+int body_mode(const struct opts *o);
+void body_hello(struct session *s, cJSON *hello);
+void body_start(struct session *s);
+void finish_body(struct session *s, int code);
+int body_interrupt(struct session *s);
+int body_on_text(struct session *s, cJSON *msg, const char *t);
+void body_on_frame(struct session *s, const uint8_t *data, size_t len);
 /* tap_sea.c: `ocean-tap sea ...` (argv[0] = "sea") */
 int tap_sea_main(int argc, char **argv);
 

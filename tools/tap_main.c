@@ -6,6 +6,7 @@
  *   ocean-tap ws://host:8080 --watch
  *   ocean-tap ws://host:8080 --probe "10,20;-5,3.5" --ticks 300
  *   ocean-tap ws://host:8080 --query "10,20;1e6,-3" [--time T]
+ *   ocean-tap ws://host:8080 --launch boat --at 10,-20 --throttle 0.5 --follow
  *   ocean-tap sea SOURCE --print          (a measured sea: tap_sea.c)
  *
  * One WebSocket connection (libwebsockets client, subprotocol oceand.v1),
@@ -88,6 +89,22 @@ void usage(FILE *to)
         "                      seq,sim_time,params_version,point,x,z,height,\n"
         "                      dx,dz,nx,ny,nz,vertical_velocity,vertical_acceleration\n"
         "  --ticks N           stop after N probe ticks (default: until Ctrl-C)\n"
+        "Floating bodies (PROTOCOL.md §3.5, §7.6; tap_body.c):\n"
+        "  --launch KIND       launch a body (a name of hello's body_kinds: spar, ball, dinghy,\n"
+        "                      boat, ship) at --at X,Z (m; north = +z, east = -x), bow toward\n"
+        "                      --heading DEG (clockwise from north, default 0); prints\n"
+        "                      {\"launched\":ID,\"resume\":KEY,\"owner\":CLIENT_ID} (stderr with --csv)\n"
+        "  --body ID           act on body ID: with --resume KEY claim it back (within the\n"
+        "                      grace); without, steer it (only its owner may: exit 4 not_owner)\n"
+        "                      or --follow it\n"
+        "  --throttle T        -1 (astern) .. 1 (full ahead), once the body is ours\n"
+        "  --rudder R          -1 (full to port) .. 1 (full to starboard)\n"
+        "  --follow            one line per tick from the frame header's records: JSON, or with\n"
+        "                      --csv seq,sim_time,id,x,y,z,heading,pitch,roll,speed (degrees,\n"
+        "                      heading compass, pitch bow up +, roll port up +; speed m/s\n"
+        "                      horizontal); --ticks N stops after N ticks, else Ctrl-C\n"
+        "  --keep              leave our body on the sea at the end (default: it is removed)\n"
+        "  --bodies            print the bodies now (hello), one JSON line each, and exit\n"
         "Other:\n"
         "  --timeout S         give up after S seconds without an expected answer or, with\n"
         "                      --frames N, a complete frame at the asked LOD (default 10)\n"
@@ -99,7 +116,8 @@ void usage(FILE *to)
         "  4 server rejected the request (its error code is printed), 5 output write failed,\n"
         "  6 timeout, 7 connection closed by the server, 130 interrupted before the\n"
         "  stream started (Ctrl-C during a stream or --watch exits 0); ocean-tap sea: 8, the\n"
-        "  source is unreadable or not a valid sea.\n");
+        "  source is unreadable or not a valid sea; 9 the followed body left the sea (sunk,\n"
+        "  abandoned).\n");
 }
 
 /* ---- options ------------------------------------------------------------ */
@@ -166,6 +184,11 @@ static int parse_args(int argc, char **argv, struct opts *o)
         {"sum-area", required_argument, 0, 'a'}, {"interp", required_argument, 0, 'i'},
         {"bake", no_argument, 0, 'B'},        {"fps", required_argument, 0, 'p'},
         {"start", required_argument, 0, 'z'},
+        {"launch", required_argument, 0, 1000}, {"at", required_argument, 0, 1001},
+        {"heading", required_argument, 0, 1002}, {"throttle", required_argument, 0, 1003},
+        {"rudder", required_argument, 0, 1004}, {"body", required_argument, 0, 1005},
+        {"resume", required_argument, 0, 1006}, {"follow", no_argument, 0, 1007},
+        {"bodies", no_argument, 0, 1008},     {"keep", no_argument, 0, 1009},
         {0, 0, 0, 0}};
     *o = (struct opts){.frames = -1, .fields = 7u, .bound = -1, .format = TAP_NPY, .timeout = 10, .cascades = 1};
     int c;
@@ -256,6 +279,32 @@ static int parse_args(int argc, char **argv, struct opts *o)
             if (!strcmp(optarg, "bilinear")) o->bilinear = 1;
             else if (strcmp(optarg, "spectral")) return usage_error("--interp must be spectral or bilinear");
             break;
+        case 1000: o->launch_kind = optarg; break;
+        case 1001:
+            if (sscanf(optarg, "%lf,%lf%c", &o->at[0], &o->at[1], &(char){0}) != 2 ||
+                !isfinite(o->at[0]) || !isfinite(o->at[1]))
+                return usage_error("--at needs X,Z (metres)");
+            o->has_at = 1;
+            break;
+        case 1002:
+            o->heading = strtod(optarg, &end);
+            if (*end || !*optarg || !isfinite(o->heading)) return usage_error("--heading needs degrees");
+            break;
+        case 1003: case 1004: {
+            double v = strtod(optarg, &end);
+            if (*end || !*optarg || !(v >= -1 && v <= 1))
+                return usage_error("--%s needs a number in -1..1", c == 1003 ? "throttle" : "rudder");
+            if (c == 1003) { o->throttle = v; o->has_throttle = 1; } else { o->rudder = v; o->has_rudder = 1; }
+            break;
+        }
+        case 1005:
+            o->body = strtoul(optarg, &end, 10);
+            if (*end || !*optarg || o->body < 1 || o->body > 0xffffffffUL) return usage_error("--body needs an id >= 1");
+            break;
+        case 1006: o->resume = optarg; break;
+        case 1007: o->follow = 1; break;
+        case 1008: o->list_bodies = 1; break;
+        case 1009: o->keep = 1; break;
         case 'h': usage(stdout); return EXIT_OK;
         default: return usage_error("unknown option");
         }
@@ -280,6 +329,15 @@ static int parse_args(int argc, char **argv, struct opts *o)
     if ((o->query || o->probe) && (o->frames >= 0 || o->out_dir || o->stats || o->watch))
         return usage_error("--query/--probe do not mix with frames (--frames/--out/--stats) or --watch");
     if (o->has_time && !o->query) return usage_error("--time is for --query");
+    if (o->launch_kind && o->body) return usage_error("--launch or --body: one at a time");
+    if (o->launch_kind && !o->has_at) return usage_error("--launch needs --at X,Z");
+    if (!o->launch_kind && (o->has_at || o->heading != 0)) return usage_error("--at and --heading are for --launch");
+    if (o->resume && !o->body) return usage_error("--resume needs --body ID");
+    if (!o->launch_kind && !o->body && (o->has_throttle || o->has_rudder || o->follow || o->keep))
+        return usage_error("--throttle, --rudder, --follow and --keep need --launch or --body");
+    if (o->list_bodies && (o->launch_kind || o->body)) return usage_error("--bodies lists: no --launch or --body");
+    if (body_mode(o) && (o->query || o->probe || o->frames >= 0 || o->out_dir || o->stats || o->watch || o->bake))
+        return usage_error("the body options do not mix with frames, --query/--probe, --watch or --bake");
     if (optind != argc - 1) return usage_error(optind >= argc ? "missing URL" : "one URL only");
     if (strlen(argv[optind]) >= sizeof o->url - 8) return usage_error("URL too long");
     snprintf(o->url, sizeof o->url, "%s%s", strstr(argv[optind], "://") ? "" : "ws://", argv[optind]);
@@ -349,6 +407,10 @@ int main(int argc, char **argv)
             fail(&s, wcode, "%s", werr);
             break;
         }
+        if (interrupted && body_interrupt(&s)) {
+            interrupted = 0; /* our body is being removed: a second Ctrl-C cuts it short */
+            continue;
+        }
         if (interrupted) {
             /* Ctrl-C ends a stream or watch normally; anything else is cut short. */
             finish(&s, s.stage == ST_RUN ? EXIT_OK : EXIT_INTERRUPTED);
@@ -356,7 +418,7 @@ int main(int argc, char **argv)
         }
         if (o.stats && s.stage == ST_RUN && t - s.st.last_report >= 1.0) report_stats(&s, t, 0);
         /* A pure watch may be silent for ever; everything else expects traffic. */
-        int expecting = s.stage != ST_RUN || s.want_frames || o.probe;
+        int expecting = s.stage != ST_RUN || s.want_frames || o.probe || o.follow;
         /* With --frames N, receiving frames we cannot write (a coarser LOD while degraded)
          * is no progress; an open-ended recording waits for the server to serve it again. */
         int counting = s.stage == ST_RUN && s.want_frames && o.frames > 0;
@@ -368,6 +430,10 @@ int main(int argc, char **argv)
                              : s.stage == ST_QUERY ? "the answer to query"
                              : s.stage == ST_PROBE ? "the answer to probe"
                              : s.stage == ST_RENDER ? "the answer to render"
+                             : s.stage == ST_BODY ? (o.launch_kind ? "the answer to launch" : "the answer to claim")
+                             : s.stage == ST_STEER ? "the answer to steer"
+                             : s.stage == ST_REMOVE ? "the answer to remove"
+                             : o.follow ? "the body's next record"
                              : o.probe ? "the next probe tick" : "the next complete frame";
             if (counting && s.degraded_lod >= 0 && s.degraded_lod != o.lod)
                 fail(&s, EXIT_TIMEOUT, "timed out after %.1f s waiting for %s: the server serves this "

@@ -136,6 +136,7 @@ void advance(struct session *s)
     }
     if (s->stage == ST_PROBE) { s->stage = ST_RUN; s->st.t0 = s->st.last_report = now_s(); return; }
     if (s->stage == ST_HELLO && s->o->nsets) { s->stage = ST_SET; send_set(s); return; }
+    if (s->stage <= ST_SET && body_mode(s->o)) { body_start(s); return; }
     if (s->stage <= ST_SET && s->o->bake) {
         s->stage = ST_RENDER;
         send_quiet_subscribe(s); /* live frames are not wanted while the server renders ours */
@@ -161,7 +162,7 @@ static int id_is(cJSON *msg, int id)
     return cJSON_IsNumber(j) && j->valuedouble == id;
 }
 
-static void print_error(cJSON *msg, const char *what)
+void print_error(cJSON *msg, const char *what)
 {
     cJSON *code = cJSON_GetObjectItemCaseSensitive(msg, "code");
     cJSON *text = cJSON_GetObjectItemCaseSensitive(msg, "message");
@@ -182,6 +183,10 @@ static void on_text(struct session *s, const char *text, size_t len)
         return;
     }
     const char *t = type->valuestring;
+    if (body_mode(s->o) && s->stage != ST_HELLO && body_on_text(s, msg, t)) {
+        cJSON_Delete(msg);
+        return;
+    }
     if (!strcmp(t, "hello") && s->stage == ST_HELLO) {
         cJSON *proto = cJSON_GetObjectItemCaseSensitive(msg, "protocol");
         if (!cJSON_IsNumber(proto) || proto->valueint != OC_PROTO_VERSION) {
@@ -197,7 +202,8 @@ static void on_text(struct session *s, const char *text, size_t len)
                 fprintf(stderr, "ocean-tap: the server runs %d cascade%s: receiving %d\n", have, have > 1 ? "s" : "", have);
             for (int c = 1; s->grid && c < s->ncasc; c++)
                 oc_grid_want(s->grid, c, fine_fields(s->o), fine_lod(s->o));
-            if (!s->o->nsets && !s->want_frames && !s->o->watch && !s->o->query && !s->o->probe) {
+            if (body_mode(s->o)) body_hello(s, msg);
+            else if (!s->o->nsets && !s->want_frames && !s->o->watch && !s->o->query && !s->o->probe) {
                 /* Info mode: the hello without the long schema, one line. */
                 char *out = cJSON_PrintUnformatted(msg);
                 if (out) puts(out);
@@ -304,7 +310,8 @@ int callback(struct lws *wsi, enum lws_callback_reasons reason, void *user, void
         memcpy(s->msg.data + s->msg.len, in, len);
         s->msg.len += len;
         if (!lws_is_final_fragment(wsi)) break;
-        if (lws_frame_is_binary(wsi)) on_binary(s, s->msg.data, s->msg.len);
+        if (lws_frame_is_binary(wsi) && body_mode(s->o)) body_on_frame(s, s->msg.data, s->msg.len);
+        else if (lws_frame_is_binary(wsi)) on_binary(s, s->msg.data, s->msg.len);
         else on_text(s, (const char *)s->msg.data, s->msg.len);
         break;
     case LWS_CALLBACK_CLIENT_WRITEABLE:

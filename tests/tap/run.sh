@@ -323,7 +323,7 @@ run 4 "probe over the limit" "$TAP" "$URL" --probe "$(for i in $(seq 1 17); do p
 grep -q 'too_many_points' "$tmp/err" || fail "no too_many_points in: $(cat "$tmp/err")"
 ok "--query prints query_result (errors: 4 with the code), --probe one line per tick (JSON or CSV)"
 
-section "Python examples: buoy and ship (probes)"
+section "Python examples: buoy (probes) and ship (a body on the shared sea)"
 run 0 "buoy" timeout 60 $PY proto/examples/buoy.py "$URL" --seconds 3
 $PY - "$tmp/out" <<'EOF' || fail "buoy.py output: $(cat "$tmp/out")"
 import json, sys
@@ -332,10 +332,11 @@ assert j["points"] == 9 and j["samples"] >= 60 and j["frames"] >= 5, j
 assert 0.5 < j["ratio"] < 2 and j["hs_sea_m"] > 0, j
 EOF
 run 0 "ship --help" $PY proto/examples/ship.py --help
-grep -q 'probes are moved once a second' "$tmp/out" || fail "ship.py --help is cut short: $(cat "$tmp/out")"
-run 0 "ship" timeout 30 $PY proto/examples/ship.py "$URL" --ticks 6 --speed 5 --heading 45
-[ "$(grep -c '^ *[0-9]' "$tmp/out")" -eq 6 ] || fail "ship.py: expected 6 motion lines: $(cat "$tmp/out")"
-ok "buoy.py compares its Hs with the sea's; ship.py prints heave, pitch and roll per tick"
+grep -q 'Ctrl-C (or the end of --seconds) removes the ship' "$tmp/out" || fail "ship.py --help is cut short: $(cat "$tmp/out")"
+run 0 "ship" timeout 30 $PY proto/examples/ship.py "$URL" --seconds 2.5 --course 45 --key-file "$tmp/ship.key"
+[ "$(grep -c '^ *[0-9]' "$tmp/out")" -ge 2 ] || fail "ship.py: expected 2+ motion lines: $(cat "$tmp/out")"
+grep -q '^ship: removed body' "$tmp/out" || fail "ship.py did not remove its ship: $(cat "$tmp/out")"
+ok "buoy.py compares its Hs with the sea's; ship.py sails a ship each second, removed at the end (test-tap-bodies: more)"
 
 section "--bake: exact-time frames through the render request (oceand, and a stand-in server)"
 run 1 "--bake without --fps" "$TAP" "$URL" --bake --start 0 --frames 2 --out "$tmp/bk"
