@@ -3350,7 +3350,8 @@ def bodies_removal_races(d, fig):
     world = world_bodies(d)
     check(set(world) <= {b3} and all(e["adrift"] for e in world.values()),
           "after the RST: %s (want nothing, or body %d adrift)" % (world, b3))
-    rw.pump(0.2)
+    rw.until(lambda rw: rw.of_type("bodies") and {e["body"] for e in rw.of_type("bodies")[-1]["bodies"]} == set(world), 3)
+    check(rw.of_type("bodies"), "the bystander got no bodies message")
     last = rw.of_type("bodies")[-1]
     check({e["body"] for e in last["bodies"]} == set(world), "bystander's last bodies %s, world %s" % (last, world))
     gone = [g["body"] for m in rw.of_type("bodies") for g in m["removed"]]
@@ -3393,7 +3394,7 @@ def bodies_launch_leave_1000(d, fig):
                 errors.append(str(e))
 
     def run(n, start):
-        threads = [threading.Thread(target=lambda t=t: [cycle(start + t + 4 * j) for j in range(n // 4)]) for t in range(4)]
+        threads = [threading.Thread(target=lambda t=t: [cycle(start + j) for j in range(t, n, 4)]) for t in range(4)]
         for t in threads:
             t.start()
         for t in threads:
@@ -3433,7 +3434,7 @@ def bodies_launch_leave_1000(d, fig):
 SOLO.add("bodies_launch_leave_1000")   # 1000 connections and launches on 4 threads
 
 
-@case(args=LIBERAL)
+@case(args=LIBERAL + ("--bodies-per-session", "16"))
 def bodies_at_bounds(d, fig):
     """Bodies launched exactly at the world's bounds (±world_half_size, the four corners, heading
     1e300), just past them (refused, out_of_range), and a boat and a ship at full throttle driven
