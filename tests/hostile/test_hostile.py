@@ -3369,7 +3369,8 @@ def bodies_launch_leave_1000(d, fig):
     """1000 cycles of connect → launch → close (4 threads), --body-grace 0.1: each body is abandoned
     (adrift, then removed) after its owner left. Rounds of 250 after a warm-up of 100: the world
     empties after each, every launch got a new id (ids only grow, never reused), and RSS after each
-    round is within 2 MB of the end of the warm-up (most within 512 kB): memory comes back."""
+    round is within 2 MB of the end of the warm-up, and most rounds grow it by < 512 kB over the
+    round before: memory comes back."""
     lock = threading.Lock()
     ids, errors = [], []
 
@@ -3428,7 +3429,12 @@ def bodies_launch_leave_1000(d, fig):
     s.close()
     check(nb > max(ids), "a new body got id %d, not above the largest %d" % (nb, max(ids)))
     check(not h.get("bodies"), "bodies left: %s" % h.get("bodies"))
-    check(max(rss) < 2048 and sum(x < 512 for x in rss) >= 3, "RSS per round %s kB, want all < 2048 and most < 512" % rss)
+    # between rounds: a leak grows every round (4 kB a body: +1.1 MB a round); a healthy daemon's
+    # allocator settles (seen: +108, +72, +48, 0 kB)
+    steps = [b - a for a, b in zip([0] + rss, rss)]
+    fig["rss_steps_kb"] = steps
+    check(max(rss) < 2048 and sum(x < 512 for x in steps) >= 3,
+          "RSS per round %s kB (steps %s), want all < 2048 from the warm-up and most steps < 512" % (rss, steps))
 
 
 SOLO.add("bodies_launch_leave_1000")   # 1000 connections and launches on 4 threads
