@@ -3482,8 +3482,9 @@ def bodies_at_bounds(d, fig):
     world = world_bodies(d)
     fig.update(frames=frames, largest_coordinate=worst)
     log("    %d frames: largest |x|,|z| %.3f of %g; bodies %s" % (frames, worst, W, sorted(world)))
-    check(frames > 30 and r.frames_with > 30, "only %d frames with records" % frames)
-    check(not bad, "; ".join(bad[:4]))
+    check(not bad, "; ".join(bad[:4]))     # (the watch stops at the first bad record)
+    check(frames > 30 and r.frames_with > 30, "only %d frames with records (connection closed: %s, close code %r)"
+          % (frames, r.eof, r.close_code))
     check(set(world) == set(placed + drivers), "bodies lost at the bounds: %s, want %s" % (sorted(world), sorted(placed + drivers)))
     s.close()
 
