@@ -2992,5 +2992,506 @@ def ids_as_sent_through_an_edge(d, fig):
 SOLO.add("ids_as_sent_through_an_edge")   # a sim, an edge and a nats-server of its own
 
 
+# ---------------------------------------------------------------- floating bodies (PROTOCOL.md §3.5, §7.6; issue 37)
+
+FRAME_MAGIC = b"OCNF"
+BODY_REC = struct.Struct("<IBBbb3f4f3f")   # a BODY record's first 48 bytes (§3.5)
+
+
+class BodyReader(Reader):
+    """A Reader that keeps the BODY records of the latest frame header (§3.5) and every
+    `bodies` message; raises nothing: a section that does not fit is kept as "corrupt"."""
+
+    def __init__(self, s):
+        super().__init__(s)
+        self.records = None      # {id: record tuple} of the latest frame with a header, None before one
+        self.frames_with = 0     # frames seen since the last reset (any header)
+        self.corrupt = 0
+
+    def _parse(self):
+        while True:
+            b = self.buf
+            if len(b) < 2:
+                return
+            n = b[1] & 0x7F
+            off = 2
+            if n == 126:
+                if len(b) < 4:
+                    return
+                n, off = struct.unpack_from("!H", b, 2)[0], 4
+            elif n == 127:
+                if len(b) < 10:
+                    return
+                n, off = struct.unpack_from("!Q", b, 2)[0], 10
+            if len(b) < off + n:
+                return
+            if b[0] & 0x0F == OP_BIN and n >= 64:
+                self._header(b[off:off + n])
+            # the base class parses this one frame (texts, counts, close), then the rest
+            self.buf, rest = b[:off + n], b[off + n:]
+            Reader._parse(self)
+            self.buf = rest
+
+    def _header(self, p):
+        if p[:4] != FRAME_MAGIC:
+            return
+        hs = struct.unpack_from("<H", p, 6)[0]
+        if hs == 48:
+            self.records, self.frames_with = {}, self.frames_with + 1
+            return
+        if hs < 64 or hs > len(p) or p[48:52] != b"BODY":
+            return                                    # a later part (48-byte header) or another tag
+        count, rsize = struct.unpack_from("<HH", p, 52)
+        if rsize < 48 or 64 + count * rsize > hs:
+            self.corrupt += 1
+            return
+        self.records = {}
+        for i in range(count):
+            r = BODY_REC.unpack_from(p, 64 + i * rsize)
+            self.records[r[0]] = r
+        self.frames_with += 1
+
+    def fresh(self, timeout=3):
+        """Records of a frame received after now."""
+        self.pump(0)
+        self.frames_with, self.records = 0, None
+        self.until(lambda r: r.frames_with >= 2, timeout)
+        return self.records
+
+    def of_type(self, typ, n0=0):
+        return [t for t in self.texts[n0:] if t.get("type") == typ]
+
+
+def body_client(d, **kw):
+    s, _ = raw_ws(d.port, **kw)
+    r = BodyReader(s)
+    check(r.until(lambda r: any(t.get("type") == "hello" for t in r.texts), 5), "body client got no hello")
+    return s, r
+
+
+def body_send_all(s, r, msgs, timeout=8):
+    """Send every message (each with a distinct id) in one burst; return {id: [replies]} (replies with
+    that id: launched/steered/removed/claimed/error), after every id has one reply or the timeout."""
+    n0 = len(r.texts)
+    check(send_quiet(s, b"".join(ws_frame(OP_TEXT, json.dumps(m) if isinstance(m, dict) else m) for m, _ in msgs)),
+          "connection closed while sending")
+    ids = [i for _, i in msgs]
+
+    def replies():
+        out = {i: [] for i in ids}
+        for t in r.texts[n0:]:
+            if t.get("type") in ("launched", "steered", "removed", "claimed", "error") and t.get("id") in out:
+                out[t["id"]].append(t)
+        return out
+    r.until(lambda r: all(replies().values()), timeout)
+    time.sleep(0.2)
+    r.pump(0.05)
+    return replies()
+
+
+def one_reply(rep, i, what):
+    got = rep.get(i, [])
+    check(len(got) == 1, "%s (id %s): %d replies %s, want exactly one" % (what, i, len(got), [json.dumps(g)[:100] for g in got]))
+    return got[0]
+
+
+def coded(s, r, cases, base=100):
+    """cases: [(text with %d for the id, codes, param)]. Texts that are not JSON (bad_json: the reply
+    has no id) are asked one at a time; the rest in bursts of 20, matched by id. Returns what was wrong."""
+    bad = []
+    for text, codes, param in cases:
+        if codes == ("bad_json",):
+            m = ask(s, r, text % 0 if "%d" in text else text)
+            if not m or code_of(m) != "bad_json":
+                bad.append("%s: %r, want bad_json" % (text[:80], m))
+    rest = [(t % (base + i), i + base, codes, param) for i, (t, codes, param) in enumerate(cases) if codes != ("bad_json",)]
+    for k in range(0, len(rest), 20):
+        chunk = rest[k:k + 20]
+        rep = body_send_all(s, r, [(text, i) for text, i, _, _ in chunk])
+        for text, i, codes, param in chunk:
+            got = rep.get(i, [])
+            if len(got) != 1:
+                bad.append("%s: %d replies" % (text[:80], len(got)))
+            elif code_of(got[0]) not in codes:
+                bad.append("%s: %s, want %s" % (text[:80], code_of(got[0]), "/".join(codes)))
+            elif param and got[0].get("param") != param:
+                bad.append("%s: param %r, want %r" % (text[:80], got[0].get("param"), param))
+    return bad
+
+
+def code_of(m):
+    return m["code"] if m.get("type") == "error" else m.get("type")
+
+
+def launch_one(s, r, kind="boat", x=0.0, z=0.0, heading=0.0, i=900):
+    rep = body_send_all(s, r, [({"type": "launch", "id": i, "kind": kind, "x": x, "z": z, "heading": heading}, i)])
+    m = one_reply(rep, i, "launch %s at (%g, %g)" % (kind, x, z))
+    check(m.get("type") == "launched", "launch %s at (%g, %g): %r" % (kind, x, z, m))
+    return m["body"], m["resume"]
+
+
+def world_bodies(d):
+    """The world's bodies as a fresh hello lists them: {body: entry}."""
+    h = fresh_hello(d)
+    return {b["body"]: b for b in h.get("bodies", [])}
+
+
+def records_finite(recs):
+    return all(all(math.isfinite(v) for v in rec[5:]) for rec in recs.values())
+
+
+@case(args=LIBERAL + ("--launch-rate", "6", "--bodies-per-session", "3", "--max-bodies", "8"))
+def bodies_launch_storm(d, fig):
+    """One client over --bodies-per-session (3) and, after removing its bodies, over --launch-rate
+    (a bucket of 6); then six clients at once at --max-bodies (8). Every launch is answered once:
+    `launched` exactly as the limits allow, every refusal with its own code; the world holds what
+    was accepted, nothing else changed."""
+    s, r = body_client(d)
+    rep = body_send_all(s, r, [({"type": "launch", "id": i, "kind": "ball", "x": 10 * i, "z": 0}, i) for i in range(1, 11)])
+    codes = [code_of(one_reply(rep, i, "launch")) for i in range(1, 11)]
+    check(codes == ["launched"] * 3 + ["too_many_bodies"] * 7, "per-session storm: %s" % codes)
+    mine = [one_reply(rep, i, "launch")["body"] for i in range(1, 4)]
+    rep = body_send_all(s, r, [({"type": "remove", "id": 20 + k, "body": b}, 20 + k) for k, b in enumerate(mine)])
+    check(all(code_of(one_reply(rep, 20 + k, "remove")) == "removed" for k in range(3)), "removes: %s" % rep)
+    # 3 of the bucket's 6 spent: 3 more launched (the session limit again), then...
+    rep = body_send_all(s, r, [({"type": "launch", "id": i, "kind": "ball", "x": 10 * i, "z": 5}, i) for i in range(30, 33)])
+    codes2 = [code_of(one_reply(rep, i, "launch")) for i in range(30, 33)]
+    mine2 = [one_reply(rep, i, "launch")["body"] for i in range(30, 33) if codes2[i - 30] == "launched"]
+    rep = body_send_all(s, r, [({"type": "remove", "id": 40 + k, "body": b}, 40 + k) for k, b in enumerate(mine2)])
+    # ...the bucket is empty (the refill is 6 a minute: at most one more within these seconds)
+    rep = body_send_all(s, r, [({"type": "launch", "id": i, "kind": "ball", "x": 10 * i, "z": 9}, i) for i in range(50, 56)])
+    codes3 = [code_of(one_reply(rep, i, "launch")) for i in range(50, 56)]
+    fig.update(session_codes=codes, rate_codes=codes2 + codes3)
+    check(codes2 == ["launched"] * 3, "after the removes: %s, want 3 launched" % codes2)
+    check(codes3.count("launched") <= 1 and codes3.count("rate_limited") >= 5
+          and set(codes3) <= {"launched", "rate_limited"}, "bucket empty: %s, want rate_limited" % codes3)
+    kept = [one_reply(rep, i, "launch")["body"] for i in range(50, 56) if codes3[i - 50] == "launched"]
+    # many clients at --max-bodies
+    others = [body_client(d) for _ in range(6)]
+    for k, (so, _) in enumerate(others):
+        send_quiet(so, b"".join(ws_frame(OP_TEXT, json.dumps({"type": "launch", "id": j, "kind": "ball", "x": -100 * k - j,
+                                                                     "z": 50})) for j in range(1, 4)))
+    want = 8 - len(kept)
+    got = {"launched": 0}
+    for so, ro in others:
+        ro.until(lambda ro: len([t for t in ro.texts if t.get("id") in (1, 2, 3)
+                                 and t.get("type") in ("launched", "error")]) >= 3, 8)
+        for t in ro.texts:
+            if t.get("id") in (1, 2, 3) and t.get("type") in ("launched", "error"):
+                got[code_of(t)] = got.get(code_of(t), 0) + 1
+    fig.update(world_codes=got)
+    log("    per session %s; bucket %s; world %s" % (codes, codes2 + codes3, got))
+    check(sum(got.values()) == 18, "18 launches from 6 clients: %d answers %s" % (sum(got.values()), got))
+    check(got["launched"] == want and got.get("too_many_bodies", 0) == 18 - want and len(got) == 2,
+          "world storm: %s, want %d launched and the rest too_many_bodies" % (got, want))
+    world = world_bodies(d)
+    check(len(world) == 8, "the world holds %d bodies, want 8 (%s)" % (len(world), sorted(world)))
+    recs = r.fresh()
+    check(recs is not None and set(recs) == set(world), "frame records %s, bodies list %s" % (sorted(recs or {}), sorted(world)))
+    for so, _ in others:
+        so.close()
+    s.close()
+
+
+BAD_KEYS = ['"9F86D081884C7D659A2FEAA0C55AD015"', '"9f86d081884c7d659a2feaa0c55ad01"', '"9f86d081884c7d659a2feaa0c55ad0150"',
+            '"9f86d081884c7d659a2feaa0c55ad01g"', '""', '123', 'null', '["9f86d081884c7d659a2feaa0c55ad015"]',
+            '"9f86d081884c7d659a2feaa0c55ad01\\u0000"']
+
+
+@case(args=LIBERAL + ("--body-grace", "2"))
+def bodies_not_owner(d, fig):
+    """A client steers, removes and claims another's body (wrong, malformed and missing resume keys),
+    then claims it with the right key after the grace. not_owner / bad_message each, and the body's
+    record (frame header) keeps its throttle, rudder and owner."""
+    a, ra = body_client(d)
+    body, key = launch_one(a, ra, "boat", 30, 40, 0)
+    rep = body_send_all(a, ra, [({"type": "steer", "id": 2, "body": body, "throttle": 0.5, "rudder": 0.25}, 2)])
+    check(code_of(one_reply(rep, 2, "own steer")) == "steered", "own steer: %s" % rep)
+    time.sleep(0.3)
+    rec0 = ra.fresh()
+    check(rec0 and body in rec0, "no record of body %d in the frames" % body)
+    check(rec0[body][3] == 64 and rec0[body][4] == 32, "own steer not in force: throttle %d rudder %d"
+          % (rec0[body][3], rec0[body][4]))
+    b, rb = body_client(d)
+    wrong = "0" * 32 if key != "0" * 32 else "1" * 32
+    msgs = [('{"type":"steer","id":1,"body":%d,"throttle":-1,"rudder":1}' % body, 1),
+            ('{"type":"steer","id":2,"body":%d,"throttle":0}' % body, 2),
+            ('{"type":"remove","id":3,"body":%d}' % body, 3),
+            ('{"type":"claim","id":4,"body":%d,"resume":"%s"}' % (body, wrong), 4),
+            ('{"type":"claim","id":5,"body":%d,"resume":"%s"}' % (body, key[:31] + ("0" if key[31] != "0" else "1")), 5),
+            ('{"type":"claim","id":6,"body":%d}' % body, 6)]
+    want = {1: "not_owner", 2: "not_owner", 3: "not_owner", 4: "not_owner", 5: "not_owner", 6: "bad_message"}
+    for k, bad in enumerate(BAD_KEYS):
+        msgs.append(('{"type":"claim","id":%d,"body":%d,"resume":%s}' % (10 + k, body, bad), 10 + k))
+        want[10 + k] = "bad_json" if "u0000" in bad else "bad_message"
+    wrongs = coded(b, rb, [(m.replace('"id":%d,' % i, '"id":%d,'), (want[i],), None) for m, i in msgs])
+    check(not wrongs, "refusals: " + "; ".join(wrongs))
+    check(not rb.of_type("claimed") and not rb.of_type("removed"), "the other client got an answer of success")
+    rec1 = rb.fresh()
+    check(rec1 and body in rec1 and rec1[body][3] == 64 and rec1[body][4] == 32 and not rec1[body][2] & 1,
+          "body %d changed after the refusals: %r" % (body, rec1 and rec1.get(body)))
+    owner = world_bodies(d)[body]
+    check(not owner["adrift"] and owner["owner"] == [t for t in ra.texts if t.get("type") == "hello"][0]["client_id"],
+          "owner changed: %r" % owner)
+    # after the grace: the right key is refused, the body drifts unpowered and is then removed
+    a.close()
+    check(wait_until(lambda: world_bodies(d).get(body, {}).get("adrift"), 3), "body not adrift after its owner left")
+    time.sleep(2.4)
+    rep = body_send_all(b, rb, [('{"type":"claim","id":50,"body":%d,"resume":"%s"}' % (body, key), 50)])
+    late = code_of(one_reply(rep, 50, "late claim"))
+    fig.update(refusals=len(msgs), late_claim=late)
+    log("    %d refusals as coded; claim after the grace: %s" % (len(msgs), late))
+    check(late in ("not_owner", "no_such_body"), "claim after the grace: %s, want not_owner" % late)
+    check(not rb.of_type("claimed"), "claimed after the grace")
+    check(wait_until(lambda: body not in world_bodies(d), 4), "abandoned body %d not removed" % body)
+    b.close()
+
+
+HOSTILE_VALUES = [("NaN", ("bad_json",)), ("Infinity", ("bad_json",)), ("-Infinity", ("bad_json",)),
+                  ("1e999", ("bad_type",)), ("-1e999", ("bad_type",)), ('"1"', ("bad_type",)), ("null", ("bad_type",)),
+                  ("true", ("bad_type",)), ("[1]", ("bad_type",)), ("{}", ("bad_type",))]
+
+
+@case(args=LIBERAL)
+def bodies_hostile_numbers(d, fig):
+    """NaN, Infinity, 1e999, huge, negative, fractional and string values in every member of launch,
+    steer, remove and claim: a coded error each (with its param), nothing launched, steered,
+    removed or claimed: the world's list and the body's record unchanged."""
+    s, r = body_client(d)
+    body, key = launch_one(s, r, "boat", 0, 0, 0)
+    rep = body_send_all(s, r, [({"type": "steer", "id": 2, "body": body, "throttle": 0.25, "rudder": -0.5}, 2)])
+    check(code_of(one_reply(rep, 2, "steer")) == "steered", "steer: %s" % rep)
+    time.sleep(0.3)
+    rec0, world0 = r.fresh(), world_bodies(d)
+    cases = []   # (text, codes, param)
+    L = '{"type":"launch","id":%d,"kind":"ball","x":X,"z":Z,"heading":H}'
+    for v, codes in HOSTILE_VALUES + [("1e300", ("out_of_range",)), ("-2500.001", ("out_of_range",)),
+                                      ("2501", ("out_of_range",)), ("-1e308", ("out_of_range",))]:
+        for m in "XZ":
+            cases.append((L.replace(m, v).replace("X", "1").replace("Z", "2").replace("H", "0"), codes, m.lower()))
+    for v, codes in HOSTILE_VALUES:
+        cases.append((L.replace("H", v).replace("X", "1").replace("Z", "2"), codes, "heading"))
+    for v in ('"boat"', "", '"BOAT"', '"__proto__"', '"boat\\u0000"', "1", "null"):
+        k = ('"kind":%s,' % v) if v else ""
+        codes = ("bad_message",) if not v else ("bad_json",) if "u0000" in v else \
+            ("bad_type",) if not v.startswith('"') else ("unknown_kind",)
+        if v == '"boat"':
+            continue
+        cases.append(('{"type":"launch","id":%%d,%s"x":1,"z":2}' % k, codes, "kind"))
+    cases.append(('{"type":"launch","id":%d,"kind":"ball","z":2}', ("bad_message",), "x"))
+    ids = [("0", ("out_of_range",)), ("-1", ("out_of_range",)), ("1.5", ("bad_type",)), ("4294967296", ("out_of_range",)),
+           ("1e300", ("out_of_range",)), ("%d.000001" % body, ("bad_type",)), ('"%d"' % body, ("bad_type",))] + HOSTILE_VALUES
+    for v, codes in ids:
+        cases.append(('{"type":"steer","id":%%d,"body":%s,"throttle":1}' % v, codes, "body"))
+        cases.append(('{"type":"remove","id":%%d,"body":%s}' % v, codes, "body"))
+        cases.append(('{"type":"claim","id":%%d,"body":%s,"resume":"%s"}' % (v, key), codes, "body"))
+    for v, codes in HOSTILE_VALUES + [("1.0001", ("out_of_range",)), ("-1.5", ("out_of_range",)), ("127", ("out_of_range",)),
+                                      ("1e300", ("out_of_range",)), ("-1e308", ("out_of_range",))]:
+        for m in ("throttle", "rudder"):
+            cases.append(('{"type":"steer","id":%%d,"body":%d,"%s":%s}' % (body, m, v), codes, m))
+            # one member good, the other hostile: nothing of it applies
+            other = "rudder" if m == "throttle" else "throttle"
+            cases.append(('{"type":"steer","id":%%d,"body":%d,"%s":1,"%s":%s}' % (body, other, m, v), codes, m))
+    cases.append(('{"type":"remove","id":%d}', ("bad_message",), "body"))
+    cases.append(('{"type":"steer","id":%d,"throttle":1}', ("bad_message",), "body"))
+    bad = coded(s, r, cases)
+    fig.update(messages=len(cases), wrong=len(bad))
+    log("    %d hostile body requests: %d wrong" % (len(cases), len(bad)))
+    check(not bad, "; ".join(bad[:6]) + (" (%d in all)" % len(bad) if len(bad) > 6 else ""))
+    check(not r.of_type("launched")[1:] and not r.of_type("removed") and not r.of_type("claimed"),
+          "a hostile request succeeded: %s" % [t for t in r.texts if t.get("type") in ("launched", "removed", "claimed")][1:])
+    rec1, world1 = r.fresh(), world_bodies(d)
+    check(world1 == world0, "bodies list changed: %s -> %s" % (world0, world1))
+    check(rec1 and set(rec1) == set(rec0) and rec1[body][3:5] == rec0[body][3:5] and records_finite(rec1),
+          "record changed: %r -> %r" % (rec0.get(body), rec1 and rec1.get(body)))
+    s.close()
+
+
+@case(args=LIBERAL)
+def bodies_removal_races(d, fig):
+    """Remove and steer the same body in one burst; remove it twice; claim it while it is being
+    removed; close the connection with a remove in flight. No crash, each request answered once
+    (removed once, the rest no_such_body or, for a steer that reached the sim first, steered), and
+    the `bodies` lists every client gets agree with the frames' records."""
+    w, rw = body_client(d)        # a bystander: follows the bodies messages
+    s, r = body_client(d)
+    b1, k1 = launch_one(s, r, "dinghy", 0, 0, 0, i=1)
+    b2, k2 = launch_one(s, r, "dinghy", 20, 0, 0, i=2)
+    b3, k3 = launch_one(s, r, "ball", 40, 0, 0, i=3)
+    rep = body_send_all(s, r, [({"type": "remove", "id": 10, "body": b1}, 10),
+                               ({"type": "steer", "id": 11, "body": b1, "throttle": 1}, 11),
+                               ({"type": "remove", "id": 12, "body": b1}, 12),
+                               ({"type": "claim", "id": 13, "body": b1, "resume": k1}, 13),
+                               ({"type": "steer", "id": 14, "body": b1, "rudder": 1}, 14),
+                               ({"type": "remove", "id": 15, "body": b1}, 15)])
+    codes = {i: code_of(one_reply(rep, i, "race")) for i in (10, 11, 12, 13, 14, 15)}
+    fig["race_codes"] = codes
+    log("    burst on body %d: %s" % (b1, codes))
+    check(codes[10] == "removed", "first remove: %s" % codes[10])
+    check(all(codes[i] == "no_such_body" for i in (12, 13, 15)), "remove twice / claim while removing: %s" % codes)
+    check(all(codes[i] in ("no_such_body", "steered") for i in (11, 14)), "steer of a removed body: %s" % codes)
+    check(len(r.of_type("removed")) == 1, "removed answered %d times" % len(r.of_type("removed")))
+    # a second client claims b2 (it holds the key) while the owner removes it, in one burst each
+    c, rc = body_client(d)
+    send_quiet(s, ws_frame(OP_TEXT, json.dumps({"type": "remove", "id": 20, "body": b2})))
+    send_quiet(c, ws_frame(OP_TEXT, json.dumps({"type": "claim", "id": 21, "body": b2, "resume": k2})))
+    r.until(lambda r: any(t.get("id") == 20 for t in r.texts), 5)
+    rc.until(lambda r: any(t.get("id") == 21 for t in r.texts), 5)
+    a20 = [code_of(t) for t in r.texts if t.get("id") == 20]
+    a21 = [code_of(t) for t in rc.texts if t.get("id") == 21]
+    fig.update(remove_vs_claim=[a20, a21])
+    check(len(a20) == 1 and len(a21) == 1, "remove vs claim: answers %s / %s, want one each" % (a20, a21))
+    check((a20, a21) in ((["removed"], ["no_such_body"]), (["not_owner"], ["claimed"])),
+          "remove vs claim: %s / %s" % (a20, a21))
+    if a21 == ["claimed"]:     # the claim came first: its new owner removes it
+        send_quiet(c, ws_frame(OP_TEXT, json.dumps({"type": "remove", "id": 22, "body": b2})))
+        rc.until(lambda r: any(t.get("id") == 22 for t in r.texts), 5)
+    # close with a remove in flight (RST right after it)
+    send_quiet(s, ws_frame(OP_TEXT, json.dumps({"type": "remove", "id": 30, "body": b3})))
+    rst_close(s)
+    check(wait_until(lambda: b1 not in world_bodies(d) and b2 not in world_bodies(d), 5), "removed bodies still listed")
+    time.sleep(0.5)
+    world = world_bodies(d)
+    check(set(world) <= {b3} and all(e["adrift"] for e in world.values()),
+          "after the RST: %s (want nothing, or body %d adrift)" % (world, b3))
+    rw.until(lambda rw: rw.of_type("bodies") and {e["body"] for e in rw.of_type("bodies")[-1]["bodies"]} == set(world), 3)
+    check(rw.of_type("bodies"), "the bystander got no bodies message")
+    last = rw.of_type("bodies")[-1]
+    check({e["body"] for e in last["bodies"]} == set(world), "bystander's last bodies %s, world %s" % (last, world))
+    gone = [g["body"] for m in rw.of_type("bodies") for g in m["removed"]]
+    check(gone.count(b1) == 1 and gone.count(b2) == 1 and gone.count(b3) <= 1,
+          "removed announced %s (each once)" % gone)
+    recs = rw.fresh()
+    check(set(recs or {}) == set(world), "frame records %s, list %s" % (sorted(recs or {}), sorted(world)))
+    for x in (w, c):
+        x.close()
+
+
+@case(args=LIBERAL + ("--body-grace", "0.1", "--max-bodies", "1000"),
+      rss_slack_kb=2048)
+def bodies_launch_leave_1000(d, fig):
+    """1000 cycles of connect → launch → close (4 threads), --body-grace 0.1: each body is abandoned
+    (adrift, then removed) after its owner left. Rounds of 250 after a warm-up of 100: the world
+    empties after each, every launch got a new id (ids only grow, never reused), and RSS after each
+    round is within 2 MB of the end of the warm-up, and most rounds grow it by < 512 kB over the
+    round before: memory comes back."""
+    lock = threading.Lock()
+    ids, errors = [], []
+
+    def cycle(k):
+        try:
+            s, _ = raw_ws(d.port)
+            r = Reader(s)
+            send_quiet(s, ws_frame(OP_TEXT, '{"type":"launch","id":1,"kind":"ball","x":%d,"z":%d}' % (k % 2000 - 1000, k % 7)))
+            r.until(lambda r: any(t.get("id") == 1 for t in r.texts), 5)
+            got = [t for t in r.texts if t.get("id") == 1]
+            with lock:
+                if got and got[0].get("type") == "launched":
+                    ids.append(got[0]["body"])
+                else:
+                    errors.append(got[0] if got else "no answer")
+            if k % 3 == 2:
+                rst_close(s)
+            else:
+                s.close()
+        except (CaseFailure, OSError) as e:
+            with lock:
+                errors.append(str(e))
+
+    def run(n, start):
+        threads = [threading.Thread(target=lambda t=t: [cycle(start + j) for j in range(t, n, 4)]) for t in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+
+    def empty():
+        return wait_until(lambda: not world_bodies(d), 10)
+
+    run(100, 0)
+    check(empty(), "the world did not empty after the warm-up")
+    time.sleep(0.3)
+    warm = d.rss_kb()
+    warmed_up(fig, warm)
+    rss, rounds, done = [], [], len(ids)
+    for k in range(4):
+        run(250, 100 + 250 * k)
+        check(empty(), "the world did not empty after round %d: %s" % (k + 1, sorted(world_bodies(d))[:10]))
+        time.sleep(0.3)
+        rss.append(d.rss_kb() - warm)
+        rounds.append(ids[done:])
+        done = len(ids)
+    grew = [k for k in range(1, len(rounds)) if rounds[k] and rounds[k - 1] and min(rounds[k]) <= max(rounds[k - 1])]
+    fig.update(launched=len(ids), errors=len(errors), rss_rounds_kb=rss)
+    log("    %d launched, %d errors; RSS per round from the warm-up: %s kB" % (len(ids), len(errors), rss))
+    check(not grew, "ids of round %s not above the round before's (an id reused?)" % grew)
+    check(not errors, "launch errors: %s" % errors[:5])
+    check(len(ids) == 1100 and len(set(ids)) == 1100, "%d ids, %d distinct, want 1100" % (len(ids), len(set(ids))))
+    h = fresh_hello(d)
+    s, r = body_client(d)
+    nb, _ = launch_one(s, r, "ball", 0, 0, 0)
+    s.close()
+    check(nb > max(ids), "a new body got id %d, not above the largest %d" % (nb, max(ids)))
+    check(not h.get("bodies"), "bodies left: %s" % h.get("bodies"))
+    # between rounds: a leak grows every round (4 kB a body: +1.1 MB a round); a healthy daemon's
+    # allocator settles (seen: +108, +72, +48, 0 kB)
+    steps = [b - a for a, b in zip([0] + rss, rss)]
+    fig["rss_steps_kb"] = steps
+    check(max(rss) < 2048 and sum(x < 512 for x in steps) >= 3,
+          "RSS per round %s kB (steps %s), want all < 2048 from the warm-up and most steps < 512" % (rss, steps))
+
+
+SOLO.add("bodies_launch_leave_1000")   # 1000 connections and launches on 4 threads
+
+
+@case(args=LIBERAL + ("--bodies-per-session", "16"))
+def bodies_at_bounds(d, fig):
+    """Bodies launched exactly at the world's bounds (±world_half_size, the four corners, heading
+    1e300), just past them (refused, out_of_range), and a boat and a ship at full throttle driven
+    straight into them: every record stays finite, within ±world_half_size, the bodies stay."""
+    s, r = body_client(d)
+    h = [t for t in r.texts if t.get("type") == "hello"][0]
+    W = h["world_half_size"]
+    placed = []
+    for k, (x, z) in enumerate([(W, W), (-W, -W), (W, -W), (-W, W), (0, W), (-W, 0)]):
+        placed.append(launch_one(s, r, "ball" if k % 2 else "spar", x, z, 1e300 if k == 0 else 0, i=10 + k)[0])
+    # east is -x (§3.5): heading 90 drives a boat at x = -W + 5 into the west... east bound; heading 0 into +z
+    drivers = [launch_one(s, r, "boat", -W + 5, 0, 90, i=20)[0], launch_one(s, r, "ship", 0, W - 30, 0, i=21)[0]]
+    rep = body_send_all(s, r, [({"type": "steer", "id": 30 + k, "body": b, "throttle": 1}, 30 + k) for k, b in enumerate(drivers)])
+    check(all(code_of(one_reply(rep, 30 + k, "steer")) == "steered" for k in range(2)), "steers: %s" % rep)
+    s2, r2 = body_client(d)
+    ms = [('{"type":"launch","id":%d,"kind":"ball","x":%r,"z":0}' % (40 + k, v), 40 + k)
+          for k, v in enumerate([W + 0.001, -W - 0.001, math.nextafter(W, 1e9)])]
+    ms.append(('{"type":"launch","id":43,"kind":"ball","x":0,"z":%r}' % math.nextafter(-W, -1e9), 43))
+    rep = body_send_all(s2, r2, ms)
+    over = [code_of(one_reply(rep, i, m)) for m, i in ms]
+    check(over == ["out_of_range"] * 4, "launches past the bounds: %s" % over)
+    s2.close()
+    worst, frames, bad = 0.0, 0, []
+    deadline = time.time() + 5
+    r.frames_with = 0
+    while time.time() < deadline and not bad:
+        r.pump(0.1)
+        if r.records is None:
+            continue
+        frames += 1
+        for rec in r.records.values():
+            if not all(math.isfinite(v) for v in rec[5:]):
+                bad.append("body %d: %r" % (rec[0], rec))
+            elif abs(rec[5]) > W or abs(rec[7]) > W:
+                bad.append("body %d out of the world at (%g, %g)" % (rec[0], rec[5], rec[7]))
+            else:
+                worst = max(worst, abs(rec[5]), abs(rec[7]))
+        r.records = None
+    world = world_bodies(d)
+    fig.update(frames=frames, largest_coordinate=worst)
+    log("    %d frames: largest |x|,|z| %.3f of %g; bodies %s" % (frames, worst, W, sorted(world)))
+    check(not bad, "; ".join(bad[:4]))     # (the watch stops at the first bad record)
+    check(frames > 30 and r.frames_with > 30, "only %d frames with records (connection closed: %s, close code %r)"
+          % (frames, r.eof, r.close_code))
+    check(set(world) == set(placed + drivers), "bodies lost at the bounds: %s, want %s" % (sorted(world), sorted(placed + drivers)))
+    s.close()
+
+
 if __name__ == "__main__":
     main()
