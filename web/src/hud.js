@@ -55,9 +55,9 @@ export function isLocal(url) {
 // subscription as asked, and when not, why (its reason) and what the link carries.
 export function linkText(link, local) {
   const rtt = link && link.rtt_ms > 0 ? `  rtt ${link.rtt_ms < 10 ? link.rtt_ms.toFixed(1) : Math.round(link.rtt_ms)} ms` : '';
-  const reason = link?.reason ? `\n         ${link.reason}` : '';
+  const reason = link?.reason && link.reason !== 'subscribed' ? `\n         ${link.reason}` : ''; // ("subscribed" says nothing)
   if (local) { // no network: a coarser rung here means this page reads slowly
-    return !link || !(link.rung > 0) ? 'local (loopback): the full stream' : `local (loopback), coarser: rung ${link.rung} of ${link.rungs - 1} (this page reads slowly)${reason}`;
+    return !link || !(link.rung > 0) ? 'local (loopback): the full stream' : `local, coarser: rung ${link.rung} of ${link.rungs - 1} (slow reader)${reason}`;
   }
   if (!link || !(link.rung > 0)) return `the full stream${rtt}${link ? `  ${formatRate(link.link_kbps)}` : ''}`.trimEnd();
   return `coarser for the link: rung ${link.rung} of ${link.rungs - 1}  ${formatRate(link.link_kbps)}${rtt}${reason}`;
