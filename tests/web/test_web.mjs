@@ -73,12 +73,14 @@ async function shot(page, name) {
   }, { b64: png.toString('base64'), name });
   return { png, ...variance };
 }
-// Mean absolute difference (0..255) between two kept screenshots.
+// Mean absolute difference (0..255) between two kept screenshots, over the rows both hold
+// (the region starts below the HUD, which grows by a line when the page says it is behind:
+// the regions then end at the same bottom row, and are compared from there up).
 const shotDiff = (page, a, b) => page.evaluate(([a, b]) => {
-  const p = window.__shots[a], q = window.__shots[b];
+  const p = window.__shots[a], q = window.__shots[b], n = Math.min(p.length, q.length), op = p.length - n, oq = q.length - n;
   let s = 0;
-  for (let i = 0; i < p.length; i++) s += Math.abs(p[i] - q[i]);
-  return s / p.length;
+  for (let i = 0; i < n; i++) s += Math.abs(p[op + i] - q[oq + i]);
+  return s / n;
 }, [a, b]);
 const state = (page) => page.evaluate(() => ({ ...window.oceand, params: window.oceand.params, stats: window.oceand.stats, view: window.oceand.view, camera: window.oceand.camera }));
 
@@ -281,7 +283,7 @@ async function withStillPage(br, fn) {
   try {
     p = await br.newPage({ viewport: { width: 600, height: 600 } });
     p.on('pageerror', (e) => pageErrors.push(e.message));
-    await p.goto(`http://127.0.0.1:${port5}/?test=1&aa=0&detail=0.5&ui=0&scale=0.5`, { timeout: 120000 });
+    await p.goto(`http://127.0.0.1:${port5}/?test=1&aa=0&detail=0.5&ui=0&scale=0.5&catchup=0`, { timeout: 120000 });
     await settle(p, 0, true); // the seams are counted on the surface at full detail
     await fn(p, port5);
   } finally {
@@ -363,6 +365,23 @@ async function lightGroup(check, br) {
       assert(free < 1, `without the floor the gestures stay ${free.toFixed(2)} m above the waves: they no longer test it`);
       assert(kept >= 1 - 0.05, `the camera came within ${kept.toFixed(2)} m of the surface`);
     });
+    // The orbit's polar limit was relative to its target (0.495π): a 1.5 m camera aimed 200 m
+    // away went up to 3.64 m. Over a trough of the held storm (surface + 1 m below 1.5 m) it
+    // stays at 1.5 m.
+    await check('storm: the orbit limit leaves a low camera aimed far away where it is', async () => {
+      let spot = null;
+      for (let x = 0; x <= 120 && !spot; x += 6) {
+        const g = await p.evaluate(([x]) => window.oceandTest.grids(x, 0, 11), [x]);
+        const h = Math.max(...[[0, 0], [0.6, 0], [-0.6, 0], [0, 0.6], [0, -0.6]].map(([a, b]) => surfaceAt(g, x + a, b)));
+        if (h < 0) spot = x;
+      }
+      assert(spot !== null, 'no trough found on the held storm');
+      await setView(p, { viewport: { width: 240, height: 150 }, cam: [spot, 1.5, 0], target: [spot + 200, 0.5, 0] });
+      await renderedMore(p, 3);
+      const c = (await state(p)).camera;
+      console.log(`     camera at 1.5 m over a trough at x = ${spot} m, aimed 200 m away: drawn at ${c.position[1].toFixed(2)} m`);
+      assert(Math.abs(c.position[1] - 1.5) < 0.05, `the camera went to ${c.position[1].toFixed(2)} m`);
+    });
     await check('storm from 80 m straight down: the foam lies on the crests, not at random', async () => {
       // The foam field is a history: held still it keeps what the earlier (fresh) sea left, so
       // the storm runs here, 8 s of its clock before the pictures (foam fades with an e-folding
@@ -403,6 +422,36 @@ async function lightGroup(check, br) {
       assert(placed.foam > 0.01, `hardly any foam in a storm: ${(100 * placed.foam).toFixed(2)} %`);
       assert(placed.squeeze > 0.2 && placed.height > 0.05, `foam does not follow the crests: ${JSON.stringify(placed)}`);
       assert(placed.squeeze > random.squeeze + 0.15, `foam placed at random correlates as well: ${JSON.stringify(random)}`);
+    });
+    // A crest lifted a 1.5 m camera to 2.24 m and it stayed there when the water fell back: the
+    // floor only ever lifted. On the running storm (after the foam check) the camera, left at
+    // 1.5 m, rises over each crest and comes down again as the water falls, never below it.
+    await check('storm: the camera rides over a crest and comes back down as the water falls', async () => {
+      version = await setParams(port5, { paused: false }); // (the foam check has let it run already)
+      await settle(p, version);
+      await setView(p, { viewport: { width: 240, height: 150 }, debugFoam: false, foamShift: null, cam: [0, 1.5, 0], target: [200, 0.5, 0] });
+      // The camera's height at every frame drawn (in the page), and now and then the floor
+      // beneath it as the test computes it from the grids (surfaceAt).
+      await p.evaluate(() => {
+        const ys = window.__camTrace = [];
+        const f = () => { ys.push(window.oceand.camera.position[1]); if (ys.length < 20000) requestAnimationFrame(f); };
+        requestAnimationFrame(f);
+      });
+      let under = Infinity;
+      const end = Date.now() + 30000;
+      while (Date.now() < end) {
+        const s = await p.evaluate(() => { const c = window.oceand.camera.position; return { y: c[1], x: c[0], z: c[2], g: window.oceandTest.grids(c[0], c[2], 11) }; });
+        under = Math.min(under, s.y - surfaceAt(s.g, s.x, s.z) - 1);
+        await sleep(500);
+      }
+      const ys = await p.evaluate(() => { const t = window.__camTrace.slice(); window.__camTrace.length = 20000; return t; });
+      const top = ys.reduce((m, y, i) => (y > ys[m] ? i : m), 0), low = Math.min(...ys.slice(top));
+      let fall = 0; // the largest descent over the trace
+      for (let i = 1, hi = ys[0]; i < ys.length; i++) { hi = Math.max(hi, ys[i]); fall = Math.max(fall, hi - ys[i]); }
+      console.log(`     ${ys.length} frames: camera at 1.5 m, lifted up to ${ys[top].toFixed(2)} m, down again to ${low.toFixed(2)} m after it (largest fall ${fall.toFixed(2)} m); least height above the floor (sampled) ${under.toFixed(2)} m`);
+      assert(ys[top] > 2, `no crest lifted the camera (highest ${ys[top].toFixed(2)} m): this does not test the floor`);
+      assert(fall > 0.5, `the camera never came down after a crest (largest fall ${fall.toFixed(2)} m)`);
+      assert(under >= -0.05, `the camera went ${(-under).toFixed(2)} m below the floor`);
     });
   });
 }
@@ -461,12 +510,70 @@ async function capGroup(check, br) {
     }
   });
 
-  // Seen from above, choppy waves move patch edges sideways; where a fine patch meets a
-  // coarser one the edges used to part: the sky showed through (without skirts), or the
-  // skirt did (with them), as a dashed seam. ?gapprobe=1 paints sky and skirts magenta,
-  // so whatever shows in the seams can be counted; the unstitched views must show some,
-  // so the check can fail. The counts depend on the moment of the sea, so it is always the
-  // same one: a daemon of its own with the clock stopped (--paused: t = 0, seed 1), and all
+  // A daemon that cannot encode the subscription within its budget serves a coarser LOD and
+  // says why (`degraded`, PROTOCOL.md §7.2): the HUD shows that reason, not just "lod 1".
+  await check('a degraded subscription: the HUD shows the reason the server gave', async () => {
+    if (args.fake) return;
+    const port4 = await freePort();
+    const busy = await startServer({ ...srvOpts, port: port4, extra: ['--encode-budget', '60000'] });
+    const p = await br.newPage({ viewport: VIEW });
+    p.on('pageerror', (e) => pageErrors.push(e.message));
+    try {
+      await p.goto(`http://127.0.0.1:${port4}/${QUERY_NODRAW}`, { timeout: 120000 });
+      await waitFor(p, 'a degraded message', () => window.oceand.degraded && window.oceand.degraded.reason, null, 60000);
+      const d = await p.evaluate(() => window.oceand.degraded);
+      await waitFor(p, 'the reason in the HUD', (why) => (document.querySelector('#hud [data-ui=degraded]')?.textContent || '').includes(why), d.reason, 15000)
+        .catch(async () => assert(false, `HUD: "${await p.locator('#hud').innerText()}", reason "${d.reason}"`));
+      const line = await p.locator('#hud [data-ui=degraded]').innerText();
+      console.log(`     HUD: "${line.replace(/\n/g, ' ')}"`);
+      assert(d.lod === d.subscribed_lod || line.includes(`lod ${d.lod} (asked ${d.subscribed_lod})`), `the HUD does not say which LOD for which: "${line}"`);
+      // Wrapped inside the HUD, not cut off by it.
+      const fit = await p.evaluate(() => {
+        const h = document.getElementById('hud').getBoundingClientRect(), l = document.querySelector('#hud [data-ui=degraded]').getBoundingClientRect();
+        return l.right <= h.right + 0.5 && l.bottom <= h.bottom + 0.5;
+      });
+      assert(fit, 'the reason runs out of the HUD');
+    } finally {
+      await p.close();
+      await busy.stop();
+    }
+  });
+
+  // Settings the grids cannot show (a 10 km patch over a 0.5 m deep sea; ?cascades=0, else the
+  // finer cascades hold some of the slope): the note that says so lay over the HUD (top
+  // centre). It lies in the bottom strip, clear of the HUD, the open panel and the toast.
+  await check('the flat-sea note lies clear of the HUD and the panel, on a desktop and a phone', async () => {
+    if (args.fake) return;
+    const port6 = await freePort();
+    const flat = await startServer({ ...srvOpts, port: port6, extra: ['--patch-size', '10000', '--depth', '0.5'] });
+    try {
+      for (const dev of [null, 'Pixel 7', 'Pixel 7 landscape']) {
+        const ctx = await br.newContext(dev ? { ...devices[dev], deviceScaleFactor: 1 } : { viewport: VIEW });
+        try {
+          const p = await ctx.newPage();
+          p.on('pageerror', (e) => pageErrors.push(e.message));
+          await p.goto(`http://127.0.0.1:${port6}/${QUERY_NODRAW}&cascades=0`, { timeout: 120000 });
+          await waitFor(p, 'the flat-sea note', () => window.oceand.flatNotice && !document.getElementById('flat-note').hidden, null, 60000);
+          if (dev) { await p.tap('#panel > .title'); await sleep(600); }
+          await waitFor(p, 'the HUD drawn', () => /fps/.test(document.querySelector('.oc-hud-text').textContent), null, 15000);
+          const boxes = await p.evaluate(() => {
+            const r = (el) => { const b = el.getBoundingClientRect(); return { x: b.left, y: b.top, w: b.width, h: b.height }; };
+            return { note: r(document.getElementById('flat-note')), hud: r(document.getElementById('hud')), panel: r(document.getElementById('panel')), vw: innerWidth, vh: innerHeight };
+          });
+          const n = boxes.note, what = dev || 'desktop';
+          // Its text whole and in a few lines (centred by left: 50%, it had half the screen to
+          // wrap in: 6 lines on a phone, cut off).
+          assert(n.h <= 90, `${what}: the note is ${n.h.toFixed(0)} px tall in a box ${n.w.toFixed(0)} px wide`);
+          assert(n.x >= 0 && n.y >= 0 && n.x + n.w <= boxes.vw + 0.5 && n.y + n.h <= boxes.vh + 0.5, `${what}: the note ${JSON.stringify(n)} runs off the screen`);
+          for (const k of ['hud', 'panel']) {
+            const q = boxes[k];
+            assert(!(n.x < q.x + q.w && q.x < n.x + n.w && n.y < q.y + q.h && q.y < n.y + n.h), `${what}: the flat-sea note ${JSON.stringify(n)} lies over the ${k} ${JSON.stringify(q)}`);
+          }
+          if (!dev) fs.writeFileSync(path.join(args.out, 'flat-note.png'), await p.screenshot({ type: 'png' }));
+        } finally { await ctx.close(); }
+      }
+    } finally { await flat.stop(); }
+  });
 }
 
 // The side groups share nothing with the main one (their own daemons, pages and browser: a
@@ -806,6 +913,10 @@ try {
       .catch(async () => assert(false, `note after the restart: "${(await state(a)).note.panel}"`));
   });
 
+  { // (a loaded machine can put page A behind: say when it asked for less, catchup.js)
+    const ev = await a.evaluate(() => window.oceand.catchup?.events || []).catch(() => []);
+    if (ev.length) console.log(`     page A stepped ${ev.map((e) => `${e.from}->${e.step} at ${(e.atMs / 1000).toFixed(0)} s (lag ${e.lagMs} ms)`).join(', ')}`);
+  }
   await a.close(); // a rendering page in the background only slows the rest down
 
 
@@ -842,6 +953,24 @@ try {
             return t && !t.hidden && t.getBoundingClientRect().height > 0 && t.textContent.includes(`Wind speed ${w}`);
           }, w, 15000).catch(async () => assert(false, `no note on the phone: ${JSON.stringify((await state(p)).note)}`));
         }
+        // In landscape (390 px high) the open panel ran to 55 % of the height: two controls,
+        // and "Wind direction, toward (deg)" cut off. It now runs the height of the screen:
+        // the first controls of the Sea folder lie wholly inside it, and no label overflows.
+        if (name.includes('landscape')) {
+          await p.tap('#panel > .title');
+          const opened = () => waitFor(p, 'the panel open and still', () => !document.getElementById('panel').classList.contains('closed') && !document.querySelector('#panel.transition, #panel .transition'), null, 5000);
+          await opened().catch(async () => { await p.evaluate(() => document.querySelector('#panel > .title').click()); await opened(); }); // (a tap lost while busy)
+          const r = await p.evaluate(() => {
+            const pn = document.getElementById('panel'), box = pn.querySelector(':scope > .children').getBoundingClientRect();
+            const rows = [...pn.querySelectorAll('[data-folder=sea] .controller')].slice(0, 3).map((c) => {
+              const b = c.getBoundingClientRect(), n = c.querySelector('.name');
+              return { label: n.textContent, inside: b.top >= box.top - 0.5 && b.bottom <= box.bottom + 0.5, clipped: n.scrollWidth > n.clientWidth + 1 || n.scrollHeight > n.clientHeight + 1 || n.getBoundingClientRect().bottom > b.bottom + 1 };
+            });
+            return { h: pn.getBoundingClientRect().height, vh: innerHeight, rows };
+          });
+          assert(r.h >= 0.8 * r.vh, `${name}: the open panel is ${r.h.toFixed(0)} px of ${r.vh}`);
+          assert(r.rows.length === 3 && r.rows.every((x) => x.inside && !x.clipped), `${name}: controls cut off: ${JSON.stringify(r.rows)}`);
+        }
         await p.close();
         // A page whose server is down: the banner joins the HUD and the panel title.
         const d = await ctx.newPage();
@@ -854,6 +983,59 @@ try {
         await layoutCheck(d, `${name} (panel open)`, true, true);
       } finally { await ctx.close(); }
     });
+  }
+
+  // A page whose main thread is slow (here a busy loop of 500 ms every animation frame, by
+  // window.oceandTest; like software GL drawing on it) reads its socket slower than the stream
+  // comes: the browser holds the rest and the page showed an ever older sea (49 s -> 189 s in
+  // 150 s) under a HUD that read a healthy frame rate. It must notice, say so, ask for less
+  // (a coarser subscription on a fresh connection) so that its lag stops growing, and come
+  // back to the full stream once its thread is free again.
+  {
+    const ctx = await browser.newContext({ viewport: VIEW }); // a renderer of its own: the loop slows no other page
+    const p = await ctx.newPage();
+    p.on('pageerror', (e) => pageErrors.push(e.message));
+    try {
+      await p.goto(`${url}&draw=0`, { timeout: 120000 });
+      await waitFor(p, 'connected and rendering', () => window.oceand.connected && window.oceand.rendered > 3, null, 120000);
+      await check('HUD: on loopback the link line says the link is local, not a rate', async () => {
+        await waitFor(p, 'the link line', () => !!document.querySelector('#hud [data-ui=link]'), null, 15000);
+        const line = await p.locator('#hud [data-ui=link]').innerText();
+        assert(/local/.test(line) && !/\d+(\.\d)? [GM]bit\/s/.test(line), `link line on loopback: "${line}"`);
+      });
+      await check('a page that falls behind says so, asks for less, stops falling behind and recovers', async () => {
+        if (args.fake) return;
+        await waitFor(p, 'the grace after the first frame', () => performance.now() > window.oceand.stats.firstDrawnMs + window.oceand.stats.graceMs, null, 30000);
+        const r0 = await p.evaluate(() => ({ sub: window.oceand.subscription, step: window.oceand.catchup.step }));
+        assert(r0.step === 0, `the page asks for less before it is slowed: ${JSON.stringify(r0)}`);
+        await p.evaluate(() => window.oceandTest.options({ busyMs: 500 }));
+        const lags = [];
+        const sample = async () => { const c = await p.evaluate(() => window.oceand.catchup); lags.push([Date.now(), c.lagMs, c.step]); return c; };
+        // Noticed and asked for less (it steps down once its lag stays over 1 s for 3 s).
+        const tDown = Date.now() + 120000;
+        let c = await sample();
+        while (c.step === 0 && Date.now() < tDown) { await sleep(500); c = await sample(); }
+        assert(c.step > 0, `the page never asked for less; lags ${JSON.stringify(lags.slice(-10))}`);
+        const ev = c.events.find((e) => e.step > e.from);
+        console.log(`     slowed: lag ${ev.lagMs} ms, reads ${ev.readKBps} kB/s of ${ev.wantKBps} wanted -> step ${ev.step} (${c.asked})`);
+        const hud = await p.locator('#hud [data-ui=behind]').innerText().catch(() => '');
+        assert(/behind|slow/.test(hud) && /asking for less/.test(hud) && /lod \d/.test(hud), `the HUD does not say so: "${hud}"`);
+        await waitFor(p, 'the coarser subscription in force', (lod0) => (window.oceand.subscription?.lod ?? 0) > lod0, r0.sub?.lod ?? 0, 30000)
+          .catch(async () => assert(false, `subscription in force ${JSON.stringify(await p.evaluate(() => window.oceand.subscription))}`));
+        // Its lag stops growing: over the 12 s after that, still slowed, it stays under 1 s.
+        const t1 = Date.now() + 12000;
+        while (Date.now() < t1) { await sleep(1000); c = await sample(); }
+        const tail = lags.filter(([t]) => t > t1 - 8000).map(([, l]) => l).filter((l) => l !== null);
+        console.log(`     lag while slowed, after asking for less: ${tail.map((l) => (l / 1000).toFixed(1)).join(' ')} s (step ${c.step})`);
+        assert(tail.length >= 4 && Math.max(...tail) < 1000, `still falling behind after asking for less: ${JSON.stringify(tail)}`);
+        // Its thread free again: back to the full stream, and the HUD says so.
+        await p.evaluate(() => window.oceandTest.options({ busyMs: 0 }));
+        await waitFor(p, 'back to the full stream, and the HUD says so', () => window.oceand.catchup.step === 0
+          && /caught up/.test(document.querySelector('#hud [data-ui=behind]')?.textContent || ''), null, 120000)
+          .catch(async () => assert(false, `not back: ${JSON.stringify(await p.evaluate(() => window.oceand.catchup))}; HUD "${await p.locator('#hud').innerText()}"`));
+        await waitFor(p, 'the subscription as chosen again', (lod0) => (window.oceand.subscription?.lod ?? 0) === lod0, r0.sub?.lod ?? 0, 30000);
+      });
+    } finally { await ctx.close(); }
   }
 
   await check('tablet: the open panel leaves most of the sea in view, apart from the HUD', async () => {

@@ -103,6 +103,18 @@ export class Connection {
     };
   }
 
+  // Drop this connection and open a new one at once (catchup.js: a page that fell behind; the
+  // frames the browser still holds for the old socket are discarded, not read). The states
+  // are those of a first connect: 'connecting', then 'open'.
+  reopen() {
+    const ws = this.ws;
+    if (!ws) return;
+    this.ws = null; // its onclose sees another socket and does nothing
+    ws.onmessage = null;
+    try { ws.close(1000, 'catching up'); } catch { /* already closing */ }
+    this.open();
+  }
+
   // Does the daemon answer HTTP at the same address? (/healthz; same origin only.)
   async probe() {
     try {

@@ -10,6 +10,7 @@ import { ProbeMarker } from './probe.js';
 import { Bodies } from './bodies.js';
 import { SkyModel } from './sky.js';
 import { DEFAULT_HOUR } from './presets.js';
+import { CatchUp } from './catchup.js';
 
 // How far seq may go back before the page takes it for a restarted stream: an edge adopts a new
 // count only when it is more than 2 s of ticks behind, and frames decoded out of order differ
@@ -34,7 +35,10 @@ const tgtArg = (query.get('target') || '').split(',').map(Number); // ?target=x,
 if (tgtArg.length === 3 && tgtArg.every(Number.isFinite)) controls.target.set(...tgtArg);
 controls.enableDamping = true;
 controls.screenSpacePanning = false;           // pan slides over the sea: a simple fly mode
-controls.maxPolarAngle = Math.PI * 0.495;      // stay above the water
+// The polar limit is relative to the target: at 0.495π it raised a 1.5 m camera aimed 200 m
+// away to 3.6 m. The camera floor (keepAboveWaves) keeps the camera above the water; this limit
+// only keeps the orbit from turning over (a camera may sit a little below its target's level).
+controls.maxPolarAngle = Math.PI / 2 + 0.1;
 controls.minDistance = 3;
 controls.maxDistance = 3000;
 controls.listenToKeyEvents(window);            // arrow keys pan
@@ -95,6 +99,11 @@ const bench = query.has('bench');
 // panel), for pages whose checks read the page's state and layout, not its pixels.
 const draw = !bench && query.get('draw') !== '0';
 const timings = { decode: [], assemble: [], upload: [] };
+// A page that falls behind the live sea says so and asks for less (catchup.js). ?catchup=0:
+// never (pages that measure one held picture); never in bench mode.
+const catchUp = new CatchUp({ enabled: !bench && query.get('catchup') !== '0' });
+let testBusyMs = 0, lastPing = -Infinity; // ?test: a busy main thread (options({busyMs}))
+let catchUpReopen = false; // the frame connection is being opened afresh by catchUp, not lost
 
 const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
 let workerBusy = 0;            // frames handed to the worker and not yet back
@@ -144,7 +153,8 @@ const conn = new Connection(serverUrl(), {
     // "connecting" keeps the last reason on screen. Cleared by hello.
     if (state === 'closed' || state === 'retrying') hud.message(detail);
     else if (state === 'connecting' && st.framesReceived === 0 && st.clientId === null) hud.message(detail);
-    if (state !== 'open' && (st.clientId !== null || panel.connected)) { st.clientId = null; panel.disconnected(); }
+    if (state === 'retrying' || state === 'closed') catchUpReopen = false; // the fresh connection failed: lost
+    if (state !== 'open' && !catchUpReopen && (st.clientId !== null || panel.connected)) { st.clientId = null; panel.disconnected(); }
   },
   onMessage(msg) {
     if (probe.onMessage(msg)) return; // the buoy marker's probe/query answers (probe.js)
@@ -157,7 +167,12 @@ const conn = new Connection(serverUrl(), {
         st.lastSeq = null; // a new session: seq gaps across a reconnect are not drops
         worker.postMessage({ type: 'reset' }); // its references belong to the old session
         st.params = msg.params; st.paramsVersion = msg.params_version;
-        panel.build(msg);
+        // A fresh connection of this page's own (catchup.js) to the same sea keeps the panel as it
+        // is (a value being typed, the notes): only its client id is new.
+        if (catchUpReopen && prev?.params && !panel.differences(prev.params, msg.params || {}).length) panel.myId = msg.client_id;
+        else panel.build(msg);
+        catchUpReopen = false;
+        // Bodies: the kinds, the list, and this tab's bodies claimed back (the new session's id).
         bodies.hello(msg, [msg.client_id, st.controlId]);
         bodies.buildPanel(panel.gui);
         if (msg.subscription) panel.subscribed(msg.subscription);
@@ -170,7 +185,8 @@ const conn = new Connection(serverUrl(), {
         {
           const foam = foamSubscription(msg, msg.params?.resolution);
           const casc = msg.cascade_patch_sizes && useCascades ? { cascades: CASCADE_SUB } : null;
-          if (Object.keys(wantedSub).length || foam || casc) conn.send({ type: 'subscribe', ...(casc || {}), ...wantedSub, ...(foam || {}) });
+          if (Object.keys(wantedSub).length || foam || casc || catchUp.step) conn.send({ type: 'subscribe', ...(casc || {}), ...wantedSub, ...(foam || {}), ...catchUpSub() });
+          catchUp.tickRate = msg.tick_rate || 30;
         }
         hud.message('');
         if (prev && prev.params) {
@@ -203,6 +219,10 @@ const conn = new Connection(serverUrl(), {
       case 'link': // the server's quality ladder for this link (PROTOCOL.md §7.2): shown in the HUD
         st.link = msg;
         break;
+      case 'degraded': // the server serves this subscription coarser or less often, and says why (§7.2)
+        st.degraded = msg.active === false ? null : msg;
+        break;
+      case 'pong': catchUp.pong(msg, performance.now()); break; // the clock offset
       case 'status': // cluster edge: the simulation behind it is unavailable (or back); the socket stays open
         st.clusterState = msg.state;
         hud.message(msg.state === 'ok' ? '' : (msg.message || 'simulation unavailable'));
@@ -217,6 +237,7 @@ const conn = new Connection(serverUrl(), {
     }
   },
   onFrame(buf) {
+    if (buf.byteLength >= 48) catchUp.arrived(Number(new DataView(buf).getBigUint64(40, true)), performance.now(), buf.byteLength);
     st.framesReceived++;
     stats.frames++;
     stats.bytes += buf.byteLength;
@@ -265,6 +286,7 @@ const control = new Connection(controlUrl(serverUrl()), {
         if (panel.me.name) control.send({ type: 'name', name: panel.me.name }); // shown with our changes
         break;
       case 'params': onParams(msg); break;
+      case 'pong': catchUp.pong(msg, performance.now()); break;
       case 'error': // a refused set; `duplicate`: its copy on the frame connection came first
         if (msg.id !== undefined && msg.code !== 'duplicate') { st.serverError = msg; panel.error(msg); }
         break;
@@ -333,7 +355,24 @@ function resync() {
   if (now - lastResync < 1000) return;
   lastResync = now;
   st.resyncs++;
-  conn.send({ type: 'subscribe', ...wantedSub });
+  conn.send({ type: 'subscribe', ...wantedSub, ...catchUpSub() });
+}
+
+// Behind the live sea (catchup.js): a step down opens a fresh connection (the browser's backlog
+// of the old one is dropped) whose hello asks for less; a step up asks for more on this one.
+function catchUpBase() {
+  return { lod: wantedSub.lod ?? lastHello?.subscription?.lod ?? 0, tickRate: wantedSub.max_rate ?? lastHello?.tick_rate ?? 30,
+    cascades: lastHello?.cascade_patch_sizes && useCascades ? CASCADE_SUB : null };
+}
+function catchUpSub() { return catchUp.overrides(catchUpBase()); }
+function catchUpTick(now) {
+  if (testBusyMs) { const t = performance.now(); while (performance.now() - t < testBusyMs); }
+  if (now - lastPing > 20000 && st.connected) { lastPing = now; (st.controlId ? control : conn).send({ type: 'ping', t: performance.now() }); }
+  catchUp.notBefore = graceEnd;
+  const act = st.connected ? catchUp.update(now) : null;
+  if (act?.down) { catchUpReopen = true; conn.reopen(); }
+  else if (act?.up) conn.send({ type: 'subscribe', ...catchUp.restore(catchUpBase()) });
+  st.catchup = catchUp.status(now, { ...(st.subscription || {}), ...catchUpSub() }); // what it asks for
 }
 
 worker.onmessage = (ev) => {
@@ -379,7 +418,7 @@ function resize() {
 }
 
 // The camera never goes below the displaced surface beneath it + CAMERA_CLEARANCE (the
-// orbit's polar limit only keeps it above sea level; a storm's crests are metres higher).
+// orbit's polar limit does not keep it above the water; a storm's crests are metres high).
 // The surface is read from the grids drawn (cascade 0 and the finer cascades), at the
 // camera and a ring of points as wide as the near plane's half-diagonal, so the view does
 // not cut into a crest beside it. ?camfloor=0 turns it off (tests show what it prevents).
@@ -391,13 +430,32 @@ function clearanceAt(x, z) {
   for (let k = 0; k < 6; k++) h = Math.max(h, ocean.surfaceHeight(x + r * Math.cos(k * Math.PI / 3), z + r * Math.sin(k * Math.PI / 3)));
   return h;
 }
-function keepAboveWaves() {
-  if (!camFloor || !ocean.hasData) return;
-  const p = camera.position, floor = clearanceAt(p.x, p.z) + CAMERA_CLEARANCE;
-  if (p.y >= floor) return;
-  p.y = floor;
-  // Looking at a target above the camera would flip the orbit: keep the target lower.
-  if (controls.target.y > p.y - 0.5) controls.target.y = p.y - 0.5;
+// The floor lifts the camera drawn, not the user's camera: the orbit (OrbitControls) keeps the
+// height the user chose, the lift is taken off before each of its updates and put back after, so
+// when the water beneath falls back the camera follows it down, easing (LIFT_EASE_S) to the
+// user's height and never below the floor; over a crest it rises at once.
+const LIFT_EASE_S = 0.35;
+let camLift = 0, liftAt = 0;
+{
+  const orbitUpdate = controls.update.bind(controls);
+  controls.update = (...a) => {
+    camera.position.y -= camLift;
+    const r = orbitUpdate(...a);
+    camera.position.y += camLift;
+    if (camLift) camera.lookAt(controls.target);
+    return r;
+  };
+}
+function keepAboveWaves(now) {
+  const dt = Math.min(1, Math.max(0, (now - liftAt) / 1000));
+  liftAt = now;
+  const p = camera.position, own = p.y - camLift;
+  const want = camFloor && ocean.hasData ? Math.max(0, clearanceAt(p.x, p.z) + CAMERA_CLEARANCE - own) : 0;
+  let lift = want >= camLift ? want : want + (camLift - want) * Math.exp(-dt / LIFT_EASE_S);
+  if (lift < 1e-4) lift = 0;
+  if (lift === camLift) return;
+  camLift = lift;
+  p.y = own + lift;
   camera.lookAt(controls.target);
 }
 
@@ -440,7 +498,7 @@ function frameLoop() {
     stats.latencyMs = (performance.timeOrigin + now) - f.header.serverTimeUs / 1000;
   }
   controls.update();
-  keepAboveWaves();
+  keepAboveWaves(now);
   // Sky, sun and light follow the local hour and the shared sea's wind; haze thickens with it.
   if (sky.update(view.hour, st.params?.wind_speed ?? 10)) ocean.uniforms.uFogDensity.value = 0.00009 * (1 + 4 * sky.state.overcast ** 2);
   // The bodies are blended between the same two frames as the sea, by the same amount.
@@ -450,6 +508,7 @@ function frameLoop() {
   flatNotice();
   stats.renders++;
   stats.tick(now);
+  catchUpTick(now);
   hud.draw(now, stats, st);
   requestAnimationFrame(frameLoop);
 }
@@ -478,8 +537,11 @@ window.oceand = Object.freeze({
   get wireframe() { return ocean.wireframe; },
   get view() { return snapshot({ hour: view.hour, hud: hud.visible, compact, sky: sky.state }); },
   get flatNotice() { return st.flatNotice || null; },
+  get catchup() { return snapshot(st.catchup || null); }, // behind the live sea? (catchup.js)
+  get degraded() { return snapshot(st.degraded || null); }, // the server's last `degraded` (active), or null
+  get link() { return snapshot(st.link || null); },
   get note() { return { panel: document.querySelector('[data-ui=last-change]')?.textContent ?? null, toast: toast.hidden ? null : toast.textContent }; },
-  get camera() { return snapshot({ position: camera.position.toArray(), target: controls.target.toArray() }); },
+  get camera() { return snapshot({ position: camera.position.toArray(), target: controls.target.toArray(), lift: camLift }); }, // lift: the floor's
   get stats() {
     return Object.freeze({
       fps: stats.fps, framesPerSec: stats.framesPerSec, kBps: stats.kBps, latencyMs: stats.latencyMs,
@@ -540,11 +602,16 @@ if (query.has('test')) {
       return { size: ocean.foamM, covered: half / f.length, some: some / f.length, jc: ocean.uniforms.uFoamJc.value };
     },
     // Put the camera at pos looking at target (as the URL's ?cam= and ?target= do).
-    look(pos, target) { camera.position.set(...pos); controls.target.set(...target); controls.update(); },
+    // (The orbit's damped motion left from earlier gestures is dropped: it would turn the new view.)
+    look(pos, target) {
+      camLift = 0; controls._sphericalDelta.set(0, 0, 0); controls._panOffset.set(0, 0, 0); controls._scale = 1;
+      camera.position.set(...pos); controls.target.set(...target); controls.update();
+    },
     // What the URL's ?hour=, ?gapprobe=, ?debugview=foam, ?foamshift=, ?camfloor= and ?scale= set, on
     // a page already open (one page serves several views; any member may be left out).
-    options({ hour, gapProbe, debugFoam, foamShift: shift, camFloor: floorOn, scale } = {}) {
+    options({ hour, gapProbe, debugFoam, foamShift: shift, camFloor: floorOn, scale, busyMs } = {}) {
       if (hour !== undefined) view.hour = hour;
+      if (busyMs !== undefined) testBusyMs = Math.max(0, Number(busyMs) || 0); // every animation frame this long
       if (scale !== undefined) renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2) * Math.min(1, Math.max(0.25, scale)));
       if (gapProbe !== undefined) sky.uniforms.uGapProbe.value = gapProbe ? 1 : 0;
       if (debugFoam !== undefined) ocean.uniforms.uDebugView.value = debugFoam ? 1 : 0;
