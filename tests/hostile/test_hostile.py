@@ -2992,7 +2992,7 @@ def ids_as_sent_through_an_edge(d, fig):
 SOLO.add("ids_as_sent_through_an_edge")   # a sim, an edge and a nats-server of its own
 
 
-# ---------------------------------------------------------------- floating bodies (PROTOCOL.md §3.5, §7.6; issue 37)
+# ---------------------------------------------------------------- floating bodies (PROTOCOL.md §3.5, §7.6)
 
 FRAME_MAGIC = b"OCNF"
 BODY_REC = struct.Struct("<IBBbb3f4f3f")   # a BODY record's first 48 bytes (§3.5)

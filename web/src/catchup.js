@@ -89,7 +89,7 @@ export class CatchUp {
     const lag = this.lagMs(now);
     if (lag === null) return null;
     const win = this.samples.filter(([t]) => now - t <= WINDOW_MS);
-    const covered = win.length && now - this.samples[0][0] >= WINDOW_MS; // a whole window of this session
+    const covered = win.length && now - this.samples[0][0] >= WINDOW_MS; // a whole window on this connection
     if (lag > BEHIND_MS && covered && now - this.lastChange >= MIN_GAP_MS && this.step < STEPS.length - 1) {
       // Jump to the first step whose stream fits half of what the page reads (bytes per
       // second on its clock); at least one step, at most two (a stream that skips ticks is
