@@ -146,6 +146,24 @@ static void fail(struct session *s, const char *code, const char *param, const c
     session_send_error(s, &e, id);
 }
 
+/* A client's request for the sim, answered to its sender (id copied for the answer);
+ * NULL, with the sender told `internal`, on no memory. */
+static struct sim_body_cmd *client_cmd(struct session *s, enum sim_body_op op, uint32_t body, const cJSON *id)
+{
+    struct sim_body_cmd *c = cmd_new(op, body);
+    cJSON *idc = id ? cJSON_Duplicate(id, 1) : NULL;
+    if (!c || (id && !idc)) {
+        free(c);
+        cJSON_Delete(idc);
+        fail(s, "internal", NULL, id, "out of memory");
+        return NULL;
+    }
+    c->serial = s->serial;
+    c->reply_id = idc;
+    c->reply = true;
+    return c;
+}
+
 /* 128 random bits as 32 hex digits. */
 static void resume_key(char out[33])
 {
@@ -190,22 +208,14 @@ static void launch(struct net *n, struct session *s, const struct body_req *r, c
         fail(s, "rate_limited", NULL, id, "more than %g launches a minute (--launch-rate)", n->dc.launch_rate);
         return;
     }
-    struct sim_body_cmd *c = cmd_new(SIM_BODY_LAUNCH, 0);
-    cJSON *idc = id ? cJSON_Duplicate(id, 1) : NULL;
-    if (!c || (id && !idc)) {
-        free(c);
-        cJSON_Delete(idc);
-        fail(s, "internal", NULL, id, "out of memory");
+    struct sim_body_cmd *c = client_cmd(s, SIM_BODY_LAUNCH, 0, id);
+    if (!c)
         return;
-    }
     s->launch_tokens -= 1;
     c->kind = r->kind;
     c->x = r->x;
     c->z = r->z;
     c->heading = r->heading;
-    c->serial = s->serial;
-    c->reply_id = idc;
-    c->reply = true;
     resume_key(c->resume);
     s->launching++;
     n->bodies.launching++;
@@ -231,19 +241,12 @@ static void steer(struct net *n, struct session *s, const struct body_req *r, co
 {
     if (!mine(n, s, r->body, id))
         return;
-    struct sim_body_cmd *c = cmd_new(SIM_BODY_STEER, r->body);
-    cJSON *idc = id ? cJSON_Duplicate(id, 1) : NULL;
-    if (!c || (id && !idc)) {
-        free(c);
-        cJSON_Delete(idc);
-        fail(s, "internal", NULL, id, "out of memory");
+    struct sim_body_cmd *c = client_cmd(s, SIM_BODY_STEER, r->body, id);
+    if (!c)
         return;
-    }
     c->control = (struct body_control){ r->throttle, r->rudder };
     c->has_throttle = r->has_throttle;
     c->has_rudder = r->has_rudder;
-    c->serial = s->serial;
-    c->reply_id = idc;
     c->reply = id != NULL; /* a steer without an id is answered only when it fails */
     sim_body_submit(n->sim, c);
 }
@@ -253,17 +256,9 @@ static void remove_body(struct net *n, struct session *s, const struct body_req 
     struct body_own *b = mine(n, s, r->body, id);
     if (!b)
         return;
-    struct sim_body_cmd *c = cmd_new(SIM_BODY_REMOVE, r->body);
-    cJSON *idc = id ? cJSON_Duplicate(id, 1) : NULL;
-    if (!c || (id && !idc)) {
-        free(c);
-        cJSON_Delete(idc);
-        fail(s, "internal", NULL, id, "out of memory");
+    struct sim_body_cmd *c = client_cmd(s, SIM_BODY_REMOVE, r->body, id);
+    if (!c)
         return;
-    }
-    c->serial = s->serial;
-    c->reply_id = idc;
-    c->reply = true;
     c->reason = "removed";
     b->removing = true;
     sim_body_submit(n->sim, c);
