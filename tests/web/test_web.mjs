@@ -23,7 +23,10 @@ const VIEW = { width: 800, height: 500 };
 // test: keep the drawing buffer; aa=0: no MSAA; detail: a lighter mesh; scale=0.25: a 16th of
 // the pixels (software GL is slow; the checks on this page compare whole images, flat against
 // varied, noon against night, solid against wireframe, which hold at any resolution).
-const QUERY = '?test=1&aa=0&detail=0.25&scale=0.25';
+const QUERY_BASE = '?test=1&aa=0&detail=0.25&scale=0.25';
+// catchup=0: a page that software GL puts behind would otherwise step itself down and reopen
+// its connection in the middle of a check (catchup.js); only the catch-up check keeps it on.
+const QUERY = `${QUERY_BASE}&catchup=0`;
 // Pages whose checks read state and layout, not pixels, do not draw the sea (?draw=0): every
 // drawing page slows all the others (software GL renders them all in one GPU process).
 const QUERY_NODRAW = `${QUERY}&draw=0`;
@@ -996,7 +999,7 @@ try {
     const p = await ctx.newPage();
     p.on('pageerror', (e) => pageErrors.push(e.message));
     try {
-      await p.goto(`${url}&draw=0`, { timeout: 120000 });
+      await p.goto(`http://127.0.0.1:${port}/${QUERY_BASE}&draw=0`, { timeout: 120000 });
       await waitFor(p, 'connected and rendering', () => window.oceand.connected && window.oceand.rendered > 3, null, 120000);
       await check('HUD: on loopback the link line says the link is local, not a rate', async () => {
         await waitFor(p, 'the link line', () => !!document.querySelector('#hud [data-ui=link]'), null, 15000);
