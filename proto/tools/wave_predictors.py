@@ -29,6 +29,9 @@ rounded codes, coefficients rounded to 1/4096 and sent, as codec 3 does):
             smallest-norm T taps exact for both e^(+-i w t) (spec2 = 2 cos(w dt) q1 - q2),
             i.e. the references' rounding noise averaged over T ticks
   specT/f32 the same in float32 with the taps rounded to 2^-14 (the precision it needs)
+  intT      specT in int64: codes with 12 fractional bits, a radix-2 FFT with twiddles and
+            taps rounded to 2^-24, one rounding rule (rnd), every product below 2^62 (what
+            any decoder can reproduce bit for bit)
   firS      spec8's taps as space-time kernels truncated to S x S samples (a local filter)
   oracle    the true floats of the last two ticks advanced by the recurrence: the floor
 """
@@ -133,6 +136,52 @@ def spec_coeffs(w, taps):
     return cs
 
 
+TW = 24   # fixed-point twiddles and taps: integers of 2^24
+FB = 12   # fractional bits of the codes inside the FFT
+
+
+def rnd(x, s):
+    """floor((x + 2^(s-1)) / 2^s): the one rounding of the integer FFT (exact in int64, in
+    Python ints, and in JavaScript doubles while |x| < 2^53)."""
+    return (x + (1 << (s - 1))) >> s
+
+
+def ifft_int_1d(re, im, axis, inverse):
+    """Radix-2 decimation in time along axis on int64 arrays; twiddles round(2^TW cos/sin);
+    every product rounded by rnd(., TW); each direction halves (rnd(., 1)) at every other
+    stage, so forward and inverse together divide by n per axis and values stay small."""
+    n = re.shape[axis]
+    bits = n.bit_length() - 1
+    rev = np.array([int(format(i, f"0{bits}b")[::-1], 2) for i in range(n)])
+    re, im = np.take(re, rev, axis), np.take(im, rev, axis)
+    re, im = np.moveaxis(re, axis, -1).copy(), np.moveaxis(im, axis, -1).copy()
+    sign = 1 if inverse else -1
+    size, stage = 2, 0
+    while size <= n:
+        h = size // 2
+        k = np.arange(h)
+        wr = np.round(np.cos(2 * np.pi * k / size) * (1 << TW)).astype(np.int64)
+        wi = np.round(sign * np.sin(2 * np.pi * k / size) * (1 << TW)).astype(np.int64)
+        a_r = re.reshape(re.shape[:-1] + (n // size, size))
+        a_i = im.reshape(im.shape[:-1] + (n // size, size))
+        br, bi = a_r[..., h:], a_i[..., h:]
+        tr, ti = rnd(br * wr - bi * wi, TW), rnd(br * wi + bi * wr, TW)
+        ur, ui = a_r[..., :h].copy(), a_i[..., :h].copy()
+        if stage % 2 == (1 if inverse or bits % 2 == 0 else 0):   # bits halvings in all
+            a_r[..., :h], a_i[..., :h] = rnd(ur + tr, 1), rnd(ui + ti, 1)
+            a_r[..., h:], a_i[..., h:] = rnd(ur - tr, 1), rnd(ui - ti, 1)
+        else:
+            a_r[..., :h], a_i[..., :h] = ur + tr, ui + ti
+            a_r[..., h:], a_i[..., h:] = ur - tr, ui - ti
+        size, stage = size * 2, stage + 1
+    return np.moveaxis(re, -1, axis), np.moveaxis(im, -1, axis)
+
+
+def fft2_int(re, im, inverse=False):
+    re, im = ifft_int_1d(re, im, 1, inverse)
+    return ifft_int_1d(re, im, 0, inverse)
+
+
 def main():
     path, n, frames = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
     warm = int(sys.argv[4]) if len(sys.argv) > 4 else 12
@@ -155,6 +204,7 @@ def main():
         res = {k: {"coded": [], "quad": [], "H0": []} for k in names}
         for name in names:
             q = [np.round(u[t]) for t in range(12)]     # keyframes (intra, not counted)
+            spec = {}                                   # intT: each reference's spectrum, kept
             for t in range(12, frames):
                 q1, q2, q3, q4 = q[t - 1], q[t - 2], q[t - 3], q[t - 4]
                 d1, d2, d3 = q1 - q2, q2 - q3, q3 - q4
@@ -171,6 +221,26 @@ def main():
                     P = ls_pred(2 * q1 - q2, feats, (feats, np.round(u[t]) - (2 * q1 - q2)), n)
                 elif name == "spec2":
                     P = np.round(np.real(np.fft.ifft2(twoc * np.fft.fft2(q1))) - q2)
+                elif name.startswith("int"):
+                    # specT in integers: forward FFT of each reference (kept by a decoder),
+                    # taps rounded to 2^-TW, products rounded, inverse FFT halving per stage
+                    taps = int(name[3:])
+                    if taps not in coef:
+                        coef[taps] = spec_coeffs(w, taps)
+                    key = ("int", taps)
+                    if key not in coef:
+                        coef[key] = np.round(coef[taps] * (1 << TW)).astype(np.int64)
+                    ci = coef[key]
+                    sr = si = 0
+                    for j in range(taps):
+                        if t - 1 - j not in spec:
+                            qi = q[t - 1 - j].astype(np.int64) << FB
+                            spec[t - 1 - j] = fft2_int(qi, np.zeros_like(qi))
+                        fr, fi = spec[t - 1 - j]
+                        sr = sr + rnd(fr * ci[..., j], TW)
+                        si = si + rnd(fi * ci[..., j], TW)
+                    assert max(np.abs(sr).max(), np.abs(si).max()) < 2 ** 38   # products < 2^62
+                    P = rnd(fft2_int(sr, si, inverse=True)[0], FB).astype(np.float64)
                 elif name.startswith("spec"):
                     taps = int(name[4:].split("/")[0])
                     if taps not in coef:
