@@ -70,7 +70,7 @@ test-cluster-durable: $(BUILD)/oceand $(BUILD)/san/oceand
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/cluster/test_cluster_durable.py --oceand $(BUILD)/san/oceand --cycles 2
 
-# Floating bodies through edges and across a standby's take-over (~15 s, ~25 s under ASan).
+# Floating bodies through edges and across a standby's take-over (~25 s, ~40 s under ASan).
 .PHONY: test-cluster-bodies
 test-cluster-bodies: $(BUILD)/oceand $(BUILD)/san/oceand
 	/usr/bin/python3 tests/cluster/test_cluster_bodies.py --oceand $(BUILD)/oceand

@@ -198,8 +198,11 @@ static void take_over(struct role_lease *ls, const struct record *rec, uint64_t 
     pthread_mutex_lock(&ls->wlock);
     pthread_mutex_lock(&ls->lock);
     bool theirs = rec && rec->version >= ls->version;
-    /* The bodies as the holder left them (before our record is written, which carries them on). */
-    bool bodies = theirs && rtext && lease_bodies_from_record(ls->bodies, rtext, rlen) == 1;
+    /* The bodies as the holder left them (before our record is written, which carries them on):
+     * its record's, or, when that is older than our state, those of the newest one we followed. */
+    if (theirs && rtext)
+        lease_bodies_from_record(ls->bodies, rtext, rlen);
+    bool bodies = rec && lease_bodies_have(ls->bodies);
     struct ocean_params p = theirs ? rec->params : ls->params;
     uint32_t v = theirs ? rec->version : ls->version;
     pthread_mutex_unlock(&ls->lock);
@@ -256,8 +259,11 @@ static void standby_round(struct role_lease *ls, double now)
              * the renewals (same version, new clock) cost nothing here. Only
              * a newer one: a record older than our state (written by a stale
              * copy, a restored bucket) never takes the version back. */
-            if (ok && rec.version > mine && strcmp(rec.holder, cl_link_instance(ls->link)) != 0)
+            bool holders = ok && strcmp(rec.holder, cl_link_instance(ls->link)) != 0;
+            if (holders && rec.version > mine)
                 adopt(ls, &rec);
+            if (holders && rec.version >= mine) /* its bodies, for a take-over (role_lease_bodies.c) */
+                lease_bodies_from_record(ls->bodies, text, len);
         }
         if (!ok) {
             if (now - ls->warn_t > 10) {

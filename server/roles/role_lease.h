@@ -51,7 +51,9 @@ int role_lease_persist(struct role_lease *ls, const struct ocean_params *p, uint
  * The lws thread hands the newest bodies over (copied); every record write
  * carries them while the record stays within LEASE_BODIES_MAX_BYTES of
  * them (the bucket holds 64 KB values: about 100 bodies; --max-bodies 64 by
- * default). A take-over from another holder's record takes its bodies:
+ * default). A standby takes the bodies of each record it follows (the
+ * holder's, at least as new as its own state: an older record brings no
+ * bodies back); a take-over restores the newest it took:
  * role_lease_take_bodies hands them out once (1; *out is the caller's to
  * free), after the wake function set by role_lease_on_bodies was called. */
 #define LEASE_BODIES_MAX_BYTES (48u << 10)
@@ -66,5 +68,6 @@ void lease_bodies_free(struct lease_bodies *lb);
 void lease_bodies_add(struct lease_bodies *lb, struct cJSON *record);
 int lease_bodies_from_record(struct lease_bodies *lb, const char *text, size_t len);
 void lease_bodies_commit(struct lease_bodies *lb);
+bool lease_bodies_have(struct lease_bodies *lb);      /* bodies taken from a record are waiting */
 
 #endif

@@ -89,9 +89,11 @@ void lease_bodies_add(struct lease_bodies *lb, cJSON *o)
     }
 }
 
-/* Take-over from the record text: its bodies become ours (the next record
- * carries them) and, once committed, the lws thread's. 1 = it had bodies,
- * 0 = none, -1 = bad ones (kept our own). */
+/* A record of the holder's (one the standby follows, or the one it takes
+ * over from): its bodies are the ones a take-over restores, and the next
+ * record we write carries them; committed, they are the lws thread's. 1 = it
+ * had bodies, 0 = none (nothing to restore), -1 = bad ones (the last good
+ * ones stay). */
 int lease_bodies_from_record(struct lease_bodies *lb, const char *text, size_t len)
 {
     cJSON *root = cJSON_ParseWithLength(text, len);
@@ -101,7 +103,12 @@ int lease_bodies_from_record(struct lease_bodies *lb, const char *text, size_t l
     int rc = !b ? 0 : state_bodies_parse(b, &sb, err, sizeof err) == 0 ? 1 : -1;
     cJSON_Delete(root);
     if (rc < 0)
-        LOGW("cluster: the bodies in the simulation's record are not valid (%s): taken over without them", err);
+        LOGW("cluster: the bodies in the simulation's record are not valid (%s): not taken", err);
+    if (rc == 0) {
+        pthread_mutex_lock(&lb->lock);
+        state_bodies_free(&lb->taken);
+        pthread_mutex_unlock(&lb->lock);
+    }
     if (rc <= 0)
         return rc;
     pthread_mutex_lock(&lb->lock);
@@ -112,6 +119,14 @@ int lease_bodies_from_record(struct lease_bodies *lb, const char *text, size_t l
     lb->taken_due = false;
     pthread_mutex_unlock(&lb->lock);
     return 1;
+}
+
+bool lease_bodies_have(struct lease_bodies *lb)
+{
+    pthread_mutex_lock(&lb->lock);
+    bool any = lb->taken.next_id != 0;
+    pthread_mutex_unlock(&lb->lock);
+    return any;
 }
 
 /* The claim succeeded: the lws thread takes them at its next wake. */

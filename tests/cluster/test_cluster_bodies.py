@@ -192,10 +192,12 @@ def test_standby_takes_over_every_body(c):
         first = c.active()
         check(first is not None, "no active sim")
         seq0, r0 = await w.frame_where(lambda r: run_id in r and still in r, "both bodies before the kill")
+        t_kill = time.time()
         first.kill()
         wait_for(lambda: c.active() not in (None, first), "the standby holds the lease", timeout=10)
-        seq1, r1 = await w.frame_where(lambda r: run_id in r and still in r, "both bodies after the take-over",
+        _, r1 = await w.frame_where(lambda r: run_id in r and still in r, "both bodies after the take-over",
                                        timeout=15, after=seq0)
+        waited = time.time() - t_kill
         launch_pt = (10.0, r0[run_id]["pos"][1], -20.0)
         moved = math.dist(r0[run_id]["pos"], launch_pt)
         v0 = math.hypot(*r0[run_id]["vel"][::2])
@@ -203,11 +205,11 @@ def test_standby_takes_over_every_body(c):
         # The standby's copy is at most a replica period plus a renewal old; the boat
         # goes on from there at its speed (not from rest at the launch point).
         gap = math.dist(r0[run_id]["pos"], r1[run_id]["pos"])
-        dt = (seq1 - seq0) / 30.0
         v1 = math.hypot(*r1[run_id]["vel"][::2])
-        print("  boat: %.1f m run, %.2f m/s; after the take-over %.2f m away, %.2f m/s (%.2f s later)"
-              % (moved, v0, gap, v1, dt))
-        check(gap < 10.0 * (dt + 0.5) + 1, "the boat is %.1f m from where it was (%.2f s later)" % (gap, dt))
+        print("  boat: %.1f m run, %.2f m/s; after the take-over %.2f m away, %.2f m/s (%.2f s after the kill)"
+              % (moved, v0, gap, v1, waited))
+        speed = 1.5 * max(v0, v1)   # it is still accelerating
+        check(gap < speed * (waited + 0.5) + 1, "the boat is %.1f m from where it was (%.2f s later)" % (gap, waited))
         check(math.dist(r1[run_id]["pos"], launch_pt) > moved - 1.5 and v1 > 0.5 * v0,
               "the boat started again: %.1f m from its launch point, %.2f m/s" % (
                   math.dist(r1[run_id]["pos"], launch_pt), v1))
@@ -232,6 +234,58 @@ def test_standby_takes_over_every_body(c):
               "owners after the take-over: %r" % h.hello["bodies"])
         for v in (a, w, h):
             await v.close()
+    asyncio.run(run())
+
+
+@test
+@cd.with_js_cluster(sims=2, edges=1)
+def test_an_older_record_brings_no_bodies_back(c):
+    """A record older than the sims' state (a stale copy written into the bucket) with a
+    body of its own: whichever sim takes the lease after it keeps the bodies it had or
+    followed (the client's boat, its owner), never the old record's (no ship 4999 in any
+    frame or list), and ids do not jump to the old record's next_id."""
+    import test_cluster_hostile as tch
+    async def run():
+        a = await viewer(c.edges[0])
+        for i in range(2):
+            m = await a.ask({"type": "set", "id": 50 + i, "params": {"wind_speed": 9.5 + i}})
+            check(m["type"] == "params", "set: %r" % m)
+        v = m["params_version"]
+        boat, _ = await launch(a, 1)
+        wait_for(lambda: cd.metric_of(c.sims[1], "oceand_params_version") == v, "the standby follows version %d" % v)
+        await asyncio.sleep(0.6)   # a renewal or two carry the boat
+        ghost = {"id": 4999, "kind": "ship", "pos": [100, 0, 100], "quat": [1, 0, 0, 0], "vel": [0, 0, 0],
+                 "omega": [0, 0, 0], "throttle": 0, "rudder": 0, "owner": "c1-rogue", "name": "",
+                 "resume": "0" * 32, "origin": "edge-rogue"}
+        old = {"holder": "rogue-1", "name": "rogue", "released": False, "params": {"wind_speed": 4.5},
+               "params_version": v - 1, "sim_time": 100.0, "wall_us": int(time.time() * 1e6), "seq": 1,
+               "tick_rate": 30, "bodies": {"next_id": 5000, "list": [ghost]}}
+        rogue = tch.RawNats(c.nats.url)
+        try:
+            rogue.sub("_INBOX.rogue")
+            rogue.pub("$KV.OCEAND_oceand.sim", json.dumps(old).encode(), reply="_INBOX.rogue")
+            _, _, ack = rogue.next_msg(5)
+            check(b'"stream"' in ack, "JetStream did not store the old record: %r" % ack)
+        finally:
+            rogue.close()
+        seq0 = max(a.frames) if a.frames else 0
+        await asyncio.sleep(4.0)   # the step-down, the lease's expiry, the take-over
+        wait_for(lambda: c.active() is not None, "a sim holds the lease")
+        _, r = await a.frame_where(lambda r: boat in r, "the boat after the old record", timeout=15,
+                                   after=max(a.frames))
+        ghosts = [s for s in a.frames if s > seq0 and 4999 in a.frames[s]]
+        check(not ghosts, "the old record's body appeared on seqs %r" % ghosts[:5])
+        check(not any(m.get("type") == "bodies" and any(e["body"] == 4999 for e in m["bodies"]) for m in a.json),
+              "the old record's body in a bodies list")
+        for k in range(50):
+            m = await a.ask({"type": "steer", "id": 100 + k, "body": boat, "throttle": 0.5})
+            if m["type"] == "steered" or m.get("code") != "unavailable":
+                break
+            await asyncio.sleep(0.2)
+        check(m["type"] == "steered", "the owner steers after the old record: %r" % m)
+        nxt, _ = await launch(a, 200, x=0.0, z=0.0)
+        check(boat < nxt < 4999, "the next id %d (the boat's %d; the old record's next_id 5000)" % (nxt, boat))
+        await a.close()
     asyncio.run(run())
 
 
