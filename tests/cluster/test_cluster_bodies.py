@@ -110,6 +110,7 @@ def test_bodies_through_edges(c):
     """A client of edge 0 launches and steers a boat; a viewer of edge 1 gets the
     `bodies` list and, on the same seq as the owner, byte for byte the same record;
     the viewer cannot steer, remove or claim it (not_owner), errors keep their codes;
+    a rogue's broken sections and list on NATS change nothing a client gets;
     when the owner leaves, the body is adrift for everyone and its key claims it back
     through the other edge."""
     async def run():
@@ -151,6 +152,28 @@ def test_bodies_through_edges(c):
         await asyncio.sleep(0.3)
         _, r = await b.frame_where(lambda r: body in r, "after the refusals")
         check(r[body]["throttle"] == 64, "a refused steer changed the throttle: %r" % r[body])
+        # A rogue on NATS: sections that are not whole, one far ahead, a list with a bad entry.
+        import struct
+        import test_cluster_hostile as tch
+        rogue = tch.RawNats(c.nats.url)
+        try:
+            good = s + 1
+            bad_count = b"BODY" + struct.pack("<HH8x", 2, 48) + b"\0" * 48
+            for body_ in (struct.pack("<Q", good) + bad_count, struct.pack("<Q", good) + b"BODX" + b"\0" * 60,
+                          b"\1\2\3"):
+                rogue.pub("oceand.bodies", tch.envelope(11, body_))
+            rogue.pub("oceand.bodies", tch.envelope(10, json.dumps(
+                {"type": "bodies", "seq": 1, "bodies": [{"body": 7, "kind": "kayak", "owner": "x", "name": "",
+                                                         "adrift": False}], "removed": []}).encode()))
+            rogue.sub("_INBOX.rogue-sync")   # its PONG: the server has every message above
+        finally:
+            rogue.close()
+        await asyncio.sleep(0.5)
+        seq_r, r = await b.frame_where(lambda r: True, "a frame after the rogue's messages")
+        check(set(r) == {body} and r[body]["throttle"] == 64, "records after the rogue's messages: %r" % r)
+        check(not any(m.get("type") == "bodies" and any(e["body"] == 7 for e in m["bodies"]) for m in b.json),
+              "the rogue's list reached a client")
+        check("that does not parse" in c.edges[1].read_log(), "the edge did not see (and drop) the rogue's list")
         # The owner leaves edge 0: adrift for everyone; its key claims it back on edge 1.
         n = len(b.json)
         await a.close()
