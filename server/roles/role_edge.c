@@ -165,6 +165,15 @@ static void publish_set(struct role_edge *r, struct cl_frame_set *set)
     frame_unref(f);
 }
 
+static void publish_held(struct role_edge *r)
+{
+    struct cl_frame_set *set;
+    while ((set = edge_bodies_next_held(r->bodies))) {
+        publish_set(r, set);
+        cl_frame_set_free(set);
+    }
+}
+
 static void edge_on_layer(void *user, struct cl_layer *layer)
 {
     struct role_edge *r = user;
@@ -180,6 +189,7 @@ static void edge_on_layer(void *user, struct cl_layer *layer)
         cl_layer_free(layer);
         return;
     case SEQ_RESTART:
+        publish_held(r); /* the old timeline's frames go out before it restarts */
         LOGW("cluster: the sim's frames count from seq %llu now (a restarted or another sim): the stream restarts",
              (unsigned long long)layer->info.seq);
         cl_collector_reset(r->collector);
@@ -195,15 +205,6 @@ static void edge_on_layer(void *user, struct cl_layer *layer)
             publish_set(r, out[i]);
             cl_frame_set_free(out[i]);
         }
-}
-
-static void publish_held(struct role_edge *r)
-{
-    struct cl_frame_set *set;
-    while ((set = edge_bodies_next_held(r->bodies))) {
-        publish_set(r, set);
-        cl_frame_set_free(set);
-    }
 }
 
 static void edge_on_bodies(void *user, bool is_section, const char *data, size_t len)
