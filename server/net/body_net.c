@@ -1034,6 +1034,13 @@ static int adopt_list(struct net *n, const cJSON *list)
     return 0;
 }
 
+void net_body_refused(struct net *n, uint64_t serial)
+{
+    struct session *s = session_find(n, serial);
+    if (s && s->launch_t > 0)
+        s->launch_tokens = fmin(n->dc.launch_rate, s->launch_tokens + 1);
+}
+
 int net_adopt_bodies(struct net *n, const char *text, size_t len)
 {
     static const char *const types[] = { "bodies", NULL };

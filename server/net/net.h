@@ -166,6 +166,10 @@ void net_remote_owners(struct net *n, const char *origin, const char *text, size
 /* edge: the owners message for the sim when it is due (a body user left or
  * renamed itself, or BODY_OWNERS_PERIOD_S passed), malloc'd; NULL = nothing to send. */
 char *net_body_owners(struct net *n, double now);
+/* edge: the sim refused a launch of client serial as too_many_bodies: its
+ * launch is given back to its --launch-rate bucket, as a local refusal
+ * never takes it (at most a full bucket). */
+void net_body_refused(struct net *n, uint64_t serial);
 /* edge: a `bodies` message from the sim: the list this edge's hellos carry,
  * relayed to every client. -1 = not a valid `bodies` (dropped). */
 int net_adopt_bodies(struct net *n, const char *text, size_t len);

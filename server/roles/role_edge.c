@@ -464,6 +464,8 @@ static void on_reply(void *ctx, int status, const char *text, size_t len)
         reply_type(text, len, type, sizeof type, code, sizeof code, &points);
         if (fw->id || strcmp(type, "steered") != 0) /* a steer without an id is answered only when it fails */
             relay(r, fw->serial, fw->id, text, len);
+        if (strcmp(code, "too_many_bodies") == 0) /* refused before it took a launch: the bucket keeps it */
+            net_body_refused(r->net, fw->serial);
     } else {
         send_unavailable(r, fw->serial, fw->id, status);
     }

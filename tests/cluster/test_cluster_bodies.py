@@ -191,6 +191,14 @@ def test_bodies_through_edges(c):
                 "steer after another's claim")
         await b.wait_json(lambda m: m["type"] == "bodies" and m["bodies"] and not m["bodies"][0]["adrift"] and
                           m["bodies"][0]["owner"] == a2.hello["client_id"], "the new owner in bodies")
+        # The limits are the sim's; a launch it refuses takes nothing from the edge's bucket (12 a minute).
+        mine = [body] + [(await launch(a2, 20 + i, x=-50.0 * (i + 1)))[0] for i in range(3)]
+        for i in range(10):
+            refused(await a2.ask({"type": "launch", "id": 30 + i, "kind": "spar", "x": 0, "z": 0}), "too_many_bodies",
+                    "a fifth body")
+        m = await a2.ask({"type": "remove", "id": 40, "body": mine[-1]})
+        check(m["type"] == "removed", "remove: %r" % m)
+        await launch(a2, 41, x=60.0)   # the 4th of 12 launches: not rate_limited
         await a2.close()
         await b.close()
     asyncio.run(run())
