@@ -68,7 +68,8 @@ deps:
 # at a time, alone on the machine: daemons that must keep their tick (ASan),
 # the hostile battery (it measures the observer's share of frames; it runs its
 # light cases 2 at a time itself), the link lab, SwiftShader.
-TESTS_CONCURRENT := test-cluster-roles test-daemon test-tap test-ops test-python test-blender test-cluster-durable
+TESTS_CONCURRENT := test-cluster-roles test-daemon test-tap test-ops test-python test-blender test-cluster-durable \
+                    test-cluster-bodies
 TESTS_PAIRED     := test-fuzz test-proto-valgrind test-sim-asan test-query-valgrind test-sim-valgrind \
                     test-daemon-valgrind test-sim test-cluster-valgrind test-proto-asan test-query \
                     test-cluster test-proto test-proto-js test-sim-tsan test-query-asan test-layout test-wording \

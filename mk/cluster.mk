@@ -11,6 +11,8 @@
 #   make test-cluster-durable    no acknowledged set lost by a kill -9 of a sim, NATS, an edge or
 #                                --role all; versions never back; the standby sim takes over
 #                                (nats-server with JetStream, its store in the test's folder)
+#   make test-cluster-bodies     floating bodies through edges (launch, steer, claim; the same
+#                                record on the same seq on every edge) and across a take-over
 # oceand links the module for --role sim|edge (mk/daemon.mk); only the role
 # glue (server/roles/) sees server/cluster/.
 
@@ -22,7 +24,7 @@ PROTO_LIB       ?= $(BUILD)/liboc_proto.a
 PROTO_SAN_LIB   ?= $(BUILD)/san/liboc_proto.a
 
 BINS  += $(CLUSTER_LIB) $(BUILD)/test_cluster_msg $(BUILD)/test_cluster_nats
-TESTS += test-cluster test-cluster-valgrind test-cluster-roles test-cluster-durable
+TESTS += test-cluster test-cluster-valgrind test-cluster-roles test-cluster-durable test-cluster-bodies
 
 # The module sees only its own folder and the protocol's header: no sim
 # internals, no daemon headers, no libwebsockets.
@@ -67,6 +69,13 @@ test-cluster-durable: $(BUILD)/oceand $(BUILD)/san/oceand
 	/usr/bin/python3 tests/cluster/test_cluster_durable.py --oceand $(BUILD)/oceand --cycles $(CLUSTER_DURABLE_CYCLES)
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/cluster/test_cluster_durable.py --oceand $(BUILD)/san/oceand --cycles 2
+
+# Floating bodies through edges and across a standby's take-over (~25 s, ~40 s under ASan).
+.PHONY: test-cluster-bodies
+test-cluster-bodies: $(BUILD)/oceand $(BUILD)/san/oceand
+	/usr/bin/python3 tests/cluster/test_cluster_bodies.py --oceand $(BUILD)/oceand
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  /usr/bin/python3 tests/cluster/test_cluster_bodies.py --oceand $(BUILD)/san/oceand
 
 # 1 sim + 1, 2, 3 edges + nats-server on this machine vs --role all (docs/scaling.md).
 BENCHES += bench-cluster

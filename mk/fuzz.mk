@@ -27,6 +27,7 @@ FUZZ_TARGETS += sea
 FUZZ_TARGETS += sea_ndbc sea_ww3 sea_cdip
 # Floating bodies: launch/steer/remove/claim (body_msg.c) and the BODY section of a frame header.
 FUZZ_TARGETS += bodies
+FUZZ_TARGETS += cluster_bodies
 
 # The config loader's input is JSON text: the operands of integer compares
 # (trace-cmp) are parsed binary values that libFuzzer cannot splice back into
@@ -43,6 +44,10 @@ FUZZ_SRCS_config  = fuzz/fuzz_config.c $(wildcard server/config/*.c server/contr
                     $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_sea     = fuzz/fuzz_sea.c $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_bodies  = fuzz/fuzz_bodies.c $(wildcard server/control/*.c) $(wildcard proto/c/*.c) $(SIM_SRCS_FOR_FUZZ)
+# What a cluster reads of the bodies: the edge's BODY_SECTION check, the record's "bodies".
+FUZZ_SRCS_cluster_bodies = fuzz/fuzz_cluster_bodies.c server/roles/edge_bodies.c server/config/state_bodies.c \
+                           server/base/fileio.c $(wildcard server/control/*.c) $(wildcard proto/c/*.c) \
+                           $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_query   = fuzz/fuzz_query.c server/query/probe.c $(wildcard server/control/*.c) $(SIM_SRCS_FOR_FUZZ)
 # cluster_*.c are the transport's NATS-free parts (formats, subjects, assembly,
 # demand); link*.c talk to NATS and are not fuzzed here.

@@ -130,7 +130,8 @@ const char *cl_strerror(int err);
 /* A prefix is 1..64 characters: dot-separated non-empty tokens of
  * [A-Za-z0-9_-] (no wildcards, no spaces). */
 bool cl_prefix_valid(const char *prefix);
-enum cl_subject { CL_SUBJ_PARAMS, CL_SUBJ_STATUS, CL_SUBJ_CTL, CL_SUBJ_HELLO, CL_SUBJ_DEMAND, CL_SUBJ_QUERY, CL_SUBJ_PROBE };
+enum cl_subject { CL_SUBJ_PARAMS, CL_SUBJ_STATUS, CL_SUBJ_CTL, CL_SUBJ_HELLO, CL_SUBJ_DEMAND, CL_SUBJ_QUERY, CL_SUBJ_PROBE,
+                  CL_SUBJ_BODIES };
 int cl_subject(char *out, size_t cap, const char *prefix, enum cl_subject which);
 /* The subject of layer key `key` (cl_key_cascade). */
 int cl_subject_layer(char *out, size_t cap, const char *prefix, int key);
@@ -320,6 +321,9 @@ enum cl_kind {
     CL_KIND_PROBE = 8,   /* edge -> sim request: a client's `probe` JSON (REPLY: `probing` or an error);
                             sent again unchanged every CL_PROBE_KEEPALIVE_S while the probe lasts */
     CL_KIND_PROBE_DATA = 9, /* sim -> edge, on <the edge's reply inbox>.p: one `probe_data` JSON; by = the client */
+    CL_KIND_BODIES = 10,    /* sim -> edges, on <prefix>.bodies: a `bodies` JSON (PROTOCOL.md §7.6) */
+    CL_KIND_BODY_SECTION = 11, /* sim -> edges, on <prefix>.bodies: u64 seq (LE) + the tick's BODY section
+                                  (PROTOCOL.md §3.5; none = 0 bodies), published before that tick's layers */
 };
 struct cl_envelope {
     enum cl_kind kind;
@@ -408,6 +412,8 @@ struct cl_handlers {
     void (*on_params)(void *user, const char *origin, const char *by, const char *text, size_t len);
     /* edge role: a `probe_data` message for client `by` (PROBE_DATA) */
     void (*on_probe_data)(void *user, const char *by, const char *text, size_t len);
+    /* edge role: a `bodies` JSON (BODIES), or a tick's BODY section (BODY_SECTION, is_section) */
+    void (*on_bodies)(void *user, bool is_section, const char *data, size_t len);
 };
 
 /* Probes through an edge: the edge repeats each live probe request this
@@ -496,6 +502,10 @@ int cl_sim_publish_layer_sections(struct cl_link *l, const struct cl_layer_info 
                                   const size_t len[2], const uint32_t *const tile_off[2], void (*release)(void *ctx),
                                   void *ctx);
 int cl_sim_publish_params(struct cl_link *l, const char *origin, const char *by, const char *text, size_t len);
+/* The floating bodies for the edges (CL_KIND_BODIES: a `bodies` JSON;
+ * CL_KIND_BODY_SECTION: u64 seq + BODY section), queued in order with the
+ * layers: a tick's section goes out before its layers. */
+int cl_sim_publish_bodies(struct cl_link *l, enum cl_kind kind, const void *data, size_t len);
 void cl_sim_set_status(struct cl_link *l, const char *text, size_t len);  /* body of the next heartbeats */
 /* A standby sim sends no STATUS (edges must not take it for the active one)
  * and is not subscribed to the request subjects (ctl, hello, query, probe):

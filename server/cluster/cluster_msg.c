@@ -275,7 +275,7 @@ long cl_envelope_write(uint8_t *dst, size_t cap, enum cl_kind kind, const char *
     origin = origin ? origin : "";
     by = by ? by : "";
     size_t ol = strlen(origin), bl = strlen(by);
-    if (!dst || kind < CL_KIND_CTL || kind > CL_KIND_PROBE_DATA || !name_ok(origin, ol) || !name_ok(by, bl) ||
+    if (!dst || kind < CL_KIND_CTL || kind > CL_KIND_BODY_SECTION || !name_ok(origin, ol) || !name_ok(by, bl) ||
         body_len > CL_BODY_MAX || (body_len && !body))
         return CL_E_ARG;
     size_t size = CL_ENV_HEADER + ol + bl + body_len;
@@ -307,7 +307,7 @@ int cl_envelope_parse(const uint8_t *msg, size_t len, struct cl_envelope *out)
     unsigned kind = msg[5];
     size_t ol = msg[6], bl = msg[7];
     uint32_t body_len = get32(msg + 8);
-    if (kind < CL_KIND_CTL || kind > CL_KIND_PROBE_DATA)
+    if (kind < CL_KIND_CTL || kind > CL_KIND_BODY_SECTION)
         return CL_E_CORRUPT;
     if (body_len > CL_BODY_MAX)
         return CL_E_TOO_LARGE;

@@ -39,12 +39,12 @@ bool cl_prefix_valid(const char *prefix)
 static const char *const subject_names[] = {
     [CL_SUBJ_PARAMS] = "params", [CL_SUBJ_STATUS] = "status", [CL_SUBJ_CTL] = "ctl",
     [CL_SUBJ_HELLO] = "hello", [CL_SUBJ_DEMAND] = "demand", [CL_SUBJ_QUERY] = "query",
-    [CL_SUBJ_PROBE] = "probe",
+    [CL_SUBJ_PROBE] = "probe", [CL_SUBJ_BODIES] = "bodies",
 };
 
 int cl_subject(char *out, size_t cap, const char *prefix, enum cl_subject which)
 {
-    if (!cl_prefix_valid(prefix) || (unsigned)which > CL_SUBJ_PROBE)
+    if (!cl_prefix_valid(prefix) || (unsigned)which > CL_SUBJ_BODIES)
         return CL_E_ARG;
     int n = snprintf(out, cap, "%s.%s", prefix, subject_names[which]);
     return n < 0 || (size_t)n >= cap ? CL_E_TOO_LARGE : CL_OK;

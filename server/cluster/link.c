@@ -123,6 +123,7 @@ static void on_msg(natsConnection *nc, natsSubscription *sub, natsMsg *msg, void
     case SUB_PROBE: link_on_request(l, msg, CL_KIND_PROBE); break;
     case SUB_DEMAND: link_on_demand(l, msg); break;
     case SUB_PARAMS: link_on_params(l, msg); break;
+    case SUB_BODIES: link_on_bodies(l, msg); break;
     case SUB_STATUS: link_on_status(l, msg); break;
     case SUB_INBOX: link_on_reply(l, msg); break;
     case SUB_LAYER: link_on_layer(l, msg); break;
@@ -171,7 +172,7 @@ void link_unsubscribe(natsSubscription **sub)
 static bool subscribe_role(struct cl_link *l)
 {
     static const enum sub_kind sim[] = { SUB_DEMAND, SUB_CTL, SUB_HELLO, SUB_QUERY, SUB_PROBE };
-    static const enum sub_kind edge[] = { SUB_PARAMS, SUB_STATUS, SUB_INBOX };
+    static const enum sub_kind edge[] = { SUB_PARAMS, SUB_STATUS, SUB_INBOX, SUB_BODIES };
     bool is_sim = l->cfg.role == CL_ROLE_SIM;
     const enum sub_kind *kinds = is_sim ? sim : edge;
     /* A silent sim takes requests only once it acts (the pump subscribes them then). */
@@ -351,6 +352,7 @@ struct cl_link *cl_link_open(const struct cl_config *cfg, char *err, size_t errl
     cl_subject(l->subj[SUB_PROBE], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_PROBE);
     cl_subject(l->subj[SUB_DEMAND], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_DEMAND);
     cl_subject(l->subj[SUB_PARAMS], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_PARAMS);
+    cl_subject(l->subj[SUB_BODIES], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_BODIES);
     cl_subject(l->subj[SUB_STATUS], CL_SUBJECT_MAX, l->prefix, CL_SUBJ_STATUS);
     if (c->role == CL_ROLE_SIM && !(l->demand = cl_demand_new(1024))) {
         snprintf(err, errlen, "out of memory");

@@ -174,6 +174,11 @@ int cl_link_dispatch(struct cl_link *l)
             if (h->on_probe_data)
                 h->on_probe_data(u, e->by, e->text, e->len);
             break;
+        case IN_BODIES:
+        case IN_BODY_SECTION:
+            if (h->on_bodies)
+                h->on_bodies(u, e->type == IN_BODY_SECTION, e->text, e->len);
+            break;
         }
         link_event_free(e);
         e = next;

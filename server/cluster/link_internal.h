@@ -43,7 +43,7 @@ struct out_item {
 
 /* ---- inbox: what cl_link_dispatch hands to the daemon (link_inbox.c) ---- */
 
-enum in_type { IN_STATE, IN_REQUEST, IN_LAYER, IN_PARAMS, IN_REPLY, IN_PROBE_DATA };
+enum in_type { IN_STATE, IN_REQUEST, IN_LAYER, IN_PARAMS, IN_REPLY, IN_PROBE_DATA, IN_BODIES, IN_BODY_SECTION };
 struct in_event {
     struct in_event *next;
     enum in_type type;
@@ -69,7 +69,7 @@ struct pending {
 
 /* What a subscription delivers: on_msg (link.c) routes by it. */
 enum sub_kind {
-    SUB_CTL, SUB_HELLO, SUB_DEMAND, SUB_PARAMS, SUB_STATUS, SUB_INBOX, SUB_LAYER, SUB_QUERY, SUB_PROBE, SUB_KINDS
+    SUB_CTL, SUB_HELLO, SUB_DEMAND, SUB_PARAMS, SUB_STATUS, SUB_INBOX, SUB_LAYER, SUB_QUERY, SUB_PROBE, SUB_BODIES, SUB_KINDS
 };
 struct sub_ctx {
     struct cl_link *l;
@@ -187,6 +187,7 @@ void link_send_envelope(struct cl_link *l, const char *subject, enum cl_kind kin
 void link_publish_layer(struct cl_link *l, const struct out_item *it, uint8_t **scratch, size_t *scap);
 void link_on_layer(struct cl_link *l, natsMsg *msg);       /* NATS delivery, edge */
 void link_on_params(struct cl_link *l, natsMsg *msg);      /* NATS delivery, edge */
+void link_on_bodies(struct cl_link *l, natsMsg *msg);      /* NATS delivery, edge */
 void link_on_probe_data(struct cl_link *l, natsMsg *msg);  /* NATS delivery, edge */
 
 /* ---- link_request.c: requests and replies, edge -> sim -> edge ---- */

@@ -119,6 +119,13 @@ int cl_sim_publish_params(struct cl_link *l, const char *origin, const char *by,
     return link_push_envelope(l, l->subj[SUB_PARAMS], NULL, CL_KIND_PARAMS, origin, by, text, len);
 }
 
+int cl_sim_publish_bodies(struct cl_link *l, enum cl_kind kind, const void *data, size_t len)
+{
+    if (!l || l->cfg.role != CL_ROLE_SIM || (kind != CL_KIND_BODIES && kind != CL_KIND_BODY_SECTION))
+        return CL_E_ARG;
+    return link_push_envelope(l, l->subj[SUB_BODIES], NULL, kind, l->name, "", data, len);
+}
+
 int cl_sim_publish_probe_data(struct cl_link *l, const char *stream, const char *by, const char *text, size_t len)
 {
     if (!l || l->cfg.role != CL_ROLE_SIM || !stream || !by || !by[0])
@@ -179,3 +186,10 @@ static void queue_text(struct cl_link *l, natsMsg *msg, enum cl_kind kind, enum 
 
 void link_on_params(struct cl_link *l, natsMsg *msg) { queue_text(l, msg, CL_KIND_PARAMS, IN_PARAMS); }
 void link_on_probe_data(struct cl_link *l, natsMsg *msg) { queue_text(l, msg, CL_KIND_PROBE_DATA, IN_PROBE_DATA); }
+
+void link_on_bodies(struct cl_link *l, natsMsg *msg)
+{
+    const uint8_t *d = (const uint8_t *)natsMsg_GetData(msg);
+    bool section = natsMsg_GetDataLength(msg) > 5 && d[5] == CL_KIND_BODY_SECTION;
+    queue_text(l, msg, section ? CL_KIND_BODY_SECTION : CL_KIND_BODIES, section ? IN_BODY_SECTION : IN_BODIES);
+}

@@ -19,6 +19,7 @@ struct state_body {
     char owner[32];             /* the owner's client id when it was saved */
     char name[CTL_NAME_BYTES];  /* its display name, "" = none */
     char resume[33];            /* the resume key (32 hex digits): claim takes the body back */
+    char origin[64];            /* a cluster's sim: the owner's edge ("" = none, a local client) */
 };
 #define STATE_IDS_EXHAUSTED ((uint64_t)UINT32_MAX + 1) /* next_id once the last id (2^32 - 1) was issued */
 struct state_bodies {
@@ -33,6 +34,8 @@ int state_bodies_copy(struct state_bodies *dst, const struct state_bodies *src);
  * bodies; free with state_bodies_free), 0 = no file or no "bodies", -1 = a
  * bad entry (code "bad_body" in err; *out empty: nothing half-applied). */
 int state_load_bodies(const char *path, struct state_bodies *out, char *err, size_t errlen);
+/* The same from the "bodies" object itself (the cluster's record): 0, or -1 with err (*out empty). */
+int state_bodies_parse(const struct cJSON *bodies, struct state_bodies *out, char *err, size_t errlen);
 
 /* The "bodies" member of the state file (state_bodies.c). */
 struct cJSON *state_bodies_json(const struct state_bodies *b);

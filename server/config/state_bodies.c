@@ -75,6 +75,8 @@ cJSON *state_bodies_json(const struct state_bodies *b)
         cJSON_AddStringToObject(j, "owner", e->owner);
         cJSON_AddStringToObject(j, "name", e->name);
         cJSON_AddStringToObject(j, "resume", e->resume);
+        if (e->origin[0])
+            cJSON_AddStringToObject(j, "origin", e->origin);
         cJSON_AddItemToArray(list, j);
     }
     return o;
@@ -157,6 +159,16 @@ static int entry(const cJSON *j, int i, struct state_body *e, char *err, size_t 
     if (!ok)
         return bad(err, errlen, i, "\"resume\" must be 32 lowercase hex digits");
     memcpy(e->resume, resume, 33);
+    const cJSON *origin = cJSON_GetObjectItemCaseSensitive(j, "origin");
+    const char *o = cJSON_GetStringValue(origin);
+    ok = !origin || (o && strlen(o) < sizeof e->origin);
+    for (size_t k = 0; ok && o && o[k]; k++)
+        ok = o[k] > 0x20 && o[k] < 0x7f;
+    if (!ok)
+        return bad(err, errlen, i, "\"origin\" must be an edge's name (printable ASCII, at most %zu bytes)",
+                   sizeof e->origin - 1);
+    if (o)
+        snprintf(e->origin, sizeof e->origin, "%s", o);
     return 0;
 }
 
@@ -177,22 +189,28 @@ int state_load_bodies(const char *path, struct state_bodies *out, char *err, siz
         cJSON_Delete(root);
         return 0;
     }
+    rc = state_bodies_parse(bodies, out, err, errlen);
+    cJSON_Delete(root);
+    return rc == 0 ? 1 : -1;
+}
+
+int state_bodies_parse(const cJSON *bodies, struct state_bodies *out, char *err, size_t errlen)
+{
+    *out = (struct state_bodies){ 0 };
+    int rc;
     const cJSON *next = cJSON_GetObjectItemCaseSensitive(bodies, "next_id");
     const cJSON *list = cJSON_GetObjectItemCaseSensitive(bodies, "list");
-    if (!cJSON_IsObject(bodies) || !whole(next, 1, (double)STATE_IDS_EXHAUSTED) || !cJSON_IsArray(list)) {
-        cJSON_Delete(root);
+    if (!cJSON_IsObject(bodies) || !whole(next, 1, (double)STATE_IDS_EXHAUSTED) || !cJSON_IsArray(list))
         return bad(err, errlen, -1, "must be {\"next_id\": 1..2^32, \"list\": [...]}");
-    }
     int n = cJSON_GetArraySize(list);
     struct state_bodies b = { .next_id = (uint64_t)next->valuedouble };
     if (n > 0 && !(b.b = calloc((size_t)n, sizeof *b.b))) {
-        cJSON_Delete(root);
         snprintf(err, errlen, "bad_body: out of memory");
         return -1;
     }
     b.cap = n;
     const cJSON *j;
-    rc = 1;
+    rc = 0;
     cJSON_ArrayForEach(j, list)
     {
         if (entry(j, b.n, &b.b[b.n], err, errlen) != 0) {
@@ -210,11 +228,10 @@ int state_load_bodies(const char *path, struct state_bodies *out, char *err, siz
             b.next_id = (uint64_t)b.b[b.n].st.id + 1;
         b.n++;
     }
-    cJSON_Delete(root);
     if (rc < 0) {
         state_bodies_free(&b);
         return -1;
     }
     *out = b;
-    return 1;
+    return 0;
 }

@@ -25,6 +25,7 @@
 
 #define BODY_SAVE_EVERY_S 1.0   /* a changed set of bodies is saved at most this often (an fsync each) */
 #define BODY_KEEP_EVERY_S 0.5   /* their motion is handed to the saver this often (saved with the next save) */
+#define BODY_REPLICA_EVERY_S 0.1 /* ... and to a cluster's record this often (written at each renewal) */
 
 /* ---- the book ---- */
 
@@ -131,11 +132,44 @@ static void set_adrift(struct net *n, uint32_t id, bool adrift, bool stop)
     submit_own(n, c);
 }
 
-/* ---- requests ---- */
+/* ---- who asked ---- */
 
-static void fail(struct session *s, const char *code, const char *param, const cJSON *id, const char *fmt, ...)
+/* The sender of a request: a local client (s), or, in a cluster's sim, a
+ * client of an edge (rc, answered exactly once through reply). */
+struct who {
+    struct session *s;
+    struct body_remote *rc;
+    net_reply_fn reply;
+    void *ctx;
+};
+
+static uint64_t who_serial(const struct who *w) { return w->s ? w->s->serial : w->rc ? w->rc->serial : 0; }
+static const char *who_client(const struct who *w) { return w->s ? w->s->client_id : w->rc ? w->rc->by : ""; }
+static const char *who_name(const struct who *w) { return w->s ? w->s->name : w->rc ? w->rc->name : ""; }
+
+static int *who_launching(struct who *w)
+{
+    static int none;
+    return w->s ? &w->s->launching : w->rc ? &w->rc->launching : &none;
+}
+
+/* msg (deleted) to the sender: queued for a local client; a remote one's answer. */
+static void who_send(struct who *w, cJSON *msg)
+{
+    if (w->s) {
+        session_queue_json(w->s, msg);
+        return;
+    }
+    char *text = control_print(msg);
+    if (w->reply)
+        w->reply(w->ctx, text ? text : "{\"type\":\"error\",\"code\":\"internal\",\"message\":\"out of memory\"}");
+    w->reply = NULL;
+    free(text);
+}
+
+static void fail(struct who *w, const char *code, const char *param, const cJSON *id, const char *fmt, ...)
     __attribute__((format(printf, 5, 6)));
-static void fail(struct session *s, const char *code, const char *param, const cJSON *id, const char *fmt, ...)
+static void fail(struct who *w, const char *code, const char *param, const cJSON *id, const char *fmt, ...)
 {
     struct ctl_error e = { .code = code };
     snprintf(e.param, sizeof e.param, "%s", param ? param : "");
@@ -143,26 +177,120 @@ static void fail(struct session *s, const char *code, const char *param, const c
     va_start(ap, fmt);
     vsnprintf(e.message, sizeof e.message, fmt, ap);
     va_end(ap);
-    session_send_error(s, &e, id);
+    if (w->s) {
+        session_send_error(w->s, &e, id);
+        return;
+    }
+    atomic_fetch_add(&g_metrics.control_errors, 1);
+    who_send(w, control_error_msg(&e, id));
 }
+
+/* ---- clients of edges (sim role) ---- */
+
+#define BODY_REMOTE_MAX 4096 /* clients of edges with bodies or requests at once */
+
+static struct body_remote *rc_find(struct net *n, uint64_t serial)
+{
+    for (int i = 0; serial && i < n->bodies.nrc; i++)
+        if (n->bodies.rc[i].serial == serial)
+            return &n->bodies.rc[i];
+    return NULL;
+}
+
+static struct body_remote *rc_find_by(struct net *n, const char *origin, const char *by)
+{
+    for (int i = 0; i < n->bodies.nrc; i++)
+        if (strcmp(n->bodies.rc[i].by, by) == 0 && strcmp(n->bodies.rc[i].origin, origin) == 0)
+            return &n->bodies.rc[i];
+    return NULL;
+}
+
+/* The entry of (origin, by), made if new; NULL when full or out of memory. */
+static struct body_remote *rc_get(struct net *n, const char *origin, const char *by)
+{
+    struct body_book *k = &n->bodies;
+    struct body_remote *r = rc_find_by(n, origin, by);
+    if (r)
+        return r;
+    if (k->nrc >= BODY_REMOTE_MAX || strlen(by) >= sizeof r->by || strlen(origin) >= sizeof r->origin)
+        return NULL;
+    if (k->nrc == k->rc_cap) {
+        int cap = k->rc_cap ? 2 * k->rc_cap : 16;
+        struct body_remote *nr = realloc(k->rc, (size_t)cap * sizeof *nr);
+        if (!nr)
+            return NULL;
+        k->rc = nr;
+        k->rc_cap = cap;
+    }
+    r = &k->rc[k->nrc++];
+    memset(r, 0, sizeof *r);
+    r->serial = net_remote_serial(n);
+    snprintf(r->origin, sizeof r->origin, "%s", origin);
+    snprintf(r->by, sizeof r->by, "%s", by);
+    r->seen = mono_now();
+    return r;
+}
+
+static void owner_left(struct net *n, uint64_t serial);
+
+/* Its edge says it is gone (or fell silent): its bodies wait for a claim. */
+static void rc_gone(struct net *n, struct body_remote *r)
+{
+    owner_left(n, r->serial);
+    struct body_book *k = &n->bodies;
+    *r = k->rc[--k->nrc];
+}
+
+/* ---- to the sim ---- */
 
 /* A client's request for the sim, answered to its sender (id copied for the answer);
  * NULL, with the sender told `internal`, on no memory. */
-static struct sim_body_cmd *client_cmd(struct session *s, enum sim_body_op op, uint32_t body, const cJSON *id)
+static struct sim_body_cmd *client_cmd(struct net *n, struct who *w, enum sim_body_op op, uint32_t body,
+                                       const cJSON *id)
 {
+    struct body_book *k = &n->bodies;
     struct sim_body_cmd *c = cmd_new(op, body);
     cJSON *idc = id ? cJSON_Duplicate(id, 1) : NULL;
-    if (!c || (id && !idc)) {
+    if (w->rc && c && k->nwait == k->wait_cap) {
+        int cap = k->wait_cap ? 2 * k->wait_cap : 16;
+        struct body_wait *nw = realloc(k->wait, (size_t)cap * sizeof *nw);
+        if (nw) {
+            k->wait = nw;
+            k->wait_cap = cap;
+        }
+    }
+    if (!c || (id && !idc) || (w->rc && k->nwait == k->wait_cap)) {
         free(c);
         cJSON_Delete(idc);
-        fail(s, "internal", NULL, id, "out of memory");
+        fail(w, "internal", NULL, id, "out of memory");
         return NULL;
     }
-    c->serial = s->serial;
+    c->serial = who_serial(w);
     c->reply_id = idc;
     c->reply = true;
+    if (w->rc) { /* answered from answer(), through the edge */
+        c->ticket = ++k->next_ticket;
+        k->wait[k->nwait++] = (struct body_wait){ .ticket = c->ticket, .reply = w->reply, .ctx = w->ctx };
+        w->reply = NULL;
+    }
     return c;
 }
+
+/* The waiting remote answer of ticket, taken out of the list. */
+static bool take_wait(struct net *n, uint64_t ticket, struct body_wait *out)
+{
+    struct body_book *k = &n->bodies;
+    for (int i = 0; ticket && i < k->nwait; i++)
+        if (k->wait[i].ticket == ticket) {
+            *out = k->wait[i];
+            memmove(&k->wait[i], &k->wait[i + 1], (size_t)(k->nwait - i - 1) * sizeof *k->wait);
+            k->nwait--;
+            return true;
+        }
+    return false;
+}
+
+/* ---- requests ---- */
 
 /* 128 random bits as 32 hex digits. */
 static void resume_key(char out[33])
@@ -191,72 +319,83 @@ static bool launch_allowed(struct net *n, struct session *s, double now)
     return s->launch_tokens >= 1;
 }
 
-static void launch(struct net *n, struct session *s, const struct body_req *r, const cJSON *id)
+static bool rate_ok(struct net *n, struct session *s, const cJSON *id)
 {
-    int mine = owned_by(n, s->serial) + s->launching;
+    if (launch_allowed(n, s, mono_now()))
+        return true;
+    fail(&(struct who){ .s = s }, "rate_limited", NULL, id, "more than %g launches a minute (--launch-rate)",
+         n->dc.launch_rate);
+    return false;
+}
+
+static void launch(struct net *n, struct who *w, const struct body_req *r, const cJSON *id)
+{
+    int mine = owned_by(n, who_serial(w)) + *who_launching(w);
     if (mine >= n->dc.bodies_per_session) {
-        fail(s, "too_many_bodies", NULL, id, "this client owns %d bodies already (at most %d: --bodies-per-session)",
+        fail(w, "too_many_bodies", NULL, id, "this client owns %d bodies already (at most %d: --bodies-per-session)",
              mine, n->dc.bodies_per_session);
         return;
     }
     if (n->bodies.n + n->bodies.launching >= n->dc.max_bodies) {
-        fail(s, "too_many_bodies", NULL, id, "the world holds %d bodies already (at most %d: --max-bodies)",
+        fail(w, "too_many_bodies", NULL, id, "the world holds %d bodies already (at most %d: --max-bodies)",
              n->bodies.n + n->bodies.launching, n->dc.max_bodies);
         return;
     }
-    if (!launch_allowed(n, s, mono_now())) {
-        fail(s, "rate_limited", NULL, id, "more than %g launches a minute (--launch-rate)", n->dc.launch_rate);
+    /* A client of an edge: its edge keeps the bucket (as it checks the token). */
+    if (w->s && !rate_ok(n, w->s, id))
         return;
-    }
-    struct sim_body_cmd *c = client_cmd(s, SIM_BODY_LAUNCH, 0, id);
+    struct sim_body_cmd *c = client_cmd(n, w, SIM_BODY_LAUNCH, 0, id);
     if (!c)
         return;
-    s->launch_tokens -= 1;
+    if (w->s)
+        w->s->launch_tokens -= 1;
     c->kind = r->kind;
     c->x = r->x;
     c->z = r->z;
     c->heading = r->heading;
     resume_key(c->resume);
-    s->launching++;
+    (*who_launching(w))++;
     n->bodies.launching++;
     sim_body_submit(n->sim, c);
 }
 
 /* A body the client may steer or remove: it exists and it owns it. */
-static struct body_own *mine(struct net *n, struct session *s, uint32_t body, const cJSON *id)
+static struct body_own *mine(struct net *n, struct who *w, uint32_t body, const cJSON *id)
 {
     struct body_own *b = find(n, body);
     if (!b || b->removing) {
-        fail(s, "no_such_body", "body", id, "no body %u", body);
+        fail(w, "no_such_body", "body", id, "no body %u", body);
         return NULL;
     }
-    if (b->owner != s->serial) {
-        fail(s, "not_owner", "body", id, "body %u belongs to %s", body, b->owner_id[0] ? b->owner_id : "someone else");
+    if (b->owner != who_serial(w)) {
+        fail(w, "not_owner", "body", id, "body %u belongs to %s", body, b->owner_id[0] ? b->owner_id : "someone else");
         return NULL;
     }
     return b;
 }
 
-static void steer(struct net *n, struct session *s, const struct body_req *r, const cJSON *id)
+static void steer(struct net *n, struct who *w, const struct body_req *r, const cJSON *id)
 {
-    if (!mine(n, s, r->body, id))
+    if (!mine(n, w, r->body, id))
         return;
-    struct sim_body_cmd *c = client_cmd(s, SIM_BODY_STEER, r->body, id);
+    struct sim_body_cmd *c = client_cmd(n, w, SIM_BODY_STEER, r->body, id);
     if (!c)
         return;
     c->control = (struct body_control){ r->throttle, r->rudder };
     c->has_throttle = r->has_throttle;
     c->has_rudder = r->has_rudder;
-    c->reply = id != NULL; /* a steer without an id is answered only when it fails */
+    /* A steer without an id is answered only when it fails; a remote one
+     * always (its edge waits, and relays only a failure). */
+    c->reply = id != NULL || c->ticket;
     sim_body_submit(n->sim, c);
 }
 
-static void remove_body(struct net *n, struct session *s, const struct body_req *r, const cJSON *id)
+static void remove_body(struct net *n, struct who *w, const struct body_req *r, const cJSON *id)
 {
-    struct body_own *b = mine(n, s, r->body, id);
+    struct body_own *b = mine(n, w, r->body, id);
     if (!b)
         return;
-    struct sim_body_cmd *c = client_cmd(s, SIM_BODY_REMOVE, r->body, id);
+    struct sim_body_cmd *c = client_cmd(n, w, SIM_BODY_REMOVE, r->body, id);
     if (!c)
         return;
     c->reason = "removed";
@@ -264,55 +403,88 @@ static void remove_body(struct net *n, struct session *s, const struct body_req 
     sim_body_submit(n->sim, c);
 }
 
-static void claim(struct net *n, struct session *s, const struct body_req *r, const cJSON *id)
+static void claim(struct net *n, struct who *w, const struct body_req *r, const cJSON *id)
 {
     struct body_own *b = find(n, r->body);
     if (!b || b->removing) {
-        fail(s, "no_such_body", "body", id, "no body %u", r->body);
+        fail(w, "no_such_body", "body", id, "no body %u", r->body);
         return;
     }
     if (!control_token_equal(r->resume, b->resume)) {
-        fail(s, "not_owner", "resume", id, "that is not body %u's resume key", r->body);
+        fail(w, "not_owner", "resume", id, "that is not body %u's resume key", r->body);
         return;
     }
-    if (b->owner == s->serial) { /* claimed twice: nothing changes */
-        session_queue_json(s, body_ack_msg("claimed", id, b->id));
+    if (b->owner == who_serial(w)) { /* claimed twice: nothing changes */
+        who_send(w, body_ack_msg("claimed", id, b->id));
         return;
     }
     if (!b->owner && b->left_t > 0 && mono_now() - b->left_t > n->dc.body_grace) {
-        fail(s, "not_owner", "body", id, "body %u was abandoned: its owner was gone for more than %g s", r->body,
+        fail(w, "not_owner", "body", id, "body %u was abandoned: its owner was gone for more than %g s", r->body,
              n->dc.body_grace);
         return;
     }
-    int count = owned_by(n, s->serial) + s->launching;
+    int count = owned_by(n, who_serial(w)) + *who_launching(w);
     if (count >= n->dc.bodies_per_session) {
-        fail(s, "too_many_bodies", NULL, id, "this client owns %d bodies already (at most %d: --bodies-per-session)",
+        fail(w, "too_many_bodies", NULL, id, "this client owns %d bodies already (at most %d: --bodies-per-session)",
              count, n->dc.bodies_per_session);
         return;
     }
     /* The key proves it: a reload takes its body back even before the old
      * connection is seen to be gone. */
     bool was_adrift = !b->owner;
-    b->owner = s->serial;
-    snprintf(b->owner_id, sizeof b->owner_id, "%s", s->client_id);
-    snprintf(b->name, sizeof b->name, "%s", s->name);
+    b->owner = who_serial(w);
+    snprintf(b->owner_id, sizeof b->owner_id, "%s", who_client(w));
+    snprintf(b->name, sizeof b->name, "%s", who_name(w));
     b->left_t = 0;
     b->stopped = false;
     if (was_adrift)
         set_adrift(n, b->id, false, false);
     n->bodies.dirty = n->bodies.save_due = true;
     n->bodies.seq = sim_seq(n->sim);
-    session_queue_json(s, body_ack_msg("claimed", id, b->id));
+    who_send(w, body_ack_msg("claimed", id, b->id));
 }
 
 static void body_net_flush(struct net *n);
 
-void body_net_dispatch(struct net *n, struct session *s, const struct ctl_msg *m)
+static void apply_request(struct net *n, struct who *w, const struct ctl_msg *m, const struct body_req *r)
+{
+    switch (m->type) {
+    case CTL_LAUNCH: launch(n, w, r, m->id); break;
+    case CTL_STEER: steer(n, w, r, m->id); break;
+    case CTL_REMOVE: remove_body(n, w, r, m->id); break;
+    case CTL_CLAIM: claim(n, w, r, m->id); break;
+    default: break;
+    }
+}
+
+/* An edge: checked here as a local request would be (the message, the
+ * token, the launch bucket), then the sim decides (who owns what, the
+ * limits), carrying the client's display name. */
+static void edge_request(struct net *n, struct session *s, const struct ctl_msg *m, const char *text, size_t len)
+{
+    if (m->type == CTL_LAUNCH && !rate_ok(n, s, m->id))
+        return;
+    if (m->type == CTL_LAUNCH)
+        s->launch_tokens -= 1;
+    if (!s->body_user) {
+        s->body_user = true;
+        n->bodies.owners_due = true;
+    }
+    char *named = NULL;
+    if (s->name[0] && !cJSON_HasObjectItem(m->root, "name") && cJSON_AddStringToObject(m->root, "name", s->name))
+        named = cJSON_PrintUnformatted(m->root);
+    n->cluster.forward(n->cluster.user, s->serial, s->client_id, m->id, named ? named : text,
+                       named ? strlen(named) : len);
+    free(named);
+}
+
+void body_net_dispatch(struct net *n, struct session *s, const struct ctl_msg *m, const char *text, size_t len)
 {
     struct body_req r;
     struct ctl_error e;
-    if (!n->sim) { /* an edge: bodies are not relayed through a cluster yet */
-        fail(s, "unavailable", NULL, m->id, "floating bodies are not served by this daemon (--role %s)", n->dc.role);
+    struct who w = { .s = s };
+    if (!n->sim && !n->cluster.forward) {
+        fail(&w, "unavailable", NULL, m->id, "floating bodies are not served by this daemon (--role %s)", n->dc.role);
         return;
     }
     if (body_parse(m->root, m->type, &r, &e) != 0) {
@@ -320,17 +492,50 @@ void body_net_dispatch(struct net *n, struct session *s, const struct ctl_msg *m
         return;
     }
     if (!s->controller && !(r.token && n->dc.control_token[0] && control_token_equal(r.token, n->dc.control_token))) {
-        fail(s, "forbidden", NULL, m->id, "this client may not launch or steer bodies (token needed)");
+        fail(&w, "forbidden", NULL, m->id, "this client may not launch or steer bodies (token needed)");
         return;
     }
-    switch (m->type) {
-    case CTL_LAUNCH: launch(n, s, &r, m->id); break;
-    case CTL_STEER: steer(n, s, &r, m->id); break;
-    case CTL_REMOVE: remove_body(n, s, &r, m->id); break;
-    case CTL_CLAIM: claim(n, s, &r, m->id); break;
-    default: break;
+    if (!n->sim) {
+        edge_request(n, s, m, text, len);
+        return;
     }
+    apply_request(n, &w, m, &r);
     body_net_flush(n);
+}
+
+void body_net_remote(struct net *n, const char *origin, const char *by, const struct ctl_msg *m, net_reply_fn reply,
+                     void *ctx)
+{
+    struct who w = { .reply = reply, .ctx = ctx };
+    struct body_req r;
+    struct ctl_error e;
+    if (body_parse(m->root, m->type, &r, &e) != 0) { /* the edge checked it: a peer of its own */
+        atomic_fetch_add(&g_metrics.control_errors, 1);
+        who_send(&w, control_error_msg(&e, m->id));
+        return;
+    }
+    if (!by[0] || !(w.rc = rc_get(n, origin, by))) {
+        fail(&w, by[0] ? "busy" : "bad_message", NULL, m->id, "%s",
+             by[0] ? "too many clients of edges use bodies at once" : "a body request needs its client");
+        return;
+    }
+    const char *name = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(m->root, "name"));
+    struct ctl_error ne;
+    if (name && control_check_name(name, &ne) == 0)
+        snprintf(w.rc->name, sizeof w.rc->name, "%s", name);
+    w.rc->seen = mono_now();
+    apply_request(n, &w, m, &r); /* the token was checked where the client is (its edge) */
+    if (w.reply) /* every path answers; this is the net under it */
+        fail(&w, "internal", NULL, m->id, "not answered");
+    body_net_flush(n);
+}
+
+void body_net_drop_remote(struct net *n)
+{
+    struct body_book *k = &n->bodies;
+    for (int i = 0; i < k->nwait; i++)
+        k->wait[i].reply(k->wait[i].ctx, NULL);
+    k->nwait = 0;
 }
 
 /* ---- answers from the sim ---- */
@@ -349,14 +554,31 @@ static const char *error_code(enum body_error e)
 
 static void answer(struct net *n, struct sim_body_cmd *c)
 {
-    struct session *s = c->serial ? session_find(n, c->serial) : NULL;
-    if (s && (!s->wsi || s->closing))
-        s = NULL;
+    struct body_wait wt;
+    struct who w = { 0 };
+    if (c->ticket && take_wait(n, c->ticket, &wt)) {
+        w.rc = rc_find(n, c->serial);
+        w.reply = wt.reply;
+        w.ctx = wt.ctx;
+    } else if (!c->ticket && c->serial) {
+        w.s = session_find(n, c->serial);
+        if (w.s && (!w.s->wsi || w.s->closing))
+            w.s = NULL;
+    }
+    bool told = w.s || w.reply;   /* someone hears the answer */
+    bool owner = w.s || w.rc;     /* someone may own the body */
     const cJSON *id = c->reply_id;
     if (c->op == SIM_BODY_LAUNCH) {
         n->bodies.launching--;
-        if (s)
-            s->launching--;
+        if (owner)
+            (*who_launching(&w))--;
+    }
+    if (c->op == SIM_BODY_RESTORE) { /* a take-over's bodies are in (or were refused: the world kept its own) */
+        n->bodies.restoring = false;
+        n->bodies.restored_seq = c->seq;
+        if (c->status != BODY_OK)
+            LOGE("bodies: the bodies taken over were refused (%s)", body_error_name(c->status));
+        return;
     }
     if (c->status != BODY_OK) {
         if (c->op == SIM_BODY_REMOVE) {
@@ -364,8 +586,8 @@ static void answer(struct net *n, struct sim_body_cmd *c)
             if (b)
                 b->removing = false;
         }
-        if (s && c->op != SIM_BODY_ADRIFT)
-            fail(s, error_code(c->status), c->op == SIM_BODY_LAUNCH ? NULL : "body", id, "%s refused: %s",
+        if (told && c->op != SIM_BODY_ADRIFT)
+            fail(&w, error_code(c->status), c->op == SIM_BODY_LAUNCH ? NULL : "body", id, "%s refused: %s",
                  c->op == SIM_BODY_LAUNCH ? "launch" : c->op == SIM_BODY_STEER ? "steer" : "remove",
                  body_error_name(c->status));
         return;
@@ -376,50 +598,54 @@ static void answer(struct net *n, struct sim_body_cmd *c)
         struct body_own *b = add(n, c->body);
         if (!b) { /* out of memory: the body may not stay unowned and unknown */
             submit_own(n, cmd_new(SIM_BODY_REMOVE, c->body));
-            if (s)
-                fail(s, "internal", NULL, id, "out of memory");
+            if (told)
+                fail(&w, "internal", NULL, id, "out of memory");
             return;
         }
         b->kind = c->kind;
         memcpy(b->resume, c->resume, sizeof b->resume);
-        if (s) {
-            b->owner = s->serial;
-            snprintf(b->owner_id, sizeof b->owner_id, "%s", s->client_id);
-            snprintf(b->name, sizeof b->name, "%s", s->name);
-            session_queue_json(s, body_launched_msg(id, b->id, b->resume));
+        if (owner) {
+            b->owner = who_serial(&w);
+            snprintf(b->owner_id, sizeof b->owner_id, "%s", who_client(&w));
+            snprintf(b->name, sizeof b->name, "%s", who_name(&w));
         } else { /* its sender left before the answer: it waits for nobody (the key was never handed out) */
             b->left_t = mono_now() - n->dc.body_grace;
             set_adrift(n, b->id, true, false);
         }
+        if (told)
+            who_send(&w, body_launched_msg(id, b->id, b->resume));
         n->bodies.dirty = n->bodies.save_due = true;
         n->bodies.seq = c->seq;
         break;
     }
     case SIM_BODY_STEER:
-        if (s && c->reply)
-            session_queue_json(s, body_ack_msg("steered", id, c->body));
+        if (told && c->reply)
+            who_send(&w, body_ack_msg("steered", id, c->body));
         break;
     case SIM_BODY_REMOVE:
         gone(n, c->body, c->reason ? c->reason : "removed", c->seq);
-        if (s && c->reply)
-            session_queue_json(s, body_ack_msg("removed", id, c->body));
+        if (told && c->reply)
+            who_send(&w, body_ack_msg("removed", id, c->body));
         break;
     case SIM_BODY_GONE:
         gone(n, c->body, "sunk", c->seq);
         break;
     case SIM_BODY_ADRIFT:
+    case SIM_BODY_RESTORE:
         break;
     }
+    if (w.reply) /* a remote request answered on no path above */
+        w.reply(w.ctx, "{\"type\":\"error\",\"code\":\"internal\",\"message\":\"not answered\"}");
 }
 
 /* ---- owners ---- */
 
-void body_net_session_gone(struct net *n, struct session *s)
+static void owner_left(struct net *n, uint64_t serial)
 {
     double now = mono_now();
-    for (int i = 0; i < n->bodies.n; i++) {
+    for (int i = 0; serial && i < n->bodies.n; i++) {
         struct body_own *b = &n->bodies.b[i];
-        if (b->owner != s->serial)
+        if (b->owner != serial)
             continue;
         b->owner = 0;
         b->left_t = now;
@@ -429,8 +655,22 @@ void body_net_session_gone(struct net *n, struct session *s)
     }
 }
 
+void body_net_session_gone(struct net *n, struct session *s)
+{
+    if (!n->sim) { /* an edge: the sim hears it with the next owners message */
+        n->bodies.owners_due |= s->body_user;
+        s->body_user = false;
+        return;
+    }
+    owner_left(n, s->serial);
+}
+
 void body_net_renamed(struct net *n, struct session *s)
 {
+    if (!n->sim) {
+        n->bodies.owners_due |= s->body_user;
+        return;
+    }
     for (int i = 0; i < n->bodies.n; i++) {
         struct body_own *b = &n->bodies.b[i];
         if (b->owner != s->serial || strcmp(b->name, s->name) == 0)
@@ -442,10 +682,93 @@ void body_net_renamed(struct net *n, struct session *s)
     body_net_flush(n);
 }
 
+/* sim role: clients of edges whose edge has not listed them for
+ * BODY_OWNERS_EXPIRE_S (the edge died, or lost the sim) are gone. */
+static void remote_expiry(struct net *n, double now)
+{
+    for (int i = n->bodies.nrc - 1; i >= 0; i--)
+        if (now - n->bodies.rc[i].seen > BODY_OWNERS_EXPIRE_S && !n->bodies.rc[i].launching)
+            rc_gone(n, &n->bodies.rc[i]);
+}
+
+void net_remote_owners(struct net *n, const char *origin, const char *text, size_t len)
+{
+    struct ctl_error e;
+    cJSON *root = control_parse_object(text, len, &e);
+    const cJSON *list = cJSON_GetObjectItemCaseSensitive(root, "clients");
+    if (!n->sim || !cJSON_IsArray(list)) {
+        cJSON_Delete(root);
+        return;
+    }
+    double now = mono_now();
+    for (int i = n->bodies.nrc - 1; i >= 0; i--) {
+        struct body_remote *r = &n->bodies.rc[i];
+        if (strcmp(r->origin, origin) != 0)
+            continue;
+        const cJSON *c, *hit = NULL;
+        cJSON_ArrayForEach(c, list)
+        {
+            const char *by = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(c, "by"));
+            if (by && strcmp(by, r->by) == 0) {
+                hit = c;
+                break;
+            }
+        }
+        if (!hit) {
+            if (!r->launching) /* a launch on its way keeps it until its answer */
+                rc_gone(n, r);
+            continue;
+        }
+        r->seen = now;
+        const char *name = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(hit, "name"));
+        if (name && strcmp(name, r->name) != 0 && control_check_name(name, &e) == 0) {
+            snprintf(r->name, sizeof r->name, "%s", name);
+            for (int k = 0; k < n->bodies.n; k++)
+                if (n->bodies.b[k].owner == r->serial) {
+                    snprintf(n->bodies.b[k].name, sizeof n->bodies.b[k].name, "%s", name);
+                    n->bodies.dirty = n->bodies.save_due = true;
+                    n->bodies.seq = sim_seq(n->sim);
+                }
+        }
+    }
+    cJSON_Delete(root);
+    body_net_flush(n);
+}
+
+char *net_body_owners(struct net *n, double now)
+{
+    struct body_book *k = &n->bodies;
+    if (!k->owners_due && now - k->owners_t < BODY_OWNERS_PERIOD_S)
+        return NULL;
+    cJSON *o = cJSON_CreateObject();
+    cJSON *list = cJSON_AddArrayToObject(o, "clients");
+    cJSON_AddStringToObject(o, "type", "owners");
+    int count = 0;
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d && list; d = d->next) {
+        struct session *s = session_of(d);
+        if (!s->body_user || !s->wsi || s->closing)
+            continue;
+        cJSON *c = cJSON_CreateObject();
+        cJSON_AddStringToObject(c, "by", s->client_id);
+        cJSON_AddStringToObject(c, "name", s->name);
+        cJSON_AddItemToArray(list, c);
+        count++;
+    }
+    bool send = count > 0 || k->owners_any; /* one empty list tells the sim the last one left */
+    char *text = send ? control_print(o) : (cJSON_Delete(o), NULL);
+    if (send && !text)
+        return NULL; /* out of memory: tried again at the next wake */
+    k->owners_due = false;
+    k->owners_t = now;
+    k->owners_any = count > 0;
+    return text;
+}
+
 /* A body whose owner is gone: after the grace it drifts unpowered, after
  * twice the grace it is removed (reason "abandoned"). */
 static void grace(struct net *n, double now)
 {
+    remote_expiry(n, now);
     for (int i = 0; i < n->bodies.n; i++) {
         struct body_own *b = &n->bodies.b[i];
         if (b->owner || b->left_t <= 0 || b->removing)
@@ -492,6 +815,8 @@ static void body_net_flush(struct net *n)
         return;
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
         session_queue_text(session_of(d), text, false);
+    if (n->cluster.on_bodies_event) /* a cluster's sim: every edge's clients */
+        n->cluster.on_bodies_event(n->cluster.user, text);
     free(text);
     k->dirty = false;
     k->ngone = 0;
@@ -519,9 +844,12 @@ cJSON *body_net_hello(struct net *n, cJSON *hello)
 static void keep(struct net *n, double now)
 {
     struct body_book *k = &n->bodies;
-    if (!n->saver || !k->snap)
-        return;
-    if (!k->save_due && now - k->kept_t < BODY_KEEP_EVERY_S)
+    /* A cluster's sim hands them to its standby's record more often (each
+     * renewal writes the newest); not before a take-over's bodies are in. */
+    bool replica = n->cluster.on_bodies_state && k->snap && !k->restoring && k->snap->seq >= k->restored_seq &&
+                   now - k->replica_t >= BODY_REPLICA_EVERY_S;
+    bool file = n->saver && k->snap && (k->save_due || now - k->kept_t >= BODY_KEEP_EVERY_S);
+    if (!replica && !file)
         return;
     struct state_bodies sb = { .next_id = k->snap->next_id };
     sb.b = calloc(k->snap->count ? (size_t)k->snap->count : 1, sizeof *sb.b);
@@ -536,8 +864,19 @@ static void keep(struct net *n, double now)
         snprintf(e->owner, sizeof e->owner, "%s", b->owner_id);
         snprintf(e->name, sizeof e->name, "%s", b->name);
         memcpy(e->resume, b->resume, sizeof e->resume);
+        const struct body_remote *r = rc_find(n, b->owner);
+        if (r)
+            snprintf(e->origin, sizeof e->origin, "%s", r->origin);
     }
     sb.cap = sb.n;
+    if (replica) {
+        n->cluster.on_bodies_state(n->cluster.user, &sb);
+        k->replica_t = now;
+    }
+    if (!file) {
+        free(sb.b);
+        return;
+    }
     state_saver_set_bodies(n->saver, &sb);
     free(sb.b);
     k->kept_t = now;
@@ -556,6 +895,7 @@ void body_net_wake(struct net *n)
         next = c->next;
         answer(n, c);
         cJSON_Delete(c->reply_id);
+        free(c->states);
         free(c);
     }
     struct body_snap *snap = sim_bodies_latest(n->sim);
@@ -573,9 +913,12 @@ void body_net_wake(struct net *n)
 
 void body_net_free(struct net *n)
 {
+    body_net_drop_remote(n);
     body_snap_unref(n->bodies.snap);
     free(n->bodies.b);
     free(n->bodies.gone);
+    free(n->bodies.rc);
+    free(n->bodies.wait);
     n->bodies = (struct body_book){ 0 };
 }
 
@@ -596,4 +939,143 @@ void net_bodies_restore(struct net *n, const struct state_bodies *sb)
         memcpy(b->resume, sb->b[i].resume, sizeof b->resume);
         b->left_t = now; /* every owner has to claim its body again, within the grace */
     }
+}
+
+/* ---- a cluster ---- */
+
+void net_bodies_take_over(struct net *n, const struct state_bodies *sb)
+{
+    struct body_book *k = &n->bodies;
+    if (!n->sim)
+        return;
+    struct sim_body_cmd *c = cmd_new(SIM_BODY_RESTORE, 0);
+    size_t bytes = (size_t)sb->n * (sizeof *c->states + 1);
+    if (c && !(c->states = malloc(bytes ? bytes : 1))) {
+        free(c);
+        c = NULL;
+    }
+    if (!c) {
+        LOGE("bodies: out of memory taking the bodies over: the world keeps its own");
+        return;
+    }
+    c->adrift_flags = (uint8_t *)(c->states + sb->n);
+    c->nstates = sb->n;
+    /* Ids never go back: past every id the record or this sim issued. */
+    c->next_id = sb->next_id;
+    if (k->snap && k->snap->next_id > c->next_id)
+        c->next_id = k->snap->next_id;
+    /* The book anew: the sessions of this daemon own nothing (a sim has
+     * none); a client of an edge keeps its body while its edge lists it. */
+    body_net_drop_remote(n);
+    k->n = k->nrc = k->launching = 0;
+    double now = mono_now();
+    for (int i = 0; i < sb->n; i++) {
+        const struct state_body *e = &sb->b[i];
+        c->states[i] = e->st;
+        struct body_own *b = add(n, e->st.id);
+        struct body_remote *r = e->origin[0] && e->owner[0] ? rc_get(n, e->origin, e->owner) : NULL;
+        c->adrift_flags[i] = !r;
+        if (!b)
+            continue;
+        b->kind = e->st.kind;
+        snprintf(b->owner_id, sizeof b->owner_id, "%s", e->owner);
+        snprintf(b->name, sizeof b->name, "%s", e->name);
+        memcpy(b->resume, e->resume, sizeof b->resume);
+        if (r) {
+            snprintf(r->name, sizeof r->name, "%s", e->name);
+            b->owner = r->serial;
+        } else {
+            b->left_t = now; /* adrift: its owner claims it within the grace */
+        }
+    }
+    k->restoring = true;
+    k->dirty = k->save_due = true;
+    k->seq = sim_seq(n->sim);
+    sim_body_submit(n->sim, c);
+    LOGI("bodies: %d floating bodies taken over", sb->n);
+    body_net_flush(n);
+}
+
+/* edge: one entry of the sim's list into the book (checked: it goes to clients). */
+static int adopt_entry(struct net *n, const cJSON *j)
+{
+    const cJSON *id = cJSON_GetObjectItemCaseSensitive(j, "body");
+    const char *kind = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(j, "kind"));
+    const char *owner = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(j, "owner"));
+    const char *name = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(j, "name"));
+    const cJSON *adrift = cJSON_GetObjectItemCaseSensitive(j, "adrift");
+    struct ctl_error e;
+    const struct body_kind *k = kind ? body_kind_find(kind) : NULL;
+    if (!cJSON_IsNumber(id) || id->valuedouble < 1 || id->valuedouble > UINT32_MAX || !k || !owner ||
+        strlen(owner) >= sizeof n->bodies.b->owner_id || !name || control_check_name(name, &e) != 0 ||
+        !cJSON_IsBool(adrift) || find(n, (uint32_t)id->valuedouble))
+        return -1;
+    struct body_own *b = add(n, (uint32_t)id->valuedouble);
+    if (!b)
+        return -1;
+    b->kind = k;
+    snprintf(b->owner_id, sizeof b->owner_id, "%s", owner);
+    snprintf(b->name, sizeof b->name, "%s", name);
+    b->owner = cJSON_IsTrue(adrift) ? 0 : 1; /* an edge knows owners by id only: 1 = somebody */
+    return 0;
+}
+
+static int adopt_list(struct net *n, const cJSON *list)
+{
+    if (!cJSON_IsArray(list) || cJSON_GetArraySize(list) > BODY_MAX_WORLD)
+        return -1;
+    n->bodies.n = 0;
+    const cJSON *j;
+    cJSON_ArrayForEach(j, list)
+        if (adopt_entry(n, j) != 0) {
+            n->bodies.n = 0; /* all or nothing: the next list tries again */
+            return -1;
+        }
+    return 0;
+}
+
+void net_body_refused(struct net *n, uint64_t serial)
+{
+    struct session *s = session_find(n, serial);
+    if (s && s->launch_t > 0)
+        s->launch_tokens = fmin(n->dc.launch_rate, s->launch_tokens + 1);
+}
+
+int net_adopt_bodies(struct net *n, const char *text, size_t len)
+{
+    static const char *const types[] = { "bodies", NULL };
+    cJSON *root = net_sim_message(text, len, NET_SIM_REPLY_MAX, types);
+    int rc = root ? adopt_list(n, cJSON_GetObjectItemCaseSensitive(root, "bodies")) : -1;
+    cJSON_Delete(root);
+    if (rc != 0)
+        return -1;
+    char *copy = malloc(len + 1);
+    if (!copy)
+        return -1;
+    memcpy(copy, text, len);
+    copy[len] = '\0';
+    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
+        session_queue_text(session_of(d), copy, false);
+    free(copy);
+    return 0;
+}
+
+int body_net_adopt_hello(struct net *n, const cJSON *hello)
+{
+    const cJSON *l = cJSON_GetObjectItemCaseSensitive(hello, "body_limits");
+    const cJSON *ps = cJSON_GetObjectItemCaseSensitive(l, "per_session");
+    const cJSON *mb = cJSON_GetObjectItemCaseSensitive(l, "max_bodies");
+    const cJSON *lr = cJSON_GetObjectItemCaseSensitive(l, "launch_rate");
+    const cJSON *gr = cJSON_GetObjectItemCaseSensitive(l, "grace");
+    /* The sim's limits, told to this edge's clients; the launch rate is kept here. */
+    if (cJSON_IsNumber(ps) && ps->valuedouble >= 0 && ps->valuedouble <= 1024)
+        n->dc.bodies_per_session = ps->valueint;
+    if (cJSON_IsNumber(mb) && mb->valuedouble >= 1 && mb->valuedouble <= 1024)
+        n->dc.max_bodies = mb->valueint;
+    if (cJSON_IsNumber(lr) && lr->valuedouble > 0 && lr->valuedouble <= 1e6)
+        n->dc.launch_rate = lr->valuedouble;
+    if (cJSON_IsNumber(gr) && gr->valuedouble >= 0.1 && gr->valuedouble <= 86400)
+        n->dc.body_grace = gr->valuedouble;
+    const cJSON *list = cJSON_GetObjectItemCaseSensitive(hello, "bodies");
+    return list ? adopt_list(n, list) : 0;
 }

@@ -93,6 +93,7 @@ static struct remote_query *remote_query_of(lws_dll2_t *d) { return lws_containe
 
 void net_drop_remote_requests(struct net *n)
 {
+    body_net_drop_remote(n);
     while (n->remote_queries.head) {
         struct remote_query *rq = remote_query_of(n->remote_queries.head);
         lws_dll2_remove(&rq->list);
@@ -624,8 +625,12 @@ void net_remote_control(struct net *n, const char *origin, const char *by, const
     struct ctl_msg m;
     if (remote_parse(&rm, text, len, &m) != 0)
         return;
-    if (!n->sim || (m.type != CTL_SET && m.type != CTL_PAUSE && m.type != CTL_RESUME)) {
-        struct ctl_error f = { .code = "bad_message", .message = "only set, pause and resume go to the simulation" };
+    bool body = m.type == CTL_LAUNCH || m.type == CTL_STEER || m.type == CTL_REMOVE || m.type == CTL_CLAIM;
+    if (n->sim && body) {
+        body_net_remote(n, origin, by, &m, reply, ctx); /* body_net.c: who owns what is decided here */
+    } else if (!n->sim || (m.type != CTL_SET && m.type != CTL_PAUSE && m.type != CTL_RESUME)) {
+        struct ctl_error f = { .code = "bad_message",
+                               .message = "only set, pause, resume and body requests go to the simulation" };
         respond_error(NULL, &rm, &f, m.id);
     } else if (m.once && once_seen(n, m.once)) { /* the client's other copy came first, through any edge */
         respond_error(NULL, &rm, &once_duplicate, m.id);
@@ -735,7 +740,7 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
     case CTL_STEER:
     case CTL_REMOVE:
     case CTL_CLAIM: /* floating bodies (body_net.c) */
-        body_net_dispatch(n, s, &m);
+        body_net_dispatch(n, s, &m, text, len);
         break;
     }
     ctl_msg_free(&m);

@@ -82,6 +82,12 @@ struct net_cluster_hooks {
     void (*on_probe_data)(void *user, uint64_t serial, const char *text);
     /* sim: an applied set's `params` event (no id), who caused it */
     void (*on_params_event)(void *user, const char *text, const char *origin, const char *by);
+    /* sim: a `bodies` message (PROTOCOL.md §7.6) for every edge's clients */
+    void (*on_bodies_event)(void *user, const char *text);
+    /* sim: the bodies and their owners now (as the state file saves them),
+     * handed on at most every BODY_KEEP_EVERY_S and at each change: the
+     * standby's copy (role_lease.h). Only for the call. */
+    void (*on_bodies_state)(void *user, const struct state_bodies *sb);
     /* /healthz: returns "ok" or "degraded" and adds its members ("role",
      * "cluster", "layers", ...) to the object obj (a cJSON object: the
      * answer is built whole, so it is valid JSON whatever its size) */
@@ -150,6 +156,26 @@ char *net_remote_probe(struct net *n, uint64_t serial, const char *text, size_t 
 void net_remote_probe_gone(struct net *n, uint64_t serial);
 /* edge: one probe_data text to client `serial`, unless it is 16 messages behind (it misses the tick). */
 void net_send_probe_data(struct net *n, uint64_t serial, const char *text);
+/* sim: edge `origin` lists the clients of its that sent body requests and
+ * are still connected: {"type":"owners","clients":[{"by":id,"name":n},...]}.
+ * A client of that edge not listed is gone (its bodies are adrift, §7.6);
+ * one whose edge lists nobody for BODY_OWNERS_EXPIRE_S is gone too. */
+void net_remote_owners(struct net *n, const char *origin, const char *text, size_t len);
+#define BODY_OWNERS_PERIOD_S 2.0
+#define BODY_OWNERS_EXPIRE_S 7.0
+/* edge: the owners message for the sim when it is due (a body user left or
+ * renamed itself, or BODY_OWNERS_PERIOD_S passed), malloc'd; NULL = nothing to send. */
+char *net_body_owners(struct net *n, double now);
+/* edge: the sim refused a launch of client serial as too_many_bodies: its
+ * launch is given back to its --launch-rate bucket, as a local refusal
+ * never takes it (at most a full bucket). */
+void net_body_refused(struct net *n, uint64_t serial);
+/* edge: a `bodies` message from the sim: the list this edge's hellos carry,
+ * relayed to every client. -1 = not a valid `bodies` (dropped). */
+int net_adopt_bodies(struct net *n, const char *text, size_t len);
+/* sim: a standby that took over: every body of sb where it was, its owners
+ * (clients of edges, by origin) keep it; the world's bodies are replaced. */
+void net_bodies_take_over(struct net *n, const struct state_bodies *sb);
 /* sim: answers every remote request still waiting with NULL (before the link closes). */
 void net_drop_remote_requests(struct net *n);
 /* sim: the hello the sim would send (client_id ""), malloc'd; for edges. */

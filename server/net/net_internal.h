@@ -154,6 +154,7 @@ struct session {
     /* floating bodies (body_net.c) */
     int launching;                /* its launches not answered yet (they count against --bodies-per-session) */
     double launch_tokens, launch_t; /* --launch-rate bucket and its last refill (0 = never: full) */
+    bool body_user;               /* edge: it sent a body request (its edge tells the sim while it is here) */
     const uint8_t *ext;           /* the BODY section of the frame being sent (its header extension), or NULL */
     size_t ext_len, ext_off;      /* its bytes in the part being sent (only the first part), and sent so far */
 };
@@ -171,8 +172,35 @@ struct body_own {
     bool removing;                /* a remove is on its way to the sim */
 };
 /* Every body the lws thread knows of, and what the clients were told. */
+/* sim role: a client of an edge that asked for bodies (body_net.c): the
+ * owner the sim knows, kept while its edge lists it (net_remote_owners). */
+struct body_remote {
+    uint64_t serial;              /* a remote serial (net_remote_serial): the owner of its bodies */
+    char origin[64];              /* its edge */
+    char by[32];                  /* its client id there (as body_own.owner_id) */
+    char name[CTL_NAME_BYTES];
+    int launching;
+    double seen;                  /* mono time its edge last listed it */
+};
+/* sim role: a client of an edge waiting for the answer of a request the sim thread applies. */
+struct body_wait {
+    uint64_t ticket;
+    net_reply_fn reply;
+    void *ctx;
+};
 struct body_book {
     struct body_own *b;           /* ascending id */
+    struct body_remote *rc;       /* sim role: clients of edges (BODY_REMOTE_MAX at most) */
+    int nrc, rc_cap;
+    struct body_wait *wait;       /* sim role: requests of edges' clients in the sim thread */
+    int nwait, wait_cap;
+    uint64_t next_ticket;
+    bool owners_due;              /* edge: tell the sim who is here (net_body_owners) now */
+    double owners_t;              /* edge: when it was last told */
+    bool owners_any;              /* edge: the last list was not empty */
+    double replica_t;             /* sim role: when the bodies were last handed to the record (on_bodies_state) */
+    bool restoring;               /* sim role: a take-over's bodies are on their way to the sim thread */
+    uint64_t restored_seq;        /* ... and the tick they were in from (older snapshots are not handed on) */
     int n, cap;
     int launching;                /* launches submitted and not answered (they count against --max-bodies) */
     struct body_gone_entry *gone; /* left since the last `bodies` message */
@@ -361,12 +389,18 @@ void net_capacity_tell(struct net *n, struct session *s);    /* `degraded` if s'
 void net_capacity_wake(struct net *n);                       /* after a wake-up: tell plan changes */
 
 /* body_net.c: floating bodies (PROTOCOL.md §7.6): requests, owners, `bodies` */
-void body_net_dispatch(struct net *n, struct session *s, const struct ctl_msg *m); /* launch/steer/remove/claim */
+/* launch/steer/remove/claim (text: the message, forwarded as it is by an edge) */
+void body_net_dispatch(struct net *n, struct session *s, const struct ctl_msg *m, const char *text, size_t len);
 void body_net_wake(struct net *n);                           /* after a wake-up: answers, grace, the sim's bodies */
 cJSON *body_net_hello(struct net *n, cJSON *hello);          /* body_kinds, body_limits, world_half_size, bodies */
 void body_net_session_gone(struct net *n, struct session *s); /* its bodies wait for a claim */
 void body_net_renamed(struct net *n, struct session *s);     /* its bodies carry its new name */
 void body_net_free(struct net *n);
+/* sim role: a launch / steer / remove / claim of a client of an edge, answered through reply exactly once */
+void body_net_remote(struct net *n, const char *origin, const char *by, const struct ctl_msg *m, net_reply_fn reply,
+                     void *ctx);
+void body_net_drop_remote(struct net *n);                    /* answers every waiting remote request with NULL */
+int body_net_adopt_hello(struct net *n, const cJSON *hello); /* edge: the sim's bodies and limits */
 
 /* http.c */
 int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len);

@@ -119,6 +119,8 @@ int net_adopt_hello(struct net *n, const char *text, size_t len)
     if (cJSON_IsNumber(ease) && ease->valueint >= 0 && ease->valueint <= 300) /* the sim's, told to this edge's clients */
         n->dc.ease_ticks = ease->valueint;
     adopt_capacity(n, root);
+    if (body_net_adopt_hello(n, root) != 0)
+        LOGW("cluster: the bodies in the sim's hello do not parse here (the next `bodies` brings them)");
     cJSON_Delete(root);
     if (n->applied_version != before || changed) {
         /* Clients that got hello from an older cache learn the sim's values now. */
@@ -196,7 +198,7 @@ char *net_hello_text(struct net *n)
         sim_capacity(n->sim, &ci);
         h.capacity = &ci;
     }
-    cJSON *m = control_hello_msg(&h);
+    cJSON *m = body_net_hello(n, control_hello_msg(&h)); /* the bodies and their limits too */
     if (m) /* the configured tile side, so that edges follow N changes like the sim */
         cJSON_AddNumberToObject(m, "cluster_tile_size", n->dc.tile_size);
     return control_print(m);

@@ -6,7 +6,10 @@
  * set / pause / resume to the sim after the local size, rate and token
  * checks, and `query` after the rate limit and the query's own checks (at
  * most EDGE_QUERIES_* in flight), and relays the answers; it keeps the
- * sim's hello for new clients.
+ * sim's hello for new clients. Floating bodies: their requests go to the
+ * sim like a set (body_net.c checks them first), their `bodies` lists are
+ * relayed, each tick's BODY section goes into the frame of that tick
+ * (edge_bodies.c), and the sim hears which of our clients are still here.
  * Stateless: nothing here outlives the process. Everything runs on the lws
  * thread (hooks and cl_link_dispatch handlers). */
 #include "roles.h"
@@ -20,6 +23,7 @@
 #include "control.h"
 #include "log.h"
 #include "role_link.h"
+#include "edge_bodies.h"
 #include "seq_guard.h"
 
 enum edge_state { EDGE_UNKNOWN, EDGE_OK, EDGE_SIM_DOWN, EDGE_NATS_DOWN };
@@ -41,6 +45,7 @@ struct forward {
     struct forward *prev, *next;  /* in role_edge.forwards (freed at close if never answered) */
     struct role_edge *r;
     bool hello;
+    bool own;                     /* the edge's own (the owners list): its answer goes to nobody */
     bool query;                   /* counted in role_edge.queries (queries and clients' probes) */
     enum { FW_NONE, FW_PROBE, FW_KEEPALIVE, FW_RESEND, FW_END } probe;
     bool gone;                    /* its client disconnected meanwhile */
@@ -71,6 +76,7 @@ struct role_edge {
     int queries;                  /* forwards that are queries or clients' probes */
     struct eprobe *probes;        /* clients' probes the sim accepted */
     double keepalive_t;           /* when the probes' keepalives were last sent */
+    struct edge_bodies *bodies;   /* the last ticks' BODY sections, and frames waiting for theirs */
     bool hello_needed;            /* ask the sim for hello (again) at the next chance */
     bool hello_in_flight;
     double hello_t;               /* when it was last asked */
@@ -141,6 +147,7 @@ static void publish_set(struct role_edge *r, struct cl_frame_set *set)
     f->tiles_per_side = h->tiles_per_side;
     f->ncascades = h->ncascades;
     f->index = r->frames++;
+    f->bodies = edge_bodies_for(r->bodies, h->seq); /* the tick's bodies, in its header (PROTOCOL.md §3.5) */
     for (int i = 0; i < set->nlayers; i++) {
         struct cl_layer *cl = set->layers[i];
         struct layer *l = &f->layers[f->nlayers++];
@@ -158,6 +165,15 @@ static void publish_set(struct role_edge *r, struct cl_frame_set *set)
     frame_unref(f);
 }
 
+static void publish_held(struct role_edge *r)
+{
+    struct cl_frame_set *set;
+    while ((set = edge_bodies_next_held(r->bodies))) {
+        publish_set(r, set);
+        cl_frame_set_free(set);
+    }
+}
+
 static void edge_on_layer(void *user, struct cl_layer *layer)
 {
     struct role_edge *r = user;
@@ -173,6 +189,7 @@ static void edge_on_layer(void *user, struct cl_layer *layer)
         cl_layer_free(layer);
         return;
     case SEQ_RESTART:
+        publish_held(r); /* the old timeline's frames go out before it restarts */
         LOGW("cluster: the sim's frames count from seq %llu now (a restarted or another sim): the stream restarts",
              (unsigned long long)layer->info.seq);
         cl_collector_reset(r->collector);
@@ -183,9 +200,21 @@ static void edge_on_layer(void *user, struct cl_layer *layer)
     }
     struct cl_frame_set *out[2];
     int k = cl_collector_add(r->collector, layer, r->want, out);
-    for (int i = 0; i < k; i++) {
-        publish_set(r, out[i]);
-        cl_frame_set_free(out[i]);
+    for (int i = 0; i < k; i++) /* published after this dispatch: its BODY section may come behind it */
+        if (edge_bodies_hold(r->bodies, out[i]) != 0) {
+            publish_set(r, out[i]);
+            cl_frame_set_free(out[i]);
+        }
+}
+
+static void edge_on_bodies(void *user, bool is_section, const char *data, size_t len)
+{
+    struct role_edge *r = user;
+    if (is_section) {
+        if (edge_bodies_add_section(r->bodies, (const uint8_t *)data, len) != 0)
+            LOGD("cluster: a BODY section that is not one (%zu bytes): dropped", len);
+    } else if (net_adopt_bodies(r->net, data, len) != 0) {
+        LOGW("cluster: a `bodies` message from the simulation that does not parse (%zu bytes): dropped", len);
     }
 }
 
@@ -338,7 +367,8 @@ static void reply_type(const char *text, size_t len, char *type, size_t cap, cha
  * anything else is answered `unavailable` (a rogue or broken answerer). */
 static void relay(struct role_edge *r, uint64_t serial, const cJSON *id, const char *text, size_t len)
 {
-    static const char *const types[] = { "params", "error", "query_result", "probing", "probe_data", NULL };
+    static const char *const types[] = { "params", "error", "query_result", "probing", "probe_data",
+                                         "launched", "steered", "removed", "claimed", NULL };
     cJSON *ok = net_sim_message(text, len, NET_SIM_REPLY_MAX, types);
     if (!ok) {
         LOGW("cluster: an answer from the simulation is not a valid message (%zu bytes); not relayed", len);
@@ -426,8 +456,16 @@ static void on_reply(void *ctx, int status, const char *text, size_t len)
         } else {
             LOGD("cluster: no hello from the sim: %s (asking again)", status ? cl_strerror(status) : "bad hello");
         }
+    } else if (fw->own) {
+        /* the owners list: nothing to tell anyone */
     } else if (status == 0) {
-        relay(r, fw->serial, fw->id, text, len);
+        char type[32], code[32];
+        bool points;
+        reply_type(text, len, type, sizeof type, code, sizeof code, &points);
+        if (fw->id || strcmp(type, "steered") != 0) /* a steer without an id is answered only when it fails */
+            relay(r, fw->serial, fw->id, text, len);
+        if (strcmp(code, "too_many_bodies") == 0) /* refused before it took a launch: the bucket keeps it */
+            net_body_refused(r->net, fw->serial);
     } else {
         send_unavailable(r, fw->serial, fw->id, status);
     }
@@ -654,12 +692,33 @@ static void edge_on_params(void *user, const char *origin, const char *by, const
         LOGW("cluster: ignoring a params event that does not parse");
 }
 
+/* Which of our clients that asked for bodies are still here, for the sim
+ * (PROTOCOL.md §7.6 through an edge): when one leaves, and every
+ * BODY_OWNERS_PERIOD_S (the sim counts a client gone whose edge falls silent). */
+static void send_owners(struct role_edge *r, double now)
+{
+    if (!cl_link_connected(r->link) || !cl_link_sim_up(r->link))
+        return;
+    char *text = net_body_owners(r->net, now);
+    if (!text)
+        return;
+    struct forward *fw = forward_new(r, false, 0, NULL);
+    if (fw) {
+        fw->own = true;
+        if (cl_edge_request(r->link, CL_KIND_CTL, "", text, strlen(text), on_reply, fw) != CL_OK)
+            forward_free(fw);
+    }
+    free(text);
+}
+
 static void edge_on_wake(void *user)
 {
     struct role_edge *r = user;
     check_pending(r);
     cl_link_dispatch(r->link);
+    publish_held(r);
     double now = mono_now();
+    send_owners(r, now);
     if (r->hello_needed && !r->hello_in_flight && cl_link_connected(r->link) && now - r->hello_t >= HELLO_RETRY)
         request_hello(r);
     probe_keepalives(r, now);
@@ -702,7 +761,9 @@ static size_t edge_metrics(void *user, char *buf, size_t cap)
 struct role_edge *role_edge_open(const struct daemon_config *dc, struct net *n, char *err, size_t errlen)
 {
     struct role_edge *r = calloc(1, sizeof *r);
-    if (!r || !(r->collector = cl_collector_new())) {
+    if (!r || !(r->collector = cl_collector_new()) || !(r->bodies = edge_bodies_new())) {
+        if (r)
+            cl_collector_free(r->collector);
         free(r);
         snprintf(err, errlen, "out of memory");
         return NULL;
@@ -717,11 +778,13 @@ struct role_edge *role_edge_open(const struct daemon_config *dc, struct net *n, 
     cfg.h.on_layer = edge_on_layer;
     cfg.h.on_params = edge_on_params;
     cfg.h.on_probe_data = edge_on_probe_data;
+    cfg.h.on_bodies = edge_on_bodies;
     char lerr[256];
     r->link = cl_link_open(&cfg, lerr, sizeof lerr);
     if (!r->link) {
         snprintf(err, errlen, "NATS: %s", lerr);
         cl_collector_free(r->collector);
+        edge_bodies_free(r->bodies);
         free(r);
         return NULL;
     }
@@ -750,5 +813,6 @@ void role_edge_close(struct role_edge *r)
     while (r->probes)
         eprobe_drop(r, r->probes->serial);
     cl_collector_free(r->collector);
+    edge_bodies_free(r->bodies);
     free(r);
 }

@@ -38,7 +38,10 @@ struct role_lease {
     double seen_t;                 /* ...and when it was first seen (mono) */
     double renew_t;
     double warn_t;
+    struct lease_bodies *bodies;   /* the record's floating bodies (role_lease_bodies.c) */
 };
+
+struct lease_bodies *role_lease_bodies(struct role_lease *ls) { return ls->bodies; }
 
 struct record {
     char holder[CL_NAME_MAX];
@@ -81,6 +84,7 @@ static char *record_text(struct role_lease *ls, const struct ocean_params *p, ui
     cJSON_AddNumberToObject(o, "wall_us", (double)unix_us());
     cJSON_AddNumberToObject(o, "seq", (double)seq);
     cJSON_AddNumberToObject(o, "tick_rate", ls->tick_rate);
+    lease_bodies_add(ls->bodies, o);
     char *t = cJSON_PrintUnformatted(o);
     cJSON_Delete(o);
     return t;
@@ -189,11 +193,16 @@ static void adopt(struct role_lease *ls, const struct record *rec)
 
 /* Take the lease: the record's state if it is at least as new as ours (an
  * older record means ours is newer, e.g. the bucket was made afresh). */
-static void take_over(struct role_lease *ls, const struct record *rec, uint64_t rev)
+static void take_over(struct role_lease *ls, const struct record *rec, uint64_t rev, const char *rtext, size_t rlen)
 {
     pthread_mutex_lock(&ls->wlock);
     pthread_mutex_lock(&ls->lock);
     bool theirs = rec && rec->version >= ls->version;
+    /* The bodies as the holder left them (before our record is written, which carries them on):
+     * its record's, or, when that is older than our state, those of the newest one we followed. */
+    if (theirs && rtext)
+        lease_bodies_from_record(ls->bodies, rtext, rlen);
+    bool bodies = rec && lease_bodies_have(ls->bodies);
     struct ocean_params p = theirs ? rec->params : ls->params;
     uint32_t v = theirs ? rec->version : ls->version;
     pthread_mutex_unlock(&ls->lock);
@@ -215,6 +224,8 @@ static void take_over(struct role_lease *ls, const struct record *rec, uint64_t 
         atomic_store(&ls->written_t, t0);
         if (rec)
             adopt(ls, &now);
+        if (bodies) /* before we act: the lws thread puts them in the world before any request */
+            lease_bodies_commit(ls->bodies);
         set_state(ls, LEASE_ACTIVE);
         ls->renew_t = mono_now();
         LOGI("cluster: this simulation holds the lease now (params_version %u%s%s)", (unsigned)v,
@@ -232,7 +243,7 @@ static void standby_round(struct role_lease *ls, double now)
     uint64_t rev = 0;
     int rc = cl_kv_read(ls->kv, &text, &len, &rev);
     if (rc == 0) {
-        take_over(ls, NULL, 0); /* nobody ever held it */
+        take_over(ls, NULL, 0, NULL, 0); /* nobody ever held it */
     } else if (rc == 1) {
         struct record rec;
         pthread_mutex_lock(&ls->lock);
@@ -248,8 +259,11 @@ static void standby_round(struct role_lease *ls, double now)
              * the renewals (same version, new clock) cost nothing here. Only
              * a newer one: a record older than our state (written by a stale
              * copy, a restored bucket) never takes the version back. */
-            if (ok && rec.version > mine && strcmp(rec.holder, cl_link_instance(ls->link)) != 0)
+            bool holders = ok && strcmp(rec.holder, cl_link_instance(ls->link)) != 0;
+            if (holders && rec.version > mine)
                 adopt(ls, &rec);
+            if (holders && rec.version >= mine) /* its bodies, for a take-over (role_lease_bodies.c) */
+                lease_bodies_from_record(ls->bodies, text, len);
         }
         if (!ok) {
             if (now - ls->warn_t > 10) {
@@ -258,7 +272,7 @@ static void standby_round(struct role_lease *ls, double now)
             }
         }
         if ((ok && rec.released) || now - ls->seen_t >= LEASE_EXPIRE_S)
-            take_over(ls, ok ? &rec : NULL, rev);
+            take_over(ls, ok ? &rec : NULL, rev, text, len);
     }
     free(text);
 }
@@ -329,6 +343,10 @@ struct role_lease *role_lease_new(struct cl_link *link, double tick_rate)
         return NULL;
     ls->link = link;
     ls->tick_rate = tick_rate;
+    if (!(ls->bodies = lease_bodies_new())) {
+        free(ls);
+        return NULL;
+    }
     pthread_mutex_init(&ls->lock, NULL);
     pthread_mutex_init(&ls->wlock, NULL);
     pthread_condattr_t ca;
@@ -374,6 +392,7 @@ void role_lease_free(struct role_lease *ls)
         return;
     role_lease_stop(ls);
     cl_kv_close(ls->kv);
+    lease_bodies_free(ls->bodies);
     pthread_cond_destroy(&ls->cond);
     pthread_mutex_destroy(&ls->wlock);
     pthread_mutex_destroy(&ls->lock);

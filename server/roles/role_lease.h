@@ -21,6 +21,7 @@
 
 #include "cluster.h"
 #include "sim_thread.h"
+#include "state.h"
 
 #define LEASE_RENEW_S 0.25  /* the holder rewrites the record this often */
 #define LEASE_EXPIRE_S 1.0  /* a record unchanged this long (by the standby's clock): its holder is gone */
@@ -45,5 +46,28 @@ const char *role_lease_state_name(enum lease_state s);
  * or the lease was lost (this sim steps down). Solo and standby: 0. */
 int role_lease_persist(struct role_lease *ls, const struct ocean_params *p, uint32_t version, double sim_time,
                        char *err, size_t errlen);
+
+/* ---- the floating bodies in the record (role_lease_bodies.c) ----
+ * The lws thread hands the newest bodies over (copied); every record write
+ * carries them while the record stays within LEASE_BODIES_MAX_BYTES of
+ * them (the bucket holds 64 KB values: about 100 bodies; --max-bodies 64 by
+ * default). A standby takes the bodies of each record it follows (the
+ * holder's, at least as new as its own state: an older record brings no
+ * bodies back); a take-over restores the newest it took:
+ * role_lease_take_bodies hands them out once (1; *out is the caller's to
+ * free), after the wake function set by role_lease_on_bodies was called. */
+#define LEASE_BODIES_MAX_BYTES (48u << 10)
+void role_lease_set_bodies(struct role_lease *ls, const struct state_bodies *sb);
+void role_lease_on_bodies(struct role_lease *ls, void (*wake)(void *), void *user);
+int role_lease_take_bodies(struct role_lease *ls, struct state_bodies *out);
+/* role_lease.c's side */
+struct lease_bodies;
+struct lease_bodies *role_lease_bodies(struct role_lease *ls);
+struct lease_bodies *lease_bodies_new(void);
+void lease_bodies_free(struct lease_bodies *lb);
+void lease_bodies_add(struct lease_bodies *lb, struct cJSON *record);
+int lease_bodies_from_record(struct lease_bodies *lb, const char *text, size_t len);
+void lease_bodies_commit(struct lease_bodies *lb);
+bool lease_bodies_have(struct lease_bodies *lb);      /* bodies taken from a record are waiting */
 
 #endif

@@ -19,6 +19,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "body_snap.h"
 #include "log.h"
 #include "metrics.h"
 #include "role_lease.h"
@@ -77,6 +78,22 @@ static void sim_remote_demand(void *user, uint8_t bits[], uint8_t stream[], uint
 
 static void release_frame(void *ctx) { frame_unref(ctx); }
 
+/* CL_KIND_BODY_SECTION: u64 seq (little-endian) + the BODY section (PROTOCOL.md §3.5). */
+static void publish_section(struct role_sim *r, uint64_t seq, const struct body_snap *b)
+{
+    size_t len = 8 + b->section_len;
+    uint8_t *buf = malloc(len);
+    if (!buf)
+        return;
+    for (int i = 0; i < 8; i++)
+        buf[i] = (uint8_t)(seq >> (8 * i));
+    memcpy(buf + 8, b->section, b->section_len);
+    int rc = cl_sim_publish_bodies(r->link, CL_KIND_BODY_SECTION, buf, len);
+    if (rc != CL_OK && rc != CL_E_NOT_CONNECTED)
+        LOGW("cluster: publishing the bodies failed: %s", cl_strerror(rc));
+    free(buf);
+}
+
 /* Each layer of the frame on its subject; the frame stays alive (one
  * reference per layer) until the pump has sent it. */
 static void sim_on_frame(void *user, struct frame *f)
@@ -90,6 +107,9 @@ static void sim_on_frame(void *user, struct frame *f)
         .frame_flags = f->hdr.flags, .server_time_us = f->hdr.server_time_us,
         .tiles_per_side = (uint16_t)f->tiles_per_side, .ncascades = (uint8_t)f->ncascades,
     };
+    /* The tick's bodies go first: an edge puts them in the frame its layers make (role_edge.c). */
+    if (f->bodies && f->bodies->count > 0)
+        publish_section(r, f->hdr.seq, f->bodies);
     /* Every cascade: the layer keys of the cluster are the daemon's (role_link.h). */
     for (int i = 0; i < f->nlayers; i++) {
         const struct layer *l = &f->layers[i];
@@ -254,6 +274,11 @@ static void sim_on_request(void *user, struct cl_request *req)
         sim_probe(r, req);
         return;
     }
+    if (req->kind == CL_KIND_CTL && !req->by[0]) { /* the edge's own: who of its clients is still there */
+        net_remote_owners(r->net, req->origin, req->body, req->len);
+        cl_request_reply(r->link, req, "{}", 2);
+        return;
+    }
     if (req->kind == CL_KIND_HELLO) {
         char *hello = net_hello_text(r->net);
         cl_request_reply(r->link, req, hello, hello ? strlen(hello) : 0);
@@ -286,9 +311,31 @@ static void sim_on_params_event(void *user, const char *text, const char *origin
         LOGW("cluster: publishing params failed: %s (edges catch up at their next hello)", cl_strerror(rc));
 }
 
+static void sim_on_bodies_event(void *user, const char *text)
+{
+    struct role_sim *r = user;
+    if (!role_lease_acting(r->lease))
+        return;
+    int rc = cl_sim_publish_bodies(r->link, CL_KIND_BODIES, text, strlen(text));
+    if (rc != CL_OK && rc != CL_E_NOT_CONNECTED)
+        LOGW("cluster: publishing `bodies` failed: %s (edges catch up at the next change or hello)", cl_strerror(rc));
+}
+
+static void sim_on_bodies_state(void *user, const struct state_bodies *sb)
+{
+    struct role_sim *r = user;
+    if (role_lease_state(r->lease) == LEASE_ACTIVE) /* a standby's own bodies never reach the record */
+        role_lease_set_bodies(r->lease, sb);
+}
+
 static void sim_on_wake(void *user)
 {
     struct role_sim *r = user;
+    struct state_bodies sb;
+    if (role_lease_take_bodies(r->lease, &sb)) { /* a take-over: the bodies in the world before any request */
+        net_bodies_take_over(r->net, &sb);
+        state_bodies_free(&sb);
+    }
     cl_link_dispatch(r->link);
     double now = mono_now();
     if (now - r->probes_t >= 0.5) {
@@ -397,6 +444,7 @@ struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, st
         free(r);
         return NULL;
     }
+    role_lease_on_bodies(r->lease, net_wake, n);
     r->file_persist = sc->persist;
     r->file_user = sc->persist_user;
     sc->persist = sim_persist;
@@ -406,7 +454,8 @@ struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, st
     sc->cluster_user = r;
     struct net_cluster_hooks h = {
         .user = r, .no_viewers = true, .on_wake = sim_on_wake, .on_params_event = sim_on_params_event,
-        .on_probe_data = sim_on_probe_data,
+        .on_probe_data = sim_on_probe_data, .on_bodies_event = sim_on_bodies_event,
+        .on_bodies_state = sim_on_bodies_state,
         .health = sim_health, .metrics = sim_metrics,
     };
     net_set_cluster(n, &h);

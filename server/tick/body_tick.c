@@ -402,6 +402,36 @@ static bool same_grids(const struct probe_grids *a, const struct probe_grids *b)
 
 /* ---- one tick ---- */
 
+/* A take-over (SIM_BODY_RESTORE): every body of c where it was, in a world
+ * of its own; the old world stays when one is refused (all or none). */
+static enum body_error restore_world(struct body_sim *b, const struct sim_body_cmd *c, double t)
+{
+    struct body_world *w = body_world_new(b->capacity);
+    if (!w)
+        return BODY_ERR_FULL;
+    enum body_error e = c->nstates > b->capacity ? BODY_ERR_FULL : BODY_OK;
+    for (int i = 0; e == BODY_OK && i < c->nstates; i++)
+        e = body_world_restore(w, &c->states[i]);
+    uint64_t next = body_world_next_id(w);
+    if (e == BODY_OK && c->next_id > 1 && next != 0 && next < c->next_id) { /* as restore_all: ids move on */
+        struct body_state ph = { .id = (uint32_t)(c->next_id - 1), .kind = &body_kinds()[0], .quat = { 1, 0, 0, 0 } };
+        if (body_world_restore(w, &ph) == BODY_OK)
+            body_remove(w, ph.id);
+    }
+    if (e != BODY_OK) {
+        body_world_free(w);
+        return e;
+    }
+    body_world_free(b->w);
+    b->w = w;
+    b->nadrift = 0;
+    for (int i = 0; i < c->nstates; i++)
+        if (c->adrift_flags[i])
+            adrift_set(b, c->states[i].id, true);
+    b->t_last = t; /* the motion goes on from here, not from the record's time */
+    return BODY_OK;
+}
+
 /* The control now in force of body id (a steer that gives one member keeps the other). */
 static bool current_control(const struct body_world *w, uint32_t id, struct body_control *out)
 {
@@ -449,6 +479,9 @@ static void apply(struct body_sim *b, struct sim_body_cmd *c, const struct body_
         break;
     case SIM_BODY_GONE:
         c->status = BODY_OK;
+        break;
+    case SIM_BODY_RESTORE:
+        c->status = restore_world(b, c, t);
         break;
     }
 }
@@ -606,6 +639,7 @@ void body_cmds_free(struct sim_body_cmd *c)
     while (c) {
         struct sim_body_cmd *next = c->next;
         cJSON_Delete(c->reply_id);
+        free(c->states);
         free(c);
         c = next;
     }

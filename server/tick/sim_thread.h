@@ -83,6 +83,7 @@ enum sim_body_op {
     SIM_BODY_REMOVE,            /* body */
     SIM_BODY_ADRIFT,            /* body: the record's adrift flag = adrift; stop: controls to 0 as well */
     SIM_BODY_GONE,              /* answer only: body sank (body_world_step removed it) */
+    SIM_BODY_RESTORE,           /* states replace every body (a standby took over): adrift_flags, next_id */
 };
 struct sim_body_cmd {
     struct sim_body_cmd *next;
@@ -101,6 +102,11 @@ struct sim_body_cmd {
     uint64_t serial;            /* the sender's session, 0 = the daemon itself (grace, abandonment) */
     void *reply_id;             /* a cJSON copy of the request's id, or NULL */
     bool reply;                 /* answer success too (launch, remove, a steer that had an id) */
+    struct body_state *states;  /* SIM_BODY_RESTORE: nstates, then adrift_flags[nstates] in the same block (freed with it) */
+    uint8_t *adrift_flags;
+    int nstates;
+    uint64_t next_id;           /* SIM_BODY_RESTORE: no id below it is issued again */
+    uint64_t ticket;            /* lws only: a client of an edge waits for the answer under it (body_net.c), 0 = none */
     char resume[33];            /* launch: the resume key handed out with `launched` */
     const char *reason;         /* remove: "removed" or "abandoned" */
 };

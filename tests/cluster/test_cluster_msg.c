@@ -37,7 +37,8 @@ static void test_subjects(void)
     CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_CTL) == 0 && strcmp(s, "eu.sea.ctl") == 0, "ctl: %s", s);
     CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_QUERY) == 0 && strcmp(s, "eu.sea.query") == 0, "query: %s", s);
     CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_PROBE) == 0 && strcmp(s, "eu.sea.probe") == 0, "probe: %s", s);
-    CHECK(cl_subject(s, sizeof s, "eu.sea", (enum cl_subject)(CL_SUBJ_PROBE + 1)) == CL_E_ARG, "unknown subject");
+    CHECK(cl_subject(s, sizeof s, "eu.sea", CL_SUBJ_BODIES) == 0 && strcmp(s, "eu.sea.bodies") == 0, "bodies: %s", s);
+    CHECK(cl_subject(s, sizeof s, "eu.sea", (enum cl_subject)(CL_SUBJ_BODIES + 1)) == CL_E_ARG, "unknown subject");
     CHECK(cl_probe_stream_subject("_INBOX.abc.17", s, sizeof s) == 0 && strcmp(s, "_INBOX.abc.p") == 0,
           "probe stream: %s", s);
     CHECK(cl_probe_stream_subject("nodot", s, sizeof s) == CL_E_ARG, "probe stream of a subject without a dot");
@@ -369,10 +370,14 @@ static void test_envelope(void)
     CHECK(trunc_ok, "a truncated envelope parsed");
     m[5] = 0;
     CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "kind 0 accepted");
-    m[5] = CL_KIND_PROBE_DATA + 1;
-    CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "kind %d accepted", CL_KIND_PROBE_DATA + 1);
+    m[5] = CL_KIND_BODY_SECTION + 1;
+    CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "kind %d accepted", CL_KIND_BODY_SECTION + 1);
     m[5] = CL_KIND_PROBE_DATA;
     CHECK(cl_envelope_parse(m, size, &e) == 0 && e.kind == CL_KIND_PROBE_DATA, "kind PROBE_DATA refused");
+    m[5] = CL_KIND_BODIES;
+    CHECK(cl_envelope_parse(m, size, &e) == 0 && e.kind == CL_KIND_BODIES, "kind BODIES refused");
+    m[5] = CL_KIND_BODY_SECTION;
+    CHECK(cl_envelope_parse(m, size, &e) == 0 && e.kind == CL_KIND_BODY_SECTION, "kind BODY_SECTION refused");
     m[5] = CL_KIND_CTL;
     m[12] = ' ';
     CHECK(cl_envelope_parse(m, size, &e) == CL_E_CORRUPT, "a space in origin accepted");
