@@ -76,28 +76,8 @@ export function drawPolar(canvas, m, size) {
   const ang = (b) => (b - 90) * Math.PI / 180; // bearing (clockwise from north, north up) -> canvas angle
   g.fillStyle = 'rgb(14, 22, 34)';
   g.beginPath(); g.arc(cx, cy, r, 0, 2 * Math.PI); g.fill();
-  const floor = m.peak * 10 ** -LOG_DECADES;
-  for (let i = 0; i < m.f.length; i++) {
-    const r0 = rad(m.fe[i]), r1 = rad(m.fe[i + 1]);
-    if (r0 >= r) break;
-    for (let j = 0; j < m.d.length; j++) {
-      const v = m.e[i][j];
-      if (!(v > floor)) continue;
-      const [c0, c1, c2] = colourAt(Math.log10(v / m.peak) / LOG_DECADES + 1);
-      g.fillStyle = `rgb(${c0},${c1},${c2})`;
-      const [a0, a1] = m.sec[j];
-      g.beginPath();
-      g.arc(cx, cy, r1, ang(a0), ang(a1));
-      g.arc(cx, cy, r0, ang(a1), ang(a0), true);
-      g.closePath();
-      g.fill();
-    }
-  }
-  // Spokes every 30°, rings at round periods inside the rim (about 4 of them), labelled.
-  g.strokeStyle = 'rgba(255, 255, 255, 0.28)'; g.lineWidth = 1;
-  for (let b = 0; b < 360; b += 30) {
-    g.beginPath(); g.moveTo(cx, cy); g.lineTo(cx + r * Math.cos(ang(b)), cy + r * Math.sin(ang(b))); g.stroke();
-  }
+  // Spokes every 30° and rings at round periods inside the rim (about 4 of them, labelled),
+  // light on the empty disc, under the cells.
   const rings = RING_PERIODS.filter((p) => 1 / p <= m.rim * 1.0001 && 1 / p >= m.rim * 0.15);
   const shown = [];
   for (const p of rings) { // thin out: at least a label and a half apart
@@ -115,11 +95,39 @@ export function drawPolar(canvas, m, size) {
     }
     if (sum < least - 1e-12) { least = sum; spoke = b; }
   }
+  const grid = (spokes, ringStyle) => {
+    g.lineWidth = 1;
+    g.strokeStyle = spokes;
+    for (let b = 0; b < 360; b += 30) {
+      g.beginPath(); g.moveTo(cx, cy); g.lineTo(cx + r * Math.cos(ang(b)), cy + r * Math.sin(ang(b))); g.stroke();
+    }
+    g.strokeStyle = ringStyle;
+    for (const p of shown) { g.beginPath(); g.arc(cx, cy, rad(1 / p), 0, 2 * Math.PI); g.stroke(); }
+  };
+  grid('rgba(255, 255, 255, 0.22)', 'rgba(255, 255, 255, 0.4)');
+  const floor = m.peak * 10 ** -LOG_DECADES;
+  for (let i = 0; i < m.f.length; i++) {
+    const r0 = rad(m.fe[i]), r1 = rad(m.fe[i + 1]);
+    if (r0 >= r) break;
+    for (let j = 0; j < m.d.length; j++) {
+      const v = m.e[i][j];
+      if (!(v > floor)) continue;
+      const [c0, c1, c2] = colourAt(Math.log10(v / m.peak) / LOG_DECADES + 1);
+      g.fillStyle = `rgb(${c0},${c1},${c2})`;
+      const [a0, a1] = m.sec[j];
+      g.beginPath();
+      g.arc(cx, cy, r1, ang(a0), ang(a1));
+      g.arc(cx, cy, r0, ang(a1), ang(a0), true);
+      g.closePath();
+      g.fill();
+    }
+  }
+  // The grid again over the cells, dark: a light line over the colours tinted them (a lilac ring
+  // over the purple of the scale's foot read as a feature of the sea).
+  grid('rgba(14, 22, 34, 0.5)', 'rgba(14, 22, 34, 0.6)');
   g.font = `${font - 1}px system-ui, sans-serif`; g.textAlign = 'center'; g.textBaseline = 'middle';
   for (const p of shown) {
     const rr = rad(1 / p);
-    g.strokeStyle = 'rgba(255, 255, 255, 0.45)';
-    g.beginPath(); g.arc(cx, cy, rr, 0, 2 * Math.PI); g.stroke();
     // the label on the ring at that spoke, on a dark patch so it reads over colour
     const t = `${p} s`, x = cx + rr * Math.cos(ang(spoke)), y = cy + rr * Math.sin(ang(spoke)), w = g.measureText(t).width + 4;
     g.fillStyle = 'rgba(14, 22, 34, 0.75)'; g.fillRect(x - w / 2, y - font / 2, w, font);

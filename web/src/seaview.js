@@ -184,7 +184,7 @@ export class SeaView {
     const card = this.card.hidden ? { left: M, right: M, top, bottom: top } : this.card.getBoundingClientRect();
     if (!this.plotOpen) return;
     // Column: the texts under the canvas; row (short screens): beside it, in a column TEXT_W wide.
-    const TEXT_W = 150, cap = this.compact ? 320 : 360;
+    const TEXT_W = 150, cap = this.compact ? 300 : 360;
     const extra = (this.plotExtra || 90) + 4; // the header, scale and caption around the canvas
     const below = { left: M, top: card.bottom + 6 }, beside = { left: card.right + M, top: card.top };
     const fit = (p, row) => {
