@@ -13,6 +13,7 @@ import { parseArgs, freePort, startServer, launchBrowser, waitFor, sleep } from 
 import { ROOT } from './webdeps.mjs';
 import { SEA_PRESETS } from '../../web/src/presets.js';
 import { sunDirection } from '../../web/src/sky.js';
+import { ndbcLikeSummary } from './sea_fixture.mjs';
 
 const require = createRequire(path.join(ROOT, 'web', 'package.json'));
 const { devices } = require('playwright-core');
@@ -33,6 +34,10 @@ const SHOTS = [
   { name: 'night', preset: 'fresh', hour: 23, cam: '0,14,48', face: { yaw: 0, dist: 120, ty: 8, moon: true } },
   { name: 'from-800m', preset: 'fresh', hour: 16, cam: '0,800,600', target: '0,0,-200' },
   { name: 'phone', preset: 'fresh', hour: 17.5, device: 'Pixel 7', hud: true, face: { yaw: 20, dist: 100, ty: 2 } },
+  // A measured sea's card, compass and polar plot: the summary (sea_fixture.mjs, NDBC-like: a
+  // swell from 285° at 12.5 s and a wind sea from 200° at 5 s) injected as the daemon would send
+  // it, over a fresh breeze blowing toward 105° (wind_direction 195: the waves from 285°).
+  { name: 'measured-sea', preset: 'fresh', set: { wind_direction: 195 }, hour: 15, hud: true, panel: true, sea: true, face: { yaw: -30, dist: 100, ty: 2 } },
   // Views a closer look takes: straight down on a gale and a storm, dusk, a crest, the glitter.
   { name: 'gale-down-30m', preset: 'gale', hour: 15, cam: '0,30,0.01', target: '0,0,0' },
   { name: 'storm-down-80m', preset: 'storm', hour: 15, cam: '0,80,0.01', target: '0,0,0' },
@@ -51,6 +56,7 @@ const STUDY = [
   { name: 'foam-3m', preset: 'storm', hour: 13, cam: '0,3,6', target: '0,0,-3' },
   { name: 'foam-gale', preset: 'gale', hour: 13, cam: '0,6,12', target: '0,0,-6' },
   { name: 'foam-fresh', preset: 'fresh', hour: 13, cam: '0,8,16', target: '0,0,-10' },
+  { name: 'measured-sea-phone', preset: 'fresh', set: { wind_direction: 195 }, hour: 15, device: 'iPhone 13', hud: true, sea: true, face: { yaw: -30, dist: 100, ty: 2 } },
   { name: 'foam-far', preset: 'storm', hour: 13, cam: '0,60,120', target: '0,0,-150' },
 ];
 // Moon direction of sky.js (altitude 38°, azimuth 155°), for the night shot.
@@ -64,7 +70,7 @@ function faceTarget(s) {
 const only = new Set(args.only ? args.only.split(',') : []);
 
 // One `set` from a plain protocol client; resolves with the new params_version.
-async function applyPreset(port, name) {
+async function applyPreset(port, name, extra = {}) {
   const preset = SEA_PRESETS.find((p) => p.name === name);
   const ws = new WebSocket(`ws://127.0.0.1:${port}/`, 'oceand.v1');
   const reply = await new Promise((resolve, reject) => {
@@ -72,7 +78,7 @@ async function applyPreset(port, name) {
     ws.on('message', (data, binary) => {
       if (binary) return;
       const m = JSON.parse(String(data));
-      if (m.type === 'hello') ws.send(JSON.stringify({ type: 'set', id: 1, params: preset.params }));
+      if (m.type === 'hello') ws.send(JSON.stringify({ type: 'set', id: 1, params: { ...preset.params, ...extra } }));
       if (m.id === 1) { clearTimeout(t); resolve(m); }
     });
     ws.on('error', reject);
@@ -106,7 +112,7 @@ async function shoot(ctx, port, s, file) {
   if (!s.hud && !s.panel) q.set('ui', '0'); // the sea alone
   await page.goto(`http://127.0.0.1:${port}/?${q}`);
   await waitFor(page, 'connected and rendering', () => window.oceand.connected && window.oceand.rendered > 2, null, 300000);
-  const version = s.preset ? await applyPreset(port, s.preset) : null;
+  const version = s.preset ? await applyPreset(port, s.preset, s.set) : null;
   if (version !== null) await waitFor(page, 'frames of the preset', (v) => window.oceand.frameParamsVersion >= v, version, 300000);
   // The page's own subscription (the foam field, the finer cascades) comes a
   // little after the first frames: a picture before it shows foam from the folds instead.
@@ -114,6 +120,11 @@ async function shoot(ctx, port, s, file) {
   // Let the HUD fill in, frames blend, and a few more frames render.
   const r0 = await page.evaluate(() => window.oceand.rendered);
   await waitFor(page, 'three more frames', (r) => window.oceand.rendered >= r + 3, r0, 600000);
+  if (s.sea) {
+    await page.evaluate((summary) => window.oceandTest.sea(summary), ndbcLikeSummary());
+    await page.click('[data-ui=sea-plot-toggle]');
+    await waitFor(page, 'two more frames', (r) => window.oceand.rendered >= r + 2, await page.evaluate(() => window.oceand.rendered), 600000);
+  }
   await sleep(600);
   await page.screenshot({ path: file, type: 'png' });
   // The surface's LOD in the picture: a server short of CPU, or a page slow to read, serves a

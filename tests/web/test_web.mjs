@@ -11,6 +11,7 @@ import { SEA_PRESETS } from '../../web/src/presets.js';
 import { checkName, tidyName } from '../../web/src/name.js';
 import { sunDirection } from '../../web/src/sky.js';
 import { glitterRatio, twilightRatio, skyColour } from './light.mjs';
+import { seaChecks } from './sea_checks.mjs';
 
 const { devices } = createRequire(path.join(ROOT, 'web', 'package.json'))('playwright-core');
 
@@ -1058,6 +1059,9 @@ try {
       assert(!r.overlap, 'the panel overlaps the HUD');
     } finally { await ctx.close(); }
   });
+
+  // What sea the page says it shows: the compass, the sea line, the polar plot (sea_checks.mjs).
+  await seaChecks({ check, browser, url, devices, pageErrors, assert, waitFor });
 
   if (side) await side; else for (const groups of SIDE) await sideGroups(browser, groups);
 

@@ -11,6 +11,7 @@ import { Bodies } from './bodies.js';
 import { SkyModel } from './sky.js';
 import { DEFAULT_HOUR } from './presets.js';
 import { CatchUp } from './catchup.js';
+import { SeaView } from './seaview.js';
 
 // How far seq may go back before the page takes it for a restarted stream: an edge adopts a new
 // count only when it is more than 2 s of ticks behind, and frames decoded out of order differ
@@ -158,6 +159,7 @@ const conn = new Connection(serverUrl(), {
   },
   onMessage(msg) {
     if (probe.onMessage(msg)) return; // the buoy marker's probe/query answers (probe.js)
+    seaFrom(msg);
     switch (msg.type) {
       case 'hello': {
         // A new session after an old one: did the sea change meanwhile? A lower parameters
@@ -178,6 +180,8 @@ const conn = new Connection(serverUrl(), {
         if (msg.subscription) panel.subscribed(msg.subscription);
         if (panel.me.name) conn.send({ type: 'name', name: panel.me.name }); // our display name, every session
         ocean.setWind(msg.params?.wind_speed, msg.params?.wind_direction);
+        seaView.setParams(msg.params);
+        seaView.applySea(msg.sea ?? null, { fresh: true }); // the measured sea's summary, or null
         lastHello = msg;
         if (msg.role === 'controller' && control.state === 'idle') control.start(); // only a controller sets
         // After a reconnect, ask again for what the user had chosen; the finer cascades,
@@ -260,6 +264,8 @@ function onParams(msg) {
   st.params = msg.params; st.paramsVersion = msg.params_version; st.paramsBy = msg.by ?? null;
   panel.update(msg);
   ocean.setWind(msg.params?.wind_speed, msg.params?.wind_direction);
+  seaView.setParams(msg.params);
+  if ('sea' in msg) seaView.applySea(msg.sea);
   // A new N: keep the foam grid at about 64×64.
   if ((msg.changed || []).includes('resolution') && lastHello) {
     const foam = foamSubscription(lastHello, msg.params.resolution);
@@ -278,6 +284,7 @@ const control = new Connection(controlUrl(serverUrl()), {
     if (state !== 'open') { st.controlId = null; panel.controlId = null; }
   },
   onMessage(msg) {
+    seaFrom(msg);
     switch (msg.type) {
       case 'hello':
         st.controlId = msg.client_id;
@@ -323,6 +330,11 @@ const panel = new Panel({
   },
 }, { compact: compact || query.get('panel') === 'closed' });
 hud.onToggle = (on) => { view.hud = on; panel.refreshView(); };
+// What sea this is, the compass, the measured spectrum's polar plot (seaview.js). Its summary
+// comes in hello and in the broadcasts (onParams); any other message that carries `sea` is a
+// broadcast of it too (applySea keeps the newest version of the copies both connections bring).
+const seaView = new SeaView({ gui: panel.gui, after: panel.folders.sea, compact });
+function seaFrom(msg) { if ('sea' in msg && msg.type !== 'hello' && msg.type !== 'params') seaView.applySea(msg.sea); }
 panel.onAnnounce = showToast;
 hud.onBanner = (shown) => { if (shown) toast.hidden = true; }; // the banner's place
 if (query.get('wireframe') === '1') { view.wireframe = true; ocean.wireframe = true; panel.refreshView(); }
@@ -510,6 +522,7 @@ function frameLoop() {
   stats.tick(now);
   catchUpTick(now);
   hud.draw(now, stats, st);
+  seaView.frame(camera);
   requestAnimationFrame(frameLoop);
 }
 
@@ -537,6 +550,7 @@ window.oceand = Object.freeze({
   get wireframe() { return ocean.wireframe; },
   get view() { return snapshot({ hour: view.hour, hud: hud.visible, compact, sky: sky.state }); },
   get flatNotice() { return st.flatNotice || null; },
+  get sea() { return snapshot(seaView.summary); }, // the measured sea's summary shown (null: parametric)
   get catchup() { return snapshot(st.catchup || null); }, // behind the live sea? (catchup.js)
   get degraded() { return snapshot(st.degraded || null); }, // the server's last `degraded` (active), or null
   get link() { return snapshot(st.link || null); },
@@ -593,6 +607,9 @@ if (query.has('test')) {
     drawnBodySeq() { return bodies.seq ?? null; }, // the tick whose records are drawn (the newer of the two frames)
     surfaceHeight(x, z, slot = null) { return ocean.surfaceHeight(x, z, slot); },
     send(msg) { return conn.send(msg); },
+    // A measured sea's summary as if the daemon had broadcast it (seaview.js), and its plot opened.
+    sea(summary, { fresh = false } = {}) { return seaView.applySea(summary, { fresh }); },
+    seaPlot(on) { seaView.openPlot(on); },
     // The foam field drawn: size, and the share of samples at >= 0.5 and > 0.1.
     foamStats() {
       const f = ocean.foam[1]?.image.data;

@@ -8,6 +8,7 @@
 import GUI from 'lil-gui';
 import { SEA_PRESETS, VIEW_PRESETS, matchSeaPreset } from './presets.js';
 import { checkName, tidyName, storedName, storeName, NAME_MAX_CHARS } from './name.js';
+import { windBearings } from './compass.js'; // the wind's bearings, as sailors name winds
 
 // Fallback labels and groups for the parameters of today's schema.
 export const PARAM_INFO = {
@@ -104,18 +105,6 @@ export function showCapacity(ctrl, capacity, nfields, temporal = true) {
   }
   note.hidden = capped === null;
   note.textContent = capped === null ? '' : `N ≥ ${capped} is off: over the server's memory cap of ${capacity.memory_cap_mb} MB (N ≤ ${capacity.max_resolution})`;
-}
-
-// Wind direction: the simulation's wind_direction is where the wind blows toward, in the
-// sea's x-z plane (0 = +x, 90 = +z); the world's north is +z and east -x (sky.js). Sailors
-// name a wind by where it comes from: bearings clockwise from north, and the 16 points.
-const POINTS = ['N', 'NNE', 'NE', 'ENE', 'E', 'ESE', 'SE', 'SSE', 'S', 'SSW', 'SW', 'WSW', 'W', 'WNW', 'NW', 'NNW'];
-export function windBearings(towardDeg) {
-  const a = (towardDeg || 0) * Math.PI / 180;
-  const toward = ((Math.atan2(-Math.cos(a), Math.sin(a)) * 180 / Math.PI) + 360) % 360;
-  const from = (toward + 180) % 360;
-  const name = (b) => POINTS[Math.round(b / 22.5) % 16];
-  return { from, toward, fromName: name(from), towardName: name(toward) };
 }
 
 // A value typed into a number field that the parameter's range does not hold: the reason,
