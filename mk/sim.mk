@@ -144,7 +144,7 @@ test-sea-valgrind: $(BUILD)/test_sea
 #   make test-wakes             Kelvin angle, transverse wavelength, the Fr^-1 narrowing,
 #                               finite depth, a drop's ring, stability, regions (tests/test_wakes.c)
 #   make test-wakes-asan        the same with ASan+UBSan, a reduced run (OCEAN_TEST_QUICK=1)
-#   make test-wakes-valgrind    a reduced run under valgrind
+#   make test-wakes-valgrind    a reduced run under valgrind: the groups that are not large patterns
 #   make bench-wakes            the layer's step for 8 moving boats at 30 Hz, JSON lines
 BINS    += $(BUILD)/test_wakes $(BUILD)/bench_wakes
 TESTS   += test-wakes test-wakes-asan test-wakes-valgrind
@@ -163,7 +163,7 @@ test-wakes: $(BUILD)/test_wakes
 test-wakes-asan: $(BUILD)/san/test_wakes
 	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 OCEAN_TEST_QUICK=1 $(BUILD)/san/test_wakes
 test-wakes-valgrind: $(BUILD)/test_wakes
-	OCEAN_TEST_QUICK=1 valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
+	OCEAN_TEST_QUICK=1 OCEAN_TEST_ONLY=test_energy,test_circling,test_regions,test_foam,test_api valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
 	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_wakes
 bench-wakes: $(BUILD)/bench_wakes
 	$(BUILD)/bench_wakes
