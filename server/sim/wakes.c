@@ -36,7 +36,7 @@
 #define DEEP_KD  20.0   /* tanh(kD) = 1 above this */
 #define CUT      1.6    /* the footprint is drawn out to this many lengths/beams from its centre */
 #define HOLD     0.8    /* a region holds a body while its footprint to HOLD lengths is inside the interior */
-#define LEAD     0.35   /* a lone moving body sits this share of the interior's half ahead of the centre */
+#define LEAD     0.5    /* a moving body sits this share of the interior's half ahead of the centre (no wave runs ahead of it) */
 #define FOAM_U0  1.5    /* m/s: slower bodies leave no stern foam */
 #define FOAM_U1  6.0    /* m/s above FOAM_U0 for full stern foam */
 #define FOAM_S0  0.25   /* wave slope where crests begin to break into foam */
@@ -72,7 +72,7 @@ struct wakes {
     int nreg;
     uint32_t next_region;
     double t;
-    struct member *mem;       /* body -> region, ascending id */
+    struct member *mem, *mem2; /* body -> region, ascending id; the next step's (swapped in) */
     int nmem, capmem;
     struct order *ord;
     int capord;
@@ -460,6 +460,7 @@ void wakes_free(struct wakes *w)
         fftwf_destroy_plan(w->c2r);
     ocean_fftw_unlock();
     free(w->mem);
+    free(w->mem2);
     free(w->ord);
     free(w);
 }
@@ -564,13 +565,18 @@ int wakes_step(struct wakes *w, double dt, int n, const struct wake_source *src,
             return -1;
         w->ord = o;
         w->capord = cap;
-        struct member *m = malloc((size_t)cap * sizeof *m);
-        if (!m)
+        struct member *m = malloc((size_t)cap * sizeof *m), *m2 = malloc((size_t)cap * sizeof *m2);
+        if (!m || !m2) {
+            free(m);
+            free(m2);
             return -1;
+        }
         if (w->nmem)
             memcpy(m, w->mem, (size_t)w->nmem * sizeof *m);
         free(w->mem);
+        free(w->mem2);
         w->mem = m;
+        w->mem2 = m2;
         w->capmem = cap;
     }
     for (int i = 0; i < n; i++)
@@ -593,14 +599,7 @@ int wakes_step(struct wakes *w, double dt, int n, const struct wake_source *src,
     w->src = src;
     w->dt = dt;
     int nun = 0, nmem = 0;
-    struct member *newmem = w->nmem ? NULL : w->mem; /* written in place once the old table is read */
-    struct member *scratch = NULL;
-    if (n > 0 && w->nmem) {
-        scratch = malloc((size_t)n * sizeof *scratch);
-        if (!scratch)
-            return -1;
-        newmem = scratch;
-    }
+    struct member *newmem = w->mem2; /* the old table is read while the new one is written */
     for (int k = 0; k < n; k++) {
         const struct wake_source *s = &src[w->ord[k].i];
         struct region *r = NULL;
@@ -646,10 +645,8 @@ int wakes_step(struct wakes *w, double dt, int n, const struct wake_source *src,
         r->src[r->nsrc++] = w->ord[k].i;
         newmem[nmem++] = (struct member){s->id, r->id};
     }
-    if (scratch) {
-        memcpy(w->mem, scratch, (size_t)nmem * sizeof *scratch);
-        free(scratch);
-    }
+    w->mem2 = w->mem;
+    w->mem = newmem;
     w->nmem = nmem;
 
     /* Regions follow their bodies; idle ones linger, then go. */
