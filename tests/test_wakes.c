@@ -521,7 +521,7 @@ static void test_api(void)
     struct { struct wakes_options o; const char *what; } bad[] = {
         {{.n = 100}, "n 100"}, {{.n = 16}, "n 16"}, {{.depth = -1}, "depth -1"}, {{.depth = NAN}, "depth NaN"},
         {{.cell = 0.01}, "cell 0.01"}, {{.n = 64, .sponge = 2}, "sponge 2"}, {{.max_regions = 65}, "max_regions 65"},
-        {{.threads = -1}, "threads -1"},
+        {{.threads = -1}, "threads -1"}, {{.plan_rigor = 2}, "plan_rigor 2"},
     };
     for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
         char err[96] = "";

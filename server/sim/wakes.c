@@ -414,6 +414,8 @@ struct wakes *wakes_new(const struct wakes_options *opt, char *err, size_t errle
     if (o.threads < 1 || o.threads > 64)
         return fail(err, errlen, "threads: must be 1..64"), NULL;
     o.displacement = o.displacement != 0;
+    if (o.plan_rigor != 0 && o.plan_rigor != 1)
+        return fail(err, errlen, "plan_rigor: must be 0 (estimate) or 1 (measure)"), NULL;
 
     struct wakes *w = calloc(1, sizeof *w);
     if (!w)
@@ -431,8 +433,9 @@ struct wakes *wakes_new(const struct wakes_options *opt, char *err, size_t errle
         ocean_fftw_init();
         ocean_fftw_lock();
         fftwf_plan_with_nthreads(1);
-        w->r2c = fftwf_plan_dft_r2c_2d(o.n, o.n, a, b, FFTW_ESTIMATE);
-        w->c2r = fftwf_plan_dft_c2r_2d(o.n, o.n, b, a, FFTW_ESTIMATE | FFTW_DESTROY_INPUT);
+        unsigned rigor = o.plan_rigor ? FFTW_MEASURE : FFTW_ESTIMATE;
+        w->r2c = fftwf_plan_dft_r2c_2d(o.n, o.n, a, b, rigor);
+        w->c2r = fftwf_plan_dft_c2r_2d(o.n, o.n, b, a, rigor | FFTW_DESTROY_INPUT);
         ocean_fftw_unlock();
     }
     fftwf_free(a);

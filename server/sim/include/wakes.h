@@ -40,6 +40,8 @@ struct wakes_options {
     int max_regions; /* 1..WAKES_MAX_REGIONS; 0 = 16 */
     int threads;     /* worker threads for a step (regions run in parallel), >= 1; 0 = 1 */
     int displacement; /* nonzero: also keep the horizontal displacement (two more transforms a step) */
+    int plan_rigor;  /* 0 = FFTW_ESTIMATE (tests: quick, deterministic plans), 1 = FFTW_MEASURE
+                      * (a daemon: planned once at wakes_new, about a second, faster steps) */
 };
 
 /* One body as the layer sees it in a step: where it is at the end of the
