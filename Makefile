@@ -74,7 +74,8 @@ TESTS_PAIRED     := test-fuzz test-proto-valgrind test-sim-asan test-query-valgr
                     test-daemon-valgrind test-sim test-cluster-valgrind test-proto-asan test-query \
                     test-cluster test-proto test-proto-js test-sim-tsan test-query-asan test-layout test-wording \
                     test-bodies test-bodies-asan test-bodies-valgrind \
-                    test-sea test-sea-asan test-sea-valgrind test-sea-readers
+                    test-sea test-sea-asan test-sea-valgrind test-sea-readers \
+                    test-wakes test-wakes-asan test-wakes-valgrind
 TEST_LOGS        := $(BUILD)/test-logs
 test: deps
 	@$(MAKE) --no-print-directory -j$$(nproc) build-all
@@ -86,7 +87,7 @@ test: deps
 # Every binary a suite runs that build-all does not make (sanitizer, TSan and
 # fuzz flavours, test helpers). One missing here is still built by its suite.
 TEST_BINS = $(DAEMON_TEST_DEPS) $(FUZZ_BINS) $(BUILD)/tsan/test_ocean \
-            $(addprefix $(BUILD)/san/,oceand test_control test_cluster_msg test_cluster_nats test_proto test_ocean test_query test_bodies test_sea)
+            $(addprefix $(BUILD)/san/,oceand test_control test_cluster_msg test_cluster_nats test_proto test_ocean test_query test_bodies test_sea test_wakes)
 .PHONY: test-bins
 test-bins: $(TEST_BINS)
 

@@ -140,3 +140,30 @@ test-sea-asan: $(BUILD)/san/test_sea
 test-sea-valgrind: $(BUILD)/test_sea
 	OCEAN_TEST_QUICK=1 valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
 	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_sea
+# Wakes (server/sim/wakes.c): the layer of dynamic waves bodies make, against theory.
+#   make test-wakes             Kelvin angle, transverse wavelength, the Fr^-1 narrowing,
+#                               finite depth, a drop's ring, stability, regions (tests/test_wakes.c)
+#   make test-wakes-asan        the same with ASan+UBSan, a reduced run (OCEAN_TEST_QUICK=1)
+#   make test-wakes-valgrind    a reduced run under valgrind: the groups that are not large patterns
+#   make bench-wakes            the layer's step for 8 moving boats at 30 Hz, JSON lines
+BINS    += $(BUILD)/test_wakes $(BUILD)/bench_wakes
+TESTS   += test-wakes test-wakes-asan test-wakes-valgrind
+BENCHES += bench-wakes
+$(BUILD)/obj/tests/test_wakes.o $(BUILD)/san/tests/test_wakes.o $(BUILD)/obj/bench/bench_wakes.o: \
+  INC := -Iserver/sim/include -Itests
+$(BUILD)/test_wakes: $(BUILD)/obj/tests/test_wakes.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/san/test_wakes: $(BUILD)/san/tests/test_wakes.o $(OCEAN_SAN_LIB)
+	$(CC) $(CFLAGS) $(SAN_FLAGS) -o $@ $^ $(PKG_LIBS)
+$(BUILD)/bench_wakes: $(BUILD)/obj/bench/bench_wakes.o $(OCEAN_LIB)
+	$(CC) $(CFLAGS) -o $@ $^ $(PKG_LIBS)
+.PHONY: test-wakes test-wakes-asan test-wakes-valgrind bench-wakes
+test-wakes: $(BUILD)/test_wakes
+	$(BUILD)/test_wakes
+test-wakes-asan: $(BUILD)/san/test_wakes
+	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 OCEAN_TEST_QUICK=1 $(BUILD)/san/test_wakes
+test-wakes-valgrind: $(BUILD)/test_wakes
+	OCEAN_TEST_QUICK=1 OCEAN_TEST_ONLY=test_energy,test_circling,test_regions,test_foam,test_api valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
+	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_wakes
+bench-wakes: $(BUILD)/bench_wakes
+	$(BUILD)/bench_wakes
