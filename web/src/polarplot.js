@@ -36,6 +36,8 @@ function sectors(dirs) {
   }
   return out;
 }
+// A measured sea's own limits (docs/simulation.md): more than that is no summary of one.
+const MAX_BANDS = 128, MAX_DIRECTIONS = 72;
 const NICE_RIM = [0.1, 0.125, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5, 0.6, 0.8, 1, 1.5, 2];
 const RING_PERIODS = [30, 20, 10, 8, 6, 5, 4, 3, 2.5, 2, 1.5, 1, 0.5]; // round periods, the roundest first when crowded
 
@@ -44,6 +46,7 @@ const RING_PERIODS = [30, 20, 10, 8, 6, 5, 4, 3, 2.5, 2, 1.5, 1, 0.5]; // round 
 export function polarModel(polar) {
   const f = polar?.f_hz, d = polar?.dir_from_deg, e = polar?.e;
   if (!Array.isArray(f) || !Array.isArray(d) || !Array.isArray(e) || !f.length || !d.length || e.length !== f.length) return null;
+  if (f.length > MAX_BANDS || d.length > MAX_DIRECTIONS) return null; // (the daemon sends at most 32 x 36)
   if (!f.every((v, i) => Number.isFinite(v) && v > 0 && (i === 0 || v > f[i - 1])) || !d.every(Number.isFinite)) return null;
   let peak = 0, pi = 0, pj = 0;
   for (let i = 0; i < f.length; i++) {
