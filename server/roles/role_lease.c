@@ -144,7 +144,7 @@ static void step_down(struct role_lease *ls, const char *why)
 }
 
 int role_lease_persist(struct role_lease *ls, const struct ocean_params *p, uint32_t version, double sim_time,
-                       char *err, size_t errlen)
+                       const struct sea_spectrum *sea, char *err, size_t errlen)
 {
     pthread_mutex_lock(&ls->wlock);
     int rc = CL_OK;

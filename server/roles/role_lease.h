@@ -44,6 +44,6 @@ const char *role_lease_state_name(enum lease_state s);
  * state, before the change is applied. 0, or -1 with err: not connected,
  * or the lease was lost (this sim steps down). Solo and standby: 0. */
 int role_lease_persist(struct role_lease *ls, const struct ocean_params *p, uint32_t version, double sim_time,
-                       char *err, size_t errlen);
+                       const struct sea_spectrum *sea, char *err, size_t errlen);
 
 #endif
