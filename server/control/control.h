@@ -198,6 +198,8 @@ struct hello_info {
     const struct subscription *sub;
     const struct capacity_info *capacity; /* NULL = not announced */
     int ease_ticks;                       /* amplitude-only changes ease in over this many ticks */
+    const char *sea;                      /* the measured sea's summary (JSON text, sea_summary_json), or NULL:
+                                           * "sea": null */
 };
 cJSON *control_hello_msg(const struct hello_info *h);
 

@@ -1,5 +1,5 @@
 /* sea_msg.c — the sea document and its summary as JSON (sea_msg.h,
- * PROTOCOL.md §7.9). */
+ * PROTOCOL.md §7.8). */
 #include "sea_msg.h"
 #include "control_internal.h"
 

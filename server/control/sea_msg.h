@@ -1,4 +1,4 @@
-/* sea_msg.h — the JSON of measured seas (proto/PROTOCOL.md §7.9): the sea
+/* sea_msg.h — the JSON of measured seas (proto/PROTOCOL.md §7.8): the sea
  * document into the library's struct sea_spectrum and back (the `sea`
  * message, the state file, the cluster record), and the compact summary
  * `hello` and `params` carry. Pure like control.c (no threads, no globals):
@@ -13,7 +13,7 @@
 #include "control.h"
 #include "sea_spectrum.h"
 
-/* The summary's polar grid, at most (PROTOCOL.md §7.9): bands x directions. */
+/* The summary's polar grid, at most (PROTOCOL.md §7.8): bands x directions. */
 #define SEA_POLAR_BANDS 32
 #define SEA_POLAR_DIRECTIONS 36
 

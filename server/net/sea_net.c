@@ -1,4 +1,4 @@
-/* sea_net.c — a measured sea over the wire (PROTOCOL.md §7.9): the `sea`
+/* sea_net.c — a measured sea over the wire (PROTOCOL.md §7.8): the `sea`
  * request checked against the view and handed to the sim like a set (its
  * parameters: spectrum "measured" and the sea's depth), and its summary in
  * hello and params. */

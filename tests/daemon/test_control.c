@@ -297,7 +297,7 @@ static void test_builders(void)
     params_defaults(&p);
     struct subscription sub;
     subscription_default(&sub, 30);
-    struct hello_info h = { "c1", true, &p, 3, 30, 64, &sub, NULL, 8 };
+    struct hello_info h = { "c1", true, &p, 3, 30, 64, &sub, NULL, 8, NULL };
     char *s = control_print(control_hello_msg(&h));
     cJSON *j = cJSON_Parse(s);
     CHECK(j && cJSON_GetArraySize(cJSON_GetObjectItem(j, "schema")) == (int)param_count, "hello schema");
@@ -577,7 +577,7 @@ static void test_hello_matches_vector(void)
     params_defaults(&p);
     struct subscription sub;
     subscription_default(&sub, 30);
-    struct hello_info h = { "c7-k3qf", true, &p, 12, 30, 64, &sub, NULL, 8 };
+    struct hello_info h = { "c7-k3qf", true, &p, 12, 30, 64, &sub, NULL, 8, NULL };
     cJSON *have = control_hello_msg(&h);
     strip_descriptions(want);
     strip_descriptions(have);

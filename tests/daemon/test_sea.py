@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Measured seas against a real daemon (PROTOCOL.md §7.9): the `sea` message
+"""Measured seas against a real daemon (PROTOCOL.md §7.8): the `sea` message
 with a fixture of tests/sea (read by the project's own reader, ocean-tap sea
 --print), the surface it streams measured against the source (Hs, the peak
 band, the mean direction and the spread, decoded from the frames with
