@@ -245,9 +245,8 @@ int main(int argc, char **argv)
         return 1;
     }
     struct sim *sim = sim_start(&params, &sc, err, sizeof err);
-    free(sea); /* sim_start and the saver copied it */
-    sea = NULL;
     if (!sim) {
+        free(sea);
         free(restore);
         state_bodies_free(&saved);
         LOGE("simulation: %s", err);
@@ -269,7 +268,10 @@ int main(int argc, char **argv)
     net_attach_saver(net, &saver);
     net_attach_sim(net, sim);
     net_attach_queries(net, queries);
-    if (role_sim_attach(cluster, sim, &params, res.params_version) != 0)
+    int attached = role_sim_attach(cluster, sim, &params, res.params_version, sea);
+    free(sea); /* sim_start, the saver and the lease copied it */
+    sea = NULL;
+    if (attached != 0)
         LOGW("cluster: no lease thread: this simulation stays a standby");
 
     LOGI("oceand listening on %s://%s:%d/ (N=%d, %g Hz, web root %s)", dc.tls_cert[0] ? "https" : "http", dc.bind, net_port(net),

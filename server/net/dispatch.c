@@ -263,6 +263,12 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
 {
     n->applied = a->params; /* in force after this set, applied or refused */
     n->applied_version = a->version;
+    bool sea = a->status == SIM_SET_APPLIED && a->sea_summary;
+    if (sea) { /* a new sea, or a new grid under it: the summary from now on */
+        free(n->sea_summary);
+        n->sea_summary = a->sea_summary;
+        ((struct sim_set *)a)->sea_summary = NULL; /* n has it now */
+    }
     if (a->adopt) /* a take-over (sim_adopt): nobody asked; edges ask hello of the new sim */
         return;
     struct request *r = NULL;
@@ -278,12 +284,6 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
     if (r->mask & params_mask(PARAM_REPLAN))
         n->replans_in_flight--;
     n->seas_in_flight -= r->sea;
-    bool sea = a->status == SIM_SET_APPLIED && a->sea_summary;
-    if (sea) {
-        free(n->sea_summary);
-        n->sea_summary = a->sea_summary;
-        ((struct sim_set *)a)->sea_summary = NULL; /* n has it now */
-    }
     if (a->status == SIM_SET_APPLIED) {
         if (a->changed & params_mask(PARAM_REPLAN)) {
             n->trim_due = mono_now() + TRIM_DELAY_S;

@@ -353,9 +353,10 @@ static int sim_persist(void *user, const struct ocean_params *p, uint32_t versio
     return r->file_persist ? r->file_persist(r->file_user, p, version, sim_time, sea, err, errlen) : 0;
 }
 
-int role_sim_attach(struct role_sim *r, struct sim *sim, const struct ocean_params *p, uint32_t version)
+int role_sim_attach(struct role_sim *r, struct sim *sim, const struct ocean_params *p, uint32_t version,
+                    const struct sea_spectrum *sea)
 {
-    return r ? role_lease_start(r->lease, sim, p, version) : 0;
+    return r ? role_lease_start(r->lease, sim, p, version, sea) : 0;
 }
 
 void role_sim_detach(struct role_sim *r)

@@ -63,11 +63,17 @@ double sim_time_now(struct sim *s) { return atomic_load(&s->now_time); }
 bool sim_take_trim(struct sim *s) { return atomic_exchange(&s->trim_wanted, false); }
 
 int sim_adopt(struct sim *s, const struct ocean_params *p, uint32_t version, double sim_time, uint64_t wall_us,
-              uint64_t seq)
+              uint64_t seq, const struct sea_spectrum *sea)
 {
     struct sim_set *set = calloc(1, sizeof *set);
     if (!set)
         return -1;
+    if (sea && !(set->sea = malloc(sizeof *set->sea))) {
+        free(set);
+        return -1;
+    }
+    if (sea)
+        *set->sea = *sea;
     set->values = *p;
     set->mask = PARAM_COUNT >= 64 ? ~0ull : (1ull << PARAM_COUNT) - 1; /* every parameter */
     set->adopt = true;

@@ -211,8 +211,9 @@ char *sim_sea_summary(struct sim *s);
  * clock extrapolated from (sim_time, seq) at wall_us; seq never goes back.
  * Not persisted (it comes from the durable record). Answered with tag 0
  * (sim_take_answers). Any thread; returns at once; -1 out of memory. */
+/* sea: the measured sea of that state when it differs from the one in force (copied), or NULL. */
 int sim_adopt(struct sim *s, const struct ocean_params *p, uint32_t version, double sim_time, uint64_t wall_us,
-              uint64_t seq);
+              uint64_t seq, const struct sea_spectrum *sea);
 /* Whether the pipeline freed memory (temporal streams) since the last call:
  * the lws thread then returns the free pages to the system (malloc_trim). */
 bool sim_take_trim(struct sim *s);
