@@ -339,7 +339,37 @@ def test_sea_token_and_restart():
         check("sea_negative" in d.read_log(), "the refusal is not logged with its code")
 
 
-def check_summary_2d(s, doc, version):
+@test
+def test_sea_forecast_plays_as_a_timeline(d):
+    """python -m oceand.sea FILE --send URL: the WAVEWATCH III forecast (3 times, 6 h apart)
+    at 6 h a second: each time arrives as a change of the sea, in order, and the last stays."""
+    docs = read_sea(WW3)
+
+    async def run():
+        w, _ = await connect(d, url=d.url + "?frames=0")
+        env = dict(os.environ, PYTHONPATH=os.path.join(ROOT, "proto", "python"))
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "oceand.sea", WW3, "--send", d.url, "--speed", "21600", "--tail", "f-5",
+            env=env, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+        seen = []
+        while len(seen) < len(docs):
+            m = await recv_json(w, lambda x: x["type"] == "params" and x.get("sea"), timeout=30)
+            seen.append(m["sea"])
+        out, err = await asyncio.wait_for(proc.communicate(), 30)
+        check(proc.returncode == 0, "python -m oceand.sea --send: %d\n%s" % (proc.returncode, err.decode()))
+        check(err.decode().count("sent WW3") == len(docs), "its report:\n%s" % err.decode())
+        check([s["time"] for s in seen] == [x["time"] for x in docs], "the times in order: %r" % [s["time"] for s in seen])
+        check([s["version"] for s in seen] == sorted(s["version"] for s in seen), "versions %r" % seen)
+        check(all(s["tail"] == "f-5" for s in seen), "the tail asked for: %r" % [s["tail"] for s in seen])
+        c, hello = await connect(d, url=d.url + "?frames=0")
+        check(hello["sea"] == seen[-1], "hello after the forecast: %r" % (hello["sea"] and hello["sea"]["time"]))
+        check_summary_2d(hello["sea"], docs[-1], hello["sea"]["version"], want_dir=225)
+        await c.close()
+        await w.close()
+    asyncio.run(run())
+
+
+def check_summary_2d(s, doc, version, want_dir=270):
     check(s["version"] == version and s["source"] == doc["source"] and s["time"] == doc["time"], "summary %r" % s)
     e = np.array(doc["energy"])
     dirs = np.sort(np.array(doc["direction"]))
@@ -347,7 +377,8 @@ def check_summary_2d(s, doc, version):
     lo, hi = cells(doc)
     m0 = float((e.sum(axis=1) * dth * (hi - lo)).sum())
     check(abs(s["hs_m"] - 4 * math.sqrt(m0)) < 0.01, "hs_m %r vs %.3f" % (s["hs_m"], 4 * math.sqrt(m0)))
-    check(abs(((s["dir_from_deg"] - 270) + 180) % 360 - 180) < 3, "the 06:00 swell from %r" % s["dir_from_deg"])
+    check(abs(((s["dir_from_deg"] - want_dir) + 180) % 360 - 180) < 3, "the peak from %r, want %r" % (s["dir_from_deg"],
+                                                                                                    want_dir))
 
 
 def main():
