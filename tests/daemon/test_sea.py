@@ -300,15 +300,24 @@ def test_sea_token_and_restart():
     state = os.path.join(tmp, "state.json")
     doc = read_sea(WW3)[1]   # the forecast's 06:00 sea: a spectrum2d document
     with running(td.Daemon, "--control-token", "s3cret", state_file=state, tmpdir=tmp, remove=False) as d:
+        # ocean-tap sea SOURCE URL: the forecast's 06:00 time, refused without the token, then sent with it.
+        def tap_send(*extra):
+            return subprocess.run([TAP, "sea", WW3, d.url, "--time", "2026-12-02T06:00Z", *extra],
+                                  capture_output=True, text=True, timeout=60)
+        r = tap_send()
+        check(r.returncode == 8 and "forbidden" in r.stderr, "ocean-tap sea without the token: %d %s" %
+              (r.returncode, r.stderr))
+        r = tap_send("--token", "s3cret", "--tail", "wind")
+        check(r.returncode == 0 and "sent WW3 46026 2026-12-02T06:00:00Z" in r.stderr,
+              "ocean-tap sea with the token: %d %s" % (r.returncode, r.stderr))
+
         async def first():
             a, hello = await connect(d, url=d.url + "?frames=0")
-            m = await ask(a, {"type": "sea", "id": 1, "sea": doc})
-            check(m["type"] == "error" and m["code"] == "forbidden", "a sea without the token: %r" % m)
-            m = await ask(a, {"type": "sea", "id": 2, "sea": doc, "token": "s3cret"}, timeout=20)
-            check(m["type"] == "params", "a sea with the token: %r" % m)
-            check_summary_2d(m["sea"], doc, m["params_version"])
+            check(hello["params"]["spectrum"] == "measured" and hello["sea"]["tail"] == "wind", "after ocean-tap: %r" %
+                  hello["params"]["spectrum"])
+            check_summary_2d(hello["sea"], doc, hello["params_version"])
             await a.close()
-            return m["sea"], m["params_version"]
+            return hello["sea"], hello["params_version"]
         summary, version = asyncio.run(first())
     saved = json.load(open(state))
     check(saved.get("sea", {}).get("source") == doc["source"] and saved["params"]["spectrum"] == "measured",
