@@ -329,6 +329,8 @@ def test_sea_token_and_restart():
             check(s is not None and s["source"] == summary["source"] and s["time"] == summary["time"] and
                   s["hs_m"] == summary["hs_m"] and s["polar"] == summary["polar"],
                   "after the restart the sea is %r" % (s and {k: s[k] for k in ("source", "time", "hs_m")}))
+            m = await ask(c, {"type": "render", "id": 5, "start": 1, "fps": 10, "frames": 2, "fields": ["height"]})
+            check(m["type"] == "error" and m["code"] == "invalid", "a render of a measured sea: %r" % m)
             check(hello["params"]["spectrum"] == "measured" and hello["params_version"] == version,
                   "after the restart: %s, version %d (was %d)" % (hello["params"]["spectrum"],
                                                                   hello["params_version"], version))
