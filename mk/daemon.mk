@@ -52,7 +52,7 @@ DAEMON_TEST_DEPS := $(BUILD)/test_control $(BUILD)/frame_check $(BUILD)/test_pro
 VALGRIND ?= valgrind -q --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite
 
 .PHONY: test-daemon test-daemon-asan test-daemon-valgrind bench-load bench-capacity bench-layer-flood run
-test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
+test-daemon: $(BUILD)/oceand $(BUILD)/ocean-tap $(DAEMON_TEST_DEPS)
 	$(BUILD)/test_control
 	$(BUILD)/test_seq_guard
 	$(BUILD)/test_frame_want
@@ -62,9 +62,15 @@ test-daemon: $(BUILD)/oceand $(DAEMON_TEST_DEPS)
 	/usr/bin/python3 tests/daemon/test_query.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check --query-ref $(BUILD)/query_ref
 	/usr/bin/python3 tests/daemon/test_render.py --oceand $(BUILD)/oceand --frame-check $(BUILD)/frame_check
 	/usr/bin/python3 tests/daemon/test_bodies.py --oceand $(BUILD)/oceand
+	/usr/bin/python3 tests/daemon/test_sea.py --oceand $(BUILD)/oceand --tap $(BUILD)/ocean-tap
+
+# The measured-sea part of test-daemon alone (~15 s): the `sea` message against a real daemon.
+.PHONY: test-daemon-sea
+test-daemon-sea: $(BUILD)/oceand $(BUILD)/ocean-tap
+	/usr/bin/python3 tests/daemon/test_sea.py --oceand $(BUILD)/oceand --tap $(BUILD)/ocean-tap
 
 # Same integration tests against an ASan+UBSan build (slower: frames at a lower N).
-test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(DAEMON_TEST_DEPS)
+test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(BUILD)/ocean-tap $(DAEMON_TEST_DEPS)
 	$(BUILD)/san/test_control
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/daemon/test_daemon.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check --sanitized
@@ -77,6 +83,8 @@ test-daemon-asan: $(BUILD)/san/oceand $(BUILD)/san/test_control $(DAEMON_TEST_DE
 	  /usr/bin/python3 tests/daemon/test_render.py --oceand $(BUILD)/san/oceand --frame-check $(BUILD)/frame_check --sanitized
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  /usr/bin/python3 tests/daemon/test_bodies.py --oceand $(BUILD)/san/oceand --sanitized
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  /usr/bin/python3 tests/daemon/test_sea.py --oceand $(BUILD)/san/oceand --tap $(BUILD)/ocean-tap --sanitized
 
 test-daemon-valgrind: $(BUILD)/test_control
 	$(VALGRIND) $(BUILD)/test_control

@@ -25,6 +25,8 @@ FUZZ_TARGETS += grid
 FUZZ_TARGETS += sea
 # ocean-tap's readers of measured seas (tools/sea_*.c): text from any server a URL names.
 FUZZ_TARGETS += sea_ndbc sea_ww3 sea_cdip
+# The `sea` message's document (server/control/sea_msg.c): JSON into the library's sea and back.
+FUZZ_TARGETS += sea_msg
 # Floating bodies: launch/steer/remove/claim (body_msg.c) and the BODY section of a frame header.
 FUZZ_TARGETS += bodies
 FUZZ_TARGETS += cluster_bodies
@@ -43,6 +45,7 @@ FUZZ_SRCS_grid    = fuzz/fuzz_grid.c $(wildcard proto/c/*.c)
 FUZZ_SRCS_config  = fuzz/fuzz_config.c $(wildcard server/config/*.c server/control/*.c server/base/*.c) \
                     $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_sea     = fuzz/fuzz_sea.c $(SIM_SRCS_FOR_FUZZ)
+FUZZ_SRCS_sea_msg = fuzz/fuzz_sea_msg.c $(wildcard server/control/*.c) $(SIM_SRCS_FOR_FUZZ)
 FUZZ_SRCS_bodies  = fuzz/fuzz_bodies.c $(wildcard server/control/*.c) $(wildcard proto/c/*.c) $(SIM_SRCS_FOR_FUZZ)
 # What a cluster reads of the bodies: the edge's BODY_SECTION check, the record's "bodies".
 FUZZ_SRCS_cluster_bodies = fuzz/fuzz_cluster_bodies.c server/roles/edge_bodies.c server/config/state_bodies.c \

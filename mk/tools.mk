@@ -22,7 +22,7 @@ UNITDIR    = $(PREFIX)/lib/systemd/system
 WEB_BUILD  := $(BUILD)/web
 
 # ocean-tap, split by verb (tools/tap.h says which file holds what).
-TAP_OBJS := $(addprefix $(BUILD)/obj/tools/,tap_main.o tap_session.o tap_watch.o tap_query.o tap_bake.o tap_body.o \
+TAP_OBJS := $(addprefix $(BUILD)/obj/tools/,tap_main.o tap_session.o tap_watch.o tap_query.o tap_bake.o tap_body.o tap_sea_send.o \
               tap_sea.o tap_write.o tap_exr.o tap_surface.o \
               sea_doc.o sea_ndbc.o sea_ww3.o sea_cdip.o sea_fetch.o)
 # OpenEXR 3.1 (Debian libopenexr-dev) for --format exr: its C API

@@ -129,6 +129,21 @@ int main(int argc, char **argv)
     log_route_lws();
     if (res.state_loaded)
         LOGI("restored parameters from %s (version %u, t=%.2f s)", dc.state_file, res.params_version, res.sim_time);
+    /* The measured sea saved with them, through the `sea` message's own check. */
+    struct sea_spectrum *sea = res.state_loaded ? malloc(sizeof *sea) : NULL;
+    int sea_rc = sea ? state_load_sea(dc.state_file, sea, err, sizeof err) : 0;
+    if (sea_rc < 0)
+        LOGW("%s: %s; starting without it", dc.state_file, err);
+    if (sea_rc <= 0) {
+        free(sea);
+        sea = NULL;
+    } else {
+        LOGI("restored the measured sea %s %s", sea->source, sea->time);
+    }
+    if (params.spectrum == SPECTRUM_MEASURED && !sea) {
+        LOGW("spectrum measured without a measured sea: starting with jonswap");
+        params.spectrum = SPECTRUM_JONSWAP;
+    }
 
     if (dc.wisdom_file[0] && ensure_parent_dir(dc.wisdom_file) != 0) {
         LOGW("no FFTW wisdom cache: cannot create the folder of %s: %s", dc.wisdom_file, strerror(errno));
@@ -138,6 +153,7 @@ int main(int argc, char **argv)
     struct net *net = net_create(&dc, &params, res.params_version, err, sizeof err);
     if (!net) {
         LOGE("%s", err);
+        free(sea);
         return 1;
     }
     install_signals();
@@ -151,11 +167,14 @@ int main(int argc, char **argv)
     if (!renders) {
         LOGE("render workers: %s", err);
         net_destroy(net);
+        free(sea);
         return 1;
     }
     net_attach_renders(net, renders);
-    if (strcmp(dc.role, "edge") == 0)
+    if (strcmp(dc.role, "edge") == 0) {
+        free(sea);
         return run_edge(&dc, net, renders); /* no simulation here: no point queries either */
+    }
     struct query_config qc = {
         .threads = dc.query_threads, .window = dc.query_window, .budget = dc.query_budget,
         .queue = dc.query_queue, .probe_max_points = dc.probe_max_points, .probe_max_total = dc.probe_max_total,
@@ -167,6 +186,7 @@ int main(int argc, char **argv)
         net_attach_renders(net, NULL);
         render_service_free(renders);
         net_destroy(net);
+        free(sea);
         return 1;
     }
     struct sim_config sc = {
@@ -193,7 +213,8 @@ int main(int argc, char **argv)
      * and acknowledged (sim_config.persist); role_sim_open may add the
      * JetStream copy on top. */
     struct state_saver saver;
-    state_saver_init(&saver, dc.state_file, &params, res.params_version);
+    state_saver_init(&saver, dc.state_file, &params, res.params_version, sea);
+    sc.sea = sea;
     sc.persist = state_saver_persist;
     sc.persist_user = &saver;
     /* The floating bodies saved with the sea: all of them or none. */
@@ -220,10 +241,12 @@ int main(int argc, char **argv)
         render_service_free(renders);
         net_destroy(net);
         state_saver_destroy(&saver);
+        free(sea);
         return 1;
     }
     struct sim *sim = sim_start(&params, &sc, err, sizeof err);
     if (!sim) {
+        free(sea);
         free(restore);
         state_bodies_free(&saved);
         LOGE("simulation: %s", err);
@@ -245,7 +268,10 @@ int main(int argc, char **argv)
     net_attach_saver(net, &saver);
     net_attach_sim(net, sim);
     net_attach_queries(net, queries);
-    if (role_sim_attach(cluster, sim, &params, res.params_version) != 0)
+    int attached = role_sim_attach(cluster, sim, &params, res.params_version, sea);
+    free(sea); /* sim_start, the saver and the lease copied it */
+    sea = NULL;
+    if (attached != 0)
         LOGW("cluster: no lease thread: this simulation stays a standby");
 
     LOGI("oceand listening on %s://%s:%d/ (N=%d, %g Hz, web root %s)", dc.tls_cert[0] ? "https" : "http", dc.bind, net_port(net),

@@ -209,5 +209,9 @@ int body_on_text(struct session *s, cJSON *msg, const char *t);
 void body_on_frame(struct session *s, const uint8_t *data, size_t len);
 /* tap_sea.c: `ocean-tap sea ...` (argv[0] = "sea") */
 int tap_sea_main(int argc, char **argv);
+/* tap_sea_send.c: the documents to the daemon at url, a forecast at its times / speed. An exit code. */
+struct sea_doc;
+int tap_sea_send(const char *url, const struct sea_doc *docs, int n, double speed, const char *token,
+                 const char *tail, double timeout);
 
 #endif

@@ -8,8 +8,8 @@
  *   anything else, by its text: 'WAVEWATCH III SPECTRA' (WW3) or CDIP's OPeNDAP answer
  * or a shortcut: ndbc:46026 (NDBC's realtime files of that station), cdip:100
  * (the newest record of CDIP station 100, two requests: the size, then the record).
- * Sending it to a daemon (`ocean-tap sea SOURCE ws://...`) waits for the daemon's
- * `sea` message, which does not exist yet: refused with a usage error. */
+ * `ocean-tap sea SOURCE ws://...` sends it to a daemon as `sea` messages (tap_sea_send.c;
+ * a forecast plays as a timeline at --speed). */
 #include <getopt.h>
 #include <math.h>
 #include <stdio.h>
@@ -40,6 +40,7 @@ static void sea_usage(FILE *to)
 {
     fprintf(to,
         "usage: ocean-tap sea SOURCE --print [--time T] [--point NAME]\n"
+        "       ocean-tap sea SOURCE ws://HOST:PORT/ [--speed S] [--token T] [--tail K] [--time T] [--point NAME]\n"
         "  SOURCE  a file or http(s):// URL: NDBC realtime (any of ID.data_spec, .swdir, .swdir2,\n"
         "          .swr1, .swr2: the other four are read beside it), NDBC historical\n"
         "          (IDw2023.txt[.gz] or its d, i, j, k files), a WAVEWATCH III point-spectrum\n"
@@ -50,6 +51,11 @@ static void sea_usage(FILE *to)
         "                direction waves come from at the peak)\n"
         "  --time T      the record at T (YYYY-MM-DDThh:mm[:ss]Z) instead of the newest\n"
         "  --point NAME  the WW3 output point (default: the first)\n"
+        "  ws://...      send it to that daemon (PROTOCOL.md 7.8); a forecast (several times) plays\n"
+        "                as the sea's evolution: each time is sent when it comes, at --speed\n"
+        "  --speed S     forecast seconds per wall-clock second (default 3600: an hour a second)\n"
+        "  --token T     the daemon's control token\n"
+        "  --tail K      above the last band: f-4 (the daemon's default), f-5, none, wind\n"
         "Exit codes: 0 ok, 1 usage, 8 the source is unreadable or not a valid sea: the message\n"
         "  says `error CODE: FILE:LINE: band K: ...` (codes: docs/operations.md, Measured seas).\n");
 }
@@ -144,15 +150,28 @@ int tap_sea_main(int argc, char **argv)
 {
     static const struct option longs[] = {{"print", no_argument, 0, 'p'}, {"time", required_argument, 0, 't'},
                                           {"point", required_argument, 0, 'P'}, {"help", no_argument, 0, 'h'},
-                                          {0, 0, 0, 0}};
+                                          {"speed", required_argument, 0, 'S'}, {"token", required_argument, 0, 'T'},
+                                          {"tail", required_argument, 0, 'L'}, {0, 0, 0, 0}};
     int print = 0, c;
-    const char *when = NULL, *point = NULL;
+    const char *when = NULL, *point = NULL, *token = NULL, *tail = NULL;
+    double speed = 3600;
+    char *end = NULL;
     optind = 1;
     while ((c = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
         switch (c) {
         case 'p': print = 1; break;
         case 't': when = optarg; break;
         case 'P': point = optarg; break;
+        case 'S':
+            speed = strtod(optarg, &end);
+            if (*end || !(speed > 0 && speed < 1e12)) return usage_error("sea: --speed needs a number > 0");
+            break;
+        case 'T': token = optarg; break;
+        case 'L':
+            if (strcmp(optarg, "f-4") && strcmp(optarg, "f-5") && strcmp(optarg, "none") && strcmp(optarg, "wind"))
+                return usage_error("sea: --tail is f-4, f-5, none or wind");
+            tail = optarg;
+            break;
         case 'h': sea_usage(stdout); return EXIT_OK;
         default: return usage_error("sea: unknown option (ocean-tap sea --help)");
         }
@@ -162,10 +181,8 @@ int tap_sea_main(int argc, char **argv)
     if (optind + 2 < argc) return usage_error("sea: one SOURCE and at most one ws:// URL");
     char canon[24];
     if (when && sea_time_canon(when, canon)) return usage_error("sea: --time needs YYYY-MM-DDThh:mm[:ss]Z");
-    if (target)
-        return usage_error("sea: sending a sea to %s needs the daemon's sea message, which it does not have yet; "
-                           "use --print", target);
-    if (!print) return usage_error("sea: nothing to do: give --print");
+    if (target && print) return usage_error("sea: --print or a ws:// URL: one of them");
+    if (!print && !target) return usage_error("sea: nothing to do: give --print or a ws:// URL");
 
     struct sea_err e = {0};
     char names[5][2048], *bufs[5] = {0}, station[64] = "";
@@ -239,6 +256,15 @@ int tap_sea_main(int argc, char **argv)
                      "by their names, WAVEWATCH III and CDIP by their text)");
             goto out;
         }
+    }
+    if (target) {
+        for (int i = 0; i < n; i++) {
+            char line[400];
+            sea_doc_summary(&docs[i], line, sizeof line);
+            fprintf(stderr, "%s\n", line);
+        }
+        rc = tap_sea_send(target, docs, n, speed, token, tail, 15.0);
+        goto out;
     }
     cJSON *list = kind == 2 ? cJSON_CreateArray() : NULL;
     for (int i = 0; i < n; i++) print_doc(&docs[i], list);

@@ -310,6 +310,10 @@ bool cl_layer_info_valid(const struct cl_layer_info *info);
 #define CL_ENV_HEADER   12
 #define CL_NAME_MAX     64   /* incl. NUL */
 #define CL_BODY_MAX     (1u << 20)
+/* The JetStream record's largest value: the parameters (~2 kB), a measured sea (the largest
+ * the check allows is ~200 kB) and the bodies (LEASE_BODIES_MAX_BYTES) together, within
+ * NATS's default max_payload (1 MiB). */
+#define CL_KV_VALUE_MAX (512u << 10)
 enum cl_kind {
     CL_KIND_CTL = 1,     /* edge -> sim request: a client's set/pause/resume JSON */
     CL_KIND_HELLO = 2,   /* edge -> sim request: body empty */

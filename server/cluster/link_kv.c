@@ -67,7 +67,7 @@ int cl_kv_open(struct cl_link *l, int timeout_ms, struct cl_kv **out, char *err,
         kc.Bucket = bucket;
         kc.History = 1;
         kc.StorageType = js_FileStorage;
-        kc.MaxValueSize = 64 * 1024;
+        kc.MaxValueSize = CL_KV_VALUE_MAX;
         kc.Description = "oceand: the active simulation's lease and state";
         s = js_CreateKeyValue(&kv->store, kv->js, &kc);
         if (s != NATS_OK) /* it exists with another configuration: use it as it is */

@@ -470,7 +470,9 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
     if (cap_default)
         dc->max_memory_mb = config_default_memory_mb();
     char verr[200];
-    if (params_validate(p, verr, sizeof verr) != 0) {
+    /* spectrum "measured" from the state file comes with its sea (main.c
+     * loads it, and falls back to jonswap when it cannot). */
+    if (params_validate_sea(p, res->state_loaded, verr, sizeof verr) != 0) {
         snprintf(err, errlen, "parameters: %s", verr);
         return -1;
     }
@@ -492,7 +494,7 @@ int config_load(int argc, char **argv, struct daemon_config *dc, struct ocean_pa
                  "using resolution %d with %d cascade%s", saved_n, saved_c, saved_c > 1 ? "s" : "", need,
                  dc->max_memory_mb, cap_default ? "a quarter of this machine's memory; see --max-memory-mb" : "--max-memory-mb",
                  p->resolution, p->cascades, p->cascades > 1 ? "s" : "");
-        if (params_validate(p, verr, sizeof verr) != 0) {
+        if (params_validate_sea(p, res->state_loaded, verr, sizeof verr) != 0) {
             snprintf(err, errlen, "parameters: %s", verr);
             return -1;
         }

@@ -16,7 +16,7 @@
 #include "ocean.h"
 
 int state_save(const char *path, const struct ocean_params *p, uint32_t version, double sim_time,
-               const struct state_bodies *bodies, char *err, size_t errlen)
+               const struct state_bodies *bodies, const struct sea_spectrum *sea, char *err, size_t errlen)
 {
     cJSON *o = cJSON_CreateObject();
     cJSON_AddItemToObject(o, "params", control_params_object(p));
@@ -24,6 +24,11 @@ int state_save(const char *path, const struct ocean_params *p, uint32_t version,
     cJSON_AddNumberToObject(o, "sim_time", sim_time);
     if (bodies && (bodies->n > 0 || bodies->next_id > 1))
         cJSON_AddItemToObject(o, "bodies", state_bodies_json(bodies)); /* state_bodies.c */
+    if (sea && !cJSON_AddItemToObject(o, "sea", state_sea_json(sea))) { /* state_sea.c */
+        cJSON_Delete(o);
+        snprintf(err, errlen, "out of memory (the measured sea)");
+        return -1;
+    }
     char *text = cJSON_Print(o);
     cJSON_Delete(o);
     if (!text) {

@@ -10,6 +10,7 @@
 #include "bodies.h"
 #include "control.h"
 #include "params.h"
+#include "sea_spectrum.h"
 
 /* The floating bodies saved with the sea (state_bodies.c): every body's
  * full state and who may claim it, so that a restart continues the same
@@ -39,9 +40,15 @@ int state_bodies_parse(const struct cJSON *bodies, struct state_bodies *out, cha
 
 /* The "bodies" member of the state file (state_bodies.c). */
 struct cJSON *state_bodies_json(const struct state_bodies *b);
-/* bodies: NULL or none = the file has no "bodies". */
+/* The measured sea saved with the parameters (state_sea.c): the "sea"
+ * member, the document as the `sea` message carries it. 1 = loaded (*out
+ * filled), 0 = no file or no "sea", -1 = a bad one (err says why, with the
+ * library's code; *out untouched). */
+int state_load_sea(const char *path, struct sea_spectrum *out, char *err, size_t errlen);
+struct cJSON *state_sea_json(const struct sea_spectrum *sea);
+/* bodies: NULL or none = the file has no "bodies"; sea: NULL = no "sea". */
 int state_save(const char *path, const struct ocean_params *p, uint32_t version, double sim_time,
-               const struct state_bodies *bodies, char *err, size_t errlen);
+               const struct state_bodies *bodies, const struct sea_spectrum *sea, char *err, size_t errlen);
 /* Returns 1 if loaded, 0 if the file does not exist (p untouched), -1 on a
  * bad file (p untouched, err says why), -2 if path is not a regular file (a
  * FIFO, a directory: refused without reading, err says why). A params_version

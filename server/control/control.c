@@ -340,6 +340,15 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
         if (tok && !cJSON_IsString(tok))
             rc = ctl_fail(e, "bad_message", NULL, "\"token\" must be a string");
         m->token = cJSON_GetStringValue(tok);
+    } else if (strcmp(ts, "sea") == 0) {
+        m->type = CTL_SEA; /* sea_doc_parse (sea_msg.c) checks the document */
+        m->sea = cJSON_GetObjectItemCaseSensitive(root, "sea");
+        if (!cJSON_IsObject(m->sea))
+            rc = ctl_fail(e, "bad_message", "sea", "\"sea\" needs a \"sea\" document (an object)");
+        const cJSON *tok = cJSON_GetObjectItemCaseSensitive(root, "token");
+        if (tok && !cJSON_IsString(tok))
+            rc = ctl_fail(e, "bad_message", NULL, "\"token\" must be a string");
+        m->token = cJSON_GetStringValue(tok);
     } else if (strcmp(ts, "name") == 0) {
         m->type = CTL_NAME;
         const cJSON *nm = cJSON_GetObjectItemCaseSensitive(root, "name");
@@ -377,7 +386,7 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
     } else {
         rc = ctl_fail(e, "unknown_type", NULL, "unknown message type \"%.40s\"", ts);
     }
-    if (!rc && (m->type == CTL_SET || m->type == CTL_PAUSE || m->type == CTL_RESUME)) {
+    if (!rc && (m->type == CTL_SET || m->type == CTL_PAUSE || m->type == CTL_RESUME || m->type == CTL_SEA)) {
         /* Optional on the requests that change the sea: the sender's display name. */
         const cJSON *nm = cJSON_GetObjectItemCaseSensitive(root, "name");
         if (nm && !cJSON_IsString(nm))
@@ -386,7 +395,7 @@ int control_parse(const char *text, size_t len, struct ctl_msg *m, cJSON **id_ou
             rc = -1;
         m->name = cJSON_GetStringValue(nm);
     }
-    if (!rc && (m->type == CTL_SET || m->type == CTL_PAUSE || m->type == CTL_RESUME)) {
+    if (!rc && (m->type == CTL_SET || m->type == CTL_PAUSE || m->type == CTL_RESUME || m->type == CTL_SEA)) {
         const cJSON *once = cJSON_GetObjectItemCaseSensitive(root, "once");
         const char *k = cJSON_GetStringValue(once);
         size_t klen = k ? strlen(k) : 0;
@@ -522,7 +531,11 @@ int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const
             return -1;
     }
     char err[160];
-    if (params_validate(&p, err, sizeof err) != 0)
+    bool have_sea = !lim || lim->have_sea;
+    if (p.spectrum == SPECTRUM_MEASURED && !have_sea)
+        return ctl_fail(e, "no_sea", "spectrum",
+                        "spectrum: measured needs a measured sea: send one first (a `sea` message)");
+    if (params_validate_sea(&p, have_sea, err, sizeof err) != 0)
         return ctl_fail(e, "invalid", NULL, "%s", err);
     if (lim && !control_fits_memory(p.resolution, p.cascades, lim->max_memory_mb))
         return ctl_fail(e, "invalid", "resolution", "resolution %d exceeds the memory cap of %d MB (with %d cascade%s)",

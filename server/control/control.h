@@ -54,12 +54,14 @@ struct subscription {
 struct ctl_limits {
     double tick_rate;       /* max_rate ceiling and default */
     int max_memory_mb;      /* simulation memory cap, decides the largest N */
+    bool have_sea;          /* a measured sea is attached: spectrum "measured" may be set */
 };
 
 enum ctl_type { CTL_SET, CTL_SUBSCRIBE, CTL_PAUSE, CTL_RESUME, CTL_PING,
                 CTL_QUERY, CTL_PROBE /* members checked by query_msg.c */, CTL_NAME,
                 CTL_RENDER /* members checked by render_msg.c */, CTL_RENDER_CANCEL,
-                CTL_LAUNCH, CTL_STEER, CTL_REMOVE, CTL_CLAIM /* floating bodies: members checked by body_msg.c */ };
+                CTL_LAUNCH, CTL_STEER, CTL_REMOVE, CTL_CLAIM /* floating bodies: members checked by body_msg.c */,
+                CTL_SEA /* a measured sea: the document checked by sea_msg.c */ };
 
 /* Display names (PROTOCOL.md §7.1 `name`): at most CTL_NAME_MAX_CHARS code
  * points of printable Unicode, UTF-8; CTL_NAME_BYTES holds any valid one. */
@@ -72,7 +74,8 @@ struct ctl_msg {
     const cJSON *id;        /* inside root, or NULL; a number is a raw node of its text as sent
                              * (cJSON's double would change 2^53 + 1), so copies print it exactly */
     const cJSON *params;    /* CTL_SET: the "params" object */
-    const char *token;      /* CTL_SET: optional "token", or NULL */
+    const char *token;      /* CTL_SET, CTL_SEA: optional "token", or NULL */
+    const cJSON *sea;       /* CTL_SEA: the "sea" document, inside root */
     const cJSON *t;         /* CTL_PING: "t" to echo, inside root (a raw node of its text), or NULL */
     const char *name;       /* CTL_NAME, or a `set`'s optional "name": a checked display name
                              * ("" = none), inside root; NULL when not given */
@@ -122,7 +125,9 @@ cJSON *control_message_id(const char *text, size_t len);
 
 /* Apply a JSON object of parameters onto *cur, all or nothing: every member
  * is checked (name, JSON type, range, power of two), then the whole set
- * (params_validate, memory cap). On success *out = new params and
+ * (params_validate_sea, memory cap). With lim, spectrum "measured" needs
+ * lim->have_sea (else code no_sea); without (an edge's early check, a
+ * loader), the sim or the loader decides whether a sea is attached. On success *out = new params and
  * *changed = bit i set for param_table[i] whose value differs. */
 int control_apply_params(const cJSON *obj, const struct ocean_params *cur, const struct ctl_limits *lim,
                          struct ocean_params *out, uint64_t *changed, struct ctl_error *e);
@@ -193,6 +198,8 @@ struct hello_info {
     const struct subscription *sub;
     const struct capacity_info *capacity; /* NULL = not announced */
     int ease_ticks;                       /* amplitude-only changes ease in over this many ticks */
+    const char *sea;                      /* the measured sea's summary (JSON text, sea_summary_json), or NULL:
+                                           * "sea": null */
 };
 cJSON *control_hello_msg(const struct hello_info *h);
 

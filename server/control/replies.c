@@ -161,6 +161,7 @@ cJSON *control_hello_msg(const struct hello_info *h)
     cJSON_AddNumberToObject(o, "params_version", h->params_version);
     add_cascade_patches(o, h->params);
     cJSON_AddItemToObject(o, "schema", control_schema());
+    cJSON_AddItemToObject(o, "sea", h->sea ? cJSON_CreateRaw(h->sea) : cJSON_CreateNull()); /* PROTOCOL.md §7.8 */
     cJSON *f = cJSON_AddArrayToObject(o, "fields");
     for (int i = 0; i < OCEAN_FIELD_COUNT; i++)
         cJSON_AddItemToArray(f, cJSON_CreateString(ocean_field_name((enum ocean_field)i)));

@@ -9,6 +9,7 @@
 #include <sys/stat.h>
 
 #include "frame.h"
+#include "sim_thread.h"
 #include "log.h"
 
 #define NET_BEAT_MS 200
@@ -114,7 +115,14 @@ struct net *net_create(const struct daemon_config *dc, const struct ocean_params
     return n;
 }
 
-void net_attach_sim(struct net *n, struct sim *s) { n->sim = s; }
+void net_attach_sim(struct net *n, struct sim *s)
+{
+    n->sim = s;
+    if (s) { /* the sea a restart put back */
+        free(n->sea_summary);
+        n->sea_summary = sim_sea_summary(s);
+    }
+}
 void net_attach_queries(struct net *n, struct query_service *q) { n->queries = q; }
 void net_attach_renders(struct net *n, struct render_service *r) { n->renders = r; }
 
@@ -139,6 +147,7 @@ void net_destroy(struct net *n)
     dispatch_free_requests(n);
     body_net_free(n);
     free(n->status_text);
+    free(n->sea_summary);
     cJSON_Delete(n->sim_capacity);
     free(n);
 }

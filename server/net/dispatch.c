@@ -43,14 +43,6 @@ void dispatch_demand(struct net *n, const struct subscription *sub, int delta)
 
 static struct request *request_of(lws_dll2_t *d) { return lws_container_of(d, struct request, list); }
 
-/* Who gets the answers to a set: a local client (s), or, in the sim role,
- * a client of another daemon (rm). */
-struct remote {
-    const char *origin, *by;
-    net_reply_fn reply;
-    void *ctx;
-};
-
 static void respond(struct session *s, const struct remote *rm, cJSON *msg)
 {
     if (s) {
@@ -62,7 +54,7 @@ static void respond(struct session *s, const struct remote *rm, cJSON *msg)
     free(text);
 }
 
-static void respond_error(struct session *s, const struct remote *rm, const struct ctl_error *e, const cJSON *id)
+void dispatch_respond_error(struct session *s, const struct remote *rm, const struct ctl_error *e, const cJSON *id)
 {
     if (s) {
         session_send_error(s, e, id);
@@ -151,7 +143,7 @@ static bool replan_allowed(struct net *n, struct session *s, const struct remote
     else
         snprintf(e.message, sizeof e.message, "the grid was just rebuilt for a new resolution; try again in %.1f s",
                  wait);
-    respond_error(s, rm, &e, id);
+    dispatch_respond_error(s, rm, &e, id);
     return false;
 }
 
@@ -178,18 +170,21 @@ static bool once_seen(struct net *n, const char *key)
     return false;
 }
 
-/* A checked change: out is the view after it, changed the rows it changes. */
-static void submit_change(struct net *n, struct session *s, const struct remote *rm, const struct ocean_params *out,
-                          uint64_t changed, const char *name, const cJSON *id)
+/* A checked change: out is the view after it, changed the rows it changes,
+ * sea a new measured sea (taken: freed whatever happens) or NULL. */
+void dispatch_submit_change(struct net *n, struct session *s, const struct remote *rm, const struct ocean_params *out,
+                            uint64_t changed, const char *name, const cJSON *id, struct sea_spectrum *sea)
 {
-    if (!replan_allowed(n, s, rm, changed, id))
+    if (!replan_allowed(n, s, rm, changed, id)) {
+        free(sea);
         return;
+    }
     if (name && s) {
         snprintf(s->name, sizeof s->name, "%s", name);
         body_net_renamed(n, s); /* its bodies show the new name */
     }
     const char *by_name = name ? name : s ? s->name : "";
-    if (!changed) {
+    if (!changed && !sea) {
         respond(s, rm, with_name(control_params_msg(&n->view, n->applied_version, 0, s ? s->client_id : rm->by, id),
                                  by_name));
         return;
@@ -200,9 +195,10 @@ static void submit_change(struct net *n, struct session *s, const struct remote 
     if (!set || !r || (id && !idc)) {
         free(set);
         free(r);
+        free(sea);
         cJSON_Delete(idc);
         struct ctl_error oom = { .code = "internal", .message = "out of memory" };
-        respond_error(s, rm, &oom, id);
+        dispatch_respond_error(s, rm, &oom, id);
         return;
     }
     r->tag = set->tag = ++n->next_tag;
@@ -219,6 +215,9 @@ static void submit_change(struct net *n, struct session *s, const struct remote 
     r->id = idc;
     r->values = set->values = *out;
     r->mask = set->mask = changed;
+    set->sea = sea;
+    r->sea = sea != NULL;
+    n->seas_in_flight += r->sea;
     lws_dll2_add_tail(&r->list, &n->requests);
     if (changed & params_mask(PARAM_REPLAN))
         n->replans_in_flight++;
@@ -231,9 +230,11 @@ static void submit_change(struct net *n, struct session *s, const struct remote 
 /* `params` for one applied set; with tile_size when N changed, since the
  * tile side follows N below the configured size (hello has it too). */
 static cJSON *params_msg(struct net *n, const struct ocean_params *p, uint32_t version, uint64_t changed,
-                         const char *by, const char *by_name, const cJSON *id)
+                         const char *by, const char *by_name, const cJSON *id, bool sea)
 {
     cJSON *m = with_name(control_params_msg(p, version, changed, by, id), by_name);
+    if (m && sea) /* a new measured sea, or a new grid under it: its summary */
+        sea_net_add(n, m);
     if (m && (changed & params_mask(PARAM_REPLAN))) {
         cJSON_AddNumberToObject(m, "tile_size", net_tile_size(n));
         net_capacity_add(n, m); /* the encode budget follows N; ~1.5 kB, so only then */
@@ -252,6 +253,7 @@ struct fanout_params {
     struct ocean_params params;
     uint32_t version;
     uint64_t changed;
+    bool sea;                      /* one of them changed the sea's summary */
     uint64_t serial;               /* the last set's sender, if local (it has its own reply) */
     bool local;
     char by[64], origin[64];
@@ -262,6 +264,12 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
 {
     n->applied = a->params; /* in force after this set, applied or refused */
     n->applied_version = a->version;
+    bool sea = a->status == SIM_SET_APPLIED && a->sea_summary;
+    if (sea) { /* a new sea, or a new grid under it: the summary from now on */
+        free(n->sea_summary);
+        n->sea_summary = a->sea_summary;
+        ((struct sim_set *)a)->sea_summary = NULL; /* n has it now */
+    }
     if (a->adopt) /* a take-over (sim_adopt): nobody asked; edges ask hello of the new sim */
         return;
     struct request *r = NULL;
@@ -276,6 +284,7 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
     struct remote rm = { .origin = r->origin, .by = r->by, .reply = r->reply, .ctx = r->reply_ctx };
     if (r->mask & params_mask(PARAM_REPLAN))
         n->replans_in_flight--;
+    n->seas_in_flight -= r->sea;
     if (a->status == SIM_SET_APPLIED) {
         if (a->changed & params_mask(PARAM_REPLAN)) {
             n->trim_due = mono_now() + TRIM_DELAY_S;
@@ -288,12 +297,13 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
         fp->params = a->params;
         fp->version = a->version;
         fp->changed |= a->changed;
+        fp->sea |= sea;
         fp->serial = r->serial;
         fp->local = !r->reply;
         snprintf(fp->by, sizeof fp->by, "%s", r->by);
         snprintf(fp->origin, sizeof fp->origin, "%s", r->origin);
         snprintf(fp->by_name, sizeof fp->by_name, "%s", r->by_name);
-        cJSON *mine = params_msg(n, &a->params, a->version, a->changed, r->by, r->by_name, r->id);
+        cJSON *mine = params_msg(n, &a->params, a->version, a->changed, r->by, r->by_name, r->id, sea || r->sea);
         if (origin)
             session_queue_json(origin, mine);
         else if (r->reply)
@@ -305,7 +315,7 @@ static void answer(struct net *n, const struct sim_set *a, struct fanout_params 
                                        : a->status == SIM_SET_VERSION_LIMIT ? "version_limit"
                                                                             : "internal" }; /* out of memory, not saved */
         snprintf(e.message, sizeof e.message, "%s", a->message);
-        respond_error(origin, &rm, &e, r->id);
+        dispatch_respond_error(origin, &rm, &e, r->id);
     }
     r->reply = NULL;
     request_free(r);
@@ -327,7 +337,7 @@ void dispatch_answers(struct net *n)
     if (!fp.any)
         return;
     /* To everyone but the last set's sender, whose own reply said it all. */
-    char *all = control_print(params_msg(n, &fp.params, fp.version, fp.changed, fp.by, fp.by_name, NULL));
+    char *all = control_print(params_msg(n, &fp.params, fp.version, fp.changed, fp.by, fp.by_name, NULL, fp.sea));
     for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
         if (!(fp.local && session_of(d)->serial == fp.serial))
             session_queue_text(session_of(d), all, false);
@@ -470,7 +480,7 @@ static int remote_parse(const struct remote *rm, const char *text, size_t len, s
     struct ctl_error e;
     cJSON *bad_id = NULL;
     if (control_parse(text, len, m, &bad_id, &e) != 0) {
-        respond_error(NULL, rm, &e, bad_id);
+        dispatch_respond_error(NULL, rm, &e, bad_id);
         cJSON_Delete(bad_id);
         return -1;
     }
@@ -488,10 +498,10 @@ void net_remote_query(struct net *n, const char *text, size_t len, net_reply_fn 
     struct remote_query *rq = calloc(1, sizeof *rq);
     if (m.type != CTL_QUERY) {
         struct ctl_error f = { .code = "bad_message", .message = "only query goes to the simulation's query workers" };
-        respond_error(NULL, &rm, &f, m.id);
+        dispatch_respond_error(NULL, &rm, &f, m.id);
     } else if (!r || !rq || !n->queries || !n->sim) {
         struct ctl_error f = { .code = "internal", .message = "point queries are not available" };
-        respond_error(NULL, &rm, &f, m.id);
+        dispatch_respond_error(NULL, &rm, &f, m.id);
     } else if (query_parse(m.root, r, &e) == 0) {
         rq->serial = net_remote_serial(n);
         rq->reply = reply;
@@ -500,10 +510,10 @@ void net_remote_query(struct net *n, const char *text, size_t len, net_reply_fn 
             lws_dll2_add_tail(&rq->list, &n->remote_queries);
             rq = NULL; /* answered from dispatch_query_results */
         } else {
-            respond_error(NULL, &rm, &e, m.id);
+            dispatch_respond_error(NULL, &rm, &e, m.id);
         }
     } else {
-        respond_error(NULL, &rm, &e, m.id);
+        dispatch_respond_error(NULL, &rm, &e, m.id);
     }
     free(rq);
     free(r);
@@ -604,17 +614,21 @@ void dispatch_query_results(struct net *n)
 static void submit_control(struct net *n, struct session *s, const struct remote *rm, const struct ctl_msg *m)
 {
     struct ocean_params out = n->view;
-    if (m->type == CTL_SET) {
+    if (m->type == CTL_SEA) {
+        sea_net_submit(n, s, rm, m); /* sea_net.c */
+    } else if (m->type == CTL_SET) {
         struct ctl_error e;
         uint64_t changed;
-        if (control_apply_params(m->params, &n->view, &n->lim, &out, &changed, &e) != 0) {
-            respond_error(s, rm, &e, m->id);
+        struct ctl_limits lim = n->lim;
+        lim.have_sea = sea_net_attached(n); /* spectrum "measured" needs one */
+        if (control_apply_params(m->params, &n->view, &lim, &out, &changed, &e) != 0) {
+            dispatch_respond_error(s, rm, &e, m->id);
             return;
         }
-        submit_change(n, s, rm, &out, changed, m->name, m->id);
+        dispatch_submit_change(n, s, rm, &out, changed, m->name, m->id, NULL);
     } else {
         out.paused = m->type == CTL_PAUSE;
-        submit_change(n, s, rm, &out, params_diff(&n->view, &out), m->name, m->id);
+        dispatch_submit_change(n, s, rm, &out, params_diff(&n->view, &out), m->name, m->id, NULL);
     }
 }
 
@@ -628,12 +642,12 @@ void net_remote_control(struct net *n, const char *origin, const char *by, const
     bool body = m.type == CTL_LAUNCH || m.type == CTL_STEER || m.type == CTL_REMOVE || m.type == CTL_CLAIM;
     if (n->sim && body) {
         body_net_remote(n, origin, by, &m, reply, ctx); /* body_net.c: who owns what is decided here */
-    } else if (!n->sim || (m.type != CTL_SET && m.type != CTL_PAUSE && m.type != CTL_RESUME)) {
+    } else if (!n->sim || (m.type != CTL_SET && m.type != CTL_PAUSE && m.type != CTL_RESUME && m.type != CTL_SEA)) {
         struct ctl_error f = { .code = "bad_message",
-                               .message = "only set, pause, resume and body requests go to the simulation" };
-        respond_error(NULL, &rm, &f, m.id);
+                               .message = "only set, sea, pause, resume and body requests go to the simulation" };
+        dispatch_respond_error(NULL, &rm, &f, m.id);
     } else if (m.once && once_seen(n, m.once)) { /* the client's other copy came first, through any edge */
-        respond_error(NULL, &rm, &once_duplicate, m.id);
+        dispatch_respond_error(NULL, &rm, &once_duplicate, m.id);
     } else {
         submit_control(n, NULL, &rm, &m); /* the token was checked where the client is (its edge) */
     }
@@ -655,6 +669,7 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
     }
     switch (m.type) {
     case CTL_SET:
+    case CTL_SEA:
     case CTL_PAUSE:
     case CTL_RESUME: {
         if (!s->controller && !(m.token && n->dc.control_token[0] && control_token_equal(m.token, n->dc.control_token))) {
@@ -674,6 +689,10 @@ void dispatch_message(struct net *n, struct session *s, const char *text, size_t
              * `name` is not taken (neither changes when a set is refused). */
             struct ocean_params out;
             if (m.type == CTL_SET && control_apply_params(m.params, &n->view, NULL, &out, NULL, &e) != 0) {
+                session_send_error(s, &e, m.id);
+                break;
+            }
+            if (m.type == CTL_SEA && sea_net_check(m.sea, &e) != 0) {
                 session_send_error(s, &e, m.id);
                 break;
             }

@@ -113,7 +113,7 @@ void net_stream_new_chains(struct net *n);
  * dropped. Anyone on the NATS prefix can publish, so nothing from there
  * goes to a client unchecked. */
 cJSON *net_sim_message(const char *text, size_t len, size_t cap, const char *const types[]);
-#define NET_SIM_PARAMS_MAX (16u << 10)   /* a params event is ~2 kB */
+#define NET_SIM_PARAMS_MAX (64u << 10)   /* a params event is ~2 kB, ~12 kB with a measured sea's summary */
 #define NET_SIM_HELLO_MAX (64u << 10)    /* hello with the schema and capacity is ~12 kB */
 #define NET_SIM_REPLY_MAX (1u << 20)     /* a query_result of the most points a query may ask */
 

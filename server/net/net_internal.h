@@ -214,6 +214,28 @@ struct body_book {
 };
 
 /* A set sent to the sim and not answered yet: the sim knows it only by tag. */
+struct session;
+/* Who gets the answers to a set: a local client (s), or, in the sim role,
+ * a client of another daemon (rm). */
+struct remote {
+    const char *origin, *by;
+    net_reply_fn reply;
+    void *ctx;
+};
+void dispatch_respond_error(struct session *s, const struct remote *rm, const struct ctl_error *e, const cJSON *id);
+/* A checked change: out is the view after it, changed the rows it changes,
+ * sea a new measured sea (taken: freed whatever happens) or NULL. */
+struct sea_spectrum;
+void dispatch_submit_change(struct net *n, struct session *s, const struct remote *rm, const struct ocean_params *out,
+                            uint64_t changed, const char *name, const cJSON *id, struct sea_spectrum *sea);
+
+/* Measured seas (sea_net.c): the `sea` request and the summary. */
+struct ctl_msg;
+bool sea_net_attached(const struct net *n);      /* a sea in force or on its way: "measured" may be set */
+int sea_net_check(const cJSON *doc, struct ctl_error *e); /* an edge's early check of a document */
+void sea_net_submit(struct net *n, struct session *s, const struct remote *rm, const struct ctl_msg *m);
+void sea_net_add(const struct net *n, cJSON *msg); /* "sea": the summary, or null */
+
 struct request {
     lws_dll2_t list;              /* in net.requests, in submission order */
     uint64_t tag;
@@ -226,6 +248,7 @@ struct request {
     cJSON *id;                    /* owned copy of the request id, or NULL */
     struct ocean_params values;   /* what the set asked for (mask of params)... */
     uint64_t mask;                /* ...replayed onto the applied params to rebuild the view */
+    bool sea;                     /* it brings a measured sea */
 };
 
 /* sim role: a `query` from a client of an edge, in the query workers under
@@ -276,6 +299,9 @@ struct net {
     struct ocean_params applied;  /* in force (from the sim's answers) */
     uint32_t applied_version;     /* its params_version */
     struct ocean_params view;     /* applied + every pending request: what the next set is checked on */
+    char *sea_summary;            /* the measured sea in force: its summary (JSON text, malloc'd) for hello
+                                     and params, or NULL (none attached) */
+    int seas_in_flight;           /* requests that bring a sea, not answered yet */
     net_params_fn on_params;      /* main writes (net_on_params) before the loop: applied-change listener */
     void *on_params_user;         /* its argument (main's state saver, used on this thread) */
     double trim_due;              /* mono time to malloc_trim after a change of N, 0 = none */

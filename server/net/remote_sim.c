@@ -78,6 +78,37 @@ cJSON *net_hello_capacity(struct net *n, cJSON *hello)
     return hello;
 }
 
+/* The measured sea's summary of a hello (always there: null for none) or a
+ * params (there when it changed), kept for this edge's hellos. Passed on as
+ * the sim made it: an object, or null. */
+/* The summary's texts are shown to people: printable ASCII, as the sim's check has them. */
+static bool printable_member(const cJSON *o, const char *name)
+{
+    const char *t = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, name));
+    for (; t && *t; t++)
+        if (*t < 0x20 || *t > 0x7e)
+            return false;
+    return t != NULL;
+}
+
+static void adopt_sea(struct net *n, const cJSON *root)
+{
+    const cJSON *s = cJSON_GetObjectItemCaseSensitive(root, "sea");
+    if (!s || !(cJSON_IsNull(s) || cJSON_IsObject(s)))
+        return;
+    if (cJSON_IsObject(s) && (!printable_member(s, "source") || !printable_member(s, "time"))) {
+        LOGW("cluster: a measured sea's summary from the sim with unprintable text: not passed on");
+        return;
+    }
+    char *text = cJSON_IsObject(s) ? cJSON_PrintUnformatted(s) : NULL;
+    if (cJSON_IsObject(s) && !text) {
+        LOGW("cluster: out of memory keeping the measured sea's summary");
+        return;
+    }
+    free(n->sea_summary);
+    n->sea_summary = text;
+}
+
 /* The params (and version) of a hello or params message onto n->applied.
  * -1 if the message has neither a valid params object nor a version. */
 static int adopt_params(struct net *n, const cJSON *root, uint64_t *changed)
@@ -96,6 +127,7 @@ static int adopt_params(struct net *n, const cJSON *root, uint64_t *changed)
     }
     n->applied = n->view = out;
     n->applied_version = version;
+    adopt_sea(n, root);
     return 0;
 }
 
@@ -192,6 +224,7 @@ char *net_hello_text(struct net *n)
     struct hello_info h = {
         .client_id = "", .controller = false, .params = &n->applied, .params_version = n->applied_version,
         .tick_rate = n->dc.tick_rate, .tile_size = net_tile_size(n), .sub = &sub, .ease_ticks = n->dc.ease_ticks,
+        .sea = n->sea_summary,
     };
     struct capacity_info ci;
     if (n->sim) { /* edges pass it on in their hellos */

@@ -32,6 +32,10 @@ void renders_dispatch(struct net *n, struct session *s, const cJSON *root, const
     } else if (!n->renders) {
         e.code = "unavailable";
         snprintf(e.message, sizeof e.message, "this daemon has no render workers");
+    } else if (n->applied.spectrum == SPECTRUM_MEASURED) {
+        /* A render rebuilds the sea from the parameters alone; a measured sea is not carried to the workers. */
+        e.code = "invalid";
+        snprintf(e.message, sizeof e.message, "renders of a measured sea are not supported: set another spectrum");
     } else if (render_submit(n->renders, s->serial, id, r, &n->applied, n->applied_version, &units, &e) == 0) {
         session_queue_json(s, render_rendering_msg(id, r, n->applied_version, n->applied.resolution,
                                                    n->applied.cascades, units));

@@ -183,6 +183,7 @@ static void session_open(struct net *n, struct session *s, struct lws *wsi)
         sim_capacity(n->sim, &ci);
         h.capacity = &ci;
     }
+    h.sea = n->sea_summary; /* the measured sea's summary, or null */
     session_queue_json(s, body_net_hello(n, net_hello_capacity(n, control_hello_msg(&h)))); /* edge: the sim's capacity */
     if (n->status_text)
         session_queue_text(s, n->status_text, false); /* cluster trouble: the banner at once */

@@ -29,6 +29,7 @@ struct role_lease {
     struct cl_kv *kv;              /* the lease thread opens it; persist reads it */
     struct ocean_params params;    /* the state this sim holds (persisted, or adopted) */
     uint32_t version;
+    struct sea_spectrum *sea;      /* its measured sea (malloc'd), or NULL (role_lease_sea.c) */
     pthread_mutex_t wlock;         /* one record write at a time: a renewal never writes an older state
                                       over the builder's newer one */
     _Atomic int state;             /* enum lease_state: the lease thread and persist write, any thread reads */
@@ -50,7 +51,14 @@ struct record {
     uint32_t version;
     double sim_time;
     uint64_t wall_us, seq;
+    struct sea_spectrum *sea;      /* malloc'd (record_free), or NULL */
 };
+
+static void record_free(struct record *r)
+{
+    free(r->sea);
+    r->sea = NULL;
+}
 
 const char *role_lease_state_name(enum lease_state s)
 {
@@ -72,7 +80,7 @@ bool role_lease_acting(struct role_lease *ls)
 /* {"holder":..,"name":..,"released":..,"params":{..},"params_version":V,
  *  "sim_time":t,"wall_us":U,"seq":S,"tick_rate":R}: the clock at wall_us. */
 static char *record_text(struct role_lease *ls, const struct ocean_params *p, uint32_t version, double sim_time,
-                         uint64_t seq, bool released)
+                         uint64_t seq, bool released, const struct sea_spectrum *sea)
 {
     cJSON *o = cJSON_CreateObject();
     cJSON_AddStringToObject(o, "holder", cl_link_instance(ls->link));
@@ -85,6 +93,10 @@ static char *record_text(struct role_lease *ls, const struct ocean_params *p, ui
     cJSON_AddNumberToObject(o, "seq", (double)seq);
     cJSON_AddNumberToObject(o, "tick_rate", ls->tick_rate);
     lease_bodies_add(ls->bodies, o);
+    if (lease_record_add_sea(o, sea) != 0) { /* role_lease_sea.c */
+        cJSON_Delete(o);
+        return NULL;
+    }
     char *t = cJSON_PrintUnformatted(o);
     cJSON_Delete(o);
     return t;
@@ -110,7 +122,7 @@ static int record_parse(const char *text, size_t len, const struct ocean_params 
         control_json_sim_time(cJSON_GetObjectItemCaseSensitive(root, "sim_time"), &r.sim_time) &&
         control_json_whole(cJSON_GetObjectItemCaseSensitive(root, "wall_us"), CTL_JSON_EXACT_MAX, &r.wall_us) &&
         control_json_whole(cJSON_GetObjectItemCaseSensitive(root, "seq"), CTL_JSON_EXACT_MAX, &r.seq) &&
-        control_apply_params(p, base, NULL, &r.params, NULL, &e) == 0) {
+        control_apply_params(p, base, NULL, &r.params, NULL, &e) == 0 && lease_record_sea(root, &r.sea) == 0) {
         snprintf(r.holder, sizeof r.holder, "%s", h->valuestring);
         r.released = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(root, "released"));
         *out = r;
@@ -133,8 +145,8 @@ static int write_record(struct role_lease *ls, bool released)
     struct ocean_params p = ls->params;
     uint32_t v = ls->version;
     struct cl_kv *kv = ls->kv;
+    char *text = record_text(ls, &p, v, sim_time_now(ls->sim), sim_seq(ls->sim), released, ls->sea);
     pthread_mutex_unlock(&ls->lock);
-    char *text = record_text(ls, &p, v, sim_time_now(ls->sim), sim_seq(ls->sim), released);
     int rc = text ? cl_kv_write(kv, text, strlen(text)) : CL_E_NOMEM;
     free(text);
     return rc;
@@ -148,7 +160,7 @@ static void step_down(struct role_lease *ls, const char *why)
 }
 
 int role_lease_persist(struct role_lease *ls, const struct ocean_params *p, uint32_t version, double sim_time,
-                       char *err, size_t errlen)
+                       const struct sea_spectrum *sea, char *err, size_t errlen)
 {
     pthread_mutex_lock(&ls->wlock);
     int rc = CL_OK;
@@ -156,7 +168,7 @@ int role_lease_persist(struct role_lease *ls, const struct ocean_params *p, uint
         pthread_mutex_lock(&ls->lock);
         struct cl_kv *kv = ls->kv;
         pthread_mutex_unlock(&ls->lock);
-        char *text = record_text(ls, p, version, sim_time, sim_seq(ls->sim), false);
+        char *text = record_text(ls, p, version, sim_time, sim_seq(ls->sim), false, sea);
         double t0 = mono_now();
         rc = text ? cl_kv_write(kv, text, strlen(text)) : CL_E_NOMEM;
         free(text);
@@ -169,6 +181,8 @@ int role_lease_persist(struct role_lease *ls, const struct ocean_params *p, uint
         pthread_mutex_lock(&ls->lock);
         ls->params = *p;
         ls->version = version;
+        if (lease_keep_sea(&ls->sea, sea) != 0)
+            LOGW("cluster: out of memory keeping the measured sea for the record's renewals");
         pthread_mutex_unlock(&ls->lock);
     } else {
         snprintf(err, errlen, "JetStream: %s", cl_strerror(rc));
@@ -181,13 +195,19 @@ int role_lease_persist(struct role_lease *ls, const struct ocean_params *p, uint
  * the tick), and as ours. */
 static void adopt(struct role_lease *ls, const struct record *rec)
 {
-    if (sim_adopt(ls->sim, &rec->params, rec->version, rec->sim_time, rec->wall_us, rec->seq) != 0) {
+    pthread_mutex_lock(&ls->lock);
+    bool new_sea = lease_sea_differs(ls->sea, rec->sea); /* only a new sea is built again */
+    pthread_mutex_unlock(&ls->lock);
+    if (sim_adopt(ls->sim, &rec->params, rec->version, rec->sim_time, rec->wall_us, rec->seq,
+                  new_sea ? rec->sea : NULL) != 0) {
         LOGW("cluster: out of memory adopting the simulation's state");
         return;
     }
     pthread_mutex_lock(&ls->lock);
     ls->params = rec->params;
     ls->version = rec->version;
+    if (lease_keep_sea(&ls->sea, rec->sea) != 0)
+        LOGW("cluster: out of memory keeping the measured sea for the record");
     pthread_mutex_unlock(&ls->lock);
 }
 
@@ -205,10 +225,14 @@ static void take_over(struct role_lease *ls, const struct record *rec, uint64_t 
     bool bodies = rec && lease_bodies_have(ls->bodies);
     struct ocean_params p = theirs ? rec->params : ls->params;
     uint32_t v = theirs ? rec->version : ls->version;
+    struct sea_spectrum *sea = NULL; /* the sea that goes with p: a copy, the lock is let go */
+    const struct sea_spectrum *from = theirs ? rec->sea : ls->sea;
+    if (from && (sea = malloc(sizeof *sea)))
+        *sea = *from;
     pthread_mutex_unlock(&ls->lock);
     double t = sim_time_now(ls->sim);
     uint64_t seq = sim_seq(ls->sim);
-    struct record now = { .params = p, .version = v, .sim_time = t, .wall_us = unix_us(), .seq = seq };
+    struct record now = { .params = p, .version = v, .sim_time = t, .wall_us = unix_us(), .seq = seq, .sea = sea };
     if (theirs) { /* its clock, carried on to now */
         double since = ((double)now.wall_us - (double)rec->wall_us) * 1e-6;
         since = since > 0 ? since : 0;
@@ -216,7 +240,7 @@ static void take_over(struct role_lease *ls, const struct record *rec, uint64_t 
         uint64_t their_seq = rec->seq + (uint64_t)(since * ls->tick_rate);
         now.seq = their_seq > seq ? their_seq : seq;
     }
-    char *text = record_text(ls, &p, v, now.sim_time, now.seq, false);
+    char *text = from && !sea ? NULL : record_text(ls, &p, v, now.sim_time, now.seq, false, sea);
     double t0 = mono_now();
     int rc = text ? cl_kv_claim(ls->kv, rev, text, strlen(text)) : CL_E_NOMEM;
     free(text);
@@ -233,6 +257,7 @@ static void take_over(struct role_lease *ls, const struct record *rec, uint64_t 
     } else if (rc != CL_E_LOST) {
         LOGD("cluster: taking the lease failed: %s", cl_strerror(rc));
     }
+    record_free(&now);
     pthread_mutex_unlock(&ls->wlock);
 }
 
@@ -273,6 +298,8 @@ static void standby_round(struct role_lease *ls, double now)
         }
         if ((ok && rec.released) || now - ls->seen_t >= LEASE_EXPIRE_S)
             take_over(ls, ok ? &rec : NULL, rev, text, len);
+        if (ok)
+            record_free(&rec);
     }
     free(text);
 }
@@ -358,11 +385,14 @@ struct role_lease *role_lease_new(struct cl_link *link, double tick_rate)
     return ls;
 }
 
-int role_lease_start(struct role_lease *ls, struct sim *sim, const struct ocean_params *p, uint32_t version)
+int role_lease_start(struct role_lease *ls, struct sim *sim, const struct ocean_params *p, uint32_t version,
+                     const struct sea_spectrum *sea)
 {
     ls->sim = sim;
     ls->params = *p;
     ls->version = version;
+    if (lease_keep_sea(&ls->sea, sea) != 0)
+        return -1;
     int rc = pthread_create(&ls->thread, NULL, lease_main, ls);
     ls->started = rc == 0;
     return rc;
@@ -396,5 +426,6 @@ void role_lease_free(struct role_lease *ls)
     pthread_cond_destroy(&ls->cond);
     pthread_mutex_destroy(&ls->wlock);
     pthread_mutex_destroy(&ls->lock);
+    free(ls->sea);
     free(ls);
 }

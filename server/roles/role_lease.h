@@ -33,7 +33,9 @@ enum lease_state { LEASE_STARTING, LEASE_SOLO, LEASE_STANDBY, LEASE_ACTIVE };
 struct role_lease;
 struct role_lease *role_lease_new(struct cl_link *link, double tick_rate);
 /* Starts the lease thread with the state the sim started from. */
-int role_lease_start(struct role_lease *ls, struct sim *sim, const struct ocean_params *p, uint32_t version);
+/* sea: the measured sea with p (copied), or NULL. */
+int role_lease_start(struct role_lease *ls, struct sim *sim, const struct ocean_params *p, uint32_t version,
+                     const struct sea_spectrum *sea);
 /* Stops the thread (before sim_stop) and releases the lease if held. */
 void role_lease_stop(struct role_lease *ls);
 void role_lease_free(struct role_lease *ls);
@@ -45,13 +47,21 @@ const char *role_lease_state_name(enum lease_state s);
  * state, before the change is applied. 0, or -1 with err: not connected,
  * or the lease was lost (this sim steps down). Solo and standby: 0. */
 int role_lease_persist(struct role_lease *ls, const struct ocean_params *p, uint32_t version, double sim_time,
-                       char *err, size_t errlen);
+                       const struct sea_spectrum *sea, char *err, size_t errlen);
+
+/* The record's measured sea (role_lease_sea.c): the "sea" member, the
+ * document as the `sea` message carries it. */
+struct cJSON;
+int lease_record_add_sea(struct cJSON *rec, const struct sea_spectrum *sea);   /* NULL: no member; -1 no memory */
+int lease_record_sea(const struct cJSON *rec, struct sea_spectrum **out);      /* 0 (*out malloc'd or NULL), -1 bad */
+bool lease_sea_differs(const struct sea_spectrum *a, const struct sea_spectrum *b);
+int lease_keep_sea(struct sea_spectrum **kept, const struct sea_spectrum *sea); /* *kept = a copy of sea (NULL: none) */
 
 /* ---- the floating bodies in the record (role_lease_bodies.c) ----
  * The lws thread hands the newest bodies over (copied); every record write
  * carries them while the record stays within LEASE_BODIES_MAX_BYTES of
- * them (the bucket holds 64 KB values: about 100 bodies; --max-bodies 64 by
- * default). A standby takes the bodies of each record it follows (the
+ * them: about 100 bodies (--max-bodies 64 by default). The bucket's values
+ * (CL_KV_VALUE_MAX, 512 KB) hold them beside the largest measured sea. A standby takes the bodies of each record it follows (the
  * holder's, at least as new as its own state: an older record brings no
  * bodies back); a take-over restores the newest it took:
  * role_lease_take_bodies hands them out once (1; *out is the caller's to

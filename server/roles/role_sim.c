@@ -46,7 +46,8 @@ struct role_sim {
     double probes_t;                              /* when expiry was last checked */
     double status_t;                              /* lws: when the heartbeat body was last set */
     struct role_lease *lease;                     /* standby and the JetStream record (role_lease.h) */
-    int (*file_persist)(void *, const struct ocean_params *, uint32_t, double, char *, size_t);
+    int (*file_persist)(void *, const struct ocean_params *, uint32_t, double, const struct sea_spectrum *, char *,
+                        size_t);
     void *file_user;                              /* the state file's persist hook (main.c), called after JetStream */
     _Atomic uint64_t demand[CL_KEY_BYTES / 8];    /* tick writes (last union), lws reads (/healthz) */
     _Atomic uint64_t streams[CL_KEY_BYTES / 8];   /* the same for the keys edges stream (temporal codec) */
@@ -390,18 +391,19 @@ static size_t sim_metrics(void *user, char *buf, size_t cap)
 
 /* sim_config.persist: the JetStream record first (the copy a standby
  * takes over from; a lost lease refuses the change), then the state file. */
-static int sim_persist(void *user, const struct ocean_params *p, uint32_t version, double sim_time, char *err,
-                       size_t errlen)
+static int sim_persist(void *user, const struct ocean_params *p, uint32_t version, double sim_time,
+                       const struct sea_spectrum *sea, char *err, size_t errlen)
 {
     struct role_sim *r = user;
-    if (role_lease_persist(r->lease, p, version, sim_time, err, errlen) != 0)
+    if (role_lease_persist(r->lease, p, version, sim_time, sea, err, errlen) != 0)
         return -1;
-    return r->file_persist ? r->file_persist(r->file_user, p, version, sim_time, err, errlen) : 0;
+    return r->file_persist ? r->file_persist(r->file_user, p, version, sim_time, sea, err, errlen) : 0;
 }
 
-int role_sim_attach(struct role_sim *r, struct sim *sim, const struct ocean_params *p, uint32_t version)
+int role_sim_attach(struct role_sim *r, struct sim *sim, const struct ocean_params *p, uint32_t version,
+                    const struct sea_spectrum *sea)
 {
-    return r ? role_lease_start(r->lease, sim, p, version) : 0;
+    return r ? role_lease_start(r->lease, sim, p, version, sea) : 0;
 }
 
 void role_sim_detach(struct role_sim *r)

@@ -21,7 +21,8 @@ struct role_sim *role_sim_open(const struct daemon_config *dc, struct net *n, st
 void role_sim_close(struct role_sim *r);
 /* After sim_start: the lease thread (role_lease.h) with the state the sim
  * started from; 0 or an errno. r NULL: nothing. */
-int role_sim_attach(struct role_sim *r, struct sim *sim, const struct ocean_params *p, uint32_t version);
+int role_sim_attach(struct role_sim *r, struct sim *sim, const struct ocean_params *p, uint32_t version,
+                    const struct sea_spectrum *sea);
 /* Before sim_stop: stops the lease thread, releasing the lease if held. */
 void role_sim_detach(struct role_sim *r);
 

@@ -11,6 +11,7 @@
 #include "control.h"
 #include "log.h"
 #include "metrics.h"
+#include "sea_msg.h"
 
 static void set_failed(struct sim_set *set, enum sim_set_status status, const char *msg)
 {
@@ -23,8 +24,9 @@ static void set_failed(struct sim_set *set, enum sim_set_status status, const ch
  * producer's ocean_step does not change, so it runs while frames are made;
  * it never overlaps a commit (the tick commits before it clears ready_full,
  * and the builder prepares only while ready_full is clear). */
-static struct ocean_prepared *build_state(struct sim *s, const struct ocean_params *p, enum sim_set_status *why,
-                                          char *err, size_t errlen)
+static struct ocean_prepared *build_state(struct sim *s, const struct ocean_params *p,
+                                          const struct sea_spectrum *sea, enum sim_set_status *why, char *err,
+                                          size_t errlen)
 {
     if (s->test_fail_seed >= 0 && p->seed == s->test_fail_seed) {
         usleep(500 * 1000); /* long enough for a test to queue another set behind this one */
@@ -33,7 +35,64 @@ static struct ocean_prepared *build_state(struct sim *s, const struct ocean_para
         return NULL;
     }
     *why = SIM_SET_INVALID;
-    return ocean_prepare(s->ocean, p, err, errlen);
+    return ocean_prepare_sea(s->ocean, p, sea, err, errlen);
+}
+
+/* ---- measured seas ---- */
+
+/* What a grid holds of a sea depends on these alone (sea_capture). */
+static bool capture_differs(const struct ocean_params *a, const struct ocean_params *b)
+{
+    return a->resolution != b->resolution || a->patch_size != b->patch_size || a->cascades != b->cascades ||
+           a->depth != b->depth || a->small_wave_cutoff != b->small_wave_cutoff;
+}
+
+char *sim_sea_summary_text(const struct sea_spectrum *sea, const struct sea_capture *cap, uint32_t version)
+{
+    return control_print(sea_summary_json(sea, cap, version));
+}
+
+/* A batch that brings a new sea, or changes the grid under the sea in force:
+ * what the grid holds of it (a pass over every mode: here, not on the tick)
+ * and the summary `params` carries, on the batch's last set still queued. */
+static void sea_summarise(struct sim *s, struct sim_set *sets, const struct sea_spectrum *new_sea,
+                          const struct ocean_params *cur)
+{
+    const struct sea_spectrum *sea = new_sea ? new_sea : s->build_sea;
+    if (!sea || (!new_sea && !capture_differs(&s->build_base, cur)))
+        return;
+    struct sim_set *last = NULL;
+    uint32_t version = s->build_version;
+    for (struct sim_set *set = sets; set; set = set->next)
+        if (set->status == SIM_SET_QUEUED) {
+            last = set;
+            version = set->adopt ? set->adopt_version : version + 1;
+        }
+    if (!last)
+        return;
+    char err[200];
+    struct sea_capture cap;
+    bool have_cap = sea_capture(sea, cur, &cap, err, sizeof err) == SEA_OK;
+    if (!have_cap)
+        LOGW("measured sea: what the grid holds is not known: %s", err);
+    free(last->sea_summary);
+    last->sea_summary = sim_sea_summary_text(sea, have_cap ? &cap : NULL, version);
+}
+
+/* A persisted batch's new sea becomes the builder's (a copy: the set that
+ * brought it goes back to the network thread). */
+static void keep_sea(struct sim *s, const struct sea_spectrum *sea)
+{
+    if (!sea)
+        return;
+    struct sea_spectrum *copy = malloc(sizeof *copy);
+    if (!copy) { /* the ocean has it; only a SIGHUP save would miss it */
+        LOGE("measured sea: out of memory keeping it for the next save");
+        return;
+    }
+    *copy = *sea;
+    free(s->build_sea);
+    s->build_sea = copy;
 }
 
 /* Check each set of a batch on top of the previous one (all or nothing per
@@ -44,10 +103,12 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
 {
     struct ocean_params cur = s->build_base;
     uint32_t version = s->build_version; /* the number each set would take */
+    const struct sea_spectrum *new_sea = NULL; /* the batch's last new sea (its set owns it) */
     char err[200];
     for (struct sim_set *set = sets; set; set = set->next) {
         struct ocean_params next = params_with(&cur, &set->values, set->mask);
-        if (params_validate(&next, err, sizeof err) != 0) {
+        bool have_sea = set->sea || new_sea || s->build_sea;
+        if (params_validate_sea(&next, have_sea, err, sizeof err) != 0) {
             set_failed(set, SIM_SET_INVALID, err);
             continue;
         }
@@ -66,13 +127,16 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
         }
         set->prev = cur;
         cur = next;
+        if (set->sea)
+            new_sea = set->sea;
     }
     out->prepared = NULL;
     out->surface = NULL;
-    if (params_physics_differ(&s->build_base, &cur)) {
+    out->sea = NULL;
+    if (params_physics_differ(&s->build_base, &cur) || new_sea) {
         enum sim_set_status why;
         double t0 = mono_now();
-        out->prepared = build_state(s, &cur, &why, err, sizeof err);
+        out->prepared = build_state(s, &cur, new_sea, &why, err, sizeof err);
         for (struct sim_set *set = sets; set; set = set->next)
             set->build_s = mono_now() - t0;
         if (!out->prepared) {
@@ -81,7 +145,11 @@ static void build_batch(struct sim *s, struct sim_set *sets, struct built *out)
                 if (set->status == SIM_SET_QUEUED)
                     set_failed(set, why, err);
             cur = s->build_base;
+            new_sea = NULL;
         }
+        if (out->prepared)
+            sea_summarise(s, sets, new_sea, &cur);
+        out->sea = out->prepared ? new_sea : NULL;
         if (out->prepared && s->cfg.queries) /* the query snapshot, here rather than on the tick (1-8 ms) */
             out->surface = query_snapshot_prepared(s->cfg.queries, s->ocean, out->prepared);
     }
@@ -97,8 +165,8 @@ static void persist_now(struct sim *s)
 {
     char err[300];
     if (s->cfg.persist &&
-        s->cfg.persist(s->cfg.persist_user, &s->build_base, s->build_version, atomic_load(&s->now_time), err,
-                       sizeof err) != 0)
+        s->cfg.persist(s->cfg.persist_user, &s->build_base, s->build_version, atomic_load(&s->now_time),
+                       s->build_sea, err, sizeof err) != 0)
         LOGW("saving the state: %s", err);
 }
 
@@ -124,11 +192,14 @@ static void persist_batch(struct sim *s, struct built *b, const struct ocean_par
     }
     if (!applying || !s->cfg.persist) {
         s->build_version = v;
+        keep_sea(s, b->sea);
         return;
     }
     char err[300];
-    if (s->cfg.persist(s->cfg.persist_user, &b->params, v, atomic_load(&s->now_time), err, sizeof err) == 0) {
+    if (s->cfg.persist(s->cfg.persist_user, &b->params, v, atomic_load(&s->now_time), b->sea ? b->sea : s->build_sea,
+                       err, sizeof err) == 0) {
         s->build_version = v;
+        keep_sea(s, b->sea);
         return;
     }
     LOGW("a parameter change could not be saved, so it is refused: %s", err);
@@ -142,6 +213,7 @@ static void persist_batch(struct sim *s, struct built *b, const struct ocean_par
     ocean_surface_free(b->surface);
     b->prepared = NULL;
     b->surface = NULL;
+    b->sea = NULL;
     b->params = *base;
     s->build_base = *base;
 }

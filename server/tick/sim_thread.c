@@ -13,7 +13,14 @@
 #include "log.h"
 #include "metrics.h"
 
-void sim_set_free(struct sim_set *set) { free(set); }
+void sim_set_free(struct sim_set *set)
+{
+    if (!set)
+        return;
+    free(set->sea);
+    free(set->sea_summary);
+    free(set);
+}
 
 /* ---- network-side API ---- */
 
@@ -56,11 +63,17 @@ double sim_time_now(struct sim *s) { return atomic_load(&s->now_time); }
 bool sim_take_trim(struct sim *s) { return atomic_exchange(&s->trim_wanted, false); }
 
 int sim_adopt(struct sim *s, const struct ocean_params *p, uint32_t version, double sim_time, uint64_t wall_us,
-              uint64_t seq)
+              uint64_t seq, const struct sea_spectrum *sea)
 {
     struct sim_set *set = calloc(1, sizeof *set);
     if (!set)
         return -1;
+    if (sea && !(set->sea = malloc(sizeof *set->sea))) {
+        free(set);
+        return -1;
+    }
+    if (sea)
+        *set->sea = *sea;
     set->values = *p;
     set->mask = PARAM_COUNT >= 64 ? ~0ull : (1ull << PARAM_COUNT) - 1; /* every parameter */
     set->adopt = true;
@@ -70,6 +83,13 @@ int sim_adopt(struct sim *s, const struct ocean_params *p, uint32_t version, dou
     set->adopt_seq = seq;
     sim_submit(s, set);
     return 0;
+}
+
+char *sim_sea_summary(struct sim *s)
+{
+    char *t = s->start_sea_summary;
+    s->start_sea_summary = NULL;
+    return t;
 }
 
 void sim_save_now(struct sim *s)
@@ -129,6 +149,8 @@ static void sim_free_parts(struct sim *s)
     frame_job_free(s->job);
     layer_streams_free(&s->streams);
     ocean_free(s->ocean);
+    free(s->build_sea);
+    free(s->start_sea_summary);
     body_sim_free(s->bodies);
     body_cmds_free(s->body_cmds);
     body_cmds_free(s->body_answers);
@@ -177,10 +199,24 @@ struct sim *sim_start(const struct ocean_params *p, const struct sim_config *cfg
     pthread_cond_init(&s->prod_cond, NULL);
     s->build_base = *p;
     s->build_version = cfg->start_version;
-    s->ocean = ocean_create(p, &cfg->opts, err, errlen);
+    s->cfg.sea = NULL; /* copied here: the caller's may go */
+    if (cfg->sea && !(s->build_sea = malloc(sizeof *s->build_sea))) {
+        snprintf(err, errlen, "out of memory (the measured sea)");
+        sim_free_parts(s);
+        return NULL;
+    }
+    if (cfg->sea)
+        *s->build_sea = *cfg->sea;
+    s->ocean = ocean_create_sea(p, cfg->sea, &cfg->opts, err, errlen);
     if (!s->ocean) {
         sim_free_parts(s);
         return NULL;
+    }
+    if (cfg->sea) { /* what hello says of it until the first change (sim_sea_summary) */
+        char why[200];
+        struct sea_capture cap;
+        bool have_cap = sea_capture(cfg->sea, p, &cap, why, sizeof why) == SEA_OK;
+        s->start_sea_summary = sim_sea_summary_text(cfg->sea, have_cap ? &cap : NULL, cfg->start_version);
     }
     /* The encode pool: encode_threads threads (while the producer sleeps
      * until the next tick every core may encode), plus the producer, which

@@ -26,6 +26,7 @@
 #include "frame.h"
 #include "ocean.h"
 #include "query_worker.h"
+#include "sea_spectrum.h"
 
 /* What became of a set. The network thread maps it to a wire error code. */
 enum sim_set_status {
@@ -46,6 +47,8 @@ struct sim_set {
     uint64_t tag;               /* opaque: the network side maps it back to the request */
     struct ocean_params values; /* the network thread's view after this set */
     uint64_t mask;              /* param_table bits this set changes */
+    struct sea_spectrum *sea;   /* a `sea`: the new measured sea (malloc'd, checked, owned; sim_set_free
+                                 * frees it), in force from this set on; NULL = the sea stays */
     /* Written by the builder and tick threads, read by the network thread
      * after sim_take_answers hands the set back. */
     enum sim_set_status status;
@@ -54,6 +57,8 @@ struct sim_set {
     uint32_t version;           /* params_version in force after it */
     uint64_t changed;           /* param_table bits that differ from before it */
     double build_s;             /* seconds the builder took to prepare its batch (0 = nothing built) */
+    char *sea_summary;          /* the last applied set of a batch that changed the sea or what the grid
+                                 * holds of it: the summary (sea_summary_json, printed; malloc'd), else NULL */
     /* Builder and tick threads only. */
     struct ocean_params prev;   /* the params this set was checked on top of */
     /* sim_adopt (tag 0): the state another sim left. values are whole
@@ -156,9 +161,10 @@ struct sim_config {
      * It may block (write + fsync + rename, a JetStream put): the builder is
      * the one thread that may wait for a disk or NATS. Nonzero refuses the
      * batch's sets (SIM_SET_NOT_SAVED: nothing changes). Also called by
-     * sim_save_now. NULL = nothing is kept. */
-    int (*persist)(void *user, const struct ocean_params *p, uint32_t version, double sim_time, char *err,
-                   size_t errlen);
+     * sim_save_now. sea: the measured sea in force with them, or NULL
+     * (none attached). NULL = nothing is kept. */
+    int (*persist)(void *user, const struct ocean_params *p, uint32_t version, double sim_time,
+                   const struct sea_spectrum *sea, char *err, size_t errlen);
     void *persist_user;
     /* Floating bodies: the world's capacity (--max-bodies) and the bodies a
      * restart puts back (the state file; copied by sim_start: all or none). */
@@ -166,6 +172,9 @@ struct sim_config {
     const struct body_state *restore;
     int nrestore;
     uint64_t restore_next_id;   /* ids below it are never issued again (2^32: none is; 0 = no rule) */
+    /* The measured sea a restart (or a take-over) puts back with the parameters: checked, copied
+     * by sim_start; NULL = none. */
+    const struct sea_spectrum *sea;
 };
 #define SIM_DEMAND_BYTES 128        /* bitmap of layer keys (every cascade) handed to remote_demand */
 _Static_assert(LAYER_KEYS_ALL <= SIM_DEMAND_BYTES * 8, "layer keys fit the remote demand bitmap");
@@ -199,13 +208,18 @@ double sim_time_now(struct sim *s);
 /* Ask the builder to persist the state in force with the current clock
  * (SIGHUP); returns at once. */
 void sim_save_now(struct sim *s);
+/* The summary (JSON text, malloc'd: the caller frees it) of the measured sea
+ * sim_start put back (sim_config.sea), once; NULL when none. Later changes
+ * come with their sets (sim_set.sea_summary). lws thread. */
+char *sim_sea_summary(struct sim *s);
 /* Take over the state another sim left (a hot standby, server/roles/):
  * these parameters (built off the tick like a set), this version, and the
  * clock extrapolated from (sim_time, seq) at wall_us; seq never goes back.
  * Not persisted (it comes from the durable record). Answered with tag 0
  * (sim_take_answers). Any thread; returns at once; -1 out of memory. */
+/* sea: the measured sea of that state when it differs from the one in force (copied), or NULL. */
 int sim_adopt(struct sim *s, const struct ocean_params *p, uint32_t version, double sim_time, uint64_t wall_us,
-              uint64_t seq);
+              uint64_t seq, const struct sea_spectrum *sea);
 /* Whether the pipeline freed memory (temporal streams) since the last call:
  * the lws thread then returns the free pages to the system (malloc_trim). */
 bool sim_take_trim(struct sim *s);

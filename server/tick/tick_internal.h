@@ -35,7 +35,10 @@ struct built {
     struct ocean_params params;   /* in force after the batch */
     struct sim_set *sets;         /* in order; each has ->prev, or a failed ->status */
     struct ocean_surface *surface; /* query snapshot of the prepared state (made by the builder), or NULL */
+    const struct sea_spectrum *sea; /* the new measured sea prepared (its set owns it), or NULL */
 };
+/* The summary of a sea as JSON text (builder.c; malloc'd, NULL on no memory). */
+char *sim_sea_summary_text(const struct sea_spectrum *sea, const struct sea_capture *cap, uint32_t version);
 
 /* Each field says which thread writes it and which reads it ("tick",
  * "builder", "lws" = the network thread; docs/threads.md). */
@@ -88,6 +91,8 @@ struct sim {
      * waiting in `ready`): the base the next batch is checked against. */
     struct ocean_params build_base;
     uint32_t build_version;       /* builder only: the version persisted for build_base (>= the tick's) */
+    struct sea_spectrum *build_sea; /* builder only: the measured sea with build_base (malloc'd), or NULL */
+    char *start_sea_summary;      /* sim_start writes; lws takes it once (sim_sea_summary) */
 
     /* floating bodies (body_tick.c) */
     struct body_sim *bodies;          /* producer only (sim_start creates it before the threads, sim_stop frees) */

@@ -20,11 +20,13 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "daemon"))
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "proto", "python"))
 import oceand_proc  # noqa: E402
 import test_cluster_roles as cr  # noqa: E402
 import test_daemon as td  # noqa: E402
 from test_cluster_roles import Cluster, Node, wait_for  # noqa: E402
 from test_daemon import TestFailure, check, connect, recv_json, recv_frame  # noqa: E402
+from oceand import sea as oceansea  # noqa: E402
 
 ARGS = None
 TESTS = []
@@ -60,6 +62,20 @@ async def set_until_acked(ws, i, wind, after):
         await asyncio.sleep(0.2)
     check(m["type"] == "params" and m["params_version"] > after and m["params"]["wind_speed"] == wind,
           "set after version %d: %r" % (after, m))
+    return m
+
+
+async def set_until_acked_params(ws, i, params, after):
+    """A set of params, sent again while the cluster settles (as set_until_acked)."""
+    deadline = time.time() + 15
+    for k in range(200):
+        await ws.send(json.dumps({"type": "set", "id": i + 1000 * k, "params": params}))
+        m = await recv_json(ws, lambda x: x["type"] in ("params", "error") and x.get("id") == i + 1000 * k, timeout=10)
+        if m["type"] == "params" or time.time() > deadline:
+            break
+        check(m["code"] in ("unavailable", "internal"), "set while the cluster settles: %r" % m)
+        await asyncio.sleep(0.2)
+    check(m["type"] == "params" and m["params_version"] > after, "set after version %d: %r" % (after, m))
     return m
 
 
@@ -310,6 +326,58 @@ def kill_active(c):
     check(act is not None, "no active sim to kill")
     act.kill()
     c.killed = act
+
+
+@test
+@with_js_cluster(sims=2, edges=1)
+def test_measured_sea_reaches_the_edge_and_the_standby(c):
+    """A `sea` sent through an edge: its sender and the edge's other clients get the
+    summary, a new client of the edge has it in hello; the JetStream record carries the
+    document, so after a kill -9 of the active sim the standby simulates the same sea
+    (spectrum measured, the same summary) at the same version."""
+    fixture = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "sea", "fixtures", "ndbc-rt",
+                           "46026.data_spec")
+    doc = oceansea.public(oceansea.read(fixture))
+
+    async def run():
+        ws, _ = await connect(c.edges[0], url=c.edges[0].url + "?frames=0")
+        other, _ = await connect(c.edges[0], url=c.edges[0].url + "?frames=0")
+        await ws.send(json.dumps({"type": "sea", "id": 1, "sea": doc}))
+        m = await recv_json(ws, lambda x: x.get("id") == 1, timeout=15)
+        check(m["type"] == "params" and m["params"]["spectrum"] == "measured" and m.get("sea"),
+              "the edge's reply to a sea: %r" % {k: m.get(k) for k in ("type", "code", "message")})
+        s, v = m["sea"], m["params_version"]
+        check(s["source"] == doc["source"] and s["time"] == doc["time"] and s["version"] == v, "summary %r" % s)
+        seen = await recv_json(other, lambda x: x["type"] == "params" and x.get("params_version") == v, timeout=10)
+        check(seen.get("sea") == s, "the edge's other client got %r" % seen.get("sea"))
+        h = await hello_at(c.edges[0], v, "after the sea")
+        check(h["sea"] == s, "a new client of the edge: sea %r" % (h["sea"] and h["sea"]["source"]))
+        bad = dict(doc, energy=[-1.0] + doc["energy"][1:])
+        await ws.send(json.dumps({"type": "sea", "id": 2, "sea": bad}))
+        m = await recv_json(ws, lambda x: x.get("id") == 2, timeout=10)
+        check(m["type"] == "error" and m["code"] == "sea_negative", "a bad sea through the edge: %r" % m)
+        first = one_active(c)
+        kill_active(c)
+        wait_for(lambda: c.active() not in (None, first), "the standby holds the lease", timeout=10)
+        deadline = time.time() + 10
+        while True:   # the edge learns the new sim's hello
+            h = await hello_at(c.edges[0], v, "after the take-over")
+            if h["sea"] and h["sea"]["source"] == s["source"] or time.time() > deadline:
+                break
+            await asyncio.sleep(0.2)
+        check(h["params"]["spectrum"] == "measured" and h["params_version"] >= v, "after the take-over: %s v%d" %
+              (h["params"]["spectrum"], h["params_version"]))
+        # The new holder's own sea, not the edge's cache: a change of the grid under it makes
+        # the holder summarise its sea again (a sim without one would refuse "measured").
+        m = await set_until_acked_params(ws, 3, {"patch_size": 512}, h["params_version"])
+        hs = m.get("sea")
+        check(hs is not None and hs["version"] == m["params_version"] and
+              all(hs[k] == s[k] for k in ("source", "time", "hs_m", "tp_s", "dir_from_deg", "polar")),
+              "the standby's sea %r, the first sim's %r" % (hs and hs["source"], s["source"]))
+        check(h["sea"] == s, "the edge's hello after the take-over: %r" % (h["sea"] and h["sea"]["source"]))
+        await ws.close()
+        await other.close()
+    asyncio.run(run())
 
 
 @test

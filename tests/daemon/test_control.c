@@ -21,9 +21,11 @@
 #include "oc_proto.h"
 #include "ocean.h"
 #include "render_msg.h"
+#include "sea_msg.h"
 #include "state.h"
 
 #include "../common/check.h"
+#include "../common/sea_fixture.h"
 
 static const struct ctl_limits lim = { .tick_rate = 30, .max_memory_mb = 256 };
 
@@ -295,7 +297,7 @@ static void test_builders(void)
     params_defaults(&p);
     struct subscription sub;
     subscription_default(&sub, 30);
-    struct hello_info h = { "c1", true, &p, 3, 30, 64, &sub, NULL, 8 };
+    struct hello_info h = { "c1", true, &p, 3, 30, 64, &sub, NULL, 8, NULL };
     char *s = control_print(control_hello_msg(&h));
     cJSON *j = cJSON_Parse(s);
     CHECK(j && cJSON_GetArraySize(cJSON_GetObjectItem(j, "schema")) == (int)param_count, "hello schema");
@@ -331,7 +333,7 @@ static void test_state_and_config(void)
     params_defaults(&p);
     p.wind_speed = 7;
     p.seed = 42;
-    CHECK(state_save(state, &p, 9, 12.5, NULL, err, sizeof err) == 0, "state_save: %s", err);
+    CHECK(state_save(state, &p, 9, 12.5, NULL, NULL, err, sizeof err) == 0, "state_save: %s", err);
     FILE *f = fopen(cfg, "w");
     fputs("{\"wind_speed\": 8, \"port\": 9999}", f);
     fclose(f);
@@ -575,7 +577,7 @@ static void test_hello_matches_vector(void)
     params_defaults(&p);
     struct subscription sub;
     subscription_default(&sub, 30);
-    struct hello_info h = { "c7-k3qf", true, &p, 12, 30, 64, &sub, NULL, 8 };
+    struct hello_info h = { "c7-k3qf", true, &p, 12, 30, 64, &sub, NULL, 8, NULL };
     cJSON *have = control_hello_msg(&h);
     strip_descriptions(want);
     strip_descriptions(have);
@@ -1591,7 +1593,7 @@ static void test_bodies(void)
           .owner = "c1-x82m", .resume = "ffffffffffffffffffffffffffffffff" },
     };
     struct state_bodies in = { .n = 2, .cap = 2, .next_id = 12, .b = sb }, out;
-    CHECK(state_save(path, &p, 1, 2.5, &in, err, sizeof err) == 0, "state_save: %s", err);
+    CHECK(state_save(path, &p, 1, 2.5, &in, NULL, err, sizeof err) == 0, "state_save: %s", err);
     CHECK(state_load_bodies(path, &out, err, sizeof err) == 1 && out.n == 2 && out.next_id == 12, "load: %s", err);
     for (int i = 0; i < 2; i++)
         CHECK(memcmp(&out.b[i].st, &sb[i].st, sizeof sb[i].st) == 0 && strcmp(out.b[i].owner, sb[i].owner) == 0 &&
@@ -1608,7 +1610,7 @@ static void test_bodies(void)
     };
     sb[1].st.kind = body_kind_find("ship");
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i += 2) {
-        CHECK(state_save(path, &p, 1, 2.5, &in, err, sizeof err) == 0, "state_save: %s", err);
+        CHECK(state_save(path, &p, 1, 2.5, &in, NULL, err, sizeof err) == 0, "state_save: %s", err);
         char *text;
         size_t len;
         CHECK(file_read_all(path, 1 << 20, &text, &len, err, sizeof err) == 0, "read back");
@@ -1636,6 +1638,82 @@ static void test_bodies(void)
     rmdir(dir);
 }
 
+/* The sea document: JSON -> struct -> JSON -> struct is exact in both forms,
+ * the state file keeps it, and the summary has the agreed shape. */
+static void test_sea_doc(void)
+{
+    static struct sea_spectrum in, back, loaded; /* 83 kB each */
+    char err[256];
+    for (int form = 0; form < 2; form++) {
+        sea_fixture_fill(&in, &sea_fixture_default, form ? SEA_FORM_SPECTRUM2D : SEA_FORM_MOMENTS, 72);
+        snprintf(in.source, sizeof in.source, "NDBC 46026");
+        snprintf(in.time, sizeof in.time, "2026-12-01T20:40:00Z");
+        in.depth = form ? 0 : 52;
+        in.tail = SEA_TAIL_WIND;
+        char msg[200];
+        CHECK(sea_spectrum_check(&in, msg, sizeof msg) == SEA_OK, "fixture: %s", msg);
+        char *text = control_print(sea_doc_json(&in));
+        CHECK(text != NULL, "sea_doc_json");
+        struct ctl_error e;
+        cJSON *doc = cJSON_Parse(text);
+        free(text);
+        memset(&back, 0x55, sizeof back);
+        CHECK(sea_doc_parse(doc, &back, &e) == 0, "form %d back: %s %s", form, e.code, e.message);
+        cJSON_Delete(doc);
+        int nd = form ? in.directions : 0;
+        bool same = back.form == in.form && back.bands == in.bands && back.directions == in.directions &&
+                    back.depth == in.depth && back.tail == in.tail && !strcmp(back.source, in.source) &&
+                    !memcmp(back.frequency, in.frequency, sizeof(double) * in.bands) &&
+                    !memcmp(back.bandwidth, in.bandwidth, sizeof(double) * in.bands);
+        if (!form)
+            same = same && !memcmp(back.energy, in.energy, sizeof(double) * in.bands) &&
+                   !memcmp(back.a2, in.a2, sizeof(double) * in.bands);
+        for (int i = 0; same && i < in.bands; i++)
+            same = !memcmp(back.energy2d[i], in.energy2d[i], sizeof(double) * nd);
+        CHECK(same, "form %d: the document does not read back exactly", form);
+        /* The summary: the agreed members, the polar plot at most 32 x 36. */
+        cJSON *sum = sea_summary_json(&in, NULL, 7);
+        const char *keys[] = { "version", "source", "time", "hs_m", "tp_s", "dir_from_deg", "spread_deg", "captured",
+                               "fit_note", "depth_m", "convention", "polar" };
+        for (size_t k = 0; k < sizeof keys / sizeof *keys; k++)
+            CHECK(cJSON_GetObjectItemCaseSensitive(sum, keys[k]) != NULL, "summary lacks %s", keys[k]);
+        const cJSON *pol = cJSON_GetObjectItemCaseSensitive(sum, "polar");
+        const cJSON *rows = cJSON_GetObjectItemCaseSensitive(pol, "e");
+        CHECK(cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(pol, "f_hz")) == 32 &&
+                  cJSON_GetArraySize(rows) == 32 && cJSON_GetArraySize(cJSON_GetArrayItem(rows, 0)) == 36,
+              "polar %d rows", cJSON_GetArraySize(rows));
+        double hs = cJSON_GetObjectItemCaseSensitive(sum, "hs_m")->valuedouble;
+        CHECK(fabs(hs - 4 * sqrt(sea_spectrum_m0(&in))) < 1e-3 * hs, "hs_m %g", hs);
+        CHECK(cJSON_IsNull(cJSON_GetObjectItemCaseSensitive(sum, form ? "depth_m" : "captured")), "nulls");
+        cJSON_Delete(sum);
+    }
+    /* The state file keeps the sea; a file without one has none. */
+    char dir[] = "/tmp/oceand-sea-XXXXXX", path[128];
+    CHECK(mkdtemp(dir) != NULL, "mkdtemp");
+    snprintf(path, sizeof path, "%s/state.json", dir);
+    struct ocean_params p;
+    params_defaults(&p);
+    p.spectrum = SPECTRUM_MEASURED;
+    CHECK(state_save(path, &p, 3, 1.5, NULL, &in, err, sizeof err) == 0, "state_save with a sea: %s", err);
+    CHECK(state_load_sea(path, &loaded, err, sizeof err) == 1 && loaded.bands == in.bands &&
+              loaded.directions == in.directions && !memcmp(loaded.energy2d[3], in.energy2d[3], sizeof(double) * in.directions),
+          "the saved sea: %s", err);
+    CHECK(state_save(path, &p, 4, 1.5, NULL, NULL, err, sizeof err) == 0 && state_load_sea(path, &loaded, err, sizeof err) == 0,
+          "a state file without a sea");
+    unlink(path);
+    rmdir(dir);
+    /* A bad document is refused with the library's code, naming the place. */
+    char *text = control_print(sea_doc_json(&in)); /* as a client sends it */
+    cJSON *doc = cJSON_Parse(text);
+    free(text);
+    cJSON *row = cJSON_GetArrayItem(cJSON_GetObjectItemCaseSensitive(doc, "energy"), 9);
+    cJSON_ReplaceItemInArray(row, 11, cJSON_CreateNumber(-1e-6));
+    struct ctl_error e = { .code = "none" };
+    CHECK(sea_doc_parse(doc, &back, &e) == -1 && !strcmp(e.code, "sea_negative") && !strcmp(e.param, "energy[9][11]"),
+          "negative energy: %s %s (%s)", e.code, e.param, e.message);
+    cJSON_Delete(doc);
+}
+
 int main(void)
 {
     test_capacity_plan();
@@ -1652,6 +1730,7 @@ int main(void)
     test_token_equal();
     test_builders();
     test_state_and_config();
+    test_sea_doc();
     test_one_validation_path();
     test_id_cap();
     test_pong_integer();

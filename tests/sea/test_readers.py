@@ -186,11 +186,13 @@ def part2():
     rc, out, err = tap("--print")
     check(rc == 1, f"no SOURCE: exit {rc}")
     rc, out, err = tap(os.path.join(FIX, "ww3/storm.spec"), "ws://127.0.0.1:9")
-    check(rc == 1 and "sea message" in err, f"sending: exit {rc}: {err.strip()}")
+    check(rc == 2 and "cannot connect" in err, f"sending to no daemon: exit {rc}: {err.strip()}")
+    rc, out, err = tap(os.path.join(FIX, "ww3/storm.spec"), "ws://127.0.0.1:9", "--print")
+    check(rc == 1 and "one of them" in err, f"--print and a URL: exit {rc}: {err.strip()}")
     rc, out, err = tap(os.path.join(FIX, "truth.json"), "--print")
     check(rc == 8 and "error bad_header" in err, f"an unknown format: {rc} {err.strip()}")
-    print(f"  ok  {len(cases)} broken fixtures; a missing file (io), no SOURCE (1), ws:// refused until the daemon "
-          f"has a sea message (1), an unknown format (bad_header)")
+    print(f"  ok  {len(cases)} broken fixtures; a missing file (io), no SOURCE (1), no daemon at the URL (2), "
+          f"--print with a URL (1), an unknown format (bad_header)")
 
 
 def part3(from_files):

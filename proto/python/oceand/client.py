@@ -11,6 +11,10 @@
     with Client("ws://127.0.0.1:8080") as sea:   # the same calls, blocking
         sea.subscribe(cascades="all"); s = sea.surface(); sea.query([[0, 0]])
 
+    A measured sea (§7.8), read by oceand.sea:  await sea.send_sea(oceand.sea.read("ndbc:46026"))
+    A forecast as a timeline:  await sea.play_forecast(oceand.sea.read("forecast.spec"), speed=3600)
+    sea.sea is the summary in force (hello's, then each params that brings one), or None.
+
 One reader task takes every message off the socket: replies go to the request
 that waits for them (by id), frames are decoded in order (predicted tiles need
 every frame, §5.8) and the latest complete one is kept, probe_data is queued,
@@ -73,6 +77,7 @@ class AsyncClient:
         self.bodies = {b["body"]: b for b in hello.get("bodies", [])}
         self.resume = {}                      # body -> resume key of the bodies this client launched
         self._bodies_now, self._bodies_event = None, asyncio.Event()
+        self.sea = hello.get("sea")           # the measured sea's summary (§7.8), or None
         self._reader = asyncio.get_running_loop().create_task(self._read())
 
     @classmethod
@@ -141,6 +146,8 @@ class AsyncClient:
             self.params_version = m.get("params_version", self.params_version)
             if m.get("cascade_patch_sizes"):
                 self.cascade_patch_sizes = list(m["cascade_patch_sizes"])
+            if "sea" in m:
+                self.sea = m["sea"]
         elif t == "bodies":
             self.bodies = {b["body"]: b for b in m.get("bodies", [])}
         elif t == "probe_data":
@@ -341,6 +348,36 @@ class AsyncClient:
             while not self._render_q.empty():   # what was on its way: the reader drops the rest
                 self._render_q.get_nowait()
 
+    # ---- measured seas (§7.8) ---------------------------------------------
+
+    async def send_sea(self, doc, token=None, tail=None):
+        """Send one sea document (oceand.sea.read's, private members dropped): the
+        `params` reply, whose "sea" is the summary (raises ServerError with the code)."""
+        doc = {k: v for k, v in doc.items() if not k.startswith("_")}
+        if tail is not None:
+            doc["tail"] = tail
+        msg = {"type": "sea", "sea": doc}
+        if token:
+            msg["token"] = token
+        return await self.request(msg)
+
+    async def play_forecast(self, docs, speed=1.0, token=None, tail=None, on_sent=None):
+        """A forecast (documents in time order) as the sea's evolution: each document is
+        sent when its time comes, the file's times scaled by 1/speed of wall-clock time
+        (speed 3600: an hour of forecast a second); the server eases each change in.
+        on_sent(doc, reply) is called after each. Returns the replies."""
+        times = [_iso_seconds(d["time"]) for d in docs]
+        t0, w0, out = times[0], asyncio.get_running_loop().time(), []
+        for d, t in zip(docs, times):
+            wait = w0 + (t - t0) / speed - asyncio.get_running_loop().time()
+            if wait > 0:
+                await asyncio.sleep(wait)
+            r = await self.send_sea(d, token, tail)
+            out.append(r)
+            if on_sent:
+                on_sent(d, r)
+        return out
+
     # ---- floating bodies (§7.6) -------------------------------------------
 
     async def _body_request(self, msg, token):
@@ -397,6 +434,13 @@ class AsyncClient:
         return await self.request(msg)
 
 
+def _iso_seconds(text):
+    """Seconds since 1970 of "YYYY-MM-DDThh:mm:ssZ" (the documents' times)."""
+    import calendar
+    import time as _time
+    return calendar.timegm(_time.strptime(text, "%Y-%m-%dT%H:%M:%SZ"))
+
+
 class Client:
     """The AsyncClient's calls, blocking: its event loop runs in a thread of its own
     (Debian 12's websockets 10 has no synchronous client)."""
@@ -446,6 +490,10 @@ class Client:
                     return
         finally:
             asyncio.run_coroutine_threadsafe(gen.aclose(), self._loop).result(self.timeout + 5)
+
+    def play_forecast(self, *a, **k):
+        """AsyncClient.play_forecast, blocking for as long as the timeline lasts."""
+        return asyncio.run_coroutine_threadsafe(self._client.play_forecast(*a, **k), self._loop).result()
 
     def __getattr__(self, name):
         attr = getattr(self._client, name)

@@ -803,7 +803,15 @@ def main(argv=None):
     ap.add_argument("source", help="a file, an http(s):// URL, ndbc:ID or cdip:ID")
     ap.add_argument("--time", help="the record at this time (YYYY-MM-DDThh:mm[:ss]Z) instead of the newest")
     ap.add_argument("--point", help="the WAVEWATCH III output point (default: the first)")
+    ap.add_argument("--send", metavar="URL", help="send it to the daemon at this ws:// URL (PROTOCOL.md §7.8) "
+                                                   "instead of printing it; a forecast plays as a timeline")
+    ap.add_argument("--speed", type=float, default=3600.0,
+                    help="--send of a forecast: forecast seconds per wall-clock second (default 3600)")
+    ap.add_argument("--token", help="--send: the daemon's control token")
+    ap.add_argument("--tail", choices=("f-4", "f-5", "none", "wind"), help="--send: what lies above the last band")
     a = ap.parse_args(argv)
+    if a.speed <= 0:
+        ap.error("--speed must be > 0")
     if a.time is not None and time_canon(a.time) is None:
         ap.error("--time needs YYYY-MM-DDThh:mm[:ss]Z")
     try:
@@ -814,8 +822,35 @@ def main(argv=None):
     docs = got if isinstance(got, list) else [got]
     for d in docs:
         print(summary(d), file=sys.stderr)
+    if a.send:
+        return _send(a, [public(d) for d in docs])
     out = [public(d) for d in docs] if isinstance(got, list) else public(got)
     print(json.dumps(out, separators=(",", ":")))
+    return 0
+
+
+def _send(a, docs):
+    """--send: the documents to a daemon, at their times (a forecast) or at once (one)."""
+    import asyncio
+    from .client import AsyncClient, ServerError
+
+    def said(d, r):
+        s = r.get("sea") or {}
+        print(f"sent {d.get('source', '')} {d.get('time', '')}: params_version {r.get('params_version')}, "
+              f"the grid holds {s.get('captured')}" + (f" ({s['fit_note']})" if s.get("fit_note") else ""),
+              file=sys.stderr)
+
+    async def run():
+        async with await AsyncClient.connect(a.send) as c:
+            await c.play_forecast(docs, a.speed, a.token, a.tail, said)
+    try:
+        asyncio.run(run())
+    except ServerError as e:
+        print(f"python -m oceand.sea: the daemon refused the sea: {e}", file=sys.stderr)
+        return EXIT_SEA
+    except (OSError, ConnectionError) as e:
+        print(f"python -m oceand.sea: {a.send}: {e}", file=sys.stderr)
+        return 2
     return 0
 
 
