@@ -17,7 +17,7 @@ web/node_modules/.package-lock.json: web/package-lock.json
 TESTS   += test-web test-web-bodies
 BENCHES += bench-web
 
-test-web: $(BUILD)/web/index.html $(BUILD)/oceand
+test-web: $(BUILD)/web/index.html $(BUILD)/oceand $(BUILD)/ocean-tap
 	node tests/web/test_web.mjs --oceand $(BUILD)/oceand --web-root $(BUILD)/web --out $(BUILD)/web-test
 
 # Bodies on the shared sea: two pages, one boat (tests/web/test_bodies.mjs; writes bodies.png).

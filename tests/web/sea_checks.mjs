@@ -4,6 +4,7 @@
 // the daemon's `sea` would arrive). Called by test_web.mjs with its check() harness.
 import { ndbcLikeSummary, SWELL, WIND_SEA } from './sea_fixture.mjs';
 import { colourAt } from '../../web/src/polarplot.js';
+import { execFileSync } from 'node:child_process';
 
 // The world's axes as docs/simulation.md states them (not the page's code): north = +z,
 // east = -x; wind_direction a (toward) is the vector (cos a, sin a) in (x, z); a wave coming
@@ -16,7 +17,7 @@ const headingVector = (h) => [-Math.sin(rad(h)), Math.cos(rad(h))]; // a bearing
 const angleDiff = (a, b) => Math.abs(((a - b) % 360 + 540) % 360 - 180);
 const screenAngle = ([dx, dy]) => Math.atan2(dx, -dy) * 180 / Math.PI; // clockwise from screen up
 
-export async function seaChecks({ check, browser, url, devices, pageErrors, assert, waitFor }) {
+export async function seaChecks({ check, browser, url, devices, pageErrors, assert, waitFor, tap }) {
   const summary = ndbcLikeSummary();
   const newPage = async (ctxOpts) => {
     const ctx = await browser.newContext(ctxOpts);
@@ -192,5 +193,30 @@ export async function seaChecks({ check, browser, url, devices, pageErrors, asse
         }
       } finally { await ctx.close(); }
     }
+  });
+
+  // A real sea from the daemon (ocean-tap sends the NDBC fixture) reaches a page opened before
+  // it: the card names it, the panel offers and shows "measured", and choosing JONSWAP there
+  // takes the shared sea back to the parametric one (the checks after this one expect it).
+  await check('a buoy\'s sea sent to the daemon reaches an open page, which offers "measured" and can leave it', async () => {
+    if (!tap) return;
+    const { ctx, p } = await newPage({ viewport: { width: 1280, height: 800 } });
+    const spectrum = () => p.evaluate(() => { const s = document.querySelector('[data-param=spectrum] select'); return { value: s.value, options: [...s.options].map((o) => o.value) }; });
+    try {
+      const before = await spectrum();
+      assert(!before.options.includes('measured'), `"measured" offered before a sea: ${JSON.stringify(before)}`);
+      const ws = url.replace(/^http/, 'ws').replace(/\/\?.*$/, '/');
+      execFileSync(tap, ['sea', 'tests/sea/fixtures/ndbc-rt/46026.data_spec', ws], { stdio: 'pipe', timeout: 30000 });
+      await waitFor(p, 'the sea line names the buoy', () => /NDBC 46026/.test(document.getElementById('sea-card').innerText), null, 15000);
+      const after = await spectrum();
+      assert(after.value === 'measured' && after.options.includes('measured'), `the panel after the sea: ${JSON.stringify(after)}`);
+      await p.evaluate(() => document.querySelector('#panel .title')?.closest('.closed') && document.querySelector('#panel > .title').click());
+      await p.locator('[data-param=spectrum] select').selectOption('jonswap', { force: true });
+      await waitFor(p, 'back to JONSWAP, "measured" no longer offered', () => window.oceand.params.spectrum === 'jonswap'
+        && ![...document.querySelector('[data-param=spectrum] select').options].some((o) => o.value === 'measured'), null, 15000)
+        .catch(async () => assert(false, `not back: ${JSON.stringify(await spectrum())}`));
+      const card = (await p.locator('#sea-card').innerText()).replace(/\s+/g, ' ');
+      assert(!/NDBC/.test(card) && /wind/.test(card), `the card after leaving the measured sea still names it: "${card}"`);
+    } finally { await ctx.close(); }
   });
 }

@@ -1061,7 +1061,7 @@ try {
   });
 
   // What sea the page says it shows: the compass, the sea line, the polar plot (sea_checks.mjs).
-  await seaChecks({ check, browser, url, devices, pageErrors, assert, waitFor });
+  await seaChecks({ check, browser, url, devices, pageErrors, assert, waitFor, tap: args.fake ? null : path.join(path.dirname(args.oceand), 'ocean-tap') });
 
   if (side) await side; else for (const groups of SIDE) await sideGroups(browser, groups);
 

@@ -608,7 +608,10 @@ if (query.has('test')) {
     surfaceHeight(x, z, slot = null) { return ocean.surfaceHeight(x, z, slot); },
     send(msg) { return conn.send(msg); },
     // A measured sea's summary as if the daemon had broadcast it (seaview.js), and its plot opened.
-    sea(summary, { fresh = false } = {}) { return seaView.applySea(summary, { fresh }); },
+    sea(summary, { fresh = false } = {}) { // with the spectrum "measured", as the daemon's params bring it
+      if (summary) seaView.setParams({ ...(seaView.params || {}), spectrum: 'measured' });
+      return seaView.applySea(summary, { fresh });
+    },
     seaPlot(on) { seaView.openPlot(on); },
     // The foam field drawn: size, and the share of samples at >= 0.5 and > 0.1.
     foamStats() {

@@ -116,6 +116,9 @@ export function rangeError(s, v) {
   return `${v} is outside ${s.min} to ${s.max}${s.unit ? ` ${s.unit}` : ''}`;
 }
 
+// "measured" is a sea a buoy or a forecast gives (ocean-tap sea): offered only while in force.
+function enumChoices(s, value) { return s.choices.filter((v) => v !== 'measured' || value === 'measured'); }
+
 export class Panel {
   // actions: { set(params), subscribe(sub), name(text), view: {wireframe, freeze, hour, hud}, onView(key, value) }
   constructor(actions, { compact = false } = {}) {
@@ -237,8 +240,7 @@ export class Panel {
     this.schema[name] = { ...s, ...info };
     if (!(name in obj)) obj[name] = s.default;
     let c;
-    // "measured" is a sea a buoy or a forecast gives (ocean-tap sea): offered only while in force.
-    if (s.type === 'enum') c = folder.add(obj, name, s.choices.filter((v) => v !== 'measured' || obj[name] === 'measured'));
+    if (s.type === 'enum') c = folder.add(obj, name, enumChoices(s, obj[name]));
     else if (s.type === 'bool') c = folder.add(obj, name);
     else if (s.type === 'int' && s.pow2) {
       const opts = [];
@@ -399,7 +401,12 @@ export class Panel {
   update(msg) {
     this.params = { ...msg.params };
     Object.assign(this.values, msg.params);
-    for (const c of Object.values(this.ctrls)) c.updateDisplay();
+    for (const [name, c] of Object.entries(this.ctrls)) {
+      // a sea attached (or let go) since the panel was built: offer "measured" while it is in force
+      const want = this.schema[name]?.type === 'enum' && enumChoices(this.schema[name], this.values[name]);
+      if (want && want.length !== c.$select.options.length) c.options(want);
+      else c.updateDisplay();
+    }
     this.updateCompass();
     if (msg.capacity) { this.capacity = msg.capacity; this.refreshCapacity(); }
     const changed = msg.changed || [];

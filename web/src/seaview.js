@@ -120,8 +120,12 @@ export class SeaView {
   // The shared parameters (the wind, for a parametric sea).
   setParams(params) { this.params = params || null; this.render(); }
 
+  // The measured sea shown: the summary while the shared spectrum is "measured" (a sea stays
+  // attached when someone picks a parametric spectrum again, and the page then shows the wind).
+  shown() { return this.summary && (!this.params || this.params.spectrum === 'measured') ? this.summary : null; }
+
   render() {
-    const s = this.summary, wind = this.params ? windBearings(this.params.wind_direction) : null;
+    const s = this.shown(), wind = this.params ? windBearings(this.params.wind_direction) : null;
     this.compass.setWaves(s && num(s.dir_from_deg) ? s.dir_from_deg : null);
     this.compass.setWind(!s && wind ? wind.toward : null);
     const [a, b] = s ? seaLineParts(s) : [windLine(this.params), ''];
@@ -131,7 +135,8 @@ export class SeaView {
     const fit = fitLine(s);
     this.fit.textContent = fit;
     this.fit.hidden = !fit;
-    this.button.hidden = !this.model;
+    if (!s && this.plotOpen) { this.plotOpen = false; this.plot.hidden = true; }
+    this.button.hidden = !this.model || !s;
     this.button.textContent = this.plotOpen ? 'hide the spectrum' : 'directional spectrum ▸';
     this.card.classList.toggle('oc-measured', !!s);
     this.card.hidden = !text && !s; // before the first hello: nothing to say
@@ -140,13 +145,13 @@ export class SeaView {
       if (s) this.folder.show(); else this.folder.hide();
       this.folderNote.textContent = [seaLine(s), fit].filter(Boolean).join('. ');
       this.folderButton.name(this.plotOpen ? 'Hide the directional spectrum' : 'Directional spectrum (polar plot)');
-      this.folderButton.disable(!this.model);
+      this.folderButton.disable(!this.model || !s);
     }
     this.layout();
   }
 
   openPlot(on) {
-    this.plotOpen = !!(on && this.model);
+    this.plotOpen = !!(on && this.model && this.shown());
     this.plot.hidden = !this.plotOpen;
     if (this.plotOpen && this.compact && this.gui && !this.gui._closed) this.gui.close(); // the sea, not two overlays
     this.render();
