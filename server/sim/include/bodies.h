@@ -4,7 +4,7 @@
  * each a rigid body with six degrees of freedom, integrated at fixed
  * substeps (BODY_SUBSTEP_S) by body_world_step. The sea enters only
  * through a struct body_sea the caller supplies (the daemon samples the
- * tick's grids of every cascade; tests supply still water or an analytic
+ * tick's grids of cascade 0; tests supply still water or an analytic
  * swell), so the library needs no simulation of its own and no threads.
  *
  * Deterministic: the same launches, steering and steps (the same dt
