@@ -349,10 +349,36 @@ static bool tick_grids(const struct sim *s, const struct prod_job *pj, struct pr
     return g->n > 0 && g->h[0] && g->dx[0] && g->dz[0];
 }
 
+/* One band of rows of this tick's heights into slot `slot` of the history
+ * (all three slots when fill). */
+struct hist_copy {
+    float *q;
+    const float *h;
+    size_t side;
+    int slot;
+    bool fill;
+};
+#define HIST_BANDS 8
+
+static void hist_band(void *arg, int item, int worker)
+{
+    const struct hist_copy *c = arg;
+    size_t i0 = c->side * (size_t)item / HIST_BANDS, i1 = c->side * (size_t)(item + 1) / HIST_BANDS;
+    float *q = c->q;
+    const float *h = c->h;
+    if (c->fill)
+        for (size_t i = i0; i < i1; i++)
+            q[3 * i] = q[3 * i + 1] = q[3 * i + 2] = h[i];
+    else
+        for (size_t i = i0; i < i1; i++)
+            q[3 * i + (size_t)c->slot] = h[i];
+}
+
 /* This tick's heights into the history, the older ones moved along (one
- * pass over N^2 floats). keep: how many older ticks stay valid (0: the
+ * pass over N^2 floats, in bands on the encode pool: every cache line of
+ * the history is written). keep: how many older ticks stay valid (0: the
  * history starts afresh: the first tick, a new grid, a gap). */
-static bool update_history(struct body_sim *b, const struct probe_grids *g, double t, int keep)
+static bool update_history(struct sim *s, struct body_sim *b, const struct probe_grids *g, double t, int keep)
 {
     size_t side = (size_t)g->n * g->n, need = 3 * side;
     if (b->hist_cap < need) {
@@ -366,14 +392,8 @@ static bool update_history(struct body_sim *b, const struct probe_grids *g, doub
         return false;
     }
     int slot = keep > 0 ? (b->hist_slot + 1) % 3 : 0; /* the oldest makes room for this tick */
-    float *q = b->hist;
-    const float *h = g->h[0];
-    if (keep > 0)
-        for (size_t i = 0; i < side; i++)
-            q[3 * i + (size_t)slot] = h[i];
-    else
-        for (size_t i = 0; i < side; i++)
-            q[3 * i] = q[3 * i + 1] = q[3 * i + 2] = h[i];
+    struct hist_copy c = { b->hist, g->h[0], side, slot, keep == 0 };
+    encode_pool_for(s->pool, HIST_BANDS, hist_band, &c);
     b->hist_slot = slot;
     b->hist_t[2] = keep > 0 ? b->hist_t[1] : t;
     b->hist_t[1] = keep > 0 ? b->hist_t[0] : t;
@@ -492,6 +512,26 @@ static struct body_snap *snapshot(const struct body_sim *b, const struct prod_jo
     return snap;
 }
 
+/* The step spread over the encode pool's threads, which are idle between a
+ * frame's encode and the next (the producer waits for that encode before
+ * the next frame anyway): bodies are independent, so each moves bit for bit
+ * as in one body_world_step, whichever thread steps it (bodies.h). Chunks of
+ * a few bodies, handed out one at a time: a descheduled thread holds up
+ * only its chunk. */
+#define BODY_CHUNK 4
+
+struct step_ctx {
+    struct body_world *w;
+    const struct body_sea *sea;
+    double t, dt;
+};
+
+static void step_chunk(void *arg, int item, int worker)
+{
+    const struct step_ctx *c = arg;
+    body_world_step_part(c->w, c->sea, c->t, c->dt, item * BODY_CHUNK, (item + 1) * BODY_CHUNK);
+}
+
 struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
 {
     struct body_sim *b = s->bodies;
@@ -524,7 +564,7 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
         bool goes_on = b->hist_n > 0 && same_grids(&b->hist_g, &g) && b->hist_t[0] == b->t_last;
         frozen = goes_on && b->hist_t[0] >= pj->sim_time;
         if (!frozen)
-            grids = update_history(b, &g, pj->sim_time, goes_on ? b->hist_n : 0);
+            grids = update_history(s, b, &g, pj->sim_time, goes_on ? b->hist_n : 0);
     } else {
         b->hist_n = 0; /* this tick's grids are not all there: the history starts again */
     }
@@ -546,7 +586,9 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
         double dt = fmin(fmax(pj->sim_time - b->t_last, 0), BODY_MAX_STEP_S);
         uint32_t ids[BODY_MAX_GONE];
         enum body_gone why[BODY_MAX_GONE];
-        int gone = body_world_step(b->w, &sea, pj->sim_time, dt, ids, why, BODY_MAX_GONE);
+        struct step_ctx sc = { b->w, &sea, pj->sim_time, dt };
+        encode_pool_for(s->pool, (body_world_count(b->w) + BODY_CHUNK - 1) / BODY_CHUNK, step_chunk, &sc);
+        int gone = body_world_step_end(b->w, ids, why, BODY_MAX_GONE);
         for (int i = 0; i < gone; i++) {
             adrift_set(b, ids[i], false);
             struct sim_body_cmd *c = calloc(1, sizeof *c);
