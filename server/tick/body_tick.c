@@ -546,6 +546,10 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
         b->t_last = pj->sim_time;
         return NULL;
     }
+    /* The previous frame's encode first (helping it): the step below runs on
+     * the encode pool's threads, and the producer would wait for it next
+     * anyway. Not counted in the bodies step's time. */
+    encode_pool_wait(s->pool);
     double t0 = mono_now();
     if (body_world_count(b->w) == 0)
         b->t_last = pj->sim_time; /* a first body starts now, not where the last one stopped */
