@@ -34,11 +34,12 @@ struct body_sim {
     bool had_bodies;            /* the last tick published some: an empty world is published once */
     uint32_t *adrift;           /* ids whose owner is gone (the record's adrift flag), unordered */
     int nadrift, capacity;
-    /* Cascade 0's height of this tick and of the two before, side by side
-     * ([3i + k], one block; k = hist_slot is this tick's, the slot after it
-     * the oldest): the substeps see the sea move through the ticks, a lookup
-     * finds all three in one cache line, and a tick writes one float of each
-     * three. */
+    /* Cascade 0's height of this tick and of the two before, three N x N
+     * planes in one block (plane hist_slot is this tick's, the one after it
+     * the oldest): the substeps see the sea move through the ticks, and a
+     * tick copies one plane (planes rather than triples side by side: a
+     * tick wrote every cache line of those, 0.13 ms of CPU at N = 256,
+     * while cascade 0's grids are small enough to stay in the cache). */
     float *hist;
     int hist_slot;
     size_t hist_cap;
@@ -242,21 +243,9 @@ static inline double tap_get(const struct tap *t, const float *g)
     return top + t->c * (bot - top);
 }
 
-/* The same on a grid of triples (body_sim.hist): out[k] of [3i + k]. */
-static inline void tap_get3(const struct tap *t, const float *g, double out[3])
-{
-    for (int k = 0; k < 3; k++) {
-        const float *p0 = g + 3 * t->r0 + k, *p1 = g + 3 * t->r1 + k;
-        double top = p0[3 * t->i0] + t->a * (p0[3 * t->i1] - p0[3 * t->i0]);
-        double bot = p1[3 * t->i0] + t->a * (p1[3 * t->i1] - p1[3 * t->i0]);
-        out[k] = top + t->c * (bot - top);
-    }
-}
-
 struct sea_ctx {
     const struct probe_grids *g; /* this tick's grids: cascade 0's dx, dz and patch */
-    const float *hist;           /* cascade 0's heights, now and the two ticks before */
-    int slot[3];                 /* where in each triple: now, the tick before, the one before */
+    const float *plane[3];       /* cascade 0's heights: now, the tick before, the one before */
     int nt;                      /* how many of the three are real ticks */
     double t[3];                 /* their sim times, newest first */
 };
@@ -306,13 +295,6 @@ static int sea_sample(void *ctx, double t, int n, const double (*xz)[2], double 
     const int N = g->n;
     double w[3], d[3];
     time_weights(c, t, w, d);
-    /* The three ticks' weights by slot of the triple, so a lookup sums its
-     * triple straight away. */
-    double ws[3], ds[3];
-    for (int k = 0; k < 3; k++) {
-        ws[c->slot[k]] = w[k];
-        ds[c->slot[k]] = d[k];
-    }
     const double scale = N / g->patch[0];
     for (int i = 0; i < n; i++) {
         const double x = xz[i][0], z = xz[i][1];
@@ -323,11 +305,10 @@ static int sea_sample(void *ctx, double t, int n, const double (*xz)[2], double 
             x0 = x - tap_get(&tp, g->dx[0]);
             z0 = z - tap_get(&tp, g->dz[0]);
         }
-        double v[3];
         tap_at(&tp, N, x0 * scale, z0 * scale);
-        tap_get3(&tp, c->hist, v);
-        height[i] = ws[0] * v[0] + ws[1] * v[1] + ws[2] * v[2];
-        dhdt[i] = ds[0] * v[0] + ds[1] * v[1] + ds[2] * v[2];
+        double v0 = tap_get(&tp, c->plane[0]), v1 = tap_get(&tp, c->plane[1]), v2 = tap_get(&tp, c->plane[2]);
+        height[i] = w[0] * v0 + w[1] * v1 + w[2] * v2;
+        dhdt[i] = d[0] * v0 + d[1] * v1 + d[2] * v2;
     }
     return 0;
 }
@@ -349,36 +330,10 @@ static bool tick_grids(const struct sim *s, const struct prod_job *pj, struct pr
     return g->n > 0 && g->h[0] && g->dx[0] && g->dz[0];
 }
 
-/* One band of rows of this tick's heights into slot `slot` of the history
- * (all three slots when fill). */
-struct hist_copy {
-    float *q;
-    const float *h;
-    size_t side;
-    int slot;
-    bool fill;
-};
-#define HIST_BANDS 8
-
-static void hist_band(void *arg, int item, int worker)
-{
-    const struct hist_copy *c = arg;
-    size_t i0 = c->side * (size_t)item / HIST_BANDS, i1 = c->side * (size_t)(item + 1) / HIST_BANDS;
-    float *q = c->q;
-    const float *h = c->h;
-    if (c->fill)
-        for (size_t i = i0; i < i1; i++)
-            q[3 * i] = q[3 * i + 1] = q[3 * i + 2] = h[i];
-    else
-        for (size_t i = i0; i < i1; i++)
-            q[3 * i + (size_t)c->slot] = h[i];
-}
-
-/* This tick's heights into the history, the older ones moved along (one
- * pass over N^2 floats, in bands on the encode pool: every cache line of
- * the history is written). keep: how many older ticks stay valid (0: the
- * history starts afresh: the first tick, a new grid, a gap). */
-static bool update_history(struct sim *s, struct body_sim *b, const struct probe_grids *g, double t, int keep)
+/* This tick's heights into the history, over its oldest plane. keep: how
+ * many older ticks stay valid (0: the history starts afresh: the first
+ * tick, a new grid, a gap; every plane gets this tick's). */
+static bool update_history(struct body_sim *b, const struct probe_grids *g, double t, int keep)
 {
     size_t side = (size_t)g->n * g->n, need = 3 * side;
     if (b->hist_cap < need) {
@@ -392,8 +347,9 @@ static bool update_history(struct sim *s, struct body_sim *b, const struct probe
         return false;
     }
     int slot = keep > 0 ? (b->hist_slot + 1) % 3 : 0; /* the oldest makes room for this tick */
-    struct hist_copy c = { b->hist, g->h[0], side, slot, keep == 0 };
-    encode_pool_for(s->pool, HIST_BANDS, hist_band, &c);
+    for (int k = 0; k < 3; k++)
+        if (k == slot || keep == 0)
+            memcpy(b->hist + side * (size_t)k, g->h[0], side * sizeof(float));
     b->hist_slot = slot;
     b->hist_t[2] = keep > 0 ? b->hist_t[1] : t;
     b->hist_t[1] = keep > 0 ? b->hist_t[0] : t;
@@ -568,16 +524,15 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
         bool goes_on = b->hist_n > 0 && same_grids(&b->hist_g, &g) && b->hist_t[0] == b->t_last;
         frozen = goes_on && b->hist_t[0] >= pj->sim_time;
         if (!frozen)
-            grids = update_history(s, b, &g, pj->sim_time, goes_on ? b->hist_n : 0);
+            grids = update_history(b, &g, pj->sim_time, goes_on ? b->hist_n : 0);
     } else {
         b->hist_n = 0; /* this tick's grids are not all there: the history starts again */
     }
     if (grids) {
         ctx.nt = frozen ? 1 : b->hist_n; /* paused: the water stands still */
         for (int k = 0; k < 3; k++)
-            ctx.slot[k] = (b->hist_slot + 3 - k) % 3;
+            ctx.plane[k] = b->hist + (size_t)g.n * g.n * (size_t)((b->hist_slot + 3 - k) % 3);
         memcpy(ctx.t, b->hist_t, sizeof ctx.t);
-        ctx.hist = b->hist;
     }
     struct sim_body_cmd *answers = cmds, **tail = &answers;
     for (struct sim_body_cmd *c = cmds; c; c = c->next) {
