@@ -468,26 +468,6 @@ static struct body_snap *snapshot(const struct body_sim *b, const struct prod_jo
     return snap;
 }
 
-/* The step spread over the encode pool's threads, which are idle between a
- * frame's encode and the next (the producer waits for that encode before
- * the next frame anyway): bodies are independent, so each moves bit for bit
- * as in one body_world_step, whichever thread steps it (bodies.h). Chunks of
- * a few bodies, handed out one at a time: a descheduled thread holds up
- * only its chunk. */
-#define BODY_CHUNK 4
-
-struct step_ctx {
-    struct body_world *w;
-    const struct body_sea *sea;
-    double t, dt;
-};
-
-static void step_chunk(void *arg, int item, int worker)
-{
-    const struct step_ctx *c = arg;
-    body_world_step_part(c->w, c->sea, c->t, c->dt, item * BODY_CHUNK, (item + 1) * BODY_CHUNK);
-}
-
 struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
 {
     struct body_sim *b = s->bodies;
@@ -502,9 +482,9 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
         b->t_last = pj->sim_time;
         return NULL;
     }
-    /* The previous frame's encode first (helping it): the step below runs on
-     * the encode pool's threads, and the producer would wait for it next
-     * anyway. Not counted in the bodies step's time. */
+    /* The previous frame's encode first (helping it; the producer would wait
+     * for it next anyway), so the step below does not compete with the encode
+     * threads for the cores, and its time is its own. */
     encode_pool_wait(s->pool);
     double t0 = mono_now();
     if (body_world_count(b->w) == 0)
@@ -545,9 +525,10 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
         double dt = fmin(fmax(pj->sim_time - b->t_last, 0), BODY_MAX_STEP_S);
         uint32_t ids[BODY_MAX_GONE];
         enum body_gone why[BODY_MAX_GONE];
-        struct step_ctx sc = { b->w, &sea, pj->sim_time, dt };
-        encode_pool_for(s->pool, (body_world_count(b->w) + BODY_CHUNK - 1) / BODY_CHUNK, step_chunk, &sc);
-        int gone = body_world_step_end(b->w, ids, why, BODY_MAX_GONE);
+        /* On the producer alone: spread over the encode pool's threads
+         * (body_world_step_part), the step took longer with 200 viewers, whose
+         * sending keeps a core busy: a chunk's thread waited for a core. */
+        int gone = body_world_step(b->w, &sea, pj->sim_time, dt, ids, why, BODY_MAX_GONE);
         for (int i = 0; i < gone; i++) {
             adrift_set(b, ids[i], false);
             struct sim_body_cmd *c = calloc(1, sizeof *c);

@@ -69,22 +69,3 @@ void encode_pool_start(struct encode_pool *p, int items, void (*fn)(void *, int,
 void encode_pool_wait(struct encode_pool *p) { pool_wait(p->pool, &p->job); }
 
 bool encode_pool_busy(struct encode_pool *p) { return pool_busy(p->pool, &p->job); }
-
-struct for_job {
-    void (*fn)(void *, int, int);
-    void *ctx;
-};
-
-static void for_range(void *arg, int i0, int i1, int worker)
-{
-    const struct for_job *j = arg;
-    for (int i = i0; i < i1; i++)
-        j->fn(j->ctx, i, worker);
-}
-
-void encode_pool_for(struct encode_pool *p, int items, void (*fn)(void *, int, int), void *ctx)
-{
-    struct for_job j = { fn, ctx };
-    pool_wait(p->pool, &p->job); /* one caller helps at a time: the encode first */
-    pool_for(p->pool, pool_threads(p->pool) + 1, items, for_range, &j);
-}

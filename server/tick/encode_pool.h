@@ -34,10 +34,5 @@ void encode_pool_start(struct encode_pool *p, int items, void (*fn)(void *ctx, i
  * (as worker 0) instead of sleeping. */
 void encode_pool_wait(struct encode_pool *p);
 bool encode_pool_busy(struct encode_pool *p);
-/* A parallel-for between encodes (the floating bodies' step, body_tick.c):
- * waits for the current job (helping), then fn(ctx, item, worker) for every
- * item in [0, items) on the pool's threads and the caller (worker 0), and
- * returns when all are done. The producer's alone, like start and wait. */
-void encode_pool_for(struct encode_pool *p, int items, void (*fn)(void *ctx, int item, int worker), void *ctx);
 
 #endif
