@@ -9,6 +9,9 @@ mbytes_per_s is all clients together, mbytes_per_s_per_client the mean per clien
 
     /usr/bin/python3 bench/load.py [--runs 256:200,512:100] [--window 10]
     /usr/bin/python3 bench/load.py --capacity      # the capacity rows (make bench-capacity)
+    /usr/bin/python3 bench/load.py --runs 256:200 --bodies 64 --no-query   # make bench-load-bodies
+--bodies K launches K floating bodies (bench/body_fleet.py) before the clients come; the line
+then has "bodies" (floating at the end) and "body_step_ms_mean".
 Client 0 sets the wind (11 <-> 12 m/s) every --set-interval s: 0.3 by default (someone
 steering); 0 under --capacity (one viewer watching; pass --set-interval 0.3 to add steering).
 """
@@ -24,6 +27,8 @@ import urllib.request
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "common"))
 import oceand_proc  # noqa: E402
+
+import body_fleet  # noqa: E402
 
 
 def metric(port, name):
@@ -85,9 +90,13 @@ def run(args, n, k, fields=None):
     # up to 2 min to be ready: the first start at a new N plans FFTW (then cached)
     d = oceand_proc.Oceand(args.oceand, "--resolution", str(n), "--state-file", "none",
                            "--web-root", tmp, "--max-clients", str(k + 16), "--log-level", "warn",
+                           *(body_fleet.DAEMON_ARGS if args.bodies else []),
                            *args.oceand_args.split(), tmp=tmp, own_tmp=True, ready_timeout=120)
     port = d.port
+    fleet = None
     try:
+        if args.bodies:   # launched and under way before the clients come
+            fleet = body_fleet.Fleet(d.url, args.bodies).start()
         sub = {"type": "subscribe", "temporal": not args.intra}   # temporal: as the web client does
         if fields:
             sub["fields"] = fields
@@ -101,6 +110,7 @@ def run(args, n, k, fields=None):
         late0 = metric(port, "oceand_tick_late_total")
         tsum0, tcnt0 = metric(port, "oceand_tick_duration_seconds_sum"), metric(port, "oceand_tick_duration_seconds_count")
         esum0, ecnt0 = metric(port, "oceand_encode_duration_seconds_sum"), metric(port, "oceand_encode_duration_seconds_count")
+        bsum0, bcnt0 = metric(port, "oceand_body_step_duration_seconds_sum"), metric(port, "oceand_body_step_duration_seconds_count")
         tb0 = hist_p50_ms(port, "oceand_tick_duration_seconds")
         rss = [rss_mb(d.pid)]
         while lc.poll() is None:
@@ -111,6 +121,8 @@ def run(args, n, k, fields=None):
         late1 = metric(port, "oceand_tick_late_total")
         tsum1, tcnt1 = metric(port, "oceand_tick_duration_seconds_sum"), metric(port, "oceand_tick_duration_seconds_count")
         esum1, ecnt1 = metric(port, "oceand_encode_duration_seconds_sum"), metric(port, "oceand_encode_duration_seconds_count")
+        bsum1, bcnt1 = metric(port, "oceand_body_step_duration_seconds_sum"), metric(port, "oceand_body_step_duration_seconds_count")
+        bodies = metric(port, "oceand_bodies")
         tb1 = hist_p50_ms(port, "oceand_tick_duration_seconds")
         degraded = metric(port, "oceand_degraded_groups")
         intra_groups = metric(port, "oceand_intra_groups")   # the codec rung: temporal clients served intra at full detail
@@ -129,6 +141,8 @@ def run(args, n, k, fields=None):
                "tick_ms_mean": round(1000 * (tsum1 - tsum0) / max(1, tcnt1 - tcnt0), 2),
                "tick_ms_p50_bucket": bucket_median(tb0, tb1),
                "encode_ms_mean": round(1000 * (esum1 - esum0) / max(1, ecnt1 - ecnt0), 2),  # wall, on the encode pool   # deadline -> frame published, histogram bucket
+               "bodies": int(bodies) if bodies == bodies else 0,   # floating at the end (--bodies launched them)
+               "body_step_ms_mean": round(1000 * (bsum1 - bsum0) / (bcnt1 - bcnt0), 3) if bcnt1 > bcnt0 else 0.0,
                "degraded_groups_at_end": int(degraded) if degraded == degraded else None,  # NaN: a daemon without the metric
                "intra_groups_at_end": int(intra_groups) if intra_groups == intra_groups else None,
                "connected": r["connected"], "frame_kb": r["frame_kb"], "mbytes_per_s": r["mbytes_per_s"],
@@ -137,6 +151,8 @@ def run(args, n, k, fields=None):
                "loadavg_1m": round(os.getloadavg()[0], 2)}   # this machine is shared: context for the numbers
         print(json.dumps(res), flush=True)
     finally:
+        if fleet:
+            fleet.stop()
         d.stop(timeout=5)
         d.close()
 
@@ -151,6 +167,8 @@ def main():
     ap.add_argument("--warmup", type=float, default=2)
     ap.add_argument("--intra", action="store_true", help="clients do not ask for the temporal codec (codec 1 only)")
     ap.add_argument("--window", type=float, default=10)
+    ap.add_argument("--bodies", type=int, default=0,
+                    help="floating bodies launched (every kind, the powered ones under way) before the clients come")
     ap.add_argument("--no-query", action="store_true", help="skip the point query / probe runs (query_load.py)")
     import query_load
     query_load.add_args(ap)

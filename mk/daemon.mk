@@ -17,7 +17,7 @@ PROTO_SAN_LIB ?= $(BUILD)/san/liboc_proto.a
 
 BINS += $(BUILD)/oceand
 TESTS += test-daemon test-daemon-asan test-daemon-valgrind
-BENCHES += bench-load bench-capacity bench-layer-flood bench-bodies
+BENCHES += bench-load bench-capacity bench-layer-flood bench-bodies bench-load-bodies
 
 # The cluster roles (--role sim|edge) link the NATS transport (mk/cluster.mk).
 $(BUILD)/oceand: $(DAEMON_OBJ) $(OCEAN_LIB) $(PROTO_LIB) $(CLUSTER_LIB)
@@ -107,6 +107,12 @@ bench-layer-flood: $(BUILD)/oceand
 .PHONY: bench-bodies
 bench-bodies: $(BUILD)/oceand
 	/usr/bin/python3 bench/bodies.py --oceand $(BUILD)/oceand $(BENCH_BODIES_ARGS)
+
+# 200 viewers (N = 256, temporal, as bench-load's row) with 64 bodies floating, the powered ones
+# under way: delivered share, overruns, tick and bodies-step time; one JSON line (~20 s).
+.PHONY: bench-load-bodies
+bench-load-bodies: $(BUILD)/oceand $(BUILD)/load_client
+	/usr/bin/python3 bench/load.py --runs 256:200 --bodies 64 --no-query $(BENCH_LOAD_BODIES_ARGS)
 
 run: deps
 	@$(MAKE) --no-print-directory build-all

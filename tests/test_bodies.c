@@ -8,6 +8,7 @@
  * any failure. OCEAN_TEST_QUICK=1 runs shorter simulations (valgrind).
  * OCEAN_TEST_ONLY=test_name runs one group. Build and run: make test-bodies. */
 #include <math.h>
+#include <pthread.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -566,26 +567,61 @@ static int states_equal(const struct body_world *a, const struct body_world *b)
     return 1;
 }
 
+/* One part of a step on a thread of its own (body_world_step_part). */
+struct part_job {
+    struct body_world *w;
+    const struct body_sea *sea;
+    double t, dt;
+    int i0, i1;
+};
+static void *part_run(void *arg)
+{
+    struct part_job *j = arg;
+    body_world_step_part(j->w, j->sea, j->t, j->dt, j->i0, j->i1);
+    return NULL;
+}
+/* A step as the daemon spreads it: the first half of the bodies on another
+ * thread while this one steps the second half, each with its own sampler
+ * (swell_sample counts its points), then the end. Returns 0 when the thread
+ * could not start. */
+static int step_in_parts(struct body_world *w, struct swell *s0, struct swell *s1, double t, double dt)
+{
+    struct body_sea sea0 = {swell_sample, s0}, sea1 = {swell_sample, s1};
+    int half = body_world_count(w) / 2;
+    struct part_job j = {w, &sea0, t, dt, 0, half};
+    pthread_t th;
+    if (pthread_create(&th, NULL, part_run, &j) != 0)
+        return 0;
+    body_world_step_part(w, &sea1, t, dt, half, body_world_count(w));
+    pthread_join(th, NULL);
+    body_world_step_end(w, NULL, NULL, 0);
+    return 1;
+}
+
 static void test_determinism(void)
 {
     check_section = "determinism";
     int ticks = quick ? 120 : 600, save_at = ticks / 2;
     struct swell sa = scene_sea(), sb = scene_sea(), sc = scene_sea();
     struct body_sea seaa = {swell_sample, &sa}, seab = {swell_sample, &sb}, seac = {swell_sample, &sc};
-    struct body_world *a = body_world_new(16), *b = body_world_new(16), *c = NULL;
+    struct swell se0 = scene_sea(), se1 = scene_sea();
+    struct body_world *a = body_world_new(16), *b = body_world_new(16), *c = NULL, *e = body_world_new(16);
     scene_launch(a);
     scene_launch(b);
+    scene_launch(e);
     double t = 0;
-    int same = 1, moved = 0;
+    int same = 1, moved = 0, parts_same = 1;
     for (int tick = 0; tick < ticks; tick++) {
         double dt = scene_dt(tick);
         t += dt;
         scene_steer(a, tick);
         scene_steer(b, tick);
+        scene_steer(e, tick);
         if (c)
             scene_steer(c, tick);
         body_world_step(a, &seaa, t, dt, NULL, NULL, 0);
         body_world_step(b, &seab, t, dt, NULL, NULL, 0);
+        parts_same &= step_in_parts(e, &se0, &se1, t, dt) && states_equal(a, e);
         if (c)
             body_world_step(c, &seac, t, dt, NULL, NULL, 0);
         same &= states_equal(a, b);
@@ -611,6 +647,7 @@ static void test_determinism(void)
           ticks, body_world_count(a), far);
     CHECK(c && states_equal(a, c), "saved at tick %d and restored into a new world: bit-identical %d ticks later",
           save_at, ticks - save_at);
+    CHECK(parts_same, "stepped in two parts on two threads at once: bit-identical to the whole step, %d ticks", ticks);
     /* A digest of the final states (FNV-1a over their bytes, kind pointers
      * left out): equal across builds (-O1 with sanitizers, -O3) and
      * machines, since the step is + - * / and sqrt only. */
@@ -646,6 +683,7 @@ static void test_determinism(void)
     body_world_free(b);
     body_world_free(c);
     body_world_free(d);
+    body_world_free(e);
 }
 
 /* ---- API ------------------------------------------------------------------------------------- */

@@ -36,6 +36,7 @@ struct body {
      * velocity at each column at the previous sample, for its acceleration. */
     double prev_dhdt[BODY_ELEMS_MAX];
     bool prev_ok;
+    bool sunk; /* sank in the step's part, removed by its end */
 };
 
 struct body_world {
@@ -528,43 +529,71 @@ enum body_error body_launch_on(struct body_world *w, const struct body_kind *kin
     return BODY_OK;
 }
 
-int body_world_step(struct body_world *w, const struct body_sea *sea, double t, double dt, uint32_t *gone_ids,
-                    enum body_gone *gone_why, int max_gone)
+/* Whether a step of dt is taken, and its substeps. */
+static bool step_plan(double t, double dt, int *n, double *h)
 {
-    if (!w || !isfinite(t) || !isfinite(dt) || dt <= 0 || dt > BODY_STEP_MAX_S)
-        return 0;
-    int n = (int)ceil(dt / BODY_SUBSTEP_S - 1e-9);
-    if (n < 1)
-        n = 1;
-    double h = dt / n, t0 = t - dt;
+    if (!isfinite(t) || !isfinite(dt) || dt <= 0 || dt > BODY_STEP_MAX_S)
+        return false;
+    *n = (int)ceil(dt / BODY_SUBSTEP_S - 1e-9);
+    if (*n < 1)
+        *n = 1;
+    *h = dt / *n;
+    return true;
+}
+
+/* One body through the n substeps of a step: it depends on nothing but its
+ * own state and the sea, so bodies may be stepped in any order, on any
+ * thread. A body that sinks stops there, marked. */
+static void step_body(struct body *b, const struct body_sea *sea, double t0, double h, int n)
+{
     /* The water's vertical velocity one substep before the first, for its
      * acceleration in the first substep (so a step depends on nothing but
      * the states and the sea: a restored world continues the same). */
-    for (int i = 0; i < w->count; i++) {
-        struct body *b = &w->b[i];
-        double r[3][3], xz[BODY_ELEMS_MAX][2], eta[BODY_ELEMS_MAX];
-        quat_matrix(b->s.quat, r);
-        b->prev_ok = sample_sea(b, r, sea, t0 - h, xz, eta, b->prev_dhdt);
-    }
+    double r[3][3], xz[BODY_ELEMS_MAX][2], eta[BODY_ELEMS_MAX];
+    quat_matrix(b->s.quat, r);
+    b->prev_ok = sample_sea(b, r, sea, t0 - h, xz, eta, b->prev_dhdt);
+    b->sunk = false;
+    for (int k = 0; k < n && !b->sunk; k++)
+        b->sunk = body_substep(b, sea, t0 + k * h, h);
+}
+
+void body_world_step_part(struct body_world *w, const struct body_sea *sea, double t, double dt, int i0, int i1)
+{
+    int n;
+    double h;
+    if (!w || !step_plan(t, dt, &n, &h))
+        return;
+    for (int i = i0 < 0 ? 0 : i0; i < i1 && i < w->count; i++)
+        step_body(&w->b[i], sea, t - dt, h, n);
+}
+
+int body_world_step_end(struct body_world *w, uint32_t *gone_ids, enum body_gone *gone_why, int max_gone)
+{
     int gone = 0;
-    for (int k = 0; k < n; k++) {
-        double tk = t0 + k * h;
-        for (int i = 0; i < w->count;) {
-            if (body_substep(&w->b[i], sea, tk, h)) {
-                if (gone < max_gone) {
-                    if (gone_ids)
-                        gone_ids[gone] = w->b[i].s.id;
-                    if (gone_why)
-                        gone_why[gone] = BODY_GONE_SUNK;
-                    gone++;
-                }
-                remove_at(w, i);
-            } else {
-                i++;
-            }
+    for (int i = 0; w && i < w->count;) {
+        if (!w->b[i].sunk) {
+            i++;
+            continue;
         }
+        if (gone < max_gone) {
+            if (gone_ids)
+                gone_ids[gone] = w->b[i].s.id;
+            if (gone_why)
+                gone_why[gone] = BODY_GONE_SUNK;
+            gone++;
+        }
+        remove_at(w, i);
     }
     return gone;
+}
+
+int body_world_step(struct body_world *w, const struct body_sea *sea, double t, double dt, uint32_t *gone_ids,
+                    enum body_gone *gone_why, int max_gone)
+{
+    if (!w)
+        return 0;
+    body_world_step_part(w, sea, t, dt, 0, w->count);
+    return body_world_step_end(w, gone_ids, gone_why, max_gone);
 }
 
 void body_attitude(const struct body_state *s, double *heading_deg, double *pitch_deg, double *roll_deg)

@@ -1,7 +1,7 @@
 /* body_tick.c — the floating bodies in the tick pipeline (bodies.h does the
  * physics). The producer owns the world: right after ocean_step of a tick it
  * applies the requests that came in (sim_body_submit), steps every body on
- * that tick's grids of every cascade, and publishes the tick's bodies (struct
+ * that tick's grids of cascade 0, and publishes the tick's bodies (struct
  * body_snap: full states for the lws thread and the state file, and the BODY
  * section for the tick's frame, PROTOCOL.md §3.5). docs/threads.md has the
  * contract. */
@@ -34,16 +34,16 @@ struct body_sim {
     bool had_bodies;            /* the last tick published some: an empty world is published once */
     uint32_t *adrift;           /* ids whose owner is gone (the record's adrift flag), unordered */
     int nadrift, capacity;
-    /* Every cascade's height of this tick and of the two before, side by
-     * side ([3i + k], one block; k = hist_slot is this tick's, the slot after
-     * it the oldest): the substeps see the sea move through the ticks, a
-     * lookup finds all three in one cache line (the fine cascades' hull
-     * points lie far apart on their grids), and a tick writes one float of
-     * each three. */
+    /* Cascade 0's height of this tick and of the two before, three N x N
+     * planes in one block (plane hist_slot is this tick's, the one after it
+     * the oldest): the substeps see the sea move through the ticks, and a
+     * tick copies one plane (planes rather than triples side by side: a
+     * tick wrote every cache line of those, 0.13 ms of CPU at N = 256,
+     * while cascade 0's grids are small enough to stay in the cache). */
     float *hist;
     int hist_slot;
     size_t hist_cap;
-    struct probe_grids hist_g;  /* the grids they came from (n, cascades, patches) */
+    struct probe_grids hist_g;  /* the grid they came from (n, cascade 0's patch) */
     double hist_t[3];           /* the sim times of the three */
     int hist_n;                 /* how many of them are real ticks (1..3; 0 = none kept) */
 };
@@ -93,22 +93,20 @@ int sim_bodies_restored(struct sim *s) { return s->bodies_restored; }
 
 bool body_wanted_locked(struct sim *s) { return atomic_load(&s->body_count) > 0 || s->body_cmds; }
 
-/* What the bodies read of a tick: the height of every cascade, and the
- * displacement of cascade 0 only. A finer cascade's displacement is
- * millimetres to centimetres (PROTOCOL.md §4.1), below what bilinear
- * interpolation on a 1 m grid resolves, and stepping it would cost the tick
- * four more inverse FFTs (measured: 2 ms of a 5.4 ms tick at N = 256 with one
- * viewer of cascade 0); the fine heights are stepped anyway whenever a web
- * page watches (it subscribes to them). A fixed rule, not "whatever was
- * stepped": the bodies' motion must not depend on who watches. */
+/* What the bodies read of a tick: cascade 0's height and displacement, not
+ * the finer cascades. Those hold waves of 0.3 to 2 m at the default 256 m
+ * patch (PROTOCOL.md §4.1), 1.1 and 0.6 cm RMS at any wind (0.5 m RMS in
+ * cascade 0 at 10 m/s), shorter than or as long as the smallest hull, whose
+ * columns average them out; stepping them for the bodies alone cost the tick
+ * two more inverse FFTs (0.7 ms of a 1.7 ms tick at N = 256 with one viewer
+ * of cascade 0) and reading them two thirds of the sampling. A fixed rule,
+ * not "whatever was stepped": the bodies' motion must not depend on who
+ * watches. */
 #define BODY_FIELDS_0 (OCEAN_FIELD_BIT(OCEAN_HEIGHT) | OCEAN_FIELD_BIT(OCEAN_DX) | OCEAN_FIELD_BIT(OCEAN_DZ))
-#define BODY_FIELDS_FINE OCEAN_FIELD_BIT(OCEAN_HEIGHT)
 
 void body_want(struct frame_want *w)
 {
     w->cfields[0] |= BODY_FIELDS_0;
-    for (int c = 1; c < OCEAN_MAX_CASCADES; c++)
-        w->cfields[c] |= BODY_FIELDS_FINE;
     w->fields |= BODY_FIELDS_0;
 }
 
@@ -214,6 +212,10 @@ struct tap {
     double a, c;                /* weights along x and z */
 };
 
+/* v clamped to [0, hi] by comparisons: fmin and fmax are calls into libm
+ * here (no -ffast-math), and this runs five times per hull point and sample. */
+static inline double clamp_grid(double v, double hi) { return v > 0 ? (v < hi ? v : hi) : 0; }
+
 static inline void tap_at(struct tap *t, int n, double u, double v)
 {
     /* An offset of whole periods keeps both positive, so the conversion to
@@ -221,8 +223,8 @@ static inline void tap_at(struct tap *t, int n, double u, double v)
      * further than 65536 patches out are clamped there (bodies stay within
      * a few km). */
     const double off = (double)n * 65536.0;
-    u = fmin(fmax(u + off, 0), 2 * off);
-    v = fmin(fmax(v + off, 0), 2 * off);
+    u = clamp_grid(u + off, 2 * off);
+    v = clamp_grid(v + off, 2 * off);
     long iu = (long)u, iv = (long)v;
     int m = n - 1, i0 = (int)(iu & m), j0 = (int)(iv & m);
     t->a = u - (double)iu;
@@ -241,23 +243,11 @@ static inline double tap_get(const struct tap *t, const float *g)
     return top + t->c * (bot - top);
 }
 
-/* The same on a grid of triples (body_sim.hist): out[k] of [3i + k]. */
-static inline void tap_get3(const struct tap *t, const float *g, double out[3])
-{
-    for (int k = 0; k < 3; k++) {
-        const float *p0 = g + 3 * t->r0 + k, *p1 = g + 3 * t->r1 + k;
-        double top = p0[3 * t->i0] + t->a * (p0[3 * t->i1] - p0[3 * t->i0]);
-        double bot = p1[3 * t->i0] + t->a * (p1[3 * t->i1] - p1[3 * t->i0]);
-        out[k] = top + t->c * (bot - top);
-    }
-}
-
 struct sea_ctx {
-    const struct probe_grids *g;          /* this tick's grids: cascade 0's dx, dz; the patches */
-    const float *hist[OCEAN_MAX_CASCADES]; /* each cascade's heights, now and the two ticks before */
-    int slot[3];                          /* where in each triple: now, the tick before, the one before */
-    int nt;                               /* how many of the three are real ticks */
-    double t[3];                          /* their sim times, newest first */
+    const struct probe_grids *g; /* this tick's grids: cascade 0's dx, dz and patch */
+    const float *plane[3];       /* cascade 0's heights: now, the tick before, the one before */
+    int nt;                      /* how many of the three are real ticks */
+    double t[3];                 /* their sim times, newest first */
 };
 
 /* Weights of the three ticks' heights for the height at t (w) and for its
@@ -286,80 +276,66 @@ static void time_weights(const struct sea_ctx *c, double t, double w[3], double 
     }
 }
 
-/* The displaced surface above each world point, the heights of every
- * cascade summed: bilinear on the tick's grids (probe_eval's Lanczos-3 costs
- * 9x the taps, too much for up to 64 hull points of each of 64 bodies at
- * every substep), the source point found by two fixed-point steps
- * x0 = x - D(x0) on cascade 0's displacement (body_want says why only its).
- * In time the height follows the parabola through the last three ticks'
- * heights at the same source point (time_weights), and dhdt is its
- * derivative: the substeps of a step (and its first sample, a substep
- * earlier) lie between those ticks, the water a body sees moves smoothly
- * and consistently with its dhdt, and dhdt changes between substeps, which
- * the library needs for the water's acceleration (an exact time derivative
- * would need more inverse FFTs per cascade and tick; the drift of the source
- * point itself is left out, a second-order term). */
+/* The displaced surface above each world point: bilinear on cascade 0's
+ * grids (probe_eval's Lanczos-3 costs 9x the taps, too much for up to 64
+ * hull points of each of 64 bodies at every substep), the source point
+ * found by two fixed-point steps x0 = x - D(x0) on its displacement
+ * (body_want says why cascade 0 alone). In time the height follows the
+ * parabola through the last three ticks' heights at the same source point
+ * (time_weights), and dhdt is its derivative: the substeps of a step (and
+ * its first sample, a substep earlier) lie between those ticks, the water a
+ * body sees moves smoothly and consistently with its dhdt, and dhdt changes
+ * between substeps, which the library needs for the water's acceleration
+ * (an exact time derivative would need more inverse FFTs per tick; the drift
+ * of the source point itself is left out, a second-order term). */
 static int sea_sample(void *ctx, double t, int n, const double (*xz)[2], double *height, double *dhdt)
 {
     const struct sea_ctx *c = ctx;
     const struct probe_grids *g = c->g;
-    const int N = g->n, nc = g->ncasc;
+    const int N = g->n;
     double w[3], d[3];
     time_weights(c, t, w, d);
-    double scale[OCEAN_MAX_CASCADES];
-    for (int k = 0; k < nc; k++)
-        scale[k] = N / g->patch[k];
+    const double scale = N / g->patch[0];
     for (int i = 0; i < n; i++) {
         const double x = xz[i][0], z = xz[i][1];
         double x0 = x, z0 = z;
         struct tap tp;
         for (int it = 0; it < 2; it++) {
-            tap_at(&tp, N, x0 * scale[0], z0 * scale[0]);
+            tap_at(&tp, N, x0 * scale, z0 * scale);
             x0 = x - tap_get(&tp, g->dx[0]);
             z0 = z - tap_get(&tp, g->dz[0]);
         }
-        double h[3] = { 0, 0, 0 }, v[3];
-        for (int k = 0; k < nc; k++) {
-            tap_at(&tp, N, x0 * scale[k], z0 * scale[k]);
-            tap_get3(&tp, c->hist[k], v);
-            h[0] += v[c->slot[0]];
-            h[1] += v[c->slot[1]];
-            h[2] += v[c->slot[2]];
-        }
-        height[i] = w[0] * h[0] + w[1] * h[1] + w[2] * h[2];
-        dhdt[i] = d[0] * h[0] + d[1] * h[1] + d[2] * h[2];
+        tap_at(&tp, N, x0 * scale, z0 * scale);
+        double v0 = tap_get(&tp, c->plane[0]), v1 = tap_get(&tp, c->plane[1]), v2 = tap_get(&tp, c->plane[2]);
+        height[i] = w[0] * v0 + w[1] * v1 + w[2] * v2;
+        dhdt[i] = d[0] * v0 + d[1] * v1 + d[2] * v2;
     }
     return 0;
 }
 
-/* This tick's grids, as the library left them after the step (before the
- * frame job takes them): every cascade must have been stepped for height,
- * dx and dz (a tick planned before the first request came may not be). */
+/* This tick's grids of cascade 0, as the library left them after the step
+ * (before the frame job takes them): height, dx and dz must have been
+ * stepped (a tick planned before the first request came may not be). */
 static bool tick_grids(const struct sim *s, const struct prod_job *pj, struct probe_grids *g)
 {
     memset(g, 0, sizeof *g);
     g->n = ocean_resolution(s->ocean);
-    g->ncasc = ocean_cascades(s->ocean);
-    for (int c = 0; c < g->ncasc; c++) {
-        unsigned need = c == 0 ? BODY_FIELDS_0 : BODY_FIELDS_FINE;
-        if ((pj->want.cfields[c] & need) != need)
-            return false;
-        g->patch[c] = ocean_cascade_patch(pj->patch_size, c);
-        g->h[c] = ocean_cascade_field(s->ocean, c, OCEAN_HEIGHT);
-        if (!g->h[c])
-            return false;
-    }
+    g->ncasc = 1;
+    if ((pj->want.cfields[0] & BODY_FIELDS_0) != BODY_FIELDS_0)
+        return false;
+    g->patch[0] = ocean_cascade_patch(pj->patch_size, 0);
+    g->h[0] = ocean_cascade_field(s->ocean, 0, OCEAN_HEIGHT);
     g->dx[0] = ocean_cascade_field(s->ocean, 0, OCEAN_DX);
     g->dz[0] = ocean_cascade_field(s->ocean, 0, OCEAN_DZ);
-    return g->n > 0 && g->ncasc > 0 && g->dx[0] && g->dz[0];
+    return g->n > 0 && g->h[0] && g->dx[0] && g->dz[0];
 }
 
-/* This tick's heights into the history, the older ones moved along (one
- * pass over N^2 floats per cascade). keep: how many older ticks stay valid
- * (0: the history starts afresh: the first tick, new grids, a gap). */
+/* This tick's heights into the history, over its oldest plane. keep: how
+ * many older ticks stay valid (0: the history starts afresh: the first
+ * tick, a new grid, a gap; every plane gets this tick's). */
 static bool update_history(struct body_sim *b, const struct probe_grids *g, double t, int keep)
 {
-    size_t side = (size_t)g->n * g->n, need = 3 * side * (size_t)g->ncasc;
+    size_t side = (size_t)g->n * g->n, need = 3 * side;
     if (b->hist_cap < need) {
         free(b->hist);
         b->hist = malloc(need * sizeof(float));
@@ -371,16 +347,9 @@ static bool update_history(struct body_sim *b, const struct probe_grids *g, doub
         return false;
     }
     int slot = keep > 0 ? (b->hist_slot + 1) % 3 : 0; /* the oldest makes room for this tick */
-    for (int c = 0; c < g->ncasc; c++) {
-        float *q = b->hist + 3 * side * (size_t)c;
-        const float *h = g->h[c];
-        if (keep > 0)
-            for (size_t i = 0; i < side; i++)
-                q[3 * i + (size_t)slot] = h[i];
-        else
-            for (size_t i = 0; i < side; i++)
-                q[3 * i] = q[3 * i + 1] = q[3 * i + 2] = h[i];
-    }
+    for (int k = 0; k < 3; k++)
+        if (k == slot || keep == 0)
+            memcpy(b->hist + side * (size_t)k, g->h[0], side * sizeof(float));
     b->hist_slot = slot;
     b->hist_t[2] = keep > 0 ? b->hist_t[1] : t;
     b->hist_t[1] = keep > 0 ? b->hist_t[0] : t;
@@ -392,12 +361,7 @@ static bool update_history(struct body_sim *b, const struct probe_grids *g, doub
 
 static bool same_grids(const struct probe_grids *a, const struct probe_grids *b)
 {
-    if (a->n != b->n || a->ncasc != b->ncasc)
-        return false;
-    for (int c = 0; c < a->ncasc; c++)
-        if (a->patch[c] != b->patch[c])
-            return false;
-    return true;
+    return a->n == b->n && a->patch[0] == b->patch[0];
 }
 
 /* ---- one tick ---- */
@@ -551,6 +515,10 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
         b->t_last = pj->sim_time;
         return NULL;
     }
+    /* The previous frame's encode first (helping it; the producer would wait
+     * for it next anyway), so the step below does not compete with the encode
+     * threads for the cores, and its time is its own. */
+    encode_pool_wait(s->pool);
     double t0 = mono_now();
     if (body_world_count(b->w) == 0)
         b->t_last = pj->sim_time; /* a first body starts now, not where the last one stopped */
@@ -576,10 +544,8 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
     if (grids) {
         ctx.nt = frozen ? 1 : b->hist_n; /* paused: the water stands still */
         for (int k = 0; k < 3; k++)
-            ctx.slot[k] = (b->hist_slot + 3 - k) % 3;
+            ctx.plane[k] = b->hist + (size_t)g.n * g.n * (size_t)((b->hist_slot + 3 - k) % 3);
         memcpy(ctx.t, b->hist_t, sizeof ctx.t);
-        for (int c = 0; c < g.ncasc; c++)
-            ctx.hist[c] = b->hist + 3 * (size_t)g.n * g.n * (size_t)c;
     }
     struct sim_body_cmd *answers = cmds, **tail = &answers;
     for (struct sim_body_cmd *c = cmds; c; c = c->next) {
@@ -592,6 +558,9 @@ struct body_snap *body_tick(struct sim *s, const struct prod_job *pj)
         double dt = fmin(fmax(pj->sim_time - b->t_last, 0), BODY_MAX_STEP_S);
         uint32_t ids[BODY_MAX_GONE];
         enum body_gone why[BODY_MAX_GONE];
+        /* On the producer alone: spread over the encode pool's threads
+         * (body_world_step_part), the step took longer with 200 viewers, whose
+         * sending keeps a core busy: a chunk's thread waited for a core. */
         int gone = body_world_step(b->w, &sea, pj->sim_time, dt, ids, why, BODY_MAX_GONE);
         for (int i = 0; i < gone; i++) {
             adrift_set(b, ids[i], false);

@@ -4,7 +4,7 @@
  * each a rigid body with six degrees of freedom, integrated at fixed
  * substeps (BODY_SUBSTEP_S) by body_world_step. The sea enters only
  * through a struct body_sea the caller supplies (the daemon samples the
- * tick's grids of every cascade; tests supply still water or an analytic
+ * tick's grids of cascade 0; tests supply still water or an analytic
  * swell), so the library needs no simulation of its own and no threads.
  *
  * Deterministic: the same launches, steering and steps (the same dt
@@ -95,8 +95,9 @@ struct body_state {
  * changes between samples, and a step also samples once at t - dt - dt/n.
  * A sampler that gives one tick's grid for every t gives no acceleration:
  * large hulls then heave too much near their heave resonance (docs). It is
- * called once per body per substep, in ascending id order, with that
- * body's column points (at most 64). */
+ * called body by body in ascending id order, for each body once per sample
+ * in ascending t, with that body's column points (at most 64); under
+ * body_world_step_part on the threads that call it, at once. */
 struct body_sea {
     int (*sample)(void *ctx, double t, int n, const double (*xz)[2], double *height, double *dhdt);
     void *ctx;
@@ -147,10 +148,19 @@ enum body_error body_remove(struct body_world *w, uint32_t id);
  * k samples the sea at t - dt + k dt/n. A dt that is not finite, negative
  * or above BODY_STEP_MAX_S, or a t that is not finite, does nothing
  * (returns 0). A body that sank is removed:
- * its id and why are appended to gone (up to max_gone; more are still
- * removed) and the count written is returned. */
+ * its id and why are appended to gone (ascending id; up to max_gone, more
+ * are still removed) and the count written is returned. */
 int body_world_step(struct body_world *w, const struct body_sea *sea, double t, double dt, uint32_t *gone_ids,
                     enum body_gone *gone_why, int max_gone);
+/* The same step in parts, for a caller that spreads the bodies over its
+ * threads (bodies do not touch each other, so each moves bit for bit as
+ * under body_world_step): body_world_step_part steps bodies i0 .. i1 - 1
+ * (body_world_get's indices), and disjoint ranges may run on several threads
+ * at once (the sampler must then be safe to call from them); once every
+ * body is stepped, body_world_step_end on one thread removes those that sank
+ * and reports them as body_world_step does. No other call on w in between. */
+void body_world_step_part(struct body_world *w, const struct body_sea *sea, double t, double dt, int i0, int i1);
+int body_world_step_end(struct body_world *w, uint32_t *gone_ids, enum body_gone *gone_why, int max_gone);
 
 /* Bodies in the world, and each one's state, in ascending id order
  * (i = 0 .. count-1). body_world_get returns -1 when i is out of range. */
