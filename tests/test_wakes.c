@@ -478,6 +478,14 @@ static void test_regions(void)
     int full = wakes_step(c, 0.1, 3, s, un, 4);
     CHECK(full == 1 && un[0] == 3 && wakes_region_count(c) == 2,
           "regions.full: 3 far-apart boats, room for 2 regions: %d uncovered (id %u)", full, un[0]);
+    /* A footprint no region can hold (100 km long on 2 m cells) is told, and opens nothing. */
+    struct wakes *g = layer(0, 64, 2);
+    struct wake_source huge = {.id = 4, .length = 1e5, .beam = 10, .mass = 1e6};
+    int big = wakes_step(g, 0.1, 1, &huge, un, 4), big2 = wakes_step(g, 0.1, 1, &huge, un, 4);
+    CHECK(big == 1 && big2 == 1 && un[0] == 4 && wakes_region_count(g) == 0,
+          "regions.too_large: a 100 km footprint is uncovered (%d, %d) and opens %d regions", big, big2,
+          wakes_region_count(g));
+    wakes_free(g);
     /* An idle region goes: once quiet, or after WAKES_LINGER_S at most. */
     for (double t = 0; t < WAKES_LINGER_S + 1; t += 1)
         wakes_step(c, 1, 0, NULL, NULL, 0);

@@ -628,7 +628,9 @@ int wakes_step(struct wakes *w, double dt, int n, const struct wake_source *src,
             for (int i = 0; !r && i < w->nreg; i++)
                 if (w->reg[i]->cell == cell && holds(w, w->reg[i], s))
                     r = w->reg[i];
-            if (!r && w->nreg == w->o.max_regions) { /* room: the longest idle region goes */
+            /* A new region, centred as target_centre will put it, must hold the body. */
+            bool fits = (w->n / 2 - w->o.sponge) * cell * (1 - LEAD) >= HOLD * fmax(s->length, s->beam) + cell;
+            if (!r && fits && w->nreg == w->o.max_regions) { /* room: the longest idle region goes */
                 int best = -1;
                 for (int i = 0; i < w->nreg; i++)
                     if (w->reg[i]->idle > 0 && w->reg[i]->nsrc == 0 &&
@@ -637,7 +639,7 @@ int wakes_step(struct wakes *w, double dt, int n, const struct wake_source *src,
                 if (best >= 0)
                     region_drop(w, best);
             }
-            if (!r && w->nreg < w->o.max_regions) {
+            if (!r && fits && w->nreg < w->o.max_regions) {
                 r = region_new(w, cell, lround(s->x / cell), lround(s->z / cell), n);
                 if (r) {
                     r->id = w->next_region < UINT32_MAX ? w->next_region++ : UINT32_MAX;
