@@ -163,7 +163,7 @@ test-wakes: $(BUILD)/test_wakes
 test-wakes-asan: $(BUILD)/san/test_wakes
 	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 OCEAN_TEST_QUICK=1 $(BUILD)/san/test_wakes
 test-wakes-valgrind: $(BUILD)/test_wakes
-	OCEAN_TEST_QUICK=1 OCEAN_TEST_ONLY=test_energy,test_circling,test_regions,test_foam,test_api valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
+	OCEAN_TEST_QUICK=1 OCEAN_TEST_ONLY=test_energy,test_circling,test_regions,test_foam,test_displacement,test_api valgrind -q --error-exitcode=1 --leak-check=full --show-possibly-lost=no \
 	  --errors-for-leak-kinds=definite,indirect $(BUILD)/test_wakes
 bench-wakes: $(BUILD)/bench_wakes
 	$(BUILD)/bench_wakes

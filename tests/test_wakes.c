@@ -21,6 +21,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <fftw3.h>
+
 #include "wakes.h"
 
 #include "common/check.h"
@@ -476,6 +478,14 @@ static void test_regions(void)
     int full = wakes_step(c, 0.1, 3, s, un, 4);
     CHECK(full == 1 && un[0] == 3 && wakes_region_count(c) == 2,
           "regions.full: 3 far-apart boats, room for 2 regions: %d uncovered (id %u)", full, un[0]);
+    /* A footprint no region can hold (100 km long on 2 m cells) is told, and opens nothing. */
+    struct wakes *g = layer(0, 64, 2);
+    struct wake_source huge = {.id = 4, .length = 1e5, .beam = 10, .mass = 1e6};
+    int big = wakes_step(g, 0.1, 1, &huge, un, 4), big2 = wakes_step(g, 0.1, 1, &huge, un, 4);
+    CHECK(big == 1 && big2 == 1 && un[0] == 4 && wakes_region_count(g) == 0,
+          "regions.too_large: a 100 km footprint is uncovered (%d, %d) and opens %d regions", big, big2,
+          wakes_region_count(g));
+    wakes_free(g);
     /* An idle region goes: once quiet, or after WAKES_LINGER_S at most. */
     for (double t = 0; t < WAKES_LINGER_S + 1; t += 1)
         wakes_step(c, 1, 0, NULL, NULL, 0);
@@ -512,6 +522,60 @@ static void test_foam(void)
     }
     CHECK(got[1] > 0.3 && got[0] < 0.01, "foam.stern: 8-20 m behind a 12 m boat: %.3f at 10 m/s, %.4f at 1 m/s", got[1],
           got[0]);
+}
+
+/* ---- displacement: the orbit's horizontal axis is coth(kD) times the vertical */
+
+static void test_displacement(void)
+{
+    /* D~ = i k^ coth(kD) h~, so by Parseval sum |D|^2 = sum coth^2(kD) |h~|^2:
+     * equal to sum h^2 in deep water, larger in shallow water. A drop's ring
+     * before it reaches the sponge. */
+    double ratio[2], expect[2];
+    for (int i = 0; i < 2; i++) {
+        struct wakes_options o = {.n = 128, .cell = 0.5, .depth = i ? 0.5 : 0, .displacement = 1};
+        struct wakes *w = wakes_new(&o, NULL, 0);
+        struct wake_source s = {.id = 1, .length = 4, .beam = 4, .mass = 1025 * 16 * 0.2};
+        for (int k = 0; k < 80; k++)
+            wakes_step(w, 0.05, k < 4 ? 1 : 0, &s, NULL, 0);
+        struct wakes_region r;
+        wakes_region_get(w, 0, &r);
+        double hh = 0, dd = 0;
+        for (int j = 0; j < r.n * r.n; j++) {
+            hh += (double)r.height[j] * r.height[j];
+            dd += (double)r.dx[j] * r.dx[j] + (double)r.dz[j] * r.dz[j];
+        }
+        ratio[i] = dd / hh;
+        /* The prediction: the height's own spectrum weighted by coth^2(kD)
+         * (FFTW in the test: an independent transform of the output). */
+        int n = r.n, nh = n / 2 + 1;
+        float *in = fftwf_malloc(sizeof(float) * n * n);
+        fftwf_complex *out = fftwf_malloc(sizeof(fftwf_complex) * n * nh);
+        memcpy(in, r.height, sizeof(float) * n * n);
+        fftwf_plan p = fftwf_plan_dft_r2c_2d(n, n, in, out, FFTW_ESTIMATE);
+        fftwf_execute(p);
+        double num = 0, den = 0, dk = 2 * PI / (n * r.cell);
+        for (int iz = 0; iz < n; iz++)
+            for (int ix = 0; ix < nh; ix++) {
+                if (ix == n / 2 || iz == n / 2 || (ix == 0 && iz == 0))
+                    continue; /* Nyquist and mean: no displacement */
+                double kx = ix * dk, kz = (iz <= n / 2 ? iz : iz - n) * dk, k = hypot(kx, kz);
+                double e = (double)out[iz * nh + ix][0] * out[iz * nh + ix][0] +
+                           (double)out[iz * nh + ix][1] * out[iz * nh + ix][1];
+                double c = o.depth > 0 ? 1 / tanh(k * o.depth) : 1, wgt = ix == 0 ? 1 : 2;
+                num += wgt * c * c * e;
+                den += wgt * e;
+            }
+        expect[i] = num / den;
+        fftwf_destroy_plan(p);
+        fftwf_free(in);
+        fftwf_free(out);
+        wakes_free(w);
+    }
+    CHECK(fabs(ratio[0] / expect[0] - 1) < 0.02 && fabs(ratio[1] / expect[1] - 1) < 0.02,
+          "displacement.parseval: sum |D|^2 / sum h^2 = %.4f in deep water, %.3f at 0.5 m depth; the height's spectrum "
+          "weighted by coth^2(kD) gives %.4f, %.3f (+- 2 %%)",
+          ratio[0], ratio[1], expect[0], expect[1]);
 }
 
 /* ---- the API: refusals change nothing; threads change nothing ------------ */
@@ -624,6 +688,7 @@ int main(void)
     RUN(test_circling);
     RUN(test_regions);
     RUN(test_foam);
+    RUN(test_displacement);
     RUN(test_api);
     return check_done();
 }

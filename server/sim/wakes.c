@@ -286,25 +286,33 @@ static void region_step(struct wakes *w, struct region *r)
     const int sx = r->shift_x, sz = r->shift_z;
     const float fdecay = (float)exp(-dt / WAKES_FOAM_TAU);
     double energy = 0, max_abs = 0;
+    const int x_lo = sx < 0 ? -sx : 0, x_hi = sx > 0 ? n - sx : n; /* new columns with an old sample */
     for (int iz = 0; iz < n; iz++) {
         int oz = iz + sz;
-        bool zin = oz >= 0 && oz < n;
-        for (int ix = 0; ix < n; ix++) {
-            int ox = ix + sx;
-            size_t i = (size_t)iz * n + ix;
-            if (!zin || ox < 0 || ox >= n) {
-                r->h[i] = r->q[i] = 0;
-                continue;
-            }
-            size_t o = (size_t)oz * n + ox;
-            float d = r->damp[ix] * r->damp[iz];
-            float hv = r->t1[o] * scale * d, qv = r->t2[o] * scale * d;
-            r->h[i] = hv;
-            r->q[i] = qv;
-            energy += (double)hv * hv + (double)qv * qv;
-            if (fabs(hv) > max_abs)
-                max_abs = fabs(hv);
+        float *hr = r->h + (size_t)iz * n, *qr = r->q + (size_t)iz * n;
+        if (oz < 0 || oz >= n || x_lo >= x_hi) {
+            memset(hr, 0, (size_t)n * sizeof *hr);
+            memset(qr, 0, (size_t)n * sizeof *qr);
+            continue;
         }
+        const float *t1 = r->t1 + (size_t)oz * n + sx, *t2 = r->t2 + (size_t)oz * n + sx;
+        const float dz = r->damp[iz] * scale;
+        float row_max = 0;
+        for (int ix = 0; ix < x_lo; ix++)
+            hr[ix] = qr[ix] = 0;
+        for (int ix = x_hi; ix < n; ix++)
+            hr[ix] = qr[ix] = 0;
+        for (int ix = x_lo; ix < x_hi; ix++) {
+            float d = r->damp[ix] * dz;
+            hr[ix] = t1[ix] * d;
+            qr[ix] = t2[ix] * d;
+            float a = fabsf(hr[ix]);
+            row_max = a > row_max ? a : row_max;
+        }
+        for (int ix = x_lo; ix < x_hi; ix++)
+            energy += (double)hr[ix] * hr[ix] + (double)qr[ix] * qr[ix];
+        if (row_max > max_abs)
+            max_abs = row_max;
     }
     /* prev and foam move with the grid: copied in an order that never reads a written sample. */
     float *moved[] = {r->prev, r->foam};
@@ -345,11 +353,16 @@ static void region_step(struct wakes *w, struct region *r)
         const float *row = r->h + (size_t)iz * n;
         const float *up1 = r->h + (size_t)((iz + 1) % n) * n, *up2 = r->h + (size_t)((iz + 2) % n) * n;
         const float *dn1 = r->h + (size_t)((iz + n - 1) % n) * n, *dn2 = r->h + (size_t)((iz + n - 2) % n) * n;
-        for (int ix = 0; ix < n; ix++) {
-            int a1 = (ix + 1) % n, a2 = (ix + 2) % n, b1 = (ix + n - 1) % n, b2 = (ix + n - 2) % n;
-            size_t i = (size_t)iz * n + ix;
-            r->sx[i] = (8 * (row[a1] - row[b1]) - (row[a2] - row[b2])) * inv;
-            r->sz[i] = (8 * (up1[ix] - dn1[ix]) - (up2[ix] - dn2[ix])) * inv;
+        float *ox = r->sx + (size_t)iz * n, *oz = r->sz + (size_t)iz * n;
+        for (int ix = 2; ix < n - 2; ix++) { /* the interior: no wrapping, vectorises */
+            ox[ix] = (8 * (row[ix + 1] - row[ix - 1]) - (row[ix + 2] - row[ix - 2])) * inv;
+            oz[ix] = (8 * (up1[ix] - dn1[ix]) - (up2[ix] - dn2[ix])) * inv;
+        }
+        const int edge[4] = {0, 1, n - 2, n - 1};
+        for (int e = 0; e < 4; e++) {
+            int ix = edge[e], a1 = (ix + 1) % n, a2 = (ix + 2) % n, b1 = (ix + n - 1) % n, b2 = (ix + n - 2) % n;
+            ox[ix] = (8 * (row[a1] - row[b1]) - (row[a2] - row[b2])) * inv;
+            oz[ix] = (8 * (up1[ix] - dn1[ix]) - (up2[ix] - dn2[ix])) * inv;
         }
     }
 
@@ -615,7 +628,9 @@ int wakes_step(struct wakes *w, double dt, int n, const struct wake_source *src,
             for (int i = 0; !r && i < w->nreg; i++)
                 if (w->reg[i]->cell == cell && holds(w, w->reg[i], s))
                     r = w->reg[i];
-            if (!r && w->nreg == w->o.max_regions) { /* room: the longest idle region goes */
+            /* A new region, centred as target_centre will put it, must hold the body. */
+            bool fits = (w->n / 2 - w->o.sponge) * cell * (1 - LEAD) >= HOLD * fmax(s->length, s->beam) + cell;
+            if (!r && fits && w->nreg == w->o.max_regions) { /* room: the longest idle region goes */
                 int best = -1;
                 for (int i = 0; i < w->nreg; i++)
                     if (w->reg[i]->idle > 0 && w->reg[i]->nsrc == 0 &&
@@ -624,7 +639,7 @@ int wakes_step(struct wakes *w, double dt, int n, const struct wake_source *src,
                 if (best >= 0)
                     region_drop(w, best);
             }
-            if (!r && w->nreg < w->o.max_regions) {
+            if (!r && fits && w->nreg < w->o.max_regions) {
                 r = region_new(w, cell, lround(s->x / cell), lround(s->z / cell), n);
                 if (r) {
                     r->id = w->next_region < UINT32_MAX ? w->next_region++ : UINT32_MAX;

@@ -90,7 +90,8 @@ void wakes_free(struct wakes *w);
 
 /* Advance the layer by dt (0 < dt <= WAKES_STEP_MAX_S) s, forced by the
  * n sources (ids distinct). A source is "uncovered" when it is outside
- * the world's bounds or no region could hold it (max_regions reached): it
+ * the world's bounds or no region could hold it (max_regions reached, or
+ * its footprint too large for a region of its cell size): it
  * forces nothing this step, and its id is written to uncovered[] (up to
  * max_uncovered; the count returned is all of them). A body that comes back
  * is covered again. Returns -1 with nothing changed on bad input: dt out of
