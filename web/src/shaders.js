@@ -275,7 +275,31 @@ float foamFieldHex(vec2 xz) {
 // water breaking now (J below the server's threshold uFoamJc) is foam at once. Foam left
 // behind trails downwind: the field is also read a few metres upwind (streaks, stronger
 // with the wind). uFoamShift moves every foam lookup (tests: foam placed at random).
-float foamCover(vec2 xz, float jac, float hex) {
+// Streaks (Beaufort 7 on: "white foam from breaking waves begins to be blown in streaks
+// along the direction of the wind"; 8: "well-marked streaks"; 10: "dense white streaks ...
+// the surface takes on a white appearance"). The foam the crests left upwind is drawn out
+// downwind and gathered into lines where the wind's rolls converge: lines some 30 m long
+// and 1-3 m across, their network from two ridged noises stretched along the wind (12x and
+// 8x), fed by the field read over 40 m upwind, so the streaks lie behind the breaking the
+// stream carries (every viewer sees the same ones). Denser and wider with the wind; below
+// the pixel the lines give way to their mean cover, so far off they do not sparkle.
+float foamStreaks(vec2 xz, float px) {
+  float on = smoothstep(13.0, 18.0, uFoamWindSpeed);
+  if (on <= 0.0) return 0.0;
+  vec2 w = uFoamWind, across = vec2(-w.y, w.x);
+  vec2 q = vec2(dot(xz, w), dot(xz, across));
+  float supply = 0.0;
+  for (int k = 0; k < 4; k++) supply += foamFieldAt(xz - w * (4.0 + 12.0 * float(k)));
+  supply = smoothstep(0.01, 0.12, 0.25 * supply);
+  float dense = smoothstep(15.0, 34.0, uFoamWindSpeed);
+  float r1 = 1.0 - 2.0 * abs(foamValueNoise(q / vec2(30.0, 2.5)) - 0.5);
+  float r2 = 1.0 - 2.0 * abs(foamValueNoise(q / vec2(9.0, 1.1) + 7.3) - 0.5);
+  float th1 = mix(0.8, 0.45, dense), th2 = mix(0.88, 0.6, dense);
+  float l1 = mix(smoothstep(th1, th1 + 0.12, r1), 1.0 - th1, smoothstep(0.5, 2.5, px));
+  float l2 = mix(smoothstep(th2, th2 + 0.08, r2), 1.0 - th2, smoothstep(0.2, 1.1, px));
+  return on * supply * mix(0.7, 1.0, dense) * max(l1, 0.8 * l2);
+}
+float foamCover(vec2 xz, float jac, float hex, float px) {
   xz += uFoamShift;
   if (uFoamRamp > 0.0) return clamp(xz.x / uFoamRamp + 0.5, 0.0, 1.0);
   float fresh = smoothstep(uFoamJc + 0.06, uFoamJc - 0.12, jac);
@@ -285,7 +309,7 @@ float foamCover(vec2 xz, float jac, float hex) {
   float trail = 1.5 + 2.5 * smoothstep(8.0, 20.0, uFoamWindSpeed);   // metres per tap
   if (hex < 1.0) for (int k = 1; k <= 3; k++) f = max(f, foamFieldAt(xz - uFoamWind * (trail * float(k))) * (1.0 - 0.24 * float(k)) * (1.0 - hex));
   float crest = smoothstep(1.2, 0.7, jac);
-  return clamp(max(f * mix(0.2, 1.35, crest), fresh), 0.0, 1.0);
+  return clamp(max(max(f * mix(0.2, 1.35, crest), fresh), foamStreaks(xz, px)), 0.0, 1.0);
 }
 // How much of the pixel is foam (0..1), with texture; px = pixel footprint in metres.
 // A domain-warped fractal noise (swirled like foam stirred by the breaking, many scales,
@@ -339,7 +363,7 @@ float foamAmount(vec2 xz, float cover, float px) {
 // of the amount), so dense foam shows lumps and the sun side of a crest is brighter than
 // its lee. Thin foam lets the water through, a little green-blue.
 vec3 foamShade(vec3 c, vec2 xz, float jac, float hex, vec3 n, float px, out float amount) {
-  float a = foamAmount(xz, foamCover(xz, jac, hex), px) * uFoam;
+  float a = foamAmount(xz, foamCover(xz, jac, hex, px), px) * uFoam;
   amount = a;
   vec2 dxz = dFdx(xz), dyz = dFdy(xz), da = vec2(dFdx(a), dFdy(a)); // (before any branch)
   if (a <= 0.0) return c;
