@@ -500,7 +500,7 @@ function frameLoop() {
   controls.update();
   keepAboveWaves(now);
   // Sky, sun and light follow the local hour and the shared sea's wind; haze thickens with it.
-  if (sky.update(view.hour, st.params?.wind_speed ?? 10)) ocean.uniforms.uFogDensity.value = 0.00009 * (1 + 4 * sky.state.overcast ** 2);
+  if (sky.update(view.hour, st.params?.wind_speed ?? 10)) ocean.uniforms.uFogDensity.value = sky.state.fogDensity;
   // The bodies are blended between the same two frames as the sea, by the same amount.
   bodies.update(ocean.lastArrival ? Math.min(Math.max((now - ocean.lastArrival) / ocean.interval, 0), 1) : 1, sky.uniforms, now);
   if (draw) ocean.render(camera, now);
