@@ -319,7 +319,9 @@ float foamCover(vec2 xz, float jac, float hex, float px, out float young) {
   float trail = 1.5 + 2.5 * smoothstep(8.0, 20.0, uFoamWindSpeed);   // metres per tap
   if (hex < 1.0) for (int k = 1; k <= 3; k++) f = max(f, foamFieldAt(xz - uFoamWind * (trail * float(k))) * (1.0 - 0.24 * float(k)) * (1.0 - hex));
   float crest = smoothstep(1.2, 0.7, jac);
-  return clamp(max(max(f * mix(0.2, 1.35, crest), fresh), foamStreaks(xz, px)), 0.0, 1.0);
+  // Streak foam too is spread thin where the surface stretches (J > 1) and gathered where it
+  // is squeezed, as foam collects where the surface converges.
+  return clamp(max(max(f * mix(0.2, 1.35, crest), fresh), foamStreaks(xz, px) * mix(0.75, 1.1, crest)), 0.0, 1.0);
 }
 // How much of the pixel is foam (0..1), with texture; px = pixel footprint in metres.
 // A domain-warped fractal noise (swirled like foam stirred by the breaking, many scales,
@@ -348,7 +350,7 @@ float foamAmount(vec2 xz, float cover, float px) {
   // Worley noise about 0.2 m a cell) that thins out away from it, instead of cutting off;
   // below the pixel the net is its mean.
   float fray = smoothstep(th - 0.14 - b.y, th - 0.01, b.x) * (1.0 - body) * smoothstep(0.3, 0.6, cv);
-  float net = mix(smoothstep(0.3, 0.46, foamCells(p / 0.2 + 3.7).x), 0.35, smoothstep(0.03, 0.12, px));
+  float net = fray > 0.0 ? mix(smoothstep(0.3, 0.46, foamCells(p / 0.2 + 3.7).x), 0.35, smoothstep(0.03, 0.12, px)) : 0.0;
   body = max(body, 0.85 * fray * fray * net);
   // Threads: bands around the mid level of two more noises (a coarse and a fine
   // network of curved lines, wider with coverage); an unresolved band counts its area.
