@@ -209,6 +209,7 @@ uniform float uFoamRamp;     // > 0: coverage is a ramp along x over this many m
 uniform float uFoamJc;       // the server's breaking threshold on J for this wind (ocean_foam.c)
 uniform vec2 uFoamShift;     // metres: every foam lookup moved (tests: foam placed at random)
 uniform float uFoamGain;     // the streamed field's scale to Monahan's coverage (ocean.js foamCoverage)
+uniform float uFoamStreaks;  // 1: the wind's streaks (0: tests of where the field's foam lies)
 float foamHash(vec2 p) {     // Hoskins' hash without sine: stable for large coordinates
   vec3 p3 = fract(vec3(p.xyx) * 0.1031);
   p3 += dot(p3, p3.yzx + 33.33);
@@ -277,7 +278,7 @@ float foamFieldHex(vec2 xz) {
 // Denser and wider with the wind; below the pixel the lines give way to their mean cover,
 // so far off they do not sparkle.
 float foamStreaks(vec2 xz, float px) {
-  float on = smoothstep(13.0, 18.0, uFoamWindSpeed);
+  float on = smoothstep(13.0, 18.0, uFoamWindSpeed) * uFoamStreaks;
   if (on <= 0.0) return 0.0;
   vec2 w = uFoamWind, across = vec2(-w.y, w.x);
   vec2 q = vec2(dot(xz, w), dot(xz, across));
