@@ -11,7 +11,7 @@ import path from 'node:path';
 import { createRequire } from 'node:module';
 import { parseArgs, freePort, startServer, launchBrowser, waitFor, sleep } from './harness.mjs';
 import { ROOT } from './webdeps.mjs';
-import { SEA_PRESETS } from '../../web/src/presets.js';
+import { SEA_PRESETS, BEAUFORT_SCALE } from '../../web/src/presets.js';
 import { sunDirection } from '../../web/src/sky.js';
 import { ndbcLikeSummary } from './sea_fixture.mjs';
 
@@ -44,6 +44,10 @@ const SHOTS = [
   { name: 'dusk', preset: 'fresh', hour: 19.5, cam: '0,14,48', face: { yaw: 0, dist: 300, ty: 12 } },
   { name: 'storm-crest', preset: 'storm', hour: 15, cam: '0,9,24', target: '0,1,0' },
   { name: 'sunset-glitter', preset: 'fresh', hour: 18.39, cam: '0,30,0', face: { yaw: 0, dist: 400, ty: 0 } },
+  // The Beaufort row: every force 0-12 (presets.js BEAUFORT_SCALE) from one camera, 20 m up,
+  // looking down 18° across the wind (it blows toward +x, left to right), the sun behind the
+  // left shoulder, the horizon in the top of the picture; 640×360, a row of the gallery.
+  ...BEAUFORT_SCALE.map((b) => ({ name: b.name, preset: b.name, hour: 15, cam: '0,20,60', target: '0,0,0', size: [640, 360] })),
 ];
 // Foam at other distances and winds (iterating on the foam texture; `--only foam-gale,...`).
 // ramp: coverage rises 0 → 1 over that many metres of x (ocean.js ?foamramp=), every stage in one view.
@@ -57,6 +61,9 @@ const STUDY = [
   { name: 'foam-gale', preset: 'gale', hour: 13, cam: '0,6,12', target: '0,0,-6' },
   { name: 'foam-fresh', preset: 'fresh', hour: 13, cam: '0,8,16', target: '0,0,-10' },
   { name: 'measured-sea-phone', preset: 'fresh', set: { wind_direction: 195 }, hour: 15, device: 'iPhone 13', hud: true, sea: true, face: { yaw: -30, dist: 100, ty: 2 } },
+  { name: 'down-80m-b7', preset: 'beaufort-7', hour: 15, cam: '0,80,0.01', target: '0,0,0', size: [480, 480] },
+  { name: 'down-80m-b8', preset: 'beaufort-8', hour: 15, cam: '0,80,0.01', target: '0,0,0', size: [480, 480] },
+  { name: 'down-80m-b10', preset: 'beaufort-10', hour: 15, cam: '0,80,0.01', target: '0,0,0', size: [480, 480] },
   { name: 'foam-far', preset: 'storm', hour: 13, cam: '0,60,120', target: '0,0,-150' },
 ];
 // Moon direction of sky.js (altitude 38°, azimuth 155°), for the night shot.
@@ -71,7 +78,7 @@ const only = new Set(args.only ? args.only.split(',') : []);
 
 // One `set` from a plain protocol client; resolves with the new params_version.
 async function applyPreset(port, name, extra = {}) {
-  const preset = SEA_PRESETS.find((p) => p.name === name);
+  const preset = [...SEA_PRESETS, ...BEAUFORT_SCALE].find((p) => p.name === name);
   const ws = new WebSocket(`ws://127.0.0.1:${port}/`, 'oceand.v1');
   const reply = await new Promise((resolve, reject) => {
     const t = setTimeout(() => reject(new Error(`no reply to set ${name}`)), 10000);
@@ -89,7 +96,7 @@ async function applyPreset(port, name, extra = {}) {
 }
 
 async function take(browser, port, s, file) {
-  const ctxOpts = s.device ? { ...devices[s.device] } : DESKTOP;
+  const ctxOpts = s.device ? { ...devices[s.device] } : s.size ? { viewport: { width: s.size[0], height: s.size[1] } } : DESKTOP;
   const ctx = await browser.newContext(ctxOpts);
   ctx.setDefaultTimeout(300000); // software GL on a shared machine: a 1280×720 frame may take long
   try {

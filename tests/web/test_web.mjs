@@ -174,6 +174,40 @@ async function setView(p, { viewport, cam, target, ...options }) {
   await renderedMore(p, 3);
 }
 
+// The foam amount of a debug-view picture (red): the share of pixels above 0.5, and the
+// autocorrelation length (lag where the normalised autocovariance falls below 1/e,
+// interpolated; at most 100 px) along the screen's x and y.
+async function foamTexture(p, png) {
+  return p.evaluate(async (b64) => {
+    const img = new Image();
+    img.src = `data:image/png;base64,${b64}`;
+    await img.decode();
+    const c = document.createElement('canvas');
+    const w = c.width = img.width, h = c.height = img.height;
+    const g = c.getContext('2d');
+    g.drawImage(img, 0, 0);
+    const d = g.getImageData(0, 0, w, h).data, a = new Float64Array(w * h);
+    let m = 0, white = 0;
+    for (let i = 0; i < w * h; i++) { a[i] = d[4 * i]; m += a[i]; white += a[i] > 127; }
+    m /= w * h;
+    let v = 0;
+    for (let i = 0; i < w * h; i++) { a[i] -= m; v += a[i] * a[i]; }
+    v /= w * h;
+    const length = (dx, dy) => {
+      let prev = 1;
+      for (let k = 1; k <= 100; k++) {
+        let s = 0, n = 0;
+        for (let y = 0; y + k * dy < h; y++) for (let x = 0; x + k * dx < w; x++) { s += a[y * w + x] * a[(y + k * dy) * w + x + k * dx]; n++; }
+        const r = v > 0 ? s / n / v : 0;
+        if (r < Math.exp(-1)) return k - 1 + (prev - Math.exp(-1)) / (prev - r);
+        prev = r;
+      }
+      return 100;
+    };
+    return { white: white / (w * h), along: length(1, 0), across: length(0, 1) };
+  }, png.toString('base64'));
+}
+
 // Height of the displaced surface at (x, z) from the page's grids (oceandTest.grids), by
 // brute force: every point of a 0.1 m lattice within 10 m is displaced (bilinear between the
 // grid's nodes) and the highest that lands within 0.2 m of (x, z) counts, plus the finer
@@ -394,7 +428,9 @@ async function lightGroup(check, br) {
       await settle(p, version);
       const t0 = await p.evaluate(() => window.oceand.frameSimTime);
       await waitFor(p, '8 s of the running storm', (t) => window.oceand.frameSimTime >= t + 8, t0, 120000);
-      await setView(p, { viewport: { width: 400, height: 400 }, cam: [0, 80, 0.01], target: [0, 0, 0], debugFoam: true });
+      // The streaks (checked below) lie along the wind over crests and troughs alike: this check
+      // is of where the field's own foam lies, so it leaves them out.
+      await setView(p, { viewport: { width: 400, height: 400 }, cam: [0, 80, 0.01], target: [0, 0, 0], debugFoam: true, foamStreaks: false });
       const corr = async (shift) => {
         await p.evaluate((s) => window.oceandTest.options({ foamShift: s }), shift);
         await renderedMore(p, 2);
@@ -433,7 +469,7 @@ async function lightGroup(check, br) {
     await check('storm: the camera rides over a crest and comes back down as the water falls', async () => {
       version = await setParams(port5, { paused: false }); // (the foam check has let it run already)
       await settle(p, version);
-      await setView(p, { viewport: { width: 240, height: 150 }, debugFoam: false, foamShift: null, cam: [0, 1.5, 0], target: [200, 0.5, 0] });
+      await setView(p, { viewport: { width: 240, height: 150 }, debugFoam: false, foamShift: null, foamStreaks: true, cam: [0, 1.5, 0], target: [200, 0.5, 0] });
       // The camera's height at every frame drawn (in the page), and now and then the floor
       // beneath it as the test computes it from the grids (surfaceAt).
       await p.evaluate(() => {
@@ -456,6 +492,43 @@ async function lightGroup(check, br) {
       assert(ys[top] > 2, `no crest lifted the camera (highest ${ys[top].toFixed(2)} m): this does not test the floor`);
       assert(fall > 0.5, `the camera never came down after a crest (largest fall ${fall.toFixed(2)} m)`);
       assert(under >= -0.05, `the camera went ${(-under).toFixed(2)} m below the floor`);
+    });
+    // Beaufort's sea: white foam "blown in streaks along the direction of the wind" from force 7,
+    // "well-marked streaks" at 8, the sea whiter with the wind. On the storm preset at forces
+    // 7, 8 and 10 (15.5, 19, 26.5 m/s, each run 8 s of its clock so the foam field is its own),
+    // from 80 m straight down on four spots of the patch, the foam amount (debug view, red):
+    // the share of the pixels foam-white (amount > 0.5) rises with the wind, and its texture's
+    // autocorrelation length along the wind (+x, the screen's x) is at least twice that across
+    // it from force 8 (crest foam alone lies across the wind: long crests, short along it).
+    await check('storm from 80 m straight down: more foam-white with the wind, streaked along it from Beaufort 8', async () => {
+      const rows = [];
+      try {
+        for (const [force, wind] of [[7, 15.5], [8, 19], [10, 26.5]]) {
+          version = await setParams(port5, { ...storm, wind_speed: wind, paused: false });
+          await settle(p, version);
+          const t0 = await p.evaluate(() => window.oceand.frameSimTime);
+          await waitFor(p, '8 s of the running sea', (t) => window.oceand.frameSimTime >= t + 8, t0, 120000);
+          const stats = [];
+          for (const [x, z] of [[0, 0], [130, 40], [-60, 170], [210, -150]]) {
+            await setView(p, { viewport: { width: 320, height: 320 }, debugFoam: true, foamShift: null, foamStreaks: true, cam: [x, 80, z + 0.01], target: [x, 0, z] });
+            const png = await p.screenshot({ type: 'png', timeout: 240000 });
+            if (force === 10 && !x) fs.writeFileSync(path.join(args.out, 'foam-streaks.png'), png);
+            stats.push(await foamTexture(p, png));
+          }
+          // Lengths: the median over the spots (one spot can hold a great patch that is long
+          // both ways); the share: the mean.
+          const mean = (k) => stats.reduce((a, s) => a + s[k], 0) / stats.length;
+          const mid = (k) => { const v = stats.map((s) => s[k]).sort((a, b) => a - b); return 0.5 * (v[(v.length - 1) >> 1] + v[v.length >> 1]); };
+          rows.push({ force, wind, white: mean('white'), along: mid('along'), across: mid('across'), spots: stats.map((s) => `${s.along.toFixed(0)}/${s.across.toFixed(0)}`).join(' ') });
+        }
+      } finally {
+        await setParams(port5, { ...storm, paused: false });
+        await setView(p, { debugFoam: false });
+      }
+      for (const r of rows) console.log(`     Beaufort ${r.force} (${r.wind} m/s): foam-white ${(100 * r.white).toFixed(1)} % of the picture; autocorrelation length along the wind ${r.along.toFixed(1)} px, across ${r.across.toFixed(1)} px (ratio ${(r.along / r.across).toFixed(2)}; spots along/across ${r.spots})`);
+      assert(rows[0].white < rows[1].white && rows[1].white < rows[2].white, `the foam-white share does not rise with the wind: ${rows.map((r) => (100 * r.white).toFixed(1)).join(', ')} %`);
+      assert(rows[2].white > 0.05, `a storm is hardly white: ${(100 * rows[2].white).toFixed(1)} %`);
+      for (const r of rows.slice(1)) assert(r.along >= 2 * r.across, `Beaufort ${r.force}: foam not streaked along the wind (autocorrelation ${r.along.toFixed(1)} px along, ${r.across.toFixed(1)} px across)`);
     });
   });
 }

@@ -512,7 +512,7 @@ function frameLoop() {
   controls.update();
   keepAboveWaves(now);
   // Sky, sun and light follow the local hour and the shared sea's wind; haze thickens with it.
-  if (sky.update(view.hour, st.params?.wind_speed ?? 10)) ocean.uniforms.uFogDensity.value = 0.00009 * (1 + 4 * sky.state.overcast ** 2);
+  if (sky.update(view.hour, st.params?.wind_speed ?? 10)) ocean.uniforms.uFogDensity.value = sky.state.fogDensity;
   // The bodies are blended between the same two frames as the sea, by the same amount.
   bodies.update(ocean.lastArrival ? Math.min(Math.max((now - ocean.lastArrival) / ocean.interval, 0), 1) : 1, sky.uniforms, now);
   if (draw) ocean.render(camera, now);
@@ -628,14 +628,16 @@ if (query.has('test')) {
       camera.position.set(...pos); controls.target.set(...target); controls.update();
     },
     // What the URL's ?hour=, ?gapprobe=, ?debugview=foam, ?foamshift=, ?camfloor= and ?scale= set, on
-    // a page already open (one page serves several views; any member may be left out).
-    options({ hour, gapProbe, debugFoam, foamShift: shift, camFloor: floorOn, scale, busyMs } = {}) {
+    // a page already open (one page serves several views; any member may be left out);
+    // foamStreaks: false leaves the wind's streaks out of the foam (the crest-placement check).
+    options({ hour, gapProbe, debugFoam, foamShift: shift, foamStreaks, camFloor: floorOn, scale, busyMs } = {}) {
       if (hour !== undefined) view.hour = hour;
       if (busyMs !== undefined) testBusyMs = Math.max(0, Number(busyMs) || 0); // every animation frame this long
       if (scale !== undefined) renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2) * Math.min(1, Math.max(0.25, scale)));
       if (gapProbe !== undefined) sky.uniforms.uGapProbe.value = gapProbe ? 1 : 0;
       if (debugFoam !== undefined) ocean.uniforms.uDebugView.value = debugFoam ? 1 : 0;
       if (shift !== undefined) ocean.uniforms.uFoamShift.value.set(...(shift || [0, 0]));
+      if (foamStreaks !== undefined) ocean.uniforms.uFoamStreaks.value = foamStreaks ? 1 : 0;
       if (floorOn !== undefined) camFloor = !!floorOn;
       panel.refreshView();
     },

@@ -113,7 +113,7 @@ export class Ocean {
       // ?foamramp=M (pictures of the foam texture): coverage rises 0 → 1 over M metres of x
       // from x = -M/2, instead of the field's, so every stage of the foam shows in one view.
       uFoamRamp: { value: Number(new URLSearchParams(globalThis.location?.search).get('foamramp')) || 0 },
-      uFoamJc: { value: foamThreshold(10) }, uFoamGain: { value: 1 }, uFoamShift: { value: new THREE.Vector2(0, 0) },
+      uFoamJc: { value: foamThreshold(10) }, uFoamGain: { value: 1 }, uFoamShift: { value: new THREE.Vector2(0, 0) }, uFoamStreaks: { value: 1 },
       uDebugView: { value: 0 },
     };
     this.material = new THREE.ShaderMaterial({

@@ -30,6 +30,33 @@ export const SEA_PRESETS = [
     params: { ...COMMON, wind_speed: 26.5, fetch: 300, patch_size: 512, cascades: 4 } },
 ].map((p) => ({ ...p, help: `${p.beaufort}: wind ${p.params.wind_speed} m/s, fetch ${p.params.fetch} km, waves about ${p.probableHs} m (a shared change)` }));
 
+// The whole Beaufort scale, one sea a force (the gallery's row, `make screenshots`; not in
+// the panel, whose five presets above are the same seas at 3, 5, 8 and 10). Wind: the middle
+// of the force's WMO range in m/s at 10 m (force 12 has no upper bound: 35 m/s, a little over
+// its 32.7). Fetch: chosen as above for the WMO probable wave height, from the fetch law the
+// presets above calibrate (Hs ~ 0.0212 U sqrt(fetch km), capped at the developed sea,
+// ~0.030 U^2); forces 0-3 are developed seas at 100 km. `sea`: the WMO specification
+// (WMO-No. 306 / the Beaufort scale's sea criterion), which the gallery captions quote.
+const BEAUFORT_ROWS = [
+  [0, 'calm', 0.1, 0, 100, 128, 3, 'Sea like a mirror'],
+  [1, 'light air', 0.9, 0.1, 100, 128, 3, 'Ripples with the appearance of scales are formed, but without foam crests'],
+  [2, 'light breeze', 2.5, 0.2, 100, 128, 3, 'Small wavelets, still short but more pronounced; crests have a glassy appearance and do not break'],
+  [3, 'gentle breeze', 4.4, 0.6, 100, 256, 3, 'Large wavelets; crests begin to break; foam of glassy appearance; perhaps scattered white horses'],
+  [4, 'moderate breeze', 6.7, 1, 50, 256, 3, 'Small waves, becoming longer; fairly frequent white horses'],
+  [5, 'fresh breeze', 9.4, 2, 100, 256, 3, 'Moderate waves, taking a more pronounced long form; many white horses are formed; chance of some spray'],
+  [6, 'strong breeze', 12.3, 3, 130, 256, 3, 'Large waves begin to form; the white foam crests are more extensive everywhere; probably some spray'],
+  [7, 'near gale', 15.5, 4, 150, 512, 4, 'Sea heaps up and white foam from breaking waves begins to be blown in streaks along the direction of the wind'],
+  [8, 'gale', 19, 5.5, 200, 512, 4, 'Moderately high waves of greater length; edges of crests begin to break into spindrift; the foam is blown in well-marked streaks along the direction of the wind'],
+  [9, 'strong gale', 22.6, 7, 220, 512, 4, 'High waves; dense streaks of foam along the direction of the wind; crests of waves begin to topple, tumble and roll over; spray may affect visibility'],
+  [10, 'storm', 26.5, 9, 300, 512, 4, 'Very high waves with long overhanging crests; the resulting foam, in great patches, is blown in dense white streaks along the direction of the wind; on the whole the surface of the sea takes on a white appearance; the tumbling of the sea becomes heavy and shock-like; visibility affected'],
+  [11, 'violent storm', 30.6, 11.5, 320, 512, 4, 'Exceptionally high waves; the sea is completely covered with long white patches of foam lying along the direction of the wind; everywhere the edges of the wave crests are blown into froth; visibility affected'],
+  [12, 'hurricane', 35, 14, 360, 512, 4, 'The air is filled with foam and spray; sea completely white with driving spray; visibility very seriously affected'],
+];
+export const BEAUFORT_SCALE = BEAUFORT_ROWS.map(([force, name, wind, probableHs, fetch, patch, cascades, sea]) => ({
+  name: `beaufort-${force}`, force, beaufort: `Beaufort ${force}, ${name}`, probableHs, sea,
+  params: { ...COMMON, wind_speed: wind, fetch, patch_size: patch, cascades },
+}));
+
 // Local solar time at latitude 40° N, sun declination +10° (sky.js): the sun is
 // about 1° up at dawn and at sunset, 60° up at noon, 38° below the horizon at night.
 export const VIEW_PRESETS = [

@@ -209,6 +209,7 @@ uniform float uFoamRamp;     // > 0: coverage is a ramp along x over this many m
 uniform float uFoamJc;       // the server's breaking threshold on J for this wind (ocean_foam.c)
 uniform vec2 uFoamShift;     // metres: every foam lookup moved (tests: foam placed at random)
 uniform float uFoamGain;     // the streamed field's scale to Monahan's coverage (ocean.js foamCoverage)
+uniform float uFoamStreaks;  // 1: the wind's streaks (0: tests of where the field's foam lies)
 float foamHash(vec2 p) {     // Hoskins' hash without sine: stable for large coordinates
   vec3 p3 = fract(vec3(p.xyx) * 0.1031);
   p3 += dot(p3, p3.yzx + 33.33);
@@ -268,6 +269,37 @@ float foamFieldHex(vec2 xz) {
           + w.z * foamFieldAt(xz + hexHash(v3) * uPatch);
   return f / max(w.x + w.y + w.z, 1e-3);
 }
+// Streaks (Beaufort 7 on: "white foam from breaking waves begins to be blown in streaks
+// along the direction of the wind"; 8: "well-marked streaks"; 10: "dense white streaks ...
+// the surface takes on a white appearance"). The foam the crests left upwind is drawn out
+// downwind and gathered into lines where the wind's rolls converge: lines some 30 m long
+// and 1-3 m across, in two families (see below), fed by the field read over 40 m upwind,
+// so the streaks lie behind the breaking the stream carries (every viewer sees the same).
+// Denser and wider with the wind; below the pixel the lines give way to their mean cover,
+// so far off they do not sparkle.
+float foamStreaks(vec2 xz, float px) {
+  float on = smoothstep(13.0, 18.0, uFoamWindSpeed) * uFoamStreaks;
+  if (on <= 0.0) return 0.0;
+  vec2 w = uFoamWind, across = vec2(-w.y, w.x);
+  vec2 q = vec2(dot(xz, w), dot(xz, across));
+  float supply = 0.0;
+  for (int k = 0; k < 4; k++) supply += foamFieldAt(xz - w * (4.0 + 12.0 * float(k)));
+  supply = smoothstep(0.01, 0.12, 0.25 * supply);
+  float dense = smoothstep(15.0, 34.0, uFoamWindSpeed);
+  // Each family: the mid-level crossings of a noise in the across coordinate alone, which
+  // wander slowly (a coarse noise bends them), so lines run on along the wind and never
+  // close into loops; a coarser noise along the wind breaks them into lengths.
+  float v1 = q.y / 2.5 + 2.5 * foamValueNoise(q / vec2(70.0, 30.0));
+  float v2 = q.y / 1.1 + 2.0 * foamValueNoise(q / vec2(30.0, 12.0) + 9.1);
+  float r1 = 1.0 - 2.0 * abs(foamValueNoise(vec2(v1, 0.5)) - 0.5);
+  float r2 = 1.0 - 2.0 * abs(foamValueNoise(vec2(v2, 7.5)) - 0.5);
+  float th1 = mix(0.8, 0.45, dense), th2 = mix(0.88, 0.6, dense);
+  float l1 = mix(smoothstep(th1, th1 + 0.12, r1), 1.0 - th1, smoothstep(0.5, 2.5, px));
+  float l2 = mix(smoothstep(th2, th2 + 0.08, r2), 1.0 - th2, smoothstep(0.15, 0.6, px));
+  l1 *= smoothstep(0.3, 0.55, foamValueNoise(q / vec2(45.0, 8.0) + 3.1));
+  l2 *= smoothstep(0.35, 0.6, foamValueNoise(q / vec2(18.0, 4.0) + 5.7));
+  return on * supply * mix(0.7, 1.0, dense) * max(l1, 0.8 * l2);
+}
 // Coverage 0..1 at xz. The server's field (about 4 m a cell) says where foam lives and
 // for how long: it is the persistence and the calibrated coverage. Where in that cell it
 // lies comes from the Jacobian at the surface grid's full resolution (1-2 m): foam sits on
@@ -275,17 +307,22 @@ float foamFieldHex(vec2 xz) {
 // water breaking now (J below the server's threshold uFoamJc) is foam at once. Foam left
 // behind trails downwind: the field is also read a few metres upwind (streaks, stronger
 // with the wind). uFoamShift moves every foam lookup (tests: foam placed at random).
-float foamCover(vec2 xz, float jac, float hex) {
+float foamCover(vec2 xz, float jac, float hex, float px, out float young) {
   xz += uFoamShift;
+  young = 0.0;
   if (uFoamRamp > 0.0) return clamp(xz.x / uFoamRamp + 0.5, 0.0, 1.0);
   float fresh = smoothstep(uFoamJc + 0.06, uFoamJc - 0.12, jac);
+  young = fresh;
   if (uFoamField < 0.5) return max(fresh, smoothstep(0.7, 0.25, jac));
   float f = foamFieldAt(xz);
+  young = max(fresh, smoothstep(0.75, 0.98, f));   // the field near 1: broken this second
   if (hex > 0.0) f = mix(f, foamFieldHex(xz), hex);
   float trail = 1.5 + 2.5 * smoothstep(8.0, 20.0, uFoamWindSpeed);   // metres per tap
   if (hex < 1.0) for (int k = 1; k <= 3; k++) f = max(f, foamFieldAt(xz - uFoamWind * (trail * float(k))) * (1.0 - 0.24 * float(k)) * (1.0 - hex));
   float crest = smoothstep(1.2, 0.7, jac);
-  return clamp(max(f * mix(0.2, 1.35, crest), fresh), 0.0, 1.0);
+  // Streak foam too is spread thin where the surface stretches (J > 1) and gathered where it
+  // is squeezed, as foam collects where the surface converges.
+  return clamp(max(max(f * mix(0.2, 1.35, crest), fresh), foamStreaks(xz, px) * mix(0.75, 1.1, crest)), 0.0, 1.0);
 }
 // How much of the pixel is foam (0..1), with texture; px = pixel footprint in metres.
 // A domain-warped fractal noise (swirled like foam stirred by the breaking, many scales,
@@ -310,6 +347,12 @@ float foamAmount(vec2 xz, float cover, float px) {
   vec2 b = foamFbm(p, 1.0, 5, px);
   float th = mix(0.68, 0.3, smoothstep(0.15, 0.95, cv));
   float body = smoothstep(th - 0.012 - b.y, th + 0.012 + b.y, b.x);
+  // Lace: just outside a patch the foam frays into a net of bubble rims (the ridges of a
+  // Worley noise about 0.2 m a cell) that thins out away from it, instead of cutting off;
+  // below the pixel the net is its mean.
+  float fray = smoothstep(th - 0.14 - b.y, th - 0.01, b.x) * (1.0 - body) * smoothstep(0.3, 0.6, cv);
+  float net = fray > 0.0 ? mix(smoothstep(0.3, 0.46, foamCells(p / 0.2 + 3.7).x), 0.35, smoothstep(0.03, 0.12, px)) : 0.0;
+  body = max(body, 0.85 * fray * fray * net);
   // Threads: bands around the mid level of two more noises (a coarse and a fine
   // network of curved lines, wider with coverage); an unresolved band counts its area.
   // Torn: threads thin out and break where a coarser noise is low.
@@ -339,7 +382,8 @@ float foamAmount(vec2 xz, float cover, float px) {
 // of the amount), so dense foam shows lumps and the sun side of a crest is brighter than
 // its lee. Thin foam lets the water through, a little green-blue.
 vec3 foamShade(vec3 c, vec2 xz, float jac, float hex, vec3 n, float px, out float amount) {
-  float a = foamAmount(xz, foamCover(xz, jac, hex), px) * uFoam;
+  float young;
+  float a = foamAmount(xz, foamCover(xz, jac, hex, px, young), px) * uFoam;
   amount = a;
   vec2 dxz = dFdx(xz), dyz = dFdy(xz), da = vec2(dFdx(a), dFdy(a)); // (before any branch)
   if (a <= 0.0) return c;
@@ -348,9 +392,12 @@ vec3 foamShade(vec3 c, vec2 xz, float jac, float hex, vec3 n, float px, out floa
   vec3 nf = normalize(n - vec3(g.x, 0.0, g.y) * 0.06 * (1.0 - smoothstep(0.05, 0.5, px)));
   float sun = max(dot(nf, uSunDir), 0.0) * step(0.0, uSunDir.y);
   vec3 amb = skyAmbient() * (0.75 + 0.25 * nf.y);
-  vec3 lit = 0.85 * (amb * 1.3 + uSunColor * sun * 0.95);
+  // Body: the foam breaking now on a crest is thick, dense and bright; older foam behind it
+  // (patches, streaks) is a thinner layer, greyer and more translucent, and the thin parts
+  // of any foam sit in the shade of the thick (a soft self-shadow).
+  vec3 lit = 0.85 * (amb * 1.3 + uSunColor * sun * 0.95) * mix(0.8, 1.08, young) * (0.86 + 0.14 * a);
   vec3 thin = lit * vec3(0.78, 0.92, 0.95);
-  return mix(c, mix(thin, lit, a), a * 0.95);
+  return mix(c, mix(thin, lit, a), a * mix(0.78, 0.97, young));
 }
 `;
 

@@ -33,10 +33,16 @@ function dirFromAltAz(alt, az) {
 
 // Cloud cover and darkening from the wind (10 m wind speed, m/s). Not a physical
 // model: fair-weather cumulus in light winds, a closed, dark deck by storm force
-// (Beaufort 10, 24.5 m/s), which is what a sailor sees.
+// (Beaufort 10, 24.5 m/s), which is what a sailor sees. fogDensity: the haze's extinction
+// over the water (1/m; visibility = 3.912 / fogDensity, Koschmieder): some 40 km in fair
+// weather, 9 km under a closed deck, and from force 9 the spray blown off the crests on top
+// ("spray may affect visibility" at 9, "visibility affected" at 10-11, "very seriously
+// affected" at 12): about 6 km at force 10, 1.3 km at 11, 0.5 km at 12.
 export function weatherFromWind(u) {
   const s = (a, b, x) => { const t = Math.min(Math.max((x - a) / (b - a), 0), 1); return t * t * (3 - 2 * t); };
-  return { overcast: 0.12 + 0.88 * s(6, 24, u), darkening: 0.5 * s(10, 28, u) };
+  const overcast = 0.12 + 0.88 * s(6, 24, u);
+  const fogDensity = 0.00009 * (1 + 4 * overcast ** 2) + 0.0075 * s(21, 36, u) ** 3;
+  return { overcast, darkening: 0.5 * s(10, 28, u), fogDensity };
 }
 
 const s01 = (a, b, x) => { const t = Math.min(Math.max((x - a) / (b - a), 0), 1); return t * t * (3 - 2 * t); };
@@ -190,7 +196,7 @@ export class SkyModel {
     if (key === this.key) return false;
     this.key = key;
     const sun = sunDirection(hour);
-    const { overcast, darkening } = weatherFromWind(wind);
+    const { overcast, darkening, fogDensity } = weatherFromWind(wind);
     const sinAlt = sun.y;
     const day = s01(-0.2, 0.08, sinAlt);        // 0 at night (sun 12° below), 1 in daylight
     const turbidity = 2 + 6 * overcast;
@@ -262,7 +268,7 @@ export class SkyModel {
     // is up the exposure is kept for the bright sky around it (as a camera would), so the
     // sunset sky keeps its colour and the water before it stays dark; it opens up at dusk.
     U.uExposure.value = 0.42 + 0.88 * (1 - s01(-0.1, 0.06, sinAlt)) + 2.2 * night;
-    this.state = { hour, wind, sun: sun.toArray(), sunAltitudeDeg: Math.asin(sinAlt) * 180 / Math.PI, overcast, darkening };
+    this.state = { hour, wind, sun: sun.toArray(), sunAltitudeDeg: Math.asin(sinAlt) * 180 / Math.PI, overcast, darkening, fogDensity };
     this.cubeCamera.update(this.renderer, this.scene);
     return true;
   }
