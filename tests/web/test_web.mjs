@@ -431,6 +431,10 @@ async function lightGroup(check, br) {
       // The streaks (checked below) lie along the wind over crests and troughs alike: this check
       // is of where the field's own foam lies, so it leaves them out.
       await setView(p, { viewport: { width: 400, height: 400 }, cam: [0, 80, 0.01], target: [0, 0, 0], debugFoam: true, foamStreaks: false });
+      // (the camera taken there, not still on its way from the low view before: a picture of a
+      // few metres of water has no crests to follow)
+      await waitFor(p, 'the camera 80 m up', () => window.oceand.camera.position[1] > 79, null, 15000)
+        .catch(async () => assert(false, `the camera is at ${JSON.stringify((await state(p)).camera)}`));
       const corr = async (shift) => {
         await p.evaluate((s) => window.oceandTest.options({ foamShift: s }), shift);
         await renderedMore(p, 2);
@@ -458,7 +462,7 @@ async function lightGroup(check, br) {
         }, png.toString('base64'));
       };
       const placed = await corr(null), random = await corr([37.3, -53.9]);
-      console.log(`     foam vs -J ${placed.squeeze.toFixed(2)}, vs height ${placed.height.toFixed(2)} (foam on ${(100 * placed.foam).toFixed(1)} % of pixels); moved 37 m, 54 m: ${random.squeeze.toFixed(2)}, ${random.height.toFixed(2)}`);
+      console.log(`     camera ${JSON.stringify((await state(p)).camera.position.map((v) => +v.toFixed(2)))}; foam vs -J ${placed.squeeze.toFixed(2)}, vs height ${placed.height.toFixed(2)} (foam on ${(100 * placed.foam).toFixed(1)} % of pixels); moved 37 m, 54 m: ${random.squeeze.toFixed(2)}, ${random.height.toFixed(2)}`);
       assert(placed.foam > 0.01, `hardly any foam in a storm: ${(100 * placed.foam).toFixed(2)} %`);
       assert(placed.squeeze > 0.2 && placed.height > 0.05, `foam does not follow the crests: ${JSON.stringify(placed)}`);
       assert(placed.squeeze > random.squeeze + 0.15, `foam placed at random correlates as well: ${JSON.stringify(random)}`);
