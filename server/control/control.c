@@ -728,3 +728,21 @@ bool control_json_sim_time(const cJSON *item, double *out)
     *out = item->valuedouble;
     return true;
 }
+
+/* The type of a JSON message, and whether its `points` is a non-empty array. */
+void control_reply_type(const char *text, size_t len, char *type, size_t cap, char *code, size_t ccap, bool *points)
+{
+    type[0] = code[0] = '\0';
+    *points = false;
+    struct ctl_error e; /* read as a relay reads it: a "probing\u0000x" is no type at all */
+    cJSON *root = control_parse_object(text, len, &e);
+    const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "type");
+    const cJSON *c = cJSON_GetObjectItemCaseSensitive(root, "code");
+    const cJSON *p = cJSON_GetObjectItemCaseSensitive(root, "points");
+    if (cJSON_IsString(t))
+        snprintf(type, cap, "%s", t->valuestring);
+    if (cJSON_IsString(c))
+        snprintf(code, ccap, "%s", c->valuestring);
+    *points = cJSON_IsArray(p) && cJSON_GetArraySize(p) > 0;
+    cJSON_Delete(root);
+}

@@ -122,6 +122,9 @@ cJSON *control_parse_object(const char *text, size_t len, struct ctl_error *e);
  * keeps it: a detached copy (cJSON_Delete) that prints as sent, or NULL
  * (none, or the message is not a strict JSON object). */
 cJSON *control_message_id(const char *text, size_t len);
+/* A message's type and code ("" when none), and whether its `points` is a non-empty
+ * array: what an edge reads of the sim's answer before it relays it. */
+void control_reply_type(const char *text, size_t len, char *type, size_t cap, char *code, size_t ccap, bool *points);
 
 /* Apply a JSON object of parameters onto *cur, all or nothing: every member
  * is checked (name, JSON type, range, power of two), then the whole set

@@ -6,7 +6,7 @@
  * message to everyone when the list or an owner changes; hello's members;
  * the bodies handed to the state saver. The physics runs on the producer
  * (server/tick/body_tick.c); nothing here waits for it. */
-#include "net_internal.h"
+#include "body_net_internal.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -29,7 +29,7 @@
 
 /* ---- the book ---- */
 
-static struct body_own *find(struct net *n, uint32_t id)
+struct body_own *body_find(struct net *n, uint32_t id)
 {
     struct body_book *k = &n->bodies;
     int lo = 0, hi = k->n - 1;
@@ -46,7 +46,7 @@ static struct body_own *find(struct net *n, uint32_t id)
 }
 
 /* Insert in id order; NULL out of memory. */
-static struct body_own *add(struct net *n, uint32_t id)
+struct body_own *body_add(struct net *n, uint32_t id)
 {
     struct body_book *k = &n->bodies;
     if (k->n == k->cap) {
@@ -67,10 +67,10 @@ static struct body_own *add(struct net *n, uint32_t id)
     return &k->b[i];
 }
 
-static void gone(struct net *n, uint32_t id, const char *reason, uint64_t seq)
+void body_gone(struct net *n, uint32_t id, const char *reason, uint64_t seq)
 {
     struct body_book *k = &n->bodies;
-    struct body_own *b = find(n, id);
+    struct body_own *b = body_find(n, id);
     if (!b)
         return;
     int i = (int)(b - k->b);
@@ -92,7 +92,7 @@ static void gone(struct net *n, uint32_t id, const char *reason, uint64_t seq)
     k->seq = seq;
 }
 
-static int owned_by(const struct net *n, uint64_t serial)
+int body_owned_by(const struct net *n, uint64_t serial)
 {
     int c = 0;
     for (int i = 0; i < n->bodies.n; i++)
@@ -102,7 +102,7 @@ static int owned_by(const struct net *n, uint64_t serial)
 
 /* ---- to the sim ---- */
 
-static struct sim_body_cmd *cmd_new(enum sim_body_op op, uint32_t body)
+struct sim_body_cmd *body_cmd_new(enum sim_body_op op, uint32_t body)
 {
     struct sim_body_cmd *c = calloc(1, sizeof *c);
     if (c) {
@@ -113,7 +113,7 @@ static struct sim_body_cmd *cmd_new(enum sim_body_op op, uint32_t body)
 }
 
 /* The daemon's own request (nobody is answered): the adrift flag, or a removal. */
-static void submit_own(struct net *n, struct sim_body_cmd *c)
+void body_submit_own(struct net *n, struct sim_body_cmd *c)
 {
     if (!c) {
         LOGE("bodies: out of memory: a request of the daemon's own is lost");
@@ -122,14 +122,14 @@ static void submit_own(struct net *n, struct sim_body_cmd *c)
     sim_body_submit(n->sim, c);
 }
 
-static void set_adrift(struct net *n, uint32_t id, bool adrift, bool stop)
+void body_set_adrift(struct net *n, uint32_t id, bool adrift, bool stop)
 {
-    struct sim_body_cmd *c = cmd_new(SIM_BODY_ADRIFT, id);
+    struct sim_body_cmd *c = body_cmd_new(SIM_BODY_ADRIFT, id);
     if (c) {
         c->adrift = adrift;
         c->stop = stop;
     }
-    submit_own(n, c);
+    body_submit_own(n, c);
 }
 
 /* ---- who asked ---- */
@@ -189,7 +189,7 @@ static void fail(struct who *w, const char *code, const char *param, const cJSON
 
 #define BODY_REMOTE_MAX 4096 /* clients of edges with bodies or requests at once */
 
-static struct body_remote *rc_find(struct net *n, uint64_t serial)
+struct body_remote *body_rc_find(struct net *n, uint64_t serial)
 {
     for (int i = 0; serial && i < n->bodies.nrc; i++)
         if (n->bodies.rc[i].serial == serial)
@@ -197,7 +197,7 @@ static struct body_remote *rc_find(struct net *n, uint64_t serial)
     return NULL;
 }
 
-static struct body_remote *rc_find_by(struct net *n, const char *origin, const char *by)
+struct body_remote *body_rc_find_by(struct net *n, const char *origin, const char *by)
 {
     for (int i = 0; i < n->bodies.nrc; i++)
         if (strcmp(n->bodies.rc[i].by, by) == 0 && strcmp(n->bodies.rc[i].origin, origin) == 0)
@@ -206,10 +206,10 @@ static struct body_remote *rc_find_by(struct net *n, const char *origin, const c
 }
 
 /* The entry of (origin, by), made if new; NULL when full or out of memory. */
-static struct body_remote *rc_get(struct net *n, const char *origin, const char *by)
+struct body_remote *body_rc_get(struct net *n, const char *origin, const char *by)
 {
     struct body_book *k = &n->bodies;
-    struct body_remote *r = rc_find_by(n, origin, by);
+    struct body_remote *r = body_rc_find_by(n, origin, by);
     if (r)
         return r;
     if (k->nrc >= BODY_REMOTE_MAX || strlen(by) >= sizeof r->by || strlen(origin) >= sizeof r->origin)
@@ -231,12 +231,11 @@ static struct body_remote *rc_get(struct net *n, const char *origin, const char 
     return r;
 }
 
-static void owner_left(struct net *n, uint64_t serial);
 
 /* Its edge says it is gone (or fell silent): its bodies wait for a claim. */
-static void rc_gone(struct net *n, struct body_remote *r)
+void body_rc_gone(struct net *n, struct body_remote *r)
 {
-    owner_left(n, r->serial);
+    body_owner_left(n, r->serial);
     struct body_book *k = &n->bodies;
     *r = k->rc[--k->nrc];
 }
@@ -249,7 +248,7 @@ static struct sim_body_cmd *client_cmd(struct net *n, struct who *w, enum sim_bo
                                        const cJSON *id)
 {
     struct body_book *k = &n->bodies;
-    struct sim_body_cmd *c = cmd_new(op, body);
+    struct sim_body_cmd *c = body_cmd_new(op, body);
     cJSON *idc = id ? cJSON_Duplicate(id, 1) : NULL;
     if (w->rc && c && k->nwait == k->wait_cap) {
         int cap = k->wait_cap ? 2 * k->wait_cap : 16;
@@ -330,7 +329,7 @@ static bool rate_ok(struct net *n, struct session *s, const cJSON *id)
 
 static void launch(struct net *n, struct who *w, const struct body_req *r, const cJSON *id)
 {
-    int mine = owned_by(n, who_serial(w)) + *who_launching(w);
+    int mine = body_owned_by(n, who_serial(w)) + *who_launching(w);
     if (mine >= n->dc.bodies_per_session) {
         fail(w, "too_many_bodies", NULL, id, "this client owns %d bodies already (at most %d: --bodies-per-session)",
              mine, n->dc.bodies_per_session);
@@ -362,7 +361,7 @@ static void launch(struct net *n, struct who *w, const struct body_req *r, const
 /* A body the client may steer or remove: it exists and it owns it. */
 static struct body_own *mine(struct net *n, struct who *w, uint32_t body, const cJSON *id)
 {
-    struct body_own *b = find(n, body);
+    struct body_own *b = body_find(n, body);
     if (!b || b->removing) {
         fail(w, "no_such_body", "body", id, "no body %u", body);
         return NULL;
@@ -405,7 +404,7 @@ static void remove_body(struct net *n, struct who *w, const struct body_req *r, 
 
 static void claim(struct net *n, struct who *w, const struct body_req *r, const cJSON *id)
 {
-    struct body_own *b = find(n, r->body);
+    struct body_own *b = body_find(n, r->body);
     if (!b || b->removing) {
         fail(w, "no_such_body", "body", id, "no body %u", r->body);
         return;
@@ -423,7 +422,7 @@ static void claim(struct net *n, struct who *w, const struct body_req *r, const 
              n->dc.body_grace);
         return;
     }
-    int count = owned_by(n, who_serial(w)) + *who_launching(w);
+    int count = body_owned_by(n, who_serial(w)) + *who_launching(w);
     if (count >= n->dc.bodies_per_session) {
         fail(w, "too_many_bodies", NULL, id, "this client owns %d bodies already (at most %d: --bodies-per-session)",
              count, n->dc.bodies_per_session);
@@ -438,13 +437,12 @@ static void claim(struct net *n, struct who *w, const struct body_req *r, const 
     b->left_t = 0;
     b->stopped = false;
     if (was_adrift)
-        set_adrift(n, b->id, false, false);
+        body_set_adrift(n, b->id, false, false);
     n->bodies.dirty = n->bodies.save_due = true;
     n->bodies.seq = sim_seq(n->sim);
     who_send(w, body_ack_msg("claimed", id, b->id));
 }
 
-static void body_net_flush(struct net *n);
 
 static void apply_request(struct net *n, struct who *w, const struct ctl_msg *m, const struct body_req *r)
 {
@@ -514,7 +512,7 @@ void body_net_remote(struct net *n, const char *origin, const char *by, const st
         who_send(&w, control_error_msg(&e, m->id));
         return;
     }
-    if (!by[0] || !(w.rc = rc_get(n, origin, by))) {
+    if (!by[0] || !(w.rc = body_rc_get(n, origin, by))) {
         fail(&w, by[0] ? "busy" : "bad_message", NULL, m->id, "%s",
              by[0] ? "too many clients of edges use bodies at once" : "a body request needs its client");
         return;
@@ -557,7 +555,7 @@ static void answer(struct net *n, struct sim_body_cmd *c)
     struct body_wait wt;
     struct who w = { 0 };
     if (c->ticket && take_wait(n, c->ticket, &wt)) {
-        w.rc = rc_find(n, c->serial);
+        w.rc = body_rc_find(n, c->serial);
         w.reply = wt.reply;
         w.ctx = wt.ctx;
     } else if (!c->ticket && c->serial) {
@@ -582,7 +580,7 @@ static void answer(struct net *n, struct sim_body_cmd *c)
     }
     if (c->status != BODY_OK) {
         if (c->op == SIM_BODY_REMOVE) {
-            struct body_own *b = find(n, c->body);
+            struct body_own *b = body_find(n, c->body);
             if (b)
                 b->removing = false;
         }
@@ -595,9 +593,9 @@ static void answer(struct net *n, struct sim_body_cmd *c)
     switch (c->op) {
     case SIM_BODY_LAUNCH: {
         atomic_fetch_add(&g_metrics.body_launches, 1);
-        struct body_own *b = add(n, c->body);
+        struct body_own *b = body_add(n, c->body);
         if (!b) { /* out of memory: the body may not stay unowned and unknown */
-            submit_own(n, cmd_new(SIM_BODY_REMOVE, c->body));
+            body_submit_own(n, body_cmd_new(SIM_BODY_REMOVE, c->body));
             if (told)
                 fail(&w, "internal", NULL, id, "out of memory");
             return;
@@ -610,7 +608,7 @@ static void answer(struct net *n, struct sim_body_cmd *c)
             snprintf(b->name, sizeof b->name, "%s", who_name(&w));
         } else { /* its sender left before the answer: it waits for nobody (the key was never handed out) */
             b->left_t = mono_now() - n->dc.body_grace;
-            set_adrift(n, b->id, true, false);
+            body_set_adrift(n, b->id, true, false);
         }
         if (told)
             who_send(&w, body_launched_msg(id, b->id, b->resume));
@@ -623,12 +621,12 @@ static void answer(struct net *n, struct sim_body_cmd *c)
             who_send(&w, body_ack_msg("steered", id, c->body));
         break;
     case SIM_BODY_REMOVE:
-        gone(n, c->body, c->reason ? c->reason : "removed", c->seq);
+        body_gone(n, c->body, c->reason ? c->reason : "removed", c->seq);
         if (told && c->reply)
             who_send(&w, body_ack_msg("removed", id, c->body));
         break;
     case SIM_BODY_GONE:
-        gone(n, c->body, "sunk", c->seq);
+        body_gone(n, c->body, "sunk", c->seq);
         break;
     case SIM_BODY_ADRIFT:
     case SIM_BODY_RESTORE:
@@ -636,156 +634,6 @@ static void answer(struct net *n, struct sim_body_cmd *c)
     }
     if (w.reply) /* a remote request answered on no path above */
         w.reply(w.ctx, "{\"type\":\"error\",\"code\":\"internal\",\"message\":\"not answered\"}");
-}
-
-/* ---- owners ---- */
-
-static void owner_left(struct net *n, uint64_t serial)
-{
-    double now = mono_now();
-    for (int i = 0; serial && i < n->bodies.n; i++) {
-        struct body_own *b = &n->bodies.b[i];
-        if (b->owner != serial)
-            continue;
-        b->owner = 0;
-        b->left_t = now;
-        set_adrift(n, b->id, true, false);
-        n->bodies.dirty = true;
-        n->bodies.seq = sim_seq(n->sim);
-    }
-}
-
-void body_net_session_gone(struct net *n, struct session *s)
-{
-    if (!n->sim) { /* an edge: the sim hears it with the next owners message */
-        n->bodies.owners_due |= s->body_user;
-        s->body_user = false;
-        return;
-    }
-    owner_left(n, s->serial);
-}
-
-void body_net_renamed(struct net *n, struct session *s)
-{
-    if (!n->sim) {
-        n->bodies.owners_due |= s->body_user;
-        return;
-    }
-    for (int i = 0; i < n->bodies.n; i++) {
-        struct body_own *b = &n->bodies.b[i];
-        if (b->owner != s->serial || strcmp(b->name, s->name) == 0)
-            continue;
-        snprintf(b->name, sizeof b->name, "%s", s->name);
-        n->bodies.dirty = n->bodies.save_due = true;
-        n->bodies.seq = n->sim ? sim_seq(n->sim) : 0;
-    }
-    body_net_flush(n);
-}
-
-/* sim role: clients of edges whose edge has not listed them for
- * BODY_OWNERS_EXPIRE_S (the edge died, or lost the sim) are gone. */
-static void remote_expiry(struct net *n, double now)
-{
-    for (int i = n->bodies.nrc - 1; i >= 0; i--)
-        if (now - n->bodies.rc[i].seen > BODY_OWNERS_EXPIRE_S && !n->bodies.rc[i].launching)
-            rc_gone(n, &n->bodies.rc[i]);
-}
-
-void net_remote_owners(struct net *n, const char *origin, const char *text, size_t len)
-{
-    struct ctl_error e;
-    cJSON *root = control_parse_object(text, len, &e);
-    const cJSON *list = cJSON_GetObjectItemCaseSensitive(root, "clients");
-    if (!n->sim || !cJSON_IsArray(list)) {
-        cJSON_Delete(root);
-        return;
-    }
-    double now = mono_now();
-    for (int i = n->bodies.nrc - 1; i >= 0; i--) {
-        struct body_remote *r = &n->bodies.rc[i];
-        if (strcmp(r->origin, origin) != 0)
-            continue;
-        const cJSON *c, *hit = NULL;
-        cJSON_ArrayForEach(c, list)
-        {
-            const char *by = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(c, "by"));
-            if (by && strcmp(by, r->by) == 0) {
-                hit = c;
-                break;
-            }
-        }
-        if (!hit) {
-            if (!r->launching) /* a launch on its way keeps it until its answer */
-                rc_gone(n, r);
-            continue;
-        }
-        r->seen = now;
-        const char *name = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(hit, "name"));
-        if (name && strcmp(name, r->name) != 0 && control_check_name(name, &e) == 0) {
-            snprintf(r->name, sizeof r->name, "%s", name);
-            for (int k = 0; k < n->bodies.n; k++)
-                if (n->bodies.b[k].owner == r->serial) {
-                    snprintf(n->bodies.b[k].name, sizeof n->bodies.b[k].name, "%s", name);
-                    n->bodies.dirty = n->bodies.save_due = true;
-                    n->bodies.seq = sim_seq(n->sim);
-                }
-        }
-    }
-    cJSON_Delete(root);
-    body_net_flush(n);
-}
-
-char *net_body_owners(struct net *n, double now)
-{
-    struct body_book *k = &n->bodies;
-    if (!k->owners_due && now - k->owners_t < BODY_OWNERS_PERIOD_S)
-        return NULL;
-    cJSON *o = cJSON_CreateObject();
-    cJSON *list = cJSON_AddArrayToObject(o, "clients");
-    cJSON_AddStringToObject(o, "type", "owners");
-    int count = 0;
-    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d && list; d = d->next) {
-        struct session *s = session_of(d);
-        if (!s->body_user || !s->wsi || s->closing)
-            continue;
-        cJSON *c = cJSON_CreateObject();
-        cJSON_AddStringToObject(c, "by", s->client_id);
-        cJSON_AddStringToObject(c, "name", s->name);
-        cJSON_AddItemToArray(list, c);
-        count++;
-    }
-    bool send = count > 0 || k->owners_any; /* one empty list tells the sim the last one left */
-    char *text = send ? control_print(o) : (cJSON_Delete(o), NULL);
-    if (send && !text)
-        return NULL; /* out of memory: tried again at the next wake */
-    k->owners_due = false;
-    k->owners_t = now;
-    k->owners_any = count > 0;
-    return text;
-}
-
-/* A body whose owner is gone: after the grace it drifts unpowered, after
- * twice the grace it is removed (reason "abandoned"). */
-static void grace(struct net *n, double now)
-{
-    remote_expiry(n, now);
-    for (int i = 0; i < n->bodies.n; i++) {
-        struct body_own *b = &n->bodies.b[i];
-        if (b->owner || b->left_t <= 0 || b->removing)
-            continue;
-        if (!b->stopped && now - b->left_t >= n->dc.body_grace) {
-            b->stopped = true;
-            set_adrift(n, b->id, true, true);
-        }
-        if (now - b->left_t >= 2 * n->dc.body_grace) {
-            struct sim_body_cmd *c = cmd_new(SIM_BODY_REMOVE, b->id);
-            if (c) {
-                c->reason = "abandoned";
-                b->removing = true;
-            }
-            submit_own(n, c);
-        }
-    }
 }
 
 /* ---- the list, to everyone ---- */
@@ -801,7 +649,7 @@ static struct body_entry *entries(struct net *n)
     return e;
 }
 
-static void body_net_flush(struct net *n)
+void body_net_flush(struct net *n)
 {
     struct body_book *k = &n->bodies;
     if (!k->dirty)
@@ -856,7 +704,7 @@ static void keep(struct net *n, double now)
     if (!sb.b)
         return;
     for (int i = 0; i < k->snap->count; i++) {
-        const struct body_own *b = find(n, k->snap->states[i].id);
+        const struct body_own *b = body_find(n, k->snap->states[i].id);
         if (!b) /* launched a moment ago: its answer comes with the next wake */
             continue;
         struct state_body *e = &sb.b[sb.n++];
@@ -864,7 +712,7 @@ static void keep(struct net *n, double now)
         snprintf(e->owner, sizeof e->owner, "%s", b->owner_id);
         snprintf(e->name, sizeof e->name, "%s", b->name);
         memcpy(e->resume, b->resume, sizeof e->resume);
-        const struct body_remote *r = rc_find(n, b->owner);
+        const struct body_remote *r = body_rc_find(n, b->owner);
         if (r)
             snprintf(e->origin, sizeof e->origin, "%s", r->origin);
     }
@@ -906,7 +754,7 @@ void body_net_wake(struct net *n)
         body_snap_unref(snap);
     }
     double now = mono_now();
-    grace(n, now);
+    body_grace_expiry(n, now);
     keep(n, now);
     body_net_flush(n);
 }
@@ -930,7 +778,7 @@ void net_bodies_restore(struct net *n, const struct state_bodies *sb)
 {
     double now = mono_now();
     for (int i = 0; i < sb->n; i++) {
-        struct body_own *b = add(n, sb->b[i].st.id);
+        struct body_own *b = body_add(n, sb->b[i].st.id);
         if (!b)
             return;
         b->kind = sb->b[i].st.kind;
@@ -939,143 +787,4 @@ void net_bodies_restore(struct net *n, const struct state_bodies *sb)
         memcpy(b->resume, sb->b[i].resume, sizeof b->resume);
         b->left_t = now; /* every owner has to claim its body again, within the grace */
     }
-}
-
-/* ---- a cluster ---- */
-
-void net_bodies_take_over(struct net *n, const struct state_bodies *sb)
-{
-    struct body_book *k = &n->bodies;
-    if (!n->sim)
-        return;
-    struct sim_body_cmd *c = cmd_new(SIM_BODY_RESTORE, 0);
-    size_t bytes = (size_t)sb->n * (sizeof *c->states + 1);
-    if (c && !(c->states = malloc(bytes ? bytes : 1))) {
-        free(c);
-        c = NULL;
-    }
-    if (!c) {
-        LOGE("bodies: out of memory taking the bodies over: the world keeps its own");
-        return;
-    }
-    c->adrift_flags = (uint8_t *)(c->states + sb->n);
-    c->nstates = sb->n;
-    /* Ids never go back: past every id the record or this sim issued. */
-    c->next_id = sb->next_id;
-    if (k->snap && k->snap->next_id > c->next_id)
-        c->next_id = k->snap->next_id;
-    /* The book anew: the sessions of this daemon own nothing (a sim has
-     * none); a client of an edge keeps its body while its edge lists it. */
-    body_net_drop_remote(n);
-    k->n = k->nrc = k->launching = 0;
-    double now = mono_now();
-    for (int i = 0; i < sb->n; i++) {
-        const struct state_body *e = &sb->b[i];
-        c->states[i] = e->st;
-        struct body_own *b = add(n, e->st.id);
-        struct body_remote *r = e->origin[0] && e->owner[0] ? rc_get(n, e->origin, e->owner) : NULL;
-        c->adrift_flags[i] = !r;
-        if (!b)
-            continue;
-        b->kind = e->st.kind;
-        snprintf(b->owner_id, sizeof b->owner_id, "%s", e->owner);
-        snprintf(b->name, sizeof b->name, "%s", e->name);
-        memcpy(b->resume, e->resume, sizeof b->resume);
-        if (r) {
-            snprintf(r->name, sizeof r->name, "%s", e->name);
-            b->owner = r->serial;
-        } else {
-            b->left_t = now; /* adrift: its owner claims it within the grace */
-        }
-    }
-    k->restoring = true;
-    k->dirty = k->save_due = true;
-    k->seq = sim_seq(n->sim);
-    sim_body_submit(n->sim, c);
-    LOGI("bodies: %d floating bodies taken over", sb->n);
-    body_net_flush(n);
-}
-
-/* edge: one entry of the sim's list into the book (checked: it goes to clients). */
-static int adopt_entry(struct net *n, const cJSON *j)
-{
-    const cJSON *id = cJSON_GetObjectItemCaseSensitive(j, "body");
-    const char *kind = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(j, "kind"));
-    const char *owner = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(j, "owner"));
-    const char *name = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(j, "name"));
-    const cJSON *adrift = cJSON_GetObjectItemCaseSensitive(j, "adrift");
-    struct ctl_error e;
-    const struct body_kind *k = kind ? body_kind_find(kind) : NULL;
-    if (!cJSON_IsNumber(id) || id->valuedouble < 1 || id->valuedouble > UINT32_MAX || !k || !owner ||
-        strlen(owner) >= sizeof n->bodies.b->owner_id || !name || control_check_name(name, &e) != 0 ||
-        !cJSON_IsBool(adrift) || find(n, (uint32_t)id->valuedouble))
-        return -1;
-    struct body_own *b = add(n, (uint32_t)id->valuedouble);
-    if (!b)
-        return -1;
-    b->kind = k;
-    snprintf(b->owner_id, sizeof b->owner_id, "%s", owner);
-    snprintf(b->name, sizeof b->name, "%s", name);
-    b->owner = cJSON_IsTrue(adrift) ? 0 : 1; /* an edge knows owners by id only: 1 = somebody */
-    return 0;
-}
-
-static int adopt_list(struct net *n, const cJSON *list)
-{
-    if (!cJSON_IsArray(list) || cJSON_GetArraySize(list) > BODY_MAX_WORLD)
-        return -1;
-    n->bodies.n = 0;
-    const cJSON *j;
-    cJSON_ArrayForEach(j, list)
-        if (adopt_entry(n, j) != 0) {
-            n->bodies.n = 0; /* all or nothing: the next list tries again */
-            return -1;
-        }
-    return 0;
-}
-
-void net_body_refused(struct net *n, uint64_t serial)
-{
-    struct session *s = session_find(n, serial);
-    if (s && s->launch_t > 0)
-        s->launch_tokens = fmin(n->dc.launch_rate, s->launch_tokens + 1);
-}
-
-int net_adopt_bodies(struct net *n, const char *text, size_t len)
-{
-    static const char *const types[] = { "bodies", NULL };
-    cJSON *root = net_sim_message(text, len, NET_SIM_REPLY_MAX, types);
-    int rc = root ? adopt_list(n, cJSON_GetObjectItemCaseSensitive(root, "bodies")) : -1;
-    cJSON_Delete(root);
-    if (rc != 0)
-        return -1;
-    char *copy = malloc(len + 1);
-    if (!copy)
-        return -1;
-    memcpy(copy, text, len);
-    copy[len] = '\0';
-    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
-        session_queue_text(session_of(d), copy, false);
-    free(copy);
-    return 0;
-}
-
-int body_net_adopt_hello(struct net *n, const cJSON *hello)
-{
-    const cJSON *l = cJSON_GetObjectItemCaseSensitive(hello, "body_limits");
-    const cJSON *ps = cJSON_GetObjectItemCaseSensitive(l, "per_session");
-    const cJSON *mb = cJSON_GetObjectItemCaseSensitive(l, "max_bodies");
-    const cJSON *lr = cJSON_GetObjectItemCaseSensitive(l, "launch_rate");
-    const cJSON *gr = cJSON_GetObjectItemCaseSensitive(l, "grace");
-    /* The sim's limits, told to this edge's clients; the launch rate is kept here. */
-    if (cJSON_IsNumber(ps) && ps->valuedouble >= 0 && ps->valuedouble <= 1024)
-        n->dc.bodies_per_session = ps->valueint;
-    if (cJSON_IsNumber(mb) && mb->valuedouble >= 1 && mb->valuedouble <= 1024)
-        n->dc.max_bodies = mb->valueint;
-    if (cJSON_IsNumber(lr) && lr->valuedouble > 0 && lr->valuedouble <= 1e6)
-        n->dc.launch_rate = lr->valuedouble;
-    if (cJSON_IsNumber(gr) && gr->valuedouble >= 0.1 && gr->valuedouble <= 86400)
-        n->dc.body_grace = gr->valuedouble;
-    const cJSON *list = cJSON_GetObjectItemCaseSensitive(hello, "bodies");
-    return list ? adopt_list(n, list) : 0;
 }

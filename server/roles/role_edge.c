@@ -344,24 +344,6 @@ static void send_unavailable(struct role_edge *r, uint64_t serial, const cJSON *
 static void send_probe_request(struct role_edge *r, int kind, uint64_t serial, const char *client, const char *text,
                                size_t len);
 
-/* The type of a JSON message, and whether its `points` is a non-empty array. */
-static void reply_type(const char *text, size_t len, char *type, size_t cap, char *code, size_t ccap, bool *points)
-{
-    type[0] = code[0] = '\0';
-    *points = false;
-    struct ctl_error e; /* read as relay() reads it: a "probing\u0000x" is no type at all */
-    cJSON *root = control_parse_object(text, len, &e);
-    const cJSON *t = cJSON_GetObjectItemCaseSensitive(root, "type");
-    const cJSON *c = cJSON_GetObjectItemCaseSensitive(root, "code");
-    const cJSON *p = cJSON_GetObjectItemCaseSensitive(root, "points");
-    if (cJSON_IsString(t))
-        snprintf(type, cap, "%s", t->valuestring);
-    if (cJSON_IsString(c))
-        snprintf(code, ccap, "%s", c->valuestring);
-    *points = cJSON_IsArray(p) && cJSON_GetArraySize(p) > 0;
-    cJSON_Delete(root);
-}
-
 /* The sim's answer to a client's request, to that client: only a message of
  * a type such a request is answered with, checked as net_sim_message does;
  * anything else is answered `unavailable` (a rogue or broken answerer). */
@@ -394,7 +376,7 @@ static void on_probe_reply(struct role_edge *r, struct forward *fw, int status, 
     char type[32], code[32];
     bool points = false;
     if (status == 0)
-        reply_type(text, len, type, sizeof type, code, sizeof code, &points);
+        control_reply_type(text, len, type, sizeof type, code, sizeof code, &points);
     switch (fw->probe) {
     case FW_PROBE:
         if (status != 0) {
@@ -461,7 +443,7 @@ static void on_reply(void *ctx, int status, const char *text, size_t len)
     } else if (status == 0) {
         char type[32], code[32];
         bool points;
-        reply_type(text, len, type, sizeof type, code, sizeof code, &points);
+        control_reply_type(text, len, type, sizeof type, code, sizeof code, &points);
         if (fw->id || strcmp(type, "steered") != 0) /* a steer without an id is answered only when it fails */
             relay(r, fw->serial, fw->id, text, len);
         if (strcmp(code, "too_many_bodies") == 0) /* refused before it took a launch: the bucket keeps it */
