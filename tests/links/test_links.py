@@ -334,8 +334,14 @@ def steps_down(role, seconds):
     coarser = (sub["lod"] > 0 or "cascades" not in sub or any(c["lod"] > 1 for c in sub["cascades"])
                or sub["bound"] > 0.01)
     check(coarser, "rung %d serves as asked: %r" % (down[0]["rung"], sub))
-    after = r["codec_seq"][down[-1]["at_frame"]:]
-    check(any(p == n and n > 0 for _, _, p, n in after), "no all-predicted frame on the lower rung")
+    # The frames on a lower rung: from the first step down until a step back to rung 0 (a later
+    # step near the end of the window may leave no frame after it to look at).
+    start = down[0]["at_frame"]
+    ups = [x["at_frame"] for x in r["links"] if x["rung"] == 0 and x["at_frame"] > start]
+    after = r["codec_seq"][start:ups[0] if ups else len(r["codec_seq"])]
+    check(any(p == n and n > 0 for _, _, p, n in after),
+          "no all-predicted frame on the lower rung (%d frames after the first step down; steps %r)"
+          % (len(after), [(x["rung"], x["at_frame"]) for x in r["links"]]))
 
 
 @lab_test
