@@ -273,15 +273,7 @@ int net_adopt_bodies(struct net *n, const char *text, size_t len)
     cJSON_Delete(root);
     if (rc != 0)
         return -1;
-    char *copy = malloc(len + 1);
-    if (!copy)
-        return -1;
-    memcpy(copy, text, len);
-    copy[len] = '\0';
-    for (lws_dll2_t *d = lws_dll2_get_head(&n->sessions); d; d = d->next)
-        session_queue_text(session_of(d), copy, false);
-    free(copy);
-    return 0;
+    return net_relay_sim_text(n, text, len, NULL);
 }
 
 int body_net_adopt_hello(struct net *n, const cJSON *hello)

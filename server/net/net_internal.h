@@ -434,4 +434,7 @@ int cb_http(struct lws *wsi, enum lws_callback_reasons reason, void *user, void 
 /* remote_sim.c: an edge's hello gets the sim's capacity (the sim's own has it from sim_capacity). */
 cJSON *net_hello_capacity(struct net *n, cJSON *hello);
 
+/* remote_sim.c: a checked message from the sim to every client but skip_client (NULL: none). */
+int net_relay_sim_text(struct net *n, const char *text, size_t len, const char *skip_client);
+
 #endif

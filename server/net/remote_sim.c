@@ -56,6 +56,20 @@ static void send_all(struct net *n, const char *text, const char *skip_client)
             session_queue_text(session_of(d), text, false);
 }
 
+/* A message from the sim (text[0..len), checked) to every client of ours but skip_client
+ * (NULL: none), as a string of its own: -1 when out of memory. */
+int net_relay_sim_text(struct net *n, const char *text, size_t len, const char *skip_client)
+{
+    char *copy = malloc(len + 1);
+    if (!copy)
+        return -1;
+    memcpy(copy, text, len);
+    copy[len] = '\0';
+    send_all(n, copy, skip_client);
+    free(copy);
+    return 0;
+}
+
 /* The sim's capacity from its hello or a params event (sent with a new N):
  * kept for this edge's hellos. Only an object passes (net_sim_message
  * bounded the message's size). */
@@ -199,14 +213,7 @@ int net_broadcast_params(struct net *n, const char *text, size_t len, const char
     cJSON_Delete(root);
     if (rc != 0)
         return -1;
-    char *copy = malloc(len + 1);
-    if (!copy)
-        return -1;
-    memcpy(copy, text, len);
-    copy[len] = '\0';
-    send_all(n, copy, skip_client);
-    free(copy);
-    return 0;
+    return net_relay_sim_text(n, text, len, skip_client);
 }
 
 void net_set_status(struct net *n, const char *text, const char *ok_text)
